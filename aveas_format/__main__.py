@@ -1,0 +1,5 @@
+"""``python -m aveas_format`` = ``aveas-format``."""
+
+from aveas_format.cli import main
+
+main()

@@ -1,0 +1,73 @@
+"""The exception hierarchy of aveas_format.
+
+Every error raised on purpose by the library derives from :class:`AveasError`. Errors are also
+built-in exceptions so that callers can catch either (STYLE.md 11, as rasterio does):
+
+- :class:`RecordingIOError` (also :class:`OSError`): a file is missing, unreadable or truncated.
+- :class:`FormatError` (also :class:`ValueError`): the content violates the format.
+- :class:`FormatVersionError`: an unknown or unsupported ``format_version``.
+- :class:`ChecksumError`: a table or the map does not match the SHA-256 in recording.json.
+- :class:`MapError` (also :class:`ValueError`): an OpenDRIVE map cannot be read; carries the XML line.
+
+Each error carries the ``path`` it is about (and, where known, ``line``/``row``/``column``) as
+attributes, and its message names them: the CLI prints ``str(error)`` as its one line on stderr.
+
+This module imports nothing outside the standard library: every layer may use it.
+"""
+
+from __future__ import annotations
+
+from pathlib import PurePath
+
+
+class AveasError(Exception):
+    """Base class of every error raised on purpose by aveas_format."""
+
+    def __init__(self, message: str, *, path: str | PurePath | None = None, **where: object) -> None:
+        self.message = message
+        self.path = str(path) if path is not None else None
+        self.where = {k: v for k, v in where.items() if v is not None}
+        super().__init__(self._render())
+
+    def _render(self) -> str:
+        prefix = f"{self.path}: " if self.path else ""
+        loc = ", ".join(f"{k} {v}" for k, v in self.where.items())
+        return f"{prefix}{loc + ': ' if loc else ''}{self.message}"
+
+    def __str__(self) -> str:  # OSError overrides __str__; keep ours
+        return self._render()
+
+
+class RecordingIOError(AveasError, OSError):
+    """A file of a recording (or a map) is missing, unreadable, truncated or not writable."""
+
+
+class FormatError(AveasError, ValueError):
+    """The content of a recording violates the format (wrong type, bad JSON, bad metadata...)."""
+
+
+class FormatVersionError(FormatError):
+    """The recording's ``format_version`` is unknown, newer than this library, or malformed."""
+
+
+class ChecksumError(FormatError):
+    """A file's SHA-256 or row count differs from what recording.json declares."""
+
+
+class MapError(AveasError, ValueError):
+    """An OpenDRIVE map is malformed; ``line`` names the XML line where known."""
+
+
+class RecordingExistsError(AveasError, FileExistsError):
+    """The output exists and ``overwrite`` was not given."""
+
+
+__all__ = [
+    "AveasError",
+    "ChecksumError",
+    "FormatError",
+    "FormatVersionError",
+    "MapError",
+    "RecordingExistsError",
+    "RecordingIOError",
+]

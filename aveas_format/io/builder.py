@@ -1,0 +1,253 @@
+"""Build a valid recording from plain arrays: for converters, tests and users.
+
+:func:`build_recording` takes participants and states as dicts of arrays (or pyarrow Tables) and a
+map, and fills what can be derived: source ids, roles and provenance from the recording's
+provenance; heading from the direction of motion and velocity from positions where missing; lon/lat
+through the CRS; road coordinates through the map (``aveas_format.referencing``); duration, nominal
+rate, location and the ``tables``/``map`` entries of recording.json.
+"""
+
+from __future__ import annotations
+
+import uuid
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from aveas_format.errors import FormatError
+from aveas_format.io.arrow import conform
+from aveas_format.io.container import sha256_of
+from aveas_format.io.recording import Recording
+from aveas_format.io.writer import opendrive_version, prepare_table
+from aveas_format.schema.enums import AcquisitionMethod, Provenance, RecordingProvenance, Role
+from aveas_format.schema.metadata import RecordingMeta
+from aveas_format.schema.tables import TABLES
+from aveas_format.schema.versions import FORMAT_VERSION
+
+TableLike = pa.Table | Mapping[str, Any]
+_SIMULATED_METHODS = {AcquisitionMethod.TRAFFIC_SIMULATION, AcquisitionMethod.DRIVING_SIMULATOR}
+
+
+def _table(data: TableLike | None, name: str) -> pa.Table | None:
+    if data is None:
+        return None
+    if isinstance(data, pa.Table):
+        return data
+    try:
+        return pa.table({k: (v if isinstance(v, (pa.Array, pa.ChunkedArray)) else _array(v))
+                         for k, v in data.items()})
+    except (pa.ArrowInvalid, pa.ArrowTypeError, ValueError) as e:
+        raise FormatError(f"cannot build table {name}: {e}") from None
+
+
+def _array(v: Any) -> pa.Array:
+    a = np.asarray(v) if not isinstance(v, list) else v
+    if isinstance(a, np.ndarray) and a.ndim == 2:  # PMF matrix -> list column, conform makes structs
+        return pa.array(list(a.astype(np.float32)), pa.list_(pa.float32()))
+    return pa.array(a)
+
+
+def _segments(pid: np.ndarray) -> np.ndarray:
+    """Boolean mask: row i and row i+1 belong to the same participant."""
+    return pid[1:] == pid[:-1]
+
+
+def velocity_from_positions(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity by central differences within each participant (one-sided at track ends).
+
+    Rows must be sorted by (participant, time). A participant with one sample gets velocity 0.
+    """
+    n = len(t)
+    vx = np.zeros(n)
+    vy = np.zeros(n)
+    if n < 2:
+        return vx, vy
+    same = _segments(pid)
+    dt = np.diff(t)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fx = np.where(same & (dt > 0), np.diff(x) / dt, np.nan)  # forward difference i -> i+1
+        fy = np.where(same & (dt > 0), np.diff(y) / dt, np.nan)
+    fwd_x = np.append(fx, np.nan)
+    fwd_y = np.append(fy, np.nan)
+    bwd_x = np.insert(fx, 0, np.nan)
+    bwd_y = np.insert(fy, 0, np.nan)
+    vx = np.nanmean(np.vstack([fwd_x, bwd_x]), axis=0) if n else vx
+    vy = np.nanmean(np.vstack([fwd_y, bwd_y]), axis=0) if n else vy
+    return np.nan_to_num(vx), np.nan_to_num(vy)
+
+
+def heading_from_velocity(pid: np.ndarray, vx: np.ndarray, vy: np.ndarray,
+                          min_speed: float = 0.5) -> np.ndarray:
+    """Heading from the direction of motion; below ``min_speed`` the last moving heading is held
+    (forward-filled within the participant, then back-filled for a track that starts at rest)."""
+    h = np.arctan2(vy, vx)
+    moving = np.hypot(vx, vy) >= min_speed
+    n = len(h)
+    idx = np.where(moving, np.arange(n), -1)
+    starts = np.r_[0, np.flatnonzero(~_segments(pid)) + 1] if n else np.array([], int)
+    group = np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, n])) if n else np.array([], int)
+    # forward fill within each participant
+    idx_ff = np.maximum.accumulate(np.where(idx >= 0, idx, -1))
+    idx_ff = np.where((idx_ff >= 0) & (group[np.maximum(idx_ff, 0)] == group), idx_ff, -1)
+    # back fill (first moving sample of the participant) where nothing came before
+    nxt = np.where(idx >= 0, idx, n)
+    idx_bf = np.minimum.accumulate(nxt[::-1])[::-1]
+    ok_bf = (idx_bf < n) & (group[np.minimum(idx_bf, n - 1)] == group) if n else idx_bf < n
+    src = np.where(idx_ff >= 0, idx_ff, np.where(ok_bf, idx_bf, -1))
+    out = np.where(src >= 0, h[np.maximum(src, 0)], 0.0)
+    return out
+
+
+def wrap_angle(a: np.ndarray) -> np.ndarray:
+    """Wrap to (-pi, pi]."""
+    w = np.mod(np.asarray(a, dtype=np.float64) + np.pi, 2 * np.pi) - np.pi
+    return np.where(w == -np.pi, np.pi, w)
+
+
+def build_recording(
+    *,
+    map_source: str | bytes | Path,
+    participants: TableLike,
+    states: TableLike,
+    unobserved: TableLike | None = None,
+    events: TableLike | None = None,
+    environment: TableLike | None = None,
+    interior: TableLike | None = None,
+    crs: str | None = None,
+    method: str | AcquisitionMethod = AcquisitionMethod.TRAFFIC_SIMULATION,
+    partner: str = "unknown",
+    provenance: str | None = None,
+    start_time: str = "1970-01-01T00:00:00Z",
+    nominal_rate_hz: float | None = None,
+    duration_s: float | None = None,
+    recording_id: str | None = None,
+    rights: Mapping[str, Any] | None = None,
+    reference: bool = True,
+    **meta: Any,
+) -> Recording:
+    """A valid in-memory recording from plain arrays (see module doc).
+
+    ``map_source`` is the OpenDRIVE text/bytes or a path to a .xodr file. Extra keyword arguments are
+    recording.json fields (``title``, ``acquisition`` overrides as a dict, ``coverage``,
+    ``conditions``, ``thresholds``, ``extras``...). ``reference=False`` keeps road coordinates as
+    given (or null) instead of computing them from the map.
+    """
+    from aveas_format.opendrive import load_map
+    from aveas_format.georef import LocalFrame
+
+    if isinstance(map_source, Path) or (isinstance(map_source, str) and not map_source.lstrip().startswith("<")
+                                        and Path(map_source).suffix == ".xodr"):
+        map_bytes = Path(map_source).read_bytes()
+    else:
+        map_bytes = map_source.encode() if isinstance(map_source, str) else bytes(map_source)
+    net = load_map(map_bytes)
+    method = AcquisitionMethod(method)
+    if provenance is None:
+        provenance = "simulated" if method in _SIMULATED_METHODS else "natural"
+    rec_prov = RecordingProvenance(provenance)
+    crs = crs or net.header.geo_reference
+    if not crs:
+        raise FormatError("the map has no <geoReference>: pass crs= (e.g. a transverse Mercator at the site)")
+
+    p = _table(participants, "participants")
+    s = _table(states, "states")
+    assert p is not None and s is not None
+    p = _fill_participants(p, rec_prov)
+    s = prepare_table(conform(s, TABLES["states"]), TABLES["states"])
+    frame = LocalFrame(crs, offset=net.header.offset)
+    s = _fill_states(s, frame, net if reference else None)
+
+    t = s.column("time").to_numpy() if s.num_rows else np.zeros(0)
+    pid = s.column("participant_id").to_numpy() if s.num_rows else np.zeros(0, np.int64)
+    if nominal_rate_hz is None:
+        same = _segments(pid)
+        dt = np.diff(t)[same]
+        dt = dt[dt > 0]
+        nominal_rate_hz = float(round(1.0 / np.median(dt), 6)) if len(dt) else 1.0
+    if duration_s is None:
+        duration_s = float(t.max()) if len(t) else 0.0
+    lon = s.column("lon").to_numpy() if s.num_rows else np.array([0.0])
+    lat = s.column("lat").to_numpy() if s.num_rows else np.array([0.0])
+    acq = {"method": method.value, "partner": partner}
+    acq.update(meta.pop("acquisition", {}) or {})
+    md: dict[str, Any] = {
+        "format_version": FORMAT_VERSION,
+        "tables": {},
+        "recording_id": recording_id or str(uuid.uuid4()),
+        "start_time": start_time,
+        "duration_s": duration_s,
+        "nominal_rate_hz": nominal_rate_hz,
+        "acquisition": acq,
+        "provenance": rec_prov.value,
+        "location": {"lon": float(np.mean(lon)), "lat": float(np.mean(lat))},
+        "crs": crs,
+        "map": {"file": "map.xodr", "sha256": sha256_of(map_bytes),
+                "opendrive_version": opendrive_version(map_bytes)},
+        "rights": dict(rights or {"right_of_use": "research_only", "license": "unspecified",
+                                  "owner": partner}),
+    }
+    md.update(meta)
+    meta_model = RecordingMeta.model_validate(md)
+    tables = {"participants": p, "states": s}
+    for name, data in (("unobserved", unobserved), ("events", events),
+                       ("environment", environment), ("interior", interior)):
+        tab = _table(data, name)
+        if tab is not None:
+            tables[name] = prepare_table(tab, TABLES[name])
+    rec = Recording(meta=meta_model, tables=tables, map_source=map_bytes)
+    rec._map = net
+    return rec
+
+
+def _fill_participants(p: pa.Table, prov: RecordingProvenance) -> pa.Table:
+    n = p.num_rows
+    for need in ("participant_id", "class", "length", "width"):
+        if need not in p.column_names:
+            raise FormatError(f"participants: column {need!r} is required")
+    if "source_id" not in p.column_names:
+        p = p.append_column("source_id", p.column("participant_id").cast(pa.string()))
+    part_prov = Provenance.NATURAL.value if prov is RecordingProvenance.MIXED else prov.value
+    if "provenance" not in p.column_names:
+        p = p.append_column("provenance", pa.array([part_prov] * n, pa.string()))
+    if "role" not in p.column_names:
+        provs = p.column("provenance").cast(pa.string()).to_pylist()
+        roles = [Role.SIMULATED_AGENT.value if v == "simulated" else
+                 Role.STAGED_ACTOR.value if v == "staged" else Role.OBSERVED.value for v in provs]
+        p = p.append_column("role", pa.array(roles, pa.string()))
+    return prepare_table(p, TABLES["participants"])
+
+
+def _fill_states(s: pa.Table, frame, net) -> pa.Table:
+    for need in ("participant_id", "time", "x", "y"):
+        if need not in s.column_names:
+            raise FormatError(f"states: column {need!r} is required")
+    pid = s.column("participant_id").to_numpy()
+    t = s.column("time").to_numpy()
+    x = s.column("x").to_numpy()
+    y = s.column("y").to_numpy()
+    cols = dict(zip(s.column_names, s.columns))
+    if "vx" not in cols or "vy" not in cols:
+        vx, vy = velocity_from_positions(pid, t, x, y)
+        cols["vx"], cols["vy"] = pa.array(vx), pa.array(vy)
+    if "heading" not in cols:
+        h = heading_from_velocity(pid, np.asarray(cols["vx"]), np.asarray(cols["vy"]))
+        cols["heading"] = pa.array(h)
+    else:
+        cols["heading"] = pa.array(wrap_angle(np.asarray(cols["heading"])))
+    if "lon" not in cols or "lat" not in cols:
+        lon, lat = frame.to_wgs84(x, y)
+        cols["lon"], cols["lat"] = pa.array(lon), pa.array(lat)
+    if net is not None and "road_id" not in cols:
+        from aveas_format.referencing import road_coordinates
+
+        ref = road_coordinates(net, pid, t, x, y, np.asarray(cols["heading"]))
+        cols.update(ref)
+    for c in ("road_id", "lane_id", "road_s", "road_t"):
+        if c not in cols:
+            cols[c] = pa.nulls(s.num_rows, pa.string() if c == "road_id" else pa.float64())
+    out = pa.table(cols)
+    return prepare_table(out, TABLES["states"])

@@ -1,0 +1,119 @@
+"""The rule registry: one declaration per rule, found by its code (STYLE.md 1, 6).
+
+A rule is a generator function decorated with :func:`rule`, which declares its stable code
+``<family>.<snake_case>``, severity, title, message template, doc and the FORMAT.md sentence it
+enforces. It yields :class:`Hit` (one finding) or :class:`Hits` (a vectorised batch: the true total
+and arrays of location fields, of which the runner keeps a bounded sample). Rules never raise on
+bad data; an exception is a tool failure.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from aveas_format.validate.report import Severity
+
+_CODE = re.compile(r"^[a-z]+\.[a-z][a-z0-9_]*$")
+
+
+@dataclass
+class Hit:
+    """One finding: location fields (file, table, row, participant_id, time, column, x, y, road_id,
+    lane_id, xpath, line) and context values, all usable in the rule's message template."""
+
+    fields: dict[str, Any]
+
+    def __init__(self, **fields: Any) -> None:
+        self.fields = fields
+
+
+@dataclass
+class Hits:
+    """Many findings at once: ``total`` and per-finding arrays (only a sample is materialised).
+
+    ``arrays`` maps a field name to an array of length >= the sample size (in file order);
+    ``const`` holds fields shared by every finding of the batch.
+    """
+
+    total: int
+    arrays: dict[str, Any]
+    const: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def where(cls, mask: np.ndarray, arrays: dict[str, Any] | None = None, **const: Any) -> Hits:
+        """Findings at the rows where ``mask`` is true; ``row`` is set from the mask's positions."""
+        idx = np.flatnonzero(mask)
+        out = {"row": idx}
+        for k, v in (arrays or {}).items():
+            out[k] = np.asarray(v)[idx]
+        return cls(total=len(idx), arrays=out, const=const)
+
+
+RuleFn = Callable[..., Iterator[Hit | Hits]]
+
+
+@dataclass(frozen=True)
+class Rule:
+    code: str
+    severity: Severity
+    title: str
+    message: str
+    doc: str
+    fn: RuleFn
+    enforces: str | None = None  # the FORMAT.md sentence behind an error / warning
+
+    @property
+    def family(self) -> str:
+        return self.code.split(".", 1)[0]
+
+
+REGISTRY: dict[str, Rule] = {}
+
+
+def rule(code: str, severity: str, title: str, message: str, enforces: str | None = None
+         ) -> Callable[[RuleFn], RuleFn]:
+    """Register a rule (decorator). The function's docstring is the rule's doc."""
+    if not _CODE.match(code):
+        raise ValueError(f"rule code {code!r} must look like 'family.snake_case'")
+    if code in REGISTRY:
+        raise ValueError(f"rule code {code!r} registered twice")
+
+    def register(fn: RuleFn) -> RuleFn:
+        doc = " ".join((fn.__doc__ or "").split())
+        if not doc:
+            raise ValueError(f"rule {code} has no doc")
+        REGISTRY[code] = Rule(code=code, severity=Severity(severity), title=title, message=message,
+                              doc=doc, fn=fn, enforces=enforces)
+        return fn
+
+    return register
+
+
+def load_rules() -> dict[str, Rule]:
+    """Import every rule module (they register themselves) and return the registry."""
+    from aveas_format.validate import rules  # noqa: F401
+
+    return REGISTRY
+
+
+def select_rules(select: list[str] | None = None, ignore: list[str] | None = None) -> list[Rule]:
+    """Rules matching ``select`` (codes or families; default all) minus ``ignore``.
+
+    Raises ValueError naming an unknown code or family.
+    """
+    reg = load_rules()
+    families = {r.family for r in reg.values()}
+
+    def match(r: Rule, pats: list[str]) -> bool:
+        return any(p == r.code or p == r.family for p in pats)
+
+    for p in (select or []) + (ignore or []):
+        if p not in reg and p not in families:
+            raise ValueError(f"unknown rule or family {p!r}; families: {', '.join(sorted(families))}")
+    chosen = [r for r in reg.values() if not select or match(r, select)]
+    return [r for r in chosen if not ignore or not match(r, ignore)]

@@ -1,0 +1,110 @@
+"""The CLI: commands, exit codes, one-line errors, JSON output equal to the API."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+import aveas_format
+from aveas_format.schema import recording_json_schema, tables_spec
+
+
+def cli(*args, check_rc=None):
+    res = subprocess.run([sys.executable, "-m", "aveas_format", *map(str, args)],
+                         capture_output=True, text=True, timeout=300)
+    if check_rc is not None:
+        assert res.returncode == check_rc, (res.returncode, res.stdout[-2000:], res.stderr[-2000:])
+    return res
+
+
+def test_version():
+    res = cli("--version", check_rc=0)
+    assert res.stdout.strip() == f"aveas-format {aveas_format.__version__}"
+
+
+def test_info_text_and_json(conformance_path):
+    res = cli("info", conformance_path, check_rc=0)
+    assert "conformance-highway-1" in res.stdout and "car 24, truck 6" in res.stdout
+    res = cli("info", conformance_path, "--json", check_rc=0)
+    data = json.loads(res.stdout)
+    assert data["participants_per_class"] == {"car": 24, "truck": 6}
+    assert data["duration_s"] == 19.96 and data["observed_rate_hz"] == 25.0
+    assert data["tables"] == {"participants": 30, "states": 15000, "unobserved": 1}
+    assert data["column_coverage"]["x"] == 1.0
+
+
+def test_schema_outputs():
+    assert json.loads(cli("schema", check_rc=0).stdout) == recording_json_schema()
+    assert json.loads(cli("schema", "--tables", check_rc=0).stdout) == tables_spec()
+
+
+@pytest.mark.parametrize("args,rc,needle", [
+    (("info", "does-not-exist.aveas"), 3, "does-not-exist.aveas: no such recording"),
+    (("validate", "does-not-exist.aveas"), 3, "no such recording"),
+    (("info",), 2, "Missing argument"),
+    (("frobnicate",), 2, "No such command"),
+    (("validate", "{rec}", "--select", "nonsense"), 2, "unknown rule or family 'nonsense'"),
+    (("validate", "{rec}", "--fail-on", "sometimes"), 2, "Invalid value"),
+])
+def test_errors_are_one_clear_line(written, args, rc, needle):
+    res = cli(*[a.replace("{rec}", str(written)) for a in args])
+    assert res.returncode == rc
+    assert needle in res.stderr
+    assert "Traceback" not in res.stderr
+    if rc == 3:
+        assert len(res.stderr.strip().splitlines()) == 1
+
+
+def test_debug_shows_the_traceback():
+    res = cli("--debug", "info", "does-not-exist.aveas")
+    assert res.returncode == 3 and "Traceback" in res.stderr
+
+
+def test_damaged_recording_gives_exit_3(written):
+    (written / "recording.json").write_text("{ not json")
+    res = cli("info", written)
+    assert res.returncode == 3
+    assert "recording.json: line 1, column 3: broken JSON" in res.stderr
+
+
+def test_validate_exit_codes_and_json_equals_api(written):
+    res = cli("validate", written, "--format", "json", check_rc=0)
+    api = aveas_format.validate(written)
+    cli_report = json.loads(res.stdout)
+    for r in (cli_report, json.loads(api.to_json())):
+        r.pop("seconds")
+        for rr in r["results"]:
+            rr.pop("seconds")
+    assert cli_report == json.loads(api.to_json()) | {"seconds": cli_report.get("seconds")} or True
+    api_d = json.loads(api.to_json())
+    api_d.pop("seconds")
+    for rr in api_d["results"]:
+        rr.pop("seconds")
+    assert cli_report == api_d
+    # break it: a duplicated state row
+    meta = json.loads((written / "recording.json").read_text())
+    meta["tables"]["states"]["rows"] = 1
+    (written / "recording.json").write_text(json.dumps(meta))
+    res = cli("validate", written)
+    assert res.returncode == 1
+    assert "ERROR   structure.row_count" in res.stdout and "INVALID" in res.stdout
+    assert cli("validate", written, "--fail-on", "never").returncode == 0
+    assert cli("validate", written, "--ignore", "structure.row_count").returncode == 0
+    out = written.parent / "report.json"
+    cli("validate", written, "--format", "json", "--output", out)
+    assert json.loads(out.read_text())["results"][0]["code"] == "structure.row_count"
+
+
+def test_demo(tmp_path):
+    res = cli("demo", "--output", tmp_path / "demo", "--vehicles", "12", "--duration", "6",
+              check_rc=0)
+    assert "VALID" in res.stdout and "equal to the directory form: True" in res.stderr
+    rec = aveas_format.open(tmp_path / "demo" / "highway.aveas.zip")
+    assert rec.participants.num_rows == 12
+    assert rec.unobserved.num_rows == 2
+    s = rec.states
+    assert {"x_std", "y_std", "heading_std", "vx_std", "vy_std", "interpolated"} <= set(s.column_names)
+    assert s.column("road_id").null_count == 0
