@@ -13,6 +13,7 @@ app = typer.Typer(
     "derive.",
     no_args_is_help=True,
     pretty_exceptions_enable=False,
+    rich_markup_mode="markdown",
     add_completion=False,
     context_settings={"help_option_names": ["-h", "--help"]},
 )
@@ -33,5 +34,16 @@ def _root(
     State.debug = debug
 
 
-# command modules register themselves on `app`
-from aveas_format.cli import demo, info, schema, validate  # noqa: E402,F401
+def _register_commands() -> None:
+    """Import every command module of this package; each registers itself on ``app``."""
+    import importlib
+    import pkgutil
+
+    import aveas_format.cli as pkg
+
+    for mod in sorted(m.name for m in pkgutil.iter_modules(pkg.__path__)):
+        if mod not in ("app", "common"):
+            importlib.import_module(f"aveas_format.cli.{mod}")
+
+
+_register_commands()

@@ -99,9 +99,9 @@ def _json_schema() -> dict:
       enforces="FORMAT.md 1: recording.json lists every table with its row count and SHA-256")
 def unlisted_table(ctx: Context) -> Iterator[Hit]:
     """A table file is present but recording.json:tables does not list it, so it cannot be checked
-    against a checksum."""
+    against a checksum. (In-memory recordings get their entries when written.)"""
     d = ctx.meta_dict
-    if d is None or not isinstance(d.get("tables"), dict):
+    if ctx.recording is not None or d is None or not isinstance(d.get("tables"), dict):
         return
     for name in ctx.table_names:
         if name not in d["tables"]:
@@ -266,12 +266,14 @@ def null_values(ctx: Context) -> Iterator[Hits]:
     """A column that must always hold a value (ids, time, position, heading, velocity, lon/lat,
     class, sizes...) has nulls."""
     for name, spec, c, arr in _typed_columns(ctx):
-        if c.nullable or arr.null_count == 0:
+        if c.nullable:
             continue
         mask = np.asarray(arr.is_null().to_numpy(zero_copy_only=False), bool)
-        if c.is_float:
-            mask |= np.isnan(arr.to_numpy(zero_copy_only=False).astype(float))
+        if c.is_float:  # NaN is how numpy writers spell null
+            mask |= np.isnan(pc.fill_null(arr, 0.0).to_numpy(zero_copy_only=False))
         rows = np.flatnonzero(mask)
+        if not len(rows):
+            continue
         yield Hits(total=len(rows), arrays={"row": rows, **_keys(ctx.table(name), rows)},
                    const={"file": spec.file, "table": name, "column": c.name})
 

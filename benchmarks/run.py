@@ -1,0 +1,42 @@
+"""`make bench`: every benchmark, each printed with its baseline measured in the same run."""
+
+from __future__ import annotations
+
+import importlib.util
+import platform
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def _load(name: str):
+    spec = importlib.util.spec_from_file_location(name, HERE / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    assert spec.loader is not None
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def main() -> int:
+    import os
+
+    print(f"# aveas-format benchmarks — {platform.processor() or platform.machine()}, "
+          f"{os.cpu_count()} cores, Python {platform.python_version()}, {time.strftime('%Y-%m-%d')}")
+    for name in sorted(p.stem for p in HERE.glob("bench_*.py")):
+        print(f"\n## {name}")
+        t0 = time.perf_counter()
+        rows = _load(name).main()
+        for r in rows or []:
+            base = r.get("baseline_s")
+            ratio = r.get("speedup_vs_baseline")
+            extra = f"  baseline {base} s -> {ratio}x" if base is not None else ""
+            print(f"{r['benchmark']:<32} {r['seconds']:>9.4f} s  {r.get('rows_per_s', ''):>12} "
+                  f"rows/s{extra}  {r.get('note', '')}")
+        print(f"({time.perf_counter() - t0:.1f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
