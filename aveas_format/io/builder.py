@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from aveas_format.errors import FormatError
+from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.io.arrow import conform
 from aveas_format.io.container import sha256_of
 from aveas_format.io.recording import Recording
@@ -48,6 +48,21 @@ def _array(v: Any) -> pa.Array:
     if isinstance(a, np.ndarray) and a.ndim == 2:  # PMF matrix -> list column, conform makes structs
         return pa.array(list(a.astype(np.float32)), pa.list_(pa.float32()))
     return pa.array(a)
+
+
+def load_map_bytes(source: str | bytes | Path) -> bytes:
+    """The bytes of a map given as a path, XML text or bytes."""
+    if isinstance(source, (bytes, bytearray, memoryview)):
+        return bytes(source)
+    if isinstance(source, str) and source.lstrip().startswith("<"):
+        return source.encode("utf-8")
+    path = Path(source)
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise RecordingIOError("map file not found", path=path) from None
+    except OSError as e:
+        raise RecordingIOError(f"cannot read map: {e.strerror or e}", path=path) from None
 
 
 def _segments(pid: np.ndarray) -> np.ndarray:
@@ -139,11 +154,7 @@ def build_recording(
     from aveas_format.opendrive import load_map
     from aveas_format.georef import LocalFrame
 
-    if isinstance(map_source, Path) or (isinstance(map_source, str) and not map_source.lstrip().startswith("<")
-                                        and Path(map_source).suffix == ".xodr"):
-        map_bytes = Path(map_source).read_bytes()
-    else:
-        map_bytes = map_source.encode() if isinstance(map_source, str) else bytes(map_source)
+    map_bytes = load_map_bytes(map_source)
     net = load_map(map_bytes)
     method = AcquisitionMethod(method)
     if provenance is None:

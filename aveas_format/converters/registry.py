@@ -1,0 +1,112 @@
+"""The converter registry: one module per foreign format, registered by name.
+
+A converter is a function ``(inputs, *, map_source, options) -> Recording`` decorated with
+:func:`converter`, which declares its name, direction, the acquisition method it produces, file
+patterns, a pydantic options model and a one-line description. ``aveas-format convert --from NAME``
+finds it here; ``aveas-format convert --list`` prints the table.
+
+Exporters (recording -> foreign format) register with ``direction="export"`` and have the signature
+``(recording, output, *, options) -> list[Path]``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from aveas_format.errors import FormatError
+
+
+class ConverterOptions(BaseModel):
+    """Base of every converter's options: unknown options are errors."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
+@dataclass(frozen=True)
+class Converter:
+    name: str
+    direction: str  # "import" or "export"
+    description: str
+    patterns: tuple[str, ...]
+    method: str | None  # acquisition method of the recordings an importer produces
+    options: type[ConverterOptions]
+    fn: Callable[..., Any]
+    needs_map: bool = True
+    version: str = "1"
+
+    def parse_options(self, raw: dict[str, Any] | None) -> ConverterOptions:
+        try:
+            return self.options.model_validate(raw or {})
+        except ValidationError as e:
+            parts = [f"{'.'.join(str(p) for p in err['loc'])}: {err['msg']}" for err in e.errors()]
+            raise FormatError(f"converter {self.name}: invalid options: {'; '.join(parts)}") from None
+
+    def __call__(self, *args: Any, options: dict[str, Any] | ConverterOptions | None = None,
+                 **kw: Any) -> Any:
+        opts = options if isinstance(options, ConverterOptions) else self.parse_options(options)
+        return self.fn(*args, options=opts, **kw)
+
+
+CONVERTERS: dict[str, Converter] = {}
+
+
+def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
+              method: str | None = None, options: type[ConverterOptions] = ConverterOptions,
+              direction: str = "import", needs_map: bool = True, version: str = "1"
+              ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """Register a converter function (decorator)."""
+    if direction not in ("import", "export"):
+        raise ValueError("direction must be 'import' or 'export'")
+    key = name if direction == "import" else f"{name}:export"
+
+    def register(fn: Callable[..., Any]) -> Callable[..., Any]:
+        if key in CONVERTERS:
+            raise ValueError(f"converter {name!r} ({direction}) registered twice")
+        CONVERTERS[key] = Converter(name=name, direction=direction, description=description,
+                                    patterns=patterns, method=method, options=options, fn=fn,
+                                    needs_map=needs_map, version=version)
+        return fn
+
+    return register
+
+
+def load_converters() -> dict[str, Converter]:
+    """Import every converter module of the package (they register themselves)."""
+    import importlib
+    import pkgutil
+
+    import aveas_format.converters as pkg
+
+    for mod in sorted(m.name for m in pkgutil.iter_modules(pkg.__path__)):
+        if mod not in ("registry", "common"):
+            importlib.import_module(f"aveas_format.converters.{mod}")
+    return CONVERTERS
+
+
+def get_converter(name: str, direction: str = "import") -> Converter:
+    reg = load_converters()
+    key = name if direction == "import" else f"{name}:export"
+    if key not in reg:
+        known = sorted(c.name for c in reg.values() if c.direction == direction)
+        raise FormatError(f"no {direction} converter named {name!r}; known: {', '.join(known)}")
+    return reg[key]
+
+
+def convert(name: str, inputs: list[str | Path], *, map_source: str | Path | bytes | None = None,
+            options: dict[str, Any] | None = None):
+    """Run the importer ``name`` on ``inputs`` and return the Recording."""
+    conv = get_converter(name)
+    paths = [Path(p) for p in inputs]
+    for p in paths:
+        if not p.exists():
+            from aveas_format.errors import RecordingIOError
+
+            raise RecordingIOError("input not found", path=p)
+    if conv.needs_map and map_source is None:
+        raise FormatError(f"converter {name} needs a map: pass --map MAP.xodr")
+    return conv(paths, map_source=map_source, options=options)

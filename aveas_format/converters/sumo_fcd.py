@@ -1,0 +1,279 @@
+"""Eclipse SUMO floating-car data (FCD) -> recording.
+
+Input: the FCD output of ``sumo --fcd-output fcd.xml`` (XML, optionally gzipped) or its Parquet/CSV
+variant (``--fcd-output fcd.parquet``: columns ``timestep_time``, ``vehicle_id``, ``vehicle_x``, ...).
+
+SUMO's conventions and what the converter does with them:
+
+- ``x``, ``y`` are the **front-bumper centre** in the network frame; the converter moves them back
+  by half the vehicle length along the heading to the footprint centre. Lengths and widths come from
+  the ``vType`` definitions of a route/additional file (option ``vtypes``), else SUMO's defaults per
+  vClass (passenger 5.0 x 1.8 m, ...).
+- The network frame is the OpenDRIVE map frame shifted by the net's ``netOffset`` when the network
+  was made with ``netconvert --opendrive-files`` (option ``net_file`` reads it from the .net.xml,
+  or ``net_offset``). With ``--fcd-output.geo`` x/y are lon/lat (option ``geo``, auto-detected from the
+  configuration SUMO writes into the file header) and are projected through the map's CRS.
+- ``angle`` is navigational (degrees, 0 = north, clockwise) -> heading in radians, counter-clockwise
+  from +x. Velocity = speed along the heading (SUMO's FCD has no lateral speed).
+- vClass -> class: passenger/private/taxi/emergency/authority/army/vip/custom -> car, delivery -> van,
+  truck/trailer -> truck, bus/coach -> bus, motorcycle/moped -> motorcycle, bicycle -> bicycle,
+  pedestrian (``<person>`` elements) -> pedestrian, rail* / tram -> railvehicle, else other.
+- Provenance ``simulated``, role ``simulated_agent``, all ``_std`` 0 (exact). Lane and position on the
+  SUMO lane are not copied: road coordinates are computed from the positions through the map.
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+from lxml import etree
+
+from aveas_format.converters.common import (
+    column,
+    factorize,
+    load_map_bytes,
+    move_along_heading,
+    navigation_deg_to_heading,
+    read_table,
+    wrap_recording,
+)
+from aveas_format.converters.registry import ConverterOptions, converter
+from aveas_format.errors import FormatError, RecordingIOError
+
+# SUMO's vType defaults per vClass: (length, width, height) in m
+VCLASS_SIZE: dict[str, tuple[float, float, float]] = {
+    "passenger": (5.0, 1.8, 1.5), "private": (5.0, 1.8, 1.5), "taxi": (5.0, 1.8, 1.5),
+    "emergency": (6.5, 2.16, 2.86), "authority": (5.0, 1.8, 1.5), "army": (5.0, 1.8, 1.5),
+    "vip": (5.0, 1.8, 1.5), "custom1": (5.0, 1.8, 1.5), "custom2": (5.0, 1.8, 1.5),
+    "delivery": (6.5, 2.16, 2.86), "truck": (7.1, 2.4, 2.4), "trailer": (16.5, 2.55, 4.0),
+    "bus": (12.0, 2.5, 3.4), "coach": (14.0, 2.6, 4.0), "motorcycle": (2.2, 0.9, 1.5),
+    "moped": (2.1, 0.8, 1.7), "bicycle": (1.6, 0.65, 1.7), "pedestrian": (0.215, 0.478, 1.719),
+    "tram": (22.0, 2.4, 3.2), "rail_urban": (36.5, 3.0, 3.6), "rail": (67.0, 2.84, 3.75),
+    "rail_electric": (25.0, 2.84, 3.75), "rail_fast": (25.0, 2.84, 3.75),
+}
+VCLASS_TO_CLASS = {
+    "delivery": "van", "truck": "truck", "trailer": "truck", "bus": "bus", "coach": "bus",
+    "motorcycle": "motorcycle", "moped": "motorcycle", "bicycle": "bicycle",
+    "pedestrian": "pedestrian", "tram": "railvehicle", "rail_urban": "railvehicle",
+    "rail": "railvehicle", "rail_electric": "railvehicle", "rail_fast": "railvehicle",
+    "evehicle": "car", "ignoring": "other", "ship": "other", "container": "other",
+}
+DEFAULT_VTYPES = {"DEFAULT_VEHTYPE": "passenger", "DEFAULT_PEDTYPE": "pedestrian",
+                  "DEFAULT_BIKETYPE": "bicycle", "DEFAULT_CONTAINERTYPE": "ignoring",
+                  "DEFAULT_TAXITYPE": "taxi", "DEFAULT_RAILTYPE": "rail"}
+
+
+class SumoFcdOptions(ConverterOptions):
+    vtypes: list[Path] = []
+    """Route/additional files with ``<vType>`` definitions (length, width, height, vClass)."""
+    net_file: Path | None = None
+    """The SUMO network; its ``<location netOffset>`` is subtracted from x/y."""
+    net_offset: tuple[float, float] | None = None
+    """netOffset (dx, dy) given directly instead of ``net_file``."""
+    geo: bool | None = None
+    """x/y are lon/lat (``--fcd-output.geo``); default: read from the file's header."""
+    default_vclass: str = "passenger"
+    """vClass of types without a definition."""
+    start_time: str = "1970-01-01T00:00:00Z"
+    partner: str = "Eclipse SUMO simulation"
+
+
+def _parse_vtypes(paths: list[Path]) -> dict[str, dict[str, float | str]]:
+    types: dict[str, dict[str, float | str]] = {}
+    for p in paths:
+        try:
+            root = etree.parse(str(p), etree.XMLParser(remove_comments=True, huge_tree=True))
+        except (OSError, etree.XMLSyntaxError) as e:
+            raise FormatError(f"cannot parse vType file: {e}", path=p,
+                              line=getattr(e, "lineno", None)) from None
+        for vt in root.iter("vType"):
+            vid = vt.get("id")
+            if not vid:
+                raise FormatError("<vType> without id", path=p, line=vt.sourceline)
+            d: dict[str, float | str] = {"vClass": vt.get("vClass", "passenger")}
+            for k in ("length", "width", "height"):
+                if vt.get(k) is not None:
+                    try:
+                        d[k] = float(vt.get(k))
+                    except ValueError:
+                        raise FormatError(f"<vType id={vid!r}> {k}={vt.get(k)!r} is not a number",
+                                          path=p, line=vt.sourceline) from None
+            types[vid] = d
+    return types
+
+
+def _net_offset(opts: SumoFcdOptions) -> tuple[float, float]:
+    if opts.net_offset is not None:
+        return opts.net_offset
+    if opts.net_file is None:
+        return 0.0, 0.0
+    if not opts.net_file.is_file():
+        raise RecordingIOError("SUMO network not found", path=opts.net_file)
+    for _, el in etree.iterparse(str(opts.net_file), tag="location"):
+        off = el.get("netOffset", "0,0").split(",")
+        try:
+            return float(off[0]), float(off[1])
+        except (ValueError, IndexError):
+            raise FormatError(f"netOffset {el.get('netOffset')!r} is not 'dx,dy'", path=opts.net_file,
+                              line=el.sourceline) from None
+    return 0.0, 0.0
+
+
+_COLS = ("time", "id", "x", "y", "angle", "type", "speed", "kind")
+
+
+def _read_xml(path: Path) -> tuple[dict[str, list], bool]:
+    """Rows of <vehicle>/<person> elements; and whether the header says fcd-output.geo."""
+    opener = gzip.open if path.suffix == ".gz" else open
+    rows: dict[str, list] = {k: [] for k in _COLS}
+    geo = False
+    try:
+        with opener(path, "rb") as f:
+            head = f.read(4096)
+            geo = bool(re.search(rb'fcd-output\.geo\s+value="(true|1)"', head))
+            f.seek(0)
+            time = None
+            for event, el in etree.iterparse(f, events=("start", "end"),
+                                             tag=("timestep", "vehicle", "person"),
+                                             remove_comments=True, huge_tree=True):
+                if el.tag == "timestep":
+                    if event == "start":
+                        try:
+                            time = float(el.get("time"))
+                        except (TypeError, ValueError):
+                            raise FormatError(f"<timestep> time={el.get('time')!r} is not a number",
+                                              path=path, line=el.sourceline) from None
+                    else:
+                        el.clear()
+                    continue
+                if event != "end":
+                    continue
+                a = el.attrib
+                if time is None:
+                    raise FormatError(f"<{el.tag}> outside a <timestep>", path=path, line=el.sourceline)
+                try:
+                    rows["x"].append(float(a["x"]))
+                    rows["y"].append(float(a["y"]))
+                    rows["angle"].append(float(a["angle"]))
+                    rows["speed"].append(float(a.get("speed", "nan")))
+                except KeyError as e:
+                    raise FormatError(f"<{el.tag} id={a.get('id')!r}> lacks attribute {e.args[0]!r}",
+                                      path=path, line=el.sourceline) from None
+                except ValueError as e:
+                    raise FormatError(f"<{el.tag} id={a.get('id')!r}>: {e}", path=path,
+                                      line=el.sourceline) from None
+                rows["time"].append(time)
+                rows["id"].append(("p:" if el.tag == "person" else "") + a.get("id", ""))
+                rows["type"].append(a.get("type", "DEFAULT_PEDTYPE" if el.tag == "person"
+                                          else "DEFAULT_VEHTYPE"))
+                rows["kind"].append(el.tag)
+    except etree.XMLSyntaxError as e:
+        raise FormatError(f"malformed XML: {e.msg}", path=path, line=e.lineno) from None
+    except (OSError, EOFError) as e:
+        raise RecordingIOError(f"cannot read: {e}", path=path) from None
+    return rows, geo
+
+
+def _read_tabular(path: Path) -> dict[str, list]:
+    t = read_table(path)
+    names = set(t.column_names)
+    prefix = "vehicle_" if "vehicle_id" in names else ""
+    tcol = "timestep_time" if "timestep_time" in names else "time"
+    need = [tcol, f"{prefix}id", f"{prefix}x", f"{prefix}y", f"{prefix}angle"]
+    missing = [c for c in need if c not in names]
+    if missing:
+        raise FormatError(f"FCD table lacks columns {missing}", path=path)
+    t = read_table(path, numeric=[tcol, f"{prefix}x", f"{prefix}y", f"{prefix}angle",
+                                  f"{prefix}speed"])
+    t = t.filter(pa.compute.is_valid(t.column(f"{prefix}id")))
+    n = t.num_rows
+    return {
+        "time": column(t, tcol).tolist(), "id": t.column(f"{prefix}id").cast(pa.string()).to_pylist(),
+        "x": column(t, f"{prefix}x").tolist(), "y": column(t, f"{prefix}y").tolist(),
+        "angle": column(t, f"{prefix}angle").tolist(),
+        "speed": (column(t, f"{prefix}speed") if f"{prefix}speed" in names else np.full(n, np.nan)).tolist(),
+        "type": (t.column(f"{prefix}type").cast(pa.string()).to_pylist() if f"{prefix}type" in names
+                 else ["DEFAULT_VEHTYPE"] * n),
+        "kind": ["vehicle"] * n,
+    }
+
+
+@converter("sumo-fcd", description="Eclipse SUMO floating-car data (XML, .xml.gz, Parquet/CSV)",
+           patterns=("*.xml", "*.xml.gz", "*.fcd.xml", "*.parquet", "*.csv"),
+           method="traffic_simulation", options=SumoFcdOptions)
+def convert_sumo_fcd(inputs: list[Path], *, map_source, options: SumoFcdOptions):
+    rows: dict[str, list] = {k: [] for k in _COLS}
+    geo_detected = False
+    for p in inputs:
+        if p.suffix.lower() in (".parquet", ".csv"):
+            part, g = _read_tabular(p), False
+        else:
+            part, g = _read_xml(p)
+        geo_detected |= g
+        for k in _COLS:
+            rows[k].extend(part[k])
+    if not rows["time"]:
+        raise FormatError("no <vehicle> or <person> samples found", path=inputs[0])
+    geo = geo_detected if options.geo is None else options.geo
+    vtypes = {**{k: {"vClass": v} for k, v in DEFAULT_VTYPES.items()}, **_parse_vtypes(options.vtypes)}
+
+    t = np.asarray(rows["time"], np.float64)
+    pid, source_ids = factorize(rows["id"])
+    types = np.asarray(rows["type"], dtype=object)
+    # one type per participant (the first seen)
+    first = np.unique(pid, return_index=True)[1]
+    p_types = types[first]
+    sizes, classes = [], []
+    for ty in p_types:
+        d = vtypes.get(ty, {"vClass": options.default_vclass})
+        vclass = str(d.get("vClass", options.default_vclass))
+        base = VCLASS_SIZE.get(vclass, VCLASS_SIZE["passenger"])
+        sizes.append((float(d.get("length", base[0])), float(d.get("width", base[1])),
+                      float(d.get("height", base[2]))))
+        classes.append(VCLASS_TO_CLASS.get(vclass, "car" if vclass in VCLASS_SIZE else "other"))
+    size = np.asarray(sizes)
+
+    heading = navigation_deg_to_heading(np.asarray(rows["angle"], np.float64))
+    x = np.asarray(rows["x"], np.float64)
+    y = np.asarray(rows["y"], np.float64)
+    map_bytes = load_map_bytes(map_source)
+    if geo:
+        from aveas_format.georef import LocalFrame
+        from aveas_format.opendrive import load_map
+
+        net = load_map(map_bytes)
+        if not net.header.geo_reference:
+            raise FormatError("geo FCD needs a map with a <geoReference> to project lon/lat")
+        x, y = LocalFrame(net.header.geo_reference, net.header.offset).from_wgs84(x, y)
+    else:
+        dx, dy = _net_offset(options)
+        x, y = x - dx, y - dy
+    length = size[pid, 0]
+    x, y = move_along_heading(x, y, heading, -length / 2.0)
+    speed = np.nan_to_num(np.asarray(rows["speed"], np.float64))
+    n = len(t)
+    states = {
+        "participant_id": pid, "time": t, "x": x, "y": y, "heading": heading,
+        "vx": speed * np.cos(heading), "vy": speed * np.sin(heading),
+        **{f"{c}_std": np.zeros(n) for c in ("x", "y", "heading", "vx", "vy")},
+    }
+    m = len(source_ids)
+    participants = {
+        "participant_id": np.arange(m, dtype=np.int64),
+        "source_id": source_ids,
+        "class": np.asarray(classes, dtype=object),
+        "length": size[:, 0], "width": size[:, 1], "height": size[:, 2],
+        "length_std": np.zeros(m), "width_std": np.zeros(m), "height_std": np.zeros(m),
+        "attributes": [json.dumps({"sumo_type": str(ty)}) for ty in p_types],
+    }
+    return wrap_recording(
+        "sumo-fcd", inputs, options, map_bytes=map_bytes, participants=participants, states=states,
+        method="traffic_simulation", provenance="simulated", partner=options.partner,
+        start_time=options.start_time,
+        acquisition={"platform": "Eclipse SUMO", "sensors": [{"id": "sumo", "kind": "simulator"}]},
+    )
