@@ -30,9 +30,11 @@ def westward_map(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def geo_map(tmp_path_factory):
-    """The same layout for the geo excerpt: a local frame centred on its first sample."""
+    """A wide lane for the geo excerpt (its road drifts 2 m north over 70 m in this frame), in a
+    local frame centred on its first sample."""
     p = tmp_path_factory.mktemp("maps") / "geo.xodr"
-    p.write_text(straight_highway(length=1000.0, lanes_right=1, x0=500.0, y0=-1.75, hdg=math.pi,
+    p.write_text(straight_highway(length=1000.0, lanes_right=1, lane_width=6.0, x0=500.0, y0=-3.0,
+                                  hdg=math.pi,
                                   geo_reference="+proj=tmerc +lat_0=48.836229 +lon_0=11.090774 +k=1 "
                                   "+x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"))
     return p
