@@ -8,11 +8,12 @@ from aveas_format.converters.registry import (
     CONVERTERS,
     Converter,
     ConverterOptions,
+    ImportOptions,
     convert,
     converter,
     get_converter,
     load_converters,
 )
 
-__all__ = ["CONVERTERS", "Converter", "ConverterOptions", "convert", "converter", "get_converter",
+__all__ = ["CONVERTERS", "Converter", "ConverterOptions", "ImportOptions", "convert", "converter", "get_converter",
            "load_converters"]

@@ -160,8 +160,26 @@ def factorize(values: Sequence[Any] | np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 def wrap_recording(converter: str, inputs: Sequence[Path], options: Any, *, map_bytes: bytes,
                    participants: dict[str, Any], states: dict[str, Any], version: str = "1",
+                   partner: str = "unknown", start_time: str = "1970-01-01T00:00:00Z",
                    **kw: Any):
     """Finish a conversion: build the recording (lon/lat and road coordinates through the map,
-    defaults filled) with the ``source`` block naming the converter, inputs and options."""
+    defaults filled) with the ``source`` block naming the converter, inputs and options.
+
+    ``partner``/``start_time`` are the converter's defaults (e.g. from the source's metadata); the
+    common import options (:class:`~aveas_format.converters.registry.ImportOptions`) override them.
+    """
+    o = options
+    partner = getattr(o, "partner", None) or partner
+    meta: dict[str, Any] = {
+        "start_time": getattr(o, "start_time", None) or start_time,
+        "rights": {"right_of_use": getattr(o, "right_of_use", "research_only"),
+                   "license": getattr(o, "license", "unspecified"),
+                   "owner": getattr(o, "owner", None) or partner},
+    }
+    for key in ("recording_id", "title"):
+        if getattr(o, key, None):
+            meta[key] = getattr(o, key)
+    meta.update(kw)
     return build_recording(map_source=map_bytes, participants=participants, states=states,
-                           source=source_block(converter, inputs, options, version), **kw)
+                           partner=partner, source=source_block(converter, inputs, options, version),
+                           **meta)

@@ -22,9 +22,29 @@ from aveas_format.errors import FormatError
 
 
 class ConverterOptions(BaseModel):
-    """Base of every converter's options: unknown options are errors."""
+    """Base of every converter's options: unknown options are errors. A docstring under a field
+    is its description (shown in docs/converters.md)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", use_attribute_docstrings=True)
+
+
+class ImportOptions(ConverterOptions):
+    """Options every importer takes: recording metadata the source files may not carry."""
+
+    partner: str | None = None
+    """Institution that acquired the data (recording.json acquisition.partner)."""
+    start_time: str | None = None
+    """UTC ISO 8601 time of `time` = 0, where the source has no absolute time."""
+    recording_id: str | None = None
+    """Recording id (default: a new UUID)."""
+    title: str | None = None
+    """Recording title."""
+    license: str = "unspecified"
+    """Licence of the data (recording.json rights.license)."""
+    owner: str | None = None
+    """Owner of the data (default: the partner)."""
+    right_of_use: str = "research_only"
+    """research_only or commercial."""
 
 
 @dataclass(frozen=True)

@@ -42,7 +42,7 @@ from aveas_format.converters.common import (
     read_table,
     wrap_recording,
 )
-from aveas_format.converters.registry import ConverterOptions, converter
+from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
 
 # SUMO's vType defaults per vClass: (length, width, height) in m
@@ -68,7 +68,7 @@ DEFAULT_VTYPES = {"DEFAULT_VEHTYPE": "passenger", "DEFAULT_PEDTYPE": "pedestrian
                   "DEFAULT_TAXITYPE": "taxi", "DEFAULT_RAILTYPE": "rail"}
 
 
-class SumoFcdOptions(ConverterOptions):
+class SumoFcdOptions(ImportOptions):
     vtypes: list[Path] = []
     """Route/additional files with ``<vType>`` definitions (length, width, height, vClass)."""
     net_file: Path | None = None
@@ -79,8 +79,6 @@ class SumoFcdOptions(ConverterOptions):
     """x/y are lon/lat (``--fcd-output.geo``); default: read from the file's header."""
     default_vclass: str = "passenger"
     """vClass of types without a definition."""
-    start_time: str = "1970-01-01T00:00:00Z"
-    partner: str = "Eclipse SUMO simulation"
 
 
 def _parse_vtypes(paths: list[Path]) -> dict[str, dict[str, float | str]]:
@@ -273,7 +271,6 @@ def convert_sumo_fcd(inputs: list[Path], *, map_source, options: SumoFcdOptions)
     }
     return wrap_recording(
         "sumo-fcd", inputs, options, map_bytes=map_bytes, participants=participants, states=states,
-        method="traffic_simulation", provenance="simulated", partner=options.partner,
-        start_time=options.start_time,
+        method="traffic_simulation", provenance="simulated", partner="Eclipse SUMO simulation",
         acquisition={"platform": "Eclipse SUMO", "sensors": [{"id": "sumo", "kind": "simulator"}]},
     )
