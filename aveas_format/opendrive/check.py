@@ -1,0 +1,306 @@
+"""Self-consistency checks of an OpenDRIVE map (``RoadNetwork.check()``).
+
+Each rule has a code, a severity and a message rendered from typed fields (road id, XML line,
+value). Codes:
+
+====================== ========= ====================================================================
+code                   severity  meaning
+====================== ========= ====================================================================
+geometry.gap           warning   consecutive geometries: the end of one is > 1 mm from the next start
+geometry.heading_jump  warning   consecutive geometries: heading differs by > 1 mrad
+geometry.s_mismatch    warning   a geometry's s differs from the previous s + length by > 1 mm
+road.length_mismatch   warning   the plan view's length differs from the road's length by > 1 mm
+lane.negative_width    error     a lane's width is negative somewhere in its section
+lane.fold              warning   a lane lies farther out than the curve radius (world -> road folds)
+link.missing_road      error     a road, junction connection or lane link names a road not in the map
+link.missing_junction  error     a road link names a junction not in the map
+link.missing_lane      error     a lane link names a lane that the linked section does not have
+georef.missing         info      no ``<geoReference>``
+georef.no_proj         warning   ``<geoReference>`` without ``+proj`` (needs a lenient interpretation)
+georef.utm_no_zone     warning   ``+proj=utm`` without ``+zone``
+georef.unparseable     error     pyproj cannot parse the ``<geoReference>``
+====================== ========= ====================================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .polygons import section_samples
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .network import RoadNetwork
+
+GAP_TOL = 1e-3
+HEADING_TOL = 1e-3
+
+
+@dataclass(frozen=True, slots=True)
+class Finding:
+    """One finding: ``code``, ``severity`` (error/warning/info), ``message``, location, value."""
+
+    code: str
+    message: str
+    severity: str = "error"
+    road_id: str | None = None
+    line: int | None = None
+    value: float | None = None
+
+
+def _geometry(net: RoadNetwork) -> list[Finding]:
+    out = []
+    pv = net.plan
+    xe, ye, he = pv.end_points()
+    for i in range(len(pv.road) - 1):
+        if pv.road[i] != pv.road[i + 1]:
+            continue
+        rid = net._road_ids[pv.road[i]]
+        gap = float(np.hypot(xe[i] - pv.x0[i + 1], ye[i] - pv.y0[i + 1]))
+        if gap > GAP_TOL:
+            out.append(
+                Finding(
+                    "geometry.gap",
+                    f"road {rid}: {gap:.4g} m gap before the geometry at s={pv.s0[i + 1]:.6g}",
+                    "warning",
+                    rid,
+                    pv.line[i + 1],
+                    gap,
+                )
+            )
+        dh = float(abs((he[i] - pv.h0[i + 1] + np.pi) % (2 * np.pi) - np.pi))
+        if dh > HEADING_TOL:
+            out.append(
+                Finding(
+                    "geometry.heading_jump",
+                    f"road {rid}: heading jumps by {dh:.4g} rad at s={pv.s0[i + 1]:.6g}",
+                    "warning",
+                    rid,
+                    pv.line[i + 1],
+                    dh,
+                )
+            )
+        ds = float(pv.s0[i] + pv.length[i] - pv.s0[i + 1])
+        if abs(ds) > GAP_TOL:
+            out.append(
+                Finding(
+                    "geometry.s_mismatch",
+                    f"road {rid}: geometry at s={pv.s0[i + 1]:.6g} should start at s={pv.s0[i] + pv.length[i]:.6g}",
+                    "warning",
+                    rid,
+                    pv.line[i + 1],
+                    ds,
+                )
+            )
+    for road in net._road_list:
+        last = road.geometries[-1]
+        d = last.s + last.length - road.length
+        if abs(d) > GAP_TOL:
+            out.append(
+                Finding(
+                    "road.length_mismatch",
+                    f"road {road.id}: the plan view ends at s={last.s + last.length:.6g}, the road's length is {road.length:.6g}",
+                    "warning",
+                    road.id,
+                    road.line,
+                    d,
+                )
+            )
+    return out
+
+
+def _lanes(net: RoadNetwork, step: float = 2.0) -> list[Finding]:
+    out = []
+    lanes = net.lanes
+    for gsec in range(len(lanes.section_road)):
+        ri = int(lanes.section_road[gsec])
+        road = net._road_list[ri]
+        sec = road.lane_sections[int(lanes.section_local[gsec])]
+        s = section_samples(net, gsec, step)
+        # evaluate just inside each piece's end as well
+        s = np.unique(np.concatenate([s, np.maximum(s - 1e-9, s[0])]))
+        piece = lanes.pieces_in_section(gsec, s)
+        b = lanes.borders(piece, s)
+        p0 = piece[0]
+        for outers, ids, sign in ((b.left, lanes.lid[p0], 1.0), (b.right, lanes.rid[p0], -1.0)):
+            inners = np.concatenate([b.center[:, None], outers[:, :-1]], axis=1)
+            width = sign * (outers - inners)
+            for k in range(outers.shape[1]):
+                if ids[k] == 0:
+                    continue
+                w = float(width[:, k].min())
+                if w < -1e-9:
+                    lane = sec.lane(int(ids[k]))
+                    out.append(
+                        Finding(
+                            "lane.negative_width",
+                            f"road {road.id}: lane {ids[k]} of the section at s={sec.s:.6g} has width {w:.4g} m",
+                            "error",
+                            road.id,
+                            lane.line if lane else sec.line,
+                            w,
+                        )
+                    )
+        x, y, h, kap, _, _ = net.plan.at(np.full(len(s), ri), s)
+        tl, tr = lanes.extent(b)
+        fold = ((kap > 0) & (tl * kap >= 1)) | ((kap < 0) & (tr * kap >= 1))
+        if fold.any():
+            out.append(
+                Finding(
+                    "lane.fold",
+                    f"road {road.id}: lanes reach beyond the curve's centre near s={s[fold][0]:.6g}",
+                    "warning",
+                    road.id,
+                    sec.line,
+                    float(s[fold][0]),
+                )
+            )
+    return out
+
+
+def _section_lane_ids(road, at_start: bool) -> set[int]:
+    sec = road.lane_sections[0] if at_start else road.lane_sections[-1]
+    return {ln.id for ln in sec.left + sec.right}
+
+
+def _links(net: RoadNetwork) -> list[Finding]:
+    out = []
+    roads, junctions = net.roads, net.junctions
+    for road in net._road_list:
+        for kind, link in (("predecessor", road.predecessor), ("successor", road.successor)):
+            if link is None:
+                continue
+            if link.element_type == "road" and link.element_id not in roads:
+                out.append(
+                    Finding(
+                        "link.missing_road",
+                        f"road {road.id}: {kind} road {link.element_id!r} is not in the map",
+                        "error",
+                        road.id,
+                        link.line,
+                    )
+                )
+            elif link.element_type == "junction" and link.element_id not in junctions:
+                out.append(
+                    Finding(
+                        "link.missing_junction",
+                        f"road {road.id}: {kind} junction {link.element_id!r} is not in the map",
+                        "error",
+                        road.id,
+                        link.line,
+                    )
+                )
+        if road.junction is not None and road.junction not in junctions:
+            out.append(
+                Finding(
+                    "link.missing_junction",
+                    f"road {road.id} belongs to junction {road.junction!r}, which is not in the map",
+                    "error",
+                    road.id,
+                    road.line,
+                )
+            )
+        # lane links within the road and to linked roads
+        secs = road.lane_sections
+        for i, sec in enumerate(secs):
+            for lane in sec.left + sec.right:
+                for kind, targets in (("successor", lane.successors), ("predecessor", lane.predecessors)):
+                    if not targets:
+                        continue
+                    nb = i + 1 if kind == "successor" else i - 1
+                    if 0 <= nb < len(secs):
+                        avail = {ln.id for ln in secs[nb].left + secs[nb].right}
+                        where = f"the section at s={secs[nb].s:.6g}"
+                    else:
+                        link = road.successor if kind == "successor" else road.predecessor
+                        if link is None or link.element_type != "road" or link.element_id not in roads:
+                            continue
+                        other = roads[link.element_id]
+                        avail = _section_lane_ids(other, at_start=(link.contact_point or "start") == "start")
+                        where = f"road {other.id}"
+                    for tid in targets:
+                        if tid != 0 and tid not in avail:
+                            out.append(
+                                Finding(
+                                    "link.missing_lane",
+                                    f"road {road.id}: lane {lane.id} has {kind} lane {tid}, which {where} lacks",
+                                    "error",
+                                    road.id,
+                                    lane.line,
+                                )
+                            )
+    for j in junctions.values():
+        for c in j.connections:
+            for role, rid in (("incoming", c.incoming_road), ("connecting", c.target_road)):
+                if rid is not None and rid not in roads:
+                    out.append(
+                        Finding(
+                            "link.missing_road",
+                            f"junction {j.id}: connection {c.id} names {role} road {rid!r}, which is not in the map",
+                            "error",
+                            None,
+                            c.line,
+                        )
+                    )
+            if c.incoming_road in roads and c.target_road in roads:
+                inc, tgt = roads[c.incoming_road], roads[c.target_road]
+                inc_ids = {ln.id for sec in inc.lane_sections for ln in sec.left + sec.right}
+                tgt_ids = {ln.id for sec in tgt.lane_sections for ln in sec.left + sec.right}
+                for ll in c.lane_links:
+                    if ll.from_lane not in inc_ids or ll.to_lane not in tgt_ids:
+                        out.append(
+                            Finding(
+                                "link.missing_lane",
+                                f"junction {j.id}: connection {c.id} links lane {ll.from_lane} -> {ll.to_lane}, not both present",
+                                "error",
+                                None,
+                                ll.line,
+                            )
+                        )
+    return out
+
+
+def _georef(net: RoadNetwork) -> list[Finding]:
+    geo = net.header.geo_reference
+    line = net.header.line
+    if not geo:
+        return [Finding("georef.missing", "the header has no <geoReference>", "info", None, line)]
+    tokens = dict(tok.lstrip("+").split("=", 1) if "=" in tok else (tok.lstrip("+"), "") for tok in geo.split())
+    if "proj" not in tokens:
+        if tokens.get("init") or geo.upper().startswith("EPSG:") or geo.startswith(("PROJCS", "GEOGCS", "PROJCRS")):
+            pass
+        else:
+            return [
+                Finding(
+                    "georef.no_proj",
+                    f"<geoReference> {geo!r} has no +proj; a fallback interpretation is needed",
+                    "warning",
+                    None,
+                    line,
+                )
+            ]
+    out = []
+    if tokens.get("proj") == "utm" and "zone" not in tokens:
+        out.append(
+            Finding("georef.utm_no_zone", f"<geoReference> {geo!r}: +proj=utm without +zone", "warning", None, line)
+        )
+        return out
+    try:
+        from pyproj import CRS
+
+        CRS.from_user_input(geo)
+    except Exception as exc:  # pyproj raises CRSError (and others for odd input)
+        out.append(
+            Finding("georef.unparseable", f"<geoReference> {geo!r} cannot be parsed: {exc}", "error", None, line)
+        )
+    return out
+
+
+def check_network(net: RoadNetwork) -> list[Finding]:
+    """All findings for ``net``: geometry continuity, lanes, links, geoReference."""
+    return _geometry(net) + _lanes(net) + _links(net) + _georef(net)
+
+
+__all__ = ["Finding", "check_network"]

@@ -1,0 +1,37 @@
+"""Helpers of the OpenDRIVE tests: paths of the hand-made fixtures and of the real maps in shared/."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+import pytest
+
+from aveas_format.opendrive import RoadNetwork, load_map
+
+DATA = Path(__file__).resolve().parent / "data"
+SHARED_XODR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "xodr"
+REAL_MAPS = sorted(p.name for p in SHARED_XODR.glob("*.xodr")) if SHARED_XODR.is_dir() else []
+#: maps whose consecutive geometries meet to <= 1e-6 m in the file itself
+CONTINUOUS_MAPS = {
+    "esmini__e6mini.xodr",
+    "esmini__fabriksgatan.xodr",
+    "esmini__multi_intersections.xodr",
+    "esmini__parking_demo.xodr",
+    "esmini__velodrome.xodr",
+}
+
+
+@lru_cache(maxsize=None)
+def real_map(name: str) -> RoadNetwork:
+    return load_map(SHARED_XODR / name)
+
+
+@lru_cache(maxsize=None)
+def fixture_map(name: str) -> RoadNetwork:
+    return load_map(DATA / name)
+
+
+def require_real_maps() -> None:
+    if not REAL_MAPS:
+        pytest.skip(f"the real OpenDRIVE maps are not there ({SHARED_XODR} is missing)")
