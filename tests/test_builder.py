@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 import aveas_format
 from aveas_format.io.builder import heading_from_velocity, velocity_from_positions, wrap_angle
 
-from conftest import STRAIGHT_MAP
+from aveas_testing import STRAIGHT_MAP
 
 
 def test_readme_example(tmp_path):

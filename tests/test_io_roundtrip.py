@@ -19,8 +19,8 @@ from aveas_format.schema import TABLES, RecordingMeta
 from aveas_format.schema.columns import Column
 from aveas_format.schema.taxonomy import CATEGORY_SETS
 
-from conftest import STRAIGHT_MAP
-from test_schema import minimal_meta
+from aveas_testing import STRAIGHT_MAP
+from aveas_testing import minimal_meta
 
 
 def random_column(c: Column, n: int, rng: np.random.Generator) -> pa.Array:

@@ -17,25 +17,11 @@ from aveas_format.schema.enums import Requirement
 from aveas_format.schema.metadata import WeatherPmf, timestamp_ns
 from aveas_format.schema.pmf import argmax, normalise, one_hot, pmf_problems
 
-from conftest import CONFORMANCE
+from aveas_testing import CONFORMANCE, minimal_meta
 
 AVEAS_OPENLABEL_ORDER = ["animal", "bicycle", "bus", "car", "pedestrian", "mobility_device",
                          "motorcycle", "other", "pushable_pullable", "railvehicle", "trailer",
                          "truck", "van"]
-
-
-def minimal_meta(**over):
-    d = {
-        "format_version": "1.0.0", "recording_id": "r1", "start_time": "2024-05-13T08:15:00Z",
-        "duration_s": 10.0, "nominal_rate_hz": 25.0,
-        "acquisition": {"method": "aerial", "partner": "KIT"}, "provenance": "natural",
-        "location": {"lon": 8.4, "lat": 49.0}, "crs": "EPSG:25832",
-        "map": {"file": "map.xodr", "sha256": "0" * 64, "opendrive_version": "1.6"},
-        "rights": {"right_of_use": "research_only", "license": "CC-BY-4.0", "owner": "KIT"},
-        "tables": {},
-    }
-    d.update(over)
-    return d
 
 
 def test_taxonomy_is_aveas_openlabel_order():

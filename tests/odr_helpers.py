@@ -9,8 +9,8 @@ import pytest
 
 from aveas_format.opendrive import RoadNetwork, load_map
 
-DATA = Path(__file__).resolve().parent / "data"
-SHARED_XODR = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "xodr"
+DATA = Path(__file__).resolve().parent / "opendrive" / "data"
+SHARED_XODR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "xodr"
 REAL_MAPS = sorted(p.name for p in SHARED_XODR.glob("*.xodr")) if SHARED_XODR.is_dir() else []
 #: maps whose consecutive geometries meet to <= 1e-6 m in the file itself
 CONTINUOUS_MAPS = {
