@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -190,7 +191,27 @@ def test_write_is_atomic(tmp_path, rec, monkeypatch, form):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_overwrite_exchanges_directories_atomically(tmp_path, rec, monkeypatch):
+    from aveas_format.io import writer
+
+    target = rec.write(tmp_path / "x.aveas")
+    used = []
+    real = writer._exchange
+    monkeypatch.setattr(writer, "_exchange", lambda a, b: used.append(real(a, b)) or used[-1])
+    rec.states = rec.states.slice(0, 10)
+    rec.write(target, overwrite=True)
+    assert aveas_format.open(target).states.num_rows == 10
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.aveas"]
+    if sys.platform.startswith("linux"):
+        assert used == [True]
+
+
 def test_failed_overwrite_keeps_the_old_recording(tmp_path, rec, monkeypatch):
+    """Where no atomic exchange exists, the fallback renames the old recording aside and puts
+    it back when the new one cannot be moved into place."""
+    from aveas_format.io import writer
+
+    monkeypatch.setattr(writer, "_exchange", lambda a, b: False)
     target = rec.write(tmp_path / "x.aveas")
     before = (target / "states.parquet").read_bytes()
     real_rename = os.rename

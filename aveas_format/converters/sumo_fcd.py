@@ -44,6 +44,7 @@ from aveas_format.converters.common import (
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.safeio import iterparse, xml_parser
 
 # SUMO's vType defaults per vClass: (length, width, height) in m
 VCLASS_SIZE: dict[str, tuple[float, float, float]] = {
@@ -85,7 +86,7 @@ def _parse_vtypes(paths: list[Path]) -> dict[str, dict[str, float | str]]:
     types: dict[str, dict[str, float | str]] = {}
     for p in paths:
         try:
-            root = etree.parse(str(p), etree.XMLParser(remove_comments=True, huge_tree=True))
+            root = etree.parse(str(p), xml_parser())
         except (OSError, etree.XMLSyntaxError) as e:
             raise FormatError(f"cannot parse vType file: {e}", path=p,
                               line=getattr(e, "lineno", None)) from None
@@ -112,7 +113,7 @@ def _net_offset(opts: SumoFcdOptions) -> tuple[float, float]:
         return 0.0, 0.0
     if not opts.net_file.is_file():
         raise RecordingIOError("SUMO network not found", path=opts.net_file)
-    for _, el in etree.iterparse(str(opts.net_file), tag="location"):
+    for _, el in iterparse(str(opts.net_file), tag="location"):
         off = el.get("netOffset", "0,0").split(",")
         try:
             return float(off[0]), float(off[1])
@@ -136,9 +137,8 @@ def _read_xml(path: Path) -> tuple[dict[str, list], bool]:
             geo = bool(re.search(rb'fcd-output\.geo\s+value="(true|1)"', head))
             f.seek(0)
             time = None
-            for event, el in etree.iterparse(f, events=("start", "end"),
-                                             tag=("timestep", "vehicle", "person"),
-                                             remove_comments=True, huge_tree=True):
+            for event, el in iterparse(f, events=("start", "end"),
+                                       tag=("timestep", "vehicle", "person")):
                 if el.tag == "timestep":
                     if event == "start":
                         try:

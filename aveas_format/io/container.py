@@ -11,11 +11,13 @@ from __future__ import annotations
 import hashlib
 import struct
 import zipfile
+from zlib import error as zlib_error
 from pathlib import Path
 
 import pyarrow as pa
 
 from aveas_format.errors import RecordingIOError
+from aveas_format.safeio import check_zip_member
 
 _LOCAL_HEADER = struct.Struct("<IHHHHHIIIHH")  # 30 bytes, signature 0x04034b50
 
@@ -39,7 +41,12 @@ class Container:
             self.form = "directory"
         elif zipfile.is_zipfile(self.path):
             self.form = "zip"
-            self._zip = zipfile.ZipFile(self.path)
+            try:
+                self._zip = zipfile.ZipFile(self.path)
+            except (zipfile.BadZipFile, OSError) as e:
+                raise RecordingIOError(f"corrupt ZIP archive: {e}", path=self.path) from None
+            for info in self._zip.infolist():
+                check_zip_member(info, self.path)
             names = self._zip.namelist()
             # tolerate archives made with the directory itself as top-level entry
             if "recording.json" not in names:
@@ -92,8 +99,13 @@ class Container:
     def _zip_member(self, name: str) -> pa.Buffer:
         assert self._zip is not None
         info = self._zip.getinfo(self._prefix + name)
-        if info.compress_type != zipfile.ZIP_STORED or info.flag_bits & 0x1:
-            return pa.py_buffer(self._zip.read(info))
+        if info.flag_bits & 0x1:
+            raise RecordingIOError("encrypted ZIP member; refused", path=self.location(name))
+        if info.compress_type != zipfile.ZIP_STORED:
+            try:
+                return pa.py_buffer(self._zip.read(info))
+            except (zipfile.BadZipFile, EOFError, NotImplementedError, zlib_error) as e:
+                raise RecordingIOError(f"corrupt ZIP member: {e}", path=self.location(name)) from None
         if self._map is None:
             with pa.memory_map(str(self.path), "r") as mm:
                 self._map = mm.read_buffer()

@@ -33,6 +33,7 @@ from aveas_format.errors import (
 )
 from aveas_format.io.arrow import conform, types_compatible, arrow_type
 from aveas_format.io.container import Container, sha256_of
+from aveas_format.safeio import load_json
 from aveas_format.schema.metadata import RecordingMeta
 from aveas_format.schema.tables import TABLES, TableSpec
 from aveas_format.schema.versions import TABLE_MIGRATIONS, VersionError, migrate_meta
@@ -63,13 +64,7 @@ def format_validation_error(e: ValidationError, limit: int = 5) -> str:
 def read_meta(container: Container) -> tuple[RecordingMeta, str | None]:
     """recording.json, migrated to the current version; returns (meta, migrated_from)."""
     where = container.location("recording.json")
-    raw = container.read_bytes("recording.json")
-    try:
-        data = json.loads(raw)
-    except UnicodeDecodeError:
-        raise FormatError("recording.json is not UTF-8 text", path=where) from None
-    except json.JSONDecodeError as e:
-        raise FormatError(f"broken JSON: {e.msg}", path=where, line=e.lineno, column=e.colno) from None
+    data = load_json(container.read_bytes("recording.json"), path=where)
     if not isinstance(data, dict):
         raise FormatError("recording.json must hold a JSON object", path=where)
     if "format_version" not in data:

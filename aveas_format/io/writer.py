@@ -9,10 +9,13 @@ leaves something that reads as a valid recording (FORMAT.md 1).
 
 from __future__ import annotations
 
+import ctypes
+import errno
 import json
 import os
 import re
 import shutil
+import sys
 import uuid
 import zipfile
 from pathlib import Path
@@ -198,8 +201,29 @@ def _remove(p: Path) -> None:
         p.unlink(missing_ok=True)
 
 
+def _exchange(a: Path, b: Path) -> bool:
+    """Atomically swap two paths (Linux ``renameat2(RENAME_EXCHANGE)``); False if unsupported."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    rc = fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange)
+    if rc != 0:
+        err = ctypes.get_errno()
+        if err in (errno.ENOSYS, errno.EINVAL, errno.ENOTSUP):
+            return False
+        raise OSError(err, os.strerror(err), str(b))
+    return True
+
+
 def _replace(tmp: Path, path: Path, overwrite: bool) -> None:
-    """Move tmp to path; an existing path is swapped out first and removed after."""
+    """Move tmp to path. An existing path is replaced atomically: files by ``os.replace``,
+    directories by an atomic exchange where the OS has one (Linux), else by renaming the old one
+    aside first and removing it only after the new one is in place."""
     if not path.exists():
         os.rename(tmp, path)
         return
@@ -207,6 +231,9 @@ def _replace(tmp: Path, path: Path, overwrite: bool) -> None:
         raise RecordingExistsError("exists", path=path)
     if path.is_file() and tmp.is_file():
         os.replace(tmp, path)
+        return
+    if path.is_dir() and tmp.is_dir() and _exchange(tmp, path):
+        _remove(tmp)  # now holds the old recording
         return
     old = path.parent / f".{path.name}.old-{uuid.uuid4().hex[:8]}"
     os.rename(path, old)

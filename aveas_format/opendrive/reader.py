@@ -19,6 +19,7 @@ import numpy as np
 from lxml import etree
 
 from ..errors import MapError, RecordingIOError
+from ..safeio import xml_parser
 from .model import (
     Connection,
     Geometry,
@@ -124,7 +125,7 @@ def _parse_xml(data: bytes, ctx: _Ctx) -> Any:
         decl = match.group(0).decode("ascii", "replace")
         text = text.replace(decl, "\n" * decl.count("\n"), 1)
         data = text.encode("utf-8")
-    parser = etree.XMLParser(huge_tree=True, remove_comments=True, resolve_entities=False, no_network=True)
+    parser = xml_parser()
     try:
         root = etree.fromstring(data, parser)
     except etree.XMLSyntaxError as exc:
