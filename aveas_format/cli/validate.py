@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from enum import Enum
 from pathlib import Path
 
@@ -20,25 +21,50 @@ class FailOn(str, Enum):
 class Format(str, Enum):
     text = "text"
     json = "json"
+    html = "html"
+
+
+def _print_and_exit(text: str) -> None:
+    print(text, end="" if text.endswith("\n") else "\n")
+    raise typer.Exit(0)
 
 
 @app.command()
 @handle_errors
 def validate(
-    recording: Path = typer.Argument(..., help="A recording: NAME.aveas directory or NAME.aveas.zip."),
+    recording: Path = typer.Argument(None, help="A recording: NAME.aveas directory or "
+                                     "NAME.aveas.zip."),
     select: list[str] = typer.Option(None, "--select", help="Run only these rules (codes or "
                                      "families, repeatable or comma-separated)."),
     ignore: list[str] = typer.Option(None, "--ignore", help="Skip these rules (codes or families)."),
     fail_on: FailOn = typer.Option(FailOn.error, "--fail-on", help="Exit 1 when a finding at or "
                                    "above this severity exists."),
-    fmt: Format = typer.Option(Format.text, "--format", help="Report format."),
+    fmt: Format = typer.Option(Format.text, "--format", help="Report format: text (greppable "
+                               "lines + summary), json, or html (self-contained, with figures)."),
     output: Path = typer.Option(None, "--output", "-o", help="Write the report to FILE instead of "
                                 "stdout."),
+    config: Path = typer.Option(None, "--config", help="TOML file of rule thresholds (see "
+                                "`--print-config` for every key and its default)."),
     max_sample: int = typer.Option(50, "--max-sample", min=1, max=1000,
                                    help="Findings kept per rule (counts are always complete)."),
+    report_schema: bool = typer.Option(False, "--report-schema", help="Print the JSON Schema of "
+                                       "the JSON report and exit."),
+    print_config: bool = typer.Option(False, "--print-config", help="Print the default "
+                                      "thresholds as TOML and exit."),
 ) -> None:
     """Validate a recording. Exit codes: 0 valid, 1 findings at/above --fail-on, 2 usage error,
     3 unreadable input or tool failure."""
+    from aveas_format.validate.config import ValidationConfig, config_toml
+    from aveas_format.validate.report import report_json_schema
+
+    if report_schema:
+        _print_and_exit(json.dumps(report_json_schema(), indent=2))
+    if print_config:
+        _print_and_exit(config_toml())
+    if recording is None:
+        raise fail("Missing argument 'RECORDING'.", EXIT_USAGE)
+
+    from aveas_format.errors import FormatError
     from aveas_format.validate import validate as run
     from aveas_format.validate.render import render_json, render_text
 
@@ -46,12 +72,24 @@ def validate(
         return [p.strip() for item in v for p in item.split(",") if p.strip()] if v else None
 
     try:
-        report = run(recording, select=split(select), ignore=split(ignore), max_sample=max_sample)
+        cfg = ValidationConfig.load(config)
+    except FormatError as e:
+        raise fail(str(e), EXIT_USAGE) from None
+    try:
+        report = run(recording, select=split(select), ignore=split(ignore), config=cfg,
+                     max_sample=max_sample)
     except ValueError as e:
         if "unknown rule or family" in str(e):
             raise fail(str(e), EXIT_USAGE) from None
         raise
-    text = render_json(report) if fmt is Format.json else render_text(report)
+    if fmt is Format.json:
+        text = render_json(report)
+    elif fmt is Format.html:
+        from aveas_format.validate.html import render_html
+
+        text = render_html(report, _open_for_figures(recording))
+    else:
+        text = render_text(report)
     if output:
         from aveas_format.io.atomic import write_text_atomic
 
@@ -59,3 +97,13 @@ def validate(
     else:
         print(text, end="" if text.endswith("\n") else "\n")
     raise typer.Exit(report.exit_code(fail_on.value))
+
+
+def _open_for_figures(path: Path):
+    """The recording for the report's figures, or None when it cannot be read."""
+    import aveas_format
+
+    try:
+        return aveas_format.open(path, verify=False)
+    except Exception:  # noqa: BLE001 — a broken recording still gets its report, without figures
+        return None

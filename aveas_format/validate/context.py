@@ -36,8 +36,13 @@ class Problem:
 class Context:
     """Lazily loaded pieces of one recording (from a path or an in-memory Recording)."""
 
-    def __init__(self, source: str | Path | Recording, config: dict[str, Any] | None = None) -> None:
-        self.config = config or {}
+    def __init__(self, source: str | Path | Recording, config: Any = None) -> None:
+        from aveas_format.validate.config import ValidationConfig
+
+        #: the thresholds (:class:`~aveas_format.validate.config.ValidationConfig`)
+        self.config = ValidationConfig.load(config)
+        #: results shared between rules (e.g. the pairs of nearby participants), by key
+        self.cache: dict[str, Any] = {}
         self.problems: list[Problem] = []
         self.recording: Recording | None = source if isinstance(source, Recording) else None
         self.container: Container | None = None
@@ -171,3 +176,67 @@ class Context:
             self.problem("missing_file", file=str(name))
             return None
         return self.container.read_bytes(name)
+
+    # -- shared views for the semantic rules --------------------------------------------------
+    @cached_property
+    def participants_view(self):
+        """:class:`~aveas_format.validate.views.ParticipantsView` of participants.parquet."""
+        from aveas_format.validate.views import ParticipantsView
+
+        prov = self.meta.provenance.value if self.meta is not None else None
+        return ParticipantsView(self.table("participants"), prov)
+
+    @cached_property
+    def states_view(self):
+        """:class:`~aveas_format.validate.views.StatesView` of states.parquet (None if absent or
+        without usable participant_id / time)."""
+        from aveas_format.validate.views import StatesView
+
+        t = self.table("states")
+        if t is None:
+            return None
+        v = StatesView(t, self.participants_view)
+        return v if v.ok else None
+
+    @cached_property
+    def network(self):
+        """The parsed map (RoadNetwork), or None when missing or unreadable (``map_unreadable``
+        problem recorded)."""
+        if self.recording is not None:
+            try:
+                return self.recording.map
+            except Exception as e:  # noqa: BLE001 — reported by map.unreadable
+                self.problem("map_unreadable", file=self.recording.meta.map.file,
+                             error=str(getattr(e, "message", e)), line=getattr(e, "where", {}).get("line"))
+                return None
+        data = self.map_bytes
+        if data is None:
+            return None
+        from aveas_format.opendrive import load_map
+
+        name = ((self.meta_dict or {}).get("map") or {}).get("file") or "map.xodr"
+        try:
+            return load_map(data)
+        except Exception as e:  # noqa: BLE001 — reported by map.unreadable
+            self.problem("map_unreadable", file=str(name), error=str(getattr(e, "message", e)),
+                         line=getattr(e, "where", {}).get("line"))
+            return None
+
+    @cached_property
+    def frame(self):
+        """The LocalFrame (crs + map offset), or None when the CRS cannot be read."""
+        import warnings
+
+        from aveas_format.errors import FormatError
+        from aveas_format.georef import LocalFrame
+
+        if self.meta is None:
+            return None
+        net = self.network
+        offset = net.header.offset if net is not None else None
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return LocalFrame(self.meta.crs, offset=offset, warn=False)
+        except FormatError:
+            return None

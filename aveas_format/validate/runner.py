@@ -80,7 +80,7 @@ def run_rule(r: Rule, ctx: Context, max_sample: int = DEFAULT_MAX_SAMPLE) -> Rul
 
 
 def validate(source: str | Path | Recording, *, select: list[str] | None = None,
-             ignore: list[str] | None = None, config: dict[str, Any] | None = None,
+             ignore: list[str] | None = None, config: Any = None,
              max_sample: int = DEFAULT_MAX_SAMPLE) -> Report:
     """Validate a recording (a path to a directory/ZIP, or an in-memory Recording).
 

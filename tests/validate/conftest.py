@@ -1,0 +1,23 @@
+"""Fixtures of the validation tests: the clean recording of the fixture factory."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import validate_factory as vf  # noqa: E402
+
+
+@pytest.fixture
+def scene():
+    return vf.fresh()
+
+
+@pytest.fixture(scope="session")
+def clean():
+    """The clean recording (session-wide: do not mutate)."""
+    return vf.build(vf.fresh())
