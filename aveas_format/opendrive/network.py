@@ -127,6 +127,22 @@ class RoadNetwork:
         inner[zero] = outer[zero] = b.center[zero]
         return inner, outer
 
+    def lane_type(self, road_id: Any, s: Any, lane_id: Any) -> np.ndarray:
+        """The ``type`` of lane ``lane_id`` at s (object array; None where the lane does not exist
+        there), vectorised over road ids, s and lane ids."""
+        r, s, lid = self._broadcast(road_id, s, lane_id)
+        sc = np.clip(s, 0.0, self._road_length[r])
+        piece = self.lanes.find_piece(r, sc)
+        lid = lid.astype(np.int64)[:, None]
+        codes = np.full(len(s), -1, dtype=np.int64)
+        for ids, types in ((self.lanes.lid, self.lanes.ltype), (self.lanes.rid, self.lanes.rtype)):
+            m = (ids[piece] == lid) & (lid != 0)
+            has = m.any(1)
+            k = np.argmax(m, 1)
+            codes[has] = types[piece[has], k[has]]
+        names = np.array(list(self.lanes.types) + [None], dtype=object)
+        return names[np.where(codes >= 0, codes, len(self.lanes.types))]
+
     # -- world -> road -------------------------------------------------------------------------------
     @cached_property
     def spatial_index(self):

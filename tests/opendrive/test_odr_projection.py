@@ -293,3 +293,16 @@ def test_property_fixture_roads(road, a, b):
     proj = net.world_to_road(x, y)
     cands = proj.candidates(0)
     assert any(c["road_id"] == road and abs(c["s"] - s[0]) <= TOL and abs(c["t"] - t[0]) <= TOL for c in cands)
+
+
+def test_lane_type_lookup():
+    from odr_helpers import fixture_map
+
+    net = fixture_map("geometry_types.xodr")
+    rid = next(iter(net.roads))
+    road = net.roads[rid]
+    sec = road.lane_sections[0]
+    lane = next(iter(sec.right or sec.left))
+    s = np.array([sec.s + 0.01])
+    assert net.lane_type(rid, s, np.array([lane.id]))[0] == lane.type
+    assert net.lane_type(rid, s, np.array([99]))[0] is None

@@ -73,29 +73,6 @@ def opendrive_info(ctx: Context) -> Iterator[Hit]:
     yield from _check_hits(ctx, "info")
 
 
-def _lane_types(net, rid: str, s: np.ndarray, lane_id: np.ndarray) -> np.ndarray | None:
-    """Lane type (object array, None where the lane does not exist) of lane ``lane_id`` at s.
-
-    Uses the engine's lane table (``net.lanes``); returns None if that layout is not available.
-    """
-    try:
-        lanes = net.lanes
-        ri = net._road_index[rid]
-        sc = np.clip(s, 0.0, net.roads[rid].length)
-        piece = lanes.find_piece(np.full(len(s), ri, dtype=np.int64), sc)
-        codes = np.full(len(s), -1, dtype=np.int64)
-        lid = lane_id.astype(np.int64)[:, None]
-        for ids, types in ((lanes.lid, lanes.ltype), (lanes.rid, lanes.rtype)):
-            m = (ids[piece] == lid) & (lid != 0)
-            has = m.any(1)
-            k = np.argmax(m, 1)
-            codes[has] = types[piece[has], k[has]]
-        names = np.array(list(lanes.types) + [None], dtype=object)
-        return names[np.where(codes >= 0, codes, len(lanes.types))]
-    except (AttributeError, KeyError, IndexError, TypeError):
-        return None
-
-
 def road_eval(ctx: Context) -> dict[str, np.ndarray] | None:
     """The stored road coordinates of every (sorted) state evaluated through the map (cached)."""
     if "map.eval" in ctx.cache:
@@ -121,7 +98,6 @@ def _evaluate(sv: StatesView, net) -> dict[str, np.ndarray] | None:
         "hdg": np.full(n, np.nan), "inner": np.full(n, np.nan), "outer": np.full(n, np.nan),
         "length": np.full(n, np.nan), "rht": np.ones(n, bool),
         "ltype": np.full(n, None, dtype=object), "s": s, "t": t, "lane": lane,
-        "types_known": np.ones(1, bool),
     }
     complete = (codes >= 0) & np.isfinite(s) & np.isfinite(t) & np.isfinite(lane)
     present = np.unique(codes[complete])
@@ -138,11 +114,7 @@ def _evaluate(sv: StatesView, net) -> dict[str, np.ndarray] | None:
         e["xw"][sel], e["yw"][sel], e["hdg"][sel] = xw, yw, hdg
         inner, outer = net.lane_borders(rid, s[sel], lane[sel].astype(np.int64))
         e["inner"][sel], e["outer"][sel] = inner, outer
-        ty = _lane_types(net, rid, s[sel], lane[sel])
-        if ty is None:
-            e["types_known"][0] = False
-        else:
-            e["ltype"][sel] = ty
+        e["ltype"][sel] = net.lane_type(rid, s[sel], lane[sel])
     return e
 
 
@@ -338,7 +310,7 @@ def off_drivable_lane(ctx: Context) -> Iterator[Hits]:
     from aveas_format.opendrive.lanes import DRIVABLE_TYPES
 
     off_map = veh & ~e["has_road"]
-    typed = e["known"] & (e["ltype"] != None) if e["types_known"][0] else np.zeros(sv.n, bool)  # noqa: E711
+    typed = e["known"] & (e["ltype"] != None)  # noqa: E711
     not_drivable = veh & typed & ~np.isin(e["ltype"], list(DRIVABLE_TYPES))
     bad = off_map | not_drivable
     if bad.any():
