@@ -183,3 +183,371 @@ def wrap_recording(converter: str, inputs: Sequence[Path], options: Any, *, map_
     return build_recording(map_source=map_bytes, participants=participants, states=states,
                            partner=partner, source=source_block(converter, inputs, options, version),
                            **meta)
+
+
+# --- sensor converters (issue 7): rotations, covariances, velocities, unobserved regions ----------
+# Appended helpers shared by ros2_mcap, infra_lidar, infra_lwir and accident.
+
+def utc_iso_from_ns(t_ns: int) -> str:
+    """ISO 8601 UTC text (nanosecond precision) of nanoseconds since the Unix epoch."""
+    from datetime import datetime, timezone
+
+    sec, ns = divmod(int(t_ns), 1_000_000_000)
+    base = datetime.fromtimestamp(sec, tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%S")
+    return f"{base}.{ns:09d}Z"
+
+
+def quaternion_matrix(q: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) rotation matrices of (n, 4) quaternions ``(qx, qy, qz, qw)`` (normalised here;
+    an all-zero quaternion counts as identity)."""
+    q = np.atleast_2d(np.asarray(q, np.float64))
+    norm = np.linalg.norm(q, axis=1, keepdims=True)
+    q = np.where(norm > 0, q / np.where(norm > 0, norm, 1.0), np.array([0.0, 0.0, 0.0, 1.0]))
+    x, y, z, w = q.T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], axis=1)
+
+
+def matrix_yaw(r: np.ndarray) -> np.ndarray:
+    """Yaw (rad, CCW from +x) of the body x-axis of (n, 3, 3) rotations, projected on the ground."""
+    r = np.asarray(r)
+    return np.arctan2(r[..., 1, 0], r[..., 0, 0])
+
+
+def rotation_2d(theta: np.ndarray) -> np.ndarray:
+    """(n, 2, 2) rotation matrices."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], axis=-2)
+
+
+def rotate_covariance_2d(cov: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """R(theta) C R(theta)^T for (n, 2, 2) covariances."""
+    r = rotation_2d(np.asarray(theta, np.float64))
+    return np.einsum("nij,njk,nlk->nil", r, cov, r)
+
+
+def covariance_std_corr(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(sx, sy, corr) of (n, 2, 2) covariances; NaN stays NaN (unknown), corr is 0 where a
+    standard deviation is 0, and clipped to [-1, 1]."""
+    sx = np.sqrt(np.clip(cov[:, 0, 0], 0.0, None))
+    sy = np.sqrt(np.clip(cov[:, 1, 1], 0.0, None))
+    den = sx * sy
+    with np.errstate(divide="ignore", invalid="ignore"):
+        corr = np.where(den > 0, cov[:, 0, 1] / np.where(den > 0, den, 1.0), 0.0)
+    corr = np.where(np.isnan(den), np.nan, np.clip(corr, -1.0, 1.0))
+    return sx, sy, corr
+
+
+def nullable(a: np.ndarray) -> pa.Array:
+    """A float array with NaN as null (for ``_std``/``_corr`` columns: null = unknown)."""
+    return pa.array(np.asarray(a, np.float64), from_pandas=True)
+
+
+def velocity_with_std(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray,
+                      x_std: np.ndarray | None = None, y_std: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Velocity by central differences within each participant (one-sided at track ends, 0 for a
+    single sample) and its 1-sigma from independent position errors:
+    ``std(vx_i) = sqrt(x_std[i+1]^2 + x_std[i-1]^2) / (t[i+1] - t[i-1])``.
+    Rows must be sorted by (participant, time)."""
+    n = len(t)
+    x_std = np.zeros(n) if x_std is None else np.nan_to_num(np.asarray(x_std, np.float64))
+    y_std = np.zeros(n) if y_std is None else np.nan_to_num(np.asarray(y_std, np.float64))
+    if n == 0:
+        z = np.zeros(0)
+        return z, z, z, z
+    idx = np.arange(n)
+    prev = np.r_[False, (pid[1:] == pid[:-1]) & (t[1:] > t[:-1])]   # row i has a predecessor
+    nxt = np.r_[prev[1:], False]                                     # row i has a successor
+    lo = np.where(prev, idx - 1, idx)
+    hi = np.where(nxt, idx + 1, idx)
+    dt = t[hi] - t[lo]
+    ok = dt > 0
+    safe = np.where(ok, dt, 1.0)
+    vx = np.where(ok, (x[hi] - x[lo]) / safe, 0.0)
+    vy = np.where(ok, (y[hi] - y[lo]) / safe, 0.0)
+    vx_std = np.where(ok, np.hypot(x_std[hi], x_std[lo]) / safe, np.nan)
+    vy_std = np.where(ok, np.hypot(y_std[hi], y_std[lo]) / safe, np.nan)
+    return vx, vy, vx_std, vy_std
+
+
+def footprint_corners(x: np.ndarray, y: np.ndarray, heading: np.ndarray, length: np.ndarray,
+                      width: np.ndarray) -> np.ndarray:
+    """(n, 4, 2) corners (front-left, rear-left, rear-right, front-right) of oriented boxes."""
+    c, s = np.cos(heading), np.sin(heading)
+    hl, hw = np.asarray(length) / 2.0, np.asarray(width) / 2.0
+    out = np.empty((len(x), 4, 2))
+    for k, (a, b) in enumerate(((1, 1), (-1, 1), (-1, -1), (1, -1))):
+        out[:, k, 0] = x + a * hl * c - b * hw * s
+        out[:, k, 1] = y + a * hl * s + b * hw * c
+    return out
+
+
+def sector_polygon(cx: float, cy: float, radius: float, yaw: float = 0.0,
+                   fov: float = 2 * np.pi, n: int = 128):
+    """A shapely polygon: the disk (``fov`` >= 2 pi) or circular sector of a sensor."""
+    import shapely
+
+    if fov >= 2 * np.pi - 1e-9:
+        return shapely.Point(cx, cy).buffer(radius, quad_segs=max(n // 4, 8))
+    a = yaw + np.linspace(-fov / 2, fov / 2, n)
+    pts = np.c_[cx + radius * np.cos(a), cy + radius * np.sin(a)]
+    return shapely.Polygon(np.vstack([[cx, cy], pts]))
+
+
+def coverage_regions(sensor_id: str, sensor_xy: tuple[float, float], range_m: float,
+                     yaw: float, fov: float, area, time_start: float, time_end: float,
+                     observed=None) -> list[dict[str, Any]]:
+    """Unobserved rows of a static sensor over [time_start, time_end]: ``area`` (a shapely polygon,
+    e.g. the map's extent) outside the sensor's range disk is ``sensor_range``; inside the disk but
+    outside the field of view (or outside ``observed``, a polygon such as a camera's ground
+    footprint) is ``field_of_view``. Empty differences are left out."""
+    import shapely
+
+    disk = sector_polygon(sensor_xy[0], sensor_xy[1], range_m)
+    view = sector_polygon(sensor_xy[0], sensor_xy[1], range_m, yaw, fov)
+    if observed is not None:
+        view = shapely.intersection(view, observed)
+    rows = []
+    for kind, geom in (("sensor_range", shapely.difference(area, disk)),
+                       ("field_of_view", shapely.difference(shapely.intersection(area, disk), view))):
+        geom = shapely.make_valid(geom)
+        polys = [g for g in getattr(geom, "geoms", [geom]) if g.geom_type == "Polygon" and g.area > 1e-6]
+        if not polys:
+            continue
+        geom = polys[0] if len(polys) == 1 else shapely.MultiPolygon(polys)
+        rows.append({"time_start": float(time_start), "time_end": float(time_end), "kind": kind,
+                     "geometry": shapely.to_wkb(geom), "sensor_id": sensor_id, "occluder_id": None})
+    return rows
+
+
+def occlusion_shadows(sensor_xyz: tuple[float, float, float], x: np.ndarray, y: np.ndarray,
+                      heading: np.ndarray, length: np.ndarray, width: np.ndarray,
+                      height: np.ndarray, range_m: float) -> np.ndarray:
+    """Ground shadows (WKB polygons, object array; None where empty) that boxes cast seen from a
+    sensor at ``sensor_xyz`` (mount height z above the ground of the boxes).
+
+    A corner at ground distance d from the sensor hides the ground up to d * H / (H - h) (similar
+    triangles, sensor height H, box height h); boxes as tall as the sensor or taller hide
+    everything up to ``range_m``. The shadow is the convex hull of the footprint and the projected
+    corners, minus the footprint, clipped to the range disk. Vectorised with shapely 2."""
+    import shapely
+
+    n = len(x)
+    if n == 0:
+        return np.empty(0, dtype=object)
+    sx, sy, sh = sensor_xyz
+    corners = footprint_corners(x, y, heading, length, width)            # (n, 4, 2)
+    d = corners - np.array([sx, sy])
+    dist = np.linalg.norm(d, axis=2)
+    h = np.asarray(height, np.float64)[:, None] * np.ones((1, 4))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = np.where(h < sh - 1e-6, sh / (sh - h), np.inf)
+    reach = np.minimum(dist * k, range_m)
+    scale = np.where(dist > 0, reach / np.where(dist > 0, dist, 1.0), 1.0)
+    far = np.array([sx, sy]) + d * scale[..., None]
+    pts = np.concatenate([corners, far], axis=1)                          # (n, 8, 2)
+    hull = shapely.convex_hull(shapely.multipoints(pts))
+    foot = shapely.polygons(np.concatenate([corners, corners[:, :1]], axis=1))
+    disk = sector_polygon(sx, sy, range_m)
+    shadow = shapely.intersection(shapely.difference(hull, foot), disk)
+    shadow = shapely.make_valid(shadow)
+    keep = ~shapely.is_empty(shadow) & (shapely.area(shadow) > 1e-6)
+    types = shapely.get_type_id(shadow)
+    keep &= np.isin(types, (3, 6))  # Polygon, MultiPolygon
+    out = np.full(n, None, dtype=object)
+    out[keep] = shapely.to_wkb(shadow[keep])
+    return out
+
+
+def map_area(map_bytes: bytes, margin: float = 20.0):
+    """A shapely box around the map's road surfaces (+ ``margin`` m): the area in which converters
+    report sensor-range and field-of-view limits."""
+    import shapely
+
+    from aveas_format.opendrive import load_map
+
+    xmin, ymin, xmax, ymax = load_map(map_bytes).bounds
+    return shapely.box(xmin - margin, ymin - margin, xmax + margin, ymax + margin)
+
+
+CLASS_SYNONYMS: dict[str, str] = {
+    # aveas names map to themselves; common dataset spellings to the 13 classes
+    "person": "pedestrian", "ped": "pedestrian", "walker": "pedestrian", "child": "pedestrian",
+    "bike": "bicycle", "cyclist": "bicycle", "bicyclist": "bicycle",
+    "motorbike": "motorcycle", "motorcyclist": "motorcycle", "moped": "motorcycle",
+    "scooter": "mobility_device", "e_scooter": "mobility_device", "wheelchair": "mobility_device",
+    "stroller": "pushable_pullable", "pram": "pushable_pullable",
+    "passenger_car": "car", "vehicle": "car", "emergency_vehicle": "car", "taxi": "car",
+    "pickup": "van", "lorry": "truck", "heavy_truck": "truck", "semi": "truck", "tractor": "truck",
+    "coach": "bus", "tram": "railvehicle", "train": "railvehicle", "dog": "animal", "deer": "animal",
+    "unknown": "other", "misc": "other", "dontcare": "other",
+}
+
+
+def class_of(name: str, extra: dict[str, str] | None = None) -> str:
+    """One of the 13 classes for a class name of a source (case- and separator-insensitive);
+    ``extra`` maps source names first; unknown names become ``other``."""
+    from aveas_format.schema.taxonomy import CLASSES
+
+    if extra and str(name) in extra:
+        return extra[str(name)]
+    key = str(name).strip().lower().replace("-", "_").replace(" ", "_")
+    if extra and key in extra:
+        return extra[key]
+    if key in CLASSES:
+        return key
+    return CLASS_SYNONYMS.get(key, "other")
+
+
+def group_mean(codes: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """Mean of ``values`` (n_rows,) or (n_rows, k) per code 0..n-1, NaN-aware (NaN where none)."""
+    v = np.asarray(values, np.float64)
+    v2 = v.reshape(len(v), -1)
+    ok = ~np.isnan(v2)
+    out = np.empty((n, v2.shape[1]))
+    for j in range(v2.shape[1]):
+        s = np.bincount(codes, weights=np.where(ok[:, j], v2[:, j], 0.0), minlength=n)
+        c = np.bincount(codes, weights=ok[:, j].astype(float), minlength=n)
+        out[:, j] = np.where(c > 0, s / np.where(c > 0, c, 1.0), np.nan)
+    return out.reshape((n,) + v.shape[1:])
+
+
+def group_std(codes: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
+    """Standard deviation of ``values`` (1D) per code (NaN where fewer than 2 samples)."""
+    v = np.asarray(values, np.float64)
+    ok = ~np.isnan(v)
+    c = np.bincount(codes, weights=ok.astype(float), minlength=n)
+    m = group_mean(codes, v, n)
+    d2 = np.where(ok, (v - m[codes]) ** 2, 0.0)
+    s = np.bincount(codes, weights=d2, minlength=n)
+    return np.where(c > 1, np.sqrt(s / np.maximum(c - 1, 1)), np.nan)
+
+
+def read_numeric_table(path: Path, *, required: Sequence[str] = (), numeric: Sequence[str] = (),
+                       delimiter: str | None = None) -> pa.Table:
+    """:func:`read_table` with ``numeric`` columns converted to float64 (empty -> null); a value
+    that is not a number raises a :class:`FormatError` naming the file, CSV line and column.
+
+    (Works around ``_try_float`` above, whose ``if_else(bool, double, string)`` has no Arrow
+    kernel, so that ``read_table(numeric=...)`` on CSV text columns fails with StopIteration.)"""
+    path = Path(path)
+    table = read_table(path, required=required, delimiter=delimiter)
+    header_lines = 0 if path.suffix.lower() == ".parquet" else 1
+    for c in numeric:
+        if c not in table.column_names:
+            continue
+        col = table.column(c)
+        if pa.types.is_floating(col.type) or pa.types.is_integer(col.type) or pa.types.is_null(col.type):
+            col = col.cast(pa.float64())
+        else:
+            s = pc.utf8_trim_whitespace(col.cast(pa.string()))
+            s = pc.if_else(pc.equal(s, ""), pa.scalar(None, pa.string()), s)
+            try:
+                col = s.cast(pa.float64())
+            except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
+                vals = s.to_pylist()
+                bad = next(i for i, v in enumerate(vals) if v is not None and not _is_float(v))
+                raise FormatError(f"column {c!r}: {vals[bad]!r} is not a number", path=path,
+                                  line=bad + 1 + header_lines if header_lines else None,
+                                  row=None if header_lines else bad) from None
+        table = table.set_column(table.column_names.index(c), c, col)
+    return table
+
+
+# --- frames and uncertainty of measured sources (aerial converters) ------------------------------
+
+def projected_to_local(x: np.ndarray, y: np.ndarray, source_crs: str, map_crs: str,
+                       map_offset: tuple[float, float, float, float] | None = None
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Points in a projected source CRS (UTM, a world file's CRS, ...) -> the map's local frame
+    (its ``geoReference`` ``map_crs`` and header ``<offset>``).
+
+    Returns ``(x, y, rotation)``: ``rotation`` (rad, per point or scalar) is the angle that source
+    directions turn by in the local frame: add it to source headings and rotate source vectors by
+    it (:func:`rotate`). It holds the header offset's ``hdg`` and, where the two CRSs differ, the
+    local grid convergence between them (measured by projecting a point 1 m east of each point).
+    """
+    from aveas_format.georef import LocalFrame, crs_equal, parse_crs
+
+    frame = LocalFrame(map_crs, map_offset, warn=False)
+    hdg = frame.offset[3]
+    x = np.asarray(x, np.float64)
+    y = np.asarray(y, np.float64)
+    if crs_equal(source_crs, map_crs):
+        lx, ly = frame.from_projected(x, y)
+        return lx, ly, np.full(x.shape, -hdg)
+    import pyproj
+
+    tr = pyproj.Transformer.from_crs(parse_crs(source_crs).crs, parse_crs(map_crs).crs,
+                                     always_xy=True)
+    px, py = (np.asarray(a, np.float64) for a in tr.transform(x, y))
+    qx, qy = (np.asarray(a, np.float64) for a in tr.transform(x + 1.0, y))
+    rot = np.arctan2(qy - py, qx - px) - hdg
+    lx, ly = frame.from_projected(px, py)
+    return lx, ly, rot
+
+
+def rotate(vx: np.ndarray, vy: np.ndarray, angle: np.ndarray | float
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """Vectors rotated counter-clockwise by ``angle`` (rad)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return vx * c - vy * s, vx * s + vy * c
+
+
+def class_pmf(labels: Sequence[str] | np.ndarray, confidence: float = 1.0) -> np.ndarray:
+    """(n, 13) PMF matrix for hard class labels: ``confidence`` on the label, the rest spread evenly
+    over the other 12 classes (``confidence`` = 1: one-hot)."""
+    from aveas_format.schema.pmf import one_hot
+
+    oh = one_hot(np.asarray(labels, dtype=object), "class").astype(np.float64)
+    k = oh.shape[1]
+    pm = oh * confidence + (1.0 - oh) * (1.0 - confidence) / (k - 1)
+    return pm.astype(np.float32)
+
+
+def sort_states(pid: np.ndarray, t: np.ndarray, path: Path | None = None,
+                lines: np.ndarray | None = None) -> np.ndarray:
+    """Row order sorting by (participant, time); a duplicate (participant, time) is an error naming
+    the line (``lines``: the source line of each row) of its second occurrence."""
+    order = np.lexsort((t, pid))
+    ps, ts = pid[order], t[order]
+    dup = np.flatnonzero((ps[1:] == ps[:-1]) & (ts[1:] == ts[:-1]))
+    if len(dup):
+        i = order[dup[0] + 1]
+        raise FormatError(f"participant sampled twice at time {float(t[i])!r}", path=path,
+                          line=None if lines is None else int(lines[i]))
+    return order
+
+
+def read_numeric_table(path: Path, *, required: Sequence[str] = (), numeric: Sequence[str] = ()
+                       ) -> pa.Table:
+    """:func:`read_table`, then ``numeric`` columns as float64 with located errors.
+
+    CSV columns are type-inferred by Arrow; a numeric column holding text (``'abc'``) is reported
+    with its line and column. Empty cells become null.
+    """
+    table = read_table(path, required=required)
+    header_lines = 0 if Path(path).suffix.lower() == ".parquet" else 1
+    for c in numeric:
+        if c not in table.column_names:
+            continue
+        col = table.column(c)
+        if pa.types.is_floating(col.type) or pa.types.is_integer(col.type) or pa.types.is_null(col.type):
+            col = col.cast(pa.float64())
+        else:
+            s = pc.utf8_trim_whitespace(col.cast(pa.string()))
+            s = pc.if_else(pc.equal(s, ""), pa.scalar(None, pa.string()), s)
+            try:
+                col = s.cast(pa.float64())
+            except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
+                vals = s.to_pylist()
+                bad = next(i for i, v in enumerate(vals) if v is not None and not _is_float(v))
+                raise FormatError(f"column {c!r}: {vals[bad]!r} is not a number", path=path,
+                                  line=bad + 1 + header_lines if header_lines else None,
+                                  row=None if header_lines else bad) from None
+        table = table.set_column(table.column_names.index(c), c, col)
+    return table
