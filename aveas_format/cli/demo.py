@@ -20,7 +20,8 @@ def demo(
     duration: float = typer.Option(30.0, "--duration", min=1.0, help="Seconds to simulate."),
 ) -> None:
     """Generate a sample aerial highway recording (map, uncertainty, occlusions, metadata), write it
-    as a directory and as a ZIP, read it back, validate it and print its summary."""
+    as a directory and as a ZIP, export it as OpenLABEL, OpenSCENARIO and MCAP (Foxglove), read it
+    back, validate it and print its summary."""
     import aveas_format
     from aveas_format.sample import highway_scene
     from aveas_format.validate.render import render_text
@@ -33,6 +34,12 @@ def demo(
     d = rec.write(output / "highway.aveas", overwrite=True)
     z = rec.write(output / "highway.aveas.zip", overwrite=True)
     err.print(f"wrote {d} and {z}")
+    from aveas_format.converters import get_converter
+
+    for name, fn in (("openlabel", "highway.openlabel.json"), ("openscenario", "highway.xosc"),
+                     ("mcap", "highway.mcap")):
+        written = get_converter(name, "export")(rec, output / fn)
+        err.print(f"exported {name}: {', '.join(str(p) for p in written)}")
     back = aveas_format.open(z)
     same = back.states.equals(aveas_format.open(d).states)
     err.print(f"read back the ZIP form: {back.states.num_rows:,} states; equal to the directory "

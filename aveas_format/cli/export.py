@@ -1,0 +1,66 @@
+"""``aveas-format export``: recording -> foreign formats (OpenLABEL, OpenSCENARIO, MCAP)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import typer
+from rich.table import Table
+
+from aveas_format.cli.app import app
+from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, out
+
+
+@app.command()
+@handle_errors
+def export(
+    recording: Path = typer.Argument(None, help="The recording (NAME.aveas or NAME.aveas.zip)."),
+    target: str = typer.Option(None, "--to", "-t", help="Exporter name: openlabel, openscenario, "
+                               "mcap (see --list)."),
+    output: Path = typer.Option(None, "--output", "-o", help="Output file (companion files such "
+                                "as the map are written next to it)."),
+    option: list[str] = typer.Option(None, "--option", "-O", help="Exporter option KEY=VALUE "
+                                     "(repeatable; see docs/converters.md)."),
+    options_file: Path = typer.Option(None, "--options", help="Exporter options as a JSON file."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output."),
+    list_: bool = typer.Option(False, "--list", help="List the exporters and exit."),
+) -> None:
+    """Export a recording to a foreign format: `aveas-format export --to openlabel run.aveas -o
+    run.json` (also `--to openscenario` -> .xosc, `--to mcap` -> .mcap for Foxglove)."""
+    from aveas_format.cli.convert import parse_option_pairs
+    from aveas_format.converters.registry import get_converter, load_converters
+
+    if list_:
+        t = Table(show_edge=False)
+        for col in ("name", "description"):
+            t.add_column(col)
+        for c in sorted(load_converters().values(), key=lambda c: c.name):
+            if c.direction == "export":
+                t.add_row(c.name, c.description)
+        out.print(t)
+        return
+    if not target or not recording or not output:
+        raise fail("--to NAME, RECORDING and --output are required (or --list)", EXIT_USAGE)
+    conv = get_converter(target, "export")
+    raw: dict[str, Any] = {}
+    if options_file:
+        try:
+            raw.update(json.loads(options_file.read_text()))
+        except (OSError, json.JSONDecodeError) as e:
+            raise fail(f"{options_file}: cannot read options: {e}", EXIT_USAGE) from None
+    try:
+        raw.update(parse_option_pairs(option or [], conv.options))
+    except ValueError as e:
+        raise fail(str(e), EXIT_USAGE) from None
+    if output.exists() and not overwrite:
+        raise fail(f"{output}: exists; pass --overwrite to replace it", EXIT_USAGE)
+    if output.parent and not output.parent.exists():
+        raise fail(f"{output.parent}: no such directory", EXIT_USAGE)
+    import aveas_format
+
+    rec = aveas_format.open(recording)
+    paths = conv(rec, output, options=raw)
+    for p in paths:
+        err.print(f"wrote {p}")

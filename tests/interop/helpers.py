@@ -1,0 +1,149 @@
+"""Comparison helpers for the interoperability tests."""
+
+from __future__ import annotations
+
+import math
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+SHARED = Path(__file__).resolve().parents[3] / "shared"
+OPENLABEL_DATA = SHARED / "data" / "openlabel"
+
+
+def _norm(v):
+    if isinstance(v, dict):
+        return {k: _norm(x) for k, x in v.items()}
+    if isinstance(v, list):
+        return [_norm(x) for x in v]
+    return v
+
+
+def assert_values_close(a, b, where: str, rtol: float = 1e-9, atol: float = 1e-6) -> None:
+    if isinstance(a, dict) and isinstance(b, dict):
+        assert set(a) == set(b), f"{where}: keys {sorted(a)} != {sorted(b)}"
+        for k in a:
+            assert_values_close(a[k], b[k], f"{where}.{k}", rtol, atol)
+    elif isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        assert len(a) == len(b), f"{where}: length {len(a)} != {len(b)}"
+        for i, (x, y) in enumerate(zip(a, b)):
+            assert_values_close(x, y, f"{where}[{i}]", rtol, atol)
+    elif isinstance(a, float) or isinstance(b, float):
+        assert a is not None and b is not None, f"{where}: {a!r} != {b!r}"
+        if math.isnan(a) and math.isnan(b):
+            return
+        assert math.isclose(a, b, rel_tol=rtol, abs_tol=atol), f"{where}: {a!r} != {b!r}"
+    else:
+        assert a == b, f"{where}: {a!r} != {b!r}"
+
+
+def assert_tables_equal(a: pa.Table | None, b: pa.Table | None, name: str, atol: float = 1e-6) -> None:
+    """Same columns, same rows (in order), values equal within float tolerance."""
+    if a is None or b is None:
+        assert a is None and b is None, f"{name}: one side is missing"
+        return
+    assert a.column_names == b.column_names, f"{name}: columns {a.column_names} != {b.column_names}"
+    assert a.num_rows == b.num_rows, f"{name}: rows {a.num_rows} != {b.num_rows}"
+    for c in a.column_names:
+        ca, cb = a.column(c), b.column(c)
+        if pa.types.is_dictionary(ca.type):
+            ca = ca.cast(ca.type.value_type)
+        if pa.types.is_dictionary(cb.type):
+            cb = cb.cast(cb.type.value_type)
+        if pa.types.is_floating(ca.type) and pa.types.is_floating(cb.type):
+            xa = ca.to_numpy(zero_copy_only=False).astype(float)
+            xb = cb.to_numpy(zero_copy_only=False).astype(float)
+            assert np.array_equal(np.isnan(xa), np.isnan(xb)), f"{name}.{c}: null pattern differs"
+            ok = np.isclose(xa, xb, rtol=1e-9, atol=atol, equal_nan=True)
+            if c in ("heading",):  # angles: compare on the circle
+                ok |= np.isclose(np.abs(np.angle(np.exp(1j * (xa - xb)))), 0, atol=atol)
+            assert ok.all(), f"{name}.{c}: max diff {np.nanmax(np.abs(xa - xb))}"
+        else:
+            assert_values_close(_norm(ca.to_pylist()), _norm(cb.to_pylist()), f"{name}.{c}", atol=atol)
+
+
+def assert_recordings_equal(a, b, *, ignore_meta=("source", "tables", "derived", "map")) -> None:
+    ma = a.meta.model_dump(mode="json", exclude_none=True)
+    mb = b.meta.model_dump(mode="json", exclude_none=True)
+    for k in ignore_meta:
+        ma.pop(k, None)
+        mb.pop(k, None)
+    assert_values_close(ma, mb, "meta")
+    for name in ("participants", "states", "unobserved", "events", "environment", "interior"):
+        assert_tables_equal(getattr(a, name), getattr(b, name), name)
+
+
+def rich_recording(n_vehicles: int = 6, duration_s: float = 3.0):
+    """The sample highway scene plus everything the format has and OpenLABEL lacks or keeps:
+    lights, accelerations, z, yaw rate, a recording vehicle, a trailer attached to a truck,
+    events of profile and non-profile kinds, time-varying environment, interior signals and a
+    derived interactions table."""
+    from aveas_format.io.writer import prepare_table
+    from aveas_format.sample import highway_scene
+    from aveas_format.schema.tables import TABLES
+
+    rec = highway_scene(n_vehicles=n_vehicles, duration_s=duration_s, rate_hz=10.0)
+    s = rec.states
+    n = s.num_rows
+    rng = np.random.default_rng(3)
+    pid = s.column("participant_id").to_numpy()
+    t = s.column("time").to_numpy()
+    s = s.append_column("z", pa.array(np.where(np.arange(n) % 7 == 0, np.nan, rng.normal(0.1, 0.01, n)),
+                                      from_pandas=True))
+    s = s.append_column("ax", pa.array(rng.normal(0, 0.3, n)))
+    s = s.append_column("ay", pa.array(rng.normal(0, 0.1, n)))
+    s = s.append_column("ax_std", pa.array(np.full(n, 0.2)))
+    s = s.append_column("ay_std", pa.array(np.full(n, 0.25)))
+    s = s.append_column("yaw_rate", pa.array(rng.normal(0, 0.01, n)))
+    s = s.append_column("vxvy_corr", pa.array(rng.uniform(-0.3, 0.3, n).astype(np.float32)))
+    s = s.append_column("light_brake_p", pa.array(rng.uniform(0, 1, n).astype(np.float32)))
+    s = s.append_column("light_indicator_left_p", pa.array(
+        np.where(np.arange(n) % 3 == 0, None, rng.uniform(0, 1, n).astype(np.float32)).tolist(),
+        pa.float32()))
+    s = s.append_column("visible_fraction", pa.array(rng.uniform(0.5, 1, n).astype(np.float32)))
+    p = rec.participants
+    m = p.num_rows
+    first = int(pid.min())
+    roles = ["recording_vehicle" if q == first else "observed" for q in p.column("participant_id").to_pylist()]
+    p = p.set_column(p.column_names.index("role"), "role", pa.array(roles))
+    p = p.append_column("attached_to", pa.array([None] * (m - 1) + [first], pa.int64()))
+    p = p.append_column("attributes", pa.array([json.dumps({"axles": 2 + i % 2}) for i in range(m)]))
+    ids = sorted(set(pid.tolist()))
+    events = {
+        "event_id": [0, 1, 2], "kind": ["lane_change", "near_miss", "following"],
+        "time_start": [0.5, 1.0, 0.0], "time_end": [0.5, 1.4, 2.0],
+        "participant_ids": [[ids[0]], [ids[0], ids[1]], [ids[1], ids[0]]],
+        "roles": [["actor"], ["first", "second"], ["follower", "leader"]],
+        "confidence": pa.array([0.9, 0.6, 1.0], pa.float32()), "origin": ["annotated", "derived", "annotated"],
+        "attributes": [None, json.dumps({"metric": "ttc", "threshold": 3.0}), None],
+    }
+    environment = {
+        "time_start": [0.0, 1.5], "time_end": [1.5, t.max()],
+        "lighting": pa.array([{"day": 0.8, "twilight": 0.2, "darkness_lit": 0.0, "darkness_unlit": 0.0},
+                              {"day": 1.0, "twilight": 0.0, "darkness_lit": 0.0, "darkness_unlit": 0.0}]),
+        "temperature_c": [14.3, 14.6], "wind_speed_m_s": [3.0, 4.2],
+    }
+    ego = pid == ids[0]
+    interior = {
+        "participant_id": pid[ego], "time": t[ego],
+        "steering_angle": rng.normal(0, 0.01, ego.sum()), "steering_angle_std": np.full(ego.sum(), 0.002),
+        "brake_pedal": rng.uniform(0, 0.2, ego.sum()), "gear": pa.array(np.full(ego.sum(), 5), pa.int8()),
+        "automation_longitudinal_p": pa.array(np.full(ego.sum(), 0.9), pa.float32()),
+        "automation_lateral_p": pa.array(np.full(ego.sum(), 0.1), pa.float32()),
+    }
+    rec.replace_tables({
+        "states": prepare_table(s, TABLES["states"]), "participants": prepare_table(p, TABLES["participants"]),
+        "events": prepare_table(pa.table(events), TABLES["events"]),
+        "environment": prepare_table(pa.table(environment), TABLES["environment"]),
+        "interior": prepare_table(pa.table(interior), TABLES["interior"]),
+    })
+    # a derived interactions table: participant 1 follows 0 closely at every common time
+    both = np.intersect1d(t[pid == ids[0]], t[pid == ids[1]])
+    rec.derived["interactions"] = pa.table({
+        "participant_id": np.full(len(both), ids[1], np.int64), "time": both,
+        "other_id": np.full(len(both), ids[0], np.int64), "relation": ["leader"] * len(both),
+        "ttc": np.linspace(5.0, 1.0, len(both)), "thw": np.full(len(both), 0.8)})
+    return rec

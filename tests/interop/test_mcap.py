@@ -1,0 +1,83 @@
+"""MCAP for Foxglove: channels, schemas, message counts and a box pose read back."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+mcap_reader = pytest.importorskip("mcap.reader")
+pytest.importorskip("foxglove_schemas_protobuf")
+
+from aveas_format.converters import get_converter  # noqa: E402
+
+
+def test_mcap_export(rich, tmp_path):
+    from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
+    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+
+    from aveas_format.schema.metadata import timestamp_ns
+
+    out = tmp_path / "rec.mcap"
+    paths = get_converter("mcap", "export")(rich, out)
+    assert paths == [out]
+    with open(out, "rb") as f:
+        reader = mcap_reader.make_reader(f)
+        summary = reader.get_summary()
+        schemas = {s.id: s for s in summary.schemas.values()}
+        channels = {c.topic: c for c in summary.channels.values()}
+        assert {"/scene", "/map", "/locations", "/origin", "/unobserved"} <= set(channels)
+        assert schemas[channels["/scene"].schema_id].name == "foxglove.SceneUpdate"
+        assert schemas[channels["/scene"].schema_id].encoding == "protobuf"
+        assert schemas[channels["/locations"].schema_id].name == "foxglove.LocationFix"
+        counts = {channels_id: n for channels_id, n in summary.statistics.channel_message_counts.items()}
+        by_topic = {c.topic: counts.get(cid, 0) for cid, c in summary.channels.items()}
+        s = rich.states
+        times = np.unique(s.column("time").to_numpy())
+        assert by_topic["/scene"] == len(times)
+        assert by_topic["/map"] == 1 and by_topic["/origin"] == 1
+        assert by_topic["/locations"] == s.num_rows
+        assert by_topic["/unobserved"] == rich.unobserved.num_rows
+        f.seek(0)
+        reader = mcap_reader.make_reader(f)
+        t0 = timestamp_ns(rich.meta.start_time)
+        first_scene = lane_msg = first_fix = None
+        for schema, channel, message in reader.iter_messages(topics=["/scene", "/map", "/locations"]):
+            if channel.topic == "/scene" and first_scene is None:
+                first_scene = (message, SceneUpdate.FromString(message.data))
+            elif channel.topic == "/map":
+                lane_msg = SceneUpdate.FromString(message.data)
+            elif channel.topic == "/locations" and first_fix is None:
+                first_fix = LocationFix.FromString(message.data)
+    msg, scene = first_scene
+    assert msg.log_time == t0 + int(round(times[0] * 1e9))
+    first_rows = s.filter(s.column("time").to_numpy() == times[0]).to_pylist()
+    assert len(scene.entities) == len(first_rows)
+    row = first_rows[0]
+    ent = next(e for e in scene.entities if e.id == f"participant/{row['participant_id']}")
+    cube = ent.cubes[0]
+    assert cube.pose.position.x == pytest.approx(row["x"]) and cube.pose.position.y == pytest.approx(row["y"])
+    assert 2 * math.atan2(cube.pose.orientation.z, cube.pose.orientation.w) == pytest.approx(row["heading"])
+    part = rich.participants.to_pylist()
+    p = next(r for r in part if r["participant_id"] == row["participant_id"])
+    assert cube.size.x == pytest.approx(p["length"]) and cube.size.y == pytest.approx(p["width"])
+    assert ent.texts[0].text.startswith(str(row["participant_id"]))
+    assert ent.frame_id == "map"
+    lanes = lane_msg.entities[0]
+    assert lanes.id == "map/lanes" and len(lanes.lines) == 3  # 3 lanes of the sample motorway
+    assert first_fix.latitude == pytest.approx(48.9, abs=0.05)
+
+
+def test_cli_export_mcap(rich, tmp_path):
+    rec_path = rich.write(tmp_path / "r.aveas")
+    out = tmp_path / "r.mcap"
+    res = subprocess.run([sys.executable, "-m", "aveas_format", "export", "--to", "mcap", str(rec_path),
+                          "-o", str(out), "-O", "every=2", "-O", "locations=false"],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    with open(out, "rb") as f:
+        summary = mcap_reader.make_reader(f).get_summary()
+    assert "/locations" not in {c.topic for c in summary.channels.values()}
