@@ -23,6 +23,10 @@ def info(
 
     rec = aveas_format.open(recording)
     s = rec.summary()
+    if rec.derived or (rec.events is not None and rec.events.num_rows):
+        from aveas_format.derive import criticality_summary
+
+        s["criticality"] = criticality_summary(rec)
     if as_json:
         print(json.dumps(s, indent=2))
         return
@@ -45,6 +49,8 @@ def info(
          else "-"),
         ("coverage", s["coverage"] or "not given"),
     ]
+    if "criticality" in s:
+        rows.append(("criticality", json.dumps(s["criticality"], default=str)))
     t = Table(show_header=False, show_edge=False, pad_edge=False, box=None)
     t.add_column(style="bold")
     t.add_column()

@@ -270,9 +270,13 @@ INTERACTIONS = TableSpec(
                  nullable=False),
         *gaussian("ttc", "s", MAY, "time to collision (null = no collision course)", minimum=0.0),
         enum_col("ttc_kind", TtcKind.values(), MAY, "how `ttc` was computed"),
+        *gaussian("ttc_ca", "s", MAY, "time to collision with constant accelerations (vehicles stop "
+                  "rather than reverse; null = no collision)", minimum=0.0),
         *gaussian("gap", "m", MAY, "net bumper-to-bumper gap"),
-        col("thw", "float64", MAY, "time headway: net gap / speed of the follower", "s", minimum=0.0),
-        col("dhw", "float64", MAY, "distance headway: net bumper-to-bumper gap", "m"),
+        col("thw", "float64", MAY, "time headway: net gap / speed of the follower (null = infinite)",
+            "s", minimum=0.0),
+        col("dhw", "float64", MAY, "distance headway: gross front-to-front spacing (gap + leader "
+            "length)", "m"),
         col("closing_speed", "float64", MAY, "rate at which the gap closes (positive = closing)",
             "m/s"),
     ),
