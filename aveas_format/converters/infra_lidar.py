@@ -81,6 +81,7 @@ from aveas_format.converters.common import (
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.safeio import MAX_BULK_JSON_BYTES, load_json
 from aveas_format.schema.taxonomy import CLASSES
 
 CLS = {c: i for i, c in enumerate(CLASSES)}
@@ -184,12 +185,10 @@ def read_sensor_pose(path: Path) -> np.ndarray:
 
 def _load_json(path: Path) -> Any:
     try:
-        with open(path, "rb") as f:
-            return json.load(f)
-    except json.JSONDecodeError as e:
-        raise FormatError(f"malformed JSON: {e.msg}", path=path, line=e.lineno, column=e.colno) from None
+        raw = Path(path).read_bytes()
     except OSError as e:
         raise RecordingIOError(f"cannot read: {e.strerror}", path=path) from None
+    return load_json(raw, path=path, max_bytes=MAX_BULK_JSON_BYTES)
 
 
 def _chain(cs: dict[str, Any], name: str, path: Path) -> np.ndarray:

@@ -67,6 +67,7 @@ import pyarrow as pa
 from aveas_format.converters.common import load_map_bytes, source_block
 from aveas_format.converters.registry import ConverterOptions, ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.safeio import MAX_BULK_JSON_BYTES, load_json
 from aveas_format.schema.taxonomy import CLASSES, LIGHTING, ROAD_SURFACE
 
 #: the namespace of everything this library adds to an OpenLABEL file
@@ -871,10 +872,7 @@ def _load_doc(path: Path) -> dict[str, Any]:
         raw = path.read_bytes()
     except OSError as e:
         raise RecordingIOError(f"cannot read: {e.strerror or e}", path=path) from None
-    try:
-        doc = json.loads(raw)
-    except json.JSONDecodeError as e:
-        raise FormatError(f"not JSON: {e.msg}", path=path, line=e.lineno) from None
+    doc = load_json(raw, path=path, max_bytes=MAX_BULK_JSON_BYTES)
     if not isinstance(doc, dict) or not isinstance(doc.get("openlabel"), dict):
         raise FormatError("not an OpenLABEL file: no top-level 'openlabel' object", path=path)
     return doc["openlabel"]

@@ -42,6 +42,7 @@ from lxml import etree
 from aveas_format.converters.common import load_map_bytes, source_block
 from aveas_format.converters.registry import ConverterOptions, ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.safeio import xml_parser
 
 VEHICLE_CATEGORY = {"car": "car", "van": "van", "truck": "truck", "bus": "bus", "trailer": "trailer",
                     "motorcycle": "motorbike", "bicycle": "bicycle", "railvehicle": "tram"}
@@ -303,7 +304,7 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
         raise FormatError(f"openscenario: expected one input file, got {len(inputs)}")
     path = Path(inputs[0])
     try:
-        root = etree.parse(str(path), etree.XMLParser(remove_comments=True, huge_tree=True)).getroot()
+        root = etree.parse(str(path), xml_parser()).getroot()
     except OSError as e:
         raise RecordingIOError(f"cannot read: {e}", path=path) from None
     except etree.XMLSyntaxError as e:

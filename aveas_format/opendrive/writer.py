@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from lxml import etree
 
+from ..safeio import xml_parser
 from .model import Geometry, Header, Junction, Lane, LaneSection, Poly3Record, Road
 
 
@@ -181,7 +182,7 @@ def _road(root: Any, road: Road) -> None:
         if items:
             box = _sub(el, tag)
             for obj in items:
-                box.append(etree.fromstring(obj.xml) if obj.xml else _plain_object(obj))
+                box.append(etree.fromstring(obj.xml, xml_parser()) if obj.xml else _plain_object(obj))
 
 
 def _plain_object(obj: Any) -> Any:

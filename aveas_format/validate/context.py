@@ -18,8 +18,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from pydantic import ValidationError
 
+from aveas_format.errors import FormatError
 from aveas_format.io.container import Container, sha256_of
 from aveas_format.io.recording import Recording
+from aveas_format.safeio import load_json
 from aveas_format.schema.metadata import RecordingMeta
 from aveas_format.schema.tables import TABLES
 from aveas_format.schema.versions import VersionError, migrate_meta
@@ -75,10 +77,10 @@ class Context:
             return None
         raw = self.container.read_bytes("recording.json")
         try:
-            data = json.loads(raw)
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
-            self.problem("broken_json", file="recording.json", line=getattr(e, "lineno", None),
-                         error=getattr(e, "msg", str(e)))
+            data = load_json(raw)
+        except FormatError as e:
+            self.problem("broken_json", file="recording.json", line=e.where.get("line"),
+                         error=e.message)
             return None
         if not isinstance(data, dict):
             self.problem("broken_json", file="recording.json", line=1, error="not a JSON object")

@@ -238,7 +238,7 @@ def test_asam_spec_cuboid_example(tmp_path):
 def test_malformed_inputs_are_located(site_map, tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text('{"openlabel": {\n  "frames": {\n    "0": {,}\n}}}')
-    with pytest.raises(aveas_format.FormatError, match=r"bad.json: line 3, column 11: malformed JSON"):
+    with pytest.raises(aveas_format.FormatError, match=r"bad.json: line 3, column 11: broken JSON"):
         convert("infra-lidar", [bad], map_source=site_map)
     doc = tum_frame(0)
     uid = TRUTH[1][0]
