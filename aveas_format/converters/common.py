@@ -95,7 +95,7 @@ def _numeric(table: pa.Table, numeric: Sequence[str], path: Path, header_lines: 
         if c not in table.column_names:
             continue
         col = table.column(c)
-        if pa.types.is_floating(col.type) or pa.types.is_integer(col.type):
+        if pa.types.is_floating(col.type) or pa.types.is_integer(col.type) or pa.types.is_null(col.type):
             col = col.cast(pa.float64())
         else:
             s = pc.utf8_trim_whitespace(col.cast(pa.string()))
@@ -114,7 +114,7 @@ def _numeric(table: pa.Table, numeric: Sequence[str], path: Path, header_lines: 
 def _try_float(s: pa.ChunkedArray) -> pa.ChunkedArray | None:
     try:
         empty = pc.equal(s, "")
-        return pc.if_else(empty, pa.scalar(None, pa.float64()), s).cast(pa.float64())
+        return pc.if_else(empty, pa.scalar(None, pa.string()), s).cast(pa.float64())
     except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
         return None
 
@@ -429,36 +429,10 @@ def group_std(codes: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
 
 def read_numeric_table(path: Path, *, required: Sequence[str] = (), numeric: Sequence[str] = (),
                        delimiter: str | None = None) -> pa.Table:
-    """:func:`read_table` with ``numeric`` columns converted to float64 (empty -> null); a value
-    that is not a number raises a :class:`FormatError` naming the file, CSV line and column.
+    """:func:`read_table` with ``numeric`` columns as float64 (empty -> null); a value that is not a
+    number raises a :class:`FormatError` naming the file, CSV line and column."""
+    return read_table(path, required=required, numeric=numeric, delimiter=delimiter)
 
-    (Works around ``_try_float`` above, whose ``if_else(bool, double, string)`` has no Arrow
-    kernel, so that ``read_table(numeric=...)`` on CSV text columns fails with StopIteration.)"""
-    path = Path(path)
-    table = read_table(path, required=required, delimiter=delimiter)
-    header_lines = 0 if path.suffix.lower() == ".parquet" else 1
-    for c in numeric:
-        if c not in table.column_names:
-            continue
-        col = table.column(c)
-        if pa.types.is_floating(col.type) or pa.types.is_integer(col.type) or pa.types.is_null(col.type):
-            col = col.cast(pa.float64())
-        else:
-            s = pc.utf8_trim_whitespace(col.cast(pa.string()))
-            s = pc.if_else(pc.equal(s, ""), pa.scalar(None, pa.string()), s)
-            try:
-                col = s.cast(pa.float64())
-            except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
-                vals = s.to_pylist()
-                bad = next(i for i, v in enumerate(vals) if v is not None and not _is_float(v))
-                raise FormatError(f"column {c!r}: {vals[bad]!r} is not a number", path=path,
-                                  line=bad + 1 + header_lines if header_lines else None,
-                                  row=None if header_lines else bad) from None
-        table = table.set_column(table.column_names.index(c), c, col)
-    return table
-
-
-# --- frames and uncertainty of measured sources (aerial converters) ------------------------------
 
 def projected_to_local(x: np.ndarray, y: np.ndarray, source_crs: str, map_crs: str,
                        map_offset: tuple[float, float, float, float] | None = None
@@ -522,32 +496,3 @@ def sort_states(pid: np.ndarray, t: np.ndarray, path: Path | None = None,
                           line=None if lines is None else int(lines[i]))
     return order
 
-
-def read_numeric_table(path: Path, *, required: Sequence[str] = (), numeric: Sequence[str] = ()
-                       ) -> pa.Table:
-    """:func:`read_table`, then ``numeric`` columns as float64 with located errors.
-
-    CSV columns are type-inferred by Arrow; a numeric column holding text (``'abc'``) is reported
-    with its line and column. Empty cells become null.
-    """
-    table = read_table(path, required=required)
-    header_lines = 0 if Path(path).suffix.lower() == ".parquet" else 1
-    for c in numeric:
-        if c not in table.column_names:
-            continue
-        col = table.column(c)
-        if pa.types.is_floating(col.type) or pa.types.is_integer(col.type) or pa.types.is_null(col.type):
-            col = col.cast(pa.float64())
-        else:
-            s = pc.utf8_trim_whitespace(col.cast(pa.string()))
-            s = pc.if_else(pc.equal(s, ""), pa.scalar(None, pa.string()), s)
-            try:
-                col = s.cast(pa.float64())
-            except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
-                vals = s.to_pylist()
-                bad = next(i for i, v in enumerate(vals) if v is not None and not _is_float(v))
-                raise FormatError(f"column {c!r}: {vals[bad]!r} is not a number", path=path,
-                                  line=bad + 1 + header_lines if header_lines else None,
-                                  row=None if header_lines else bad) from None
-        table = table.set_column(table.column_names.index(c), c, col)
-    return table

@@ -1,0 +1,313 @@
+"""ASAM OSI traces (GroundTruth / SensorView) -> recording.
+
+Input: an OSI trace, either a binary ``.osi`` file (messages each prefixed with their length as a
+4-byte little-endian integer; the message type from the trace file name convention
+``<time>_<gt|sv>_...osi``, the ``message_type`` option, or probed from the first message) or an
+MCAP file (``.mcap``) with ``osi3.GroundTruth``/``osi3.SensorView`` channels and the
+``net.asam.osi.trace`` metadata record. SensorViews contribute their ``global_ground_truth``.
+Decoding uses the PyPI package ``betterosi`` (pure-Python OSI 3.7/3.8 bindings).
+
+What is read, per GroundTruth message (``timestamp`` -> time, relative to the first message;
+MCAP ``zero_time`` metadata + that offset gives ``start_time`` unless the option sets it):
+
+- every ``moving_object``: ``id`` -> source id; ``base.position`` x, y (z) = the bounding box centre
+  in the OSI global frame, which is the footprint centre the format uses; ``base.orientation.yaw``
+  (rad, counter-clockwise) -> heading; ``base.velocity``/``base.acceleration`` x, y -> vx, vy, ax,
+  ay; ``base.dimension`` length/width/height (the first message of an object counts);
+  ``base.orientation_rate.yaw`` -> yaw_rate.
+- class: ``type`` PEDESTRIAN -> pedestrian, ANIMAL -> animal, VEHICLE by
+  ``vehicle_classification.type``: (small/compact/luxury) car -> car, delivery van -> van, heavy
+  truck / semitractor -> truck, (semi)trailer -> trailer, motorbike -> motorcycle, bicycle, bus,
+  tram/train -> railvehicle, wheelchair / stand-up scooter / micromobility device ->
+  mobility_device, anything else -> other.
+- ``vehicle_classification.light_state``: brake light on, indicators left/right/warning ->
+  ``light_brake_p``, ``light_indicator_left_p``/``right_p``, ``light_hazard_p`` (0/1).
+- ``assigned_lane_id`` (OSI lane ids, not OpenDRIVE lanes) -> the participant's ``osi_lanes``
+  attribute; road coordinates are computed through the map.
+- ``host_vehicle_id`` -> that participant gets role ``host_role`` (default ``system_under_test``).
+
+Frame: the OSI global frame is taken to be the map's local frame (a simulator driving on the same
+OpenDRIVE map). Where the GroundTruth carries a ``proj_string`` that differs from the map's
+geoReference, positions go from the OSI frame (through ``proj_frame_offset``) to the projected CRS
+and then into the map's frame. Provenance ``simulated``, role ``simulated_agent``, every ``_std`` 0;
+method ``traffic_simulation`` (option ``method`` for driving-simulator traces).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+import warnings
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from aveas_format.converters.common import (
+    load_map_bytes,
+    projected_to_local,
+    rotate,
+    sort_states,
+    wrap_recording,
+)
+from aveas_format.converters.registry import ImportOptions, converter
+from aveas_format.errors import FormatError, RecordingIOError
+
+VEHICLE_CLASS = {
+    "SMALL_CAR": "car", "COMPACT_CAR": "car", "CAR": "car", "MEDIUM_CAR": "car", "LUXURY_CAR": "car",
+    "DELIVERY_VAN": "van", "HEAVY_TRUCK": "truck", "SEMITRACTOR": "truck", "SEMITRAILER": "trailer",
+    "TRAILER": "trailer", "MOTORBIKE": "motorcycle", "BICYCLE": "bicycle", "BUS": "bus",
+    "TRAM": "railvehicle", "TRAIN": "railvehicle", "WHEELCHAIR": "mobility_device",
+    "STANDUP_SCOOTER": "mobility_device", "MICROMOBILITY_DEVICE": "mobility_device",
+}
+
+
+class OsiOptions(ImportOptions):
+    message_type: Literal["auto", "GroundTruth", "SensorView"] = "auto"
+    """Message type of a .osi trace (auto: from the file name, else probed)."""
+    host_role: Literal["system_under_test", "recording_vehicle", "simulated_agent"] = \
+        "system_under_test"
+    """Role of the GroundTruth's host vehicle."""
+    method: Literal["traffic_simulation", "driving_simulator"] = "traffic_simulation"
+    """acquisition.method of the recording."""
+
+
+def _enum_name(v: Any) -> str:
+    name = getattr(v, "name", None)
+    if name is None:
+        name = str(v).rsplit(".", 1)[-1]
+    return str(name).upper().removeprefix("TYPE_")
+
+
+def check_osi_framing(path: Path) -> int:
+    """Number of length-prefixed messages of a binary .osi trace; a truncated message is an error
+    naming its index and byte offset."""
+    size = path.stat().st_size
+    count = 0
+    with open(path, "rb") as f:
+        offset = 0
+        while offset < size:
+            head = f.read(4)
+            if len(head) < 4:
+                raise FormatError(f"truncated length prefix of message {count} at byte {offset}",
+                                  path=path)
+            (n,) = struct.unpack("<I", head)
+            if offset + 4 + n > size:
+                raise FormatError(f"message {count} at byte {offset} declares {n} bytes but the file "
+                                  f"ends {size - offset - 4} bytes later (truncated trace?)", path=path)
+            f.seek(n, 1)
+            offset += 4 + n
+            count += 1
+    return count
+
+
+def _messages(path: Path, options: OsiOptions):
+    import betterosi
+
+    suffix = path.suffix.lower()
+    if suffix == ".osi":
+        if check_osi_framing(path) == 0:
+            raise FormatError("empty OSI trace", path=path)
+        kw: dict[str, Any] = {}
+        if options.message_type != "auto":
+            kw["osi_message_type"] = options.message_type
+        return betterosi.read(str(path), return_ground_truth=True, **kw)
+    if suffix == ".mcap":
+        return betterosi.read(str(path), return_ground_truth=True)
+    raise RecordingIOError("not an OSI trace (.osi or .mcap)", path=path)
+
+
+def _zero_time(path: Path) -> str | None:
+    if path.suffix.lower() != ".mcap":
+        return None
+    try:
+        import betterosi
+
+        for md in betterosi.read_file_metadata(str(path)):
+            if md.get("name") == "net.asam.osi.trace":
+                return (md.get("data") or md.get("metadata") or {}).get("zero_time")
+    except Exception:  # noqa: BLE001 - metadata is optional
+        return None
+    return None
+
+
+@converter("osi", description="ASAM OSI trace (.osi length-prefixed binary or MCAP): GroundTruth "
+           "moving objects", patterns=("*.osi", "*.mcap"), method="traffic_simulation",
+           options=OsiOptions)
+def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
+    from aveas_format.georef import LocalFrame, crs_equal
+    from aveas_format.opendrive import load_map
+
+    cols: dict[str, list] = {k: [] for k in (
+        "t", "id", "x", "y", "z", "yaw", "vx", "vy", "ax", "ay", "yaw_rate", "brake", "ind_l",
+        "ind_r", "hazard", "msg")}
+    static: dict[int, dict[str, Any]] = {}
+    host_ids: set[int] = set()
+    proj: tuple[str, tuple[float, float, float, float]] | None = None
+    n_msg = 0
+    for path in inputs:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", DeprecationWarning)
+                for gt in _messages(path, options):
+                    t = _get(gt, "timestamp", "seconds", default=0.0) + \
+                        _get(gt, "timestamp", "nanos", default=0.0) * 1e-9
+                    if getattr(gt, "host_vehicle_id", None) is not None:
+                        host_ids.add(int(gt.host_vehicle_id.value))
+                    if proj is None and getattr(gt, "proj_string", ""):
+                        off = getattr(gt, "proj_frame_offset", None)
+                        o = (0.0, 0.0, 0.0, 0.0) if off is None else (
+                            _get(off, "position", "x", default=0.0),
+                            _get(off, "position", "y", default=0.0), 0.0,
+                            _get(off, "yaw", default=0.0))
+                        proj = (str(gt.proj_string), o)
+                    for mo in gt.moving_object:
+                        _object(mo, t, n_msg, cols, static)
+                    n_msg += 1
+        except (FormatError, RecordingIOError):
+            raise
+        except Exception as e:  # noqa: BLE001 - decoder errors of any kind
+            raise FormatError(f"cannot decode OSI message {n_msg}: {type(e).__name__}: {e}",
+                              path=path) from None
+    if not cols["t"]:
+        raise FormatError("no GroundTruth moving objects in the trace", path=inputs[0])
+
+    t = np.asarray(cols["t"])
+    t0 = float(t.min())
+    t = t - t0
+    src = np.asarray(cols["id"], np.int64)
+    uniq, pid = np.unique(src, return_inverse=True)
+    pid = pid.astype(np.int64)
+    order = sort_states(pid, t, inputs[0])
+
+    def arr(k: str) -> np.ndarray:
+        return np.asarray(cols[k], np.float64)
+
+    x, y, yaw = arr("x"), arr("y"), arr("yaw")
+    vx, vy, ax, ay = arr("vx"), arr("vy"), arr("ax"), arr("ay")
+    map_bytes = load_map_bytes(map_source)
+    header = load_map(map_bytes).header
+    if proj is not None and header.geo_reference and not crs_equal(proj[0], header.geo_reference):
+        px, py = LocalFrame(proj[0], proj[1], warn=False).to_projected(x, y)
+        x, y, rot = projected_to_local(px, py, proj[0], header.geo_reference, header.offset)
+        rot = rot + proj[1][3]
+        yaw = yaw + rot
+        vx, vy = rotate(vx, vy, rot)
+        ax, ay = rotate(ax, ay, rot)
+    n = len(t)
+    states: dict[str, Any] = {
+        "participant_id": pid, "time": t, "x": x, "y": y, "z": arr("z"), "heading": yaw,
+        "vx": vx, "vy": vy, "ax": ax, "ay": ay, "yaw_rate": arr("yaw_rate"),
+        **{f"{c}_std": np.zeros(n) for c in ("x", "y", "heading", "vx", "vy")},
+        "light_brake_p": arr("brake").astype(np.float32),
+        "light_indicator_left_p": arr("ind_l").astype(np.float32),
+        "light_indicator_right_p": arr("ind_r").astype(np.float32),
+        "light_hazard_p": arr("hazard").astype(np.float32),
+        "source_frame": np.asarray(cols["msg"], np.int64),
+    }
+    states = {k: v[order] for k, v in states.items()}
+    import pyarrow as pa
+
+    for k in ("z", "ax", "ay", "yaw_rate", "light_brake_p", "light_indicator_left_p",
+              "light_indicator_right_p", "light_hazard_p"):
+        v = states[k]
+        states[k] = pa.array(v, mask=np.isnan(v))
+    m = len(uniq)
+    info = [static[int(u)] for u in uniq]
+    roles = [options.host_role if int(u) in host_ids else "simulated_agent" for u in uniq]
+    participants = {
+        "participant_id": np.arange(m, dtype=np.int64), "source_id": [str(int(u)) for u in uniq],
+        "class": [d["class"] for d in info],
+        "length": [d["length"] for d in info], "width": [d["width"] for d in info],
+        "height": [d["height"] for d in info],
+        "length_std": np.zeros(m), "width_std": np.zeros(m), "height_std": np.zeros(m),
+        "role": roles, "provenance": ["simulated"] * m,
+        "attributes": [json.dumps({"osi_type": d["osi_type"], "osi_lanes": sorted(d["lanes"])})
+                       for d in info],
+    }
+    kw: dict[str, Any] = {}
+    zt = _zero_time(inputs[0])
+    if zt and not options.start_time:
+        kw["start_time"] = _shift_iso(zt, t0)
+    return wrap_recording(
+        "osi", inputs, options, map_bytes=map_bytes, participants=participants, states=states,
+        method=options.method, provenance="simulated", partner="ASAM OSI simulation",
+        acquisition={"platform": "ASAM OSI trace",
+                     "sensors": [{"id": "osi", "kind": "simulator"}]},
+        **kw,
+    )
+
+
+def _shift_iso(iso: str, seconds: float) -> str:
+    from datetime import datetime, timedelta, timezone
+
+    try:
+        dt = datetime.fromisoformat(iso.replace("Z", "+00:00")).astimezone(timezone.utc)
+    except ValueError:
+        return "1970-01-01T00:00:00Z"
+    dt = dt + timedelta(seconds=seconds)
+    return dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+def _get(obj: Any, *path: str, default: float = math.nan) -> float:
+    """A numeric field of nested OSI messages; ``default`` where a message on the way is unset."""
+    for name in path:
+        obj = getattr(obj, name, None)
+        if obj is None:
+            return default
+    return float(obj)
+
+
+def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dict[str, Any]]) -> None:
+    if getattr(mo, "id", None) is None or getattr(mo, "base", None) is None:
+        raise FormatError(f"moving object without id or base in message {msg}")
+    oid = int(mo.id.value)
+    b = mo.base
+    cols["t"].append(t)
+    cols["id"].append(oid)
+    cols["msg"].append(msg)
+    cols["x"].append(_get(b, "position", "x"))
+    cols["y"].append(_get(b, "position", "y"))
+    cols["z"].append(_get(b, "position", "z"))
+    cols["yaw"].append(_get(b, "orientation", "yaw", default=0.0))
+    cols["vx"].append(_get(b, "velocity", "x", default=0.0))
+    cols["vy"].append(_get(b, "velocity", "y", default=0.0))
+    cols["ax"].append(_get(b, "acceleration", "x"))
+    cols["ay"].append(_get(b, "acceleration", "y"))
+    cols["yaw_rate"].append(_get(b, "orientation_rate", "yaw"))
+    brake = ind_l = ind_r = hazard = math.nan
+    vc = getattr(mo, "vehicle_classification", None)
+    ls = getattr(vc, "light_state", None) if vc is not None else None
+    if ls is not None:
+        bname = _enum_name(ls.brake_light_state)
+        if bname not in ("UNKNOWN", "OTHER"):
+            brake = 0.0 if bname == "OFF" else 1.0
+        iname = _enum_name(ls.indicator_state)
+        if iname not in ("UNKNOWN", "OTHER"):
+            ind_l = 1.0 if iname == "LEFT" else 0.0
+            ind_r = 1.0 if iname == "RIGHT" else 0.0
+            hazard = 1.0 if iname == "WARNING" else 0.0
+    cols["brake"].append(brake)
+    cols["ind_l"].append(ind_l)
+    cols["ind_r"].append(ind_r)
+    cols["hazard"].append(hazard)
+    d = static.get(oid)
+    if d is None:
+        otype = _enum_name(mo.type)
+        if otype == "PEDESTRIAN":
+            cls = "pedestrian"
+        elif otype == "ANIMAL":
+            cls = "animal"
+        elif otype == "VEHICLE":
+            cls = VEHICLE_CLASS.get(_enum_name(vc.type), "other") if vc is not None else "car"
+        else:
+            cls = "other"
+        length, width, height = (_get(b, "dimension", k) for k in ("length", "width", "height"))
+        if not (length > 0 and width > 0):
+            raise FormatError(f"moving object {oid} has no positive base.dimension "
+                              f"(length {length}, width {width}) in message {msg}")
+        static[oid] = d = {"class": cls, "length": length, "width": width,
+                           "height": height if height > 0 else None, "osi_type": otype,
+                           "lanes": set()}
+    d["lanes"].update(int(li.value) for li in mo.assigned_lane_id)

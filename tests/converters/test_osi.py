@@ -1,0 +1,166 @@
+"""ASAM OSI traces (.osi and MCAP) -> recording, from GroundTruth messages made from an analytic
+truth with the betterosi bindings."""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+import warnings
+
+import numpy as np
+import pytest
+
+import aveas_format
+from aveas_format.converters import convert, load_converters
+from aveas_format.opendrive.builder import straight_highway
+
+b = pytest.importorskip("betterosi")
+
+GEO = "+proj=tmerc +lat_0=49.0 +lon_0=8.4 +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
+DT = 0.05
+
+
+@pytest.fixture(scope="module")
+def road(tmp_path_factory):
+    p = tmp_path_factory.mktemp("maps") / "road.xodr"
+    p.write_text(straight_highway(length=600.0, lanes_right=2, lanes_left=1, geo_reference=GEO))
+    return p
+
+
+def truth(n: int = 60):
+    t = 100.0 + np.arange(n) * DT   # simulation time does not start at 0
+    s = t - t[0]
+    ego = dict(id=1, x=20 + 30 * s + 0.5 * 2 * s ** 2, y=np.full(n, -1.75), yaw=np.zeros(n),
+               vx=30 + 2 * s, vy=np.zeros(n), ax=np.full(n, 2.0), L=4.8, W=1.9, H=1.5,
+               vtype="MEDIUM_CAR", lane=11)
+    truck = dict(id=2, x=300 - 20 * s, y=np.full(n, 1.75), yaw=np.full(n, math.pi),
+                 vx=np.full(n, -20.0), vy=np.zeros(n), ax=np.zeros(n), L=16.5, W=2.55, H=4.0,
+                 vtype="HEAVY_TRUCK", lane=21)
+    ped = dict(id=3, x=np.full(n, 100.0), y=-9 + 1.2 * s, yaw=np.full(n, math.pi / 2),
+               vx=np.zeros(n), vy=np.full(n, 1.2), ax=np.zeros(n), L=0.5, W=0.6, H=1.8,
+               vtype=None, lane=None)
+    return t, [ego, truck, ped]
+
+
+def messages(t, objs, sensor_view: bool = False):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        for i, ti in enumerate(t):
+            mos = []
+            for o in objs:
+                kw = {}
+                if o["vtype"]:
+                    ind = "RIGHT" if (o["id"] == 1 and i < 10) else "OFF"
+                    brake = b.MovingObjectVehicleClassificationLightStateBrakeLightState.OFF
+                    kw["vehicle_classification"] = b.MovingObjectVehicleClassification(
+                        type=getattr(b.MovingObjectVehicleClassificationType, o["vtype"]),
+                        light_state=b.MovingObjectVehicleClassificationLightState(
+                            indicator_state=getattr(
+                                b.MovingObjectVehicleClassificationLightStateIndicatorState, ind),
+                            brake_light_state=brake))
+                    kw["type"] = b.MovingObjectType.VEHICLE
+                else:
+                    kw["type"] = b.MovingObjectType.PEDESTRIAN
+                if o["lane"]:
+                    kw["assigned_lane_id"] = [b.Identifier(value=o["lane"])]
+                mos.append(b.MovingObject(
+                    id=b.Identifier(value=o["id"]),
+                    base=b.BaseMoving(
+                        dimension=b.Dimension3d(length=o["L"], width=o["W"], height=o["H"]),
+                        position=b.Vector3d(x=float(o["x"][i]), y=float(o["y"][i]), z=o["H"] / 2),
+                        orientation=b.Orientation3d(yaw=float(o["yaw"][i])),
+                        velocity=b.Vector3d(x=float(o["vx"][i]), y=float(o["vy"][i]), z=0.0),
+                        acceleration=b.Vector3d(x=float(o["ax"][i]), y=0.0, z=0.0)),
+                    **kw))
+            sec = int(ti)
+            gt = b.GroundTruth(timestamp=b.Timestamp(seconds=sec, nanos=int(round((ti - sec) * 1e9))),
+                               host_vehicle_id=b.Identifier(value=1), moving_object=mos)
+            if sensor_view:
+                yield b.SensorView(timestamp=gt.timestamp, host_vehicle_id=gt.host_vehicle_id,
+                                   global_ground_truth=gt)
+            else:
+                yield gt
+
+
+def write_osi(path, msgs):
+    with open(path, "wb") as f:
+        for m in msgs:
+            data = m.to_binary()
+            f.write(struct.pack("<I", len(data)))
+            f.write(data)
+    return path
+
+
+def check(rec, t, objs):
+    s, p = rec.states, rec.participants
+    assert p.column("source_id").to_pylist() == ["1", "2", "3"]
+    assert p.column("class").to_pylist() == ["car", "truck", "pedestrian"]
+    assert p.column("role").to_pylist() == ["system_under_test", "simulated_agent", "simulated_agent"]
+    assert p.column("length").to_pylist() == pytest.approx([4.8, 16.5, 0.5])
+    pid = s.column("participant_id").to_numpy()
+    for k, o in enumerate(objs):
+        m = pid == k
+        assert np.allclose(s.column("time").to_numpy()[m], t - t[0], atol=1e-9)
+        assert np.allclose(s.column("x").to_numpy()[m], o["x"], atol=1e-9)
+        assert np.allclose(s.column("y").to_numpy()[m], o["y"], atol=1e-9)
+        dh = np.angle(np.exp(1j * (s.column("heading").to_numpy()[m] - o["yaw"])))
+        assert np.abs(dh).max() < 1e-12
+        assert np.allclose(s.column("vx").to_numpy()[m], o["vx"])
+        assert np.allclose(s.column("ax").to_numpy()[m], o["ax"])
+    ind = s.column("light_indicator_right_p").to_numpy()
+    assert ind[pid == 0][:10].tolist() == [1.0] * 10 and ind[pid == 0][10] == 0.0
+    lane = np.asarray(s.column("lane_id").to_pylist())
+    assert (lane[pid == 0] == -1).all() and (lane[pid == 1] == 1).all()
+    attrs = [json.loads(a) for a in p.column("attributes").to_pylist()]
+    assert attrs[0]["osi_lanes"] == [11] and attrs[2]["osi_type"] == "PEDESTRIAN"
+    assert rec.meta.provenance.value == "simulated"
+    assert rec.meta.nominal_rate_hz == pytest.approx(1 / DT)
+
+
+def test_registered():
+    assert "osi" in load_converters()
+
+
+def test_binary_osi_ground_truth(tmp_path, road):
+    t, objs = truth()
+    trace = write_osi(tmp_path / "run_gt.osi", messages(t, objs))
+    rec = convert("osi", [trace], map_source=road)
+    check(rec, t, objs)
+    report = aveas_format.validate(rec.write(tmp_path / "osi.aveas"))
+    assert report.counts["error"] == 0, report
+
+
+def test_binary_osi_sensor_view(tmp_path, road):
+    t, objs = truth(20)
+    trace = write_osi(tmp_path / "trace.osi", messages(t, objs, sensor_view=True))
+    rec = convert("osi", [trace], map_source=road, options={"message_type": "SensorView"})
+    assert rec.states.num_rows == 60
+
+
+def test_mcap_trace(tmp_path, road):
+    t, objs = truth()
+    path = tmp_path / "run.mcap"
+    with b.Writer(path, topic="ground_truth",
+                  metadata={"zero_time": "2024-05-01T10:00:00Z", "description": "test"}) as w:
+        for m in messages(t, objs):
+            w.add(m)
+    rec = convert("osi", [path], map_source=road)
+    check(rec, t, objs)
+    assert rec.meta.start_time.startswith("2024-05-01T10:01:40")
+
+
+def test_truncated_trace_is_located(tmp_path, road):
+    t, objs = truth(5)
+    trace = write_osi(tmp_path / "cut_gt.osi", messages(t, objs))
+    data = trace.read_bytes()
+    trace.write_bytes(data[:-7])
+    with pytest.raises(aveas_format.FormatError, match=r"cut_gt.osi: message 4 at byte \d+ declares"):
+        convert("osi", [trace], map_source=road)
+    trace.write_bytes(b"")
+    with pytest.raises(aveas_format.FormatError, match="empty OSI trace"):
+        convert("osi", [trace], map_source=road)
+    junk = tmp_path / "junk_gt.osi"
+    junk.write_bytes(struct.pack("<I", 6) + b"\xff\xff\xff\xff\xff\xff")
+    with pytest.raises(aveas_format.FormatError, match=r"junk_gt.osi: cannot decode OSI message 0"):
+        convert("osi", [junk], map_source=road)
