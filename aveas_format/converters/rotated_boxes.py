@@ -63,6 +63,7 @@ from aveas_format.converters.common import (
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.safeio import xml_parser
 from aveas_format.schema.taxonomy import CLASSES
 
 WORLD_FILE_SUFFIXES = (".tfw", ".tifw", ".pgw", ".pngw", ".jgw", ".jpgw", ".j2w", ".gfw", ".bpw",
@@ -134,7 +135,7 @@ def read_aux_xml(path: Path) -> tuple[tuple[np.ndarray, np.ndarray] | None, str 
     from lxml import etree
 
     try:
-        root = etree.parse(str(path))
+        root = etree.parse(str(path), xml_parser())
     except (OSError, etree.XMLSyntaxError) as e:
         raise FormatError(f"cannot parse GDAL .aux.xml: {e}", path=path,
                           line=getattr(e, "lineno", None)) from None
