@@ -1,0 +1,159 @@
+"""One place that maps work over recordings or simulations: in-process, local processes, or an
+existing Dask cluster.
+
+>>> from aveas_format.parallel import run_tasks
+>>> for r in run_tasks(validate_one, paths, workers=4):          # or scheduler="tcp://host:8786"
+...     print(r.item, r.error or r.value)
+
+Results stream back as tasks finish (not in input order; ``TaskResult.index`` gives the position).
+A task that raises, or whose worker process dies (segfault, ``os._exit``, out of memory), becomes a
+``TaskResult`` with ``error`` set, and the other tasks still complete: a broken local pool is
+replaced and its in-flight tasks are retried one at a time to find the one that killed it.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import traceback
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass
+class TaskResult:
+    """The outcome of one task."""
+
+    index: int
+    item: Any
+    value: Any = None
+    error: str | None = None
+    traceback: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+def _call(fn: Callable[[Any], Any], item: Any) -> tuple[Any, str | None, str | None]:
+    """Run one task, capturing its exception (runs inside the worker)."""
+    try:
+        return fn(item), None, None
+    except Exception as e:  # noqa: BLE001 — a failing task is data for the caller
+        return None, f"{type(e).__name__}: {e}", traceback.format_exc()
+
+
+def default_workers() -> int:
+    return max(1, (os.cpu_count() or 1))
+
+
+def run_tasks(fn: Callable[[Any], Any], items: Iterable[Any], *, workers: int | None = 1,
+              scheduler: str | None = None, progress: bool = False, description: str = "tasks"
+              ) -> Iterator[TaskResult]:
+    """Run ``fn(item)`` for every item; yield a :class:`TaskResult` per item as it finishes.
+
+    workers: 1 = in this process (default), N > 1 = N local processes, 0/None = one per core.
+    scheduler: address of an existing Dask scheduler (``tcp://host:8786``); overrides workers.
+    ``fn`` must be picklable (a module-level function) for processes and Dask.
+    """
+    items = list(items)
+    bar = _Progress(len(items), description) if progress else None
+    try:
+        if scheduler:
+            gen = _run_dask(fn, items, scheduler)
+        elif workers == 1 or len(items) <= 1:
+            gen = (TaskResult(i, it, *_call(fn, it)) for i, it in enumerate(items))
+        else:
+            gen = _run_processes(fn, items, workers or default_workers())
+        for r in gen:
+            if bar:
+                bar.advance(r.ok)
+            yield r
+    finally:
+        if bar:
+            bar.close()
+
+
+def _run_processes(fn: Callable[[Any], Any], items: list[Any], workers: int) -> Iterator[TaskResult]:
+    pending = list(range(len(items)))[::-1]  # a stack of indices still to submit
+    suspects: list[int] = []  # in flight when a pool broke: retried one at a time
+    while pending or suspects:
+        if suspects:
+            i = suspects.pop()
+            yield _run_isolated(fn, items, i)
+            continue
+        with ProcessPoolExecutor(max_workers=min(workers, len(pending))) as pool:
+            running: dict[Future, int] = {}
+            broken = False
+            while (pending or running) and not broken:
+                while pending and len(running) < 2 * workers:
+                    i = pending.pop()
+                    running[pool.submit(_call, fn, items[i])] = i
+                done, _ = wait(list(running), return_when=FIRST_COMPLETED)
+                for fut in done:
+                    i = running.pop(fut)
+                    try:
+                        value, err, tb = fut.result()
+                    except BrokenProcessPool:
+                        broken = True
+                        suspects.append(i)
+                        continue
+                    yield TaskResult(i, items[i], value, err, tb)
+            if broken:
+                suspects.extend(running.values())
+                pool.shutdown(wait=False, cancel_futures=True)
+
+
+def _run_isolated(fn: Callable[[Any], Any], items: list[Any], i: int) -> TaskResult:
+    """Run one task in a fresh one-worker pool: a crash there is this task's."""
+    with ProcessPoolExecutor(max_workers=1) as pool:
+        try:
+            value, err, tb = pool.submit(_call, fn, items[i]).result()
+        except BrokenProcessPool:
+            return TaskResult(i, items[i], None, "the worker process died (crash, os._exit or out of "
+                              "memory) while running this task", None)
+    return TaskResult(i, items[i], value, err, tb)
+
+
+def _run_dask(fn: Callable[[Any], Any], items: list[Any], scheduler: str) -> Iterator[TaskResult]:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        from aveas_format.errors import AveasError
+
+        raise AveasError("--scheduler needs Dask: pip install \"aveas-format[dask]\"") from None
+    with Client(scheduler) as client:
+        futures = client.map(_call, [fn] * len(items), items, pure=False)
+        index = {f.key: i for i, f in enumerate(futures)}
+        for fut in as_completed(futures):
+            i = index[fut.key]
+            try:
+                value, err, tb = fut.result()
+            except Exception as e:  # noqa: BLE001 — e.g. KilledWorker: the task killed its workers
+                value, err, tb = None, f"{type(e).__name__}: {e}", None
+            yield TaskResult(i, items[i], value, err, tb)
+
+
+class _Progress:
+    """A rich progress bar on stderr (quiet when stderr is not a terminal)."""
+
+    def __init__(self, total: int, description: str) -> None:
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        self._p = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                           TextColumn("{task.fields[failed]} failed"), TimeElapsedColumn(),
+                           console=Console(file=sys.stderr), disable=not sys.stderr.isatty())
+        self._p.start()
+        self._task = self._p.add_task(description, total=total, failed=0)
+        self._failed = 0
+
+    def advance(self, ok: bool) -> None:
+        self._failed += 0 if ok else 1
+        self._p.update(self._task, advance=1, failed=self._failed)
+
+    def close(self) -> None:
+        self._p.stop()

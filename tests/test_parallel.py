@@ -1,0 +1,30 @@
+"""parallel.run_tasks: in-process and local processes; failing and crashing tasks are reported."""
+
+from __future__ import annotations
+
+import pytest
+
+from aveas_format.parallel import run_tasks
+
+from parallel_tasks import crash_on_two, fail_on_three, square
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_all_results_come_back(workers):
+    res = sorted(run_tasks(square, range(10), workers=workers), key=lambda r: r.index)
+    assert [r.value for r in res] == [i * i for i in range(10)]
+    assert all(r.ok for r in res)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_failing_task_does_not_stop_the_others(workers):
+    res = {r.item: r for r in run_tasks(fail_on_three, range(6), workers=workers)}
+    assert res[3].error == "ValueError: three is not allowed" and "Traceback" in res[3].traceback
+    assert [res[i].value for i in (0, 1, 2, 4, 5)] == [0, 1, 2, 4, 5]
+
+
+def test_a_task_that_kills_its_worker_is_reported_and_the_rest_complete():
+    res = {r.item: r for r in run_tasks(crash_on_two, range(8), workers=2)}
+    assert set(res) == set(range(8))
+    assert "worker process died" in res[2].error
+    assert all(res[i].value == i + 100 for i in range(8) if i != 2)
