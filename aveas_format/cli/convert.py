@@ -2,40 +2,12 @@
 
 from __future__ import annotations
 
-import json
-import typing
 from pathlib import Path
-from typing import Any
-
 import typer
 from rich.table import Table
 
 from aveas_format.cli.app import app
-from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, out
-
-
-def parse_option_pairs(pairs: list[str], model: type) -> dict[str, Any]:
-    """``["net_file=a.net.xml", "vtypes=a.rou.xml,b.rou.xml", "geo=true"]`` -> dict.
-
-    Values are read as JSON where they parse (numbers, booleans, lists), else as strings; a
-    comma-separated string becomes a list for list-typed options.
-    """
-    out_: dict[str, Any] = {}
-    fields = getattr(model, "model_fields", {})
-    for pair in pairs:
-        if "=" not in pair:
-            raise ValueError(f"--option {pair!r}: expected KEY=VALUE")
-        key, raw = pair.split("=", 1)
-        key = key.strip().replace("-", "_")
-        try:
-            value: Any = json.loads(raw)
-        except json.JSONDecodeError:
-            value = raw
-        ann = fields[key].annotation if key in fields else None
-        if typing.get_origin(ann) in (list, tuple) and isinstance(value, str):
-            value = [v for v in value.split(",") if v]
-        out_[key] = value
-    return out_
+from aveas_format.cli.common import EXIT_USAGE, converter_options, err, fail, handle_errors, out
 
 
 @app.command()
@@ -69,16 +41,7 @@ def convert(
     if not source or not inputs or not output:
         raise fail("--from NAME, INPUT... and --output are required (or --list)", EXIT_USAGE)
     conv = get_converter(source)
-    raw: dict[str, Any] = {}
-    if options_file:
-        try:
-            raw.update(json.loads(options_file.read_text()))
-        except (OSError, json.JSONDecodeError) as e:
-            raise fail(f"{options_file}: cannot read options: {e}", EXIT_USAGE) from None
-    try:
-        raw.update(parse_option_pairs(option or [], conv.options))
-    except ValueError as e:
-        raise fail(str(e), EXIT_USAGE) from None
+    raw = converter_options(options_file, option, conv.options)
     if output.exists() and not overwrite:
         raise fail(f"{output}: exists; pass --overwrite to replace it", EXIT_USAGE)
     from aveas_format.converters.registry import convert as run

@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
-from typing import Any
 
 import typer
 from rich.table import Table
 
 from aveas_format.cli.app import app
-from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, out
+from aveas_format.cli.common import EXIT_USAGE, converter_options, err, fail, handle_errors, out
 
 
 @app.command()
@@ -29,7 +27,6 @@ def export(
 ) -> None:
     """Export a recording to a foreign format: `aveas-format export --to openlabel run.aveas -o
     run.json` (also `--to openscenario` -> .xosc, `--to mcap` -> .mcap for Foxglove)."""
-    from aveas_format.cli.convert import parse_option_pairs
     from aveas_format.converters.registry import get_converter, load_converters
 
     if list_:
@@ -44,16 +41,7 @@ def export(
     if not target or not recording or not output:
         raise fail("--to NAME, RECORDING and --output are required (or --list)", EXIT_USAGE)
     conv = get_converter(target, "export")
-    raw: dict[str, Any] = {}
-    if options_file:
-        try:
-            raw.update(json.loads(options_file.read_text()))
-        except (OSError, json.JSONDecodeError) as e:
-            raise fail(f"{options_file}: cannot read options: {e}", EXIT_USAGE) from None
-    try:
-        raw.update(parse_option_pairs(option or [], conv.options))
-    except ValueError as e:
-        raise fail(str(e), EXIT_USAGE) from None
+    raw = converter_options(options_file, option, conv.options)
     if output.exists() and not overwrite:
         raise fail(f"{output}: exists; pass --overwrite to replace it", EXIT_USAGE)
     if output.parent and not output.parent.exists():
