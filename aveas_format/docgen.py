@@ -66,23 +66,34 @@ def cli_markdown() -> str:
     commands = getattr(root, "commands", {})
     for name in sorted(commands):
         cmd = commands[name]
-        lines += [f"## `aveas-format {name}`", "", " ".join((cmd.help or "").split()), "", "| parameter | "
-                  "description |", "|---|---|"]
-        for p in cmd.params:
-            if p.name == "help":
-                continue
-            if getattr(p, "param_type_name", "") == "argument":
-                label = f"`{(p.name or '').upper()}`"
-            else:
-                label = ", ".join(f"`{o}`" for o in p.opts)
-            default = getattr(p, "default", None)
-            dtxt = ""
-            if default not in (None, False, (), []) and not callable(default):
-                dtxt = f" (default: `{getattr(default, 'value', default)}`)"
-            help_text = (getattr(p, "help", None) or "").replace("|", "\\|").replace("\n", " ")
-            lines.append(f"| {label} | {help_text}{dtxt} |")
-        lines.append("")
+        subs = getattr(cmd, "commands", None)
+        if subs:  # a command group: its help, then each subcommand
+            lines += [f"## `aveas-format {name}`", "", " ".join((cmd.help or "").split()), ""]
+            for sub in sorted(subs):
+                lines += _command_markdown(f"{name} {sub}", subs[sub], level="###")
+        else:
+            lines += _command_markdown(name, cmd)
     return "\n".join(lines)
+
+
+def _command_markdown(name: str, cmd, level: str = "##") -> list[str]:
+    lines = [f"{level} `aveas-format {name}`", "", " ".join((cmd.help or "").split()), "",
+             "| parameter | description |", "|---|---|"]
+    for p in cmd.params:
+        if p.name == "help":
+            continue
+        if getattr(p, "param_type_name", "") == "argument":
+            label = f"`{(p.name or '').upper()}`"
+        else:
+            label = ", ".join(f"`{o}`" for o in p.opts)
+        default = getattr(p, "default", None)
+        dtxt = ""
+        if default not in (None, False, (), []) and not callable(default):
+            dtxt = f" (default: `{getattr(default, 'value', default)}`)"
+        help_text = (getattr(p, "help", None) or "").replace("|", "\\|").replace("\n", " ")
+        lines.append(f"| {label} | {help_text}{dtxt} |")
+    lines.append("")
+    return lines
 
 
 def converters_markdown() -> str:

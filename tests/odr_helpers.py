@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import importlib.util
 from functools import lru_cache
 from pathlib import Path
 
 import pytest
+from lxml import etree
 
 from aveas_format.opendrive import RoadNetwork, load_map
 
@@ -35,3 +37,14 @@ def fixture_map(name: str) -> RoadNetwork:
 def require_real_maps() -> None:
     if not REAL_MAPS:
         pytest.skip(f"the real OpenDRIVE maps are not there ({SHARED_XODR} is missing)")
+
+
+def xsd_16():
+    """The official OpenDRIVE 1.6 XSD shipped by PyPI ``asam-qc-opendrive`` (skip without it)."""
+    spec = importlib.util.find_spec("qc_opendrive")
+    if spec is None or not spec.submodule_search_locations:
+        pytest.skip("asam-qc-opendrive (which ships the official XSD) is not installed")
+    core = Path(next(iter(spec.submodule_search_locations))) / "schema" / "1.6.1" / "opendrive_16_core.xsd"
+    if not core.exists():
+        pytest.skip(f"no OpenDRIVE 1.6 XSD at {core}")
+    return etree.XMLSchema(etree.parse(str(core)))

@@ -27,7 +27,9 @@ from .model import (
     RoadObject,
     RoadType,
 )
+from .fit import RoadFit, fit_reference_line, fit_road, road_from_lane_markings
 from .network import RoadNetwork
+from .plot import plot_map
 from .projection import Projection
 
 
@@ -57,7 +59,12 @@ __all__ = [
     "RoadLink",
     "RoadMark",
     "RoadNetwork",
+    "RoadFit",
     "RoadObject",
     "RoadType",
+    "fit_reference_line",
+    "fit_road",
     "load_map",
+    "plot_map",
+    "road_from_lane_markings",
 ]

@@ -207,4 +207,44 @@ def curved_highway(
     )
 
 
-__all__ = ["curved_highway", "straight_highway"]
+def roads_xodr(
+    roads: list[Road],
+    junctions: list | tuple = (),
+    *,
+    name: str = "",
+    geo_reference: str | None = None,
+    offset: tuple[float, float, float, float] | None = None,
+    rev_minor: int = 6,
+) -> str:
+    """OpenDRIVE 1.``rev_minor`` text of hand-made or fitted roads (:mod:`.model` dataclasses).
+
+    The header's bounding box (north/south/east/west) is computed from the lane surfaces of the
+    roads (the reference lines offset to their outermost lane borders). Used by
+    :mod:`.fit`; the highway builders above write their one road the same way.
+    """
+    from .network import RoadNetwork
+
+    roads = list(roads)
+    if not roads:
+        raise ValueError("roads_xodr needs at least one road")
+    header = Header(rev_major=1, rev_minor=rev_minor, name=name, vendor="aveas_format",
+                    geo_reference=geo_reference, offset=offset)
+    net = RoadNetwork(header, {r.id: r for r in roads}, {j.id: j for j in junctions})
+    xs, ys = [], []
+    for gsec in range(len(net.lanes.section_road)):
+        ri = int(net.lanes.section_road[gsec])
+        a, b = float(net.lanes.section_start[gsec]), float(net.lanes.section_end[gsec])
+        s = np.linspace(a, b, max(2, int(np.ceil((b - a) / 2.0)) + 1))
+        r = np.full(len(s), ri)
+        x, y, h, _, _, _ = net.plan.at(r, s)
+        tl, tr = net.lanes.extent(net.lanes.borders(net.lanes.find_piece(r, s), s))
+        for t in (tl, tr):
+            xs.append(x - t * np.sin(h))
+            ys.append(y + t * np.cos(h))
+    xa, ya = np.concatenate(xs), np.concatenate(ys)
+    header.north, header.south = float(ya.max()), float(ya.min())
+    header.east, header.west = float(xa.max()), float(xa.min())
+    return write_xodr((header, roads, list(junctions)), rev_minor=rev_minor)
+
+
+__all__ = ["curved_highway", "roads_xodr", "straight_highway"]

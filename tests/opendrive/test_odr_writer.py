@@ -2,28 +2,15 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
 from lxml import etree
-from odr_helpers import fixture_map
+from odr_helpers import fixture_map, xsd_16
 
 from aveas_format.opendrive import load_map
 from aveas_format.opendrive.builder import curved_highway, straight_highway
 from aveas_format.opendrive.writer import write_xodr
-
-
-def _xsd_16():
-    """The official OpenDRIVE 1.6 XSD shipped by PyPI ``asam-qc-opendrive`` (skip without it)."""
-    spec = importlib.util.find_spec("qc_opendrive")
-    if spec is None or not spec.submodule_search_locations:
-        pytest.skip("asam-qc-opendrive (which ships the official XSD) is not installed")
-    core = Path(next(iter(spec.submodule_search_locations))) / "schema" / "1.6.1" / "opendrive_16_core.xsd"
-    if not core.exists():
-        pytest.skip(f"no OpenDRIVE 1.6 XSD at {core}")
-    return etree.XMLSchema(etree.parse(str(core)))
 
 
 def test_straight_highway():
@@ -78,7 +65,7 @@ def test_curved_rejects_fold():
 
 
 def test_generated_maps_validate_against_the_official_xsd():
-    xsd = _xsd_16()
+    xsd = xsd_16()
     for text in (
         straight_highway(geo_reference="+proj=tmerc +lat_0=49 +lon_0=8"),
         curved_highway(radius=300.0, spiral=40.0, straight=10.0, lanes_left=2),

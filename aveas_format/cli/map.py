@@ -1,0 +1,366 @@
+"""``aveas-format map``: OpenDRIVE maps — info, project (world -> road), plot, check."""
+
+from __future__ import annotations
+
+import csv
+import enum
+import json
+import sys
+from collections import Counter
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import typer
+from rich.markup import escape
+from rich.table import Table
+
+from aveas_format.cli.app import app
+from aveas_format.cli.common import EXIT_FINDINGS, EXIT_USAGE, err, fail, handle_errors, out
+
+map_app = typer.Typer(
+    help="OpenDRIVE maps: `info` (summary), `project` (x, y -> road, lane, s, t), `plot` (PNG of "
+    "the lanes) and `check` (self-consistency).",
+    no_args_is_help=True,
+    rich_markup_mode="markdown",
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+app.add_typer(map_app, name="map")
+
+_MAP_HELP = "The OpenDRIVE map (.xodr)."
+
+
+def _load(path: Path | None):
+    if path is None:
+        raise fail("Missing argument 'MAP'.", EXIT_USAGE)
+    from aveas_format.opendrive import load_map
+
+    return load_map(path)
+
+
+# ----------------------------------------------------------------------------------------------
+# info
+def map_summary(net) -> dict[str, Any]:
+    """The summary printed by ``map info`` (also its ``--json``)."""
+    from aveas_format.errors import FormatError
+    from aveas_format.georef import parse_crs
+
+    roads = list(net.roads.values())
+    lane_types: Counter[str] = Counter()
+    lane_len: Counter[str] = Counter()
+    n_sections = 0
+    for r in roads:
+        starts = [sec.s for sec in r.lane_sections] + [r.length]
+        for i, sec in enumerate(r.lane_sections):
+            n_sections += 1
+            seclen = max(0.0, min(starts[i + 1], r.length) - sec.s)
+            for ln in sec.left + sec.right:
+                lane_types[ln.type] += 1
+                lane_len[ln.type] += seclen
+    geo = net.header.geo_reference
+    crs: dict[str, Any] = {"geo_reference": geo, "offset": list(net.header.offset) if net.header.offset else None}
+    if geo:
+        try:
+            parsed = parse_crs(geo)
+            c = parsed.crs
+            name = c.name
+            if name == "unknown":
+                op = c.coordinate_operation
+                name = f"{c.type_name}: {op.method_name}" if op is not None else c.type_name
+            crs.update(read_as=name, proj=c.srs, lenient=parsed.lenient,
+                       notes=list(parsed.notes), error=None)
+        except FormatError as e:
+            crs.update(read_as=None, proj=None, lenient=False, notes=[], error=e.message)
+    else:
+        crs.update(read_as=None, proj=None, lenient=False, notes=["no <geoReference>: local coordinates only"],
+                   error=None)
+    kinds = Counter(g.kind for r in roads for g in r.geometries)
+    jtypes = Counter(j.type for j in net.junctions.values())
+    b = net.bounds if roads else (0.0, 0.0, 0.0, 0.0)
+    return {
+        "path": net.path,
+        "opendrive_version": net.header.version,
+        "name": net.header.name,
+        "vendor": net.header.vendor,
+        "date": net.header.date,
+        "roads": len(roads),
+        "junction_roads": sum(r.junction is not None for r in roads),
+        "junctions": len(net.junctions),
+        "junction_types": dict(sorted(jtypes.items())),
+        "lane_sections": n_sections,
+        "lanes": sum(lane_types.values()),
+        "lane_types": dict(lane_types.most_common()),
+        "lane_length_m": {k: round(v, 3) for k, v in lane_len.most_common()},
+        "length_m": round(sum(r.length for r in roads), 3),
+        "length_outside_junctions_m": round(sum(r.length for r in roads if r.junction is None), 3),
+        "geometry_types": dict(kinds.most_common()),
+        "objects": sum(len(r.objects) for r in roads),
+        "signals": sum(len(r.signals) for r in roads),
+        "bounds": [round(float(v), 3) for v in b],
+        "crs": crs,
+    }
+
+
+@map_app.command("info")
+@handle_errors
+def info(
+    map_file: Path = typer.Argument(None, metavar="MAP", help=_MAP_HELP),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+) -> None:
+    """Summarise a map: roads, junctions, lanes by type, length, geometry types, CRS and how the
+    `<geoReference>` was read."""
+    s = map_summary(_load(map_file))
+    if as_json:
+        print(json.dumps(s, indent=2))
+        return
+    c = s["crs"]
+    if c["geo_reference"] is None:
+        crs_txt = "none (local coordinates)"
+    elif c["error"]:
+        crs_txt = f"{c['geo_reference']!r}: UNREADABLE ({c['error']})"
+    else:
+        crs_txt = f"{c['geo_reference']!r} -> {c['read_as']}"
+        if c["lenient"]:
+            crs_txt += f" [lenient: {'; '.join(c['notes'])}]"
+    rows = [
+        ("map", f"{s['path'] or '-'} (OpenDRIVE {s['opendrive_version']}"
+         + (f", {s['name']}" if s["name"] else "") + (f", by {s['vendor']}" if s["vendor"] else "") + ")"),
+        ("roads", f"{s['roads']} ({s['junction_roads']} in junctions)"),
+        ("junctions", f"{s['junctions']}" + (" (" + ", ".join(f"{k} {v}" for k, v in
+                                                               s["junction_types"].items()) + ")"
+                                              if s["junction_types"] else "")),
+        ("length", f"{s['length_m']:,.1f} m ({s['length_outside_junctions_m']:,.1f} m outside junctions)"),
+        ("lanes", f"{s['lanes']} in {s['lane_sections']} lane sections: "
+         + ", ".join(f"{k} {v}" for k, v in s["lane_types"].items())),
+        ("lane length", ", ".join(f"{k} {v / 1000:,.2f} km" for k, v in s["lane_length_m"].items()) or "-"),
+        ("geometry", ", ".join(f"{k} {v}" for k, v in s["geometry_types"].items())),
+        ("objects", f"{s['objects']} objects, {s['signals']} signals"),
+        ("bounds", "x {0:,.1f} .. {2:,.1f}, y {1:,.1f} .. {3:,.1f} m".format(*s["bounds"])),
+        ("crs", crs_txt),
+        ("offset", "x {:.3f}, y {:.3f}, z {:.3f}, hdg {:.6f}".format(*c["offset"]) if c["offset"] else "none"),
+    ]
+    t = Table(show_header=False, show_edge=False, pad_edge=False, box=None)
+    t.add_column(style="bold")
+    t.add_column()
+    for k, v in rows:
+        t.add_row(k, escape(str(v)))
+    out.print(t)
+
+
+# ----------------------------------------------------------------------------------------------
+# project
+def _csv_problem(path: Path, columns: list[str]) -> str | None:
+    """The first malformed line of a CSV file (wrong field count, non-numeric x/y/heading), as a
+    message naming line and column; None when the file looks fine."""
+    numeric = [c for c in ("x", "y", "heading") if c in columns]
+    with path.open(newline="", encoding="utf-8", errors="replace") as f:
+        reader = csv.reader(f)
+        header = next(reader, None)
+        if header is None:
+            return "the file is empty"
+        idx = {c: header.index(c) for c in numeric if c in header}
+        for row in reader:
+            if not row:
+                continue
+            if len(row) != len(header):
+                return f"line {reader.line_num}: {len(row)} fields, the header has {len(header)}"
+            for c, i in idx.items():
+                v = row[i].strip()
+                if v == "":
+                    return f"line {reader.line_num}, column {c}: empty value"
+                try:
+                    float(v)
+                except ValueError:
+                    return f"line {reader.line_num}, column {c}: {v!r} is not a number"
+    return None
+
+
+def read_points(path: Path):
+    """The points table (pyarrow) of a CSV or Parquet file with columns x, y[, heading]."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    from aveas_format.errors import FormatError, RecordingIOError
+
+    if not path.exists():
+        raise RecordingIOError("no such file", path=path)
+    if path.is_dir():
+        raise RecordingIOError("is a directory, not a CSV or Parquet file", path=path)
+    if path.suffix.lower() in (".parquet", ".pq"):
+        import pyarrow.parquet as pq
+
+        try:
+            table = pq.read_table(path)
+        except (pa.ArrowException, OSError) as e:
+            raise FormatError(f"cannot read Parquet: {e}", path=path) from None
+        bad_line = None
+    else:
+        import pyarrow.csv as pcsv
+
+        try:
+            table = pcsv.read_csv(path)
+        except (pa.ArrowException, OSError) as e:
+            where = _csv_problem(path, ["x", "y", "heading"])
+            raise FormatError(where or f"cannot read CSV: {str(e).splitlines()[0]}", path=path) from None
+        bad_line = True
+    cols = table.column_names
+    missing = [c for c in ("x", "y") if c not in cols]
+    if missing:
+        raise FormatError(f"no column {' or '.join(repr(c) for c in missing)} (columns: {', '.join(cols) or 'none'})",
+                          path=path)
+    for c in ("x", "y", "heading"):
+        if c not in cols:
+            continue
+        col = table.column(c)
+        if not (pa.types.is_floating(col.type) or pa.types.is_integer(col.type)) or col.null_count:
+            if bad_line:
+                where = _csv_problem(path, cols)
+                if where:
+                    raise FormatError(where, path=path)
+            if col.null_count:
+                row = int(pc.index(pc.is_null(col), True).as_py())
+                raise FormatError(f"row {row}, column {c}: empty value", path=path)
+            raise FormatError(f"column {c}: type {col.type}, not a number", path=path)
+    return table
+
+
+def write_table(table, path: Path | None) -> None:
+    """CSV (or Parquet by the suffix) to ``path``; CSV to stdout when None."""
+    import pyarrow.csv as pcsv
+
+    if path is None:
+        pcsv.write_csv(table, sys.stdout.buffer)
+        sys.stdout.flush()
+        return
+    if path.suffix.lower() in (".parquet", ".pq"):
+        import pyarrow.parquet as pq
+
+        pq.write_table(table, path)
+    else:
+        pcsv.write_csv(table, path)
+
+
+@map_app.command("project")
+@handle_errors
+def project(
+    map_file: Path = typer.Argument(None, metavar="MAP", help=_MAP_HELP),
+    points: Path = typer.Option(None, "--points", "-p", help="CSV or Parquet (.parquet) with columns x, y "
+                                "[, heading] in the map's local frame (other columns are kept)."),
+    output: Path = typer.Option(None, "--output", "-o", help="Output .csv or .parquet (default: CSV "
+                                "on stdout)."),
+    drivable_only: bool = typer.Option(False, "--drivable-only", help="Ignore non-drivable lanes "
+                                       "(sidewalks, shoulders, ...)."),
+    track: bool = typer.Option(False, "--track", help="Choose among overlapping roads by continuity "
+                               "along trajectories (columns track_id and time when present, else "
+                               "the row order)."),
+) -> None:
+    """World -> road coordinates: append road_id, lane_id, s, t, lane_offset, n_candidates (and
+    rel_heading when a heading column is given) to every point. Off-road points get empty
+    road_id/lane_id/s/t and n_candidates 0."""
+    import pyarrow as pa
+
+    if points is None:
+        raise fail("Missing option '--points'.", EXIT_USAGE)
+    if output is not None and output.suffix.lower() not in (".csv", ".parquet", ".pq"):
+        raise fail(f"{output}: unknown output format {output.suffix or '(no suffix)'!r}; use .csv or "
+                   ".parquet", EXIT_USAGE)
+    if map_file is None:
+        raise fail("Missing argument 'MAP'.", EXIT_USAGE)
+    table = read_points(points)
+    net = _load(map_file)
+    x = table.column("x").to_numpy(zero_copy_only=False).astype(np.float64)
+    y = table.column("y").to_numpy(zero_copy_only=False).astype(np.float64)
+    heading = (table.column("heading").to_numpy(zero_copy_only=False).astype(np.float64)
+               if "heading" in table.column_names else None)
+    if track:
+        tid = table.column("track_id").to_numpy(zero_copy_only=False) if "track_id" in table.column_names else None
+        tm = table.column("time").to_numpy(zero_copy_only=False) if "time" in table.column_names else None
+        proj = net.world_to_road_track(x, y, heading, tm, tid, drivable_only=drivable_only)
+    else:
+        proj = net.world_to_road(x, y, heading, drivable_only=drivable_only)
+    on = proj.n_candidates > 0
+    cols: dict[str, Any] = {
+        "road_id": pa.array([str(r) if r is not None else None for r in proj.road_id], pa.string()),
+        "lane_id": pa.array(proj.lane_id.astype(np.int16), mask=~on),
+        "s": pa.array(proj.s, mask=~on),
+        "t": pa.array(proj.t, mask=~on),
+        "lane_offset": pa.array(proj.lane_offset, mask=~on),
+        "n_candidates": pa.array(proj.n_candidates.astype(np.int32)),
+    }
+    if heading is not None:
+        cols["rel_heading"] = pa.array(proj.rel_heading, mask=~on | ~np.isfinite(proj.rel_heading))
+    for name, arr in cols.items():
+        if name in table.column_names:
+            table = table.remove_column(table.column_names.index(name))
+        table = table.append_column(name, arr)
+    write_table(table, output)
+    n = len(x)
+    err.print(f"projected {n:,} points onto {map_file.name}: {int(on.sum()):,} on a road, "
+              f"{int((proj.n_candidates > 1).sum()):,} on several roads"
+              + (f"; wrote {output}" if output else ""))
+
+
+# ----------------------------------------------------------------------------------------------
+# plot
+@map_app.command("plot")
+@handle_errors
+def plot(
+    map_file: Path = typer.Argument(None, metavar="MAP", help=_MAP_HELP),
+    output: Path = typer.Option(None, "--output", "-o", help="The image (.png, .svg or .pdf)."),
+    labels: bool = typer.Option(True, "--labels/--no-labels", help="Write road and junction ids."),
+    junction_road_labels: bool = typer.Option(False, "--junction-road-labels", help="Also label "
+                                              "the roads inside junctions."),
+    dpi: int = typer.Option(150, "--dpi", min=20, max=1200, help="Resolution of a PNG."),
+    step: float = typer.Option(1.0, "--step", min=0.05, help="Sampling of lane borders [m]."),
+) -> None:
+    """Draw the map: lanes filled by type, reference lines, road ids, junction outlines."""
+    if output is None:
+        raise fail("Missing option '--output' / '-o' (the image to write).", EXIT_USAGE)
+    if output.suffix.lower() not in (".png", ".svg", ".pdf"):
+        raise fail(f"{output}: unknown image format {output.suffix or '(no suffix)'!r}; use .png, .svg or "
+                   ".pdf", EXIT_USAGE)
+    if output.parent and not output.parent.exists():
+        raise fail(f"{output.parent}: no such directory", EXIT_USAGE)
+    net = _load(map_file)
+    from aveas_format.opendrive.plot import save_map
+
+    save_map(net, output, dpi=dpi, labels=labels, junction_road_labels=junction_road_labels, step=step)
+    err.print(f"wrote {output}")
+
+
+# ----------------------------------------------------------------------------------------------
+# check
+class CheckFormat(str, enum.Enum):
+    text = "text"
+    json = "json"
+
+
+@map_app.command("check")
+@handle_errors
+def check(
+    map_file: Path = typer.Argument(None, metavar="MAP", help=_MAP_HELP),
+    fmt: CheckFormat = typer.Option(CheckFormat.text, "--format", "-f", help="Report format."),
+) -> None:
+    """Self-consistency of a map: geometry continuity gaps, lane widths >= 0, broken links,
+    unparseable geoReference. Exit 1 when there are errors."""
+    net = _load(map_file)
+    findings = net.check()
+    counts = Counter(f.severity for f in findings)
+    summary = {k: counts.get(k, 0) for k in ("error", "warning", "info")}
+    if fmt is CheckFormat.json:
+        print(json.dumps({
+            "map": net.path,
+            "valid": summary["error"] == 0,
+            "counts": summary,
+            "findings": [{"code": f.code, "severity": f.severity, "message": f.message, "road_id": f.road_id,
+                          "line": f.line, "value": f.value} for f in findings],
+        }, indent=2))
+    else:
+        for f in findings:
+            loc = f" (line {f.line})" if f.line else ""
+            print(f"{f.severity.upper():<8}{f.code:<24}{f.message}{loc}")
+        verdict = "INVALID" if summary["error"] else "VALID"
+        print(f"{verdict}: {summary['error']} errors, {summary['warning']} warnings, {summary['info']} info "
+              f"({net.path or 'map'})")
+    if summary["error"]:
+        raise typer.Exit(EXIT_FINDINGS)
