@@ -57,7 +57,7 @@ def read_table(path: Path, *, required: Sequence[str] = (), numeric: Sequence[st
     if path.suffix.lower() == ".parquet":
         try:
             table = pq.read_table(path)
-        except (pa.ArrowInvalid, OSError) as e:
+        except (pa.ArrowException, OSError) as e:
             raise RecordingIOError(f"not a readable Parquet file: {str(e).splitlines()[0]}",
                                    path=path) from None
         _check_required(table, required, path)

@@ -160,7 +160,7 @@ def read_table(container: Container, name: str, meta: RecordingMeta, *,
             plan.hashed.append(name)
     try:
         pf = pq.ParquetFile(pa.BufferReader(buf))
-    except (pa.ArrowInvalid, OSError) as e:
+    except (pa.ArrowException, OSError) as e:
         raise RecordingIOError(f"not a readable Parquet file (truncated or corrupt): "
                                f"{str(e).splitlines()[0]}", path=where) from None
     if entry is not None and pf.metadata.num_rows != entry.rows:
@@ -189,7 +189,7 @@ def read_table(container: Container, name: str, meta: RecordingMeta, *,
             table = pf.read(columns=read_cols)
         else:
             table = pf.read_row_groups(groups, columns=read_cols)
-    except (pa.ArrowInvalid, OSError) as e:
+    except (pa.ArrowException, OSError) as e:
         raise RecordingIOError(f"cannot decode Parquet data (corrupt file): {str(e).splitlines()[0]}",
                                path=where) from None
     table = _filter(table, pid_filter, time_range)

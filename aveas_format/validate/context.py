@@ -87,6 +87,12 @@ class Context:
             return None
         return data
 
+    def meta_part(self, key: str) -> dict[str, Any]:
+        """A section of recording.json as a dict ({} where absent or not an object)."""
+        d = self.meta_dict
+        v = d.get(key) if isinstance(d, dict) else None
+        return v if isinstance(v, dict) else {}
+
     @cached_property
     def meta(self) -> RecordingMeta | None:
         """The validated metadata model (migrated), None if invalid."""
@@ -117,7 +123,8 @@ class Context:
             return list(self.recording.tables())
         assert self.container is not None
         files = set(self.container.names())
-        listed = set((self.meta_dict or {}).get("tables", {}) or {})
+        tables = self.meta_part("tables")
+        listed = {k for k in tables if isinstance(k, str)}
         return [n for n in TABLES if TABLES[n].file in files or n in listed]
 
     @cached_property
@@ -157,7 +164,7 @@ class Context:
             info["rows"] = pf.metadata.num_rows
             info["row_groups"] = pf.metadata.num_row_groups
             return pf.read()
-        except (pa.ArrowInvalid, OSError) as e:
+        except (pa.ArrowException, OSError) as e:
             self.problem("unreadable_table", file=spec.file, table=name,
                          error=str(e).splitlines()[0])
             return None
@@ -173,7 +180,7 @@ class Context:
         if self.recording is not None:
             return self.recording.map_source
         assert self.container is not None
-        name = ((self.meta_dict or {}).get("map") or {}).get("file") or "map.xodr"
+        name = self.meta_part("map").get("file") or "map.xodr"
         if not isinstance(name, str) or not self.container.exists(name):
             self.problem("missing_file", file=str(name))
             return None
@@ -216,7 +223,7 @@ class Context:
             return None
         from aveas_format.opendrive import load_map
 
-        name = ((self.meta_dict or {}).get("map") or {}).get("file") or "map.xodr"
+        name = self.meta_part("map").get("file") or "map.xodr"
         try:
             return load_map(data)
         except Exception as e:  # noqa: BLE001 — reported by map.unreadable

@@ -95,7 +95,8 @@ def validate(source: str | Path | Recording, *, select: list[str] | None = None,
         for r in rules:
             report.rules_run.append(r.code)
             try:
-                res = run_rule(r, ctx, max_sample)
+                with np.errstate(all="ignore"):  # NaN/inf in data are findings, not warnings
+                    res = run_rule(r, ctx, max_sample)
             except Exception as e:  # noqa: BLE001 — a crashing rule is a tool failure, by design
                 report.failures.append(ToolFailure(code=r.code, error=f"{type(e).__name__}: {e}",
                                                    traceback=traceback.format_exc()))
