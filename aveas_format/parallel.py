@@ -128,12 +128,26 @@ def _run_dask(fn: Callable[[Any], Any], items: list[Any], scheduler: str) -> Ite
     with Client(scheduler) as client:
         futures = client.map(_call, [fn] * len(items), items, pure=False)
         index = {f.key: i for i, f in enumerate(futures)}
+        suspects: list[int] = []  # KilledWorker: perhaps only queued on a worker another task killed
         for fut in as_completed(futures):
             i = index[fut.key]
             try:
                 value, err, tb = fut.result()
             except Exception as e:  # noqa: BLE001 — e.g. KilledWorker: the task killed its workers
+                if type(e).__name__ == "KilledWorker":
+                    suspects.append(i)
+                    continue
                 value, err, tb = None, f"{type(e).__name__}: {e}", None
+            yield TaskResult(i, items[i], value, err, tb)
+        for i in sorted(suspects):  # retried one at a time: a crash now is this task's own
+            fut = client.submit(_call, fn, items[i], pure=False)
+            try:
+                value, err, tb = fut.result()
+            except Exception as e:  # noqa: BLE001
+                value, err, tb = None, f"{type(e).__name__}: {e}", None
+                if type(e).__name__ == "KilledWorker":
+                    err = ("the worker process died (crash, os._exit or out of memory) while "
+                           f"running this task ({err})")
             yield TaskResult(i, items[i], value, err, tb)
 
 

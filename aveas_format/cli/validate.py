@@ -32,8 +32,10 @@ def _print_and_exit(text: str) -> None:
 @app.command()
 @handle_errors
 def validate(
-    recording: Path = typer.Argument(None, help="A recording: NAME.aveas directory or "
-                                     "NAME.aveas.zip."),
+    recordings: list[str] = typer.Argument(None, metavar="RECORDING...", help="A recording "
+                                           "(NAME.aveas directory or NAME.aveas.zip), or a "
+                                           "dataset: a directory of recordings, several paths, "
+                                           "globs or file:// / s3:// URLs."),
     select: list[str] = typer.Option(None, "--select", help="Run only these rules (codes or "
                                      "families, repeatable or comma-separated)."),
     ignore: list[str] = typer.Option(None, "--ignore", help="Skip these rules (codes or families)."),
@@ -51,6 +53,15 @@ def validate(
                                        "the JSON report and exit."),
     print_config: bool = typer.Option(False, "--print-config", help="Print the default "
                                       "thresholds as TOML and exit."),
+    workers: int = typer.Option(0, "--workers", "-j", min=0, help="Dataset: local worker "
+                                "processes (0 = one per core, 1 = in this process)."),
+    scheduler: str = typer.Option(None, "--scheduler", help="Dataset: address of a Dask "
+                                  "scheduler (tcp://HOST:PORT) to run on instead of local "
+                                  "processes (needs aveas-format[dask])."),
+    reports_dir: Path = typer.Option(None, "--reports-dir", help="Dataset: write every "
+                                     "recording's JSON report and the dataset report (JSON + "
+                                     "HTML) into this directory."),
+    top: int = typer.Option(20, "--top", min=1, help="Dataset: worst recordings listed."),
 ) -> None:
     """Validate a recording. Exit codes: 0 valid, 1 findings at/above --fail-on, 2 usage error,
     3 unreadable input or tool failure."""
@@ -61,7 +72,7 @@ def validate(
         _print_and_exit(json.dumps(report_json_schema(), indent=2))
     if print_config:
         _print_and_exit(config_toml())
-    if recording is None:
+    if not recordings:
         raise fail("Missing argument 'RECORDING'.", EXIT_USAGE)
 
     from aveas_format.errors import FormatError
@@ -75,6 +86,12 @@ def validate(
         cfg = ValidationConfig.load(config)
     except FormatError as e:
         raise fail(str(e), EXIT_USAGE) from None
+    from aveas_format.dataset import is_dataset_spec
+
+    if is_dataset_spec(recordings):
+        _validate_dataset(recordings, split(select), split(ignore), cfg, max_sample, fail_on.value,
+                          fmt, output, workers, scheduler, reports_dir, top)
+    recording = Path(recordings[0])
     try:
         report = run(recording, select=split(select), ignore=split(ignore), config=cfg,
                      max_sample=max_sample)
@@ -97,6 +114,45 @@ def validate(
     else:
         print(text, end="" if text.endswith("\n") else "\n")
     raise typer.Exit(report.exit_code(fail_on.value))
+
+
+def _validate_dataset(specs: list[str], select: list[str] | None, ignore: list[str] | None,
+                      cfg, max_sample: int, fail_on: str, fmt: Format, output: Path | None,
+                      workers: int, scheduler: str | None, reports_dir: Path | None,
+                      top: int) -> None:
+    """Validate every recording of a dataset, one task each; exit with the worst code."""
+    from aveas_format.cli.common import err
+    from aveas_format.dataset import discover, validate_dataset
+    from aveas_format.io.atomic import write_text_atomic
+    from aveas_format.validate.registry import select_rules
+
+    try:
+        select_rules(select, ignore)
+    except ValueError as e:
+        raise fail(str(e), EXIT_USAGE) from None
+    paths = discover(specs)
+    err.print(f"validating {len(paths)} recordings "
+              + (f"on {scheduler}" if scheduler else f"with {workers or 'all'} worker(s)"))
+
+    def stream(r) -> None:
+        if not r.ok:
+            err.print(f"[red]failed[/red] {r.item}: {r.error}", markup=True, highlight=False)
+
+    rep = validate_dataset(paths, select=select, ignore=ignore, config=cfg, max_sample=max_sample,
+                           reports_dir=reports_dir, fail_on=fail_on, workers=workers or None,
+                           scheduler=scheduler, progress=True, specs=list(specs),
+                           on_result=stream)
+    if reports_dir:
+        write_text_atomic(reports_dir / "dataset-report.json", rep.to_json(top))
+        write_text_atomic(reports_dir / "dataset-report.html", rep.to_html(top))
+    text = (rep.to_json(top) if fmt is Format.json else rep.to_html(top) if fmt is Format.html
+            else rep.to_text())
+    if output:
+        write_text_atomic(output, text)
+        err.print(rep.to_text().rstrip().rsplit("\n", 1)[-1])
+    else:
+        print(text, end="" if text.endswith("\n") else "\n")
+    raise typer.Exit(rep.exit_code())
 
 
 def _open_for_figures(path: Path):
