@@ -578,6 +578,96 @@ def derive_dataset(paths: Iterable[str | Path], *, output_dir: str | Path | None
 # catalog
 
 #: the classes of the taxonomy, one ``n_CLASS`` column each in the catalog
+def conversion_groups(inputs: Iterable[str | Path], group: str | None = None
+                      ) -> dict[str, list[str]]:
+    """Split source files into conversions: one per INPUT (a directory stands for its files), or,
+    with ``group`` (a regular expression with one capture group applied to file names), one per
+    distinct captured value — e.g. ``r"^(\\d+)_"`` for levelX's ``01_tracks.csv``, ``01_tracksMeta.csv``...
+
+    Returns ``{name: [files]}``; the name becomes the output recording's stem.
+    """
+    files: list[Path] = []
+    units: dict[str, list[str]] = {}
+    for raw in inputs:
+        p = Path(raw)
+        members = sorted(q for q in p.iterdir() if q.is_file()) if p.is_dir() else [p]
+        if group is None:
+            name = p.name.split(".")[0] if not p.is_dir() else p.name
+            if name in units:
+                raise AveasError(f"two inputs would both become {name}.aveas: {raw}")
+            units[name] = [str(q) for q in members]
+        else:
+            files.extend(members)
+    if group is not None:
+        try:
+            rx = re.compile(group)
+        except re.error as e:
+            raise AveasError(f"--group {group!r} is not a regular expression: {e}") from None
+        if rx.groups != 1:
+            raise AveasError(f"--group {group!r} must have exactly one capture group")
+        for q in files:
+            m = rx.search(q.name)
+            if m:
+                units.setdefault(m.group(1), []).append(str(q))
+        if not units:
+            raise AveasError(f"--group {group!r} matched no input file name")
+    return units
+
+
+def convert_recording(item: tuple[str, list[str], str], *, source: str,
+                      map_source: str | None, options: dict[str, Any] | None,
+                      overwrite: bool = False, validate_result: bool = True) -> dict[str, Any]:
+    """One conversion (a task): ``(name, input files, output path)`` -> a written recording."""
+    from aveas_format.converters.registry import convert
+
+    name, files, output = item
+    t0 = time.perf_counter()
+    rec = convert(source, files, map_source=map_source, options=options)
+    written = rec.write(output, overwrite=overwrite)
+    entry: dict[str, Any] = {
+        "path": name, "inputs": files, "output": str(written), **_facts(rec.meta),
+        "participants": rec.participants.num_rows, "states": rec.states.num_rows,
+        "counts": {}, "rules": [],
+    }
+    if validate_result:
+        import aveas_format
+
+        report = aveas_format.validate(written)
+        entry["counts"] = report.counts
+        entry["rules"] = [{"code": r.code, "severity": r.severity.value, "title": r.title,
+                           "count": r.count} for r in report.results]
+    entry["seconds"] = round(time.perf_counter() - t0, 4)
+    return entry
+
+
+def convert_dataset(inputs: Iterable[str | Path], *, source: str, output_dir: str | Path,
+                    map_source: str | None = None, options: dict[str, Any] | None = None,
+                    group: str | None = None, overwrite: bool = False, validate: bool = True,
+                    workers: int | None = 1, scheduler: str | None = None, progress: bool = False,
+                    on_result: Callable[[TaskResult], None] | None = None) -> DatasetReport:
+    """Convert many sources, one recording each (see :func:`conversion_groups`), in parallel;
+    a source that fails is reported and the others complete."""
+    units = conversion_groups(inputs, group)
+    out = Path(output_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    items = [(name, files, str(out / f"{name}.aveas")) for name, files in units.items()]
+    fn = functools.partial(convert_recording, source=source, map_source=map_source,
+                           options=options, overwrite=overwrite, validate_result=validate)
+    rep = DatasetReport("convert", [str(i) for i in inputs] if not isinstance(inputs, Iterator)
+                        else list(units), "error")
+    rep.runner = {"workers": None if scheduler else (workers or os.cpu_count()),
+                  "scheduler": scheduler}
+    t0 = time.perf_counter()
+    for r in run_tasks(fn, items, workers=workers, scheduler=scheduler, progress=progress,
+                       description="convert"):
+        r.item = r.item[0]
+        rep.add(r)
+        if on_result is not None:
+            on_result(r)
+    rep.seconds = time.perf_counter() - t0
+    return rep
+
+
 def _classes() -> list[str]:
     from aveas_format.schema.taxonomy import CLASSES
 

@@ -23,6 +23,15 @@ def convert(
     options_file: Path = typer.Option(None, "--options", help="Converter options as a JSON file."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output."),
     list_: bool = typer.Option(False, "--list", help="List the converters and exit."),
+    each: bool = typer.Option(False, "--each", help="Many recordings: each INPUT (a file, or a "
+                              "directory of files) becomes OUTPUT/NAME.aveas; OUTPUT is a directory."),
+    group: str = typer.Option(None, "--group", help="With --each: group input files into "
+                              "recordings by the first capture group of this regular expression on "
+                              "their names, e.g. '^(\\d+)_' for levelX."),
+    workers: int = typer.Option(0, "--workers", "-j", min=0, help="With --each: local worker "
+                                "processes (0 = one per core)."),
+    scheduler: str = typer.Option(None, "--scheduler", help="With --each: address of a Dask "
+                                  "scheduler (tcp://HOST:PORT)."),
     validate_: bool = typer.Option(True, "--validate/--no-validate", help="Validate the result "
                                    "and report errors (exit 1 when it has any)."),
 ) -> None:
@@ -42,6 +51,10 @@ def convert(
         raise fail("--from NAME, INPUT... and --output are required (or --list)", EXIT_USAGE)
     conv = get_converter(source)
     raw = converter_options(options_file, option, conv.options)
+    if each or group:
+        _convert_many(source, [str(i) for i in inputs], map_file, raw, output, group, overwrite,
+                      validate_, workers, scheduler)
+        return
     if output.exists() and not overwrite:
         raise fail(f"{output}: exists; pass --overwrite to replace it", EXIT_USAGE)
     from aveas_format.converters.registry import convert as run
@@ -59,3 +72,36 @@ def convert(
             out.print(render_text(report), end="")
             raise typer.Exit(1)
         err.print(f"valid: {report.counts['warning']} warnings, {report.counts['info']} info")
+
+
+def _convert_many(source: str, inputs: list[str], map_file: Path | None, raw: dict, output: Path,
+                  group: str | None, overwrite: bool, validate_: bool, workers: int,
+                  scheduler: str | None) -> None:
+    """One recording per input (or per --group), in parallel; a failing source is reported and
+    the others complete. Exit 3 when any failed, 1 when any result has validation errors."""
+    import json
+
+    from aveas_format.dataset import convert_dataset
+
+    if output.exists() and not output.is_dir():
+        raise fail(f"{output}: with --each, --output is a directory", EXIT_USAGE)
+
+    def stream(r) -> None:
+        if not r.ok:
+            err.print(f"failed {r.item}: {r.error}", markup=False, highlight=False)
+
+    rep = convert_dataset(inputs, source=source, output_dir=output,
+                          map_source=str(map_file) if map_file else None, options=raw,
+                          group=group, overwrite=overwrite, validate=validate_,
+                          workers=workers or None, scheduler=scheduler, progress=True,
+                          on_result=stream)
+    d = rep.to_dict()
+    print(json.dumps({"recordings": d["recordings"], "completed": d["completed"],
+                      "failed": d["failed"], "seconds": d["seconds"],
+                      "results": [{k: e.get(k) for k in ("path", "output", "participants", "states",
+                                                          "counts")} for e in d["entries"]],
+                      "failures": [{"path": f["path"], "error": f["error"]}
+                                   for f in d["failures"]]}, indent=2))
+    err.print(f"converted {d['completed']} of {d['recordings']} -> {output}"
+              + (f", {d['failed']} failed" if d["failed"] else ""))
+    raise typer.Exit(rep.exit_code())
