@@ -79,6 +79,10 @@ def read_table(path: Path, *, required: Sequence[str] = (), numeric: Sequence[st
         m = re.search(r"[Rr]ow #(\d+)", str(e))
         line = int(m.group(1)) if m else None
         raise FormatError(f"malformed CSV: {msg}", path=path, line=line) from None
+    try:
+        table.column_names  # noqa: B018 — decodes the header
+    except UnicodeDecodeError:
+        raise FormatError("the CSV header is not UTF-8 text", path=path, line=1) from None
     _check_required(table, required, path)
     return _numeric(table, numeric, path, header_lines=1)
 

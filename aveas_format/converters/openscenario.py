@@ -263,7 +263,10 @@ def _float(el, name: str, default: float = 0.0) -> float:
     if v.startswith("$"):
         raise FormatError(f"parameter reference {v!r} in <{el.tag}> is not supported (resolve "
                           "parameters first)", line=el.sourceline)
-    return float(v)
+    try:
+        return float(v)
+    except ValueError:
+        raise FormatError(f"<{el.tag}> {name}={v!r} is not a number", line=el.sourceline) from None
 
 
 def _pos_xyzh(pos, net) -> tuple[float, float, float, float | None]:

@@ -18,7 +18,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from aveas_format.errors import FormatError
+from aveas_format.errors import AveasError, FormatError
 
 
 class ConverterOptions(BaseModel):
@@ -129,4 +129,10 @@ def convert(name: str, inputs: list[str | Path], *, map_source: str | Path | byt
             raise RecordingIOError("input not found", path=p)
     if conv.needs_map and map_source is None:
         raise FormatError(f"converter {name} needs a map: pass --map MAP.xodr")
-    return conv(paths, map_source=map_source, options=options)
+    try:
+        return conv(paths, map_source=map_source, options=options)
+    except AveasError as e:
+        if e.path is None and e.where.get("line") is not None and len(paths) == 1:
+            # a located error without its file: name the (only) input
+            raise type(e)(e.message, path=paths[0], **e.where) from None
+        raise

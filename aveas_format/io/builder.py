@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
+from pydantic import ValidationError
 
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.io.arrow import conform
@@ -202,7 +203,12 @@ def build_recording(
                                   "owner": partner}),
     }
     md.update(meta)
-    meta_model = RecordingMeta.model_validate(md)
+    try:
+        meta_model = RecordingMeta.model_validate(md)
+    except ValidationError as e:
+        from aveas_format.io.reader import format_validation_error
+
+        raise FormatError(f"invalid recording metadata: {format_validation_error(e)}") from None
     tables = {"participants": p, "states": s}
     for name, data in (("unobserved", unobserved), ("events", events),
                        ("environment", environment), ("interior", interior)):

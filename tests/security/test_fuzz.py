@@ -20,37 +20,13 @@ from aveas_format.errors import AveasError
 from aveas_format.opendrive import load_map
 
 from aveas_testing import DATA, STRAIGHT_MAP, small_recording
+from fuzzing import OPS, mutate
 
 FUZZ = DATA / "fuzz"
 SETTINGS = settings(max_examples=int(__import__("os").environ.get("AVEAS_FUZZ_EXAMPLES", "40")), deadline=None,
                     derandomize=not __import__("os").environ.get("AVEAS_FUZZ_EXAMPLES"),
                     suppress_health_check=[HealthCheck.function_scoped_fixture,
                                            HealthCheck.too_slow])
-
-
-def mutate(data: bytes, ops: list[tuple[str, int, int]]) -> bytes:
-    """Apply byte-level mutations: flip, delete a span, duplicate a span, truncate, insert junk."""
-    b = bytearray(data)
-    for op, pos, n in ops:
-        if not b:
-            break
-        pos %= len(b)
-        n = 1 + n % 64
-        if op == "flip":
-            b[pos] ^= 1 << (n % 8)
-        elif op == "delete":
-            del b[pos:pos + n]
-        elif op == "dup":
-            b[pos:pos] = b[pos:pos + n]
-        elif op == "truncate":
-            del b[pos:]
-        elif op == "junk":
-            b[pos:pos] = bytes((pos * 31 + i * 7) % 256 for i in range(n))
-    return bytes(b)
-
-
-OPS = st.lists(st.tuples(st.sampled_from(["flip", "delete", "dup", "truncate", "junk"]),
-                         st.integers(0, 10**9), st.integers(0, 10**6)), min_size=1, max_size=6)
 
 
 def _expect_clean(fn, *args, **kw):
