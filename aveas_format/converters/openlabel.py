@@ -27,10 +27,12 @@ OpenLABEL 1.0 JSON schema and loads with ``aveas_openlabel.AveasOpenLabel.from_d
 What the profile cannot carry (occlusions, full covariance, exact probabilities of lights, PET,
 provenance and roles, other event kinds, the exact metadata) goes into the namespaced extension
 ``aveas_format`` where the OpenLABEL schema allows additional properties: ``metadata.aveas_format``
-(recording.json, the ``unobserved``/``events``/``environment``/``interior`` tables, column lists),
-the ``dimensions/size`` item of each object and the ``bounding_box`` item of each object in a
-frame. Other readers ignore it; our own import uses it, so export -> import is lossless.
-Derived tables are not carried (run ``aveas-format derive`` again).
+(recording.json, the ``unobserved``/``events``/``environment``/``interior`` tables, column lists,
+the derived tables -- kinematics, interactions, encroachments with PET, traffic -- as column lists
+with their recording.json ``derived`` entries and provenance), the ``dimensions/size`` item of each
+object and the ``bounding_box`` item of each object in a frame (with the exact value of a velocity,
+acceleration or z where the rebuilt one would differ in the last bit). Other readers ignore it;
+our own import uses it, so export -> import is lossless and leaves derived tables fresh.
 
 **Import** (``aveas-format convert --from openlabel FILE.json``) reads AVEAS-profile files,
 including those written by ``aveas-openlabel`` itself (``to_dict(exclude_none=True)``) with its
@@ -168,17 +170,42 @@ def _clean(v: Any) -> Any:
     return v
 
 
+#: schema-metadata key of a derived table (aveas_format.derive.registry.DERIVED_KEY)
+_DERIVED_KEY = b"aveas_derived"
+_NONFINITE = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
+
+
 def table_to_json(table: pa.Table | None) -> dict[str, Any] | None:
-    """A table as ``{"columns": {name: [values]}}`` (binary as base64, dictionary as plain)."""
+    """A table as ``{"columns": {name: [values]}, "rows": n}`` (binary as base64, dictionary as
+    plain). JSON has no NaN or infinity: the row indices of such float values go to
+    ``"nonfinite": {name: {"NaN"|"Infinity"|"-Infinity": [rows]}}`` (the list holds null there), and
+    the table's ``aveas_derived`` schema metadata (how a derived table was made) to
+    ``"derived_info"``."""
     if table is None:
         return None
     cols = {}
+    nonfinite: dict[str, dict[str, list[int]]] = {}
     for name in table.column_names:
         col = table.column(name)
         if pa.types.is_dictionary(col.type):
             col = col.cast(col.type.value_type)
+        if pa.types.is_floating(col.type) and table.num_rows:
+            x = col.to_numpy(zero_copy_only=False).astype(np.float64)
+            valid = ~np.asarray(col.is_null().to_numpy(zero_copy_only=False), bool)
+            bad = {key: np.flatnonzero(valid & m).tolist()
+                   for key, m in (("NaN", np.isnan(x)), ("Infinity", np.isposinf(x)),
+                                  ("-Infinity", np.isneginf(x)))}
+            bad = {k: v for k, v in bad.items() if v}
+            if bad:
+                nonfinite[name] = bad
         cols[name] = _clean(col.to_pylist())
-    return {"columns": cols, "rows": table.num_rows}
+    out: dict[str, Any] = {"columns": cols, "rows": table.num_rows}
+    if nonfinite:
+        out["nonfinite"] = nonfinite
+    info = (table.schema.metadata or {}).get(_DERIVED_KEY)
+    if info is not None:
+        out["derived_info"] = info.decode("utf-8", "replace")
+    return out
 
 
 def table_from_json(obj: dict[str, Any] | None, name: str) -> pa.Table | None:
@@ -189,8 +216,16 @@ def table_from_json(obj: dict[str, Any] | None, name: str) -> pa.Table | None:
     from aveas_format.schema.tables import TABLES
 
     spec = TABLES[name]
+    nonfinite = obj.get("nonfinite") or {}
     arrays = {}
-    for cname, vals in obj.get("columns", {}).items():
+    for cname, vals in (obj.get("columns") or {}).items():
+        fix = nonfinite.get(cname)
+        if fix:
+            vals = list(vals)
+            for key, rows in fix.items():
+                for i in rows:
+                    if 0 <= int(i) < len(vals):
+                        vals[int(i)] = _NONFINITE.get(key, math.nan)
         if any(isinstance(v, dict) and set(v) == {"base64"} for v in vals if v is not None):
             arrays[cname] = pa.array([None if v is None else base64.b64decode(v["base64"])
                                       for v in vals], pa.binary())
@@ -203,7 +238,13 @@ def table_from_json(obj: dict[str, Any] | None, name: str) -> pa.Table | None:
         return None
     n = int(obj.get("rows", len(next(iter(arrays.values())))))
     arrays = {k: (v if len(v) == n else pa.nulls(n)) for k, v in arrays.items()}
-    return conform(pa.table(arrays), spec)
+    table = conform(pa.table(arrays), spec)
+    info = obj.get("derived_info")
+    if isinstance(info, str):
+        md = dict(table.schema.metadata or {})
+        md[_DERIVED_KEY] = info.encode()
+        table = table.replace_schema_metadata(md)
+    return table
 
 
 def _iso_ms(ts: str) -> str:
@@ -517,6 +558,26 @@ def _recording_to_openlabel(rec, opendrive: str, extension: bool, road_attribute
                 if c in s.column_names]
     null_of = {c: s.column(c).is_null().to_numpy(zero_copy_only=False) for c in nullable}
     null_ofl = {c: v.tolist() for c, v in null_of.items()}
+    # values the importer rebuilds with rounding (vehicle -> world frame, box centre -> ground):
+    # the exact value goes into the extension where the rebuilt one would differ in any bit, so
+    # that an unchanged round trip hashes the same (and derived tables stay fresh)
+    exact: dict[str, list] = {}
+    if extension and n:
+        from aveas_format.io.builder import wrap_angle
+
+        hw = wrap_angle(h)
+        back = dict(zip(("vx", "vy"), _rot_world(vu, vv, hw)))
+        if ax is not None and ay is not None:
+            back.update(zip(("ax", "ay"), _rot_world(au, av, hw)))
+        if z is not None:
+            hv = np.asarray([height[q] for q in pid.tolist()], float)
+            hv = np.where(np.isfinite(hv), hv, 0.0)
+            back["z"] = (np.where(np.isfinite(z), z, 0.0) + hv / 2) - hv / 2
+        for c, b in back.items():
+            orig = _col(s, c)
+            off = np.isfinite(orig) & (b != orig)
+            if off.any():
+                exact[c] = np.where(off, orig, np.nan).tolist()
 
     # uncertainty attributes, vectorised (lists of Python floats per row)
     def _z(a):
@@ -624,6 +685,9 @@ def _recording_to_openlabel(rec, opendrive: str, extension: bool, road_attribute
             for c in nullable:
                 if null_ofl[c][i]:
                     ext[c] = None
+            for c, vals in exact.items():
+                if not math.isnan(vals[i]):
+                    ext[c] = vals[i]
             if ext:
                 cuboid[EXT] = _clean(ext)
         od: dict[str, Any] = {"cuboid": [cuboid], "vec": vec}
@@ -735,6 +799,10 @@ def _recording_to_openlabel(rec, opendrive: str, extension: bool, road_attribute
             "tables": {name: table_to_json(getattr(rec, name)) for name in
                        ("unobserved", "events", "environment", "interior")
                        if getattr(rec, name) is not None},
+            # derived tables (columnar) and their recording.json ``derived`` entries
+            "derived": {name: table_to_json(t) for name, t in sorted((rec.derived or {}).items())
+                        if t is not None},
+            "derived_entries": [e.model_dump(mode="json", exclude_none=True) for e in meta.derived],
         })
     return {"openlabel": doc}
 
@@ -1484,7 +1552,7 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
                 del kw["thresholds"]
     if "conditions" not in kw and conditions:
         kw["conditions"] = conditions
-    if "title" not in kw and md.get("name"):
+    if "title" not in kw and ext is None and md.get("name"):  # ours: recording.json has it (or none)
         kw["title"] = str(md["name"])
     if options.title:
         kw["title"] = options.title
@@ -1492,7 +1560,7 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
         kw.setdefault("duration_s", 0.0)
         kw.setdefault("nominal_rate_hz", options.rate_hz)
     opts_src = options
-    return build_recording(
+    rec = build_recording(
         map_source=map_bytes, participants=participants, states=states, unobserved=unobserved,
         events=events, environment=environment, interior=interior_t, crs=crs, method=method,
         partner=partner, provenance=provenance, start_time=start_time,
@@ -1500,6 +1568,34 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
         rights=rights, reference=not use_file, acquisition=acq,
         source=source_block("openlabel", [path] if path is not None else [], opts_src),
         **kw)
+    if ext is not None:
+        _restore_derived(rec, ext)
+    return rec
+
+
+def _restore_derived(rec, ext: dict[str, Any]) -> None:
+    """The derived tables and recording.json ``derived`` entries of this library's own export."""
+    from aveas_format.schema.metadata import DerivedEntry
+    from aveas_format.schema.tables import TABLES
+
+    for name, obj in sorted((ext.get("derived") or {}).items()):
+        spec = TABLES.get(f"derived/{name}")
+        if spec is None or not isinstance(obj, dict):
+            warnings.warn(f"OpenLABEL extension: unknown derived table {name!r} skipped", stacklevel=3)
+            continue
+        table = table_from_json(obj, spec.name)
+        if table is not None:
+            # types as declared, columns and rows in the order they had (as exported)
+            rec.derived[name] = table.select([c for c in obj.get("columns") or {}
+                                              if c in table.column_names])
+    entries = []
+    for e in ext.get("derived_entries") or []:
+        try:
+            entries.append(DerivedEntry.model_validate(e))
+        except Exception as err:  # noqa: BLE001 — a damaged entry: the table is then reported stale
+            warnings.warn(f"OpenLABEL extension: derived entry skipped ({err})", stacklevel=3)
+    if entries:
+        rec.meta.derived = entries
 
 
 _MISSING = object()

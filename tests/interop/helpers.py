@@ -83,6 +83,7 @@ def rich_recording(n_vehicles: int = 6, duration_s: float = 3.0):
     derived interactions table."""
     from aveas_format.io.writer import prepare_table
     from aveas_format.sample import highway_scene
+    from aveas_format.schema.metadata import DerivedEntry
     from aveas_format.schema.tables import TABLES
 
     rec = highway_scene(n_vehicles=n_vehicles, duration_s=duration_s, rate_hz=10.0)
@@ -142,8 +143,12 @@ def rich_recording(n_vehicles: int = 6, duration_s: float = 3.0):
     })
     # a derived interactions table: participant 1 follows 0 closely at every common time
     both = np.intersect1d(t[pid == ids[0]], t[pid == ids[1]])
-    rec.derived["interactions"] = pa.table({
+    rec.derived["interactions"] = prepare_table(pa.table({
         "participant_id": np.full(len(both), ids[1], np.int64), "time": both,
         "other_id": np.full(len(both), ids[0], np.int64), "relation": ["leader"] * len(both),
-        "ttc": np.linspace(5.0, 1.0, len(both)), "thw": np.full(len(both), 0.8)})
+        "ttc": np.linspace(5.0, 1.0, len(both)), "thw": np.full(len(both), 0.8)}),
+        TABLES["derived/interactions"])
+    # documented in recording.json `derived` as `derive` would, so the recording is valid
+    rec.meta.derived = [DerivedEntry(table="derived/interactions", method="hand_made", version="0",
+                                     parameters={"scene": "rich"}, created="2024-05-13T08:15:00Z")]
     return rec

@@ -19,7 +19,7 @@ from aveas_format.converters import convert, get_converter
 from aveas_format.converters.openlabel import openlabel_to_recording, recording_to_openlabel
 from aveas_format.opendrive.builder import straight_highway
 
-from helpers import OPENLABEL_DATA, assert_recordings_equal
+from helpers import OPENLABEL_DATA, assert_recordings_equal, assert_tables_equal, rich_recording
 
 STRAIGHT = aveas_format.__path__[0] + "/../tests/data/straight.xodr"
 SITE = "+proj=tmerc +lat_0=48.9 +lon_0=8.35 +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
@@ -81,6 +81,8 @@ def test_lossless_round_trip(rich, tmp_path):
     paths = _export(rich, tmp_path)
     back = convert("openlabel", [paths[0]])  # the map is found next to the file
     assert_recordings_equal(rich, back)
+    assert_tables_equal(rich.derived["interactions"], back.derived.get("interactions"), "interactions")
+    assert back.meta.derived == rich.meta.derived
     assert back.meta.source.converter == "openlabel"
     assert aveas_format.validate(back).counts["error"] == 0
 
@@ -306,3 +308,93 @@ def test_poses_and_utm_names():
     assert _utm_crs("UTM32N", None) == "EPSG:32632"
     assert _utm_crs("utm-56h", "geo_utm") == "EPSG:32756"
     assert _utm_crs("vehicle-iso8855", "local_cs") is None
+
+
+def _crossing_scene():
+    """Two cars along a lane and a third crossing it: all four derived tables, one PET below the
+    threshold and one undefined (null) PET."""
+    from aveas_format.io.builder import build_recording
+    from aveas_format.sample import SITE_CRS
+
+    t = np.arange(61) * 0.1
+    actors = [(10.0, -5.25, 10.0, 0.0, 4.5, 1.8), (-5.0, -5.25, 10.0, 0.0, 4.5, 1.8),
+              (30.0, -40.0, 0.0, 10.0, 4.0, 2.0)]
+    cols: dict[str, list] = {k: [] for k in ("participant_id", "time", "x", "y", "heading", "vx", "vy")}
+    for i, (x, y, vx, vy, _, _) in enumerate(actors):
+        cols["participant_id"].append(np.full(len(t), i))
+        cols["time"].append(t)
+        cols["x"].append(x + vx * t)
+        cols["y"].append(y + vy * t)
+        cols["heading"].append(np.full(len(t), math.atan2(vy, vx)))
+        cols["vx"].append(np.full(len(t), vx))
+        cols["vy"].append(np.full(len(t), vy))
+    states = {k: np.concatenate(v) for k, v in cols.items()}
+    n = len(states["time"])
+    for k in ("x_std", "y_std", "vx_std", "vy_std"):
+        states[k] = np.full(n, 0.1)
+    states["heading_std"] = np.full(n, 0.01)
+    parts = {"participant_id": np.arange(3), "class": ["car"] * 3,
+             "length": np.array([a[4] for a in actors]), "width": np.array([a[5] for a in actors]),
+             "length_std": np.full(3, 0.05), "width_std": np.full(3, 0.05)}
+    xodr = straight_highway(length=200.0, lanes_right=3, x0=-50.0, geo_reference=SITE_CRS)
+    return build_recording(map_source=xodr, participants=parts, states=states, method="aerial",
+                           partner="test")
+
+
+@pytest.mark.parametrize("scene", ["highway", "crossing"])
+def test_derived_tables_round_trip(scene, tmp_path, openlabel_schema):
+    """recording -> OpenLABEL -> recording keeps every derived table (PET included), its
+    recording.json ``derived`` entry and its provenance, so nothing is reported stale."""
+    from aveas_openlabel import AveasOpenLabel
+
+    from aveas_format.derive import DERIVED_KEY, derive, stale_derived
+    from aveas_format.sample import highway_scene
+
+    rec = highway_scene(n_vehicles=8, duration_s=4.0) if scene == "highway" else _crossing_scene()
+    derive(rec)
+    assert set(rec.derived) == {"kinematics", "interactions", "encroachments", "traffic"}
+    assert stale_derived(rec) == []
+    paths = _export(rec, tmp_path)
+    doc = json.loads(paths[0].read_text())
+    jsonschema.validate(doc, openlabel_schema)
+    AveasOpenLabel.from_dict(doc)
+    carried = doc["openlabel"]["metadata"]["aveas_format"]["derived"]
+    assert set(carried) == set(rec.derived)
+    assert all(isinstance(v, list) for t in carried.values() for v in t["columns"].values())  # columnar
+    back = convert("openlabel", [paths[0]])
+    assert_recordings_equal(rec, back)
+    assert set(back.derived) == set(rec.derived)
+    for name, table in rec.derived.items():
+        assert_tables_equal(table, back.derived[name], f"derived/{name}")
+        assert back.derived[name].schema.metadata[DERIVED_KEY] == table.schema.metadata[DERIVED_KEY]
+    dump = [e.model_dump(mode="json") for e in rec.meta.derived]
+    assert [e.model_dump(mode="json") for e in back.meta.derived] == dump
+    assert back.events.schema.metadata[DERIVED_KEY] == rec.events.schema.metadata[DERIVED_KEY]
+    # the states come back bit for bit: the recorded input hashes still match
+    assert stale_derived(back) == []
+    assert aveas_format.validate(back).counts["error"] == 0
+    if scene == "crossing":
+        pet = back.derived["encroachments"].column("pet").to_pylist()
+        assert pet[0] == pytest.approx(0.86) and pet[1] is None
+        prets = [x["val"] for f in doc["openlabel"]["frames"].values() for o in f["objects"].values()
+                 for x in o["object_data"]["vec"] if x["name"] == "impact/pret/values"]
+        assert prets == [[pytest.approx(0.86)]]
+    # written and opened again: still fresh
+    back.write(tmp_path / "back.aveas")
+    assert stale_derived(aveas_format.open(tmp_path / "back.aveas")) == []
+
+
+def test_table_json_keeps_nonfinite_values():
+    import pyarrow as pa
+
+    from aveas_format.converters.openlabel import table_from_json, table_to_json
+
+    t = pa.table({"participant_id": [0, 0, 1, 1], "time": [0.0, 0.1, 0.0, 0.1],
+                  "other_id": [1, 1, 0, 0], "relation": ["leader"] * 4,
+                  "ttc": [1.5, math.nan, math.inf, None], "thw": [-math.inf, 0.5, None, 1.0]})
+    obj = json.loads(json.dumps(table_to_json(t), allow_nan=False))
+    back = table_from_json(obj, "derived/interactions")
+    assert back.column("ttc").null_count == 1 and back.column("thw").null_count == 1
+    ttc = back.column("ttc").to_pylist()
+    assert ttc[0] == 1.5 and math.isnan(ttc[1]) and ttc[2] == math.inf and ttc[3] is None
+    assert back.column("thw").to_pylist()[0] == -math.inf
