@@ -19,6 +19,18 @@ def _load(name: str):
     return mod
 
 
+def format_row(r: dict) -> str:
+    """One result line: name, seconds, rows/s, the same-run baseline and its ratio, a note."""
+    base = r.get("baseline_s")
+    ratio = r.get("speedup_vs_baseline")
+    extra = f"  baseline {base} s -> {ratio}x" if base is not None else ""
+    secs = r.get("seconds")
+    secs_txt = f"{secs:>9.4f} s" if isinstance(secs, (int, float)) else f"{'':>11}"
+    rate = r.get("rows_per_s")
+    rate_txt = f"{rate:>12,.0f} rows/s" if isinstance(rate, (int, float)) else f"{'':>19}"
+    return f"{r.get('benchmark', '?'):<32} {secs_txt}  {rate_txt}{extra}  {r.get('note', '')}"
+
+
 def main() -> int:
     import os
 
@@ -29,11 +41,7 @@ def main() -> int:
         t0 = time.perf_counter()
         rows = _load(name).main()
         for r in rows or []:
-            base = r.get("baseline_s")
-            ratio = r.get("speedup_vs_baseline")
-            extra = f"  baseline {base} s -> {ratio}x" if base is not None else ""
-            print(f"{r['benchmark']:<32} {r['seconds']:>9.4f} s  {r.get('rows_per_s', ''):>12} "
-                  f"rows/s{extra}  {r.get('note', '')}")
+            print(format_row(r))
         print(f"({time.perf_counter() - t0:.1f} s)")
     return 0
 
