@@ -1,0 +1,216 @@
+"""Fit the desired-speed distributions N(mu, sigma) per class to recorded per-vehicle mean speeds.
+
+>>> from aveas_format.fit import FitConfig, fit_desired_speed
+>>> result = fit_desired_speed({"car": v_car, "truck": v_truck}, FitConfig(restarts=100),
+...                            workers=8, outdir="fit-out")                      # doctest: +SKIP
+>>> result.best                                                                  # doctest: +SKIP
+
+Nelder-Mead (SciPy) minimises -ln L (:mod:`.objective`) from ``restarts`` starting points drawn
+uniformly from the bounds; the initial simplex has edges of ``simplex_fraction`` x the bound widths
+(pointing inwards), the bounds are enforced by SciPy's bounded Nelder-Mead (points are clipped).
+Each evaluation runs SUMO with the same seed (common random numbers: same arrivals and same
+standard-normal draw per vehicle), so the objective is a smooth-ish deterministic function.
+
+Restarts are independent tasks run through :func:`aveas_format.parallel.run_tasks` (in-process,
+local processes or a Dask cluster). Each finished restart is appended to ``OUTDIR/runs.jsonl`` at
+once, so an interrupted fit resumes where it stopped (restarts already stored are skipped);
+``runs.parquet``, ``best.json`` and the figures are written at the end.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from aveas_format.fit.objective import neg_log_likelihood
+from aveas_format.sim.scenario import Scenario
+
+
+class FitConfig(BaseModel):
+    """What to fit and how."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    scenario: Scenario = Field(default_factory=Scenario, description="the simulation; its classes' "
+                               "mu/sigma are replaced by the parameters")
+    classes: list[str] = Field(default_factory=lambda: ["car", "truck"])
+    bounds: dict[str, tuple[float, float]] = Field(default_factory=lambda: {
+        "mu_car": (100.0, 160.0), "sigma_car": (2.0, 30.0),
+        "mu_truck": (70.0, 110.0), "sigma_truck": (1.0, 15.0)},
+        description="per parameter mu_<class>/sigma_<class>, km/h")
+    restarts: int = Field(100, ge=1)
+    seed: int = Field(0, description="seed of the starting points")
+    maxfev: int = Field(120, ge=5, description="evaluations per restart at most")
+    xatol: float = Field(0.1, gt=0, description="km/h")
+    fatol: float = Field(0.05, gt=0)
+    simplex_fraction: float = Field(0.2, gt=0, le=1)
+    bandwidth: str | float = "silverman"
+    kde_backend: str = "numpy"
+
+    @property
+    def names(self) -> list[str]:
+        return [f"{p}_{c}" for c in self.classes for p in ("mu", "sigma")]
+
+    def bounds_array(self) -> np.ndarray:
+        try:
+            return np.array([self.bounds[n] for n in self.names], np.float64)
+        except KeyError as e:
+            raise ValueError(f"bounds lack {e.args[0]!r} (need {self.names})") from None
+
+    def starts(self) -> np.ndarray:
+        b = self.bounds_array()
+        rng = np.random.default_rng(self.seed)
+        return b[:, 0] + rng.random((self.restarts, len(b))) * (b[:, 1] - b[:, 0])
+
+
+def speeds_of(theta: np.ndarray, classes: list[str]) -> dict[str, tuple[float, float]]:
+    return {c: (float(theta[2 * i]), float(theta[2 * i + 1])) for i, c in enumerate(classes)}
+
+
+def evaluate(theta: np.ndarray, config: FitConfig, recorded: dict[str, np.ndarray]
+             ) -> tuple[float, dict[str, np.ndarray]]:
+    """-ln L at ``theta`` (mu/sigma per class, km/h) and the simulated metric."""
+    from aveas_format.sim.runner import simulate
+
+    sc = config.scenario.with_desired_speeds(speeds_of(theta, config.classes))
+    sim = simulate(sc).mean_speeds()
+    return neg_log_likelihood(recorded, sim, config.bandwidth, config.kde_backend), sim
+
+
+def initial_simplex(x0: np.ndarray, bounds: np.ndarray, fraction: float) -> np.ndarray:
+    """x0 plus one vertex per parameter, moved by ``fraction`` of the bound width, inwards."""
+    w = (bounds[:, 1] - bounds[:, 0]) * fraction
+    sim = [x0]
+    for i in range(len(x0)):
+        v = x0.copy()
+        v[i] = x0[i] + w[i] if x0[i] + w[i] <= bounds[i, 1] else x0[i] - w[i]
+        sim.append(v)
+    return np.array(sim)
+
+
+def run_restart(task: dict) -> dict:
+    """One Nelder-Mead run (a module-level function: runs in worker processes and on Dask)."""
+    from scipy.optimize import minimize
+
+    config = FitConfig.model_validate(task["config"])
+    recorded = {c: np.asarray(v, np.float64) for c, v in task["recorded"].items()}
+    x0 = np.asarray(task["x0"], np.float64)
+    b = config.bounds_array()
+    t0 = time.perf_counter()
+    cache: dict[tuple, float] = {}
+
+    def f(x: np.ndarray) -> float:
+        key = tuple(np.round(x, 6))
+        if key not in cache:
+            cache[key] = evaluate(np.clip(x, b[:, 0], b[:, 1]), config, recorded)[0]
+        return cache[key]
+
+    r = minimize(f, x0, method="Nelder-Mead", bounds=[tuple(v) for v in b],
+                 options={"initial_simplex": initial_simplex(x0, b, config.simplex_fraction),
+                          "maxfev": config.maxfev, "xatol": config.xatol, "fatol": config.fatol})
+    out = {"restart": int(task["restart"]), "fun": float(r.fun), "nfev": int(r.nfev), "nit": int(r.nit),
+           "success": bool(r.success), "message": str(r.message),
+           "seconds": round(time.perf_counter() - t0, 3)}
+    for i, n in enumerate(config.names):
+        out[f"start_{n}"] = float(x0[i])
+        out[n] = float(np.clip(r.x[i], b[i, 0], b[i, 1]))
+    return out
+
+
+@dataclass
+class FitResult:
+    config: FitConfig
+    runs: list[dict]
+    recorded: dict[str, np.ndarray]
+    outdir: Path | None = None
+    failed: list[str] = field(default_factory=list)
+
+    @property
+    def best(self) -> dict:
+        return min(self.runs, key=lambda r: r["fun"])
+
+    def best_params(self) -> dict[str, float]:
+        return {n: self.best[n] for n in self.config.names}
+
+
+def load_runs(outdir: Path) -> list[dict]:
+    p = Path(outdir) / "runs.jsonl"
+    if not p.exists():
+        return []
+    runs = []
+    for line in p.read_text().splitlines():
+        if line.strip():
+            try:
+                runs.append(json.loads(line))
+            except json.JSONDecodeError:  # a line cut by an interruption
+                continue
+    return runs
+
+
+def fit_desired_speed(recorded: dict[str, np.ndarray], config: FitConfig | None = None, *,
+                      workers: int | None = 1, scheduler: str | None = None,
+                      outdir: str | Path | None = None, progress: bool = False,
+                      figures: bool = True) -> FitResult:
+    """Run (or resume) the restarts; see the module docstring."""
+    from aveas_format.parallel import run_tasks
+
+    config = config or FitConfig()
+    recorded = {c: np.asarray(recorded.get(c, []), np.float64) for c in config.classes}
+    od = Path(outdir) if outdir is not None else None
+    done: list[dict] = []
+    if od is not None:
+        od.mkdir(parents=True, exist_ok=True)
+        cfg_path = od / "config.json"
+        cfg_json = config.model_dump(mode="json")
+        if cfg_path.exists():
+            old = json.loads(cfg_path.read_text())
+            if {k: v for k, v in old.items() if k != "restarts"} != \
+                    {k: v for k, v in cfg_json.items() if k != "restarts"}:
+                from aveas_format.errors import AveasError
+
+                raise AveasError("holds a fit with a different configuration; use another "
+                                 "output directory", path=od)
+        cfg_path.write_text(json.dumps(cfg_json, indent=2))
+        (od / "recorded.json").write_text(json.dumps({c: v.tolist() for c, v in recorded.items()}))
+        done = [r for r in load_runs(od) if r["restart"] < config.restarts]
+    have = {r["restart"] for r in done}
+    starts = config.starts()
+    cfg = config.model_dump(mode="json")
+    rec_l = {c: v.tolist() for c, v in recorded.items()}
+    tasks = [{"config": cfg, "recorded": rec_l, "restart": i, "x0": starts[i].tolist()}
+             for i in range(config.restarts) if i not in have]
+    runs = list(done)
+    failed = []
+    for r in run_tasks(run_restart, tasks, workers=workers, scheduler=scheduler, progress=progress,
+                       description="restarts"):
+        if not r.ok:
+            failed.append(f"restart {r.item['restart']}: {r.error}")
+            continue
+        runs.append(r.value)
+        if od is not None:
+            with open(od / "runs.jsonl", "a") as f:
+                f.write(json.dumps(r.value) + "\n")
+    runs.sort(key=lambda r: r["restart"])
+    res = FitResult(config, runs, recorded, od, failed)
+    if od is not None and runs:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        pq.write_table(pa.Table.from_pylist(runs), od / "runs.parquet")
+        (od / "best.json").write_text(json.dumps(res.best, indent=2))
+        if figures:
+            from aveas_format.fit.plots import plot_histogram, plot_parameters
+
+            sc = config.scenario.with_desired_speeds(speeds_of(
+                np.array([res.best[n] for n in config.names]), config.classes))
+            from aveas_format.sim.runner import simulate
+
+            sim = simulate(sc).mean_speeds()
+            plot_histogram(recorded, sim, od / "fit_histogram.png", bandwidth=config.bandwidth)
+            plot_parameters(runs, config.classes, od / "fit_parameters.png")
+    return res

@@ -1,0 +1,16 @@
+"""Helpers of the SUMO runner/fitter tests."""
+
+from __future__ import annotations
+
+from aveas_format.sim import Network, Scenario, VehicleClass
+
+PAPER = {"car": (131.05, 17.48), "truck": (89.22, 6.20)}
+
+
+def small_scenario(duration: float = 300.0, seed: int = 1, length: float = 1000.0, inflow: float = 300.0,
+                   **kw) -> Scenario:
+    """The paper's demand and desired speeds on a shorter road."""
+    return Scenario(network=Network(length=length, inflow=inflow), duration=duration, seed=seed, classes=[
+        VehicleClass(name="car", flow=1680, speed_mean_kmh=PAPER["car"][0], speed_std_kmh=PAPER["car"][1]),
+        VehicleClass(name="truck", vclass="truck", flow=320, speed_mean_kmh=PAPER["truck"][0],
+                     speed_std_kmh=PAPER["truck"][1])], **kw)

@@ -1,0 +1,102 @@
+"""The fitter: parameter recovery (fast and slow), resuming, Dask, CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from sim.sim_helpers import PAPER, small_scenario
+
+from aveas_format.fit import FitConfig, fit_desired_speed, load_runs
+from aveas_format.sim import simulate
+
+NARROW = {"mu_car": (115.0, 150.0), "sigma_car": (8.0, 28.0), "mu_truck": (80.0, 100.0),
+          "sigma_truck": (2.0, 12.0)}
+
+
+def synthetic_recorded(n_car: int = 178, n_truck: int = 33, seed: int = 7, **kw) -> dict[str, np.ndarray]:
+    """'Recorded' per-vehicle mean speeds: a run at the paper's parameters with another seed,
+    subsampled to the paper's counts."""
+    ms = simulate(small_scenario(seed=seed, **kw)).mean_speeds()
+    rng = np.random.default_rng(seed)
+    return {"car": rng.choice(ms["car"], n_car, replace=False),
+            "truck": rng.choice(ms["truck"], n_truck, replace=False)}
+
+
+def _check(best: dict, tol_mu: float, tol_sigma: float) -> None:
+    for c in ("car", "truck"):
+        assert abs(best[f"mu_{c}"] - PAPER[c][0]) < tol_mu, best
+        assert abs(best[f"sigma_{c}"] - PAPER[c][1]) < tol_sigma, best
+
+
+def test_fast_parameter_recovery(sumo, tmp_path):
+    """Small variant: 2 restarts (in 2 processes) of <= 50 evaluations each on a 1.3 km road with
+    10 min of demand; mu within 4 km/h, sigma within 5 km/h."""
+    recorded = synthetic_recorded(duration=900)
+    cfg = FitConfig(scenario=small_scenario(duration=600), bounds=NARROW, restarts=2, maxfev=50, seed=3)
+    res = fit_desired_speed(recorded, cfg, workers=2, outdir=tmp_path / "fit")
+    assert len(res.runs) == 2 and not res.failed
+    b = res.best
+    for n in cfg.names:  # bounds respected
+        assert cfg.bounds[n][0] <= b[n] <= cfg.bounds[n][1]
+    _check(b, tol_mu=4.0, tol_sigma=5.0)
+    for f in ("runs.parquet", "best.json", "fit_histogram.png", "fit_parameters.png"):
+        assert (tmp_path / "fit" / f).exists()
+
+
+def test_resume_skips_stored_restarts(sumo, tmp_path):
+    recorded = synthetic_recorded(n_car=40, n_truck=10, duration=300, length=400, inflow=100)
+    cfg = FitConfig(scenario=small_scenario(duration=120, length=400, inflow=100), bounds=NARROW,
+                    restarts=1, maxfev=6)
+    res = fit_desired_speed(recorded, cfg, outdir=tmp_path / "fit", figures=False)
+    assert len(res.runs) == 1
+    res2 = fit_desired_speed(recorded, cfg.model_copy(update={"restarts": 2}), outdir=tmp_path / "fit",
+                             figures=False)
+    assert [r["restart"] for r in res2.runs] == [0, 1]
+    assert res2.runs[0] == res.runs[0]  # not run again
+    assert len(load_runs(tmp_path / "fit")) == 2
+    with pytest.raises(Exception, match="different configuration"):
+        fit_desired_speed(recorded, cfg.model_copy(update={"maxfev": 7}), outdir=tmp_path / "fit")
+
+
+def test_restarts_on_a_dask_local_cluster(sumo, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    recorded = synthetic_recorded(n_car=40, n_truck=10, duration=300, length=400, inflow=100)
+    cfg = FitConfig(scenario=small_scenario(duration=120, length=400, inflow=100), bounds=NARROW,
+                    restarts=2, maxfev=6)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        res = fit_desired_speed(recorded, cfg, scheduler=cluster.scheduler_address, figures=False)
+    assert sorted(r["restart"] for r in res.runs) == [0, 1] and not res.failed
+
+
+def test_cli_fit_desired_speed(sumo, tmp_path):
+    from aveas_format.cli import main
+
+    cfg = tmp_path / "s.toml"
+    cfg.write_text('duration = 120\nseed = 5\n[network]\nlength = 400\ninflow = 100\n')
+    with pytest.raises(SystemExit) as e:
+        main(["sim", "run", "-c", str(cfg), "-o", str(tmp_path / "rec.aveas"), "--no-validate"])
+    assert e.value.code == 0
+    with pytest.raises(SystemExit) as e:
+        main(["fit", "desired-speed", str(tmp_path / "rec.aveas"), "-c", str(cfg), "-o",
+              str(tmp_path / "fit"), "-r", "1", "--maxfev", "6", "--s-range", "100,500",
+              "--bounds", json.dumps({k: list(v) for k, v in NARROW.items()})])
+    assert e.value.code == 0
+    best = json.loads((tmp_path / "fit" / "best.json").read_text())
+    assert set(best) >= {"mu_car", "sigma_car", "mu_truck", "sigma_truck", "fun"}
+
+
+@pytest.mark.slow
+def test_full_parameter_recovery(sumo, tmp_path):
+    """The issue's recovery test: 178 cars and 33 trucks 'recorded' at the paper's parameters on the
+    paper's road (1.5 km inflow + 4 km), fitted back with 4 restarts of <= 200 evaluations (default
+    bounds; 30 min of demand and instantaneous lane changes per evaluation, ~1 s each); mu within
+    2 km/h, sigma within 2.5 km/h. ~10 min on 2 cores."""
+    kw = {"length": 4000, "inflow": 1500, "lane_change_duration": 0}
+    recorded = synthetic_recorded(duration=1800, **kw)
+    cfg = FitConfig(scenario=small_scenario(duration=1800, **kw), restarts=4, maxfev=200, seed=1)
+    res = fit_desired_speed(recorded, cfg, workers=None, outdir=tmp_path / "fit")
+    assert not res.failed
+    _check(res.best, tol_mu=2.0, tol_sigma=2.5)
