@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-all bench docs lint clean
+.PHONY: demo test test-all bench docs fuzz clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -23,6 +23,10 @@ test: $(STAMP)
 
 test-all: $(STAMP)
 	$(PY) -m pytest -q
+
+# a longer, randomised fuzzing campaign of the readers (make test replays a fixed, short one)
+fuzz: $(STAMP)
+	AVEAS_FUZZ_EXAMPLES=$${AVEAS_FUZZ_EXAMPLES:-2000} $(PY) -m pytest -q tests/security -x
 
 bench: $(STAMP)
 	$(PY) benchmarks/run.py
