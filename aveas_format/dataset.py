@@ -443,19 +443,23 @@ def _meta_facts_safe(item: Any) -> dict[str, Any]:
     return _meta_facts(item)
 
 
-def run_dataset(fn: Callable[[str], Any], paths: Iterable[str], *, kind: str,
+def run_dataset(fn: Callable[[Any], Any], items: Iterable[Any], *, kind: str,
                 specs: list[str] | None = None, fail_on: str = "error", workers: int | None = 1,
                 scheduler: str | None = None, progress: bool = False,
-                on_result: Callable[[TaskResult], None] | None = None) -> DatasetReport:
-    """Map ``fn`` over recordings and collect a :class:`DatasetReport` (``on_result`` is called
-    with every result as it arrives, e.g. to print it)."""
-    paths = [str(p) for p in paths]
-    rep = DatasetReport(kind, specs or paths, fail_on)
+                on_result: Callable[[TaskResult], None] | None = None,
+                name: Callable[[Any], str] | None = None) -> DatasetReport:
+    """Map ``fn`` over items (recording paths, or tuples whose ``name(item)`` names the
+    recording) and collect a :class:`DatasetReport` (``on_result`` is called with every result as
+    it arrives, e.g. to print it)."""
+    items = [str(i) for i in items] if name is None else list(items)
+    label = name or str
+    rep = DatasetReport(kind, specs or [label(i) for i in items], fail_on)
     rep.runner = {"workers": None if scheduler else (workers or os.cpu_count()),
                   "scheduler": scheduler}
     t0 = time.perf_counter()
-    for r in map_recordings(fn, paths, workers=workers, scheduler=scheduler, progress=progress,
-                            description=kind):
+    for r in run_tasks(fn, items, workers=workers, scheduler=scheduler, progress=progress,
+                       description=kind):
+        r.item = label(r.item)
         rep.add(r)
         if on_result is not None:
             on_result(r)
@@ -560,18 +564,9 @@ def derive_dataset(paths: Iterable[str | Path], *, output_dir: str | Path | None
     items = [(p, None if in_place else str(output_path_for(p, root, output_dir))) for p in paths]
     fn = functools.partial(_derive_task, only=only, params=params, overwrite=overwrite,
                            in_place=in_place)
-    rep = DatasetReport("derive", specs or paths, "never")
-    rep.runner = {"workers": None if scheduler else (workers or os.cpu_count()),
-                  "scheduler": scheduler}
-    t0 = time.perf_counter()
-    for r in run_tasks(fn, items, workers=workers, scheduler=scheduler, progress=progress,
-                       description="derive"):
-        r.item = r.item[0]
-        rep.add(r)
-        if on_result is not None:
-            on_result(r)
-    rep.seconds = time.perf_counter() - t0
-    return rep
+    return run_dataset(fn, items, kind="derive", specs=specs or paths, fail_on="never",
+                       workers=workers, scheduler=scheduler, progress=progress,
+                       on_result=on_result, name=lambda item: item[0])
 
 
 # ------------------------------------------------------------------------------------------
@@ -653,19 +648,9 @@ def convert_dataset(inputs: Iterable[str | Path], *, source: str, output_dir: st
     items = [(name, files, str(out / f"{name}.aveas")) for name, files in units.items()]
     fn = functools.partial(convert_recording, source=source, map_source=map_source,
                            options=options, overwrite=overwrite, validate_result=validate)
-    rep = DatasetReport("convert", [str(i) for i in inputs] if not isinstance(inputs, Iterator)
-                        else list(units), "error")
-    rep.runner = {"workers": None if scheduler else (workers or os.cpu_count()),
-                  "scheduler": scheduler}
-    t0 = time.perf_counter()
-    for r in run_tasks(fn, items, workers=workers, scheduler=scheduler, progress=progress,
-                       description="convert"):
-        r.item = r.item[0]
-        rep.add(r)
-        if on_result is not None:
-            on_result(r)
-    rep.seconds = time.perf_counter() - t0
-    return rep
+    return run_dataset(fn, items, kind="convert", specs=list(units), workers=workers,
+                       scheduler=scheduler, progress=progress, on_result=on_result,
+                       name=lambda item: item[0])
 
 
 def _classes() -> list[str]:
