@@ -56,7 +56,11 @@ def _params(text: str) -> dict[str, str | None]:
 
 
 def _tmerc_at(lat0: str | None, lon0: str | None) -> str:
-    return (f"+proj=tmerc +lat_0={float(lat0 or 0)!r} +lon_0={float(lon0 or 0)!r} +k=1 +x_0=0 +y_0=0 "
+    try:
+        lat, lon = float(lat0 or 0), float(lon0 or 0)
+    except ValueError:
+        raise FormatError(f"+lat_0={lat0!r} / +lon_0={lon0!r} are not numbers") from None
+    return (f"+proj=tmerc +lat_0={lat!r} +lon_0={lon!r} +k=1 +x_0=0 +y_0=0 "
             "+ellps=WGS84 +units=m +no_defs")
 
 
@@ -102,8 +106,11 @@ def parse_crs(text: str) -> ParsedCrs:
     if not _usable(crs) and candidate.lstrip().startswith("+"):
         stripped = re.sub(r"\+(geoidgrids|vunits|geoid_crs)=\S*", "", candidate)
         stripped = re.sub(r"\s+", " ", stripped).strip()
-        crs2 = pyproj.CRS.from_user_input(stripped)
-        if _usable(crs2):
+        try:
+            crs2 = pyproj.CRS.from_user_input(stripped)
+        except CRSError:
+            crs2 = None
+        if crs2 is not None and _usable(crs2):
             notes.append("vertical grid not available: +geoidgrids/+vunits dropped (heights not "
                          "transformed)")
             crs = crs2

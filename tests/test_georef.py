@@ -40,7 +40,8 @@ def test_missing_vertical_grid_is_dropped_with_a_note():
     LocalFrame(text, warn=False).to_wgs84(np.array([500000.0]), np.array([0.0]))
 
 
-@pytest.mark.parametrize("text", ["", "   ", "+ellps=WGS84", "+proj=nonsense +lat_0=1", "+proj=utm +datum=WGS84"])
+@pytest.mark.parametrize("text", ["", "   ", "+ellps=WGS84", "+proj=nonsense +lat_0=1", "+proj=utm +datum=WGS84",
+                                  "+lat_0=4:.9 +lon_0=8", "+oj=tmerc +lat_0=4:.9"])
 def test_unreadable_strings_are_clear_errors(text):
     with pytest.raises(FormatError):
         parse_crs(text)
