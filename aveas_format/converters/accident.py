@@ -300,6 +300,8 @@ def convert_accident(inputs: list[Path], *, map_source, options: AccidentOptions
         i = unknown[0]
         raise FormatError(f"participant_id {d_src[i]!r} is not in {pp.name}", path=dp,
                           line=i + 2 if dp.suffix.lower() != ".parquet" else None)
+    if not d_src:
+        raise FormatError("dynamics has no rows", path=dp)
     pid = np.fromiter((index[s] for s in d_src), np.int64, len(d_src))
     tv = column(dt_, tcol)
     time = tv / rate if tcol == "step" else tv

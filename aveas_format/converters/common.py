@@ -83,8 +83,29 @@ def read_table(path: Path, *, required: Sequence[str] = (), numeric: Sequence[st
         table.column_names  # noqa: B018 — decodes the header
     except UnicodeDecodeError:
         raise FormatError("the CSV header is not UTF-8 text", path=path, line=1) from None
+    dup = next((c for i, c in enumerate(table.column_names) if c in table.column_names[:i]), None)
+    if dup is not None:
+        raise FormatError(f"column {dup!r} appears more than once in the header", path=path, line=1)
+    reject_non_utf8(table, path, header_lines=1)
     _check_required(table, required, path)
     return _numeric(table, numeric, path, header_lines=1)
+
+
+def reject_non_utf8(table: pa.Table, path: Path, header_lines: int = 1) -> None:
+    """A CSV column that pyarrow typed as binary holds bytes that are not UTF-8 text: raise a
+    :class:`FormatError` naming the column and the line of the first such value (instead of an
+    ``ArrowInvalid`` from a later cast to string)."""
+    for c, col in zip(table.column_names, table.columns):
+        if not (pa.types.is_binary(col.type) or pa.types.is_large_binary(col.type)):
+            continue
+        for i, v in enumerate(col.to_pylist()):
+            if v is None:
+                continue
+            try:
+                v.decode("utf-8")
+            except UnicodeDecodeError:
+                raise FormatError(f"column {c!r}: value is not UTF-8 text", path=path,
+                                  line=i + 1 + header_lines) from None
 
 
 def _check_required(table: pa.Table, required: Sequence[str], path: Path) -> None:

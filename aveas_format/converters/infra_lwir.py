@@ -51,6 +51,7 @@ from aveas_format.converters.common import (
     map_area,
     nullable,
     read_numeric_table,
+    reject_non_utf8,
     velocity_with_std,
     wrap_recording,
 )
@@ -221,6 +222,7 @@ def _read_mot(path: Path) -> pa.Table:
         m = re.search(r"[Rr]ow #(\d+)", str(e))
         raise FormatError(f"malformed MOT file: {str(e).splitlines()[0]}", path=path,
                           line=int(m.group(1)) if m else None) from None
+    reject_non_utf8(raw, path, header_lines=0)
     k = raw.num_columns
     if k < 6:
         raise FormatError(f"a MOT line needs at least 6 fields (frame,id,bb_left,bb_top,bb_width,"

@@ -309,9 +309,32 @@ def _read_det3d(msg, objs: _Objects, t_ns: int, ti: int, mi: int, opts: Ros2Mcap
 _READERS = {T_TRACKED: _read_tracked, T_DERIVED: _read_derived, T_DET3D: _read_det3d}
 
 
+def _mcap_errors() -> tuple[type[BaseException], ...]:
+    """What a corrupt MCAP file raises from the reader: record-level errors, a damaged record
+    length (OverflowError, or MemoryError for the buffer the reader asks for) and, from a damaged
+    compressed chunk, the decompressors' own (zstandard.ZstdError; lz4 raises RuntimeError)."""
+    from mcap.exceptions import McapError
+
+    errs: list[type[BaseException]] = [McapError, ValueError, EOFError, KeyError, OSError,
+                                       struct.error, IndexError, RuntimeError, OverflowError,
+                                       MemoryError]
+    try:
+        import zstandard
+
+        errs.append(zstandard.ZstdError)
+    except ImportError:  # pragma: no cover - mcap depends on it
+        pass
+    return tuple(errs)
+
+
+def _why(e: BaseException) -> str:
+    if isinstance(e, MemoryError) and not str(e):
+        return "MemoryError: a record's length field is implausibly large"
+    return f"{type(e).__name__}: {e}"
+
+
 def _channels(path: Path) -> dict[str, str]:
     """topic -> canonical message type of an MCAP file (from its summary, else a scan)."""
-    from mcap.exceptions import McapError
     from mcap.reader import make_reader
 
     try:
@@ -326,8 +349,8 @@ def _channels(path: Path) -> dict[str, str]:
                 if schema is not None:
                     out.setdefault(ch.topic, _canon(schema.name))
             return out
-    except (McapError, ValueError, EOFError, KeyError, OSError, struct.error, IndexError) as e:
-        raise FormatError(f"not a readable MCAP file: {type(e).__name__}: {e}", path=path) from None
+    except _mcap_errors() as e:
+        raise FormatError(f"not a readable MCAP file: {_why(e)}", path=path) from None
 
 
 def _pick(types: dict[str, str], wanted: str, given: str | None, preferred: tuple[str, ...],
@@ -351,7 +374,6 @@ def _pick(types: dict[str, str], wanted: str, given: str | None, preferred: tupl
 
 
 def _read(paths: list[Path], opts: Ros2McapOptions):
-    from mcap.exceptions import McapError
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
@@ -402,9 +424,9 @@ def _read(paths: list[Path], opts: Ros2McapOptions):
                     schema, ch, m = next(it)
                 except StopIteration:
                     break
-                except (McapError, ValueError, EOFError, KeyError, OSError, struct.error, IndexError) as e:
+                except _mcap_errors() as e:
                     raise FormatError(f"corrupt MCAP after {sum(counters.values())} messages: "
-                                      f"{type(e).__name__}: {e}", path=path) from None
+                                      f"{_why(e)}", path=path) from None
                 topic = ch.topic
                 mi = counters.get(topic, 0)
                 counters[topic] = mi + 1

@@ -162,6 +162,7 @@ def _georeference(inputs: list[Path], options: RotatedBoxOptions
     tables, geo = [], []
     affine = None
     crs = options.crs
+    crs_from: Path | None = None
     for p in inputs:
         name = p.name.lower()
         if p.suffix.lower() in WORLD_FILE_SUFFIXES:
@@ -170,10 +171,12 @@ def _georeference(inputs: list[Path], options: RotatedBoxOptions
         elif name.endswith(".aux.xml"):
             aff, srs = read_aux_xml(p)
             affine = aff or affine
-            crs = crs or srs
+            if not crs and srs:
+                crs, crs_from = srs, p
             geo.append(p)
         elif p.suffix.lower() == ".prj":
-            crs = crs or p.read_text(errors="replace").strip()
+            if not crs:
+                crs, crs_from = p.read_text(errors="replace").strip(), p
             geo.append(p)
         else:
             tables.append(p)
@@ -191,7 +194,23 @@ def _georeference(inputs: list[Path], options: RotatedBoxOptions
                           path=geo[0] if geo else None)
     if not tables:
         raise RecordingIOError("no track table among the inputs", path=inputs[0])
+    _check_crs(crs, crs_from)
     return A, c, crs, tables, geo
+
+
+def _check_crs(crs: str, source: Path | None) -> None:
+    """Read the georeference's CRS now, so that an unreadable one is reported with its file (the
+    .prj / .aux.xml it came from; none for the crs option)."""
+    from pyproj.exceptions import CRSError
+
+    from aveas_format.georef import parse_crs
+
+    try:
+        parse_crs(crs)
+    except (FormatError, CRSError, ValueError) as e:
+        where = "the crs option" if source is None else "the georeference"
+        raise FormatError(f"{where}: unreadable CRS {crs[:200]!r}: {str(e).splitlines()[0]}",
+                          path=source) from None
 
 
 # --- boxes ---------------------------------------------------------------------------------------
