@@ -53,11 +53,19 @@ class _Ctx:
         return MapError(message, path=self.path or "<map>", line=line)
 
     # -- attribute helpers ---------------------------------------------------------------------
-    def num(self, el: Any, name: str, default: Any = _REQUIRED, *, finite: bool = True) -> float:
+    def _present(self, el: Any, name: str, default: Any) -> str | None:
+        """The attribute's text, or None where it is absent/empty and ``default`` applies
+        (a MapError where the attribute is required)."""
         raw = el.get(name)
         if raw is None or raw.strip() == "":
             if default is _REQUIRED:
                 raise self.error(f"<{el.tag}> lacks the required attribute {name!r}", el)
+            return None
+        return raw
+
+    def num(self, el: Any, name: str, default: Any = _REQUIRED, *, finite: bool = True) -> float:
+        raw = self._present(el, name, default)
+        if raw is None:
             return default
         try:
             value = float(raw)
@@ -68,10 +76,8 @@ class _Ctx:
         return value
 
     def integer(self, el: Any, name: str, default: Any = _REQUIRED) -> int:
-        raw = el.get(name)
-        if raw is None or raw.strip() == "":
-            if default is _REQUIRED:
-                raise self.error(f"<{el.tag}> lacks the required attribute {name!r}", el)
+        raw = self._present(el, name, default)
+        if raw is None:
             return default
         try:
             value = float(raw)
