@@ -121,6 +121,32 @@ class Container:
     def read_bytes(self, name: str) -> bytes:
         return self.buffer(name).to_pybytes()
 
+    def input_file(self, name: str) -> pa.NativeFile:
+        """A random-access file of one member for reading part of it (Parquet row groups): a plain
+        file for a directory (read with ``pread``, so only what is read is held in memory), a
+        reader over the member's bytes in a ZIP."""
+        if self._zip is None:
+            if not self.exists(name):
+                raise RecordingIOError("file missing from the recording", path=self.location(name))
+            try:
+                return pa.OSFile(str(self.path / name), "rb")
+            except OSError as e:
+                raise RecordingIOError(f"cannot read: {e}", path=self.location(name)) from None
+        return pa.BufferReader(self.buffer(name))
+
+    def sha256(self, name: str, chunk: int = 1 << 20) -> str:
+        """SHA-256 of one member, hashed in chunks (a directory's file is never held whole)."""
+        if self._zip is not None:
+            return sha256_of(self.buffer(name))
+        h = hashlib.sha256()
+        try:
+            with open(self.path / name, "rb") as f:
+                while block := f.read(chunk):
+                    h.update(block)
+        except OSError as e:
+            raise RecordingIOError(f"cannot read: {e}", path=self.location(name)) from None
+        return h.hexdigest()
+
     def close(self) -> None:
         if self._zip is not None:
             self._zip.close()

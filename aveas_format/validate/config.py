@@ -148,6 +148,13 @@ class MetadataConfig(_Section):
         description="values of partner / licence / owner that say nothing")
 
 
+class StreamingConfig(_Section):
+    above_rows: int = Field(2_000_000, ge=1, description="states, interior and derived tables with "
+                            "more rows than this are validated in batches, not loaded whole")
+    batch_rows: int = Field(500_000, ge=1, description="rows per batch (a batch is extended to "
+                            "hold each participant's states whole)")
+
+
 class ValidationConfig(_Section):
     """Every threshold of the rule catalogue (see docs/validate.md)."""
 
@@ -159,6 +166,7 @@ class ValidationConfig(_Section):
     map: MapConfig = Field(default_factory=MapConfig)
     interactions: InteractionsConfig = Field(default_factory=InteractionsConfig)
     metadata: MetadataConfig = Field(default_factory=MetadataConfig)
+    streaming: StreamingConfig = Field(default_factory=StreamingConfig)
 
     @model_validator(mode="before")
     @classmethod

@@ -4,6 +4,13 @@
 :class:`Context` reads recording.json and each table on first use and records what went wrong
 (``problems``) for the structure rules to report, so later rules simply see ``None`` for what could
 not be read.
+
+Large tables (states, interior, derived tables above ``[streaming] above_rows`` rows) are not
+loaded whole: they are *streamed*. :meth:`Context.passes` yields the context itself (whose
+``row_tables`` are the tables loaded whole) and then one batch context per batch of a streamed
+table, whose ``table(name)`` is that batch and whose ``file_rows`` map batch rows to file rows.
+States batches hold each participant's samples whole (row groups are cut at a participant
+boundary), so per-participant rules see complete trajectories.
 """
 
 from __future__ import annotations
@@ -14,7 +21,9 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 from pydantic import ValidationError
 
@@ -25,6 +34,76 @@ from aveas_format.safeio import load_json
 from aveas_format.schema.metadata import RecordingMeta
 from aveas_format.schema.tables import TABLES
 from aveas_format.schema.versions import VersionError, migrate_meta
+
+
+#: tables that may be streamed (participants, events, unobserved, environment are read whole:
+#: every rule needs them at once, and they are small)
+_STREAMABLE_PREFIX = "derived/"
+_STREAMABLE = ("states", "interior")
+#: cache entries that do not depend on the states rows and are shared with batch contexts
+_SHARED_CACHE = ("map.checks", "unobserved.geoms", "geo.coverage")
+
+
+@dataclass
+class Streamed:
+    """A table validated in batches: its Parquet file and whether batches keep participants whole."""
+
+    name: str
+    pf: pq.ParquetFile
+    rows: int
+    by_participant: bool
+
+    def batches(self, batch_rows: int):
+        """(table, file rows) of each batch, in file order."""
+        md = self.pf.metadata
+        offsets = np.r_[0, np.cumsum([md.row_group(g).num_rows for g in range(md.num_row_groups)])]
+        pid_idx = self.pf.schema_arrow.get_field_index("participant_id")
+        pending: list[pa.Table] = []
+        pending_rows: list[np.ndarray] = []
+        n = 0
+        last = md.num_row_groups - 1
+        for g in range(md.num_row_groups):
+            t = self.pf.read_row_group(g)
+            pending.append(t)
+            pending_rows.append(np.arange(offsets[g], offsets[g] + t.num_rows, dtype=np.int64))
+            n += t.num_rows
+            if n < batch_rows or g == last:
+                continue
+            tab = pa.concat_tables(pending)
+            rows = np.concatenate(pending_rows)
+            if not self.by_participant:
+                yield tab, rows
+                pending, pending_rows, n = [], [], 0
+                continue
+            # the participant at the end of this row group may go on in the next one: keep it
+            cut = md.row_group(g).column(pid_idx).statistics.max
+            keep = np.asarray(pc.fill_null(pc.less(tab.column("participant_id"), cut), True)
+                              .to_numpy(zero_copy_only=False), bool)
+            if keep.any():
+                yield tab.filter(keep), rows[keep]
+            rest = ~keep
+            pending, pending_rows = [tab.filter(rest)], [rows[rest]]
+            n = int(rest.sum())
+        if pending:
+            yield pa.concat_tables(pending), np.concatenate(pending_rows)
+
+
+def _participant_sorted(pf: pq.ParquetFile) -> bool:
+    """True when the row groups' participant_id statistics do not overlap (max of one <= min of the
+    next), so that only the participant at a row-group end can go on in the next row group."""
+    idx = pf.schema_arrow.get_field_index("participant_id")
+    if idx < 0 or not pa.types.is_integer(pf.schema_arrow.field(idx).type):
+        return False
+    prev = None
+    md = pf.metadata
+    for g in range(md.num_row_groups):
+        st = md.row_group(g).column(idx).statistics
+        if st is None or not st.has_min_max:
+            return False
+        if prev is not None and st.min < prev:
+            return False
+        prev = st.max
+    return True
 
 
 @dataclass
@@ -46,6 +125,15 @@ class Context:
         #: results shared between rules (e.g. the pairs of nearby participants), by key
         self.cache: dict[str, Any] = {}
         self.problems: list[Problem] = []
+        #: merged results of the collectors (set by the runner before the recording rules run)
+        self.collected: dict[str, Any] = {}
+        #: tables validated in batches (empty for small recordings and in-memory ones)
+        self.streamed: dict[str, Streamed] = {}
+        #: in a batch context: the batch's number and, per table, the file row of each batch row
+        self.batch_index = 0
+        self.file_rows: dict[str, np.ndarray] = {}
+        self._row_tables: list[str] | None = None
+        self._keys: dict[str, pa.Table | None] = {}
         self.recording: Recording | None = source if isinstance(source, Recording) else None
         self.container: Container | None = None
         if self.recording is None:
@@ -135,8 +223,106 @@ class Context:
         return out
 
     def table(self, name: str) -> pa.Table | None:
-        """The table as stored (not cast), or None if absent or unreadable."""
+        """The table as stored (not cast), or None if absent, unreadable, or streamed (in a batch
+        context: the batch of the streamed table)."""
         return self._tables.get(name)
+
+    @property
+    def row_tables(self) -> list[str]:
+        """The tables whose rows this context checks (``scope="rows"`` rules iterate these): the
+        tables loaded whole, or in a batch context the batch's table."""
+        if self._row_tables is not None:
+            return self._row_tables
+        _ = self._tables
+        return [n for n in self.table_names if n not in self.streamed]
+
+    def row_table(self, name: str) -> pa.Table | None:
+        """``table(name)`` if its rows are checked in this context, else None."""
+        return self.table(name) if name in self.row_tables else None
+
+    def schema(self, name: str) -> pa.Schema | None:
+        """The Arrow schema of a table as stored (also of a streamed one), None if unreadable."""
+        _ = self._tables
+        if name in self.streamed:
+            return self.streamed[name].pf.schema_arrow
+        t = self.table(name)
+        return t.schema if t is not None else None
+
+    def num_rows(self, name: str) -> int | None:
+        """Rows of a table (also of a streamed one), None if unreadable."""
+        _ = self._tables
+        if name in self.streamed:
+            return self.streamed[name].rows
+        t = self.table(name)
+        return t.num_rows if t is not None else None
+
+    def key_table(self, name: str, columns: tuple[str, ...] | None = None) -> pa.Table | None:
+        """Only the key columns (default: the table's declared key, those present) of a table, all
+        rows in file order; read from the file alone for a streamed table (and cached)."""
+        spec = TABLES[name]
+        cols = tuple(columns or spec.key)
+        _ = self._tables
+        if name not in self.streamed:
+            t = self.table(name)
+            return t.select([c for c in cols if c in t.column_names]) if t is not None else None
+        ck = f"{name}:{','.join(cols)}"
+        for other, t in self._keys.items():  # a cached superset serves (states: pid, time)
+            if t is not None and other.split(":", 1)[0] == name and all(
+                    c in t.column_names or c not in self.streamed[name].pf.schema_arrow.names
+                    for c in cols):
+                return t.select([c for c in cols if c in t.column_names])
+        if set(cols) <= set(spec.key):  # read the whole key once; subsets are served from it
+            cols = spec.key
+            ck = f"{name}:{','.join(cols)}"
+        if ck not in self._keys:
+            st = self.streamed[name]
+            present = [c for c in cols if c in st.pf.schema_arrow.names]
+            try:
+                self._keys[ck] = st.pf.read(columns=present)
+            except (pa.ArrowException, OSError) as e:
+                self.problem("unreadable_table", file=spec.file, table=name,
+                             error=str(e).splitlines()[0])
+                self._keys[ck] = None
+        t = self._keys[ck]
+        return t.select([c for c in columns or spec.key if c in t.column_names]) if t is not None \
+            else None
+
+    def passes(self):
+        """This context, then one batch context per batch of each streamed table."""
+        _ = self._tables
+        yield self
+        if not self.streamed:
+            return
+        # what batches share is loaded once, here
+        for prop in ("meta", "map_bytes", "network", "frame", "participants_view"):
+            getattr(self, prop)
+        batch_rows = self.config.streaming.batch_rows
+        for name, st in self.streamed.items():
+            k = 0
+            try:
+                for table, rows in st.batches(batch_rows):
+                    yield self._batch(name, table, rows, k)
+                    k += 1
+            except (pa.ArrowException, OSError) as e:
+                self.problem("unreadable_table", file=TABLES[name].file, table=name,
+                             error=f"batch {k}: " + str(e).splitlines()[0])
+
+    def _batch(self, name: str, table: pa.Table, rows: np.ndarray, k: int) -> Context:
+        b = Context.__new__(Context)
+        d = b.__dict__
+        for key in ("config", "recording", "container", "name", "problems", "meta_dict", "meta",
+                    "table_names", "map_bytes", "network", "frame", "participants_view",
+                    "_file_info", "streamed"):
+            if key in self.__dict__:
+                d[key] = self.__dict__[key]
+        d["cache"] = {k_: v for k_, v in self.cache.items() if k_ in _SHARED_CACHE}
+        d["collected"] = {}
+        d["_tables"] = {**self._tables, name: table}
+        d["_row_tables"] = [name]
+        d["batch_index"] = k
+        d["file_rows"] = {name: rows}
+        d["_keys"] = {}
+        return b
 
     def file_info(self, name: str) -> dict[str, Any]:
         """sha256, bytes, rows, row_groups and the raw ``aveas`` key of a table's file."""
@@ -155,6 +341,8 @@ class Context:
         if not self.container.exists(spec.file):
             self.problem("missing_file", file=spec.file, table=name)
             return None
+        if self._stream(name):
+            return None
         buf = self.container.buffer(spec.file)
         info: dict[str, Any] = {"sha256": sha256_of(buf), "bytes": buf.size}
         self._file_info[name] = info
@@ -168,6 +356,30 @@ class Context:
             self.problem("unreadable_table", file=spec.file, table=name,
                          error=str(e).splitlines()[0])
             return None
+
+    def _stream(self, name: str) -> bool:
+        """Register ``name`` as streamed when it is large enough (and, for states, sorted by
+        participant across row groups); its file info is taken from the footer and a chunked hash."""
+        if not (name in _STREAMABLE or name.startswith(_STREAMABLE_PREFIX)):
+            return False
+        assert self.container is not None
+        spec = TABLES[name]
+        try:
+            src = self.container.input_file(spec.file)
+            pf = pq.ParquetFile(src)
+        except (pa.ArrowException, OSError):
+            return False  # read whole below, which reports the problem
+        rows = pf.metadata.num_rows
+        if rows <= self.config.streaming.above_rows:
+            return False
+        if name == "states" and not _participant_sorted(pf):
+            return False  # read whole: structure.sort_order reports the order
+        self._file_info[name] = {"sha256": self.container.sha256(spec.file),
+                                 "bytes": src.size(), "rows": rows,
+                                 "row_groups": pf.metadata.num_row_groups,
+                                 "kv": (pf.schema_arrow.metadata or {}).get(b"aveas")}
+        self.streamed[name] = Streamed(name, pf, rows, by_participant=name == "states")
+        return True
 
     def _load_all(self) -> None:
         _ = self.meta

@@ -66,6 +66,11 @@ class Rule:
     doc: str
     fn: RuleFn
     enforces: str | None = None  # the FORMAT.md sentence behind an error / warning
+    #: "recording": runs once on the whole recording; "rows": looks only within the rows of a table
+    #: (and within one participant's trajectory), so it runs on each batch of a streamed table
+    scope: str = "recording"
+    #: collectors (see :func:`collector`) whose merged results the rule reads from ctx.collected
+    needs: tuple[str, ...] = ()
 
     @property
     def family(self) -> str:
@@ -75,20 +80,60 @@ class Rule:
 REGISTRY: dict[str, Rule] = {}
 
 
-def rule(code: str, severity: str, title: str, message: str, enforces: str | None = None
-         ) -> Callable[[RuleFn], RuleFn]:
-    """Register a rule (decorator). The function's docstring is the rule's doc."""
+_SCOPES = ("recording", "rows")
+
+
+def rule(code: str, severity: str, title: str, message: str, enforces: str | None = None,
+         scope: str = "recording", needs: tuple[str, ...] = ()) -> Callable[[RuleFn], RuleFn]:
+    """Register a rule (decorator). The function's docstring is the rule's doc.
+
+    ``scope="rows"`` declares that the rule only looks within the rows it is given: per row, or
+    within one participant's trajectory (the runner hands it every participant's samples in one
+    batch). Such rules run on each batch when a large table is streamed (docs/validate.md,
+    "Streaming"); the runner maps their ``row`` back to file rows. ``scope="recording"`` rules run
+    once and must not read a streamed table's rows (``Context.table`` gives None for it; they use
+    ``Context.schema``, ``num_rows``, ``key_table`` or a collector instead).
+    """
     if not _CODE.match(code):
         raise ValueError(f"rule code {code!r} must look like 'family.snake_case'")
     if code in REGISTRY:
         raise ValueError(f"rule code {code!r} registered twice")
+    if scope not in _SCOPES:
+        raise ValueError(f"rule {code}: scope must be one of {_SCOPES}")
 
     def register(fn: RuleFn) -> RuleFn:
         doc = " ".join((fn.__doc__ or "").split())
         if not doc:
             raise ValueError(f"rule {code} has no doc")
         REGISTRY[code] = Rule(code=code, severity=Severity(severity), title=title, message=message,
-                              doc=doc, fn=fn, enforces=enforces)
+                              doc=doc, fn=fn, enforces=enforces, scope=scope, needs=tuple(needs))
+        return fn
+
+    return register
+
+
+@dataclass(frozen=True)
+class Collector:
+    """Gathers a compact summary of the states batch by batch for a ``recording`` rule that needs
+    all participants at once (e.g. pairs of participants at the same time): ``collect(ctx)``
+    runs on each context holding states rows and returns a partial (or None); ``merge(partials)``
+    combines them and is stored in ``ctx.collected[key]``."""
+
+    key: str
+    collect: Callable[[Any], Any]
+    merge: Callable[[list[Any]], Any]
+
+
+COLLECTORS: dict[str, Collector] = {}
+
+
+def collector(key: str, merge: Callable[[list[Any]], Any]) -> Callable[[Callable], Callable]:
+    """Register a collector (decorator on its ``collect`` function)."""
+    if key in COLLECTORS:
+        raise ValueError(f"collector {key!r} registered twice")
+
+    def register(fn: Callable) -> Callable:
+        COLLECTORS[key] = Collector(key=key, collect=fn, merge=merge)
         return fn
 
     return register

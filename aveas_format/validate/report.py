@@ -113,6 +113,8 @@ class Report(BaseModel):
     results: list[RuleResult] = Field(default_factory=list)
     failures: list[ToolFailure] = Field(default_factory=list)
     seconds: float = 0.0
+    #: tables validated in batches (too large to load whole) and their number of batches
+    streamed: dict[str, int] = Field(default_factory=dict)
 
     @property
     def counts(self) -> dict[str, int]:

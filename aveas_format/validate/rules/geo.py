@@ -10,7 +10,7 @@ import shapely
 from aveas_format.errors import FormatError
 from aveas_format.georef import crs_equal, parse_crs
 from aveas_format.validate.context import Context
-from aveas_format.validate.registry import Hit, Hits, rule
+from aveas_format.validate.registry import Hit, Hits, collector, rule
 
 
 @rule("geo.crs_unparseable", "error", "recording.json crs cannot be read",
@@ -50,7 +50,7 @@ def crs_mismatch(ctx: Context) -> Iterator[Hit]:
       "states.parquet: row {row}: lon/lat lie {value} m from x/y through crs (tolerance "
       "{tolerance} m)",
       enforces="FORMAT.md 5: lon, lat are the same point in WGS 84, consistent with x, y through "
-               "crs")
+               "crs", scope="rows")
 def lonlat_mismatch(ctx: Context) -> Iterator[Hits]:
     """A state's lon/lat, projected into the local frame (crs + the map's header offset), lies more
     than ``[geo] lonlat_tolerance_m`` (0.1 m) from its x/y: lon and lat swapped, another datum, or
@@ -95,9 +95,30 @@ def coverage_polygon(ctx: Context):
     return ctx.cache[key]
 
 
+def _merge_bbox(parts: list[np.ndarray]) -> np.ndarray | None:
+    if not parts:
+        return None
+    b = np.vstack(parts)
+    return np.array([b[:, 0].min(), b[:, 1].min(), b[:, 2].max(), b[:, 3].max()])
+
+
+@collector("geo.states_bbox", merge=_merge_bbox)
+def _states_bbox(ctx: Context) -> np.ndarray | None:
+    """(xmin, ymin, xmax, ymax) of the finite state positions of one batch."""
+    sv = ctx.states_view
+    xs, ys = (sv.col("x"), sv.col("y")) if sv is not None else (None, None)
+    if xs is None or ys is None:
+        return None
+    ok = np.isfinite(xs) & np.isfinite(ys)
+    if not ok.any():
+        return None
+    return np.array([xs[ok].min(), ys[ok].min(), xs[ok].max(), ys[ok].max()])
+
+
 @rule("geo.location_outside_coverage", "error", "location is not inside the covered area",
       "recording.json: location (lon {lon}, lat {lat}) lies {value} m outside {area}",
-      enforces="FORMAT.md 3: location is the WGS 84 centroid of the covered area")
+      enforces="FORMAT.md 3: location is the WGS 84 centroid of the covered area",
+      needs=("geo.states_bbox",))
 def location_outside_coverage(ctx: Context) -> Iterator[Hit]:
     """recording.json ``location``, projected into the local frame, lies outside the coverage
     polygon (or, without coverage, outside the bounding box of the states' positions) by more than
@@ -111,11 +132,10 @@ def location_outside_coverage(ctx: Context) -> Iterator[Hit]:
     if cov is not None:
         area, name = cov, "the coverage"
     else:
-        sv = ctx.states_view
-        xs, ys = (sv.col("x"), sv.col("y")) if sv is not None else (None, None)
-        if xs is None or ys is None or not len(xs) or not np.isfinite(xs).any():
+        bbox = ctx.collected.get("geo.states_bbox")
+        if bbox is None:
             return
-        area = shapely.box(np.nanmin(xs), np.nanmin(ys), np.nanmax(xs), np.nanmax(ys))
+        area = shapely.box(*bbox)
         name = "the bounding box of the states"
     b = area.bounds
     margin = 0.1 * max(b[2] - b[0], b[3] - b[1], 10.0)
@@ -127,7 +147,7 @@ def location_outside_coverage(ctx: Context) -> Iterator[Hit]:
 
 @rule("geo.state_outside_coverage", "warning", "State outside the covered area",
       "states.parquet: row {row}: participant {participant_id} at x,y = {x},{y} lies outside "
-      "recording.json coverage ({n_samples} samples of this participant)")
+      "recording.json coverage ({n_samples} samples of this participant)", scope="rows")
 def state_outside_coverage(ctx: Context) -> Iterator[Hits]:
     """A state lies more than ``[geo] coverage_margin_m`` outside the coverage polygon, which by
     definition contains everything observed. One finding per participant (its first such sample)."""

@@ -70,7 +70,7 @@ def _limit(ctx: Context, sv: StatesView, attr: str) -> np.ndarray:
       "states.parquet: row {row}: participant {participant_id} ({class_}) moves at {value} m/s "
       "(from positions; {n_samples} samples), above the {limit} m/s plausible for its class",
       enforces="FORMAT.md 5: x, y are the participant's real positions; beyond the class's physical "
-               "limit (configurable, by more than z sigma) they are a data error")
+               "limit (configurable, by more than z sigma) they are a data error", scope="rows")
 def speed(ctx: Context) -> Iterator[Hits]:
     """The speed over ground, estimated from positions over ``window_s``, exceeds the class's
     ``speed_max`` by more than z sigma (e.g. a car faster than 75 m/s: positions in the wrong unit,
@@ -123,7 +123,7 @@ def _with_limit(h: Hits | None, sv: StatesView, lim: np.ndarray) -> Hits | None:
       "states.parquet: row {row}: participant {participant_id} ({class_}) accelerates at {value} "
       "m/s² (from vx, vy; {n_samples} samples), above the {limit} m/s² plausible for its class",
       enforces="FORMAT.md 5: vx, vy are the participant's real velocity; accelerations beyond the "
-               "class's physical limit (configurable, by more than z sigma) are a data error")
+               "class's physical limit (configurable, by more than z sigma) are a data error", scope="rows")
 def acceleration(ctx: Context) -> Iterator[Hits]:
     """The magnitude of the planar acceleration, estimated from the velocity columns over
     ``window_s``, exceeds the class's ``accel_max`` by more than z sigma (e.g. a car braking at
@@ -145,7 +145,7 @@ def acceleration(ctx: Context) -> Iterator[Hits]:
 
 @rule("kinematics.jerk", "warning", "Jerk implausible for the class",
       "states.parquet: row {row}: participant {participant_id} ({class_}) has a jerk of {value} "
-      "m/s³ ({n_samples} samples), above the {limit} m/s³ plausible for its class")
+      "m/s³ ({n_samples} samples), above the {limit} m/s³ plausible for its class", scope="rows")
 def jerk(ctx: Context) -> Iterator[Hits]:
     """The change of acceleration (from the velocity columns, two successive windows) exceeds
     the class's ``jerk_max`` by more than z sigma: velocities that step instead of changing
@@ -175,7 +175,7 @@ def _wrap(a: np.ndarray) -> np.ndarray:
 
 @rule("kinematics.yaw_rate", "warning", "Yaw rate implausible for the class",
       "states.parquet: row {row}: participant {participant_id} ({class_}) turns at {value} rad/s "
-      "({source}; {n_samples} samples), above the {limit} rad/s plausible for its class")
+      "({source}; {n_samples} samples), above the {limit} rad/s plausible for its class", scope="rows")
 def yaw_rate(ctx: Context) -> Iterator[Hits]:
     """The yaw rate exceeds the class's ``yaw_rate_max`` by more than z sigma: from heading
     differences over ``window_s`` while moving faster than walking speed (heading is noise at rest),
@@ -211,7 +211,7 @@ def yaw_rate(ctx: Context) -> Iterator[Hits]:
 
 @rule("kinematics.heading_vs_motion", "warning", "Heading disagrees with the direction of motion",
       "states.parquet: row {row}: participant {participant_id} ({class_}) moves {value} rad away "
-      "from its heading at {speed} m/s ({n_samples} samples)")
+      "from its heading at {speed} m/s ({n_samples} samples)", scope="rows")
 def heading_vs_motion(ctx: Context) -> Iterator[Hits]:
     """A vehicle (car, van, truck, bus, motorcycle, trailer, rail vehicle) moving faster than
     ``walking_speed`` has a heading more than ``heading_tolerance`` (+ z sigma) away from the
@@ -243,7 +243,7 @@ def heading_vs_motion(ctx: Context) -> Iterator[Hits]:
 @rule("kinematics.position_jump", "error", "Position jump inconsistent with the velocity",
       "states.parquet: row {row}: participant {participant_id} moves {step} m in {dt} s, but its "
       "velocity integrates to {expected} m (off by {value} m, tolerance {tolerance} m)",
-      enforces="FORMAT.md 5: vx, vy are the velocity of the reference point x, y in the local frame")
+      enforces="FORMAT.md 5: vx, vy are the velocity of the reference point x, y in the local frame", scope="rows")
 def position_jump(ctx: Context) -> Iterator[Hits]:
     """Between two consecutive samples of a participant, the displacement differs from the
     velocity integrated over the step (trapezoid rule) by more than ``jump_tolerance_m`` + ``jump_z``

@@ -127,7 +127,7 @@ def _pos_tol(ctx: Context, sv: StatesView) -> np.ndarray:
 
 @rule("map.incomplete_road_coordinates", "error", "Road coordinates partly null",
       "states.parquet: row {row}: participant {participant_id}: {present} set but {missing} null",
-      enforces="FORMAT.md 5: road_id, lane_id, road_s, road_t are null together, where off-map")
+      enforces="FORMAT.md 5: road_id, lane_id, road_s, road_t are null together, where off-map", scope="rows")
 def incomplete_road_coordinates(ctx: Context) -> Iterator[Hits]:
     """A state has some of road_id, lane_id, road_s, road_t but not all: either it is on the map
     (all set) or off it (all null)."""
@@ -156,7 +156,7 @@ def incomplete_road_coordinates(ctx: Context) -> Iterator[Hits]:
 
 @rule("map.unknown_road", "error", "road_id not in the map",
       "states.parquet: row {row}: road_id {road_id!r} is not a road of the map ({n_rows} rows)",
-      enforces="FORMAT.md 5: road_id is an OpenDRIVE road of map.xodr")
+      enforces="FORMAT.md 5: road_id is an OpenDRIVE road of map.xodr", scope="rows")
 def unknown_road(ctx: Context) -> Iterator[Hits]:
     """A state names a road that map.xodr does not contain. One finding per unknown road id, at
     its first row."""
@@ -185,7 +185,7 @@ def unknown_road(ctx: Context) -> Iterator[Hits]:
 @rule("map.unknown_lane", "error", "Lane or road_s not on the road",
       "states.parquet: row {row}: road {road_id} has {what}",
       enforces="FORMAT.md 5: lane_id is an OpenDRIVE lane of the road at road_s; road_s lies on "
-               "the road")
+               "the road", scope="rows")
 def unknown_lane(ctx: Context) -> Iterator[Hits]:
     """road_s lies outside [0, road length] (beyond ``[map] s_margin_m``), or the road has no
     lane ``lane_id`` in the lane section at road_s."""
@@ -211,7 +211,7 @@ def unknown_lane(ctx: Context) -> Iterator[Hits]:
 @rule("map.road_position_mismatch", "error", "Road coordinates disagree with x/y",
       "states.parquet: row {row}: (road {road_id}, s {s}, t {t}) lies {value} m from x/y "
       "(tolerance {tolerance} m)",
-      enforces="FORMAT.md 5: road_s, road_t are consistent with x, y through the map")
+      enforces="FORMAT.md 5: road_s, road_t are consistent with x, y through the map", scope="rows")
 def road_position_mismatch(ctx: Context) -> Iterator[Hits]:
     """The point that (road_id, road_s, road_t) gives through the map lies farther from the state's
     x/y than max(``[map] tolerance_m`` (0.1 m), z sigma of the position)."""
@@ -238,7 +238,7 @@ def road_position_mismatch(ctx: Context) -> Iterator[Hits]:
 @rule("map.lane_mismatch", "error", "lane_id disagrees with road_t",
       "states.parquet: row {row}: road_t {t} m is not in lane {lane_id} of road {road_id} "
       "(borders {inner} .. {outer} m at s {s})",
-      enforces="FORMAT.md 5: lane_id is the lane containing (road_s, road_t)")
+      enforces="FORMAT.md 5: lane_id is the lane containing (road_s, road_t)", scope="rows")
 def lane_mismatch(ctx: Context) -> Iterator[Hits]:
     """road_t lies outside the borders of lane ``lane_id`` at road_s (beyond the position
     tolerance of map.road_position_mismatch)."""
@@ -264,7 +264,7 @@ def lane_mismatch(ctx: Context) -> Iterator[Hits]:
       "states.parquet: row {row}: lane_offset {value} m, but road_t {t} m lies {expected} m from "
       "the centre of lane {lane_id}",
       enforces="FORMAT.md 2: lane_offset is the offset from the lane's centre line, positive to "
-               "the left")
+               "the left", scope="rows")
 def lane_offset_mismatch(ctx: Context) -> Iterator[Hits]:
     """``lane_offset`` differs from road_t minus the centre of lane ``lane_id`` at road_s by more
     than the position tolerance (states whose road_t is not in their lane are left to
@@ -297,7 +297,7 @@ def _first_per_participant(sv: StatesView, mask: np.ndarray) -> tuple[np.ndarray
 
 
 @rule("map.off_drivable_lane", "warning", "Vehicle off any drivable lane",
-      "states.parquet: row {row}: {class_} {participant_id} is {where} ({n_samples} samples)")
+      "states.parquet: row {row}: {class_} {participant_id} is {where} ({n_samples} samples)", scope="rows")
 def off_drivable_lane(ctx: Context) -> Iterator[Hits]:
     """A vehicle (car, van, truck, bus, motorcycle, trailer) is off the map (null road
     coordinates) or in a lane whose OpenDRIVE type is not drivable (shoulder, border, sidewalk...).
@@ -325,7 +325,7 @@ def off_drivable_lane(ctx: Context) -> Iterator[Hits]:
 
 @rule("map.wrong_way", "warning", "Driving against the lane direction",
       "states.parquet: row {row}: {class_} {participant_id} drives against the direction of lane "
-      "{lane_id} of road {road_id} for {duration} s")
+      "{lane_id} of road {road_id} for {duration} s", scope="rows")
 def wrong_way(ctx: Context) -> Iterator[Hits]:
     """A vehicle faster than walking speed moves more than ``[map] wrong_way_angle`` away from
     the driving direction of its lane (right lanes along +s in right-hand traffic, left lanes

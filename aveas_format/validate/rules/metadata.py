@@ -198,7 +198,10 @@ def derived_stale(ctx: Context) -> Iterator[Hit]:
     if rec is None:  # a Recording over the tables already read (no second read of the files)
         from aveas_format.io.recording import Recording
 
-        tables = {n: t for n in ctx.table_names if (t := ctx.table(n)) is not None}
+        # a streamed table enters with its key columns only: staleness needs its row count and the
+        # SHA-256 recording.json lists, not its values
+        tables = {n: t for n in ctx.table_names
+                  if (t := ctx.table(n) if n not in ctx.streamed else ctx.key_table(n)) is not None}
         try:
             rec = Recording(meta=ctx.meta, tables=tables, map_source=ctx.map_bytes,
                             path=Path(ctx.name))

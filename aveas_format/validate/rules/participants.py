@@ -143,7 +143,8 @@ def without_states(ctx: Context) -> Iterator[Hits]:
     """A participant is declared but never appears in states.parquet (a leftover of filtering, or
     states written for other ids)."""
     pv = ctx.participants_view
-    s = ints(ctx.table("states"), "participant_id")
+    s = ints(ctx.key_table("states", ("participant_id",)) if "states" in ctx.table_names
+             else None, "participant_id")
     if s is None or not pv.n or not pv.ok:
         return
     bad = ~np.isin(pv.pid, np.unique(s))
@@ -164,7 +165,8 @@ def unknown_in_states(ctx: Context) -> Iterator[Hits]:
     if not pv.ok or ctx.table("participants") is None:
         return
     for name in ("states", "interior"):
-        pid = ints(ctx.table(name), "participant_id")
+        keys = ctx.key_table(name, ("participant_id",)) if name in ctx.table_names else None
+        pid = ints(keys, "participant_id")
         if pid is None or not len(pid):
             continue
         unknown = pv.index_of(pid) < 0

@@ -153,10 +153,10 @@ def row_count(ctx: Context) -> Iterator[Hit]:
     d = ctx.meta_dict or {}
     listed = d.get("tables") if isinstance(d.get("tables"), dict) else {}
     for name, entry in listed.items():
-        t = ctx.table(name) if name in TABLES else None
+        n = ctx.num_rows(name) if name in TABLES else None
         expected = entry.get("rows") if isinstance(entry, dict) else None
-        if t is not None and isinstance(expected, int) and t.num_rows != expected:
-            yield Hit(file=TABLES[name].file, table=name, actual=t.num_rows, expected=expected)
+        if n is not None and isinstance(expected, int) and n != expected:
+            yield Hit(file=TABLES[name].file, table=name, actual=n, expected=expected)
 
 
 @rule("structure.unreadable_table", "error", "Unreadable Parquet file",
@@ -175,7 +175,7 @@ def parquet_key(ctx: Context) -> Iterator[Hit]:
     """The ``aveas`` key-value metadata of a table is missing, not JSON, lacks format_version/table,
     or names another table."""
     for name in ctx.table_names:
-        if ctx.table(name) is None:
+        if ctx.schema(name) is None:
             continue
         if ctx.recording is not None:
             return  # in-memory tables get their key when written
@@ -201,11 +201,11 @@ def parquet_key(ctx: Context) -> Iterator[Hit]:
 def missing_column(ctx: Context) -> Iterator[Hit]:
     """A column the format marks MUST is absent from its table."""
     for name in ctx.table_names:
-        t = ctx.table(name)
+        t = ctx.schema(name)
         if t is None:
             continue
         for c in TABLES[name].required:
-            if c.name not in t.column_names:
+            if c.name not in t.names:
                 yield Hit(file=TABLES[name].file, table=name, column=c.name)
 
 
@@ -215,11 +215,11 @@ def missing_column(ctx: Context) -> Iterator[Hit]:
 def column_type(ctx: Context) -> Iterator[Hit]:
     """A declared column is stored with an incompatible Arrow type (e.g. a string ``x``)."""
     for name in ctx.table_names:
-        t = ctx.table(name)
+        t = ctx.schema(name)
         if t is None:
             continue
         spec = TABLES[name]
-        for f in t.schema:
+        for f in t:
             c = spec.get(f.name)
             if c is not None and not types_compatible(f.type, arrow_type(c)):
                 yield Hit(file=spec.file, table=name, column=f.name, actual=str(f.type),
@@ -231,17 +231,18 @@ def column_type(ctx: Context) -> Iterator[Hit]:
 def unknown_column(ctx: Context) -> Iterator[Hit]:
     """A table has a column the format does not declare; readers keep it, nothing checks it."""
     for name in ctx.table_names:
-        t = ctx.table(name)
+        t = ctx.schema(name)
         if t is None:
             continue
-        for col in t.column_names:
+        for col in t.names:
             if col not in TABLES[name]:
                 yield Hit(file=TABLES[name].file, table=name, column=col)
 
 
 def _typed_columns(ctx: Context):
-    """(table name, spec, column spec, array) for each declared column stored with its type."""
-    for name in ctx.table_names:
+    """(table name, spec, column spec, array) for each declared column stored with its type, of the
+    tables whose rows this context checks."""
+    for name in ctx.row_tables:
         t = ctx.table(name)
         if t is None:
             continue
@@ -261,7 +262,7 @@ def _keys(t: pa.Table, rows: np.ndarray) -> dict[str, np.ndarray]:
 
 @rule("structure.null_values", "error", "Nulls in a non-nullable column",
       "{file}: row {row}: {column} is null",
-      enforces="FORMAT.md 4-10: key and required values (ids, time, x, y, heading, ...) are never null")
+      enforces="FORMAT.md 4-10: key and required values (ids, time, x, y, heading, ...) are never null", scope="rows")
 def null_values(ctx: Context) -> Iterator[Hits]:
     """A column that must always hold a value (ids, time, position, heading, velocity, lon/lat,
     class, sizes...) has nulls."""
@@ -281,7 +282,7 @@ def null_values(ctx: Context) -> Iterator[Hits]:
 @rule("structure.value_range", "error", "Value outside the declared range",
       "{file}: row {row}: {column} = {value} outside {range}",
       enforces="FORMAT.md 2-10: declared ranges (sizes > 0, std >= 0, probabilities and correlations "
-               "in [0, 1] / [-1, 1], heading in (-pi, pi], lon/lat bounds)")
+               "in [0, 1] / [-1, 1], heading in (-pi, pi], lon/lat bounds)", scope="rows")
 def value_range(ctx: Context) -> Iterator[Hits]:
     """A numeric value lies outside the range its column declares, or is infinite. Null (NaN) is
     not checked here (see structure.null_values)."""
@@ -308,7 +309,7 @@ def value_range(ctx: Context) -> Iterator[Hits]:
 @rule("structure.category", "error", "Value not in the allowed categories",
       "{file}: row {row}: {column} = {value!r} is not one of the allowed values",
       enforces="FORMAT.md 4-7: class is one of the 13 classes; role, provenance, kind, origin are "
-               "enumerations")
+               "enumerations", scope="rows")
 def category(ctx: Context) -> Iterator[Hits]:
     """A categorical column (class, role, provenance, kind, relation...) holds a value outside its
     enumeration."""
@@ -328,7 +329,7 @@ def category(ctx: Context) -> Iterator[Hits]:
 
 @rule("structure.pmf", "error", "PMF not normalised",
       "{file}: row {row}: {column} is not a PMF (fields >= 0 summing to 1 ± 1e-3; sum = {sum})",
-      enforces="FORMAT.md 2: PMF fields are >= 0 and sum to 1 (tolerance 1e-3)")
+      enforces="FORMAT.md 2: PMF fields are >= 0 and sum to 1 (tolerance 1e-3)", scope="rows")
 def pmf(ctx: Context) -> Iterator[Hits]:
     """A PMF struct column (class_pmf, weather, ...) has a row with negative or non-finite fields or
     a sum that differs from 1 by more than 1e-3."""
@@ -369,7 +370,7 @@ def _key_arrays(t: pa.Table, keys: tuple[str, ...]) -> list[np.ndarray] | None:
 def sort_order(ctx: Context) -> Iterator[Hits]:
     """A table with a declared order (states, interior: participant_id then time) is not sorted."""
     for name in ("states", "interior"):
-        t = ctx.table(name)
+        t = ctx.key_table(name, ("participant_id", "time")) if name in ctx.table_names else None
         if t is None or t.num_rows < 2:
             continue
         keys = _key_arrays(t, ("participant_id", "time"))
@@ -394,8 +395,8 @@ def duplicate_key(ctx: Context) -> Iterator[Hits]:
     """Two rows share the key of their table (participant_id in participants; (participant_id,
     time) in states; region_id, event_id, ...)."""
     for name in ctx.table_names:
-        t = ctx.table(name)
         spec = TABLES[name]
+        t = ctx.key_table(name) if spec.key else None
         if t is None or t.num_rows < 2 or not spec.key:
             continue
         keys = _key_arrays(t, spec.key)

@@ -23,7 +23,7 @@ def _duration(ctx: Context) -> float | None:
 
 @rule("time.out_of_range", "error", "time outside [0, duration_s]",
       "{file}: row {row}: {column} = {value} s lies outside [0, duration_s = {duration}]",
-      enforces="FORMAT.md 3: every `time` lies in [0, duration_s]")
+      enforces="FORMAT.md 3: every `time` lies in [0, duration_s]", scope="rows")
 def out_of_range(ctx: Context) -> Iterator[Hits]:
     """A ``time`` (states, interior) or an interval bound (``time_start``/``time_end`` of
     unobserved, events, environment) lies before 0 or after recording.json ``duration_s``
@@ -36,7 +36,7 @@ def out_of_range(ctx: Context) -> Iterator[Hits]:
                        ("unobserved", ("time_start", "time_end")),
                        ("events", ("time_start", "time_end")),
                        ("environment", ("time_start", "time_end"))):
-        t = ctx.table(name)
+        t = ctx.row_table(name)
         if t is None:
             continue
         pid = num(t, "participant_id")
@@ -59,7 +59,7 @@ def out_of_range(ctx: Context) -> Iterator[Hits]:
       "states.parquet: row {row}: participant {participant_id}: time {time} s follows the previous "
       "sample after only {dt} s (below the resolution {resolution} s)",
       enforces="FORMAT.md 5: (participant_id, time) unique; time strictly increasing per "
-               "participant")
+               "participant", scope="rows")
 def not_increasing(ctx: Context) -> Iterator[Hits]:
     """Two consecutive samples of one participant are less than ``[time] resolution_s`` (1 µs)
     apart but not equal: float noise, not a new measurement. Equal times are
@@ -93,7 +93,7 @@ def nominal_rate_low(ctx: Context) -> Iterator[Hit]:
 
 @rule("time.rate_below_nominal", "warning", "Participant sampled below the nominal rate",
       "states.parquet: row {row}: participant {participant_id} is sampled at {rate} Hz (median), "
-      "below nominal_rate_hz = {nominal} Hz")
+      "below nominal_rate_hz = {nominal} Hz", scope="rows")
 def rate_below_nominal(ctx: Context) -> Iterator[Hits]:
     """A participant's median sample rate is more than ``[time] rate_tolerance`` (10 %) below the
     recording's ``nominal_rate_hz``. One finding per participant, at its first row."""
@@ -141,7 +141,7 @@ def _regions(ctx: Context):
 
 @rule("time.gap", "warning", "Gap in a trajectory",
       "states.parquet: row {row}: participant {participant_id}: no sample between {time_before} s "
-      "and {time} s ({dt} s, nominal step {step} s) and no unobserved region explains it")
+      "and {time} s ({dt} s, nominal step {step} s) and no unobserved region explains it", scope="rows")
 def gap(ctx: Context) -> Iterator[Hits]:
     """Two consecutive samples of a participant are more than ``[time] gap_factor`` nominal steps
     apart and the gap is not explained by an unobserved region (one whose interval overlaps the gap
@@ -182,7 +182,7 @@ def gap(ctx: Context) -> Iterator[Hits]:
 
 @rule("time.interpolated_share", "info", "Mostly interpolated participant",
       "states.parquet: row {row}: participant {participant_id}: {share}% of its samples are "
-      "interpolated (filled in, not measured)")
+      "interpolated (filled in, not measured)", scope="rows")
 def interpolated_share(ctx: Context) -> Iterator[Hits]:
     """More than ``[time] interpolated_share`` (50 %) of a participant's samples have
     ``interpolated`` = true: most of its trajectory is filled in, not measured."""

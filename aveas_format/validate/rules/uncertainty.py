@@ -35,7 +35,7 @@ def seg_median(seg: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 @rule("uncertainty.std_missing", "warning", "Measured states without uncertainty",
       "states.parquet: row {row}: participant {participant_id} is measured but {column} is {state}"
-      "{more}")
+      "{more}", scope="rows")
 def std_missing(ctx: Context) -> Iterator[Hits | Hit]:
     """Measured participants (provenance natural or staged) have states without ``x_std``,
     ``y_std``, ``heading_std``, ``vx_std`` or ``vy_std`` (the column is absent, or null for the
@@ -46,8 +46,12 @@ def std_missing(ctx: Context) -> Iterator[Hits | Hit]:
         return
     for c in STATE_STDS:
         if not sv.present(c):
+            if ctx.batch_index:
+                continue  # reported with the first batch of a streamed table
             i = int(np.flatnonzero(sv.measured)[0])
             n = int(np.unique(sv.seg[sv.measured]).size)
+            if ctx.file_rows:  # a batch: count the measured participants of the whole recording
+                n = max(n, int(ctx.participants_view.measured.sum()))
             yield Hit(file="states.parquet", table="states", column=c, row=int(sv.row[i]),
                       participant_id=int(sv.pid[i]), state="absent",
                       more=f" (and {n - 1} more measured participants)" if n > 1 else "")
@@ -91,14 +95,14 @@ def class_pmf_missing(ctx: Context) -> Iterator[Hits]:
 
 
 @rule("uncertainty.std_implausibly_large", "warning", "Standard deviation implausibly large",
-      "{file}: row {row}: {column} = {value} exceeds the plausible {maximum}")
+      "{file}: row {row}: {column} = {value} exceeds the plausible {maximum}", scope="rows")
 def std_implausibly_large(ctx: Context) -> Iterator[Hits]:
     """A ``_std`` value exceeds the plausible maximum of ``[uncertainty] std_max`` (e.g. x_std
     above 10 m, heading_std above 1 rad): usually a variance stored as a standard deviation, or a
     wrong unit. One finding per row and column."""
     maxima = ctx.config.uncertainty.std_max
     for name in ("states", "participants"):
-        t = ctx.table(name)
+        t = ctx.row_table(name)
         if t is None:
             continue
         pid = num(t, "participant_id")
@@ -134,7 +138,7 @@ def _jitter(sv: StatesView, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @rule("uncertainty.std_implausibly_small", "warning", "Standard deviation implausibly small",
-      "states.parquet: row {row}: participant {participant_id}: {column} = {value} {why}")
+      "states.parquet: row {row}: participant {participant_id}: {column} = {value} {why}", scope="rows")
 def std_implausibly_small(ctx: Context) -> Iterator[Hits]:
     """A measured participant claims more precision than its data has: a ``_std`` of exactly 0
     (0 means exact, i.e. simulation), or a stated x/y standard deviation that is smaller than the

@@ -114,7 +114,7 @@ def outside_map(ctx: Context) -> Iterator[Hits]:
 @rule("unobserved.state_inside", "warning", "Observed state inside an unobserved region",
       "states.parquet: row {row}: participant {participant_id} at x,y = {x},{y} is inside "
       "unobserved region {region_id} ({kind}) at {time} s but not marked interpolated "
-      "({n_samples} samples)")
+      "({n_samples} samples)", scope="rows")
 def state_inside(ctx: Context) -> Iterator[Hits]:
     """A state that is not ``interpolated`` lies inside an unobserved region during the region's
     interval: either the region is wrong or the state was not measured. The interval is read
