@@ -23,8 +23,11 @@ def plot(
     acceleration.png (histograms per class), sample_rate.png (sample rate over time)."""
     import aveas_format
     from aveas_format.plot import save_figures
+    from aveas_format.plot.figures import open_for_figures
 
-    rec = aveas_format.open(recording)
-    found = aveas_format.validate(rec).findings() if findings else []
-    for p in save_figures(rec, output, found):
+    report = aveas_format.validate(recording) if findings else None
+    rec = open_for_figures(recording, report)  # bounded: a subset of a large recording
+    if getattr(rec, "figure_note", None):
+        err.print(f"figures {rec.figure_note}")
+    for p in save_figures(rec, output, report.findings() if report is not None else []):
         err.print(f"wrote {p}")

@@ -104,7 +104,7 @@ def validate(
     elif fmt is Format.html:
         from aveas_format.validate.html import render_html
 
-        text = render_html(report, _open_for_figures(recording))
+        text = render_html(report, _open_for_figures(recording, report))
     else:
         text = render_text(report)
     if output:
@@ -155,11 +155,12 @@ def _validate_dataset(specs: list[str], select: list[str] | None, ignore: list[s
     raise typer.Exit(rep.exit_code())
 
 
-def _open_for_figures(path: Path):
-    """The recording for the report's figures, or None when it cannot be read."""
-    import aveas_format
+def _open_for_figures(path: Path, report=None):
+    """The recording for the report's figures (the columns they draw; of a large recording, a
+    subset of its participants), or None when it cannot be read."""
+    from aveas_format.plot.figures import open_for_figures
 
     try:
-        return aveas_format.open(path, verify=False)
+        return open_for_figures(path, report)
     except Exception:  # noqa: BLE001 — a broken recording still gets its report, without figures
         return None

@@ -195,6 +195,62 @@ def sample_rate_figure(rec, bin_s: float = 1.0) -> Figure:
     return fig
 
 
+#: figures of a larger recording are drawn from a subset of its participants of about this many rows
+FIGURE_ROWS = 2_000_000
+_FIGURE_COLUMNS = ["x", "y", "vx", "vy"]
+
+
+def open_for_figures(path: str | Path, report: Any = None, max_rows: int = FIGURE_ROWS):
+    """The recording as the figures need it: participants and the state columns they draw. Of a
+    recording with more than ``max_rows`` states, every k-th participant is read (the figures say
+    so), and the positions of findings located by state row only are read from their row groups
+    (written into the findings' ``x``/``y``), so memory stays bounded."""
+    import aveas_format
+    from aveas_format.io.container import Container
+
+    head = aveas_format.open(path, tables=["participants"], verify=False)
+    entry = head.meta.tables.get("states")
+    ids = None
+    if entry is not None and entry.rows > max_rows and head.participants.num_rows:
+        pids = np.sort(head.participants.column("participant_id").to_numpy())
+        k = -(-entry.rows // max_rows)
+        ids = pids[::k].tolist()
+    rec = aveas_format.open(path, tables=["participants", "states"],
+                            columns={"states": _FIGURE_COLUMNS}, participants=ids, verify=False)
+    if ids is not None:
+        rec.__dict__["figure_note"] = (f"drawn from every {k}th participant ({len(ids)} of "
+                                       f"{head.participants.num_rows}; {rec.states.num_rows:,} of "
+                                       f"{entry.rows:,} state rows)")
+        if report is not None:
+            with Container(path) as c:
+                _locate_state_rows(c, report)
+    return rec
+
+
+def _locate_state_rows(container, report: Any) -> None:
+    """Fill x/y of sampled findings that name a states row but no position, reading only the row
+    groups that hold those rows."""
+    import pyarrow.parquet as pq
+
+    todo = [f for f in report.findings() if f.location.table == "states"
+            and f.location.row is not None and (f.location.x is None or f.location.y is None)]
+    if not todo:
+        return
+    pf = pq.ParquetFile(container.input_file("states.parquet"))
+    md = pf.metadata
+    ends = np.cumsum([md.row_group(g).num_rows for g in range(md.num_row_groups)])
+    rows = np.array([f.location.row for f in todo], dtype=np.int64)
+    groups = np.searchsorted(ends, rows, side="right")
+    for g in np.unique(groups[groups < len(ends)]):
+        t = pf.read_row_group(int(g), columns=["x", "y"])
+        start = ends[g] - t.num_rows
+        for f, r, gg in zip(todo, rows, groups):
+            if gg == g:
+                x, y = t.column("x")[int(r - start)].as_py(), t.column("y")[int(r - start)].as_py()
+                if x is not None and y is not None:
+                    f.location.x, f.location.y = float(x), float(y)
+
+
 def figures(rec, findings: Iterable[Any] = ()) -> dict[str, Figure]:
     """Every report figure by name (``map``, ``speed``, ``acceleration``, ``sample_rate``)."""
     return {

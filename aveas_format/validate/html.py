@@ -118,6 +118,9 @@ def render_html(report: Report, rec: Any = None, figures: dict[str, bytes] | Non
         out.append("</div>")
         if "sample_rate" in figures:
             out.append(_img(figures["sample_rate"], "Sample rate over time"))
+        note = getattr(rec, "figure_note", None) if rec is not None else None
+        if note:
+            out.append(f"<p class='muted'>Figures {_e(note)}; the findings cover every row.</p>")
     else:
         out.append(f"<p class='muted'>No figures: {_e(fig_error or 'not requested')}.</p>")
     out.append("<h2>Findings by rule</h2>")

@@ -143,3 +143,28 @@ def test_cli_config_html_and_schema(tmp_path, scene):
     assert res.returncode == 0 and "[classes.car]" in res.stdout
     res = cli("plot", path, "-o", tmp_path / "figs")
     assert res.returncode == 0 and (tmp_path / "figs" / "map.png").exists()
+
+
+def test_figures_of_a_large_recording_read_a_participant_subset(tmp_path):
+    """Above the figure row budget, figures draw every k-th participant (and say so); findings
+    located by state row only get their x/y from the file."""
+    import test_rule_corpus as corpus
+    import validate_factory as vf
+
+    from aveas_format.plot.figures import open_for_figures
+    from aveas_format.validate.html import render_html
+
+    path = corpus.c_out_of_range(vf.fresh()).write(tmp_path / "r.aveas")
+    report = aveas_format.validate(path)
+    f = report.results[0].sample[0]
+    assert f.location.row is not None and f.location.x is None
+    total = aveas_format.open(path).states.num_rows
+    rec = open_for_figures(path, report, max_rows=total // 3)
+    assert 0 < rec.states.num_rows < total
+    assert set(rec.states.column_names) >= {"participant_id", "time", "x", "y"}
+    assert "participant" in rec.figure_note
+    full = aveas_format.open(path).states
+    assert f.location.x == full.column("x")[f.location.row].as_py()
+    assert "drawn from every" in render_html(report, rec)
+    small = open_for_figures(path, report)
+    assert small.states.num_rows == total and getattr(small, "figure_note", None) is None
