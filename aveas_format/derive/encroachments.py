@@ -17,6 +17,12 @@ area: the *first* participant enters first; ``time_first_exit`` is its last exit
 ``pet`` is null ("undefined") when both occupy the area at once. ``pet_std`` propagates the
 position standard deviations along the direction of motion through the speeds at exit and entry:
 ``pet_std² = (σ_first/v_first)² + (σ_second/v_second)²`` with ``σ² = σ_pos² + (σ_length/2)²``.
+
+The computation is columnar: the swept-path intersections, their parts and convex hulls are bulk
+shapely calls; the occupancy of every (area, track) entry is one set of numpy operations over the
+concatenated sample windows near the areas (polygons padded to a common vertex count); the pairs
+of visits in an area come from a ragged index expansion. Per-track loops remain only where shapely
+builds the swept paths.
 """
 
 from __future__ import annotations
@@ -78,7 +84,10 @@ def _box_polygon_interval(cx, cy, h, L, W, vx, vy, poly_xy):
 
 def occupancy(t, x, y, h, L, W, poly_xy, max_gap):
     """``(first_entry, last_exit, entry_index, exit_index)`` of one track in one convex area (NaN
-    if it never occupies it). Times are interpolated within frames (constant velocity)."""
+    if it never occupies it). Times are interpolated within frames (constant velocity).
+
+    The scalar form of what :func:`_occupancy_rows` computes for many tracks and areas at once
+    (kept as its reference and for single-track use)."""
     n = len(t)
     if n == 0:
         return np.nan, np.nan, -1, -1
@@ -137,117 +146,331 @@ def compute(rec, p: EncroachmentsParams) -> pa.Table:
     ends = np.r_[starts[1:], S.n]
     pids = S.pid[starts]
     tracks = [slice(a, b) for a, b in zip(starts, ends)]
-    rows: dict[str, list] = {k: [] for k in ("first", "second", "t_exit", "t_enter", "pet",
-                                             "pet_std", "geom")}
     if p.conflict_areas is not None:
         try:
             areas = [shapely.from_wkt(w) for w in p.conflict_areas]
         except shapely.errors.ShapelyError as e:
             raise FormatError(f"derivation encroachments: parameter conflict_areas: {e}") from None
-        for area in areas:
-            _pairs_in_area(S, tracks, area, list(range(len(tracks))), p, rows)
+        areas = np.asarray(areas, dtype=object)
+        # every track is a member of every area (in track order)
+        area_of = np.repeat(np.arange(len(areas)), len(tracks))
+        member = np.tile(np.arange(len(tracks)), len(areas))
     else:
-        paths = [swept_path(S.x[sl], S.y[sl], S.L[sl.start], S.W[sl.start]) for sl in tracks]
-        tree = shapely.STRtree(paths)
-        a_idx, b_idx = tree.query(paths, predicate="intersects")
-        # directions of travel per track (mean and largest deviation): pairs that travel the same
-        # way everywhere cannot cross at min_angle and are skipped before any geometry
-        mean_dir = np.empty(len(tracks))
-        spread = np.empty(len(tracks))
-        for m, sl in enumerate(tracks):
-            moving = np.hypot(S.vx[sl], S.vy[sl]) > 0.5
-            d = np.where(moving, np.arctan2(S.vy[sl], S.vx[sl]), S.h[sl])
-            mean_dir[m] = np.angle(np.exp(1j * d).mean())
-            dev = np.abs(np.angle(np.exp(1j * (d - mean_dir[m]))))
-            spread[m] = np.quantile(dev, 0.99)
-        keep = a_idx < b_idx
-        dd = np.abs(np.angle(np.exp(1j * (mean_dir[a_idx] - mean_dir[b_idx]))))
-        keep &= dd + spread[a_idx] + spread[b_idx] >= p.min_angle
-        for a, b in zip(a_idx[keep].tolist(), b_idx[keep].tolist()):
-            inter = shapely.intersection(paths[a], paths[b])
-            for part in getattr(inter, "geoms", [inter]):
-                if part.is_empty or part.area <= 0 or part.geom_type != "Polygon":
-                    continue
-                hull = part.convex_hull
-                c = np.array(hull.centroid.coords[0])
-                ang = []
-                for tr in (tracks[a], tracks[b]):
-                    k = tr.start + int(np.argmin(np.hypot(S.x[tr] - c[0], S.y[tr] - c[1])))
-                    ang.append(np.arctan2(S.vy[k], S.vx[k]) if np.hypot(S.vx[k], S.vy[k]) > 0.1
-                               else S.h[k])
-                diff = abs(np.angle(np.exp(1j * (ang[0] - ang[1]))))
-                if diff < p.min_angle:
-                    continue
-                _pairs_in_area(S, tracks, hull, [a, b], p, rows)
-    n = len(rows["first"])
-    order = np.argsort(np.asarray(rows["t_exit"], float), kind="stable") if n else np.zeros(0, int)
-
-    def col(k, typ):
-        return pa.array([rows[k][i] for i in order], typ)
-
-    pet = np.asarray([rows["pet"][i] for i in order], float)
-    pstd = np.asarray([rows["pet_std"][i] for i in order], float)
+        areas, area_of, member = _swept_areas(S, tracks, p)
+    out = _area_pairs(S, starts, ends, areas, area_of, member, p)
+    order = np.argsort(out["t_exit"], kind="stable")
+    out = {k: v[order] for k, v in out.items()}
+    n = len(order)
+    pet, pstd = out["pet"], out["pet_std"]
     return pa.table({
         "conflict_id": pa.array(np.arange(n, dtype=np.int64)),
-        "first_id": pa.array([int(pids[rows["first"][i]]) for i in order], pa.int64()),
-        "second_id": pa.array([int(pids[rows["second"][i]]) for i in order], pa.int64()),
-        "time_first_exit": col("t_exit", pa.float64()),
-        "time_second_enter": col("t_enter", pa.float64()),
+        "first_id": pa.array(pids[out["first"]].astype(np.int64), pa.int64()),
+        "second_id": pa.array(pids[out["second"]].astype(np.int64), pa.int64()),
+        "time_first_exit": pa.array(out["t_exit"], pa.float64()),
+        "time_second_enter": pa.array(out["t_enter"], pa.float64()),
         "pet": pa.array(pet, pa.float64(), mask=~np.isfinite(pet)),
         "pet_std": pa.array(pstd, pa.float64(), mask=~np.isfinite(pstd)),
-        "geometry": col("geom", pa.binary()),
+        "geometry": pa.array(list(out["geom"]), pa.binary()),
     })
 
 
-def _pairs_in_area(S, tracks, area, members, p, rows) -> None:
-    """PET rows of every pair of ``members`` (track indices) passing through ``area``."""
-    if area.geom_type != "Polygon":
-        area = area.convex_hull
-    hull = area.convex_hull
-    poly = np.asarray(hull.exterior.coords)[:-1]
-    if len(poly) < 3:
-        return
-    bx0, by0, bx1, by1 = hull.bounds
-    visits = []
-    for m in members:
-        sl = tracks[m]
-        L, W = S.L[sl.start], S.W[sl.start]
-        reach = 0.5 * np.hypot(L, W)
-        near = ((S.x[sl] >= bx0 - reach - 10) & (S.x[sl] <= bx1 + reach + 10)
-                & (S.y[sl] >= by0 - reach - 10) & (S.y[sl] <= by1 + reach + 10))
-        if not near.any():
-            continue
-        ii = np.flatnonzero(near)
-        lo, hi = sl.start + ii[0], sl.start + ii[-1] + 1
-        t_in, t_out, ke, kx = occupancy(S.t[lo:hi], S.x[lo:hi], S.y[lo:hi], S.h[lo:hi], L, W, poly,
-                                        p.max_gap_s)
-        if np.isfinite(t_in):
-            visits.append((m, t_in, t_out, lo + ke, lo + kx))
-    wkb = shapely.to_wkb(hull)
-    for a in range(len(visits)):
-        for b in range(a + 1, len(visits)):
-            va, vb = visits[a], visits[b]
-            first, second = (va, vb) if va[1] <= vb[1] else (vb, va)
-            t_exit, t_enter = first[2], second[1]
-            both = t_enter <= t_exit  # both occupy the area at once
-            pet = np.nan if both else t_enter - t_exit
-            if not both and pet > p.max_pet:
-                continue
-            sd = []
-            for idx in (first[4], second[3]):
-                v = np.hypot(S.vx[idx], S.vy[idx])
-                u = (S.vx[idx] / v, S.vy[idx] / v) if v > 0 else (1.0, 0.0)
-                var = ((u[0] * S.sx[idx]) ** 2 + (u[1] * S.sy[idx]) ** 2
-                       + 2 * u[0] * u[1] * S.rxy[idx] * S.sx[idx] * S.sy[idx]
-                       + 0.25 * S.sL[idx] ** 2)
-                sd.append(var / v ** 2 if v > 0 else np.inf)
-            rows["first"].append(first[0])
-            rows["second"].append(second[0])
-            rows["t_exit"].append(t_exit)
-            rows["t_enter"].append(t_enter)
-            rows["pet"].append(pet)
-            rows["pet_std"].append(np.sqrt(sum(sd)) if not both else np.nan)
-            rows["geom"].append(wkb)
+def _ragged(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(segment, position)`` of every element of segments of the given lengths, concatenated."""
+    lengths = np.asarray(lengths, np.int64)
+    seg = np.repeat(np.arange(len(lengths)), lengths)
+    first = np.cumsum(lengths) - lengths
+    return seg, np.arange(int(lengths.sum())) - first[seg]
+
+
+def _segment_first_extreme(values: np.ndarray, seg_start: np.ndarray, largest: bool
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """Per segment (non-empty, starting at ``seg_start``, contiguous): the position (within the
+    segment) of the first smallest (``largest``: largest) finite value, as ``np.nanargmin``
+    (``np.nanargmax``) gives it, and whether the segment has a finite value at all."""
+    fill = -np.inf if largest else np.inf
+    v = np.where(np.isfinite(values), values, fill)
+    ext = (np.maximum if largest else np.minimum).reduceat(v, seg_start)
+    seg = np.repeat(np.arange(len(seg_start)), np.diff(np.r_[seg_start, len(v)]))
+    hit = np.flatnonzero((v == ext[seg]) & np.isfinite(v))
+    found = np.zeros(len(seg_start), bool)
+    pos = np.zeros(len(seg_start), np.int64)
+    segs, first = np.unique(seg[hit], return_index=True)
+    found[segs] = True
+    pos[segs] = hit[first] - seg_start[segs]
+    return pos, found
+
+
+def _swept_areas(S, tracks: list[slice], p: EncroachmentsParams
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Conflict areas from intersections of swept paths: ``(areas, area_of, member)``, the convex
+    hulls of the intersections' parts whose directions of travel differ by at least
+    ``min_angle``, and for each (area, member track) entry its area index and track index (two
+    per area, the pair's tracks in index order)."""
+    paths = np.asarray([swept_path(S.x[sl], S.y[sl], S.L[sl.start], S.W[sl.start])
+                        for sl in tracks], dtype=object)
+    empty = (np.zeros(0, object), np.zeros(0, np.int64), np.zeros(0, np.int64))
+    if len(paths) < 2:
+        return empty
+    tree = shapely.STRtree(paths)
+    a_idx, b_idx = tree.query(paths)  # overlapping bounding boxes; exact test below
+    # directions of travel per track (mean and largest deviation): pairs that travel the same way
+    # everywhere cannot cross at min_angle and are skipped before any geometry
+    mean_dir = np.empty(len(tracks))
+    spread = np.empty(len(tracks))
+    for m, sl in enumerate(tracks):
+        moving = np.hypot(S.vx[sl], S.vy[sl]) > 0.5
+        d = np.where(moving, np.arctan2(S.vy[sl], S.vx[sl]), S.h[sl])
+        mean_dir[m] = np.angle(np.exp(1j * d).mean())
+        dev = np.abs(np.angle(np.exp(1j * (d - mean_dir[m]))))
+        spread[m] = np.quantile(dev, 0.99)
+    keep = a_idx < b_idx
+    dd = np.abs(np.angle(np.exp(1j * (mean_dir[a_idx] - mean_dir[b_idx]))))
+    keep &= dd + spread[a_idx] + spread[b_idx] >= p.min_angle
+    a_idx, b_idx = a_idx[keep], b_idx[keep]
+    shapely.prepare(paths)
+    touching = shapely.intersects(paths[a_idx], paths[b_idx])
+    a_idx, b_idx = a_idx[touching], b_idx[touching]
+    if not len(a_idx):
+        return empty
+    inter = shapely.intersection(paths[a_idx], paths[b_idx])
+    parts, which = shapely.get_parts(inter, return_index=True)
+    good = (~shapely.is_empty(parts)) & (shapely.get_type_id(parts) == 3)
+    good[good] = shapely.area(parts[good]) > 0
+    parts, which = parts[good], which[good]
+    if not len(parts):
+        return empty
+    hulls = shapely.convex_hull(parts)
+    cen = shapely.get_coordinates(shapely.centroid(hulls))
+    # direction of each track at its sample nearest to the area's centroid
+    ta, tb = a_idx[which], b_idx[which]
+    starts = np.array([sl.start for sl in tracks], np.int64)
+    lens = np.array([sl.stop - sl.start for sl in tracks], np.int64)
+    ang = np.empty((2, len(parts)))
+    for r, tr in enumerate((ta, tb)):
+        for lo, hi in _chunks(lens[tr], 2_000_000):
+            seg, pos = _ragged(lens[tr[lo:hi]])
+            k = starts[tr[lo:hi]][seg] + pos
+            c = cen[lo:hi][seg]
+            d = np.hypot(S.x[k] - c[:, 0], S.y[k] - c[:, 1])
+            first = np.cumsum(lens[tr[lo:hi]]) - lens[tr[lo:hi]]
+            near, _ = _segment_first_extreme(d, first, largest=False)
+            kk = starts[tr[lo:hi]] + near
+            ang[r, lo:hi] = np.where(np.hypot(S.vx[kk], S.vy[kk]) > 0.1,
+                                     np.arctan2(S.vy[kk], S.vx[kk]), S.h[kk])
+    diff = np.abs(np.angle(np.exp(1j * (ang[0] - ang[1]))))
+    ok = ~(diff < p.min_angle)
+    hulls, ta, tb = hulls[ok], ta[ok], tb[ok]
+    m = len(hulls)
+    return hulls, np.repeat(np.arange(m), 2), np.column_stack([ta, tb]).ravel()
+
+
+def _chunks(lengths: np.ndarray, budget: int) -> list[tuple[int, int]]:
+    """Consecutive ranges ``[lo, hi)`` of items, cut where the running sum of ``lengths``
+    crosses a multiple of ``budget`` (so a range holds about ``budget`` elements, at least one
+    item)."""
+    lengths = np.asarray(lengths, np.int64)
+    if not len(lengths):
+        return []
+    group = (np.cumsum(lengths) - lengths) // max(int(budget), 1)
+    cut = np.r_[0, np.flatnonzero(np.diff(group)) + 1, len(lengths)]
+    return list(zip(cut[:-1].tolist(), cut[1:].tolist()))
+
+
+def _area_pairs(S, starts: np.ndarray, ends: np.ndarray, areas: np.ndarray, area_of: np.ndarray,
+                member: np.ndarray, p: EncroachmentsParams) -> dict[str, np.ndarray]:
+    """PET rows of every pair of member tracks passing through the same area, columnar.
+
+    ``area_of``/``member`` list the (area, track) entries, grouped by area; within an area the
+    pairs follow the order of the entries. Rows come in that order (areas, then pairs)."""
+    cols = ("first", "second", "t_exit", "t_enter", "pet", "pet_std", "geom")
+    out = {k: np.zeros(0, np.int64 if k in ("first", "second") else object if k == "geom"
+                       else float) for k in cols}
+    if not len(areas) or not len(area_of):
+        return out
+    areas = np.asarray(areas, dtype=object)
+    poly_areas = shapely.get_type_id(areas) == 3
+    areas = np.where(poly_areas, areas, shapely.convex_hull(areas))
+    hulls = shapely.convex_hull(areas)
+    is_poly = shapely.get_type_id(hulls) == 3
+    ring = shapely.get_exterior_ring(np.where(is_poly, hulls, None))
+    xy, ridx = shapely.get_coordinates(ring, return_index=True)
+    nv = np.bincount(ridx, minlength=len(hulls)) - 1  # closing vertex dropped
+    nv = np.where(is_poly, nv, 0)
+    usable = nv >= 3
+    vmax = int(nv.max()) if len(nv) else 0
+    if vmax < 3:
+        return out
+    # vertices padded with the last one (duplicate vertices change no projection range; the
+    # zero-length edges they add are skipped like degenerate edges)
+    P = np.zeros((len(hulls), vmax, 2))
+    ring_first = np.r_[0, np.cumsum(np.bincount(ridx, minlength=len(hulls)))[:-1]]
+    jj = np.minimum(np.arange(vmax)[None, :], np.maximum(nv - 1, 0)[:, None])
+    has = np.bincount(ridx, minlength=len(hulls)) > 0
+    P[has] = xy[(ring_first[:, None] + jj)[has]]
+    edges = np.roll(P, -1, axis=1) - P
+    # the closing edge of a padded polygon runs from the last padded vertex to the first
+    normals = np.stack([-edges[..., 1], edges[..., 0]], -1)
+    nrm = np.hypot(normals[..., 0], normals[..., 1])
+    nvalid = nrm > 1e-12
+    with np.errstate(invalid="ignore", divide="ignore"):
+        normals = normals / nrm[..., None]
+    bounds = shapely.bounds(hulls)
+    wkb = shapely.to_wkb(hulls)
+
+    sel = usable[area_of]
+    area_of, member = area_of[sel], member[sel]
+    # --- the window of samples near each area, per entry --------------------------------------
+    L = S.L[starts[member]]
+    W = S.W[starts[member]]
+    lens = (ends - starts)[member]
+    win_lo = np.full(len(member), -1, np.int64)
+    win_hi = np.full(len(member), -1, np.int64)
+    for lo, hi in _chunks(lens, 4_000_000):
+        seg, pos = _ragged(lens[lo:hi])
+        e = lo + seg
+        k = starts[member[e]] + pos
+        reach = 0.5 * np.hypot(L[e], W[e])
+        bx0, by0, bx1, by1 = bounds[area_of[e]].T
+        near = ((S.x[k] >= bx0 - reach - 10) & (S.x[k] <= bx1 + reach + 10)
+                & (S.y[k] >= by0 - reach - 10) & (S.y[k] <= by1 + reach + 10))
+        hit = np.flatnonzero(near)
+        if len(hit):
+            es = e[hit]
+            u, f = np.unique(es, return_index=True)
+            win_lo[u] = k[hit][f]
+            u2, f2 = np.unique(es[::-1], return_index=True)
+            win_hi[u2] = k[hit][::-1][f2] + 1
+    seen = win_lo >= 0
+    area_of, member, L, W, win_lo, win_hi = (a[seen] for a in
+                                             (area_of, member, L, W, win_lo, win_hi))
+    if not len(member):
+        return out
+    # --- occupancy of every entry (static at the samples, moving between them) ----------------
+    n = win_hi - win_lo
+    t_in = np.full(len(member), np.nan)
+    t_out = np.full(len(member), np.nan)
+    k_in = np.zeros(len(member), np.int64)
+    k_out = np.zeros(len(member), np.int64)
+    for lo, hi in _chunks(n, 2_000_000):
+        r = _occupancy_rows(S, win_lo[lo:hi], n[lo:hi], area_of[lo:hi], L[lo:hi], W[lo:hi], P,
+                            normals, nvalid, p.max_gap_s)
+        t_in[lo:hi], t_out[lo:hi], k_in[lo:hi], k_out[lo:hi] = r
+    vis = np.isfinite(t_in)
+    area_of, member, t_in, t_out, k_in, k_out = (a[vis] for a in
+                                                 (area_of, member, t_in, t_out, k_in, k_out))
+    if not len(member):
+        return out
+    # --- pairs of visits in one area, in entry order -----------------------------------------
+    grp_end = np.searchsorted(area_of, area_of, side="right")
+    cnt = grp_end - np.arange(len(area_of)) - 1
+    ia, off = _ragged(cnt)
+    ib = ia + 1 + off
+    fa = t_in[ia] <= t_in[ib]
+    first = np.where(fa, ia, ib)
+    second = np.where(fa, ib, ia)
+    t_exit, t_enter = t_out[first], t_in[second]
+    both = t_enter <= t_exit
+    pet = np.where(both, np.nan, t_enter - t_exit)
+    keep = both | ~(pet > p.max_pet)
+    first, second, t_exit, t_enter, pet, both = (a[keep] for a in
+                                                 (first, second, t_exit, t_enter, pet, both))
+    sd = np.zeros(len(first))
+    for idx in (k_out[first], k_in[second]):
+        v = np.hypot(S.vx[idx], S.vy[idx])
+        pos = v > 0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u0 = np.where(pos, S.vx[idx] / v, 1.0)
+            u1 = np.where(pos, S.vy[idx] / v, 0.0)
+            var = ((u0 * S.sx[idx]) ** 2 + (u1 * S.sy[idx]) ** 2
+                   + 2 * u0 * u1 * S.rxy[idx] * S.sx[idx] * S.sy[idx] + 0.25 * S.sL[idx] ** 2)
+            sd = sd + np.where(pos, var / v ** 2, np.inf)
+    return {"first": member[first], "second": member[second], "t_exit": t_exit,
+            "t_enter": t_enter, "pet": pet, "pet_std": np.where(both, np.nan, np.sqrt(sd)),
+            "geom": wkb[area_of[first]]}
+
+
+def _occupancy_rows(S, lo: np.ndarray, n: np.ndarray, area: np.ndarray, L: np.ndarray,
+                    W: np.ndarray, P: np.ndarray, normals: np.ndarray, nvalid: np.ndarray,
+                    max_gap: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """First entry, last exit and the sample indices of the entry and exit frames of windows of
+    samples (``lo``, ``n``) in convex areas (padded vertices ``P``), all at once: the columnar
+    form of :func:`occupancy` (NaN entry where a window never occupies its area)."""
+    seg, pos = _ragged(n)
+    k = lo[seg] + pos
+    a = area[seg]
+    zero = np.zeros(len(k))
+    s_lo, s_hi = _box_polygons_interval(S.x[k], S.y[k], S.h[k], L[seg], W[seg], zero, zero, a,
+                                        P, normals, nvalid)
+    occ = s_lo <= s_hi
+    last = pos == n[seg] - 1
+    iv = np.flatnonzero(~last)  # intervals from sample iv to iv + 1
+    ki, kn = k[iv], k[iv] + 1
+    dt = S.t[kn] - S.t[ki]
+    step = np.where(dt > 0, dt, 1.0)
+    vx = (S.x[kn] - S.x[ki]) / step
+    vy = (S.y[kn] - S.y[ki]) / step
+    ia, ib = _box_polygons_interval(S.x[ki], S.y[ki], S.h[ki], L[seg[iv]], W[seg[iv]], vx, vy,
+                                    a[iv], P, normals, nvalid)
+    ok = (dt > 0) & (dt <= max_gap)
+    a_c, b_c = np.maximum(ia, 0.0), np.minimum(ib, dt)
+    touch = ok & (a_c <= b_c)
+    first_row = pos == 0
+    entries = np.where(first_row & occ, S.t[k], np.nan)
+    entries[iv + 1] = np.where(touch, S.t[ki] + a_c, np.nan)
+    exits = np.where(last & occ, S.t[k], np.nan)
+    exits[iv] = np.where(touch, S.t[ki] + b_c, np.nan)
+    seg_start = np.cumsum(n) - n
+    ie, has_in = _segment_first_extreme(entries, seg_start, largest=False)
+    ix, has_out = _segment_first_extreme(exits, seg_start, largest=True)
+    t_in = np.where(has_in, entries[seg_start + ie], np.nan)
+    # an entry without an exit (occupied across a gap only): the last occupied sample
+    t_out = np.where(has_out, exits[seg_start + ix], t_in)
+    ix = np.where(has_out, ix, ie)
+    return (t_in, t_out, lo + np.maximum(ie - 1, 0), lo + np.minimum(ix, n - 1))
+
+
+def _box_polygons_interval(cx, cy, h, L, W, vx, vy, area, P, normals, nvalid):
+    """:func:`_box_polygon_interval` with one polygon per row: row ``i`` against the convex
+    polygon ``P[area[i]]`` (vertices padded by repetition, edge normals ``normals`` valid where
+    ``nvalid``)."""
+    c, s = np.cos(h), np.sin(h)
+    t_in = np.full(cx.shape, -np.inf)
+    t_out = np.full(cx.shape, np.inf)
+    nv = P.shape[1]
+    # projection ranges of each polygon on its own edge normals (per polygon, not per row)
+    projn = (P[:, None, :, 0] * normals[:, :, None, 0] + P[:, None, :, 1] * normals[:, :, None, 1])
+    nmin, nmax = projn.min(2), projn.max(2)
+    for j in range(-2, nv):
+        if j < 0:
+            nx, ny = (c, s) if j == -2 else (-s, c)
+            pmin = np.full(cx.shape, np.inf)
+            pmax = np.full(cx.shape, -np.inf)
+            for q in range(nv):
+                proj = P[area, q, 0] * nx + P[area, q, 1] * ny
+                pmin = np.minimum(pmin, proj)
+                pmax = np.maximum(pmax, proj)
+        else:
+            nx, ny = normals[area, j, 0], normals[area, j, 1]
+            pmin, pmax = nmin[area, j], nmax[area, j]
+        r = 0.5 * L * np.abs(nx * c + ny * s) + 0.5 * W * np.abs(-nx * s + ny * c)
+        d0 = nx * cx + ny * cy
+        dv = nx * vx + ny * vy
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a = (pmin - r - d0) / dv
+            b = (pmax + r - d0) / dv
+        lo = np.where(dv > 0, a, b)
+        hi = np.where(dv > 0, b, a)
+        still = dv == 0
+        inside = (d0 >= pmin - r) & (d0 <= pmax + r)
+        lo = np.where(still, np.where(inside, -np.inf, np.inf), lo)
+        hi = np.where(still, np.where(inside, np.inf, -np.inf), hi)
+        if j >= 0:
+            valid = nvalid[area, j]
+            lo = np.where(valid, lo, -np.inf)
+            hi = np.where(valid, hi, np.inf)
+        t_in = np.maximum(t_in, lo)
+        t_out = np.minimum(t_out, hi)
+    return t_in, t_out
 
 
 ENCROACHMENTS = register(Derivation(

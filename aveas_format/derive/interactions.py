@@ -3,10 +3,16 @@ gap, THW, DHW and closing speed, each per time step.
 
 Lane relations come from the road coordinates (``road_id``, ``lane_id``, ``road_s``). Lanes are
 chained along the direction of travel across lane sections and roads wherever the map's links give
-a unique continuation (:func:`lane_chains`); each sample gets a *chain* and a travel coordinate
-``u`` along it, and one sort by ``(time, chain, u)`` gives every leader and follower. Left and right
-neighbours are the nearest participants (by ``|Δs|``, within ``neighbour_range``) in the adjacent
-lanes of the same road section.
+a unique continuation (:func:`lane_graph`); each sample gets a *chain* and a travel coordinate
+``u`` along it, and one sort by ``(time, chain, u)`` gives every leader within a chain. The
+frontmost sample of a chain at a time step looks on beyond the chain's end along its *route*
+(diverges, junction entries, merges): where the chain has several continuations, the one the
+participant itself occupies later in the recording (by lane, else by road); where its later
+samples show none (the recording ends first, or it leaves the lane sideways), all of them,
+nearest vehicle first; up to ``route_range`` beyond the chain's end. Followers mirror leaders, so a vehicle just past a merge
+has one follower per approaching lane. Left and right neighbours are the lead (front level with or
+ahead of the participant's front) and the lag (front behind it) in the adjacent lanes, found along
+the adjacent lane's chain within ``neighbour_range``.
 
 Conventions (docs/derive.md):
 
@@ -16,6 +22,8 @@ Conventions (docs/derive.md):
 - ``thw``: net time headway ``gap / v_follower`` (null where the follower does not move forward);
   ``dhw``: gross distance headway front-to-front, ``gap + L_leader``. In a ``leader`` row the
   headways are the participant's own, in a ``follower`` row those of the follower behind it.
+- ``dhw`` of a neighbour row: the signed front-to-front distance along the lanes, the
+  neighbour's front minus the participant's (>= 0: lead, < 0: lag).
 - ``closing_speed``: ``v_follower - v_leader`` along the lane for lane pairs, the range rate
   ``-d|Δp|/dt`` for neighbours and conflicting pairs (positive = approaching).
 - ``ttc`` (``lane_1d``): ``gap / closing_speed`` when closing, with ``ttc_std`` by the delta method
@@ -42,8 +50,9 @@ from aveas_format.errors import FormatError
 class InteractionsParams(Params):
     """Parameters of ``interactions``."""
 
-    neighbour_range: float = Field(100.0, gt=0, description="largest |Δs| (m) of a left/right "
-                                   "neighbour")
+    neighbour_range: float = Field(100.0, gt=0, description="largest distance (m) along the "
+                                   "lanes between the fronts of a participant and its left/right "
+                                   "lead or lag")
     search_radius: float = Field(120.0, gt=0, description="centre distance (m) within which "
                                  "pairs are candidates for a 2D conflict (those that cannot "
                                  "touch within `horizon` at their relative speed are dropped)")
@@ -57,6 +66,9 @@ class InteractionsParams(Params):
     max_heading_deviation: float = Field(1.0, gt=0, description="samples whose heading deviates "
                                          "more than this (rad) from their lane's direction of "
                                          "travel take part in 2D conflicts only")
+    route_range: float = Field(250.0, gt=0, description="how far (m) beyond the end of its lane "
+                               "chain a leader is searched along the participant's route (across "
+                               "diverges, merges and junctions)")
 
 
 # --- 1D TTC ----------------------------------------------------------------------------------------
@@ -174,6 +186,35 @@ def lane_chains(net) -> dict[tuple[str, int, int], tuple[int, float, int]]:
     direction +1 and ``offset + (section_end - s)`` for -1. Two lanes are chained where the
     first's only successor (in the direction of travel, across sections, road links and junction
     connections) is the second and the second's only predecessor is the first."""
+    return lane_graph(net).chains
+
+
+class LaneGraph:
+    """Lane chains and how they connect where the continuation is not unique.
+
+    ``chains``: as :func:`lane_chains`; ``length[c]``: the length of chain ``c`` along the
+    direction of travel; ``succ[c]``: the chains entered at the end of chain ``c``, each as
+    ``(chain, entry_u)`` (``entry_u`` is 0 at a chain's head; diverges and junction entries have
+    several, merges lead several chains into one); ``pred[c]``: the chains whose end leads into
+    ``c``; ``roads[c]``: the roads chain ``c`` runs on."""
+
+    def __init__(self, chains: dict[tuple[str, int, int], tuple[int, float, int]],
+                 length: np.ndarray, succ: list[list[tuple[int, float]]],
+                 pred: list[list[int]], roads: list[frozenset[str]]) -> None:
+        self.chains = chains
+        self.length = length
+        self.succ = succ
+        self.pred = pred
+        self.roads = roads
+
+    @property
+    def n(self) -> int:
+        """Number of chains."""
+        return len(self.length)
+
+
+def lane_graph(net) -> LaneGraph:
+    """The :class:`LaneGraph` of a road network (see :func:`lane_chains`)."""
     nodes: dict[tuple[str, int, int], dict] = {}
     for rid, road in net.roads.items():
         rht = (road.rule or "RHT").upper() != "LHT"
@@ -235,25 +276,35 @@ def lane_chains(net) -> dict[tuple[str, int, int], tuple[int, float, int]]:
     nxt_of = {k: next(iter(v)) for k, v in succ.items() if len(v) == 1 and len(pred[next(iter(v))]) == 1}
     has_prev = set(nxt_of.values())
     out: dict[tuple[str, int, int], tuple[int, float, int]] = {}
+    tails: list[tuple[str, int, int]] = []
+    lengths: list[float] = []
     chain = 0
-    for key in nodes:  # chain heads first
-        if key in has_prev:
-            continue
-        off, k = 0.0, key
-        while k is not None and k not in out:
-            out[k] = (chain, off, nodes[k]["dir"])
-            off += nodes[k]["len"]
-            k = nxt_of.get(k)
-        chain += 1
-    for key in nodes:  # pure cycles
-        if key not in out:
-            off, k = 0.0, key
+    for pure_cycles in (False, True):  # chain heads first, then what is left: pure cycles
+        for key in nodes:
+            if key in out or (not pure_cycles and key in has_prev):
+                continue
+            off, k, tail = 0.0, key, key
             while k is not None and k not in out:
                 out[k] = (chain, off, nodes[k]["dir"])
                 off += nodes[k]["len"]
+                tail = k
                 k = nxt_of.get(k)
+            tails.append(tail)
+            lengths.append(off)
             chain += 1
-    return out
+    csucc: list[list[tuple[int, float]]] = []
+    cpred: list[list[int]] = [[] for _ in range(chain)]
+    for c, tail in enumerate(tails):
+        nxt = sorted({(out[k][0], out[k][1]) for k in succ[tail]})
+        csucc.append(nxt)
+        for d, _ in nxt:
+            if c not in cpred[d]:
+                cpred[d].append(c)
+    roads: list[set[str]] = [set() for _ in range(chain)]
+    for (rid, _, _), (c, _, _) in out.items():
+        roads[c].add(rid)
+    return LaneGraph(out, np.asarray(lengths, float), csucc, cpred,
+                     [frozenset(r) for r in roads])
 
 
 def _has_explicit_links(road, si: int, nsi: int) -> bool:
@@ -360,6 +411,8 @@ def _var_along(S: _Samples, i, c, sn):
 # --- lane relations -----------------------------------------------------------------------------------
 
 def _lane_rows(rec, S: _Samples, p: InteractionsParams) -> dict[str, np.ndarray]:
+    """Leader/follower rows (along lane chains and, past a chain's end, along each participant's
+    route) and left/right neighbour rows (lead and lag in the adjacent lanes)."""
     s = rec.states
     if not {"road_id", "lane_id", "road_s"} <= set(s.column_names):
         return {}
@@ -372,19 +425,23 @@ def _lane_rows(rec, S: _Samples, p: InteractionsParams) -> dict[str, np.ndarray]
     if not on.any():
         return {}
     net = rec.map
-    chains = lane_chains(net)
+    G = lane_graph(net)
+    chains = G.chains
     idx = np.flatnonzero(on)
     rid = road_np[idx].astype(str)
     lid = lane[idx].astype(np.int64)
     sv = rs[idx]
-    # section index and chain per sample (loop over roads, not samples)
-    sec = np.zeros(len(idx), np.int64)
-    chain = np.full(len(idx), -1, np.int64)
-    u = np.full(len(idx), np.nan)
-    direction = np.zeros(len(idx), np.int64)
-    hdg = np.zeros(len(idx))
+    # section index, chain and travel coordinate per sample, and the same in the adjacent lanes
+    # (left, right of the direction of travel); a loop over roads and lane keys, not samples
+    n = len(idx)
+    chain = np.full(n, -1, np.int64)
+    u = np.full(n, np.nan)
+    direction = np.zeros(n, np.int64)
+    hdg = np.zeros(n)
+    adj_chain = np.full((2, n), -1, np.int64)
+    adj_u = np.full((2, n), np.nan)
     for r in np.unique(rid):
-        m = rid == r
+        m = np.flatnonzero(rid == r)
         if r not in net.roads:
             raise FormatError(f"derivation interactions: table states: road_id {r!r} is not in the "
                               "map")
@@ -392,24 +449,24 @@ def _lane_rows(rec, S: _Samples, p: InteractionsParams) -> dict[str, np.ndarray]
         starts = np.array([q.s for q in road_obj.lane_sections])
         ends = np.r_[starts[1:], road_obj.length]
         si = np.clip(np.searchsorted(starts, sv[m], side="right") - 1, 0, len(starts) - 1)
-        sec[m] = si
-        keys = list(zip(si.tolist(), lid[m].tolist()))
-        ukeys = set(keys)
-        lut = {k: chains.get((r, k[0], k[1]), (-1, 0.0, 0)) for k in ukeys}
-        vals = np.array([lut[k] for k in keys], dtype=float).reshape(-1, 3)
-        chain[m] = vals[:, 0].astype(np.int64)
-        d = vals[:, 2].astype(np.int64)
-        direction[m] = d
-        u[m] = vals[:, 1] + np.where(d > 0, sv[m] - starts[si], ends[si] - sv[m])
+        c, off, d = _chain_lookup(chains, r, si, lid[m])
+        chain[m], direction[m] = c, d
+        along = np.where(d > 0, sv[m] - starts[si], ends[si] - sv[m])
+        u[m] = off + along
         hdg[m] = np.asarray(net.reference_line(r, sv[m])[2])
+        for k, side in enumerate((+1, -1)):
+            # left of the direction of travel: towards larger lane ids for right lanes (dir +1)
+            adj = lid[m] + side * d
+            ok = (c >= 0) & (adj != 0) & (np.sign(adj) == np.sign(lid[m]))
+            ca, offa, da = _chain_lookup(chains, r, si, np.where(ok, adj, 0))
+            ok &= (ca >= 0) & (da == d)
+            adj_chain[k, m] = np.where(ok, ca, -1)
+            adj_u[k, m] = np.where(ok, offa + along, np.nan)
     good = chain >= 0
-    idx, rid, lid, sv, sec, chain, u, direction, hdg = (a[good] for a in
-                                                        (idx, rid, lid, sv, sec, chain, u,
-                                                         direction, hdg))
     theta = hdg + np.where(direction < 0, np.pi, 0.0)
-    aligned = np.abs(np.angle(np.exp(1j * (S.h[idx] - theta)))) <= p.max_heading_deviation
-    idx, rid, lid, sv, sec, chain, u, direction, hdg, theta = (
-        a[aligned] for a in (idx, rid, lid, sv, sec, chain, u, direction, hdg, theta))
+    good &= np.abs(np.angle(np.exp(1j * (S.h[idx] - theta)))) <= p.max_heading_deviation
+    idx, rid, chain, u, theta = idx[good], rid[good], chain[good], u[good], theta[good]
+    adj_chain, adj_u = adj_chain[:, good], adj_u[:, good]
     if not len(idx):
         return {}
     c, sn = np.cos(theta), np.sin(theta)
@@ -417,16 +474,15 @@ def _lane_rows(rec, S: _Samples, p: InteractionsParams) -> dict[str, np.ndarray]
     a_along = S.ax[idx] * c + S.ay[idx] * sn
     vp, vv, va = _var_along(S, idx, c, sn)
     ts = S.tstep[idx]
-    order = np.lexsort((u, chain, ts))
+    pid = S.pid[idx]
     rows: dict[str, list] = {k: [] for k in ("i", "j", "rel", "gap", "gap_var", "closing",
                                              "ttc", "ttc_std", "thw", "dhw", "ttc_ca",
                                              "ttc_ca_std")}
-    a, b = order[:-1], order[1:]  # b is the leader of a where same (time, chain)
-    same = (ts[a] == ts[b]) & (chain[a] == chain[b])
-    a, b = a[same], b[same]
+    # --- leaders and followers --------------------------------------------------------------
+    a, b, du = _leaders(G, S, idx, pid, ts, rid, chain, u, p)
     if len(a):
         fi, li = idx[a], idx[b]
-        gap = (u[b] - u[a]) - 0.5 * (S.L[li] + S.L[fi])
+        gap = du - 0.5 * (S.L[li] + S.L[fi])
         gvar = vp[a] + vp[b] + 0.25 * (S.sL[li] ** 2 + S.sL[fi] ** 2)
         dv = v_along[a] - v_along[b]
         dvvar = vv[a] + vv[b]
@@ -452,57 +508,186 @@ def _lane_rows(rec, S: _Samples, p: InteractionsParams) -> dict[str, np.ndarray]
             rows["dhw"].append(dhw)
             rows["ttc_ca"].append(ttc_ca)
             rows["ttc_ca_std"].append(ttc_ca_std)
-    # neighbours: nearest in the adjacent lane of the same road section
-    key_road = np.unique(rid, return_inverse=True)[1].ravel()
-    lane_off = 1 << 8
-    grp = ((ts.astype(np.int64) * (key_road.max() + 1) + key_road) * (sec.max() + 1) + sec) * \
-        (2 * lane_off) + (lid + lane_off)
-    o2 = np.lexsort((sv, grp))
-    g_sorted, s_sorted = grp[o2], sv[o2]
-    for side, rel in ((+1, "left_neighbour"), (-1, "right_neighbour")):
-        # left of the direction of travel: towards larger lane ids for right lanes (dir +1)
-        step = side * direction
-        adj = lid + step
-        ok = (adj != 0) & (np.sign(adj) == np.sign(lid))
-        q = np.flatnonzero(ok)
+    # --- neighbours: lead and lag in the adjacent lanes ---------------------------------------
+    nch = max(G.n, 1)
+    key = ts.astype(np.int64) * nch + chain
+    front = u + 0.5 * S.L[idx]
+    o2 = np.lexsort((front, key))
+    k_sorted, f_sorted = key[o2], front[o2]
+    for k, rel in enumerate(("left_neighbour", "right_neighbour")):
+        q = np.flatnonzero(adj_chain[k] >= 0)
         if not len(q):
             continue
-        gq = grp[q] + step[q]
-        lo = np.searchsorted(g_sorted, gq, side="left")
-        hi = np.searchsorted(g_sorted, gq, side="right")
+        gq = ts[q].astype(np.int64) * nch + adj_chain[k, q]
+        lo = np.searchsorted(k_sorted, gq, side="left")
+        hi = np.searchsorted(k_sorted, gq, side="right")
         has = hi > lo
-        q, gq, lo, hi = q[has], gq[has], lo[has], hi[has]
-        # position of s within the group [lo, hi)
-        pos = lo + _searchsorted_segments(s_sorted, lo, hi, sv[q])
-        cand = np.stack([np.clip(pos - 1, lo, hi - 1), np.clip(pos, lo, hi - 1)])
-        dist = np.abs(s_sorted[cand] - sv[q])
-        pick = cand[np.argmin(dist, axis=0), np.arange(len(q))]
-        other = o2[pick]
-        near = np.abs(sv[other] - sv[q]) <= p.neighbour_range
-        q, other = q[near], other[near]
-        if not len(q):
-            continue
-        i, j = idx[q], idx[other]
-        gap = np.abs(u[other] - u[q]) - 0.5 * (S.L[i] + S.L[j])
-        gvar = vp[q] + vp[other] + 0.25 * (S.sL[i] ** 2 + S.sL[j] ** 2)
-        rows["i"].append(i)
-        rows["j"].append(j)
-        rows["rel"].append(np.full(len(i), rel, object))
-        rows["gap"].append(gap)
-        rows["gap_var"].append(gvar)
-        rows["closing"].append(_range_rate(S, i, j))
-        nan = np.full(len(i), np.nan)
-        rows["ttc"].append(np.full(len(i), np.inf))
-        rows["ttc_std"].append(nan)
-        rows["thw"].append(nan)
-        rows["dhw"].append(nan)
-        rows["ttc_ca"].append(np.full(len(i), np.inf))
-        rows["ttc_ca_std"].append(nan)
+        q, lo, hi = q[has], lo[has], hi[has]
+        fq = adj_u[k, q] + 0.5 * S.L[idx[q]]  # own front, in the adjacent lane's coordinate
+        pos = lo + _searchsorted_segments(f_sorted, lo, hi, fq)
+        for sel, at in ((pos < hi, pos), (pos > lo, pos - 1)):  # lead (front level or ahead), lag
+            qq, other = q[sel], o2[at[sel]]
+            dh = front[other] - fq[sel]
+            near = (np.abs(dh) <= p.neighbour_range) & (pid[other] != pid[qq])
+            qq, other, dh = qq[near], other[near], dh[near]
+            if not len(qq):
+                continue
+            i, j = idx[qq], idx[other]
+            gap = np.abs(u[other] - adj_u[k, qq]) - 0.5 * (S.L[i] + S.L[j])
+            gvar = vp[qq] + vp[other] + 0.25 * (S.sL[i] ** 2 + S.sL[j] ** 2)
+            rows["i"].append(i)
+            rows["j"].append(j)
+            rows["rel"].append(np.full(len(i), rel, object))
+            rows["gap"].append(gap)
+            rows["gap_var"].append(gvar)
+            rows["closing"].append(_range_rate(S, i, j))
+            nan = np.full(len(i), np.nan)
+            rows["ttc"].append(np.full(len(i), np.inf))
+            rows["ttc_std"].append(nan)
+            rows["thw"].append(nan)
+            rows["dhw"].append(dh)
+            rows["ttc_ca"].append(np.full(len(i), np.inf))
+            rows["ttc_ca_std"].append(nan)
     if not rows["i"]:
         return {}
     out = {k: np.concatenate(v) for k, v in rows.items()}
     out["kind"] = np.where(np.isin(out["rel"], ["leader", "follower"]), "lane_1d", None)
     return out
+
+
+def _chain_lookup(chains: dict[tuple[str, int, int], tuple[int, float, int]], road_id: str,
+                  section: np.ndarray, lane_id: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(chain, offset, direction)`` per sample of one road (chain -1 where the lane is not in
+    the map), through a dense table over the road's (section, lane) pairs."""
+    section = np.asarray(section, np.int64)
+    lane_id = np.asarray(lane_id, np.int64)
+    n = len(lane_id)
+    if not n:
+        return np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64)
+    lo_l, hi_l = int(min(lane_id.min(), 0)), int(max(lane_id.max(), 0))
+    nsec = int(section.max()) + 1
+    lut = np.full((3, nsec, hi_l - lo_l + 1), [[[-1.0]], [[0.0]], [[0.0]]])
+    for si in range(nsec):
+        for lid in range(lo_l, hi_l + 1):
+            v = chains.get((road_id, si, lid))
+            if v is not None:
+                lut[:, si, lid - lo_l] = v
+    vals = lut[:, section, lane_id - lo_l]
+    return vals[0].astype(np.int64), vals[1], vals[2].astype(np.int64)
+
+
+def _leaders(G: LaneGraph, S: _Samples, idx: np.ndarray, pid: np.ndarray, ts: np.ndarray,
+             rid: np.ndarray, chain: np.ndarray, u: np.ndarray, p: InteractionsParams
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Follower/leader pairs ``(a, b, du)`` (positions in the lane samples, ``du``: centre
+    distance along the lanes).
+
+    Within a lane chain the leader is the next sample by ``u`` at the same time step (one sort).
+    The last sample of a chain at a time step looks beyond the chain's end along its route
+    (:func:`_route`): the nearest sample, within ``route_range`` of the chain's end, among the
+    chains the route enters."""
+    nch = max(G.n, 1)
+    key = ts.astype(np.int64) * nch + chain
+    order = np.lexsort((u, key))
+    ks, us = key[order], u[order]
+    same = ks[:-1] == ks[1:]
+    a, b = order[:-1][same], order[1:][same]
+    du = u[b] - u[a]
+    tails = order[np.r_[~same, True]] if len(order) else np.zeros(0, np.int64)
+    if not len(tails) or not any(G.succ):
+        return a, b, du
+    # route variants, one per run of a participant in one chain
+    o3 = np.lexsort((S.t[idx], pid))
+    new_run = np.r_[True, (pid[o3][1:] != pid[o3][:-1]) | (chain[o3][1:] != chain[o3][:-1])]
+    run_of = np.empty(len(o3), np.int64)
+    run_of[o3] = np.cumsum(new_run) - 1
+    run_chain = chain[o3][new_run]
+    run_road = rid[o3][new_run]
+    run_pid = pid[o3][new_run]
+    run_end = np.r_[np.flatnonzero(run_pid[1:] != run_pid[:-1]) + 1, len(run_pid)]
+    run_last = run_end[np.searchsorted(run_end, np.arange(len(run_pid)), side="right")]
+    need = np.unique(run_of[tails])
+    need = need[np.array([len(G.succ[c]) > 0 for c in run_chain[need]], bool)]
+    vptr = np.zeros(len(run_pid) + 1, np.int64)
+    vch: list[int] = []
+    ven: list[float] = []
+    vdi: list[float] = []
+    memo: dict[tuple, list] = {}
+    counts = np.zeros(len(run_pid), np.int64)
+    for r in need.tolist():
+        fut = tuple(zip(run_chain[r + 1:run_last[r]].tolist(),
+                        run_road[r + 1:run_last[r]].tolist()))
+        mk = (int(run_chain[r]), fut)
+        if mk not in memo:
+            memo[mk] = _route(G, mk[0], fut, p.route_range)
+        ent = memo[mk]
+        counts[r] = len(ent)
+        for c, e, d in ent:
+            vch.append(c)
+            ven.append(e)
+            vdi.append(d)
+    # entries of run r are at [vptr[r], vptr[r + 1]) in run order of `need`
+    vptr[1:] = np.cumsum(counts)
+    vch_a, ven_a, vdi_a = (np.asarray(x, float) for x in (vch, ven, vdi))
+    vch_a = vch_a.astype(np.int64)
+    tr = run_of[tails]
+    cnt = counts[tr]
+    rep = np.repeat(np.arange(len(tails)), cnt)
+    e = vptr[tr][rep] + (np.arange(int(cnt.sum())) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+    q = tails[rep]
+    gk = ts[q].astype(np.int64) * nch + vch_a[e]
+    lo = np.searchsorted(ks, gk, side="left")
+    hi = np.searchsorted(ks, gk, side="right")
+    pos = lo + _searchsorted_segments(us, lo, hi, ven_a[e])
+    found = pos < hi
+    cand = order[np.minimum(pos, len(order) - 1)]
+    dist = vdi_a[e] + u[cand] - ven_a[e]
+    ok = found & (dist <= p.route_range) & (pid[cand] != pid[q])
+    rep, q, cand, dist = rep[ok], q[ok], cand[ok], dist[ok]
+    pick = np.lexsort((dist, rep))
+    first = pick[np.r_[True, rep[pick][1:] != rep[pick][:-1]]] if len(pick) else pick
+    q, cand, dist = q[first], cand[first], dist[first]
+    du_x = (G.length[chain[q]] - u[q]) + dist
+    return np.r_[a, q], np.r_[b, cand], np.r_[du, du_x]
+
+
+def _route(G: LaneGraph, start: int, future: tuple[tuple[int, str], ...], reach: float
+           ) -> list[tuple[int, float, float]]:
+    """The chains a participant in chain ``start`` enters beyond its end, as ``(chain,
+    entry_u, distance from the end of start to the entry)``, up to ``reach`` m.
+
+    ``future``: the participant's later stretches in one chain each, as ``(chain, road at their
+    start)`` in time order. At each chain end with several continuations the participant's own
+    route decides: the first later stretch that is on one of the continuations (or, failing an
+    exact lane match, on a road one of them runs on: it took that branch but its lane was matched
+    to a neighbouring lane). Where none is (the recording ends before, or it leaves the lane
+    sideways for good), all continuations are searched and the nearest vehicle wins. At merges
+    the continuation is unique."""
+    best: dict[int, tuple[float, float]] = {}
+    stack = [(start, 0.0, 0)]  # chain, distance at its end, next index into `future`
+    while stack:
+        x, d_end, k = stack.pop()
+        cands = G.succ[x]
+        if not cands or d_end > reach:
+            continue
+        names = {c for c, _ in cands}
+        chosen: set[int] | None = None
+        nk = len(future)
+        for j in range(k, len(future)):
+            fc, fr = future[j]
+            by_road = {c for c in names if fr in G.roads[c]}
+            if fc in names or by_road:
+                chosen, nk = ({fc} if fc in names else by_road), j + 1
+                break
+        for c, entry in cands:
+            if chosen is not None and c not in chosen:
+                continue
+            if c in best and best[c][1] <= d_end:
+                continue
+            best[c] = (entry, d_end)
+            stack.append((c, d_end + float(G.length[c]) - entry, nk))
+    return [(c, e, d) for c, (e, d) in sorted(best.items())]
 
 
 def _searchsorted_segments(a: np.ndarray, lo: np.ndarray, hi: np.ndarray, v: np.ndarray
@@ -738,7 +923,7 @@ def _table(S: _Samples, r: dict[str, np.ndarray]) -> pa.Table:
 INTERACTIONS = register(Derivation(
     name="interactions",
     table="derived/interactions",
-    version="1.0.0",
+    version="1.1.0",
     params=InteractionsParams,
     fn=compute,
     needs={"states": ("participant_id", "time", "x", "y", "heading", "vx", "vy"),

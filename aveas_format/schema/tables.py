@@ -276,7 +276,8 @@ INTERACTIONS = TableSpec(
         col("thw", "float64", MAY, "time headway: net gap / speed of the follower (null = infinite)",
             "s", minimum=0.0),
         col("dhw", "float64", MAY, "distance headway: gross front-to-front spacing (gap + leader "
-            "length)", "m"),
+            "length); in left/right_neighbour rows the signed front-to-front distance along the "
+            "lane (>= 0: the neighbour leads, < 0: it lags)", "m"),
         col("closing_speed", "float64", MAY, "rate at which the gap closes (positive = closing)",
             "m/s"),
     ),
