@@ -80,6 +80,7 @@ from aveas_format.converters.common import (
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.safeio import check_mcap
 from aveas_format.schema.taxonomy import CLASSES
 
 CLS = {c: i for i, c in enumerate(CLASSES)}
@@ -311,8 +312,10 @@ _READERS = {T_TRACKED: _read_tracked, T_DERIVED: _read_derived, T_DET3D: _read_d
 
 def _mcap_errors() -> tuple[type[BaseException], ...]:
     """What a corrupt MCAP file raises from the reader: record-level errors, a damaged record
-    length (OverflowError, or MemoryError for the buffer the reader asks for) and, from a damaged
-    compressed chunk, the decompressors' own (zstandard.ZstdError; lz4 raises RuntimeError)."""
+    length (OverflowError) and, from a damaged compressed chunk, the decompressors' own
+    (zstandard.ZstdError; lz4 raises RuntimeError). Lengths beyond the file and oversized chunks
+    are refused before the reader runs (``safeio.check_mcap``); MemoryError stays listed only as a
+    last resort."""
     from mcap.exceptions import McapError
 
     errs: list[type[BaseException]] = [McapError, ValueError, EOFError, KeyError, OSError,
@@ -381,6 +384,7 @@ def _read(paths: list[Path], opts: Ros2McapOptions):
     for p in paths:
         if not p.is_file():
             raise RecordingIOError("input not found", path=p)
+        check_mcap(p)  # bounded pre-scan: no record or chunk may claim more than the file holds
         types.update(_channels(p))
     first = paths[0]
     if opts.object_topics is not None:
