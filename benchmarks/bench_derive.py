@@ -63,29 +63,38 @@ def junction_scene(n_per_stream: int = 60, rate_hz: float = 25.0, seed: int = 3)
                            partner="bench", reference=False)
 
 
-def main(n_vehicles: int = 1000, duration_s: float = 600.0) -> list[dict]:
-    from aveas_format.derive import derive
+def bench_kinematics(n_tracks: int = 1000, n_steps: int = 3000) -> list[dict]:
+    """Kinematics on ``n_tracks x n_steps`` samples (25 Hz, position std 0.1 m): fixed process
+    noise, ``auto`` (maximum likelihood per window) and Savitzky-Golay. Runs alone with
+    ``python -c 'from benchmarks.bench_derive import bench_kinematics as b; print(b())'``."""
     from aveas_format.derive.kinematics import KinematicsParams, estimate
-    from aveas_format.sample import highway_scene, synthetic_states
+    from aveas_format.sample import synthetic_states
 
     rows = []
-    # --- kinematics on 3M samples -------------------------------------------------------------
-    s = synthetic_states(1000, 3000)
+    s = synthetic_states(n_tracks, n_steps)
     pid = s.column("participant_id").to_numpy()
     t = s.column("time").to_numpy()
     x, y = s.column("x").to_numpy(), s.column("y").to_numpy()
     n = len(t)
     ones = np.full(n, 0.1)
     zero = np.zeros(n)
-    for q, label in ((1.0, "fixed q = 1 m²/s⁵"), ("auto", "q by maximum likelihood (7 values)")):
+    for q, label in ((1.0, "fixed q = 1 m²/s⁵"),
+                     ("auto", "q by maximum likelihood per window (9 decades + 1 bisection)")):
         dt, _ = _timed(lambda: estimate(pid, t, x, y, ones, ones, zero, None,
                                         KinematicsParams(jerk_density=q)))
-        rows.append(_row("derive.kinematics", n, dt, f"CA Kalman + RTS, {label}; 1,000 tracks x "
-                         "3,000 samples, lockstep over tracks"))
+        rows.append(_row("derive.kinematics", n, dt, f"CA Kalman + RTS, {label}; "
+                         f"{n_tracks:,} tracks x {n_steps:,} samples, lockstep over tracks"))
     dt, _ = _timed(lambda: estimate(pid, t, x, y, ones, ones, zero, None,
                                     KinematicsParams(method="savitzky_golay")))
     rows.append(_row("derive.kinematics_savgol", n, dt, "Savitzky-Golay option"))
-    del s, pid, t, x, y
+    return rows
+
+
+def main(n_vehicles: int = 1000, duration_s: float = 600.0) -> list[dict]:
+    from aveas_format.derive import derive
+    from aveas_format.sample import highway_scene
+
+    rows = bench_kinematics()
     # --- interactions on a highway recording ------------------------------------------------------
     tb, rec = _timed(lambda: highway_scene(n_vehicles=n_vehicles, duration_s=duration_s,
                                            length_m=1000.0, seed=11))
@@ -106,7 +115,14 @@ def main(n_vehicles: int = 1000, duration_s: float = 600.0) -> list[dict]:
     rows.append(_row("derive.encroachments", jr.states.num_rows, dt,
                      f"two crossing streams, {jr.participants.num_rows} cars, "
                      f"{jr.derived['encroachments'].num_rows} conflicts (swept paths, "
-                     "in-frame entry/exit)"))
+                     "in-frame entry/exit; columnar occupancy and pairing)"))
+    import shapely
+
+    box = shapely.box(-3.0, 4997.0, 3.0, 5003.0).wkt  # the crossing, passed by every car
+    dt, _ = _timed(lambda: derive(jr, only="encroachments", conflict_areas=[box]))
+    rows.append(_row("derive.encroachments_area", jr.states.num_rows, dt,
+                     f"same scene, one explicit conflict area: "
+                     f"{jr.derived['encroachments'].num_rows} pairs within max_pet"))
     return rows
 
 

@@ -27,8 +27,11 @@ def _np(t, c):
 
 def test_highway_accuracy(highway):
     """sigma 0.1 m at 25 Hz: RMS acceleration error <= 0.3 m/s^2; the std covers the truth at
-    least 68 % of the time (the scene's smooth motion with lane-change jerk steps is not a
-    white-jerk process, so the coverage is conservative: ~0.9-0.95)."""
+    least 68 % of the time. The scene's IDM motion is far smoother than a white-jerk process
+    between occasional jerk steps, so inside a track, where the smoother is symmetric and its bias
+    on smooth motion cancels, the error is about the noise part of the posterior variance (1/6 of
+    it) and the coverage is conservative (~0.88 with 'auto'; it was ~0.95 with the old grid
+    floored at 0.01 m²/s⁵); see docs/derive.md."""
     rec, truth = highway
     k = rec.derived["kinematics"]
     assert np.array_equal(_np(k, "participant_id"), truth["participant_id"])
@@ -39,9 +42,26 @@ def test_highway_accuracy(highway):
     rms = np.sqrt(np.mean(err[ok] ** 2))
     assert rms <= 0.3
     cover = np.mean(np.abs(err[ok]) <= std[ok])
-    assert 0.68 <= cover <= 0.99
+    assert 0.8 <= cover <= 0.93
     speed = np.hypot(truth["vx"], truth["vy"])
     assert np.sqrt(np.nanmean((_np(k, "speed") - speed) ** 2)) < 0.1
+
+
+def test_highway_a_lon_std_calibrated_where_the_smoother_is_one_sided(highway):
+    """In the first and last second of every track (one-sided smoother: the bias of smooth
+    motion no longer cancels) the a_lon std covers the truth ~68 % of the time."""
+    rec, truth = highway
+    k = rec.derived["kinematics"]
+    pid = _np(k, "participant_id")
+    start = np.r_[True, pid[1:] != pid[:-1]]
+    seg = np.cumsum(start) - 1
+    pos = np.arange(len(pid)) - np.flatnonzero(start)[seg]
+    edge = np.minimum(pos, np.bincount(seg)[seg] - 1 - pos) < 25
+    speed = np.hypot(truth["vx"], truth["vy"])
+    a_lon = (truth["vx"] * truth["ax"] + truth["vy"] * truth["ay"]) / speed
+    err = np.abs(_np(k, "a_lon") - a_lon)
+    ok = edge & np.isfinite(err)
+    assert 0.6 <= np.mean(err[ok] <= _np(k, "a_lon_std")[ok]) <= 0.76
 
 
 def _white_jerk(q=0.5, n=1500, tracks=30, seed=1, dt=0.04):
