@@ -509,15 +509,19 @@ def class_pmf(labels: Sequence[str] | np.ndarray, confidence: float = 1.0) -> np
 
 
 def sort_states(pid: np.ndarray, t: np.ndarray, path: Path | None = None,
-                lines: np.ndarray | None = None) -> np.ndarray:
+                lines: np.ndarray | None = None, *, ids: Sequence[Any] | np.ndarray | None = None,
+                unit: str = "line") -> np.ndarray:
     """Row order sorting by (participant, time); a duplicate (participant, time) is an error naming
-    the line (``lines``: the source line of each row) of its second occurrence."""
+    the line (``lines``: the source line of each row; ``unit``: what ``lines`` counts, e.g.
+    ``"message"``) of its second occurrence, and the participant's source id (``ids``, indexed by
+    ``pid``) where given."""
     order = np.lexsort((t, pid))
     ps, ts = pid[order], t[order]
     dup = np.flatnonzero((ps[1:] == ps[:-1]) & (ts[1:] == ts[:-1]))
     if len(dup):
         i = order[dup[0] + 1]
-        raise FormatError(f"participant sampled twice at time {float(t[i])!r}", path=path,
-                          line=None if lines is None else int(lines[i]))
+        who = "participant" if ids is None else f"participant {str(ids[int(pid[i])])!r}"
+        raise FormatError(f"{who} sampled twice at time {round(float(t[i]), 9)!r}", path=path,
+                          **{unit: None if lines is None else int(lines[i])})
     return order
 

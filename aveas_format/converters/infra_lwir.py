@@ -213,6 +213,10 @@ def _read_landmarks(path: Path):
 
 def _read_mot(path: Path) -> pa.Table:
     """A MOTChallenge text file (no header) as a table with named columns."""
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    if len(head) < 4096 and not head.strip():
+        raise FormatError("no rows: the MOT file is empty", path=path)
     try:
         raw = pacsv.read_csv(path, read_options=pacsv.ReadOptions(autogenerate_column_names=True),
                              convert_options=pacsv.ConvertOptions(strings_can_be_null=True))
@@ -253,7 +257,8 @@ def _num(v: str) -> bool:
 
 
 def _read_tracks(path: Path, opts: InfraLwirOptions):
-    """(time, track ids, class names, u_bottom_centre, v_bottom, header_lines) of one file."""
+    """(time, track ids, class names, u_bottom_centre, v_bottom, source line of each row) of one
+    file."""
     with open(path, encoding="utf-8", errors="replace") as f:
         head = f.readline()
     has_header = any(c.isalpha() for c in head.split(",")[0])
@@ -297,7 +302,7 @@ def _read_tracks(path: Path, opts: InfraLwirOptions):
             raise FormatError(f"column {c!r}: value {what}", path=path, line=i + 1 + header)
     time = (tv - 1.0) / opts.rate_hz if frame_based else tv
     ids = t.column(idc).cast(pa.string()).to_pylist()
-    return time, ids, cls, left + w / 2.0, top + h
+    return time, ids, cls, left + w / 2.0, top + h, np.arange(len(tv)) + 1 + header
 
 
 # --- the converter ---------------------------------------------------------------------------------
@@ -333,22 +338,26 @@ def convert_infra_lwir(inputs: list[Path], *, map_source, options: InfraLwirOpti
     cls_names = sum((p[2] for p in parts), [])
     u = np.concatenate([p[3] for p in parts])
     v = np.concatenate([p[4] for p in parts])
+    lines = np.concatenate([p[5] for p in parts])
+    files = np.concatenate([np.full(len(p[0]), k) for k, p in enumerate(parts)])
     w_side = _apply(H, np.array([o.image_size[0] / 2.0]), np.array([float(o.image_size[1])]))[2][0]
     on_ground = np.sign(_apply(H, u, v)[2]) == np.sign(w_side)
     if not on_ground.all():
         i = int(np.flatnonzero(~on_ground)[0])
         raise FormatError(f"box of track {ids[i]!r} at time {time[i]:.3f} s has its bottom above the "
-                          "horizon of the ground homography", path=track_paths[0])
+                          "horizon of the ground homography", path=track_paths[int(files[i])],
+                          line=int(lines[i]))
 
     pid, uniq = factorize(ids)
     order = np.lexsort((time, pid))
-    pid, time, u, v = pid[order], time[order], u[order], v[order]
+    pid, time, u, v, lines, files = (pid[order], time[order], u[order], v[order], lines[order],
+                                     files[order])
     cls_arr = np.asarray(cls_names, dtype=object)[order]
     dup = np.r_[False, (pid[1:] == pid[:-1]) & (time[1:] == time[:-1])]
     if dup.any():
         i = int(np.flatnonzero(dup)[0])
         raise FormatError(f"track {uniq[pid[i]]!r} has two boxes in one frame (time {time[i]:.3f} s)",
-                          path=track_paths[0])
+                          path=track_paths[int(files[i])], line=int(lines[i]))
     X, Y, jp, jh = _jacobians(H, u, v)
     cpx = np.diag([o.pixel_std ** 2 / 2.0, o.pixel_std ** 2])
     cov = (np.einsum("nij,jk,nlk->nil", jp, cpx, jp)

@@ -33,6 +33,7 @@ positions (finite differences); provenance ``simulated``.
 from __future__ import annotations
 
 import math
+import warnings
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -380,8 +381,17 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
             if tp is not None:
                 samples[ref].append((0.0, *_pos_xyzh(tp, net)))
     rows: dict[str, list] = {k: [] for k in ("participant_id", "time", "x", "y", "z", "heading")}
+    dropped: list[tuple[str, float]] = []
     for n, smp in samples.items():
-        smp = sorted(dict((round(s_[0], 9), s_) for s_ in smp).values())
+        # one state per entity and time: a vertex repeating a time is dropped (the first is kept),
+        # with a warning below, never silently
+        first: dict[float, tuple] = {}
+        for s_ in smp:
+            if round(s_[0], 9) in first:
+                dropped.append((n, s_[0]))
+            else:
+                first[round(s_[0], 9)] = s_
+        smp = sorted(first.values(), key=lambda s_: s_[0])
         for tt, x, y, z, h in smp:
             rows["participant_id"].append(part["participant_id"][index[n]])
             rows["time"].append(tt)
@@ -391,6 +401,10 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
             rows["heading"].append(h if h is not None else math.nan)
     if not rows["time"]:
         raise FormatError("no trajectory (FollowTrajectoryAction polyline) found", path=path)
+    if dropped:
+        warnings.warn(f"{path.name}: {len(dropped)} trajectory vertices repeat an entity's time "
+                      f"(e.g. entity {dropped[0][0]!r} at {dropped[0][1]!r} s) and were dropped; "
+                      "the first vertex of each time is kept", stacklevel=2)
     states = {k: np.asarray(v, np.int64 if k == "participant_id" else np.float64) for k, v in rows.items()}
     if np.isnan(states["heading"]).any():
         del states["heading"]  # from the direction of motion

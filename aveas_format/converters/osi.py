@@ -53,6 +53,7 @@ from aveas_format.converters.common import (
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.safeio import check_mcap
 
 VEHICLE_CLASS = {
     "SMALL_CAR": "car", "COMPACT_CAR": "car", "CAR": "car", "MEDIUM_CAR": "car", "LUXURY_CAR": "car",
@@ -114,6 +115,7 @@ def _messages(path: Path, options: OsiOptions):
             kw["osi_message_type"] = options.message_type
         return betterosi.read(str(path), return_ground_truth=True, **kw)
     if suffix == ".mcap":
+        check_mcap(path)  # bounded pre-scan before betterosi's mcap reader opens the file
         return betterosi.read(str(path), return_ground_truth=True)
     raise RecordingIOError("not an OSI trace (.osi or .mcap)", path=path)
 
@@ -179,7 +181,10 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     src = np.asarray(cols["id"], np.int64)
     uniq, pid = np.unique(src, return_inverse=True)
     pid = pid.astype(np.int64)
-    order = sort_states(pid, t, inputs[0])
+    # a duplicate names the object id and the frame (0-based message index, the states'
+    # source_frame) of its second sample
+    order = sort_states(pid, t, inputs[0] if len(inputs) == 1 else None,
+                        np.asarray(cols["msg"], np.int64), ids=uniq.tolist(), unit="frame")
 
     def arr(k: str) -> np.ndarray:
         return np.asarray(cols[k], np.float64)

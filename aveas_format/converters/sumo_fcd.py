@@ -123,7 +123,7 @@ def _net_offset(opts: SumoFcdOptions) -> tuple[float, float]:
     return 0.0, 0.0
 
 
-_COLS = ("time", "id", "x", "y", "angle", "type", "speed", "kind")
+_COLS = ("time", "id", "x", "y", "angle", "type", "speed", "kind", "line")
 
 
 def _read_xml(path: Path) -> tuple[dict[str, list], bool]:
@@ -170,6 +170,7 @@ def _read_xml(path: Path) -> tuple[dict[str, list], bool]:
                 rows["type"].append(a.get("type", "DEFAULT_PEDTYPE" if el.tag == "person"
                                           else "DEFAULT_VEHTYPE"))
                 rows["kind"].append(el.tag)
+                rows["line"].append(el.sourceline)
     except etree.XMLSyntaxError as e:
         raise FormatError(f"malformed XML: {e.msg}", path=path, line=e.lineno) from None
     except (OSError, EOFError) as e:
@@ -198,7 +199,21 @@ def _read_tabular(path: Path) -> dict[str, list]:
         "type": (t.column(f"{prefix}type").cast(pa.string()).to_pylist() if f"{prefix}type" in names
                  else ["DEFAULT_VEHTYPE"] * n),
         "kind": ["vehicle"] * n,
+        "line": list(range(2, n + 2)) if path.suffix.lower() == ".csv" else [None] * n,
     }
+
+
+def _check_unique(pid: np.ndarray, t: np.ndarray, source_ids, lines: list, files: list[int],
+                  inputs: list[Path]) -> None:
+    """A vehicle sampled twice at one time (a repeated <timestep>, or an id twice in one) is an
+    error naming its second occurrence: the recording keys states by (participant, time)."""
+    order = np.lexsort((t, pid))
+    ps, ts = pid[order], t[order]
+    dup = np.flatnonzero((ps[1:] == ps[:-1]) & (ts[1:] == ts[:-1]))
+    if len(dup):
+        i = int(max(order[dup[0]], order[dup[0] + 1]))
+        raise FormatError(f"{str(source_ids[int(pid[i])])!r} sampled twice at time {float(t[i])!r}",
+                          path=inputs[files[i]], line=lines[i])
 
 
 @converter("sumo-fcd", description="Eclipse SUMO floating-car data (XML, .xml.gz, Parquet/CSV)",
@@ -206,8 +221,9 @@ def _read_tabular(path: Path) -> dict[str, list]:
            method="traffic_simulation", options=SumoFcdOptions)
 def convert_sumo_fcd(inputs: list[Path], *, map_source, options: SumoFcdOptions):
     rows: dict[str, list] = {k: [] for k in _COLS}
+    files: list[int] = []
     geo_detected = False
-    for p in inputs:
+    for fi, p in enumerate(inputs):
         if p.suffix.lower() in (".parquet", ".csv"):
             part, g = _read_tabular(p), False
         else:
@@ -215,6 +231,7 @@ def convert_sumo_fcd(inputs: list[Path], *, map_source, options: SumoFcdOptions)
         geo_detected |= g
         for k in _COLS:
             rows[k].extend(part[k])
+        files += [fi] * len(part["time"])
     if not rows["time"]:
         raise FormatError("no <vehicle> or <person> samples found", path=inputs[0])
     geo = geo_detected if options.geo is None else options.geo
@@ -222,6 +239,7 @@ def convert_sumo_fcd(inputs: list[Path], *, map_source, options: SumoFcdOptions)
 
     t = np.asarray(rows["time"], np.float64)
     pid, source_ids = factorize(rows["id"])
+    _check_unique(pid, t, source_ids, rows["line"], files, inputs)
     types = np.asarray(rows["type"], dtype=object)
     # one type per participant (the first seen)
     first = np.unique(pid, return_index=True)[1]
