@@ -842,6 +842,11 @@ def convert_ros2_mcap(inputs: list[Path], *, map_source, options: Ros2McapOption
         r = {k: v[order] for k, v in rows.items()}
         codes = codes[order]
         dup = np.r_[False, (codes[1:] == codes[:-1]) & (r["t_ns"][1:] == r["t_ns"][:-1])]
+        if dup.any():
+            k = int(np.flatnonzero(dup)[0])
+            warnings.warn(f"{first}: {int(dup.sum())} object sample(s) repeat a (track, stamp) and "
+                          f"were dropped, the first kept (e.g. track {uniq[codes[k]]!r} at stamp "
+                          f"{int(r['t_ns'][k])} ns)", stacklevel=2)
         r = {k: v[~dup] for k, v in r.items()}
         codes = codes[~dup]
         m = len(uniq)

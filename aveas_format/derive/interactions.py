@@ -421,7 +421,7 @@ def _lane_rows(rec, S: _Samples, p: InteractionsParams) -> dict[str, np.ndarray]
     road_np = np.asarray(road.to_numpy(zero_copy_only=False), dtype=object)
     lane = _num(s, "lane_id")
     rs = _num(s, "road_s")
-    on = np.array([r is not None for r in road_np]) & np.isfinite(lane) & np.isfinite(rs) & (lane != 0)
+    on = np.array([r is not None for r in road_np], dtype=bool) & np.isfinite(lane) & np.isfinite(rs) & (lane != 0)
     if not on.any():
         return {}
     net = rec.map

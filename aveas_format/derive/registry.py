@@ -177,6 +177,15 @@ def _params_for(d: Derivation, per: Mapping[str, Any], flat: Mapping[str, Any],
         raise FormatError(f"derivation {d.name}: parameter {loc}: {first['msg']}") from None
 
 
+def _empty(name: str) -> pa.Table:
+    """A zero-row table of the required columns of derived table ``name``."""
+    from aveas_format.io.arrow import arrow_schema
+    from aveas_format.schema.tables import TABLES
+
+    spec = TABLES[name]
+    return arrow_schema(spec, [c.name for c in spec.required]).empty_table()
+
+
 def derive(rec, only: str | Iterable[str] | None = None, **params: Any) -> list[str]:
     """Run derivations on ``rec`` in dependency order; return the names of those run.
 
@@ -220,7 +229,10 @@ def derive(rec, only: str | Iterable[str] | None = None, **params: Any) -> list[
         for tname, cols in d.needs.items():
             check_columns(get_table(rec, tname), tname, cols, n)
         inputs = {t: table_sha256(rec, t) for t in d.inputs() if get_table(rec, t) is not None}
-        table = d.fn(rec, p)
+        if not rec.states.num_rows and d.table != "events":
+            table = _empty(d.table)  # nothing to derive from: an empty table, documented as usual
+        else:
+            table = d.fn(rec, p)
         method = d.method(p)
         pdump = p.model_dump(mode="json")
         info = {"derivation": n, "method": method, "version": d.version, "parameters": pdump,

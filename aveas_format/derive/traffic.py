@@ -126,7 +126,7 @@ def compute(rec, p: TrafficParams) -> pa.Table:
     rs = _num(s, "road_s")
     sx, sy = _num(s, "x_std", 0.0), _num(s, "y_std", 0.0)
     sigma = np.sqrt(0.5 * (sx ** 2 + sy ** 2))
-    on = np.array([r is not None for r in road_np]) & np.isfinite(lane) & np.isfinite(rs)
+    on = np.array([r is not None for r in road_np], dtype=bool) & np.isfinite(lane) & np.isfinite(rs)
     roads = sorted({r for r in road_np[on]})
     rmap = {r: i for i, r in enumerate(roads)}
     lane_i = np.where(on, np.nan_to_num(lane).astype(np.int64), 0)
@@ -194,7 +194,7 @@ def local_density(rec, radius_m: float = 50.0) -> pa.Table:
     road_np = np.asarray(road.to_numpy(zero_copy_only=False), dtype=object)
     lane = _num(s, "lane_id")
     rs = _num(s, "road_s")
-    on = np.array([r is not None for r in road_np]) & np.isfinite(lane) & np.isfinite(rs)
+    on = np.array([r is not None for r in road_np], dtype=bool) & np.isfinite(lane) & np.isfinite(rs)
     idx = np.flatnonzero(on)
     count = np.full(len(t), -1, np.int64)
     if len(idx):

@@ -452,15 +452,9 @@ def _located(msg: str, files: list[str]) -> bool:
 
 
 #: known bugs outside this test's reach (reported, not fixed here): (source, case) -> reason
-KNOWN = {
-    ("ros2-mcap", "dup_time"): "ros2-mcap drops a repeated (participant, stamp) without a warning",
-    ("ros2-mcap", "same_time"): "ros2-mcap drops a repeated (participant, stamp) without a warning",
-}
+KNOWN: dict[tuple[str, str], str] = {}
 #: ... of the derivations, on a successful conversion
-KNOWN_DERIVE = {
-    ("openlabel", "empty"): "derive on a zero-row recording: encroachments IndexError, "
-                            "interactions/events/traffic TypeError (bitwise_and)",
-}
+KNOWN_DERIVE: dict[tuple[str, str], str] = {}
 
 
 def _params(known: dict) -> list:
