@@ -48,6 +48,25 @@ class EncroachmentsParams(Params):
     max_gap_s: float = Field(1.0, gt=0, description="a longer gap between samples ends a visit")
 
 
+def _axis_interval(nx, ny, pmin, pmax, cx, cy, c, s, L, W, vx, vy):
+    """Times (lo, hi) during which a box (centre cx, cy; heading cos/sin c, s; length L, width W)
+    moving at (vx, vy) overlaps a polygon's projection [pmin, pmax] on the axis (nx, ny):
+    ``pmin - r <= d0 + dv t <= pmax + r`` with the box's half-extent r on that axis."""
+    r = 0.5 * L * np.abs(nx * c + ny * s) + 0.5 * W * np.abs(-nx * s + ny * c)
+    d0 = nx * cx + ny * cy
+    dv = nx * vx + ny * vy
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = (pmin - r - d0) / dv
+        b = (pmax + r - d0) / dv
+    lo = np.where(dv > 0, a, b)
+    hi = np.where(dv > 0, b, a)
+    still = dv == 0
+    inside = (d0 >= pmin - r) & (d0 <= pmax + r)
+    lo = np.where(still, np.where(inside, -np.inf, np.inf), lo)
+    hi = np.where(still, np.where(inside, np.inf, -np.inf), hi)
+    return lo, hi
+
+
 def _box_polygon_interval(cx, cy, h, L, W, vx, vy, poly_xy):
     """Contact interval ``[t_in, t_out]`` (relative times) of rectangles translating with (vx, vy)
     against one static convex polygon (vertices ``poly_xy``), elementwise; ``t_in > t_out`` where
@@ -62,21 +81,8 @@ def _box_polygon_interval(cx, cy, h, L, W, vx, vy, poly_xy):
     t_out = np.full(cx.shape, np.inf)
     axes = [(c, s), (-s, c)] + [(np.full(cx.shape, n[0]), np.full(cx.shape, n[1])) for n in normals]
     for nx, ny in axes:
-        r = 0.5 * L * np.abs(nx * c + ny * s) + 0.5 * W * np.abs(-nx * s + ny * c)
         proj = P[:, 0][None, :] * nx[:, None] + P[:, 1][None, :] * ny[:, None]
-        pmin, pmax = proj.min(1), proj.max(1)
-        d0 = nx * cx + ny * cy
-        dv = nx * vx + ny * vy
-        # overlap: pmin - r <= d0 + dv t <= pmax + r
-        with np.errstate(divide="ignore", invalid="ignore"):
-            a = (pmin - r - d0) / dv
-            b = (pmax + r - d0) / dv
-        lo = np.where(dv > 0, a, b)
-        hi = np.where(dv > 0, b, a)
-        still = dv == 0
-        inside = (d0 >= pmin - r) & (d0 <= pmax + r)
-        lo = np.where(still, np.where(inside, -np.inf, np.inf), lo)
-        hi = np.where(still, np.where(inside, np.inf, -np.inf), hi)
+        lo, hi = _axis_interval(nx, ny, proj.min(1), proj.max(1), cx, cy, c, s, L, W, vx, vy)
         t_in = np.maximum(t_in, lo)
         t_out = np.minimum(t_out, hi)
     return t_in, t_out
@@ -452,18 +458,7 @@ def _box_polygons_interval(cx, cy, h, L, W, vx, vy, area, P, normals, nvalid):
         else:
             nx, ny = normals[area, j, 0], normals[area, j, 1]
             pmin, pmax = nmin[area, j], nmax[area, j]
-        r = 0.5 * L * np.abs(nx * c + ny * s) + 0.5 * W * np.abs(-nx * s + ny * c)
-        d0 = nx * cx + ny * cy
-        dv = nx * vx + ny * vy
-        with np.errstate(divide="ignore", invalid="ignore"):
-            a = (pmin - r - d0) / dv
-            b = (pmax + r - d0) / dv
-        lo = np.where(dv > 0, a, b)
-        hi = np.where(dv > 0, b, a)
-        still = dv == 0
-        inside = (d0 >= pmin - r) & (d0 <= pmax + r)
-        lo = np.where(still, np.where(inside, -np.inf, np.inf), lo)
-        hi = np.where(still, np.where(inside, np.inf, -np.inf), hi)
+        lo, hi = _axis_interval(nx, ny, pmin, pmax, cx, cy, c, s, L, W, vx, vy)
         if j >= 0:
             valid = nvalid[area, j]
             lo = np.where(valid, lo, -np.inf)
