@@ -365,3 +365,217 @@ def check_mcap(path: object) -> None:
                     raise FormatError(f"MCAP {index} points at byte {target}, where no "
                                       f"{_MCAP_NAMES[op]} record starts",
                                       path=path, byte=at)
+
+
+# --- streamed JSON (ijson): limits, error messages and a structural pre-scan ---
+
+def check_json_size(path: object, *, max_bytes: int = MAX_BULK_JSON_BYTES) -> int:
+    """The size of the file at ``path``; a :class:`FormatError` (as :func:`load_json` gives) where it
+    exceeds ``max_bytes``, a :class:`RecordingIOError` where it cannot be read."""
+    import os
+
+    try:
+        size = os.stat(path).st_size
+    except OSError as e:
+        raise RecordingIOError(f"cannot read: {e.strerror or e}", path=path) from None
+    if size > max_bytes:
+        raise FormatError(f"JSON of {size:,} bytes exceeds the limit of {max_bytes:,}", path=path)
+    return size
+
+
+class CountingReader:
+    """A binary reader that counts the bytes handed out (where a streaming parser has got to) and
+    can splice a byte range out of the file, replacing it by other bytes."""
+
+    def __init__(self, f: IO[bytes], skip: tuple[int, int, bytes] | None = None, *,
+                 start: int = 0, stop: int | None = None) -> None:
+        self.f, self.pos, self.skip, self.stop = f, start, skip, stop
+        if start:
+            f.seek(start)
+
+    def read(self, n: int = -1) -> bytes:
+        if n is None or n < 0:
+            n = 1 << 62
+        if self.stop is not None:
+            n = max(0, min(n, self.stop - self.pos))
+            if n == 0:
+                return b""
+        if self.skip is not None:
+            start, end, repl = self.skip
+            if self.pos < start:
+                data = self.f.read(min(n, start - self.pos))
+                self.pos += len(data)
+                return data
+            if self.pos == start:
+                self.f.seek(end)
+                self.pos = end
+                self.skip = None
+                return repl
+        data = self.f.read(n)
+        self.pos += len(data)
+        return data
+
+
+def stream_json_error(e: Exception, *, path: object, consumed: int | None = None) -> FormatError:
+    """A :class:`FormatError` naming the file (and how far the parser had read) for an error of
+    ``ijson`` (yajl's message names the problem and shows the text around it)."""
+    arg = e.args[0] if e.args else ""
+    msg = arg.decode("utf-8", "replace") if isinstance(arg, bytes) else str(e)
+    lines = [ln.strip() for ln in msg.splitlines() if ln.strip()]
+    if any("UTF8" in ln or "UTF-8" in ln for ln in lines[:1]):
+        where = f" (in the bytes before byte {consumed:,})" if consumed else ""
+        return FormatError(f"not UTF-8 text{where}", path=path)
+    head = lines[0] if lines else type(e).__name__
+    context = lines[1] if len(lines) > 1 and "(right here)" not in lines[1] else None
+    text = f"broken JSON: {head.rstrip('.')}"
+    if context:
+        text += f", near {context[:80]!r}"
+    if consumed is not None:
+        text += f" (within the 64 KiB before byte {consumed:,})"
+    return FormatError(text, path=path)
+
+
+_WS = b" \t\r\n"
+
+
+class _Peek:
+    """Single bytes at any offset of a binary file, without moving its read position."""
+
+    def __init__(self, f: IO[bytes]) -> None:
+        self.f = f
+        try:
+            self.fd: int | None = f.fileno()
+        except (AttributeError, OSError, ValueError):
+            self.fd = None
+
+    def get(self, n: int, pos: int) -> bytes:
+        import os
+
+        if self.fd is not None:
+            return os.pread(self.fd, n, pos)
+        here = self.f.tell()
+        self.f.seek(pos)
+        try:
+            return self.f.read(n)
+        finally:
+            self.f.seek(here)
+
+    def skip_ws(self, i: int) -> tuple[int, int | None]:
+        """The first offset from ``i`` that is no JSON whitespace and its byte (None at the end)."""
+        while True:
+            data = self.get(64, i)
+            if not data:
+                return i, None
+            for k, c in enumerate(data):
+                if c not in _WS:
+                    return i + k, c
+            i += len(data)
+
+
+def scan_json_member(f: IO[bytes], key: str, member: str, *, chunk: int = 1024 * 1024
+                     ) -> tuple[int, tuple[int, int] | None, bool]:
+    """A vectorised structural pass over the JSON text in the binary file ``f`` (read from its
+    start in chunks; meant for text that a streaming parser checks anyway): returns
+    ``(depth, span, ok)``. ``depth`` is the deepest nesting of containers, ``span`` the byte range
+    ``[start, end)`` of the object value of ``doc[key][member]`` (None where there is none) and
+    ``ok`` False where the structure is not as expected (unbalanced brackets or strings, ``key`` or
+    ``member`` appearing twice): then use another reader. Memory: a few arrays of one chunk."""
+    import numpy as np
+
+    peek = _Peek(f)
+    kpat = json.dumps(key).encode()
+    mpat = json.dumps(member).encode()
+    look = max(len(kpat), len(mpat))
+    depth = maxd = parity = 0  # parity: 1 while inside a string
+    key_val: int | None = None  # where the value of doc[key] starts, and its end
+    key_end: int | None = None
+    mem_val: int | None = None
+    mem_end: int | None = None
+    found_key = found_mem = 0
+    off = 0
+    f.seek(0)
+    while True:
+        buf = f.read(chunk)
+        if not buf:
+            break
+        n = len(buf)
+
+        def byte_at(j: int, buf: bytes = buf, off: int = off, n: int = n) -> int:
+            return buf[j - off] if off <= j < off + n else peek.get(1, j)[0]
+
+        a = np.frombuffer(buf, np.uint8)
+        q = np.flatnonzero(a == 34)
+        if len(q):
+            esc = np.zeros(len(q), bool)
+            prev = np.zeros(len(q), bool)
+            pos = q > 0
+            prev[pos] = a[q[pos] - 1] == 92
+            if q[0] == 0 and off > 0:
+                prev[0] = byte_at(off - 1) == 92
+            for i in np.flatnonzero(prev):
+                j = off + int(q[i]) - 1
+                run = 0
+                while j >= 0 and byte_at(j) == 92:
+                    run += 1
+                    j -= 1
+                esc[i] = run % 2 == 1
+            q = q[~esc]
+        br = np.flatnonzero((a == 123) | (a == 125) | (a == 91) | (a == 93))
+        inside = ((parity + np.searchsorted(q, br)) & 1).astype(bool)
+        s = br[~inside]
+        d = np.where((a[s] == 123) | (a[s] == 91), 1, -1)
+        dep = depth + np.cumsum(d)
+        if len(dep):
+            if dep.min() < 0:
+                return maxd, None, False
+            maxd = max(maxd, int(dep.max()))
+        # candidate keys starting in this chunk
+        text = buf + peek.get(look, off + n)
+        cands = []
+        for pat, level in ((kpat, 1), (mpat, 2)):
+            i = text.find(pat)
+            while 0 <= i < n:
+                cands.append((i, level, pat))
+                i = text.find(pat, i + 1)
+        for loc, level, pat in sorted(cands):
+            k = int(np.searchsorted(q, loc))
+            if k >= len(q) or q[k] != loc or (parity + k) & 1:
+                continue  # not an opening quote outside a string
+            b = int(np.searchsorted(s, loc))
+            if (int(dep[b - 1]) if b else depth) != level:
+                continue
+            j, c = peek.skip_ws(off + loc + len(pat))
+            if c != 58:  # ':' - else a string value, not a key
+                continue
+            j, c = peek.skip_ws(j + 1)
+            p = off + loc
+            if key_val is not None and key_end is None and key_val < p:  # closed before p?
+                idx = np.flatnonzero((dep == 1) & (s > key_val - off) & (s < loc))
+                if len(idx):
+                    key_end = off + int(s[idx[0]]) + 1
+            if level == 1:
+                found_key += 1
+                key_val = j if c == 123 else None
+            elif key_val is not None and p > key_val and (key_end is None or p < key_end):
+                found_mem += 1
+                mem_val = j if c == 123 else None
+        # where the values found so far end
+        if key_val is not None and key_end is None and key_val < off + n:
+            idx = np.flatnonzero((dep == 1) & (s > key_val - off))
+            if len(idx):
+                key_end = off + int(s[idx[0]]) + 1
+        if mem_val is not None and mem_end is None and mem_val < off + n:
+            idx = np.flatnonzero((dep == 2) & (s > mem_val - off))
+            if len(idx):
+                mem_end = off + int(s[idx[0]]) + 1
+        if len(dep):
+            depth = int(dep[-1])
+        parity = (parity + len(q)) & 1
+        off += n
+    f.seek(0)
+    if depth != 0 or parity or found_key > 1 or found_mem > 1:
+        return maxd, None, False
+    if mem_val is not None and (mem_end is None or key_end is None or mem_end > key_end):
+        return maxd, None, False
+    span = (mem_val, mem_end) if mem_val is not None else None
+    return maxd, span, True

@@ -69,7 +69,8 @@ import pyarrow as pa
 from aveas_format.converters.common import load_map_bytes, source_block
 from aveas_format.converters.registry import ConverterOptions, ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
-from aveas_format.safeio import MAX_BULK_JSON_BYTES, load_json
+from aveas_format.safeio import (MAX_BULK_JSON_BYTES, MAX_JSON_DEPTH, CountingReader, check_json_size,
+                                 load_json, scan_json_member, stream_json_error)
 from aveas_format.schema.taxonomy import CLASSES, LIGHTING, ROAD_SURFACE
 
 #: the namespace of everything this library adds to an OpenLABEL file
@@ -946,6 +947,83 @@ def _load_doc(path: Path) -> dict[str, Any]:
     return doc["openlabel"]
 
 
+class _NotStrictJSON(Exception):
+    """The file uses Python's JSON extensions (NaN, Infinity), which ``json.loads`` reads and the
+    streaming parser refuses: read it whole instead (as before the import streamed)."""
+
+
+def _stream_error(e: Exception, path: Path, consumed: int) -> Exception:
+    arg = e.args[0] if e.args else ""
+    msg = arg.decode("utf-8", "replace") if isinstance(arg, bytes) else str(arg)
+    if "invalid char" in msg and re.search(r"NaN|Infinity", msg):
+        return _NotStrictJSON()
+    return stream_json_error(e, path=path, consumed=consumed)
+
+
+def _check_stream(path: Path) -> None:
+    """Parse the whole file without building anything: the file's JSON error, if it has one."""
+    import ijson
+
+    with open(path, "rb") as f:
+        r = CountingReader(f)
+        try:
+            for _ in ijson.basic_parse(r, use_float=True):
+                pass
+        except ijson.JSONError as e:
+            raise _stream_error(e, path, r.pos) from None
+
+
+def _stream_doc(path: Path):
+    """Open an OpenLABEL file for a streamed import: ``(ol, frames)`` with ``ol`` the object under
+    ``openlabel`` without its frames (read whole: metadata, objects, coordinate systems, ...) and
+    ``frames`` a function that yields ``(frame key, frame)`` one at a time in file order (ijson);
+    ``frames`` is None where the file was read whole (no frames object, or a file the structural
+    pre-scan does not take: then :func:`_load_doc`, the same limits and errors).
+
+    The size limit is checked before reading; the nesting limit on the structural pre-scan
+    (:func:`aveas_format.safeio.scan_json_member`, which also finds the byte range of the frames).
+    Broken JSON and non-UTF-8 text give a :class:`FormatError` naming the file."""
+    import ijson
+
+    check_json_size(path, max_bytes=MAX_BULK_JSON_BYTES)
+    try:
+        f = open(path, "rb")  # noqa: SIM115 - closed below
+    except OSError as e:
+        raise RecordingIOError(f"cannot read: {e.strerror or e}", path=path) from None
+    with f:
+        head = f.read(4096).lstrip(b" \t\r\n")
+        if not head.startswith(b"{"):  # empty, a BOM, UTF-16/32, not an object: read it whole
+            return _load_doc(path), None
+        depth, span, ok = scan_json_member(f, "openlabel", "frames")
+    if not ok:  # broken (e.g. truncated: refused here in bounded memory) or a member repeats
+        _check_stream(path)
+    if not ok or depth == MAX_JSON_DEPTH:  # (at the limit: the exact check of load_json decides)
+        return _load_doc(path), None
+    if depth > MAX_JSON_DEPTH:
+        raise FormatError(f"JSON nested deeper than {MAX_JSON_DEPTH} levels", path=path)
+    with open(path, "rb") as f:
+        r = CountingReader(f, (span[0], span[1], b"{}") if span else None)
+        try:
+            doc = dict(ijson.kvitems(r, "", use_float=True))
+        except ijson.JSONError as e:
+            raise _stream_error(e, path, r.pos) from None
+    if not isinstance(doc.get("openlabel"), dict):
+        raise FormatError("not an OpenLABEL file: no top-level 'openlabel' object", path=path)
+    ol = doc["openlabel"]
+    if span is None:
+        return ol, None
+
+    def frames():
+        with open(path, "rb") as fr:
+            rd = CountingReader(fr, start=span[0], stop=span[1])
+            try:
+                yield from ijson.kvitems(rd, "", use_float=True)
+            except ijson.JSONError as e:
+                raise _stream_error(e, path, rd.pos) from None
+
+    return ol, frames
+
+
 def _attrs(od: dict[str, Any] | None) -> dict[str, list[dict[str, Any]]]:
     """name -> list of items (all types), in file order."""
     out: dict[str, list] = defaultdict(list)
@@ -1067,6 +1145,304 @@ def _utm_crs(name: str, cs_type: str | None) -> str | None:
     return f"EPSG:{32700 + zone if south else 32600 + zone}"
 
 
+# -- the frames: one at a time into column chunks ------------------------------------------------
+
+#: boxes per chunk of the column buffers (Python lists -> numpy arrays)
+_CHUNK = 4096
+_FLOAT_COLS = ("cub_ts", "px", "py", "pz", "yaw", "vu", "vv", "yr", "au", "av", "x_std", "y_std",
+               "z_std", "heading_std", "vu_std", "vv_std", "yr_std", "au_std", "av_std", "road_s",
+               "road_t", "lane_position", *LIGHTS)
+_OBJ_COLS = ("csroot", "road_id", "lane_id")
+
+
+def _as_obj(lst: list) -> np.ndarray:
+    a = np.empty(len(lst), object)
+    for i, v in enumerate(lst):
+        a[i] = v
+    return a
+
+
+def _as_float(lst: list) -> np.ndarray:
+    """float64 where every value converts (as ``np.asarray(values, float)`` would), else the values
+    as an object array (converted, or refused with the same error, where the column is used)."""
+    try:
+        a = np.asarray(lst, float)
+        if a.ndim == 1:
+            return a
+    except (TypeError, ValueError, OverflowError):
+        pass
+    return _as_obj(lst)
+
+
+def _ext_rep(vals: list) -> tuple:
+    """One extension column (values or ``_MISSING``): ``("f", values, present, null)`` where all
+    present values are floats or null, else ``("o", object array)``."""
+    n = len(vals)
+    if all(v is _MISSING or v is None or type(v) is float for v in vals):
+        return ("f", np.fromiter((v if type(v) is float else np.nan for v in vals), float, n),
+                np.fromiter((v is not _MISSING for v in vals), bool, n),
+                np.fromiter((v is None for v in vals), bool, n))
+    return ("o", _as_obj(vals))
+
+
+def _rep_list(rep: tuple) -> list:
+    if rep[0] == "o":
+        return rep[1].tolist()
+    _, fv, pr, nl = rep
+    return [(None if b else v) if p else _MISSING for v, p, b in zip(fv.tolist(), pr, nl)]
+
+
+def _rep_take(rep: tuple, idx: np.ndarray) -> tuple:
+    return (rep[0], *(a[idx] for a in rep[1:]))
+
+
+def _rep_concat(reps: list[tuple]) -> tuple:
+    if all(r[0] == "f" for r in reps):
+        return ("f", *(np.concatenate([r[i] for r in reps]) for i in (1, 2, 3)))
+    return ("o", np.concatenate([r[1] if r[0] == "o" else _as_obj(_rep_list(r)) for r in reps]))
+
+
+class _FrameData:
+    """What :class:`_FrameRows` collected, in sorted frame order."""
+
+    def __init__(self, **kw: Any) -> None:
+        self.__dict__.update(kw)
+
+
+class _FrameRows:
+    """The frames of an OpenLABEL file, one ``(key, frame)`` at a time in any order: per box the
+    values of one state in column chunks (numpy), per frame its key, timestamp and object ids.
+    :meth:`finish` sorts the rows by frame key (numerically where digits, as the dict path always
+    did) and, where a key repeats, keeps the last frame of that key (as ``json.loads`` does)."""
+
+    def __init__(self, objects: Any, cs: _Frames, path: Path | None) -> None:
+        self.objects, self.cs, self.path = objects, cs, path
+        self.keys: list = []  # per frame occurrence (file order)
+        self.stamps: list = []
+        self.frame_uids: list[np.ndarray] = []
+        self.uid_index: dict[str, int] = {}
+        self.buf: dict[str, list] = {c: [] for c in (*_FLOAT_COLS, *_OBJ_COLS, "uidx", "occ",
+                                                     "hv", "hr")}
+        self.ext_buf: list = []
+        self.chunks: list[dict[str, np.ndarray]] = []
+        self.ext_chunks: list[tuple[int, dict[str, tuple]]] = []
+        self.sizes: list[tuple[int, str, list]] = []
+        self.interior: list[tuple[int, str, dict]] = []
+        self._need_size: dict[str, bool] = {}
+
+    def _needs_size(self, u: str) -> bool:
+        need = self._need_size.get(u)
+        if need is None:
+            try:
+                obj = self.objects.get(u) or {}
+                need = _first(_attrs(obj.get("object_data")), "dimensions/size") is None
+            except Exception:  # noqa: BLE001 - a damaged object: keep the sizes (they are unused)
+                need = True
+            self._need_size[u] = need
+        return need
+
+    def _flush(self) -> None:
+        b = self.buf
+        if not b["occ"]:
+            return
+        ch = {c: _as_float(b[c]) for c in _FLOAT_COLS}
+        ch.update({c: _as_obj(b[c]) for c in _OBJ_COLS})
+        ch["uidx"] = np.asarray(b["uidx"], np.int64)
+        ch["occ"] = np.asarray(b["occ"], np.int64)
+        ch["hv"] = np.asarray(b["hv"], bool)
+        ch["hr"] = np.asarray(b["hr"], bool)
+        self.chunks.append(ch)
+        es = self.ext_buf
+        keys = dict.fromkeys(c for e in es if e for c in e)
+        self.ext_chunks.append((len(es), {c: _ext_rep([e.get(c, _MISSING) if e else _MISSING
+                                                       for e in es]) for c in keys}))
+        for v in b.values():
+            v.clear()
+        self.ext_buf = []
+
+    def add(self, k: Any, fr: Any) -> None:
+        j = len(self.keys)
+        fr = fr or {}
+        ts = (fr.get("frame_properties") or {}).get("timestamp")
+        if isinstance(ts, str):
+            try:
+                ts = float(ts)
+            except ValueError:
+                try:
+                    from aveas_format.schema.metadata import timestamp_ns
+
+                    ts = timestamp_ns(_to_utc(ts)) / 1e9
+                except (ValueError, FormatError):
+                    ts = None
+        self.keys.append(k)
+        self.stamps.append(ts)
+        ui = self.uid_index
+        fobjs = fr.get("objects") or {}
+        self.frame_uids.append(np.fromiter((ui.setdefault(u, len(ui)) for u in fobjs), np.int64))
+        cs, path, b = self.cs, self.path, self.buf
+        transforms = (fr.get("frame_properties") or {}).get("transforms")
+        for u, oif in fobjs.items():
+            od = (oif or {}).get("object_data") or {}
+            cubs = od.get("cuboid") or []
+            if isinstance(cubs, dict):
+                cubs = [cubs]
+            cub = next((c for c in cubs if c.get("name") == "bounding_box"), cubs[0] if cubs else None)
+            if cub is None or cub.get("val") is None:
+                continue
+            v = [float(a) for a in cub["val"]]
+            csname = cub.get("coordinate_system")
+            if len(v) == 9 and v[3] == 0.0 and v[4] == 0.0 and not csname:
+                # the common case (the AVEAS profile): a level box in the root frame
+                pw, yaw, dims = v[:3], v[5], v[6:9]
+            elif len(v) == 10:
+                R = _quat_matrix(v[3], v[4], v[5], v[6])
+                dims = v[7:10]
+            elif len(v) == 9:
+                R = _euler_matrix(v[3], v[4], v[5])
+                dims = v[6:9]
+            else:
+                raise FormatError(f"frame {k} object {u}: cuboid with {len(v)} values", path=path)
+            if len(v) == 10 or not (v[3] == 0.0 and v[4] == 0.0 and not csname):
+                M = cs.to_root(csname, transforms)
+                Rw = M[:3, :3] @ R
+                pw = M[:3, :3] @ np.asarray(v[:3]) + M[:3, 3]
+                yaw = math.atan2(Rw[1, 0], Rw[0, 0])
+            attrs = _attrs(od)
+            b["uidx"].append(ui[u])
+            b["occ"].append(j)
+            cub_ts = _first(_attrs(cub.get("attributes")), "timestamp")
+            b["cub_ts"].append(float(cub_ts) if isinstance(cub_ts, (int, float)) else np.nan)
+            b["px"].append(pw[0])
+            b["py"].append(pw[1])
+            b["pz"].append(pw[2] - dims[2] / 2.0)
+            b["yaw"].append(yaw)
+            b["csroot"].append(cs.root_of(csname))
+            if self._needs_size(u):
+                self.sizes.append((j, u, dims))
+            vel = _first(attrs, "velocity")
+            acc = _first(attrs, "acceleration")
+            b["vu"].append(vel[0] if vel else np.nan)
+            b["vv"].append(vel[1] if vel else np.nan)
+            b["yr"].append(vel[5] if vel and len(vel) > 5 else np.nan)
+            b["hv"].append(vel is not None)
+            b["au"].append(acc[0] if acc else np.nan)
+            b["av"].append(acc[1] if acc else np.nan)
+            bsd = _first(attrs, "bounding_box/ustddev")
+            b["x_std"].append(bsd[0] if bsd else np.nan)
+            b["y_std"].append(bsd[1] if bsd else np.nan)
+            b["z_std"].append(bsd[2] if bsd else np.nan)
+            b["heading_std"].append(bsd[5] if bsd else np.nan)
+            vsd = _first(attrs, "velocity/ustddev")
+            b["vu_std"].append(vsd[0] if vsd else np.nan)
+            b["vv_std"].append(vsd[1] if vsd else np.nan)
+            b["yr_std"].append(vsd[5] if vsd and len(vsd) > 5 else np.nan)
+            asd = _first(attrs, "acceleration/ustddev")
+            b["au_std"].append(asd[0] if asd else np.nan)
+            b["av_std"].append(asd[1] if asd else np.nan)
+            road = _first(attrs, "used_road_link", _first(attrs, "open_drive/road_id"))
+            lrc = _first(attrs, "open_drive/local_road_coordinates")
+            lane = _first(attrs, "open_drive/lane_id")
+            b["hr"].append(road is not None and lrc is not None)
+            b["road_id"].append(str(road) if road is not None and lrc is not None else None)
+            b["road_s"].append(lrc[0] if road is not None and lrc else np.nan)
+            b["road_t"].append(lrc[1] if road is not None and lrc else np.nan)
+            try:
+                b["lane_id"].append(int(str(_enum_value(lane))) if lane is not None and road is not None else None)
+            except ValueError:
+                b["lane_id"].append(None)
+            b["lane_position"].append(_first(attrs, "open_drive/lane_position", np.nan))
+            for c, name in LIGHTS.items():
+                bl = _first(attrs, name)
+                b[c].append(np.nan if bl is None else float(bool(bl)))
+            # interior (the lateral flag carries the longitudinal name: the second one is lateral)
+            lon_items = attrs.get(_LONGITUDINAL) or []
+            lat_items = attrs.get("interior/automated_control/lateral") or []
+            irow = {}
+            if lon_items:
+                irow["automation_longitudinal_p"] = float(bool(lon_items[0].get("val")))
+            if lat_items:
+                irow["automation_lateral_p"] = float(bool(lat_items[0].get("val")))
+            elif len(lon_items) > 1:
+                irow["automation_lateral_p"] = float(bool(lon_items[1].get("val")))
+            for c, name in (("steering_angle", "interior/steering_angle"),
+                            ("steering_angle_std", "interior/steering_angle/ustddev"),
+                            ("brake_pedal", "interior/brake_pedal"),
+                            ("accelerator_pedal", "interior/accelerator_pedal"),
+                            ("gear", "interior/gear")):
+                val = _first(attrs, name)
+                if val is not None:
+                    irow[c] = val
+            if irow:
+                self.interior.append((j, u, irow))
+            any(n.startswith("impact/") for n in attrs)  # (as before: attribute names are text)
+            e = cub.get(EXT)
+            self.ext_buf.append(e if isinstance(e, dict) else None)
+            if len(b["occ"]) >= _CHUNK:
+                self._flush()
+
+    def finish(self) -> _FrameData:
+        self._flush()
+        last: dict = {}
+        for j, k in enumerate(self.keys):
+            last[k] = j
+        fkeys = sorted(last, key=lambda k: (int(k) if str(k).lstrip("-").isdigit() else 0, str(k)))
+        rank_of = np.full(len(self.keys), -1, np.int64)
+        for r, k in enumerate(fkeys):
+            rank_of[last[k]] = r
+        names = list(self.uid_index)
+        seen: dict[str, None] = {}
+        objects = self.objects
+        for k in fkeys:
+            for i in self.frame_uids[last[k]].tolist():
+                u = names[i]
+                if u not in objects and u not in seen:
+                    seen[u] = None
+        rows: dict[str, np.ndarray] = {}
+        ext: dict[str, tuple] = {}
+        has_vel, has_road = True, False
+        if self.chunks:
+            rank = rank_of[np.concatenate([ch.pop("occ") for ch in self.chunks])]
+            sel = np.flatnonzero(rank >= 0)
+            sel = sel[np.argsort(rank[sel], kind="stable")]
+            ident = len(sel) == len(rank) and bool((sel == np.arange(len(sel))).all())
+            for c in list(self.chunks[0]):  # one column at a time, freeing its chunks
+                a = np.concatenate([ch.pop(c) for ch in self.chunks])
+                rows[c] = a if ident else a[sel]
+            self.chunks = []
+            rows["rank"] = rank if ident else rank[sel]
+            hv, hr = rows.pop("hv"), rows.pop("hr")
+            has_vel, has_road = bool(hv.all()), bool(hr.any())
+            keys = dict.fromkeys(c for _, reps in self.ext_chunks for c in reps)
+            for c in keys:
+                parts = [reps.get(c) or ("f", np.full(m, np.nan), np.zeros(m, bool), np.zeros(m, bool))
+                         for m, reps in self.ext_chunks]
+                ext[c] = _rep_concat(parts) if ident else _rep_take(_rep_concat(parts), sel)
+        else:
+            rows = {c: np.asarray([]) for c in (*_FLOAT_COLS, *_OBJ_COLS)}
+            rows["uidx"] = rows["rank"] = np.asarray([], np.int64)
+        sizes: dict[str, list] = defaultdict(list)
+        for j, u, dims in self.sizes:
+            if rank_of[j] >= 0:
+                sizes[u].append(dims)
+
+        def interior(pid_of: dict, time_of: dict) -> dict[str, list]:
+            out: dict[str, list] = defaultdict(list)
+            keep = sorted((int(rank_of[j]), i) for i, (j, _, _) in enumerate(self.interior)
+                          if rank_of[j] >= 0)
+            for r, i in keep:
+                _, u, irow = self.interior[i]
+                out["participant_id"].append(pid_of[u])
+                out["time"].append(time_of[fkeys[r]])
+                for c in ("automation_longitudinal_p", "automation_lateral_p", "steering_angle",
+                          "steering_angle_std", "brake_pedal", "accelerator_pedal", "gear"):
+                    out[c].append(irow.get(c))
+            return out
+
+        return _FrameData(fkeys=fkeys, stamps={k: self.stamps[last[k]] for k in fkeys},
+                          seen_in_frames=list(seen), uid_names=names, rows=rows, ext=ext,
+                          sizes=sizes, interior=interior, has_vel=has_vel, has_road=has_road)
+
+
 # -- the import ----------------------------------------------------------------------------------
 
 def _find_map(path: Path, ol: dict[str, Any], map_source, options) -> bytes:
@@ -1091,6 +1467,32 @@ def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImport
     if len(inputs) != 1:
         raise FormatError(f"openlabel: expected one input file, got {len(inputs)}")
     path = Path(inputs[0])
+    import importlib.util
+
+    if importlib.util.find_spec("ijson") is None:  # a dependency; without it: read whole, as before
+        warnings.warn("ijson is not installed: the OpenLABEL file is read whole (pip install ijson)",
+                      stacklevel=2)
+    else:
+        with _no_gc():
+            try:
+                try:
+                    ol, frames = _stream_doc(path)
+                    map_bytes = _find_map(path, ol, map_source, options)
+                    return _openlabel_to_recording(ol, map_bytes, options=options, path=path,
+                                                   frames=frames)
+                except (_NotStrictJSON, FormatError) as e:
+                    if isinstance(e, _NotStrictJSON) or str(e.message).startswith(
+                            ("broken JSON", "not UTF-8", "JSON ")):
+                        raise
+                    _check_stream(path)
+                    raise
+                except Exception:
+                    # as when the file was parsed whole: a JSON error anywhere in the file comes
+                    # before what the frames read so far made of it (checked only on failure)
+                    _check_stream(path)
+                    raise
+            except _NotStrictJSON:
+                pass
     with _no_gc():
         ol = _load_doc(path)
     map_bytes = _find_map(path, ol, map_source, options)
@@ -1104,7 +1506,9 @@ def openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=None
 
 
 def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=None,
-                            path: Path | None = None):
+                            path: Path | None = None, frames=None):
+    """``frames``: a function yielding ``(key, frame)`` in file order (the streamed import); else
+    the frames are ``ol["frames"]``. Both go through :class:`_FrameRows`."""
     from aveas_format.georef import LocalFrame, parse_crs
     from aveas_format.io.builder import build_recording, wrap_angle
     from aveas_format.opendrive import load_map
@@ -1132,24 +1536,16 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
                           "a usable CRS", path=path)
     local = LocalFrame(crs, offset=net.header.offset, warn=False)
 
-    # ---- frames and time ----------------------------------------------------------------------
-    frames = ol.get("frames") or {}
-    fkeys = sorted(frames, key=lambda k: (int(k) if str(k).lstrip("-").isdigit() else 0, str(k)))
+    # ---- frames (streamed one at a time, or from the dict) and time ---------------------------
+    objects = ol.get("objects") or {}
+    cs = _Frames(ol.get("coordinate_systems"))
+    acc = _FrameRows(objects, cs, path)
+    for k, fr in (frames() if frames is not None else (ol.get("frames") or {}).items()):
+        acc.add(k, fr)
+    fd = acc.finish()
+    fkeys = fd.fkeys
     fnum = {k: (int(k) if str(k).lstrip("-").isdigit() else i) for i, k in enumerate(fkeys)}
-    stamps = {}
-    for k in fkeys:
-        ts = ((frames[k] or {}).get("frame_properties") or {}).get("timestamp")
-        if isinstance(ts, str):
-            try:
-                ts = float(ts)
-            except ValueError:
-                try:
-                    from aveas_format.schema.metadata import timestamp_ns
-
-                    ts = timestamp_ns(_to_utc(ts)) / 1e9
-                except (ValueError, FormatError):
-                    ts = None
-        stamps[k] = ts
+    stamps = fd.stamps
     start_time = None
     if ext and ext.get("start_time"):
         start_time = ext["start_time"]
@@ -1170,15 +1566,8 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     start_time = options.start_time or start_time or "1970-01-01T00:00:00Z"
 
     # ---- objects -----------------------------------------------------------------------------
-    objects = ol.get("objects") or {}
-    cs = _Frames(ol.get("coordinate_systems"))
     uids = list(objects)
-    seen_in_frames = []
-    for k in fkeys:
-        for u in ((frames[k] or {}).get("objects") or {}):
-            if u not in objects and u not in seen_in_frames:
-                seen_in_frames.append(u)
-    uids += seen_in_frames
+    uids += fd.seen_in_frames
     obj_ext = {}
     for u in uids:
         size_items = _attrs((objects.get(u) or {}).get("object_data")).get("dimensions/size") or []
@@ -1193,116 +1582,15 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
 
     # ---- per object and frame ---------------------------------------------------------------
     root_crs = options.world_crs
-    rows: dict[str, list] = defaultdict(list)
-    state_ext: list[dict[str, Any] | None] = []
-    sizes: dict[str, list] = defaultdict(list)
-    interior: dict[str, list] = defaultdict(list)
-    impact_seen = False
-    has_vel = True
-    has_road = False
-    for k in fkeys:
-        fr = frames[k] or {}
-        transforms = (fr.get("frame_properties") or {}).get("transforms")
-        for u, oif in (fr.get("objects") or {}).items():
-            od = (oif or {}).get("object_data") or {}
-            cubs = od.get("cuboid") or []
-            if isinstance(cubs, dict):
-                cubs = [cubs]
-            cub = next((c for c in cubs if c.get("name") == "bounding_box"), cubs[0] if cubs else None)
-            if cub is None or cub.get("val") is None:
-                continue
-            v = [float(a) for a in cub["val"]]
-            csname = cub.get("coordinate_system")
-            if len(v) == 9 and v[3] == 0.0 and v[4] == 0.0 and not csname:
-                # the common case (the AVEAS profile): a level box in the root frame
-                pw, yaw, dims = v[:3], v[5], v[6:9]
-            elif len(v) == 10:
-                R = _quat_matrix(v[3], v[4], v[5], v[6])
-                dims = v[7:10]
-            elif len(v) == 9:
-                R = _euler_matrix(v[3], v[4], v[5])
-                dims = v[6:9]
-            else:
-                raise FormatError(f"frame {k} object {u}: cuboid with {len(v)} values", path=path)
-            if len(v) == 10 or not (v[3] == 0.0 and v[4] == 0.0 and not csname):
-                M = cs.to_root(csname, transforms)
-                Rw = M[:3, :3] @ R
-                pw = M[:3, :3] @ np.asarray(v[:3]) + M[:3, 3]
-                yaw = math.atan2(Rw[1, 0], Rw[0, 0])
-            attrs = _attrs(od)
-            q = pid_of[u]
-            rows["participant_id"].append(q)
-            rows["time"].append(time_of[k])
-            cub_ts = _first(_attrs(cub.get("attributes")), "timestamp")
-            rows["cub_ts"].append(float(cub_ts) if isinstance(cub_ts, (int, float)) else np.nan)
-            rows["px"].append(pw[0])
-            rows["py"].append(pw[1])
-            rows["pz"].append(pw[2] - dims[2] / 2.0)
-            rows["yaw"].append(yaw)
-            rows["csroot"].append(cs.root_of(csname))
-            sizes[u].append(dims)
-            vel = _first(attrs, "velocity")
-            acc = _first(attrs, "acceleration")
-            rows["vu"].append(vel[0] if vel else np.nan)
-            rows["vv"].append(vel[1] if vel else np.nan)
-            rows["yr"].append(vel[5] if vel and len(vel) > 5 else np.nan)
-            has_vel &= vel is not None
-            rows["au"].append(acc[0] if acc else np.nan)
-            rows["av"].append(acc[1] if acc else np.nan)
-            bsd = _first(attrs, "bounding_box/ustddev")
-            rows["x_std"].append(bsd[0] if bsd else np.nan)
-            rows["y_std"].append(bsd[1] if bsd else np.nan)
-            rows["z_std"].append(bsd[2] if bsd else np.nan)
-            rows["heading_std"].append(bsd[5] if bsd else np.nan)
-            vsd = _first(attrs, "velocity/ustddev")
-            rows["vu_std"].append(vsd[0] if vsd else np.nan)
-            rows["vv_std"].append(vsd[1] if vsd else np.nan)
-            rows["yr_std"].append(vsd[5] if vsd and len(vsd) > 5 else np.nan)
-            asd = _first(attrs, "acceleration/ustddev")
-            rows["au_std"].append(asd[0] if asd else np.nan)
-            rows["av_std"].append(asd[1] if asd else np.nan)
-            road = _first(attrs, "used_road_link", _first(attrs, "open_drive/road_id"))
-            lrc = _first(attrs, "open_drive/local_road_coordinates")
-            lane = _first(attrs, "open_drive/lane_id")
-            has_road |= road is not None and lrc is not None
-            rows["road_id"].append(str(road) if road is not None and lrc is not None else None)
-            rows["road_s"].append(lrc[0] if road is not None and lrc else np.nan)
-            rows["road_t"].append(lrc[1] if road is not None and lrc else np.nan)
-            try:
-                rows["lane_id"].append(int(str(_enum_value(lane))) if lane is not None and road is not None else None)
-            except ValueError:
-                rows["lane_id"].append(None)
-            rows["lane_position"].append(_first(attrs, "open_drive/lane_position", np.nan))
-            for c, name in LIGHTS.items():
-                b = _first(attrs, name)
-                rows[c].append(None if b is None else float(bool(b)))
-            # interior (the lateral flag carries the longitudinal name: the second one is lateral)
-            lon_items = attrs.get(_LONGITUDINAL) or []
-            lat_items = attrs.get("interior/automated_control/lateral") or []
-            irow = {}
-            if lon_items:
-                irow["automation_longitudinal_p"] = float(bool(lon_items[0].get("val")))
-            if lat_items:
-                irow["automation_lateral_p"] = float(bool(lat_items[0].get("val")))
-            elif len(lon_items) > 1:
-                irow["automation_lateral_p"] = float(bool(lon_items[1].get("val")))
-            for c, name in (("steering_angle", "interior/steering_angle"),
-                            ("steering_angle_std", "interior/steering_angle/ustddev"),
-                            ("brake_pedal", "interior/brake_pedal"),
-                            ("accelerator_pedal", "interior/accelerator_pedal"),
-                            ("gear", "interior/gear")):
-                val = _first(attrs, name)
-                if val is not None:
-                    irow[c] = val
-            if irow:
-                interior["participant_id"].append(q)
-                interior["time"].append(time_of[k])
-                for c in ("automation_longitudinal_p", "automation_lateral_p", "steering_angle",
-                          "steering_angle_std", "brake_pedal", "accelerator_pedal", "gear"):
-                    interior[c].append(irow.get(c))
-            impact_seen |= any(n.startswith("impact/") for n in attrs)
-            e = cub.get(EXT)
-            state_ext.append(e if isinstance(e, dict) else None)
+    rows = fd.rows
+    uidx, rank = rows.pop("uidx"), rows.pop("rank")
+    rows["participant_id"] = np.asarray([pid_of.get(u, 0) for u in fd.uid_names])[uidx] \
+        if fd.uid_names else np.asarray([])
+    rows["time"] = np.asarray([time_of[k] for k in fkeys], float)[rank] if fkeys else np.asarray([])
+    state_ext = fd.ext
+    sizes = fd.sizes
+    interior = fd.interior(pid_of, time_of)
+    has_vel, has_road = fd.has_vel, fd.has_road
     n = len(rows["time"])
     if n == 0 and uids:
         raise FormatError("no frame has a cuboid for any object", path=path)
@@ -1312,7 +1600,7 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     cts = np.asarray(rows["cub_ts"], float)
     if ext is None and n and np.isfinite(cts).all() and cts.min() > 1e8:
         t0 = float(cts.min())
-        rows["time"] = (cts - t0).tolist()
+        rows["time"] = cts - t0
         if not options.start_time:
             start_time = datetime.fromtimestamp(t0, tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
     # one state per participant and time: later duplicates are dropped, with a warning
@@ -1324,8 +1612,8 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
             warnings.warn(f"OpenLABEL: {n - len(keep)} boxes repeat a (participant, time) and were "
                           "dropped", stacklevel=2)
             for c in list(rows):
-                rows[c] = [rows[c][i] for i in keep]
-            state_ext = [state_ext[i] for i in keep]
+                rows[c] = rows[c][keep]
+            state_ext = {c: _rep_take(r, keep) for c, r in state_ext.items()}
             n = len(keep)
 
     # ---- world -> local frame -----------------------------------------------------------------
@@ -1377,12 +1665,13 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
         if np.isfinite(su).any() and "ax" in states:
             states["ax_std"], states["ay_std"] = _body_std(su, sv, None, -heading)
     for c in LIGHTS:
-        if any(v is not None for v in rows[c]):
-            states[c] = pa.array(rows[c], pa.float32())
+        a = np.asarray(rows[c], float)
+        if not np.isnan(a).all():
+            states[c] = pa.array(a, mask=np.isnan(a), type=pa.float32())
     use_file = options.road_coordinates == "file" or (options.road_coordinates == "auto" and has_road)
     if use_file and n:
-        states["road_id"] = pa.array(rows["road_id"], pa.string())
-        states["lane_id"] = pa.array(rows["lane_id"], pa.int16())
+        states["road_id"] = pa.array(rows["road_id"].tolist(), pa.string())
+        states["lane_id"] = pa.array(rows["lane_id"].tolist(), pa.int16())
         states["road_s"] = np.asarray(rows["road_s"], float)
         states["road_t"] = np.asarray(rows["road_t"], float)
         lp = np.asarray(rows["lane_position"], float)
@@ -1401,17 +1690,30 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
             states["lane_offset"] = lo
 
     # extension: exact values of this library's own export
-    if any(e is not None for e in state_ext):
-        keys = sorted({c for e in state_ext if e for c in e})
-        for c in keys:
+    if state_ext:
+        for c in sorted(state_ext):
             base = states.get(c)
-            vals = [e.get(c, _MISSING) if e else _MISSING for e in state_ext]
+            rep = state_ext[c]
+            if rep[0] == "f":  # floats (the common case): vectorised, same result as below
+                _, fv, pr, nl = rep
+                if base is None and (pr & ~nl).any():
+                    states[c] = pa.array(fv, mask=~(pr & ~nl), type=pa.float64())
+                    continue
+                if (isinstance(base, np.ndarray) and base.dtype == np.float64 and base.ndim == 1
+                        and len(base) == len(fv)):
+                    null = np.where(pr, nl, np.isnan(base))
+                    if not null.all():
+                        states[c] = pa.array(np.where(pr, fv, base), mask=null, type=pa.float64())
+                        continue
+            vals = _rep_list(rep)
             if base is None:
                 states[c] = pa.array([None if v is _MISSING else v for v in vals])
             else:
                 cur = base.to_pylist() if isinstance(base, (pa.Array, pa.ChunkedArray)) else [
                     None if (isinstance(b, float) and math.isnan(b)) else b for b in np.asarray(base).tolist()]
                 states[c] = pa.array([cur[i] if v is _MISSING else v for i, v in enumerate(vals)])
+    del rows, state_ext  # the per-box columns are in ``states`` now
+    fd.rows = fd.ext = None
     cols_keep = (ext or {}).get("states_columns")
     if cols_keep:
         for c in list(states):
