@@ -48,6 +48,20 @@ class EncroachmentsParams(Params):
     max_gap_s: float = Field(1.0, gt=0, description="a longer gap between samples ends a visit")
 
 
+def track_directions(S, tracks: list[slice]) -> tuple[np.ndarray, np.ndarray]:
+    """Per track: the mean direction of travel (heading where it stands) and the 99th percentile
+    of the deviations from it."""
+    mean_dir = np.empty(len(tracks))
+    spread = np.empty(len(tracks))
+    for m, sl in enumerate(tracks):  # per track (few), each vectorised over its samples
+        moving = np.hypot(S.vx[sl], S.vy[sl]) > 0.5
+        d = np.where(moving, np.arctan2(S.vy[sl], S.vx[sl]), S.h[sl])
+        mean_dir[m] = np.angle(np.exp(1j * d).mean())
+        dev = np.abs(np.angle(np.exp(1j * (d - mean_dir[m]))))
+        spread[m] = np.quantile(dev, 0.99)
+    return mean_dir, spread
+
+
 def _axis_interval(nx, ny, pmin, pmax, cx, cy, c, s, L, W, vx, vy):
     """Times (lo, hi) during which a box (centre cx, cy; heading cos/sin c, s; length L, width W)
     moving at (vx, vy) overlaps a polygon's projection [pmin, pmax] on the axis (nx, ny):
@@ -221,14 +235,7 @@ def _swept_areas(S, tracks: list[slice], p: EncroachmentsParams
     a_idx, b_idx = tree.query(paths)  # overlapping bounding boxes; exact test below
     # directions of travel per track (mean and largest deviation): pairs that travel the same way
     # everywhere cannot cross at min_angle and are skipped before any geometry
-    mean_dir = np.empty(len(tracks))
-    spread = np.empty(len(tracks))
-    for m, sl in enumerate(tracks):
-        moving = np.hypot(S.vx[sl], S.vy[sl]) > 0.5
-        d = np.where(moving, np.arctan2(S.vy[sl], S.vx[sl]), S.h[sl])
-        mean_dir[m] = np.angle(np.exp(1j * d).mean())
-        dev = np.abs(np.angle(np.exp(1j * (d - mean_dir[m]))))
-        spread[m] = np.quantile(dev, 0.99)
+    mean_dir, spread = track_directions(S, tracks)
     keep = a_idx < b_idx
     dd = np.abs(np.angle(np.exp(1j * (mean_dir[a_idx] - mean_dir[b_idx]))))
     keep &= dd + spread[a_idx] + spread[b_idx] >= p.min_angle

@@ -14,7 +14,8 @@ import pytest
 import shapely
 
 from aveas_format.derive import derive
-from aveas_format.derive.encroachments import EncroachmentsParams, occupancy, swept_path
+from aveas_format.derive.encroachments import (EncroachmentsParams, occupancy, swept_path,
+                                               track_directions)
 from aveas_format.derive.interactions import InteractionsParams, _Samples
 
 from .helpers import VECTORS, recording, road_map, vectors
@@ -48,14 +49,7 @@ def _reference(rec, p: EncroachmentsParams) -> pa.Table:
         paths = [swept_path(S.x[sl], S.y[sl], S.L[sl.start], S.W[sl.start]) for sl in tracks]
         tree = shapely.STRtree(paths)
         a_idx, b_idx = tree.query(paths, predicate="intersects")
-        mean_dir = np.empty(len(tracks))
-        spread = np.empty(len(tracks))
-        for m, sl in enumerate(tracks):
-            moving = np.hypot(S.vx[sl], S.vy[sl]) > 0.5
-            d = np.where(moving, np.arctan2(S.vy[sl], S.vx[sl]), S.h[sl])
-            mean_dir[m] = np.angle(np.exp(1j * d).mean())
-            dev = np.abs(np.angle(np.exp(1j * (d - mean_dir[m]))))
-            spread[m] = np.quantile(dev, 0.99)
+        mean_dir, spread = track_directions(S, tracks)
         keep = a_idx < b_idx
         dd = np.abs(np.angle(np.exp(1j * (mean_dir[a_idx] - mean_dir[b_idx]))))
         keep &= dd + spread[a_idx] + spread[b_idx] >= p.min_angle
