@@ -79,7 +79,7 @@ def bench_kinematics(n_tracks: int = 1000, n_steps: int = 3000) -> list[dict]:
     ones = np.full(n, 0.1)
     zero = np.zeros(n)
     for q, label in ((1.0, "fixed q = 1 m²/s⁵"),
-                     ("auto", "q by maximum likelihood per window (9 decades + 1 bisection)")):
+                     ("auto", "q by maximum likelihood per window (12 decades + 1 bisection)")):
         dt, _ = _timed(lambda: estimate(pid, t, x, y, ones, ones, zero, None,
                                         KinematicsParams(jerk_density=q)))
         rows.append(_row("derive.kinematics", n, dt, f"CA Kalman + RTS, {label}; "

@@ -54,8 +54,9 @@ class KinematicsParams(Params):
         "(m²/s⁵), or 'auto': chosen per track window and axis by maximum likelihood over "
         "`jerk_density_grid`")
     jerk_density_grid: tuple[float, ...] = Field(
-        (1e-6, 1e-5, 1e-4, 1e-3, 0.01, 0.1, 1.0, 10.0, 100.0), min_length=1,
-        description="candidate values of q for 'auto' (m²/s⁵), evaluated in one batched pass")
+        (1e-15, 1e-12, 1e-9, 1e-6, 1e-5, 1e-4, 1e-3, 0.01, 0.1, 1.0, 10.0, 100.0), min_length=1,
+        description="candidate values of q for 'auto' (m²/s⁵), evaluated in one batched pass; "
+        "the smallest stands for 'no jerk' (the likelihood is flat towards 0)")
     jerk_density_refine: int = Field(
         1, ge=0, le=4, description="'auto': bisections in log q around each window's best "
         "candidate (two more candidates per bisection) before the parabolic refinement")
@@ -586,7 +587,9 @@ def _ml_jerk_density(z: np.ndarray, r: np.ndarray, dt: np.ndarray, first: np.nda
     fine, step = lik.fine, 1 << p.jerk_density_refine
     coarse = np.arange(0, len(fine), step)
     ll = lik(coarse)  # (windows, nq, 2)
-    best = np.argmax(ll, axis=1)
+    # ties (within 1e-6: a flat likelihood towards q = 0) go to the smallest candidate, so the
+    # choice on the plateau does not depend on rounding
+    best = np.argmax(ll >= ll.max(axis=1, keepdims=True) - 1e-6, axis=1)
     c = coarse[best]
     pad = np.full((ll.shape[0], 1, 2), -np.inf)
     llp = np.concatenate([pad, ll, pad], axis=1)

@@ -26,12 +26,14 @@ def _np(t, c):
 
 
 def test_highway_accuracy(highway):
-    """sigma 0.1 m at 25 Hz: RMS acceleration error <= 0.3 m/s^2; the std covers the truth at
-    least 68 % of the time. The scene's IDM motion is far smoother than a white-jerk process
-    between occasional jerk steps, so inside a track, where the smoother is symmetric and its bias
-    on smooth motion cancels, the error is about the noise part of the posterior variance (1/6 of
-    it) and the coverage is conservative (~0.88 with 'auto'; it was ~0.95 with the old grid
-    floored at 0.01 m²/s⁵); see docs/derive.md."""
+    """sigma 0.1 m at 25 Hz: RMS acceleration error <= 0.3 m/s^2; the std covers the truth about
+    68 % of the time where the white-jerk model holds, conservatively where the truth is smoother.
+    Lateral motion without a lane change has no jerk at all: the likelihood is flat towards
+    q = 0 and the grid's floor (1e-9 m²/s⁵, 'no jerk') gives a calibrated band (~0.68; it was
+    ~0.90 with the floor at 1e-6). The longitudinal IDM motion is far smoother than a white-jerk
+    process between occasional jerk steps, so inside a track, where the smoother is symmetric
+    and its bias on smooth motion cancels, the error is about the noise part of the posterior
+    variance and the band is conservative (~0.85-0.89); see docs/derive.md."""
     rec, truth = highway
     k = rec.derived["kinematics"]
     assert np.array_equal(_np(k, "participant_id"), truth["participant_id"])
@@ -42,7 +44,16 @@ def test_highway_accuracy(highway):
     rms = np.sqrt(np.mean(err[ok] ** 2))
     assert rms <= 0.3
     cover = np.mean(np.abs(err[ok]) <= std[ok])
-    assert 0.8 <= cover <= 0.93
+    assert 0.7 <= cover <= 0.86
+    # the road runs along x: ay is the lateral acceleration; tracks without a lane change
+    pid = truth["participant_id"]
+    changes = np.zeros(pid.max() + 1, bool)
+    np.logical_or.at(changes, pid, np.abs(truth["ay"]) > 1e-9)
+    straight = ~changes[pid] & np.isfinite(_np(k, "ay"))
+    lat = np.abs(_np(k, "ay") - truth["ay"])[straight] <= _np(k, "ay_std")[straight]
+    assert 0.6 <= lat.mean() <= 0.76
+    lon = np.abs(_np(k, "ax") - truth["ax"]) <= _np(k, "ax_std")
+    assert 0.8 <= lon[np.isfinite(_np(k, "ax"))].mean() <= 0.93
     speed = np.hypot(truth["vx"], truth["vy"])
     assert np.sqrt(np.nanmean((_np(k, "speed") - speed) ** 2)) < 0.1
 
