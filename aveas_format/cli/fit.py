@@ -25,47 +25,46 @@ def _range(text: str | None) -> tuple[float, float] | None:
     return a, b
 
 
-@fit_app.command("desired-speed")
-@handle_errors
-def desired_speed(
-    recordings: list[Path] = typer.Argument(..., help="Recordings with the observed vehicles."),
-    output: Path = typer.Option(..., "--output", "-o", help="Output directory (runs.jsonl/.parquet, "
-                                "best.json, figures); an existing one is resumed."),
-    config: Path = typer.Option(None, "--config", "-c", help="Scenario TOML of the simulation "
-                                "(default: the paper's autobahn)."),
-    restarts: int = typer.Option(100, "--restarts", "-r", min=1, help="Nelder-Mead starts."),
-    workers: int = typer.Option(1, "--workers", "-w", help="Local processes (0 = one per core)."),
-    scheduler: str = typer.Option(None, "--scheduler", help="Dask scheduler address tcp://... "
-                                  "(overrides --workers)."),
-    maxfev: int = typer.Option(120, "--maxfev", help="Evaluations per restart at most."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the starting points."),
-    bandwidth: str = typer.Option("silverman", "--bandwidth", help="KDE bandwidth: silverman, "
-                                  "scott or a number (km/h)."),
-    bounds: str = typer.Option(None, "--bounds", help="JSON {\"mu_car\": [lo, hi], ...} (km/h)."),
-    road: str = typer.Option(None, "--road", help="Use only samples on this road id."),
-    s_range: str = typer.Option(None, "--s-range", help="Use only samples with road_s in MIN,MAX."),
-) -> None:
-    """Fit the desired-speed distributions N(mu, sigma) of cars and trucks to the per-vehicle mean
-    speeds of recordings (the paper's experiment)."""
-    import numpy as np
-
+def _recorded(recordings: list[Path], metric: str, road: str | None, s_range: str | None,
+              options: dict[str, float]) -> dict[str, list[float]]:
     import aveas_format
-    from aveas_format.fit import FitConfig, fit_desired_speed, recorded_mean_speeds
-    from aveas_format.sim.scenario import Scenario
+    from aveas_format.fit import METRICS
 
     classes = ("car", "truck")
-    rec_speeds: dict[str, list] = {c: [] for c in classes}
+    values: dict[str, list] = {c: [] for c in classes}
     for p in recordings:
-        v = recorded_mean_speeds(aveas_format.open(p), classes=classes, road_id=road,
-                                 s_range=_range(s_range))
+        v = METRICS[metric].recorded(aveas_format.open(p), classes=classes, road_id=road,
+                                     s_range=_range(s_range), **options)
         for c in classes:
-            rec_speeds[c].extend(v[c].tolist())
-    used = [c for c in classes if rec_speeds[c]]
+            values[c].extend(v[c].tolist())
+    return values
+
+
+def _fit(recordings: list[Path], output: Path, config: Path | None, metric: str,
+         parameters: list[str] | None, options: dict[str, float], restarts: int, workers: int,
+         scheduler: str | None, maxfev: int, seed: int, bandwidth: str, bounds: str | None,
+         road: str | None, s_range: str | None) -> None:
+    import numpy as np
+    from pydantic import ValidationError
+
+    from aveas_format.fit import METRICS, FitConfig, fit_desired_speed
+    from aveas_format.io.reader import format_validation_error
+    from aveas_format.sim.scenario import Scenario
+
+    if metric not in METRICS:
+        raise fail(f"--metric {metric!r}: expected one of {', '.join(METRICS)}", EXIT_USAGE)
+    values = _recorded(recordings, metric, road, s_range, options)
+    used = [c for c in values if values[c]]
     if not used:
-        raise fail("the recordings hold no cars or trucks", EXIT_USAGE)
-    err.print("recorded: " + ", ".join(f"{len(rec_speeds[c])} {c}s" for c in used))
+        raise fail(f"the recordings hold no cars or trucks with a {metric} value", EXIT_USAGE)
+    err.print(f"recorded {metric}: " + ", ".join(f"{len(values[c])} {c}s" for c in used))
+    if parameters:
+        parameters = [n for n in parameters if n.partition("_")[2] in used]
+        if not parameters:
+            raise fail("no parameter of a class with recorded values", EXIT_USAGE)
     cfg: dict = {"scenario": Scenario.from_toml(config) if config else Scenario(),
-                 "classes": used, "restarts": restarts, "maxfev": maxfev, "seed": seed}
+                 "classes": used, "restarts": restarts, "maxfev": maxfev, "seed": seed,
+                 "metric": metric, "parameters": parameters, "metric_options": options}
     try:
         cfg["bandwidth"] = float(bandwidth)
     except ValueError:
@@ -76,8 +75,11 @@ def desired_speed(
         except (json.JSONDecodeError, TypeError, AttributeError):
             raise fail(f"--bounds {bounds!r}: expected JSON like {{\"mu_car\": [100, 160]}}",
                        EXIT_USAGE) from None
-    fc = FitConfig(**cfg)
-    res = fit_desired_speed({c: np.asarray(rec_speeds[c]) for c in used}, fc, workers=workers,
+    try:
+        fc = FitConfig(**cfg)
+    except ValidationError as e:
+        raise fail(f"fit configuration: {format_validation_error(e)}", EXIT_USAGE) from None
+    res = fit_desired_speed({c: np.asarray(values[c]) for c in used}, fc, workers=workers,
                             scheduler=scheduler, outdir=output, progress=True)
     for f in res.failed:
         err.print(f"failed: {f}")
@@ -87,3 +89,85 @@ def desired_speed(
     out.print(json.dumps({"best": {n: round(b[n], 3) for n in fc.names}, "neg_log_likelihood":
                           round(b["fun"], 4), "restarts": len(res.runs)}, indent=2))
     err.print(f"wrote {output}/runs.parquet, best.json, fit_histogram.png, fit_parameters.png")
+
+
+_RECORDINGS = typer.Argument(..., help="Recordings with the observed vehicles.")
+_OUTPUT = typer.Option(..., "--output", "-o", help="Output directory (runs.jsonl/.parquet, "
+                       "best.json, figures); an existing one is resumed.")
+_CONFIG = typer.Option(None, "--config", "-c", help="Scenario TOML of the simulation (default: the "
+                       "paper's autobahn).")
+_WORKERS = typer.Option(1, "--workers", "-w", help="Local processes (0 = one per core).")
+_SCHEDULER = typer.Option(None, "--scheduler", help="Dask scheduler address tcp://... (overrides "
+                          "--workers).")
+_MAXFEV = typer.Option(120, "--maxfev", help="Evaluations per restart at most.")
+_SEED = typer.Option(0, "--seed", help="Seed of the starting points.")
+_ROAD = typer.Option(None, "--road", help="Use only samples on this road id.")
+_S_RANGE = typer.Option(None, "--s-range", help="Use only samples with road_s in MIN,MAX.")
+
+
+@fit_app.command("desired-speed")
+@handle_errors
+def desired_speed(
+    recordings: list[Path] = _RECORDINGS,
+    output: Path = _OUTPUT,
+    config: Path = _CONFIG,
+    restarts: int = typer.Option(100, "--restarts", "-r", min=1, help="Nelder-Mead starts."),
+    workers: int = _WORKERS,
+    scheduler: str = _SCHEDULER,
+    maxfev: int = _MAXFEV,
+    seed: int = _SEED,
+    bandwidth: str = typer.Option("silverman", "--bandwidth", help="KDE bandwidth: silverman, "
+                                  "scott or a number (km/h)."),
+    bounds: str = typer.Option(None, "--bounds", help="JSON {\"mu_car\": [lo, hi], ...} (km/h)."),
+    road: str = _ROAD,
+    s_range: str = _S_RANGE,
+) -> None:
+    """Fit the desired-speed distributions N(mu, sigma) of cars and trucks to the per-vehicle mean
+    speeds of recordings (the paper's experiment)."""
+    _fit(recordings, output, config, "mean_speed", None, {}, restarts, workers, scheduler, maxfev,
+         seed, bandwidth, bounds, road, s_range)
+
+
+@fit_app.command("car-following")
+@handle_errors
+def car_following(
+    recordings: list[Path] = _RECORDINGS,
+    output: Path = _OUTPUT,
+    param: list[str] = typer.Option(None, "--param", "-p", help="Parameter to fit, NAME_CLASS: "
+                                    "cc0_car ... cc9_truck, mu_car, sigma_car (repeatable; "
+                                    "default cc1_car and cc1_truck)."),
+    metric: str = typer.Option("time_headway", "--metric", "-m", help="Per-vehicle metric: "
+                               "time_headway, min_ttc, a_lon_std or mean_speed."),
+    config: Path = _CONFIG,
+    restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Nelder-Mead starts."),
+    workers: int = _WORKERS,
+    scheduler: str = _SCHEDULER,
+    maxfev: int = _MAXFEV,
+    seed: int = _SEED,
+    bandwidth: str = typer.Option("silverman", "--bandwidth", help="KDE bandwidth: silverman, "
+                                  "scott or a number (in the metric's unit)."),
+    bounds: str = typer.Option(None, "--bounds", help="JSON {\"cc1_car\": [lo, hi], ...} "
+                               "(default: the paper's W99 ranges)."),
+    option: list[str] = typer.Option(None, "--option", help="Metric option NAME=VALUE (max_thw, "
+                                     "min_speed, max_closing, max_ttc, min_following)."),
+    road: str = _ROAD,
+    s_range: str = _S_RANGE,
+) -> None:
+    """Fit Wiedemann 99 car-following parameters (e.g. cc1, the headway time) to per-vehicle
+    car-following metrics of recordings: time headway, minimum TTC or acceleration spread
+    (the paper's outlook)."""
+    options: dict[str, float] = {}
+    for o in option or []:
+        k, sep, v = o.partition("=")
+        try:
+            options[k.strip()] = float(v)
+        except ValueError:
+            raise fail(f"--option {o!r}: expected NAME=NUMBER", EXIT_USAGE) from None
+        if not sep or k.strip() not in _METRIC_OPTIONS:
+            raise fail(f"--option {o!r}: expected one of {', '.join(_METRIC_OPTIONS)}=NUMBER",
+                       EXIT_USAGE)
+    _fit(recordings, output, config, metric, param or ["cc1_car", "cc1_truck"], options, restarts, workers, scheduler, maxfev,
+         seed, bandwidth, bounds, road, s_range)
+
+
+_METRIC_OPTIONS = ("max_thw", "min_speed", "max_closing", "max_ttc", "min_following")

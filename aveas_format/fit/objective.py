@@ -9,8 +9,9 @@ units, unlike scikit-learn's ``bandwidth="silverman"``, which assumes unit-scale
 ``1.06 sd n^(-1/5)``, or a fixed number.
 
 Metrics are pluggable (:class:`Metric`): each turns a recording and a simulation result into values
-per class. ``mean_speed`` (per-vehicle mean speed, km/h) is the paper's; TTC, THW or acceleration
-distributions plug in the same way.
+per class. ``mean_speed`` (per-vehicle mean speed, km/h) is the paper's; ``time_headway``,
+``min_ttc`` and ``a_lon_std`` (:mod:`aveas_format.fit.metrics`) are the car-following metrics of
+its outlook.
 """
 
 from __future__ import annotations
@@ -88,13 +89,16 @@ def neg_log_likelihood(recorded: dict[str, np.ndarray], simulated: dict[str, np.
 
 @dataclass(frozen=True)
 class Metric:
-    """A per-class metric: ``recorded(rec, **kw)`` and ``simulated(sim_result)`` both return
-    ``{class: values}``."""
+    """A per-class metric: ``recorded(rec, **kw)`` and ``simulated(sim_result, **options)`` both
+    return ``{class: values}``."""
 
     name: str
     unit: str
     recorded: Callable[..., dict[str, np.ndarray]]
     simulated: Callable[..., dict[str, np.ndarray]]
+    #: the simulated side reads the run's recording (converted FCD), not only the FCD
+    needs_recording: bool = False
+    label: str = ""
 
 
 def recorded_mean_speeds(rec, *, classes: tuple[str, ...] = ("car", "truck"), road_id: str | None = None,
@@ -131,10 +135,23 @@ def recorded_mean_speeds(rec, *, classes: tuple[str, ...] = ("car", "truck"), ro
     return out
 
 
-def _sim_mean_speeds(res) -> dict[str, np.ndarray]:
-    return res.mean_speeds()
+def _sim_mean_speeds(res, **options) -> dict[str, np.ndarray]:
+    return res.mean_speeds(**options)
 
 
-METRICS: dict[str, Metric] = {
-    "mean_speed": Metric("mean_speed", "km/h", recorded_mean_speeds, _sim_mean_speeds),
-}
+def _metrics() -> dict[str, Metric]:
+    from aveas_format.fit.metrics import recorded_metric, simulated_metric
+
+    out = {"mean_speed": Metric("mean_speed", "km/h", recorded_mean_speeds, _sim_mean_speeds,
+                                label="mean speed")}
+    for name, unit, label in (("time_headway", "s", "median time headway while following"),
+                              ("min_ttc", "s", "minimum TTC to the lane leader"),
+                              ("a_lon_std", "m/s²", "std of the longitudinal acceleration")):
+        out[name] = Metric(name, unit, recorded_metric(name), simulated_metric(name),
+                           needs_recording=True, label=label)
+    return out
+
+
+#: the metrics by name: ``mean_speed`` (the paper's) and the car-following metrics of
+#: :mod:`aveas_format.fit.metrics`
+METRICS: dict[str, Metric] = _metrics()

@@ -25,10 +25,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from aveas_format.fit.objective import neg_log_likelihood
-from aveas_format.sim.scenario import Scenario
+from aveas_format.sim.scenario import W99_DEFAULTS, W99_RANGES, Scenario
 
 
 class FitConfig(BaseModel):
@@ -43,6 +43,12 @@ class FitConfig(BaseModel):
         "mu_car": (100.0, 160.0), "sigma_car": (2.0, 30.0),
         "mu_truck": (70.0, 110.0), "sigma_truck": (1.0, 15.0)},
         description="per parameter mu_<class>/sigma_<class>, km/h")
+    metric: str = Field("mean_speed", description="the per-vehicle metric compared (fit.METRICS)")
+    parameters: list[str] | None = Field(None, description="what is fitted: mu_<class>, "
+                                         "sigma_<class> (km/h) or a W99 parameter cc0..cc9 as "
+                                         "<cc>_<class>; default mu and sigma of every class")
+    metric_options: dict[str, float] = Field(default_factory=dict, description="options of the "
+                                             "metric (e.g. max_thw, min_following)")
     restarts: int = Field(100, ge=1)
     seed: int = Field(0, description="seed of the starting points")
     maxfev: int = Field(120, ge=5, description="evaluations per restart at most")
@@ -52,15 +58,51 @@ class FitConfig(BaseModel):
     bandwidth: str | float = "silverman"
     kde_backend: str = "numpy"
 
+    @model_validator(mode="after")
+    def _check(self) -> FitConfig:
+        from aveas_format.fit.objective import METRICS
+
+        if self.metric not in METRICS:
+            raise ValueError(f"metric {self.metric!r}: expected one of {', '.join(METRICS)}")
+        for n in self.names:
+            kind, _, c = n.partition("_")
+            if kind not in ("mu", "sigma", *W99_DEFAULTS) or c not in self.classes:
+                raise ValueError(f"parameter {n!r}: expected mu_<class>, sigma_<class> or "
+                                 f"cc0_<class> ... cc9_<class> with a class of {self.classes}")
+        return self
+
     @property
     def names(self) -> list[str]:
+        if self.parameters:
+            return list(self.parameters)
         return [f"{p}_{c}" for c in self.classes for p in ("mu", "sigma")]
 
     def bounds_array(self) -> np.ndarray:
-        try:
-            return np.array([self.bounds[n] for n in self.names], np.float64)
-        except KeyError as e:
-            raise ValueError(f"bounds lack {e.args[0]!r} (need {self.names})") from None
+        """(lower, upper) per parameter: ``bounds``, else the paper's W99 range for cc0..cc9."""
+        out = []
+        for n in self.names:
+            kind = n.partition("_")[0]
+            if n in self.bounds:
+                out.append(sorted(self.bounds[n]))
+            elif kind in W99_RANGES:
+                out.append(sorted(W99_RANGES[kind]))
+            else:
+                raise ValueError(f"bounds lack {n!r} (need {self.names})")
+        return np.array(out, np.float64)
+
+    def scenario_at(self, theta: np.ndarray) -> Scenario:
+        """The scenario with the parameters set to ``theta``."""
+        sc = self.scenario.model_copy(deep=True)
+        for n, v in zip(self.names, np.asarray(theta, np.float64), strict=True):
+            kind, _, c = n.partition("_")
+            vc = sc.cls(c)
+            if kind == "mu":
+                vc.speed_mean_kmh = float(v)
+            elif kind == "sigma":
+                vc.speed_std_kmh = float(v)
+            else:
+                vc.cf_params = {**vc.cf_params, kind: float(v)}
+        return sc
 
     def starts(self) -> np.ndarray:
         b = self.bounds_array()
@@ -68,17 +110,20 @@ class FitConfig(BaseModel):
         return b[:, 0] + rng.random((self.restarts, len(b))) * (b[:, 1] - b[:, 0])
 
 
-def speeds_of(theta: np.ndarray, classes: list[str]) -> dict[str, tuple[float, float]]:
-    return {c: (float(theta[2 * i]), float(theta[2 * i + 1])) for i, c in enumerate(classes)}
+def simulated_metric(theta: np.ndarray, config: FitConfig) -> dict[str, np.ndarray]:
+    """The simulated per-vehicle metric at ``theta``."""
+    from aveas_format.fit.objective import METRICS
+    from aveas_format.sim.runner import simulate
+
+    m = METRICS[config.metric]
+    res = simulate(config.scenario_at(theta), recording=m.needs_recording)
+    return m.simulated(res, **config.metric_options)
 
 
 def evaluate(theta: np.ndarray, config: FitConfig, recorded: dict[str, np.ndarray]
              ) -> tuple[float, dict[str, np.ndarray]]:
-    """-ln L at ``theta`` (mu/sigma per class, km/h) and the simulated metric."""
-    from aveas_format.sim.runner import simulate
-
-    sc = config.scenario.with_desired_speeds(speeds_of(theta, config.classes))
-    sim = simulate(sc).mean_speeds()
+    """-ln L at ``theta`` (the parameters of ``config.names``) and the simulated metric."""
+    sim = simulated_metric(theta, config)
     return neg_log_likelihood(recorded, sim, config.bandwidth, config.kde_backend), sim
 
 
@@ -169,6 +214,10 @@ def fit_desired_speed(recorded: dict[str, np.ndarray], config: FitConfig | None 
         cfg_json = config.model_dump(mode="json")
         if cfg_path.exists():
             old = json.loads(cfg_path.read_text())
+            try:  # fills fields added since the fit was stored with their defaults
+                old = FitConfig.model_validate(old).model_dump(mode="json")
+            except ValueError:
+                pass
             if {k: v for k, v in old.items() if k != "restarts"} != \
                     {k: v for k, v in cfg_json.items() if k != "restarts"}:
                 from aveas_format.errors import AveasError
@@ -204,13 +253,12 @@ def fit_desired_speed(recorded: dict[str, np.ndarray], config: FitConfig | None 
         pq.write_table(pa.Table.from_pylist(runs), od / "runs.parquet")
         (od / "best.json").write_text(json.dumps(res.best, indent=2))
         if figures:
+            from aveas_format.fit.objective import METRICS
             from aveas_format.fit.plots import plot_histogram, plot_parameters
 
-            sc = config.scenario.with_desired_speeds(speeds_of(
-                np.array([res.best[n] for n in config.names]), config.classes))
-            from aveas_format.sim.runner import simulate
-
-            sim = simulate(sc).mean_speeds()
-            plot_histogram(recorded, sim, od / "fit_histogram.png", bandwidth=config.bandwidth)
-            plot_parameters(runs, config.classes, od / "fit_parameters.png")
+            m = METRICS[config.metric]
+            sim = simulated_metric(np.array([res.best[n] for n in config.names]), config)
+            plot_histogram(recorded, sim, od / "fit_histogram.png", bandwidth=config.bandwidth,
+                           unit=m.unit, label=m.label or m.name)
+            plot_parameters(runs, config.names, od / "fit_parameters.png")
     return res

@@ -22,12 +22,17 @@ def _plt():
 
 
 def plot_histogram(recorded: dict[str, np.ndarray], simulated: dict[str, np.ndarray], path: str | Path,
-                   *, bandwidth: str | float = "silverman", unit: str = "km/h") -> Path:
+                   *, bandwidth: str | float = "silverman", unit: str = "km/h",
+                   label: str = "mean speed") -> Path:
     plt = _plt()
     fig, ax = plt.subplots(figsize=(8, 4))
-    allv = np.concatenate([np.asarray(v) for v in [*recorded.values(), *simulated.values()] if len(v)])
-    grid = np.linspace(allv.min() - 10, allv.max() + 10, 400)
-    bins = np.arange(np.floor(allv.min() / 2.5) * 2.5, allv.max() + 2.5, 2.5)
+    parts = [np.asarray(v) for v in [*recorded.values(), *simulated.values()] if len(v)]
+    allv = np.concatenate(parts) if parts else np.zeros(1)
+    lo, hi = float(allv.min()), float(allv.max())
+    width = 2.5 if unit == "km/h" else max((hi - lo) / 40, 1e-3)  # the paper's 2.5 km/h bins
+    pad = 10.0 if unit == "km/h" else 0.1 * (hi - lo) + width
+    grid = np.linspace(lo - pad, hi + pad, 400)
+    bins = np.arange(np.floor(lo / width) * width, hi + width, width)
     for c, v in recorded.items():
         hc, kc = COLOURS.get(c, (None, None))
         if len(v):
@@ -36,7 +41,7 @@ def plot_histogram(recorded: dict[str, np.ndarray], simulated: dict[str, np.ndar
         if len(s):
             ax.plot(grid, np.exp(kde_logpdf(s, grid, bandwidth)), color=kc, lw=2,
                     label=f"simulated {c} KDE (n={len(s)})")
-    ax.set_xlabel(f"mean speed ({unit})")
+    ax.set_xlabel(f"{label} ({unit})")
     ax.set_ylabel("density")
     ax.legend()
     fig.tight_layout()
@@ -45,26 +50,60 @@ def plot_histogram(recorded: dict[str, np.ndarray], simulated: dict[str, np.ndar
     return Path(path)
 
 
-def plot_parameters(runs: list[dict], classes: list[str], path: str | Path) -> Path:
+def _axes_pairs(names: list[str]) -> list[tuple[str, str | None]]:
+    """The (x, y) parameter pairs to draw: (mu, sigma) per class, else consecutive pairs; a lone
+    parameter is drawn as end against start (y None)."""
+    pairs, rest = [], []
+    for n in names:
+        kind, _, c = n.partition("_")
+        if kind == "mu" and f"sigma_{c}" in names:
+            pairs.append((n, f"sigma_{c}"))
+        elif not (kind == "sigma" and f"mu_{c}" in names):
+            rest.append(n)
+    pairs += [(rest[i], rest[i + 1] if i + 1 < len(rest) else None) for i in range(0, len(rest), 2)]
+    return pairs
+
+
+def plot_parameters(runs: list[dict], names: list[str], path: str | Path) -> Path:
+    """Start (grey) and end (colour) parameters of every restart, the best as a red star."""
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(5, 5))
-    for k, c in enumerate(classes):
+    pairs = _axes_pairs(names)
+    same_axes = all(x.startswith("mu_") for x, _ in pairs)  # the paper's figure: one (mu, sigma) plot
+    n_ax = 1 if same_axes else len(pairs)
+    fig, axes = plt.subplots(1, n_ax, figsize=(5 * n_ax, 5), squeeze=False)
+    best = min(runs, key=lambda r: r["fun"]) if runs else None
+    for k, (xn, yn) in enumerate(pairs):
+        ax = axes[0, 0 if same_axes else k]
+        c = xn.partition("_")[2]
         col = COLOURS.get(c, ("tab:red",))[0]
-        ax.scatter([r[f"start_mu_{c}"] for r in runs], [r[f"start_sigma_{c}"] for r in runs], s=12,
-                   color="0.6", label="starts" if k == 0 else None)
-        ax.scatter([r[f"mu_{c}"] for r in runs], [r[f"sigma_{c}"] for r in runs], s=18, color=col,
-                   label=f"end ({c})")
+
+        if yn is None:  # one parameter: where each restart started and ended
+            ax.scatter([r[f"start_{xn}"] for r in runs], [r[xn] for r in runs], s=18, color=col,
+                       label="restarts")
+            if best is not None:
+                ax.scatter([best[f"start_{xn}"]], [best[xn]], marker="*", s=150, color="red",
+                           zorder=5, label="best")
+            ax.set_xlabel(f"start {xn}")
+            ax.set_ylabel(f"end {xn}")
+            ax.legend(fontsize=8)
+            continue
+        ax.scatter([r[f"start_{xn}"] for r in runs], [r[f"start_{yn}"] for r in runs], s=12,
+                   color="0.6", label="starts" if k == 0 or not same_axes else None)
         for r in runs:
-            ax.plot([r[f"start_mu_{c}"], r[f"mu_{c}"]], [r[f"start_sigma_{c}"], r[f"sigma_{c}"]],
-                    color="0.85", lw=0.5, zorder=0)
-    if runs:
-        best = min(runs, key=lambda r: r["fun"])
-        for c in classes:
-            ax.scatter([best[f"mu_{c}"]], [best[f"sigma_{c}"]], marker="*", s=150, color="red",
-                       zorder=5, label="best" if c == classes[0] else None)
-    ax.set_xlabel("mu (km/h)")
-    ax.set_ylabel("sigma (km/h)")
-    ax.legend(fontsize=8)
+            ax.plot([r[f"start_{xn}"], r[xn]], [r[f"start_{yn}"], r[yn]], color="0.85", lw=0.5,
+                    zorder=0)
+        ax.scatter([r[xn] for r in runs], [r[yn] for r in runs], s=18, color=col,
+                   label=f"end ({c})" if same_axes else "end")
+        if best is not None:
+            ax.scatter([best[xn]], [best[yn]], marker="*", s=150, color="red", zorder=5,
+                       label="best" if k == 0 or not same_axes else None)
+        if same_axes:
+            ax.set_xlabel("mu (km/h)")
+            ax.set_ylabel("sigma (km/h)")
+        else:
+            ax.set_xlabel(xn)
+            ax.set_ylabel(yn)
+        ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
