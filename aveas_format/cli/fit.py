@@ -47,7 +47,7 @@ def _fit(recordings: list[Path], output: Path, config: Path | None, metric: str,
     import numpy as np
     from pydantic import ValidationError
 
-    from aveas_format.fit import METRICS, FitConfig, fit_desired_speed
+    from aveas_format.fit import METRICS, FitConfig, fit_parameters
     from aveas_format.io.reader import format_validation_error
     from aveas_format.sim.scenario import Scenario
 
@@ -79,8 +79,8 @@ def _fit(recordings: list[Path], output: Path, config: Path | None, metric: str,
         fc = FitConfig(**cfg)
     except ValidationError as e:
         raise fail(f"fit configuration: {format_validation_error(e)}", EXIT_USAGE) from None
-    res = fit_desired_speed({c: np.asarray(values[c]) for c in used}, fc, workers=workers,
-                            scheduler=scheduler, outdir=output, progress=True)
+    res = fit_parameters({c: np.asarray(values[c]) for c in used}, fc, workers=workers,
+                         scheduler=scheduler, outdir=output, progress=True)
     for f in res.failed:
         err.print(f"failed: {f}")
     if not res.runs:

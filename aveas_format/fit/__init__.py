@@ -4,7 +4,9 @@
 >>> rec_speeds = recorded_mean_speeds(aveas_format.open("highway.aveas"))   # doctest: +SKIP
 >>> res = fit_desired_speed(rec_speeds, FitConfig(restarts=100), workers=8, outdir="fit")  # doctest: +SKIP
 
-See docs/fitting.md for the method and the SUMO-vs-Vissim differences.
+``fit_parameters(..., FitConfig(metric="time_headway", parameters=["cc1_car"]))`` fits W99
+car-following parameters to per-vehicle metrics (:mod:`aveas_format.fit.metrics`). See
+docs/fitting.md for the method and the SUMO-vs-Vissim differences.
 """
 
 from __future__ import annotations
@@ -23,11 +25,12 @@ from aveas_format.fit.optimize import (
     FitResult,
     evaluate,
     fit_desired_speed,
+    fit_parameters,
     initial_simplex,
     load_runs,
     run_restart,
 )
 
 __all__ = ["METRICS", "FitConfig", "FitResult", "Metric", "evaluate", "fit_desired_speed",
-           "initial_simplex", "kde_logpdf", "load_runs", "neg_log_likelihood", "recorded_mean_speeds",
-           "run_restart", "scott_bandwidth", "silverman_bandwidth"]
+           "fit_parameters", "initial_simplex", "kde_logpdf", "load_runs", "neg_log_likelihood",
+           "recorded_mean_speeds", "run_restart", "scott_bandwidth", "silverman_bandwidth"]

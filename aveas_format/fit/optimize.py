@@ -1,9 +1,14 @@
-"""Fit the desired-speed distributions N(mu, sigma) per class to recorded per-vehicle mean speeds.
+"""Fit simulation parameters to recorded per-vehicle metrics: the paper's desired-speed
+distributions N(mu, sigma) per class against mean speeds (the default), or W99 car-following
+parameters against time headways, minimum TTCs or acceleration spreads (``FitConfig.metric`` and
+``FitConfig.parameters``).
 
->>> from aveas_format.fit import FitConfig, fit_desired_speed
->>> result = fit_desired_speed({"car": v_car, "truck": v_truck}, FitConfig(restarts=100),
-...                            workers=8, outdir="fit-out")                      # doctest: +SKIP
+>>> from aveas_format.fit import FitConfig, fit_parameters
+>>> result = fit_parameters({"car": v_car, "truck": v_truck}, FitConfig(restarts=100),
+...                         workers=8, outdir="fit-out")                         # doctest: +SKIP
 >>> result.best                                                                  # doctest: +SKIP
+>>> fit_parameters(headways, FitConfig(metric="time_headway", parameters=["cc1_car"]),
+...                outdir="fit-cc1")                                             # doctest: +SKIP
 
 Nelder-Mead (SciPy) minimises -ln L (:mod:`.objective`) from ``restarts`` starting points drawn
 uniformly from the bounds; the initial simplex has edges of ``simplex_fraction`` x the bound widths
@@ -197,11 +202,12 @@ def load_runs(outdir: Path) -> list[dict]:
     return runs
 
 
-def fit_desired_speed(recorded: dict[str, np.ndarray], config: FitConfig | None = None, *,
-                      workers: int | None = 1, scheduler: str | None = None,
-                      outdir: str | Path | None = None, progress: bool = False,
-                      figures: bool = True) -> FitResult:
-    """Run (or resume) the restarts; see the module docstring."""
+def fit_parameters(recorded: dict[str, np.ndarray], config: FitConfig | None = None, *,
+                   workers: int | None = 1, scheduler: str | None = None,
+                   outdir: str | Path | None = None, progress: bool = False,
+                   figures: bool = True) -> FitResult:
+    """Run (or resume) the restarts; see the module docstring. ``recorded``: per class, the
+    recorded values of ``config.metric``."""
     from aveas_format.parallel import run_tasks
 
     config = config or FitConfig()
@@ -262,3 +268,7 @@ def fit_desired_speed(recorded: dict[str, np.ndarray], config: FitConfig | None 
                            unit=m.unit, label=m.label or m.name)
             plot_parameters(runs, config.names, od / "fit_parameters.png")
     return res
+
+
+#: the paper's experiment (the default configuration fits the desired speeds)
+fit_desired_speed = fit_parameters

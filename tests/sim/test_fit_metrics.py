@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from sim.sim_helpers import small_scenario
 
-from aveas_format.fit import METRICS, FitConfig, fit_desired_speed
+from aveas_format.fit import METRICS, FitConfig, fit_desired_speed, fit_parameters
 from aveas_format.fit.metrics import per_vehicle
 from aveas_format.io.builder import build_recording
 from aveas_format.sim import simulate
@@ -143,7 +143,7 @@ def test_cc1_recovery_from_time_headways(sumo, tmp_path):
     cfg = FitConfig(scenario=small_scenario(duration=600), metric="time_headway",
                     parameters=["cc1_car"], bounds={"cc1_car": (0.3, 1.8)}, restarts=2, maxfev=20,
                     xatol=0.02, seed=4)
-    res = fit_desired_speed(recorded, cfg, workers=2, outdir=tmp_path / "fit")
+    res = fit_parameters(recorded, cfg, workers=2, outdir=tmp_path / "fit")
     assert len(res.runs) == 2 and not res.failed
     assert abs(res.best["cc1_car"] - 0.9) < 0.2, res.runs
     for f in ("runs.parquet", "best.json", "fit_histogram.png", "fit_parameters.png"):
