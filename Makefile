@@ -33,6 +33,7 @@ bench: $(STAMP)
 
 docs: $(STAMP)
 	$(PY) -m aveas_format.docgen
+	$(PY) -m aveas_format.docgen --tutorials
 
 clean:
 	rm -rf $(VENV) demo-output .pytest_cache .hypothesis build dist *.egg-info

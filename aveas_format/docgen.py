@@ -1,11 +1,20 @@
-"""Generate the reference docs from the code: ``docs/format.md``, ``docs/rules.md``, ``docs/cli.md``.
+"""Generate the reference docs from the code: ``docs/format.md``, ``docs/rules.md``, ``docs/cli.md``,
+``docs/converters.md``, and the figures of the tutorials in ``docs/tutorials/``.
 
-``make docs`` (``python -m aveas_format.docgen``) rewrites them; ``tests/test_docs.py`` fails when a
-committed file differs from what the code generates.
+``make docs`` (``python -m aveas_format.docgen`` and ``... --tutorials``) rewrites them;
+``tests/test_docs.py`` fails when a committed file differs from what the code generates, and
+``tests/test_tutorials.py`` runs every tutorial's code.
+
+Tutorials are Markdown whose fenced ``sh`` and ``python`` blocks run in order in one working
+directory (Python blocks share one namespace; a block whose first line is ``# not run`` is only
+shown). A shell command runs line by line (``\\`` continues a line) and must exit 0 unless it
+ends with ``# -> exit N``. ``<!-- figure: FILE -> NAME.png -->`` copies FILE (in the working
+directory) to ``docs/figures/NAME.png``.
 """
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -151,7 +160,95 @@ def generated() -> dict[Path, str]:
     }
 
 
+TUTORIALS = DOCS / "tutorials"
+_BLOCK = re.compile(r"^```(sh|python)\n(.*?)^```", re.DOTALL | re.MULTILINE)
+_FIGURE = re.compile(r"<!--\s*figure:\s*(\S+)\s*->\s*(\S+\.png)\s*-->")
+_EXIT = re.compile(r"#\s*->\s*exit\s+(\d+)\s*$")
+
+
+class TutorialError(RuntimeError):
+    """A tutorial step did not do what the tutorial says."""
+
+
+def tutorial_paths() -> list[Path]:
+    return sorted(p for p in TUTORIALS.glob("[0-9]*.md"))
+
+
+def _commands(block: str) -> list[str]:
+    lines, cur = [], ""
+    for raw in block.splitlines():
+        if raw.rstrip().endswith("\\"):
+            cur += raw.rstrip()[:-1] + " "
+            continue
+        cur += raw
+        if cur.strip() and not cur.strip().startswith("#"):
+            lines.append(cur.strip())
+        cur = ""
+    return lines
+
+
+def run_tutorial(path: Path, workdir: Path, *, timeout: float = 600) -> list[tuple[Path, Path]]:
+    """Run the tutorial's blocks in ``workdir``; return its figures as (produced file, docs file).
+    Raises :class:`TutorialError` naming the step that failed."""
+    import contextlib
+    import io
+    import os
+    import subprocess
+
+    text = path.read_text(encoding="utf-8")
+    env = {**os.environ, "MPLBACKEND": "Agg", "COLUMNS": "100",
+           "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
+    ns: dict = {"__name__": "__tutorial__"}
+    old = Path.cwd()
+    os.chdir(workdir)
+    try:
+        for k, m in enumerate(_BLOCK.finditer(text), 1):
+            kind, body = m.group(1), m.group(2)
+            if body.lstrip().startswith("# not run"):
+                continue
+            where = f"{path.name}, block {k} (line {text[:m.start()].count(chr(10)) + 1})"
+            if kind == "python":
+                buf = io.StringIO()
+                try:
+                    with contextlib.redirect_stdout(buf):
+                        exec(compile(body, where, "exec"), ns)  # noqa: S102 - our own docs
+                except Exception as e:
+                    raise TutorialError(f"{where}: {type(e).__name__}: {e}") from e
+                continue
+            for cmd in _commands(body):
+                em = _EXIT.search(cmd)
+                want = int(em.group(1)) if em else 0
+                r = subprocess.run(["bash", "-c", cmd], cwd=workdir, env=env, capture_output=True, check=False,
+                                   text=True, timeout=timeout)
+                if r.returncode != want:
+                    tail = (r.stdout + r.stderr)[-2000:]
+                    raise TutorialError(f"{where}: `{cmd}` exited {r.returncode}, the tutorial "
+                                        f"says {want}:\n{tail}")
+    finally:
+        os.chdir(old)
+    figs = [(workdir / a, DOCS / "figures" / b) for a, b in _FIGURE.findall(text)]
+    missing = [str(a) for a, _ in figs if not a.exists()]
+    if missing:
+        raise TutorialError(f"{path.name}: figure(s) not produced: {', '.join(missing)}")
+    return figs
+
+
+def tutorial_figures() -> int:
+    """Run every tutorial and copy its figures into docs/figures."""
+    import shutil
+    import tempfile
+
+    for path in tutorial_paths():
+        with tempfile.TemporaryDirectory(prefix="aveas-tutorial-") as tmp:
+            for src, dest in run_tutorial(path, Path(tmp)):
+                shutil.copyfile(src, dest)
+                print(f"wrote {dest}", file=sys.stderr)
+    return 0
+
+
 def main() -> int:
+    if "--tutorials" in sys.argv[1:]:
+        return tutorial_figures()
     for path, text in generated().items():
         path.parent.mkdir(parents=True, exist_ok=True)
         if not path.exists() or path.read_text(encoding="utf-8") != text:
