@@ -9,7 +9,8 @@ Tutorials are Markdown whose fenced ``sh`` and ``python`` blocks run in order in
 directory (Python blocks share one namespace; a block whose first line is ``# not run`` is only
 shown). A shell command runs line by line (``\\`` continues a line) and must exit 0 unless it
 ends with ``# -> exit N``. ``<!-- figure: FILE -> NAME.png -->`` copies FILE (in the working
-directory) to ``docs/figures/NAME.png``.
+directory) to ``docs/figures/NAME.png``; ``<!-- requires: sumo -->`` skips a tutorial where SUMO
+is not installed.
 """
 
 from __future__ import annotations
@@ -174,6 +175,18 @@ def tutorial_paths() -> list[Path]:
     return sorted(p for p in TUTORIALS.glob("[0-9]*.md"))
 
 
+def tutorial_missing(path: Path) -> str | None:
+    """Why the tutorial cannot run here (``<!-- requires: sumo -->`` without SUMO), else None."""
+    if "<!-- requires: sumo -->" in path.read_text(encoding="utf-8"):
+        from aveas_format.sim import SumoNotFoundError, find_sumo
+
+        try:
+            find_sumo("sumo")
+        except SumoNotFoundError:
+            return 'SUMO not installed (pip install "aveas-format[sim]")'
+    return None
+
+
 def _commands(block: str) -> list[str]:
     lines, cur = [], ""
     for raw in block.splitlines():
@@ -218,8 +231,8 @@ def run_tutorial(path: Path, workdir: Path, *, timeout: float = 600) -> list[tup
             for cmd in _commands(body):
                 em = _EXIT.search(cmd)
                 want = int(em.group(1)) if em else 0
-                r = subprocess.run(["bash", "-c", cmd], cwd=workdir, env=env, capture_output=True, check=False,
-                                   text=True, timeout=timeout)
+                r = subprocess.run(["bash", "-c", cmd], cwd=workdir, env=env, capture_output=True,
+                                   check=False, text=True, timeout=timeout)
                 if r.returncode != want:
                     tail = (r.stdout + r.stderr)[-2000:]
                     raise TutorialError(f"{where}: `{cmd}` exited {r.returncode}, the tutorial "
@@ -239,6 +252,10 @@ def tutorial_figures() -> int:
     import tempfile
 
     for path in tutorial_paths():
+        why = tutorial_missing(path)
+        if why:
+            print(f"skipped {path.name}: {why}", file=sys.stderr)
+            continue
         with tempfile.TemporaryDirectory(prefix="aveas-tutorial-") as tmp:
             for src, dest in run_tutorial(path, Path(tmp)):
                 shutil.copyfile(src, dest)
