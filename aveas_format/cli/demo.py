@@ -20,7 +20,8 @@ def demo(
     duration: float = typer.Option(30.0, "--duration", min=1.0, help="Seconds to simulate."),
 ) -> None:
     """Generate a sample aerial highway recording (map, uncertainty, occlusions, metadata), write it
-    as a directory and as a ZIP, export it as OpenLABEL, OpenSCENARIO and MCAP (Foxglove), read it
+    as a directory and as a ZIP, export it as OpenLABEL, OpenSCENARIO, MCAP (Foxglove) and an ASAM OSI
+    trace, read it
     back, validate it and print its summary."""
     import aveas_format
     from aveas_format.sample import highway_scene
@@ -37,7 +38,7 @@ def demo(
     from aveas_format.converters import get_converter
 
     for name, fn in (("openlabel", "highway.openlabel.json"), ("openscenario", "highway.xosc"),
-                     ("mcap", "highway.mcap")):
+                     ("mcap", "highway.mcap"), ("osi", "highway.osi")):
         written = get_converter(name, "export")(rec, output / fn)
         err.print(f"exported {name}: {', '.join(str(p) for p in written)}")
     back = aveas_format.open(z)

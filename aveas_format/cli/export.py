@@ -16,7 +16,7 @@ from aveas_format.cli.common import EXIT_USAGE, converter_options, err, fail, ha
 def export(
     recording: Path = typer.Argument(None, help="The recording (NAME.aveas or NAME.aveas.zip)."),
     target: str = typer.Option(None, "--to", "-t", help="Exporter name: openlabel, openscenario, "
-                               "mcap (see --list)."),
+                               "mcap, osi (see --list)."),
     output: Path = typer.Option(None, "--output", "-o", help="Output file (companion files such "
                                 "as the map are written next to it)."),
     option: list[str] = typer.Option(None, "--option", "-O", help="Exporter option KEY=VALUE "
@@ -26,7 +26,8 @@ def export(
     list_: bool = typer.Option(False, "--list", help="List the exporters and exit."),
 ) -> None:
     """Export a recording to a foreign format: `aveas-format export --to openlabel run.aveas -o
-    run.json` (also `--to openscenario` -> .xosc, `--to mcap` -> .mcap for Foxglove)."""
+    run.json` (also `--to openscenario` -> .xosc, `--to mcap` -> .mcap for Foxglove, `--to osi` ->
+    an ASAM OSI GroundTruth trace, .osi or .mcap)."""
     from aveas_format.converters.registry import get_converter, load_converters
 
     if list_:

@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
+from pydantic import Field
 
 from aveas_format.converters.common import (
     load_map_bytes,
@@ -51,7 +52,7 @@ from aveas_format.converters.common import (
     sort_states,
     wrap_recording,
 )
-from aveas_format.converters.registry import ImportOptions, converter
+from aveas_format.converters.registry import ConverterOptions, ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.safeio import check_mcap
 
@@ -316,3 +317,144 @@ def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dic
                            "height": height if height > 0 else None, "osi_type": otype,
                            "lanes": set()}
     d["lanes"].update(int(li.value) for li in mo.assigned_lane_id)
+
+
+# ---- export ------------------------------------------------------------------------------------
+
+#: class -> (OSI MovingObject type, vehicle classification type or None)
+EXPORT_CLASS: dict[str, tuple[str, str | None]] = {
+    "car": ("VEHICLE", "MEDIUM_CAR"), "van": ("VEHICLE", "DELIVERY_VAN"),
+    "truck": ("VEHICLE", "HEAVY_TRUCK"), "trailer": ("VEHICLE", "TRAILER"),
+    "bus": ("VEHICLE", "BUS"), "motorcycle": ("VEHICLE", "MOTORBIKE"),
+    "bicycle": ("VEHICLE", "BICYCLE"), "railvehicle": ("VEHICLE", "TRAM"),
+    "mobility_device": ("VEHICLE", "MICROMOBILITY_DEVICE"), "pedestrian": ("PEDESTRIAN", None),
+    "animal": ("ANIMAL", None), "pushable_pullable": ("OTHER", None), "other": ("OTHER", None),
+}
+
+
+class OsiExportOptions(ConverterOptions):
+    host_id: int | None = None
+    """Participant that becomes the GroundTruth's host vehicle (default: the first participant with
+    role system_under_test or recording_vehicle, else none)."""
+    every: int = Field(1, ge=1)
+    """Write every n-th time step (1 = all)."""
+
+
+def _light_state(b, brake: float, left: float, right: float, hazard: float):
+    def on(p: float) -> bool:
+        return bool(np.isfinite(p) and p >= 0.5)
+
+    ind = ("WARNING" if on(hazard) else "LEFT" if on(left) else "RIGHT" if on(right) else
+           "OFF" if np.isfinite(left) or np.isfinite(right) or np.isfinite(hazard) else "UNKNOWN")
+    brk = "NORMAL" if on(brake) else "OFF" if np.isfinite(brake) else "UNKNOWN"
+    return b.MovingObjectVehicleClassificationLightState(
+        indicator_state=getattr(b.MovingObjectVehicleClassificationLightStateIndicatorState, ind),
+        brake_light_state=getattr(b.MovingObjectVehicleClassificationLightStateBrakeLightState, brk))
+
+
+@converter("osi", direction="export", options=OsiExportOptions,
+           description="ASAM OSI GroundTruth trace (.osi length-prefixed binary, or .mcap)")
+def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
+    """One ``osi3.GroundTruth`` per distinct ``time``: every participant present then as a moving
+    object (id = participant_id; base position = footprint centre with z = half the height, yaw =
+    heading, velocity, acceleration where the states or derived kinematics have it, dimension;
+    type and vehicle classification from the class; brake and indicator lights where the states
+    carry their probabilities, on at >= 0.5), ``proj_string`` = the recording's CRS, and the host
+    vehicle. Timestamps are the recording's ``time`` (s); an MCAP trace carries ``zero_time`` =
+    ``start_time``. The map is referenced, not embedded: write it next to the trace with
+    ``aveas-format map`` if the consumer needs it. ``.osi`` or ``.mcap`` by the output's suffix."""
+    import os
+
+    import betterosi as b
+    import pyarrow.compute as pc
+
+    from aveas_format.io.atomic import write_bytes_atomic
+
+    suffix = output.suffix.lower()
+    if suffix not in (".osi", ".mcap"):
+        raise FormatError("the OSI export writes .osi or .mcap (by the output's suffix)", path=output)
+    st = rec.states
+    n = st.num_rows
+
+    def col(name: str, default: float = math.nan) -> np.ndarray:
+        if name in st.column_names:
+            return pc.fill_null(st[name].cast("float64"), default).to_numpy(zero_copy_only=False)
+        return np.full(n, default)
+
+    pid = st["participant_id"].to_numpy()
+    t = st["time"].to_numpy(zero_copy_only=False).astype(np.float64)
+    x, y, heading = col("x"), col("y"), col("heading", 0.0)
+    vx, vy, ax, ay = col("vx", 0.0), col("vy", 0.0), col("ax"), col("ay")
+    kin = rec.derived.get("kinematics")
+    if kin is not None and np.isnan(ax).all() and kin.num_rows == n:
+        ax = pc.fill_null(kin["ax"], math.nan).to_numpy(zero_copy_only=False)
+        ay = pc.fill_null(kin["ay"], math.nan).to_numpy(zero_copy_only=False)
+    lights = [col(c) for c in ("light_brake_p", "light_indicator_left_p", "light_indicator_right_p",
+                               "light_hazard_p")]
+    has_lights = any(np.isfinite(v).any() for v in lights)
+    parts = rec.participants.to_pylist()
+    info = {p["participant_id"]: p for p in parts}
+    host = options.host_id
+    if host is None:
+        host = next((p["participant_id"] for p in parts
+                     if p.get("role") in ("system_under_test", "recording_vehicle")), None)
+    elif host not in info:
+        raise FormatError(f"host_id {host}: no such participant", path=output)
+    default_h = {"pedestrian": 1.75, "bicycle": 1.7, "truck": 3.5, "bus": 3.2, "trailer": 3.5}
+
+    def moving_object(i: int):
+        p = info[int(pid[i])]
+        otype, vtype = EXPORT_CLASS.get(p["class"], ("OTHER", None))
+        h = p.get("height") or default_h.get(p["class"], 1.5)
+        kw: dict[str, Any] = {"type": getattr(b.MovingObjectType, otype)}
+        if vtype is not None:
+            vc = {"type": getattr(b.MovingObjectVehicleClassificationType, vtype)}
+            if has_lights:
+                vc["light_state"] = _light_state(b, *(v[i] for v in lights))
+            kw["vehicle_classification"] = b.MovingObjectVehicleClassification(**vc)
+        acc = b.Vector3d(x=float(ax[i]), y=float(ay[i]), z=0.0) if np.isfinite(ax[i]) else None
+        return b.MovingObject(
+            id=b.Identifier(value=int(pid[i])),
+            base=b.BaseMoving(
+                dimension=b.Dimension3d(length=float(p["length"]), width=float(p["width"]),
+                                        height=float(h)),
+                position=b.Vector3d(x=float(x[i]), y=float(y[i]), z=float(h) / 2),
+                orientation=b.Orientation3d(yaw=float(heading[i])),
+                velocity=b.Vector3d(x=float(vx[i]), y=float(vy[i]), z=0.0),
+                **({"acceleration": acc} if acc is not None else {})),
+            **kw)
+
+    times = np.unique(t)
+    order = np.lexsort((pid, t))
+    bounds = np.searchsorted(t[order], times)
+    ends = np.r_[bounds[1:], n]
+    msgs = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        for k in range(0, len(times), options.every):
+            sec, nanos = divmod(round(float(times[k]) * 1e9), 10**9)
+            gt = b.GroundTruth(
+                timestamp=b.Timestamp(seconds=sec, nanos=nanos),
+                moving_object=[moving_object(int(i)) for i in order[bounds[k]:ends[k]]],
+                proj_string=rec.meta.crs or "")
+            if host is not None:
+                gt.host_vehicle_id = b.Identifier(value=int(host))
+            msgs.append(gt)
+    if suffix == ".osi":
+        data = b"".join(struct.pack("<I", len(m)) + m for m in (g.to_binary() for g in msgs))
+        return [write_bytes_atomic(output, data)]
+    tmp = output.with_name(f".{output.stem}.tmp-{os.getpid()}.mcap")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)
+            with b.Writer(tmp, metadata={"zero_time": rec.meta.start_time,
+                                         "description": f"aveas-format export of "
+                                                        f"{rec.meta.recording_id}"}) as w:
+                for m in msgs:
+                    w.add(m)
+        with open(tmp, "rb") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, output)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return [output]

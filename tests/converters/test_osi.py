@@ -164,3 +164,90 @@ def test_truncated_trace_is_located(tmp_path, road):
     junk.write_bytes(struct.pack("<I", 6) + b"\xff\xff\xff\xff\xff\xff")
     with pytest.raises(aveas_format.FormatError, match=r"junk_gt.osi: cannot decode OSI message 0"):
         convert("osi", [junk], map_source=road)
+
+
+# ---- export ------------------------------------------------------------------------------------
+
+def _lit_recording():
+    """The sample scene with brake and indicator light probabilities and a host vehicle."""
+    import pyarrow as pa
+
+    from aveas_format.sample import highway_scene
+
+    rec = highway_scene(n_vehicles=12, duration_s=6.0, seed=4)
+    st = rec.states
+    n = st.num_rows
+    pid = st["participant_id"].to_numpy()
+    brake = np.where(pid == 2, 0.9, 0.1).astype(np.float32)
+    left = np.where(pid == 3, 0.8, 0.0).astype(np.float32)
+    for name, v in (("light_brake_p", brake), ("light_indicator_left_p", left),
+                    ("light_indicator_right_p", np.zeros(n, np.float32)),
+                    ("light_hazard_p", np.zeros(n, np.float32))):
+        st = st.append_column(name, pa.array(v))
+    parts = rec.participants
+    roles = parts["role"].to_pylist()
+    roles[1] = "system_under_test"
+    parts = parts.set_column(parts.schema.get_field_index("role"), "role",
+                             pa.array(roles, parts.schema.field("role").type))
+    rec.replace_tables({"states": st, "participants": parts})
+    return rec
+
+
+@pytest.mark.parametrize("suffix", [".osi", ".mcap"])
+def test_export_round_trip(tmp_path, suffix):
+    """Recording -> OSI trace -> recording: positions, heading, velocities, sizes, classes, lights,
+    the host vehicle and (MCAP) the start time come back."""
+    from aveas_format.converters import get_converter
+
+    rec = _lit_recording()
+    (tmp_path / "map.xodr").write_bytes(rec.map_source)
+    out = tmp_path / f"trace{suffix}"
+    assert get_converter("osi", "export")(rec, out) == [out]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["map.xodr", out.name])  # no temp left
+    back = convert("osi", [out], map_source=tmp_path / "map.xodr")
+    a, c = rec.states, back.states
+    assert c.num_rows == a.num_rows
+    for k in ("x", "y", "vx", "vy", "heading"):
+        np.testing.assert_allclose(c[k].to_numpy(), a[k].to_numpy(), atol=1e-9, err_msg=k)
+    np.testing.assert_allclose(c["time"].to_numpy(), a["time"].to_numpy() - a["time"].to_numpy().min(),
+                               atol=1e-9)
+    assert back.participants["class"].to_pylist() == rec.participants["class"].to_pylist()
+    np.testing.assert_allclose(back.participants["length"].to_numpy(), rec.participants["length"].to_numpy())
+    assert back.participants["role"].to_pylist()[1] == "system_under_test"
+    assert back.participants["role"].to_pylist().count("system_under_test") == 1
+    pid = c["participant_id"].to_numpy()
+    brake = c["light_brake_p"].to_numpy(zero_copy_only=False)
+    assert (brake[pid == 2] == 1.0).all() and (brake[pid != 2] == 0.0).all()
+    left = c["light_indicator_left_p"].to_numpy(zero_copy_only=False)
+    assert (left[pid == 3] == 1.0).all() and (left[pid != 3] == 0.0).all()
+    if suffix == ".mcap":
+        assert back.meta.start_time.startswith(rec.meta.start_time.rstrip("Z"))
+    assert aveas_format.validate(back).exit_code("error") == 0
+
+
+def test_export_every_and_errors(tmp_path):
+    from aveas_format.converters import get_converter
+    from aveas_format.errors import FormatError
+
+    rec = _lit_recording()
+    export = get_converter("osi", "export")
+    export(rec, tmp_path / "half.osi", options={"every": 2})
+    n_times = len(np.unique(rec.states["time"].to_numpy()))
+    from aveas_format.converters.osi import check_osi_framing
+
+    assert check_osi_framing(tmp_path / "half.osi") == (n_times + 1) // 2
+    with pytest.raises(FormatError, match=r"\.osi or \.mcap"):
+        export(rec, tmp_path / "trace.bin")
+    with pytest.raises(FormatError, match="host_id 999"):
+        export(rec, tmp_path / "x.osi", options={"host_id": 999})
+
+
+def test_export_cli(tmp_path):
+    from aveas_format.cli import main
+    from aveas_format.sample import highway_scene
+
+    highway_scene(n_vehicles=5, duration_s=3.0).write(tmp_path / "r.aveas")
+    with pytest.raises(SystemExit) as e:
+        main(["export", "--to", "osi", str(tmp_path / "r.aveas"), "-o", str(tmp_path / "r.osi")])
+    assert e.value.code == 0
+    assert (tmp_path / "r.osi").stat().st_size > 1000
