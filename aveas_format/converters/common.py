@@ -388,6 +388,41 @@ def occlusion_shadows(sensor_xyz: tuple[float, float, float], x: np.ndarray, y: 
     return out
 
 
+def unobserved_table(rows: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The ``unobserved`` table (columns) of region rows as :func:`coverage_regions` makes them;
+    None for no rows."""
+    import pyarrow as pa
+
+    if not rows:
+        return None
+    return {
+        "region_id": np.arange(len(rows), dtype=np.int64),
+        "time_start": np.array([r["time_start"] for r in rows], np.float64),
+        "time_end": np.array([r["time_end"] for r in rows], np.float64),
+        "kind": [r["kind"] for r in rows],
+        "geometry": pa.array([r["geometry"] for r in rows], pa.binary()),
+        "sensor_id": [r.get("sensor_id") for r in rows],
+        "occluder_id": pa.array([r.get("occluder_id") for r in rows], pa.int64()),
+    }
+
+
+def outside_coverage(map_bytes: bytes, coverage_wkt: str, time_start: float, time_end: float,
+                     sensor_id: str) -> dict[str, Any] | None:
+    """An aerial view's unobserved table: the map's area (:func:`map_area`) outside the image's
+    ground footprint ``coverage_wkt``, kind ``outside_coverage``, for the whole recording (None
+    where the footprint covers it all). Occlusions (bridges, trees) are not known to such sources."""
+    import shapely
+
+    geom = shapely.make_valid(shapely.difference(map_area(map_bytes), shapely.from_wkt(coverage_wkt)))
+    polys = [g for g in getattr(geom, "geoms", [geom]) if g.geom_type == "Polygon" and g.area > 1e-6]
+    if not polys:
+        return None
+    geom = polys[0] if len(polys) == 1 else shapely.MultiPolygon(polys)
+    return unobserved_table([{"time_start": float(time_start), "time_end": float(time_end),
+                              "kind": "outside_coverage", "geometry": shapely.to_wkb(geom),
+                              "sensor_id": sensor_id}])
+
+
 def map_area(map_bytes: bytes, margin: float = 20.0):
     """A shapely box around the map's road surfaces (+ ``margin`` m): the area in which converters
     report sensor-range and field-of-view limits."""

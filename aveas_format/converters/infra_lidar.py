@@ -61,6 +61,7 @@ from aveas_format.converters.common import (
     class_of,
     column,
     coverage_regions,
+    unobserved_table,
     covariance_std_corr,
     factorize,
     group_mean,
@@ -497,17 +498,7 @@ def convert_infra_lidar(inputs: list[Path], *, map_source, options: InfraLidarOp
         for i, te in zip(keep, ends):
             unob.append({"time_start": float(time[i]), "time_end": float(te), "kind": "occlusion",
                          "geometry": shadows[i], "sensor_id": o.sensor_id, "occluder_id": int(pid[i])})
-    unobserved = None
-    if unob:
-        unobserved = {
-            "region_id": np.arange(len(unob), dtype=np.int64),
-            "time_start": np.array([u["time_start"] for u in unob]),
-            "time_end": np.array([u["time_end"] for u in unob]),
-            "kind": [u["kind"] for u in unob],
-            "geometry": pa.array([u["geometry"] for u in unob], pa.binary()),
-            "sensor_id": [u["sensor_id"] for u in unob],
-            "occluder_id": pa.array([u["occluder_id"] for u in unob], pa.int64()),
-        }
+    unobserved = unobserved_table(unob)
     yaw_s = float(matrix_yaw(mats[0][None, :3, :3])[0])
     from scipy.spatial.transform import Rotation
 

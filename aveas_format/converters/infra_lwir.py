@@ -45,6 +45,7 @@ from aveas_format.converters.common import (
     class_of,
     column,
     coverage_regions,
+    unobserved_table,
     covariance_std_corr,
     factorize,
     load_map_bytes,
@@ -431,15 +432,7 @@ def convert_infra_lwir(inputs: list[Path], *, map_source, options: InfraLwirOpti
     duration = float(states["time"].max()) + 1.0 / o.rate_hz
     unob = coverage_regions(o.sensor_id, (float(bx[0]), float(by[0])), o.range_m, 0.0, 2 * np.pi,
                             map_area(map_bytes), 0.0, duration, observed=observed)
-    unobserved = None
-    if unob:
-        unobserved = {
-            "region_id": np.arange(len(unob), dtype=np.int64),
-            "time_start": [r["time_start"] for r in unob], "time_end": [r["time_end"] for r in unob],
-            "kind": [r["kind"] for r in unob],
-            "geometry": pa.array([r["geometry"] for r in unob], pa.binary()),
-            "sensor_id": [r["sensor_id"] for r in unob],
-        }
+    unobserved = unobserved_table(unob)
     return wrap_recording(
         "infra-lwir", inputs + ([Path(lm_path)] if Path(lm_path) not in inputs else []), options,
         map_bytes=map_bytes, participants=participants, states=states,

@@ -25,6 +25,10 @@ highD (``highd``; builds its own map, ``--map`` optional):
   Mercator at 50.95 N 6.95 E (Cologne, where highD was recorded) with x pointing east, so lon/lat
   are nominal unless the option is given. With ``--map`` the given map is used instead (it must be
   in the same image-aligned, y-up frame).
+- With the built map, ``coverage`` is the observed road (the tracks' x extent, the outer markings
+  plus ``shoulder_width``) and ``unobserved`` holds the map's surroundings outside it as one
+  ``outside_coverage`` region for the whole recording. Occlusions (bridges, trees) are not in the
+  data and not claimed.
 - ``class`` Car -> car, Truck -> truck (highD's trucks include buses). ``laneId`` changes within a
   track become ``lane_change`` events (origin ``derived``).
 
@@ -79,6 +83,7 @@ from aveas_format.converters.common import (
     class_pmf,
     column,
     load_map_bytes,
+    outside_coverage,
     projected_to_local,
     read_numeric_table,
     rotate,
@@ -444,6 +449,8 @@ def convert_highd(inputs: list[Path], *, map_source=None, options: HighDOptions)
         top, bottom = -float(upper[0]) + options.shoulder_width, -float(lower[-1]) - options.shoulder_width
         kw["coverage"] = (f"POLYGON (({x0} {bottom}, {x1} {bottom}, {x1} {top}, {x0} {top}, "
                           f"{x0} {bottom}))")
+        kw["unobserved"] = outside_coverage(map_bytes, kw["coverage"], 0.0,
+                                            float(np.max(states["time"])), "drone_camera")
     loc = rec.get("locationId")
     return wrap_recording(
         "highd", [tracks_p, meta_p, rec_p], options, map_bytes=map_bytes, participants=participants,

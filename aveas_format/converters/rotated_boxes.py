@@ -38,7 +38,9 @@ Uncertainty: the centre's pixel covariance (``pixel_std`` or the per-row columns
 through the affine transform and the rotation into the local frame: ``x_std``, ``y_std``,
 ``xy_corr``; ``heading_std`` = ``angle_std_deg``; ``vx_std``/``vy_std``/``vxvy_corr`` from the
 regression. Method ``aerial``, provenance ``natural``, role ``observed``; lights and interior are
-not observable. ``coverage`` is the image footprint when ``image_size`` is given.
+not observable. ``coverage`` is the image footprint when ``image_size`` is given; the map's area
+outside it is then an ``outside_coverage`` region of ``unobserved`` for the whole recording
+(occlusions are not in the data and not claimed).
 """
 
 from __future__ import annotations
@@ -56,6 +58,7 @@ from aveas_format.converters.common import (
     column,
     factorize,
     load_map_bytes,
+    outside_coverage,
     projected_to_local,
     read_numeric_table,
     sort_states,
@@ -472,6 +475,8 @@ def convert_rotated_boxes(inputs: list[Path], *, map_source, options: RotatedBox
         if header.geo_reference:
             fx, fy, _ = projected_to_local(fx, fy, crs, header.geo_reference, header.offset)
         kw["coverage"] = "POLYGON ((" + ", ".join(f"{float(a)!r} {float(b)!r}" for a, b in zip(fx, fy)) + "))"
+        kw["unobserved"] = outside_coverage(map_bytes, kw["coverage"], 0.0,
+                                            float(np.max(states["time"])), "aerial_camera")
     rate = options.frame_rate
     return wrap_recording(
         "rotated-boxes", [path, *geo], options, map_bytes=map_bytes, participants=participants,

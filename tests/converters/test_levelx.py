@@ -463,3 +463,25 @@ def test_cli_convert_highd_without_map(tmp_path):
                           str(files[0]), "-o", str(tmp_path / "x.aveas")], capture_output=True,
                          text=True)
     assert res.returncode != 0 and "needs a map" in res.stderr
+
+
+def test_highd_unobserved_outside_the_footprint(tmp_path):
+    """The built map's surroundings outside the drone's footprint (the coverage) are one
+    outside_coverage region for the whole recording; no state lies in it, and validate no longer
+    asks for an unobserved table."""
+    import shapely
+
+    import aveas_format
+
+    rec = convert("highd", [write_highd(tmp_path / "highd")[0]])
+    un = rec.unobserved
+    assert un.num_rows == 1 and un["kind"].to_pylist() == ["outside_coverage"]
+    assert un["time_start"][0].as_py() == 0.0
+    assert un["time_end"][0].as_py() == pytest.approx(float(np.max(rec.states["time"].to_numpy())))
+    region = shapely.from_wkb(un["geometry"][0].as_py())
+    cover = shapely.from_wkt(rec.meta.coverage)
+    assert region.is_valid and shapely.intersection(region, cover).area < 1e-6
+    pts = shapely.points(rec.states["x"].to_numpy(), rec.states["y"].to_numpy())
+    assert not shapely.contains(region, pts).any()
+    codes = aveas_format.validate(rec).codes()
+    assert "unobserved.table_missing" not in codes and "unobserved.state_inside" not in codes

@@ -138,13 +138,19 @@ def test_registered():
     assert "rotated-boxes" in load_converters()
 
 
-def test_centre_form_with_world_file(tmp_path, site_map):
+def centre_inputs(folder):
+    """The analytic truth, its centre-form box table, a world file and a .prj in ``folder``."""
     veh = truth()
-    tracks = write_tracks(tmp_path / "tracks.csv", veh)
-    tfw = write_world_file(tmp_path / "ortho.tfw")
-    prj = tmp_path / "ortho.prj"
+    tracks = write_tracks(folder / "tracks.csv", veh)
+    tfw = write_world_file(folder / "ortho.tfw")
+    prj = folder / "ortho.prj"
     prj.write_text(SITE_CRS)
-    rec = convert("rotated-boxes", [tracks, tfw, prj], map_source=site_map,
+    return veh, [tracks, tfw, prj]
+
+
+def test_centre_form_with_world_file(tmp_path, site_map):
+    veh, inputs = centre_inputs(tmp_path)
+    rec = convert("rotated-boxes", inputs, map_source=site_map,
                   options={"frame_rate": RATE, "image_size": [3000, 1500]})
     check_truth(rec, veh)
     p, s = rec.participants, rec.states
@@ -337,3 +343,19 @@ def test_participant_attributes_count_boxes(tmp_path, site_map):
     assert [json.loads(a)["boxes"] for a in rec.participants.column("attributes").to_pylist()] == \
         [10, 10, 10]
     assert rec.states.column("source_frame").to_pylist()[:3] == [0, 1, 2]
+
+
+def test_unobserved_outside_the_image(tmp_path, site_map):
+    """With the image size known, the map's area outside the image footprint is unobserved
+    (outside_coverage) for the whole recording; without it, nothing is claimed."""
+    import shapely
+
+    _, inputs = centre_inputs(tmp_path)
+    rec = convert("rotated-boxes", inputs, map_source=site_map,
+                  options={"frame_rate": RATE, "image_size": [3000, 1500]})
+    un = rec.unobserved
+    assert un["kind"].to_pylist() == ["outside_coverage"]
+    region = shapely.from_wkb(un["geometry"][0].as_py())
+    assert shapely.intersection(region, shapely.from_wkt(rec.meta.coverage)).area < 1e-3
+    bare = convert("rotated-boxes", inputs, map_source=site_map, options={"frame_rate": RATE})
+    assert bare.unobserved is None or bare.unobserved.num_rows == 0
