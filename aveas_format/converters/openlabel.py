@@ -1593,7 +1593,12 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     has_vel, has_road = fd.has_vel, fd.has_road
     n = len(rows["time"])
     if n == 0 and uids:
-        raise FormatError("no frame has a cuboid for any object", path=path)
+        static = sum(1 for o in objects.values()
+                     if isinstance(o, dict) and isinstance(o.get("object_data"), dict)
+                     and "cuboid" in o["object_data"])
+        hint = (f" ({static} object(s) carry a static cuboid in object_data, which has no time: "
+                "a trajectory needs frames)" if static else "")
+        raise FormatError(f"no frame has a cuboid for any object{hint}", path=path)
 
     # per-box measurement timestamps (cuboid attribute "timestamp", Unix seconds) beat the
     # frame's: the ASAM example repeats frame timestamps while its boxes' differ

@@ -234,6 +234,14 @@ def test_minimum_example_with_map(tmp_path):
     AveasOpenLabel.from_dict(json.loads(out.read_text()))
 
 
+def test_static_cuboids_without_frames_are_a_clear_error():
+    """VCD's test file labels two cars with cuboids in object_data and no frames: no time, so no
+    trajectory; the error says why."""
+    with pytest.raises(aveas_format.FormatError, match=r"2 object\(s\) carry a static cuboid"):
+        convert("openlabel", [OPENLABEL_DATA / "vcd__openlabel100_test_cuboids.json"],
+                map_source=STRAIGHT)
+
+
 def test_minimum_example_without_map_is_a_clear_error():
     with pytest.raises(aveas_format.FormatError, match="no map: pass --map"):
         convert("openlabel", [OPENLABEL_DATA / "aveas__minimum_openlabel_example.json"])
