@@ -386,7 +386,9 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
     x, y, heading = col("x"), col("y"), col("heading", 0.0)
     vx, vy, ax, ay = col("vx", 0.0), col("vy", 0.0), col("ax"), col("ay")
     kin = rec.derived.get("kinematics")
-    if kin is not None and np.isnan(ax).all() and kin.num_rows == n:
+    if (kin is not None and np.isnan(ax).all() and kin.num_rows == n
+            and np.array_equal(kin["participant_id"].to_numpy(), pid)
+            and np.array_equal(kin["time"].to_numpy(zero_copy_only=False), t)):  # row-aligned
         ax = pc.fill_null(kin["ax"], math.nan).to_numpy(zero_copy_only=False)
         ay = pc.fill_null(kin["ay"], math.nan).to_numpy(zero_copy_only=False)
     lights = [col(c) for c in ("light_brake_p", "light_indicator_left_p", "light_indicator_right_p",

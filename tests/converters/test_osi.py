@@ -251,3 +251,19 @@ def test_export_cli(tmp_path):
         main(["export", "--to", "osi", str(tmp_path / "r.aveas"), "-o", str(tmp_path / "r.osi")])
     assert e.value.code == 0
     assert (tmp_path / "r.osi").stat().st_size > 1000
+
+
+def test_export_takes_accelerations_from_derived_kinematics(tmp_path):
+    """States without ax/ay: the export writes the smoothed accelerations of derived/kinematics."""
+    from aveas_format.converters import get_converter
+    from aveas_format.derive import derive
+    from aveas_format.sample import highway_scene
+
+    rec = highway_scene(n_vehicles=6, duration_s=4.0, seed=2)
+    assert "ax" not in rec.states.column_names
+    derive(rec, only="kinematics")
+    (tmp_path / "map.xodr").write_bytes(rec.map_source)
+    get_converter("osi", "export")(rec, tmp_path / "k.osi")
+    back = convert("osi", [tmp_path / "k.osi"], map_source=tmp_path / "map.xodr")
+    np.testing.assert_allclose(back.states["ax"].to_numpy(zero_copy_only=False),
+                               rec.derived["kinematics"]["ax"].to_numpy(zero_copy_only=False), atol=1e-9)
