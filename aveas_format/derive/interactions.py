@@ -39,6 +39,8 @@ Conventions (docs/derive.md):
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 import pyarrow as pa
 from pydantic import Field
@@ -69,6 +71,9 @@ class InteractionsParams(Params):
     route_range: float = Field(250.0, gt=0, description="how far (m) beyond the end of its lane "
                                "chain a leader is searched along the participant's route (across "
                                "diverges, merges and junctions)")
+    velocities: Literal["auto", "states", "smoothed"] = Field(
+        "auto", description="velocity along the direction of motion: the states' (measured) or "
+        "derived/kinematics' smoothed speed; auto: the one with the smaller std per sample")
 
 
 # --- 1D TTC ----------------------------------------------------------------------------------------
@@ -352,16 +357,19 @@ def _accel(rec, pid: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     return tuple(np.where(have, m, d) for m, d in zip(measured, derived))
 
 
-def _accel_derived(rec, pid: np.ndarray, t: np.ndarray):
+def _kinematics_columns(rec, pid: np.ndarray, t: np.ndarray, cols: tuple[str, ...]):
+    """Columns of derived/kinematics per states row (NaN where it has no such row or no table)."""
     k = rec.derived.get("kinematics")
     n = len(t)
-    if k is None:
-        return (np.full(n, np.nan),) * 4
+    if k is None or not set(cols) <= set(k.column_names):
+        return (np.full(n, np.nan),) * len(cols)
     kp = k.column("participant_id").to_numpy()
     kt = _num(k, "time")
     if len(kp) == n and np.array_equal(kp, pid) and np.array_equal(kt, t):
         rows = np.arange(n)
         ok = np.ones(n, bool)
+    elif len(kp) == 0:
+        return (np.full(n, np.nan),) * len(cols)
     else:
         korder = np.lexsort((kt, kp))
         kp, kt = kp[korder], kt[korder]
@@ -369,11 +377,38 @@ def _accel_derived(rec, pid: np.ndarray, t: np.ndarray):
         rows = np.clip(rows, 0, len(kp) - 1)
         ok = (kp[rows] == pid) & (kt[rows] == t)
         rows = korder[rows]
-    out = []
-    for c in ("ax", "ay", "ax_std", "ay_std"):
-        v = _num(k, c)[rows]
-        out.append(np.where(ok, v, np.nan))
-    return tuple(out)
+    return tuple(np.where(ok, _num(k, c)[rows], np.nan) for c in cols)
+
+
+def _accel_derived(rec, pid: np.ndarray, t: np.ndarray):
+    return _kinematics_columns(rec, pid, t, ("ax", "ay", "ax_std", "ay_std"))
+
+
+def _smoothed_velocities(S: _Samples, rec, mode: str) -> int:
+    """Replace the along-motion component of the states' velocity by derived/kinematics' smoothed
+    speed (with its std), keeping the across-motion component and its variance, where ``mode`` is
+    ``smoothed``, or ``auto`` and the smoothed std is the smaller. Only samples moving at >= 0.5
+    m/s (a defined direction of motion). Returns the number of samples replaced."""
+    speed, speed_std = _kinematics_columns(rec, S.pid, S.t, ("speed", "speed_std"))
+    v = np.hypot(S.vx, S.vy)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c, sn = S.vx / v, S.vy / v
+    cxy = S.rv * S.svx * S.svy
+    var_along = c * c * S.svx ** 2 + sn * sn * S.svy ** 2 + 2 * c * sn * cxy
+    var_across = sn * sn * S.svx ** 2 + c * c * S.svy ** 2 - 2 * c * sn * cxy
+    use = (v >= 0.5) & np.isfinite(speed) & np.isfinite(speed_std)
+    if mode == "auto":
+        use &= speed_std ** 2 < var_along
+    if not use.any():
+        return 0
+    c, sn, sa, sw = c[use], sn[use], speed_std[use] ** 2, np.maximum(var_across[use], 0.0)
+    S.vx, S.vy, S.svx, S.svy, S.rv = (np.array(a, np.float64) for a in (S.vx, S.vy, S.svx, S.svy, S.rv))
+    S.vx[use], S.vy[use] = speed[use] * c, speed[use] * sn
+    vxx, vyy, vxy = sa * c * c + sw * sn * sn, sa * sn * sn + sw * c * c, (sa - sw) * c * sn
+    S.svx[use], S.svy[use] = np.sqrt(vxx), np.sqrt(vyy)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        S.rv[use] = np.where((vxx > 0) & (vyy > 0), vxy / np.sqrt(vxx * vyy), 0.0)
+    return int(use.sum())
 
 
 class _Samples:
@@ -833,6 +868,8 @@ def _box_std(S: _Samples, i: np.ndarray, j: np.ndarray, p: InteractionsParams) -
 def compute(rec, p: InteractionsParams) -> pa.Table:
     """The ``derived/interactions`` table of ``rec``."""
     S = _Samples(rec, p)
+    if p.velocities != "states":
+        _smoothed_velocities(S, rec, p.velocities)
     lane = _lane_rows(rec, S, p)
     parts = []
     if lane:
