@@ -20,7 +20,8 @@ def main(n_vehicles: int = 60, duration_s: float = 30.0) -> list[dict]:
     tmp = Path(tempfile.mkdtemp(prefix="aveas-bench-interop-"))
     rows: list[dict] = []
     try:
-        for name, file in (("openlabel", "rec.json"), ("openscenario", "rec.xosc"), ("mcap", "rec.mcap")):
+        for name, file in (("openlabel", "rec.json"), ("openscenario", "rec.xosc"), ("mcap", "rec.mcap"),
+                           ("osi", "rec.osi")):
             t0 = time.perf_counter()
             get_converter(name, "export")(rec, tmp / file)
             dt = time.perf_counter() - t0
