@@ -241,3 +241,30 @@ def test_zip_with_a_top_level_directory_is_read(tmp_path, written):
         for f in Path(written).iterdir():
             zf.write(f, f"small.aveas/{f.name}")
     assert aveas_format.open(z).states.num_rows == aveas_format.open(written).states.num_rows
+
+
+def test_figures_and_tables_are_written_atomically(tmp_path):
+    """save_figure_atomic / write_parquet_atomic (plots, fitter outputs, map tables): the result
+    appears whole or not at all; a failing render leaves the old file and no temporary behind."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from aveas_format.io.atomic import save_figure_atomic, write_parquet_atomic
+
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [1, 0])
+    p = save_figure_atomic(fig, tmp_path / "f.png", dpi=50)
+    assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    before = p.read_bytes()
+    with pytest.raises(ValueError):
+        save_figure_atomic(fig, tmp_path / "f.png", format="no-such-format")
+    assert p.read_bytes() == before
+    plt.close(fig)
+    t = pa.table({"a": [1, 2, 3]})
+    q = write_parquet_atomic(t, tmp_path / "t.parquet")
+    assert pq.read_table(q).equals(t)
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["f.png", "t.parquet"]

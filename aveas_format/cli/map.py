@@ -225,19 +225,22 @@ def read_points(path: Path):
 
 
 def write_table(table, path: Path | None) -> None:
-    """CSV (or Parquet by the suffix) to ``path``; CSV to stdout when None."""
+    """CSV (or Parquet by the suffix) to ``path`` (atomically); CSV to stdout when None."""
+    import pyarrow as pa
     import pyarrow.csv as pcsv
 
     if path is None:
         pcsv.write_csv(table, sys.stdout.buffer)
         sys.stdout.flush()
         return
-    if path.suffix.lower() in (".parquet", ".pq"):
-        import pyarrow.parquet as pq
+    from aveas_format.io.atomic import write_bytes_atomic, write_parquet_atomic
 
-        pq.write_table(table, path)
+    if path.suffix.lower() in (".parquet", ".pq"):
+        write_parquet_atomic(table, path)
     else:
-        pcsv.write_csv(table, path)
+        buf = pa.BufferOutputStream()
+        pcsv.write_csv(table, buf)
+        write_bytes_atomic(path, buf.getvalue().to_pybytes())
 
 
 @map_app.command("project")

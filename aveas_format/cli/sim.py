@@ -93,7 +93,9 @@ def sensitivity_cmd(
     output.mkdir(parents=True, exist_ok=True)
     rows = sensitivity(sc, params=param or None, n_values=values, fraction=fraction,
                        workers=workers, scheduler=scheduler, progress=True)
-    (output / "sensitivity.json").write_text(json.dumps(rows, indent=2))
+    from aveas_format.io.atomic import write_text_atomic
+
+    write_text_atomic(output / "sensitivity.json", json.dumps(rows, indent=2))
     plot_sensitivity(rows, output / "sensitivity.png")
     for r in rows:
         if "error" in r:

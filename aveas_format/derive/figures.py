@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from aveas_format.io.atomic import save_figure_atomic
+
 
 def cut_in_recording():
     """Ego (id 0) in lane -1 at 30 m/s; a car (id 1) 30 m ahead (centres) in lane -2 at 26 m/s changes into
@@ -75,7 +77,7 @@ def cut_in_figure(path: Path) -> Path:
     ax.set_xlim(0, 8)
     ax.set_title("Cut-in: ego 30 m/s, cutting car 26 m/s, 30 m ahead (centres)")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure_atomic(fig, path, dpi=120)
     plt.close(fig)
     return path
 
@@ -110,7 +112,7 @@ def kinematics_figure(path: Path) -> Path:
     axes[1].set_xlabel("time (s)")
     axes[0].set_title(f"CA Kalman + RTS from positions with σ = 0.1 m at 25 Hz (car {car})")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure_atomic(fig, path, dpi=120)
     plt.close(fig)
     return path
 

@@ -33,6 +33,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from aveas_format.fit.objective import neg_log_likelihood
+from aveas_format.io.atomic import write_parquet_atomic, write_text_atomic
 from aveas_format.sim.scenario import W99_DEFAULTS, W99_RANGES, Scenario
 
 
@@ -230,8 +231,8 @@ def fit_parameters(recorded: dict[str, np.ndarray], config: FitConfig | None = N
 
                 raise AveasError("holds a fit with a different configuration; use another "
                                  "output directory", path=od)
-        cfg_path.write_text(json.dumps(cfg_json, indent=2))
-        (od / "recorded.json").write_text(json.dumps({c: v.tolist() for c, v in recorded.items()}))
+        write_text_atomic(cfg_path, json.dumps(cfg_json, indent=2))
+        write_text_atomic(od / "recorded.json", json.dumps({c: v.tolist() for c, v in recorded.items()}))
         done = [r for r in load_runs(od) if r["restart"] < config.restarts]
     have = {r["restart"] for r in done}
     starts = config.starts()
@@ -254,10 +255,9 @@ def fit_parameters(recorded: dict[str, np.ndarray], config: FitConfig | None = N
     res = FitResult(config, runs, recorded, od, failed)
     if od is not None and runs:
         import pyarrow as pa
-        import pyarrow.parquet as pq
 
-        pq.write_table(pa.Table.from_pylist(runs), od / "runs.parquet")
-        (od / "best.json").write_text(json.dumps(res.best, indent=2))
+        write_parquet_atomic(pa.Table.from_pylist(runs), od / "runs.parquet")
+        write_text_atomic(od / "best.json", json.dumps(res.best, indent=2))
         if figures:
             from aveas_format.fit.objective import METRICS
             from aveas_format.fit.plots import plot_histogram, plot_parameters

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from aveas_format.fit.objective import kde_logpdf
+from aveas_format.io.atomic import save_figure_atomic
 
 COLOURS = {"car": ("tab:blue", "black"), "truck": ("tab:green", "tab:orange")}
 
@@ -45,7 +46,7 @@ def plot_histogram(recorded: dict[str, np.ndarray], simulated: dict[str, np.ndar
     ax.set_ylabel("density")
     ax.legend()
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure_atomic(fig, path, dpi=120)
     plt.close(fig)
     return Path(path)
 
@@ -105,6 +106,6 @@ def plot_parameters(runs: list[dict], names: list[str], path: str | Path) -> Pat
             ax.set_ylabel(yn)
         ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure_atomic(fig, path, dpi=120)
     plt.close(fig)
     return Path(path)

@@ -33,3 +33,23 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
 
 def write_text_atomic(path: str | Path, text: str) -> Path:
     return write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def save_figure_atomic(fig, path: str | Path, **kw) -> Path:
+    """``fig.savefig`` into memory (format from the suffix, PNG by default), then an atomic write."""
+    import io
+
+    path = Path(path)
+    buf = io.BytesIO()
+    fig.savefig(buf, format=kw.pop("format", path.suffix.lstrip(".").lower() or "png"), **kw)
+    return write_bytes_atomic(path, buf.getvalue())
+
+
+def write_parquet_atomic(table, path: str | Path, **kw) -> Path:
+    """A pyarrow Table as Parquet, written atomically."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    sink = pa.BufferOutputStream()
+    pq.write_table(table, sink, **kw)
+    return write_bytes_atomic(path, sink.getvalue().to_pybytes())

@@ -780,9 +780,9 @@ class RoadFit:
 
     def write(self, path: str | Path) -> Path:
         """Write the OpenDRIVE text to ``path``."""
-        p = Path(path)
-        p.write_text(self.xodr, encoding="utf-8")
-        return p
+        from aveas_format.io.atomic import write_text_atomic
+
+        return write_text_atomic(path, self.xodr)
 
 
 def fit_road(

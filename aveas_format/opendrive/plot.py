@@ -177,9 +177,9 @@ def save_map(net: RoadNetwork, path: str | Path, *, dpi: int = 150, **kw: Any) -
     ax = plot_map(net, **kw)
     fig = ax.figure
     fig.tight_layout()
-    p = Path(path)
-    fig.savefig(p, dpi=dpi)
-    return p
+    from aveas_format.io.atomic import save_figure_atomic
+
+    return save_figure_atomic(fig, path, dpi=dpi)
 
 
 __all__ = ["LANE_COLORS", "plot_map", "save_map"]

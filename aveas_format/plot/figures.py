@@ -21,6 +21,8 @@ import numpy as np  # noqa: E402
 import pyarrow as pa  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
+from aveas_format.io.atomic import save_figure_atomic  # noqa: E402
+
 _SEV_STYLE = {"error": ("#d62728", "x"), "warning": ("#ff7f0e", "^"), "info": ("#1f77b4", "o")}
 
 
@@ -267,8 +269,7 @@ def save_figures(rec, outdir: str | Path, findings: Iterable[Any] = ()) -> list[
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     for name, fig in figures(rec, findings).items():
-        p = out / f"{name}.png"
-        fig.savefig(p)
+        p = save_figure_atomic(fig, out / f"{name}.png")
         plt.close(fig)
         paths.append(p)
     return paths
