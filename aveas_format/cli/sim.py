@@ -84,6 +84,8 @@ def sensitivity_cmd(
                                    "(the paper: 4 h)."),
     workers: int = typer.Option(1, "--workers", "-w", help="Local processes (0 = one per core)."),
     scheduler: str = typer.Option(None, "--scheduler", help="Dask scheduler address tcp://..."),
+    min_ttc_samples: int = typer.Option(1, "--min-ttc-samples", min=1, help="TTC samples a vehicle "
+                                        "needs for its mean TTC to count in the minimum mean TTC."),
 ) -> None:
     """Vary each Wiedemann 99 parameter over the paper's range and report the minimum mean TTC and
     the minimum TTC of the altered cars per value."""
@@ -92,7 +94,8 @@ def sensitivity_cmd(
     sc = _scenario(config, None, duration)
     output.mkdir(parents=True, exist_ok=True)
     rows = sensitivity(sc, params=param or None, n_values=values, fraction=fraction,
-                       workers=workers, scheduler=scheduler, progress=True)
+                       workers=workers, scheduler=scheduler, progress=True,
+                       min_ttc_samples=min_ttc_samples)
     from aveas_format.io.atomic import write_text_atomic
 
     write_text_atomic(output / "sensitivity.json", json.dumps(rows, indent=2))

@@ -7,7 +7,8 @@ while the others keep Vissim's defaults; the varied values apply to a subset of 
 recording, ``derive(only=["kinematics", "interactions"])`` gives the TTC of every follower to its
 lane leader, and per value the study reports
 
-- ``min_mean_ttc``: the smallest per-vehicle mean TTC among the altered vehicles, and
+- ``min_mean_ttc``: the smallest per-vehicle mean TTC among the altered vehicles (those with at
+  least ``min_ttc_samples`` TTC samples; default 1, every vehicle), and
 - ``min_ttc``: the smallest TTC of an altered vehicle in any time step.
 
 Runs are independent tasks through :func:`aveas_format.parallel.run_tasks`.
@@ -57,21 +58,32 @@ def ttc_stats(task: dict) -> dict:
     pid = t["participant_id"].to_numpy()
     ttc = t["ttc"].to_numpy(zero_copy_only=False)
     ok = np.isfinite(ttc) & (ttc > 0) & np.isin(pid, list(mod_ids))
-    pid, ttc = pid[ok], ttc[ok]
-    out = {"param": task["param"], "value": task["value"], "n_altered": len(mod_ids),
-           "n_ttc_samples": int(len(ttc)), "min_ttc": float(ttc.min()) if len(ttc) else float("nan"),
-           "min_mean_ttc": float("nan")}
+    return {"param": task["param"], "value": task["value"], "n_altered": len(mod_ids),
+            **ttc_summary(pid[ok], ttc[ok], int(task.get("min_ttc_samples", 1)))}
+
+
+def ttc_summary(pid: np.ndarray, ttc: np.ndarray, min_samples: int = 1) -> dict:
+    """``min_ttc`` over all samples; ``min_mean_ttc`` over the per-vehicle mean TTCs of the
+    vehicles with at least ``min_samples`` TTC samples (a vehicle with one short closing-in event
+    otherwise decides the statistic alone); NaN where there are none."""
+    out = {"n_ttc_samples": int(len(ttc)), "min_ttc": float(ttc.min()) if len(ttc) else float("nan"),
+           "min_mean_ttc": float("nan"), "n_vehicles_mean": 0}
     if len(ttc):
-        u, inv = np.unique(pid, return_inverse=True)
-        means = np.bincount(inv, weights=ttc) / np.bincount(inv)
-        out["min_mean_ttc"] = float(means.min())
+        _, inv, counts = np.unique(pid, return_inverse=True, return_counts=True)
+        means = np.bincount(inv, weights=ttc) / counts
+        keep = counts >= min_samples
+        out["n_vehicles_mean"] = int(keep.sum())
+        if keep.any():
+            out["min_mean_ttc"] = float(means[keep].min())
     return out
 
 
 def sensitivity(base: Scenario | None = None, *, params: list[str] | None = None, n_values: int = 5,
                 car: str = "car", fraction: float = 0.2, workers: int | None = 1,
-                scheduler: str | None = None, progress: bool = False) -> list[dict]:
-    """One row per (parameter, value): ``min_mean_ttc``, ``min_ttc`` (s); failed runs carry ``error``."""
+                scheduler: str | None = None, progress: bool = False,
+                min_ttc_samples: int = 1) -> list[dict]:
+    """One row per (parameter, value): ``min_mean_ttc``, ``min_ttc`` (s); failed runs carry ``error``.
+    ``min_ttc_samples``: TTC samples a vehicle needs for its mean to count (see :func:`ttc_summary`)."""
     from aveas_format.parallel import run_tasks
 
     base = base or Scenario()
@@ -84,7 +96,7 @@ def sensitivity(base: Scenario | None = None, *, params: list[str] | None = None
         for v in np.linspace(lo, hi, n_values):
             sc = modified_scenario(base, p, float(v), car=car, fraction=fraction)
             tasks.append({"scenario": sc.model_dump(mode="json"), "param": p, "value": float(v),
-                          "mod_class": f"{car}_mod"})
+                          "mod_class": f"{car}_mod", "min_ttc_samples": int(min_ttc_samples)})
     rows = []
     for r in run_tasks(ttc_stats, tasks, workers=workers, scheduler=scheduler, progress=progress,
                        description="sensitivity"):

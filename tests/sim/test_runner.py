@@ -90,12 +90,30 @@ def test_cli_sim_run_and_sensitivity(sumo, tmp_path):
     assert aveas_format.open(tmp_path / "sim.aveas").participants.num_rows > 10
     with pytest.raises(SystemExit) as e:
         main(["sim", "sensitivity", "--config", str(cfg), "-o", str(tmp_path / "sens"), "-p", "cc1",
-              "-n", "2"])
+              "-n", "2", "--min-ttc-samples", "2"])
     assert e.value.code == 0
     rows = json.loads((tmp_path / "sens" / "sensitivity.json").read_text())
     assert [r["value"] for r in rows] == [0.1, 1.0]
     assert all(r["min_ttc"] > 0 and r["min_mean_ttc"] >= r["min_ttc"] for r in rows)
+    assert all(r["n_vehicles_mean"] >= 1 for r in rows)
     assert (tmp_path / "sens" / "sensitivity.png").stat().st_size > 1000
+
+
+def test_ttc_summary_needs_enough_samples_per_vehicle():
+    """A vehicle with a single short TTC sample no longer decides the minimum mean TTC alone."""
+    import numpy as np
+
+    from aveas_format.sim.sensitivity import ttc_summary
+
+    pid = np.array([1, 2, 2, 2, 3, 3])
+    ttc = np.array([4.0, 9.0, 11.0, 10.0, 6.0, 8.0])
+    every = ttc_summary(pid, ttc)
+    assert every["min_ttc"] == 4.0 and every["min_mean_ttc"] == 4.0 and every["n_vehicles_mean"] == 3
+    two = ttc_summary(pid, ttc, min_samples=2)
+    assert two["min_ttc"] == 4.0 and two["min_mean_ttc"] == 7.0 and two["n_vehicles_mean"] == 2
+    none = ttc_summary(pid, ttc, min_samples=4)
+    assert np.isnan(none["min_mean_ttc"]) and none["n_vehicles_mean"] == 0
+    assert np.isnan(ttc_summary(pid[:0], ttc[:0])["min_ttc"])
 
 
 def test_network_from_a_map_file(sumo, tmp_path):
