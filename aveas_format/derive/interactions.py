@@ -346,13 +346,12 @@ def _sizes(rec, pid: np.ndarray) -> dict[str, np.ndarray]:
     return out
 
 
-def _accel(rec, pid: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                         np.ndarray]:
+def _accel(rec, derived: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                           np.ndarray]:
     """ax, ay and their std per states row: the measured ``ax``/``ay`` of states where present,
-    otherwise those of derived/kinematics (NaN where neither has them)."""
+    otherwise ``derived`` (those of derived/kinematics; NaN where neither has them)."""
     s = rec.states
     measured = tuple(_num(s, c) for c in ("ax", "ay", "ax_std", "ay_std"))
-    derived = _accel_derived(rec, pid, t)
     have = np.isfinite(measured[0]) & np.isfinite(measured[1])
     return tuple(np.where(have, m, d) for m, d in zip(measured, derived))
 
@@ -380,16 +379,12 @@ def _kinematics_columns(rec, pid: np.ndarray, t: np.ndarray, cols: tuple[str, ..
     return tuple(np.where(ok, _num(k, c)[rows], np.nan) for c in cols)
 
 
-def _accel_derived(rec, pid: np.ndarray, t: np.ndarray):
-    return _kinematics_columns(rec, pid, t, ("ax", "ay", "ax_std", "ay_std"))
-
-
-def _smoothed_velocities(S: _Samples, rec, mode: str) -> int:
+def _smoothed_velocities(S: _Samples, mode: str) -> int:
     """Replace the along-motion component of the states' velocity by derived/kinematics' smoothed
     speed (with its std), keeping the across-motion component and its variance, where ``mode`` is
     ``smoothed``, or ``auto`` and the smoothed std is the smaller. Only samples moving at >= 0.5
     m/s (a defined direction of motion). Returns the number of samples replaced."""
-    speed, speed_std = _kinematics_columns(rec, S.pid, S.t, ("speed", "speed_std"))
+    speed, speed_std = S.k_speed, S.k_speed_std
     v = np.hypot(S.vx, S.vy)
     with np.errstate(invalid="ignore", divide="ignore"):
         c, sn = S.vx / v, S.vy / v
@@ -429,7 +424,10 @@ class _Samples:
         size = _sizes(rec, self.pid)
         self.L, self.W = size["length"], size["width"]
         self.sL, self.sW = size["length_std"], size["width_std"]
-        self.ax, self.ay, self.sax, self.say = _accel(rec, self.pid, self.t)
+        kin = _kinematics_columns(rec, self.pid, self.t,
+                                  ("ax", "ay", "ax_std", "ay_std", "speed", "speed_std"))
+        self.ax, self.ay, self.sax, self.say = _accel(rec, kin[:4])
+        self.k_speed, self.k_speed_std = kin[4:]  # smoothed speed (see _smoothed_velocities)
         tk = np.round(self.t / p.time_resolution).astype(np.int64)
         self.tstep = np.unique(tk, return_inverse=True)[1].ravel()
         self.n = len(self.t)
@@ -869,7 +867,7 @@ def compute(rec, p: InteractionsParams) -> pa.Table:
     """The ``derived/interactions`` table of ``rec``."""
     S = _Samples(rec, p)
     if p.velocities != "states":
-        _smoothed_velocities(S, rec, p.velocities)
+        _smoothed_velocities(S, p.velocities)
     lane = _lane_rows(rec, S, p)
     parts = []
     if lane:
