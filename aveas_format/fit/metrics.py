@@ -60,18 +60,22 @@ def participant_classes(rec, by: str = "class") -> dict[int, str]:
     return out
 
 
-def recorded_section(rec, road_id: str | None = None, s_range: tuple[float, float] | None = None
-                     ) -> pa.Table:
-    """(participant_id, time) of the states on ``road_id`` with ``road_s`` in ``s_range``."""
-    st = rec.states
+def section_states(st: pa.Table, road_id: str | None = None,
+                   s_range: tuple[float, float] | None = None) -> pa.Table:
+    """The states rows on ``road_id`` with ``road_s`` in ``s_range`` (either may be None)."""
     mask = None
     if road_id is not None and "road_id" in st.column_names:
         mask = pc.equal(st["road_id"].cast(pa.string()), road_id)
     if s_range is not None and "road_s" in st.column_names:
         m2 = pc.and_(pc.greater_equal(st["road_s"], s_range[0]), pc.less_equal(st["road_s"], s_range[1]))
         mask = m2 if mask is None else pc.and_(mask, m2)
-    keys = st.select(["participant_id", "time"])
-    return keys if mask is None else keys.filter(pc.fill_null(mask, False))
+    return st if mask is None else st.filter(pc.fill_null(mask, False))
+
+
+def recorded_section(rec, road_id: str | None = None, s_range: tuple[float, float] | None = None
+                     ) -> pa.Table:
+    """(participant_id, time) of the states on ``road_id`` with ``road_s`` in ``s_range``."""
+    return section_states(rec.states, road_id, s_range).select(["participant_id", "time"])
 
 
 def simulated_section(res) -> pa.Table:
@@ -94,9 +98,14 @@ def simulated_section(res) -> pa.Table:
     return keys.join(inside, ["source_id", "time"], join_type="inner").select(["participant_id", "time"])
 
 
+def _float_time(table: pa.Table) -> pa.Table:
+    return table.cast(table.schema.set(table.schema.get_field_index("time"), pa.field("time", pa.float64())))
+
+
 def _in_section(table: pa.Table, section: pa.Table) -> pa.Table:
-    t = table.cast(table.schema.set(table.schema.get_field_index("time"), pa.field("time", pa.float64())))
-    return t.join(section, ["participant_id", "time"], join_type="inner")
+    """The rows of ``table`` whose (participant_id, time) is in ``section`` (an inner join that
+    adds ``section``'s other columns)."""
+    return _float_time(table).join(_float_time(section), ["participant_id", "time"], join_type="inner")
 
 
 def sampling_step(rec) -> float:
@@ -109,20 +118,15 @@ def sampling_step(rec) -> float:
     return float(np.median(dt)) if len(dt) else 1.0
 
 
-def _group(pid: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sort by (participant, value); return the sorted values, group starts and counts."""
-    o = np.lexsort((v, pid))
-    pid, v = pid[o], v[o]
-    uniq, start, count = np.unique(pid, return_index=True, return_counts=True)
-    return uniq, v, np.stack([start, count])
-
-
 def per_vehicle(pid: np.ndarray, v: np.ndarray, how: str, min_samples: int = 1
                 ) -> tuple[np.ndarray, np.ndarray]:
     """One value per participant (``median``, ``min`` or ``std``) where it has >= ``min_samples``."""
     if len(pid) == 0:
         return np.empty(0, np.int64), np.empty(0)
-    uniq, v, (start, count) = _group(np.asarray(pid), np.asarray(v, np.float64))
+    pid, v = np.asarray(pid), np.asarray(v, np.float64)
+    o = np.lexsort((v, pid))                     # by participant, then value
+    pid, v = pid[o], v[o]
+    uniq, start, count = np.unique(pid, return_index=True, return_counts=True)
     if how == "median":
         out = 0.5 * (v[start + (count - 1) // 2] + v[start + count // 2])
     elif how == "min":
@@ -161,8 +165,7 @@ def metric_values(rec, name: str, section: pa.Table, classes, cls_of: dict[int, 
     it = it.filter(pc.equal(it["relation"].cast(pa.string()), "leader"))
     it = _in_section(it.select(["participant_id", "time", "thw", "ttc", "closing_speed"]), section)
     if name == "time_headway":
-        kin = rec.derived["kinematics"].select(["participant_id", "time", "speed"])
-        it = _in_section(it, kin.cast(kin.schema.set(1, pa.field("time", pa.float64()))))
+        it = _in_section(it, rec.derived["kinematics"].select(["participant_id", "time", "speed"]))
         thw = it["thw"].to_numpy(zero_copy_only=False).astype(np.float64)
         speed = it["speed"].to_numpy(zero_copy_only=False).astype(np.float64)
         closing = it["closing_speed"].to_numpy(zero_copy_only=False).astype(np.float64)

@@ -106,17 +106,9 @@ def recorded_mean_speeds(rec, *, classes: tuple[str, ...] = ("car", "truck"), ro
                          ) -> dict[str, np.ndarray]:
     """Per class: each participant's mean speed (km/h) over its samples (optionally only those on
     ``road_id`` with ``road_s`` in ``s_range``)."""
-    import pyarrow.compute as pc
+    from aveas_format.fit.metrics import section_states
 
-    st = rec.states
-    mask = None
-    if road_id is not None and "road_id" in st.column_names:
-        mask = pc.equal(st["road_id"].cast("string"), road_id)
-    if s_range is not None and "road_s" in st.column_names:
-        m2 = pc.and_(pc.greater_equal(st["road_s"], s_range[0]), pc.less_equal(st["road_s"], s_range[1]))
-        mask = m2 if mask is None else pc.and_(mask, m2)
-    if mask is not None:
-        st = st.filter(pc.fill_null(mask, False))
+    st = section_states(rec.states, road_id, s_range)
     pid = st["participant_id"].to_numpy()
     v = np.hypot(st["vx"].to_numpy(zero_copy_only=False), st["vy"].to_numpy(zero_copy_only=False)) * 3.6
     ok = np.isfinite(v)
