@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 
 from aveas_format.cli.app import app
-from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, out
+from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, out, parse_option_pairs
 
 fit_app = typer.Typer(help="Fit behaviour-model parameters to recordings (maximum likelihood "
                       "with SUMO; docs/fitting.md).", no_args_is_help=True)
@@ -156,18 +156,17 @@ def car_following(
     """Fit Wiedemann 99 car-following parameters (e.g. cc1, the headway time) to per-vehicle
     car-following metrics of recordings: time headway, minimum TTC or acceleration spread
     (the paper's outlook)."""
-    options: dict[str, float] = {}
-    for o in option or []:
-        k, sep, v = o.partition("=")
-        try:
-            options[k.strip()] = float(v)
-        except ValueError:
-            raise fail(f"--option {o!r}: expected NAME=NUMBER", EXIT_USAGE) from None
-        if not sep or k.strip() not in _METRIC_OPTIONS:
-            raise fail(f"--option {o!r}: expected one of {', '.join(_METRIC_OPTIONS)}=NUMBER",
+    from aveas_format.fit.metrics import METRIC_OPTIONS
+
+    try:
+        options = parse_option_pairs(option or [], object)
+    except ValueError as e:
+        raise fail(f"{e} (NAME=NUMBER)", EXIT_USAGE) from None
+    for k, v in options.items():
+        if k not in METRIC_OPTIONS or isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise fail(f"--option {k}={v}: expected one of {', '.join(METRIC_OPTIONS)}=NUMBER",
                        EXIT_USAGE)
-    _fit(recordings, output, config, metric, param or ["cc1_car", "cc1_truck"], options, restarts, workers, scheduler, maxfev,
-         seed, bandwidth, bounds, road, s_range)
+    options = {k: float(v) for k, v in options.items()}
+    _fit(recordings, output, config, metric, param or ["cc1_car", "cc1_truck"], options, restarts,
+         workers, scheduler, maxfev, seed, bandwidth, bounds, road, s_range)
 
-
-_METRIC_OPTIONS = ("max_thw", "min_speed", "max_closing", "max_ttc", "min_following")

@@ -22,6 +22,7 @@ recordings and the SUMO vType (``attributes.sumo_type``) for simulations, like t
 
 from __future__ import annotations
 
+import inspect
 import json
 
 import numpy as np
@@ -179,6 +180,11 @@ def metric_values(rec, name: str, section: pa.Table, classes, cls_of: dict[int, 
     else:
         raise ValueError(f"unknown metric {name!r}")
     return _by_class(u, v, classes, cls_of)
+
+
+#: the keyword options of :func:`metric_values` (thresholds of the metrics; CLI ``--option``)
+METRIC_OPTIONS: tuple[str, ...] = tuple(
+    n for n, prm in inspect.signature(metric_values).parameters.items() if prm.kind is prm.KEYWORD_ONLY)
 
 
 def recorded_metric(name: str):

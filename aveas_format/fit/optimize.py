@@ -116,7 +116,7 @@ class FitConfig(BaseModel):
         return b[:, 0] + rng.random((self.restarts, len(b))) * (b[:, 1] - b[:, 0])
 
 
-def simulated_metric(theta: np.ndarray, config: FitConfig) -> dict[str, np.ndarray]:
+def metric_at(theta: np.ndarray, config: FitConfig) -> dict[str, np.ndarray]:
     """The simulated per-vehicle metric at ``theta``."""
     from aveas_format.fit.objective import METRICS
     from aveas_format.sim.runner import simulate
@@ -129,7 +129,7 @@ def simulated_metric(theta: np.ndarray, config: FitConfig) -> dict[str, np.ndarr
 def evaluate(theta: np.ndarray, config: FitConfig, recorded: dict[str, np.ndarray]
              ) -> tuple[float, dict[str, np.ndarray]]:
     """-ln L at ``theta`` (the parameters of ``config.names``) and the simulated metric."""
-    sim = simulated_metric(theta, config)
+    sim = metric_at(theta, config)
     return neg_log_likelihood(recorded, sim, config.bandwidth, config.kde_backend), sim
 
 
@@ -263,7 +263,7 @@ def fit_parameters(recorded: dict[str, np.ndarray], config: FitConfig | None = N
             from aveas_format.fit.plots import plot_histogram, plot_parameters
 
             m = METRICS[config.metric]
-            sim = simulated_metric(np.array([res.best[n] for n in config.names]), config)
+            sim = metric_at(np.array([res.best[n] for n in config.names]), config)
             plot_histogram(recorded, sim, od / "fit_histogram.png", bandwidth=config.bandwidth,
                            unit=m.unit, label=m.label or m.name)
             plot_parameters(runs, config.names, od / "fit_parameters.png")

@@ -14,3 +14,18 @@ def small_scenario(duration: float = 300.0, seed: int = 1, length: float = 1000.
         VehicleClass(name="car", flow=1680, speed_mean_kmh=PAPER["car"][0], speed_std_kmh=PAPER["car"][1]),
         VehicleClass(name="truck", vclass="truck", flow=320, speed_mean_kmh=PAPER["truck"][0],
                      speed_std_kmh=PAPER["truck"][1])], **kw)
+
+
+def cli_simulated_recording(folder, toml: str):
+    """Write the scenario ``toml`` to ``folder/s.toml`` and run ``aveas-format sim run`` on it into
+    ``folder/rec.aveas`` (no validation); returns both paths."""
+    import pytest
+
+    from aveas_format.cli import main
+
+    cfg = folder / "s.toml"
+    cfg.write_text(toml)
+    with pytest.raises(SystemExit) as e:
+        main(["sim", "run", "-c", str(cfg), "-o", str(folder / "rec.aveas"), "--no-validate"])
+    assert e.value.code == 0
+    return cfg, folder / "rec.aveas"

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from sim.sim_helpers import PAPER, small_scenario
+from sim.sim_helpers import PAPER, cli_simulated_recording, small_scenario
 
 from aveas_format.fit import FitConfig, fit_desired_speed, load_runs
 from aveas_format.sim import simulate
@@ -74,11 +74,8 @@ def test_restarts_on_a_dask_local_cluster(sumo, tmp_path):
 def test_cli_fit_desired_speed(sumo, tmp_path):
     from aveas_format.cli import main
 
-    cfg = tmp_path / "s.toml"
-    cfg.write_text('duration = 120\nseed = 5\n[network]\nlength = 400\ninflow = 100\n')
-    with pytest.raises(SystemExit) as e:
-        main(["sim", "run", "-c", str(cfg), "-o", str(tmp_path / "rec.aveas"), "--no-validate"])
-    assert e.value.code == 0
+    cfg, _ = cli_simulated_recording(tmp_path, 'duration = 120\nseed = 5\n[network]\nlength = 400\n'
+                                                'inflow = 100\n')
     with pytest.raises(SystemExit) as e:
         main(["fit", "desired-speed", str(tmp_path / "rec.aveas"), "-c", str(cfg), "-o",
               str(tmp_path / "fit"), "-r", "1", "--maxfev", "6", "--s-range", "100,500",

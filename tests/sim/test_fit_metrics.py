@@ -10,7 +10,7 @@ import pytest
 from aveas_testing import STRAIGHT_MAP
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from sim.sim_helpers import small_scenario
+from sim.sim_helpers import cli_simulated_recording, small_scenario
 
 from aveas_format.fit import METRICS, FitConfig, fit_desired_speed, fit_parameters
 from aveas_format.fit.metrics import per_vehicle
@@ -153,11 +153,8 @@ def test_cc1_recovery_from_time_headways(sumo, tmp_path):
 def test_cli_fit_car_following(sumo, tmp_path):
     from aveas_format.cli import main
 
-    cfg = tmp_path / "s.toml"
-    cfg.write_text('duration = 300\nseed = 5\n[network]\nlength = 600\ninflow = 100\n')
-    with pytest.raises(SystemExit) as e:
-        main(["sim", "run", "-c", str(cfg), "-o", str(tmp_path / "rec.aveas"), "--no-validate"])
-    assert e.value.code == 0
+    cfg, _ = cli_simulated_recording(tmp_path, 'duration = 300\nseed = 5\n[network]\nlength = 600\n'
+                                                'inflow = 100\n')
     with pytest.raises(SystemExit) as e:
         main(["fit", "car-following", str(tmp_path / "rec.aveas"), "-c", str(cfg), "-o",
               str(tmp_path / "fit"), "-r", "1", "--maxfev", "5", "-p", "cc1_car",
