@@ -323,6 +323,18 @@ def sector_polygon(cx: float, cy: float, radius: float, yaw: float = 0.0,
     return shapely.Polygon(np.vstack([[cx, cy], pts]))
 
 
+def _areal(geom):
+    """The polygonal part of ``geom`` (made valid; slivers under 1e-6 m² dropped) as a Polygon or
+    MultiPolygon, None when nothing is left."""
+    import shapely
+
+    geom = shapely.make_valid(geom)
+    polys = [g for g in getattr(geom, "geoms", [geom]) if g.geom_type == "Polygon" and g.area > 1e-6]
+    if not polys:
+        return None
+    return polys[0] if len(polys) == 1 else shapely.MultiPolygon(polys)
+
+
 def coverage_regions(sensor_id: str, sensor_xy: tuple[float, float], range_m: float,
                      yaw: float, fov: float, area, time_start: float, time_end: float,
                      observed=None) -> list[dict[str, Any]]:
@@ -339,11 +351,9 @@ def coverage_regions(sensor_id: str, sensor_xy: tuple[float, float], range_m: fl
     rows = []
     for kind, geom in (("sensor_range", shapely.difference(area, disk)),
                        ("field_of_view", shapely.difference(shapely.intersection(area, disk), view))):
-        geom = shapely.make_valid(geom)
-        polys = [g for g in getattr(geom, "geoms", [geom]) if g.geom_type == "Polygon" and g.area > 1e-6]
-        if not polys:
+        geom = _areal(geom)
+        if geom is None:
             continue
-        geom = polys[0] if len(polys) == 1 else shapely.MultiPolygon(polys)
         rows.append({"time_start": float(time_start), "time_end": float(time_end), "kind": kind,
                      "geometry": shapely.to_wkb(geom), "sensor_id": sensor_id, "occluder_id": None})
     return rows
@@ -413,11 +423,9 @@ def outside_coverage(map_bytes: bytes, coverage_wkt: str, time_start: float, tim
     where the footprint covers it all). Occlusions (bridges, trees) are not known to such sources."""
     import shapely
 
-    geom = shapely.make_valid(shapely.difference(map_area(map_bytes), shapely.from_wkt(coverage_wkt)))
-    polys = [g for g in getattr(geom, "geoms", [geom]) if g.geom_type == "Polygon" and g.area > 1e-6]
-    if not polys:
+    geom = _areal(shapely.difference(map_area(map_bytes), shapely.from_wkt(coverage_wkt)))
+    if geom is None:
         return None
-    geom = polys[0] if len(polys) == 1 else shapely.MultiPolygon(polys)
     return unobserved_table([{"time_start": float(time_start), "time_end": float(time_end),
                               "kind": "outside_coverage", "geometry": shapely.to_wkb(geom),
                               "sensor_id": sensor_id}])
