@@ -97,17 +97,18 @@ class FitConfig(BaseModel):
         return np.array(out, np.float64)
 
     def scenario_at(self, theta: np.ndarray) -> Scenario:
-        """The scenario with the parameters set to ``theta``."""
-        sc = self.scenario.model_copy(deep=True)
+        """The scenario with the parameters set to ``theta`` (the others as in ``scenario``)."""
+        speeds = {c.name: [c.speed_mean_kmh, c.speed_std_kmh] for c in self.scenario.classes}
+        cf: dict[str, dict[str, float]] = {}
         for n, v in zip(self.names, np.asarray(theta, np.float64), strict=True):
             kind, _, c = n.partition("_")
-            vc = sc.cls(c)
-            if kind == "mu":
-                vc.speed_mean_kmh = float(v)
-            elif kind == "sigma":
-                vc.speed_std_kmh = float(v)
+            if kind in ("mu", "sigma"):
+                speeds[c][kind == "sigma"] = float(v)
             else:
-                vc.cf_params = {**vc.cf_params, kind: float(v)}
+                cf.setdefault(c, {})[kind] = float(v)
+        sc = self.scenario.with_desired_speeds({c: (mu, sd) for c, (mu, sd) in speeds.items()})
+        for c, params in cf.items():
+            sc = sc.with_cf_params(c, **params)
         return sc
 
     def starts(self) -> np.ndarray:
