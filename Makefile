@@ -32,8 +32,9 @@ bench: $(STAMP)
 	$(PY) benchmarks/run.py
 
 docs: $(STAMP)
-	$(PY) -m aveas_format.docgen
-	$(PY) -m aveas_format.docgen --tutorials
+	$(PY) tools/docgen.py
+	$(PY) tools/docgen.py --tutorials
+	$(PY) tools/docgen.py --figures
 
 clean:
 	rm -rf $(VENV) demo-output .pytest_cache .hypothesis build dist *.egg-info

@@ -30,7 +30,7 @@ _LAZY = {
     "open": ("aveas_format.io.reader", "open_recording"),
     "Recording": ("aveas_format.io.recording", "Recording"),
     "ReadPlan": ("aveas_format.io.reader", "ReadPlan"),
-    "build_recording": ("aveas_format.io.builder", "build_recording"),
+    "build_recording": ("aveas_format.mapref.build", "build_recording"),
 }
 
 

@@ -271,7 +271,7 @@ def validate_recording(path: str, *, select: list[str] | None = None,
                           max_sample=max_sample)
     report_file = None
     if reports_dir:
-        from aveas_format.io.atomic import write_text_atomic
+        from aveas_format.safeio import write_text_atomic
 
         report_file = str(Path(reports_dir) / f"{_report_name(path)}.json")
         write_text_atomic(report_file, report.to_json())

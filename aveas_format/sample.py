@@ -48,7 +48,7 @@ def highway_scene(
     ``participant_id``, ``time``, ``x``, ``y``, ``vx``, ``vy``, ``ax``, ``ay`` of every state row
     (same order as the recording's states).
     """
-    from aveas_format.io.builder import build_recording
+    from aveas_format.mapref.build import build_recording
     from aveas_format.opendrive import load_map
     from aveas_format.opendrive.builder import straight_highway
 

@@ -27,7 +27,7 @@ def _row(name, n, t, note, base=None):
 def junction_scene(n_per_stream: int = 60, rate_hz: float = 25.0, seed: int = 3):
     """Two perpendicular streams of cars crossing at the origin (off the test map's road):
     eastbound at ~12 m/s and northbound at ~10 m/s, headways 2-6 s."""
-    from aveas_format.io.builder import build_recording
+    from aveas_format.mapref.build import build_recording
     from aveas_format.opendrive.builder import straight_highway
     from aveas_format.sample import SITE_CRS
 

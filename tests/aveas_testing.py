@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aveas_format.io.builder import build_recording
+from aveas_format.mapref.build import build_recording
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = Path(__file__).resolve().parent / "data"

@@ -8,7 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import aveas_format
-from aveas_format.io.builder import heading_from_velocity, velocity_from_positions, wrap_angle
+from aveas_format.mapref import LocalFrame
+from aveas_format.mapref.build import heading_from_velocity, velocity_from_positions
+from aveas_format.numeric import wrap_angle
 
 from aveas_testing import STRAIGHT_MAP
 
@@ -35,7 +37,7 @@ def test_readme_example(tmp_path):
 
 def test_lon_lat_are_consistent_with_the_crs(rec):
     s = rec.states
-    x, y = rec.local_frame().from_wgs84(s.column("lon").to_numpy(), s.column("lat").to_numpy())
+    x, y = LocalFrame.of(rec).from_wgs84(s.column("lon").to_numpy(), s.column("lat").to_numpy())
     assert np.abs(x - s.column("x").to_numpy()).max() < 1e-6
     assert np.abs(y - s.column("y").to_numpy()).max() < 1e-6
 

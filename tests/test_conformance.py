@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 import aveas_format
+from aveas_format.mapref import LocalFrame
 
 
 def test_conformance_recording_reads(conformance_path):
@@ -23,7 +24,7 @@ def test_conformance_recording_validates_without_errors(conformance_path):
 
 def test_conformance_lon_lat_agree_with_our_georeferencing(conformance_path):
     rec = aveas_format.open(conformance_path)
-    frame = rec.local_frame()
+    frame = LocalFrame.of(rec)
     s = rec.states
     lon, lat = frame.to_wgs84(s.column("x").to_numpy(), s.column("y").to_numpy())
     assert np.abs(lon - s.column("lon").to_numpy()).max() < 1e-9

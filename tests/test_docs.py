@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from aveas_format.docgen import generated
+from docgen import generated
 
 
 @pytest.mark.parametrize("path,text", list(generated().items()), ids=lambda v: getattr(v, "name", ""))

@@ -253,7 +253,7 @@ def test_figures_and_tables_are_written_atomically(tmp_path):
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from aveas_format.io.atomic import save_figure_atomic, write_parquet_atomic
+    from aveas_format.safeio import save_figure_atomic, write_parquet_atomic
 
     fig, ax = plt.subplots()
     ax.plot([0, 1], [1, 0])

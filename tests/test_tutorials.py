@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from aveas_format.docgen import DOCS, run_tutorial, tutorial_missing, tutorial_paths
+from docgen import DOCS, run_tutorial, tutorial_missing, tutorial_paths
 
 
 def test_there_are_tutorials():

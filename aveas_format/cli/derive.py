@@ -113,7 +113,7 @@ def _derive_dataset(specs: list[str], output: Path | None, in_place: bool, overw
     """Derive every recording of a dataset, one task each, into the directory OUTPUT (same
     relative layout) or in place; exit 3 when any recording failed."""
     from aveas_format.dataset import derive_dataset, discover, is_recording
-    from aveas_format.io.atomic import write_text_atomic
+    from aveas_format.safeio import write_text_atomic
 
     if output is not None and output.exists() and (not output.is_dir() or is_recording(output)):
         raise fail(f"{output}: for a dataset, --output is a directory (of recordings)",

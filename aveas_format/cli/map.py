@@ -43,7 +43,7 @@ def _load(path: Path | None):
 def map_summary(net) -> dict[str, Any]:
     """The summary printed by ``map info`` (also its ``--json``)."""
     from aveas_format.errors import FormatError
-    from aveas_format.georef import parse_crs
+    from aveas_format.mapref.crs import parse_crs
 
     roads = list(net.roads.values())
     lane_types: Counter[str] = Counter()
@@ -233,7 +233,7 @@ def write_table(table, path: Path | None) -> None:
         pcsv.write_csv(table, sys.stdout.buffer)
         sys.stdout.flush()
         return
-    from aveas_format.io.atomic import write_bytes_atomic, write_parquet_atomic
+    from aveas_format.safeio import write_bytes_atomic, write_parquet_atomic
 
     if path.suffix.lower() in (".parquet", ".pq"):
         write_parquet_atomic(table, path)

@@ -96,7 +96,7 @@ def sensitivity_cmd(
     rows = sensitivity(sc, params=param or None, n_values=values, fraction=fraction,
                        workers=workers, scheduler=scheduler, progress=True,
                        min_ttc_samples=min_ttc_samples)
-    from aveas_format.io.atomic import write_text_atomic
+    from aveas_format.safeio import write_text_atomic
 
     write_text_atomic(output / "sensitivity.json", json.dumps(rows, indent=2))
     plot_sensitivity(rows, output / "sensitivity.png")

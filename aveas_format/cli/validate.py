@@ -108,7 +108,7 @@ def validate(
     else:
         text = render_text(report)
     if output:
-        from aveas_format.io.atomic import write_text_atomic
+        from aveas_format.safeio import write_text_atomic
 
         write_text_atomic(output, text)
     else:
@@ -123,7 +123,7 @@ def _validate_dataset(specs: list[str], select: list[str] | None, ignore: list[s
     """Validate every recording of a dataset, one task each; exit with the worst code."""
     from aveas_format.cli.common import err
     from aveas_format.dataset import discover, validate_dataset
-    from aveas_format.io.atomic import write_text_atomic
+    from aveas_format.safeio import write_text_atomic
     from aveas_format.validate.registry import select_rules
 
     try:

@@ -311,7 +311,7 @@ def convert_accident(inputs: list[Path], *, map_source, options: AccidentOptions
         yaw = column(dt_, "yaw")
         heading = np.radians(yaw) if o.yaw_unit == "deg" else yaw
     else:
-        from aveas_format.io.builder import heading_from_velocity
+        from aveas_format.mapref.build import heading_from_velocity
 
         heading = heading_from_velocity(pid, vx, vy)
     if "ref_offset" in names:

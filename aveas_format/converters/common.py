@@ -16,7 +16,7 @@ import pyarrow.parquet as pq
 
 from aveas_format._version import __version__
 from aveas_format.errors import FormatError, RecordingIOError
-from aveas_format.io.builder import build_recording, load_map_bytes
+from aveas_format.mapref.build import build_recording, load_map_bytes
 
 __all__ = [
     "build_recording", "column", "factorize", "file_sha256", "load_map_bytes", "move_along_heading",
@@ -171,7 +171,7 @@ def move_along_heading(x: np.ndarray, y: np.ndarray, heading: np.ndarray, d: np.
 def navigation_deg_to_heading(angle_deg: np.ndarray) -> np.ndarray:
     """Navigational degrees (0 = north, clockwise) -> heading (rad, counter-clockwise from +x,
     wrapped to (-pi, pi])."""
-    from aveas_format.io.builder import wrap_angle
+    from aveas_format.numeric import wrap_angle
 
     return wrap_angle(np.pi / 2 - np.radians(angle_deg))
 
@@ -513,7 +513,7 @@ def projected_to_local(x: np.ndarray, y: np.ndarray, source_crs: str, map_crs: s
     it (:func:`rotate`). It holds the header offset's ``hdg`` and, where the two CRSs differ, the
     local grid convergence between them (measured by projecting a point 1 m east of each point).
     """
-    from aveas_format.georef import LocalFrame, crs_equal, parse_crs
+    from aveas_format.mapref.crs import LocalFrame, crs_equal, parse_crs
 
     frame = LocalFrame(map_crs, map_offset, warn=False)
     hdg = frame.offset[3]

@@ -370,7 +370,7 @@ def convert_infra_lwir(inputs: list[Path], *, map_source, options: InfraLwirOpti
     sx, sy, _ = covariance_std_corr(cov)
 
     def kinematics(x, y):
-        from aveas_format.io.builder import heading_from_velocity
+        from aveas_format.mapref.build import heading_from_velocity
 
         vx, vy, vxs, vys = velocity_with_std(pid, time, x, y, sx, sy)
         hd = heading_from_velocity(pid, vx, vy)

@@ -485,7 +485,7 @@ def shifted_crs(crs: str, dx: float, dy: float) -> str:
     ``(dx, dy)``: the frame of the levelX tracks."""
     import pyproj
 
-    from aveas_format.georef import parse_crs
+    from aveas_format.mapref.crs import parse_crs
 
     import warnings
 

@@ -92,7 +92,7 @@ def export_mcap(rec, output: Path, *, options: McapExportOptions) -> list[Path]:
                           f"({e.name} is missing): pip install mcap foxglove-schemas-protobuf") from None
 
     from aveas_format._version import __version__
-    from aveas_format.io.atomic import write_bytes_atomic
+    from aveas_format.safeio import write_bytes_atomic
     from aveas_format.schema.metadata import timestamp_ns
 
     t0 = timestamp_ns(rec.meta.start_time)

@@ -483,7 +483,7 @@ def _recording_to_openlabel(rec, opendrive: str, extension: bool, road_attribute
         if kin is not None and kin.num_rows == n:
             a_est = (_col(kin, "ax"), _col(kin, "ay"))
         if a_est is None:
-            from aveas_format.io.builder import velocity_from_positions
+            from aveas_format.mapref.build import velocity_from_positions
 
             a_est = velocity_from_positions(pid, t, vx, vy)
         ax_w = np.nan_to_num(a_est[0]) if ax is None else ax
@@ -564,7 +564,7 @@ def _recording_to_openlabel(rec, opendrive: str, extension: bool, road_attribute
     # that an unchanged round trip hashes the same (and derived tables stay fresh)
     exact: dict[str, list] = {}
     if extension and n:
-        from aveas_format.io.builder import wrap_angle
+        from aveas_format.numeric import wrap_angle
 
         hw = wrap_angle(h)
         back = dict(zip(("vx", "vy"), _rot_world(vu, vv, hw)))
@@ -900,7 +900,7 @@ def _contexts(rec, times: np.ndarray, speed: np.ndarray) -> dict[str, Any]:
 @converter("openlabel", direction="export", options=OpenLabelExportOptions,
            description="ASAM OpenLABEL 1.0 JSON, AVEAS profile (+ the map as .xodr next to it)")
 def export_openlabel(rec, output: Path, *, options: OpenLabelExportOptions) -> list[Path]:
-    from aveas_format.io.atomic import write_bytes_atomic
+    from aveas_format.safeio import write_bytes_atomic
 
     output = Path(output)
     stem = output.name[:-5] if output.name.endswith(".json") else output.stem
@@ -1509,8 +1509,9 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
                             path: Path | None = None, frames=None):
     """``frames``: a function yielding ``(key, frame)`` in file order (the streamed import); else
     the frames are ``ol["frames"]``. Both go through :class:`_FrameRows`."""
-    from aveas_format.georef import LocalFrame, parse_crs
-    from aveas_format.io.builder import build_recording, wrap_angle
+    from aveas_format.mapref.crs import LocalFrame, parse_crs
+    from aveas_format.mapref.build import build_recording
+    from aveas_format.numeric import wrap_angle
     from aveas_format.opendrive import load_map
 
     options = options or OpenLabelImportOptions()

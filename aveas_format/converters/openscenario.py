@@ -235,7 +235,7 @@ def recording_to_openscenario(rec, *, logic_file: str = "map.xodr",
            description="ASAM OpenSCENARIO XML 1.2/1.3: entities + FollowTrajectoryAction polylines "
                        "(+ the map as .xodr)")
 def export_openscenario(rec, output: Path, *, options: OpenScenarioExportOptions) -> list[Path]:
-    from aveas_format.io.atomic import write_bytes_atomic
+    from aveas_format.safeio import write_bytes_atomic
 
     output = Path(output)
     map_name = options.map_file or f"{output.stem}.xodr"
@@ -301,7 +301,7 @@ def _pos_xyzh(pos, net) -> tuple[float, float, float, float | None]:
            patterns=("*.xosc",), method="traffic_simulation", options=OpenScenarioImportOptions,
            needs_map=False)
 def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenarioImportOptions):
-    from aveas_format.io.builder import build_recording
+    from aveas_format.mapref.build import build_recording
     from aveas_format.opendrive import load_map
 
     if len(inputs) != 1:

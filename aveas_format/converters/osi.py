@@ -139,7 +139,7 @@ def _zero_time(path: Path) -> str | None:
            "moving objects", patterns=("*.osi", "*.mcap"), method="traffic_simulation",
            options=OsiOptions)
 def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
-    from aveas_format.georef import LocalFrame, crs_equal
+    from aveas_format.mapref.crs import LocalFrame, crs_equal
     from aveas_format.opendrive import load_map
 
     cols: dict[str, list] = {k: [] for k in (
@@ -368,7 +368,7 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
     import betterosi as b
     import pyarrow.compute as pc
 
-    from aveas_format.io.atomic import write_bytes_atomic
+    from aveas_format.safeio import write_bytes_atomic
 
     suffix = output.suffix.lower()
     if suffix not in (".osi", ".mcap"):

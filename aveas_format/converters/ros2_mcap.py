@@ -725,7 +725,7 @@ def convert_ros2_mcap(inputs: list[Path], *, map_source, options: Ros2McapOption
                "cov": cov, "v": v, "vcov": vcov, "yaw_rate": twist[:, 2],
                "yaw_rate_var": tcov[:, 2, 2], "source": odom, "frame": child}
     elif ego_fix["t"]:
-        from aveas_format.georef import LocalFrame
+        from aveas_format.mapref.crs import LocalFrame
         from aveas_format.opendrive import load_map
 
         net = load_map(map_bytes)
@@ -749,7 +749,7 @@ def convert_ros2_mcap(inputs: list[Path], *, map_source, options: Ros2McapOption
         sx = np.sqrt(np.clip(fc[:, 0, 0], 0, None))
         sy = np.sqrt(np.clip(fc[:, 1, 1], 0, None))
         vx, vy, vxs, vys = velocity_with_std(pid0, ts, mx, my, sx, sy)
-        from aveas_format.io.builder import heading_from_velocity
+        from aveas_format.mapref.build import heading_from_velocity
 
         heading = heading_from_velocity(pid0, vx, vy)
         speed = np.hypot(vx, vy)
@@ -909,7 +909,7 @@ def convert_ros2_mcap(inputs: list[Path], *, map_source, options: Ros2McapOption
         r["vcov"][nov] = 0.0
         r["vcov"][nov, 0, 0], r["vcov"][nov, 1, 1] = fvxs[nov] ** 2, fvys[nov] ** 2
         # heading where unavailable or only known up to its sign
-        from aveas_format.io.builder import heading_from_velocity
+        from aveas_format.mapref.build import heading_from_velocity
 
         hv = heading_from_velocity(codes, r["vel"][:, 0], r["vel"][:, 1])
         moving = np.hypot(r["vel"][:, 0], r["vel"][:, 1]) >= 0.5

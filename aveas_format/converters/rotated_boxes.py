@@ -206,7 +206,7 @@ def _check_crs(crs: str, source: Path | None) -> None:
     .prj / .aux.xml it came from; none for the crs option)."""
     from pyproj.exceptions import CRSError
 
-    from aveas_format.georef import parse_crs
+    from aveas_format.mapref.crs import parse_crs
 
     try:
         parse_crs(crs)
@@ -357,7 +357,8 @@ def local_linear_velocity(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.n
            patterns=("*.csv", "*.parquet", "*.tfw", "*.pgw", "*.jgw", "*.wld", "*.prj", "*.aux.xml"),
            method="aerial", options=RotatedBoxOptions)
 def convert_rotated_boxes(inputs: list[Path], *, map_source, options: RotatedBoxOptions):
-    from aveas_format.io.builder import heading_from_velocity, wrap_angle
+    from aveas_format.mapref.build import heading_from_velocity
+    from aveas_format.numeric import wrap_angle
     from aveas_format.opendrive import load_map
 
     A, c, crs, tables, geo = _georeference(inputs, options)

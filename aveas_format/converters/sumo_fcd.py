@@ -259,7 +259,7 @@ def convert_sumo_fcd(inputs: list[Path], *, map_source, options: SumoFcdOptions)
     y = np.asarray(rows["y"], np.float64)
     map_bytes = load_map_bytes(map_source)
     if geo:
-        from aveas_format.georef import LocalFrame
+        from aveas_format.mapref.crs import LocalFrame
         from aveas_format.opendrive import load_map
 
         net = load_map(map_bytes)

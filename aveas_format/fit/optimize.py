@@ -33,7 +33,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from aveas_format.fit.objective import neg_log_likelihood
-from aveas_format.io.atomic import write_parquet_atomic, write_text_atomic
+from aveas_format.safeio import write_parquet_atomic, write_text_atomic
 from aveas_format.sim.scenario import W99_DEFAULTS, W99_RANGES, Scenario
 
 

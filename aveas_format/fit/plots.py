@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from aveas_format.fit.objective import kde_logpdf
-from aveas_format.io.atomic import save_figure_atomic
+from aveas_format.safeio import save_figure_atomic
 
 COLOURS = {"car": ("tab:blue", "black"), "truck": ("tab:green", "tab:orange")}
 

@@ -21,7 +21,9 @@ class Recording:
     Attributes: ``meta`` (:class:`~aveas_format.schema.RecordingMeta`), the tables
     ``participants``, ``states``, ``unobserved``, ``events``, ``environment``, ``interior``
     (:class:`pyarrow.Table` or None), ``derived`` (``{"kinematics": Table, ...}``), ``map_source``
-    (the bytes of map.xodr) and ``map`` (the parsed road network, loaded on first use).
+    (the bytes of map.xodr) and ``map`` (the parsed road network, loaded on first use: the one
+    place where ``io`` reaches up into ``opendrive``, see docs/architecture.md). The local <-> WGS 84
+    frame is :meth:`aveas_format.mapref.LocalFrame.of`.
     """
 
     participants: pa.Table | None
@@ -80,13 +82,6 @@ class Recording:
                 where = f"{self.path}/{self.meta.map.file}" if self.path else self.meta.map.file
                 raise MapError(e.message, path=where, **e.where) from None
         return self._map
-
-    def local_frame(self):
-        """The :class:`aveas_format.georef.LocalFrame` of this recording (local <-> WGS 84): the
-        CRS of recording.json with the map header's ``<offset>``."""
-        from aveas_format.georef import LocalFrame
-
-        return LocalFrame(self.meta.crs, offset=self.map.header.offset)
 
     # -- I/O ---------------------------------------------------------------------------------
     def write(self, path: str | Path, *, overwrite: bool = False, form: str | None = None) -> Path:

@@ -780,7 +780,7 @@ class RoadFit:
 
     def write(self, path: str | Path) -> Path:
         """Write the OpenDRIVE text to ``path``."""
-        from aveas_format.io.atomic import write_text_atomic
+        from aveas_format.safeio import write_text_atomic
 
         return write_text_atomic(path, self.xodr)
 

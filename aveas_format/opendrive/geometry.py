@@ -43,11 +43,6 @@ _N_PANELS = 64
 _FRESNEL_TOL = 1e-10  # metres: use Fresnel where its rounding error estimate is below this
 
 
-def wrap_angle(a: np.ndarray) -> np.ndarray:
-    """Wrap angles to [-pi, pi)."""
-    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
-
-
 def polyval3(coef: np.ndarray, ds: np.ndarray) -> np.ndarray:
     """``a + b ds + c ds^2 + d ds^3`` with coef[..., 0..3] broadcast against ds."""
     return coef[..., 0] + ds * (coef[..., 1] + ds * (coef[..., 2] + ds * coef[..., 3]))
@@ -396,4 +391,4 @@ class PlanView:
         return x, y, h
 
 
-__all__ = ["PlanView", "Profile", "SegmentedIndex", "polyval3", "wrap_angle"]
+__all__ = ["PlanView", "Profile", "SegmentedIndex", "polyval3"]

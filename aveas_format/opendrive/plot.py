@@ -177,7 +177,7 @@ def save_map(net: RoadNetwork, path: str | Path, *, dpi: int = 150, **kw: Any) -
     ax = plot_map(net, **kw)
     fig = ax.figure
     fig.tight_layout()
-    from aveas_format.io.atomic import save_figure_atomic
+    from aveas_format.safeio import save_figure_atomic
 
     return save_figure_atomic(fig, path, dpi=dpi)
 

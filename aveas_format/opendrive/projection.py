@@ -33,7 +33,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import shapely
 
-from .geometry import ARC, LINE, POLY3, PPOLY3, SPIRAL, wrap_angle
+from aveas_format.numeric import wrap_angle
+
+from .geometry import ARC, LINE, POLY3, PPOLY3, SPIRAL
 
 if TYPE_CHECKING:  # pragma: no cover
     from .network import RoadNetwork

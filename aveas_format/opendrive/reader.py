@@ -19,7 +19,7 @@ import numpy as np
 from lxml import etree
 
 from ..errors import MapError, RecordingIOError
-from ..safeio import xml_parser
+from aveas_format.safeio import xml_parser
 from .model import (
     Connection,
     Geometry,

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from lxml import etree
 
-from ..safeio import xml_parser
+from aveas_format.safeio import xml_parser
 from .model import Geometry, Header, Junction, Lane, LaneSection, Poly3Record, Road
 
 

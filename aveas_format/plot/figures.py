@@ -21,7 +21,7 @@ import numpy as np  # noqa: E402
 import pyarrow as pa  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 
-from aveas_format.io.atomic import save_figure_atomic  # noqa: E402
+from aveas_format.safeio import save_figure_atomic  # noqa: E402
 
 _SEV_STYLE = {"error": ("#d62728", "x"), "warning": ("#ff7f0e", "^"), "info": ("#1f77b4", "o")}
 

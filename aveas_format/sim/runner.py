@@ -111,9 +111,9 @@ class NetInfo:
 def _map_bytes(path: Path) -> bytes:
     if path.suffix == ".xodr":
         return path.read_bytes()
-    import aveas_format
+    from aveas_format.io.reader import open_recording
 
-    rec = aveas_format.open(path)
+    rec = open_recording(path)
     if rec.map_source is None:
         raise AveasError("the recording has no map", path=path)
     return rec.map_source

@@ -126,7 +126,7 @@ def plot_sensitivity(rows: list[dict], path: str | Path) -> Path:
     axes[1].set_xlabel("position in the parameter's range (start -> end)")
     axes[0].legend(ncol=5, fontsize=7)
     fig.tight_layout()
-    from aveas_format.io.atomic import save_figure_atomic
+    from aveas_format.safeio import save_figure_atomic
 
     save_figure_atomic(fig, path, dpi=120)
     plt.close(fig)

@@ -449,7 +449,7 @@ class Context:
         import warnings
 
         from aveas_format.errors import FormatError
-        from aveas_format.georef import LocalFrame
+        from aveas_format.mapref.crs import LocalFrame
 
         if self.meta is None:
             return None

@@ -8,7 +8,7 @@ import pytest
 
 from aveas_format.derive import derive
 from aveas_format.derive.interactions import lane_graph
-from aveas_format.io.builder import build_recording
+from aveas_format.mapref.build import build_recording
 from aveas_format.opendrive import load_map
 from aveas_format.opendrive.builder import roads_xodr
 from aveas_format.opendrive.model import (Connection, Geometry, Junction, Lane, LaneLink,

@@ -196,7 +196,7 @@ def test_accel_kinematics(method):
             x, y = 100 * np.cos(0.2 * t), 100 * np.sin(0.2 * t)
         else:
             x, y = 25 * t - 1.5 * t * t, 0 * t
-        from aveas_format.io.builder import build_recording
+        from aveas_format.mapref.build import build_recording
 
         n = len(t)
         rec = build_recording(

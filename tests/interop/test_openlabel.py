@@ -321,7 +321,7 @@ def test_poses_and_utm_names():
 def _crossing_scene():
     """Two cars along a lane and a third crossing it: all four derived tables, one PET below the
     threshold and one undefined (null) PET."""
-    from aveas_format.io.builder import build_recording
+    from aveas_format.mapref.build import build_recording
     from aveas_format.sample import SITE_CRS
 
     t = np.arange(61) * 0.1

@@ -99,7 +99,7 @@ def test_empty_input(geom_net):
 def test_relative_heading(geom_net):
     x, y, _, h = geom_net.road_to_world("arc", [30.0, 30.0], [-1.0, 1.5])
     proj = geom_net.world_to_road(x, y, heading=h + np.array([0.1, np.pi]))
-    np.testing.assert_allclose(proj.rel_heading, [0.1, -np.pi], atol=1e-9)
+    np.testing.assert_allclose(proj.rel_heading, [0.1, np.pi], atol=1e-9)
     np.testing.assert_allclose(proj.road_heading, h, atol=1e-12)
     assert np.isnan(geom_net.world_to_road(x, y).rel_heading).all()
 

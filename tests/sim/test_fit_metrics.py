@@ -14,7 +14,7 @@ from sim.sim_helpers import cli_simulated_recording, small_scenario
 
 from aveas_format.fit import METRICS, FitConfig, fit_desired_speed, fit_parameters
 from aveas_format.fit.metrics import per_vehicle
-from aveas_format.io.builder import build_recording
+from aveas_format.mapref.build import build_recording
 from aveas_format.sim import simulate
 
 RATE = 10.0

@@ -18,7 +18,7 @@ import pyarrow as pa
 import shapely
 
 from aveas_format.io.arrow import pmf_array
-from aveas_format.io.builder import build_recording
+from aveas_format.mapref.build import build_recording
 from aveas_format.schema.pmf import one_hot
 from aveas_format.schema.tables import TABLES
 

@@ -21,6 +21,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from aveas_format.numeric import wrap_angle
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hits, rule
 from aveas_format.validate.rules.interactions import in_accident
@@ -169,10 +170,6 @@ def jerk(ctx: Context) -> Iterator[Hits]:
         yield h
 
 
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
 @rule("kinematics.yaw_rate", "warning", "Yaw rate implausible for the class",
       "states.parquet: row {row}: participant {participant_id} ({class_}) turns at {value} rad/s "
       "({source}; {n_samples} samples), above the {limit} rad/s plausible for its class", scope="rows")
@@ -192,7 +189,7 @@ def yaw_rate(ctx: Context) -> Iterator[Hits]:
         moving = (sp[i] > ctx.config.kinematics.walking_speed) & (sp[j] > ctx.config.kinematics.walking_speed)
         i, j, dt = i[moving], j[moving], dt[moving]
         w = np.full(sv.n, np.nan)
-        w[i] = np.abs(_wrap(h[j] - h[i])) / dt
+        w[i] = np.abs(wrap_angle(h[j] - h[i])) / dt
         hs = _std(sv, "heading_std")
         s = np.zeros(sv.n)
         s[i] = np.sqrt(hs[i] ** 2 + hs[j] ** 2) / dt
@@ -226,7 +223,7 @@ def heading_vs_motion(ctx: Context) -> Iterator[Hits]:
     k = ctx.config.kinematics
     sp = np.hypot(vx, vy)
     moving = sv.vehicle & (sp > k.walking_speed)
-    diff = np.abs(_wrap(h - np.arctan2(vy, vx)))
+    diff = np.abs(wrap_angle(h - np.arctan2(vy, vx)))
     sig = np.sqrt(_std(sv, "heading_std") ** 2 +
                   (np.hypot(_std(sv, "vx_std"), _std(sv, "vy_std")) / np.maximum(sp, 1e-9)) ** 2)
     tol = k.heading_tolerance + k.z * sig

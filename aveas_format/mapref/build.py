@@ -3,7 +3,8 @@
 :func:`build_recording` takes participants and states as dicts of arrays (or pyarrow Tables) and a
 map, and fills what can be derived: source ids, roles and provenance from the recording's
 provenance; heading from the direction of motion and velocity from positions where missing; lon/lat
-through the CRS; road coordinates through the map (``aveas_format.referencing``); duration, nominal
+through the CRS (:mod:`aveas_format.mapref.crs`); road coordinates through the map
+(:mod:`aveas_format.mapref.roads`); duration, nominal
 rate, location and the ``tables``/``map`` entries of recording.json.
 """
 
@@ -26,6 +27,10 @@ from aveas_format.io.writer import opendrive_version, prepare_table
 from aveas_format.schema.enums import AcquisitionMethod, Provenance, RecordingProvenance, Role
 from aveas_format.schema.metadata import RecordingMeta
 from aveas_format.schema.tables import TABLES
+from aveas_format.mapref.crs import LocalFrame
+from aveas_format.mapref.roads import road_coordinates
+from aveas_format.numeric import same_participant, wrap_angle
+from aveas_format.opendrive import load_map
 from aveas_format.schema.versions import FORMAT_VERSION
 
 TableLike = pa.Table | Mapping[str, Any]
@@ -66,11 +71,6 @@ def load_map_bytes(source: str | bytes | Path) -> bytes:
         raise RecordingIOError(f"cannot read map: {e.strerror or e}", path=path) from None
 
 
-def _segments(pid: np.ndarray) -> np.ndarray:
-    """Boolean mask: row i and row i+1 belong to the same participant."""
-    return pid[1:] == pid[:-1]
-
-
 def velocity_from_positions(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray
                             ) -> tuple[np.ndarray, np.ndarray]:
     """Velocity by central differences within each participant (one-sided at track ends).
@@ -82,7 +82,7 @@ def velocity_from_positions(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np
     vy = np.zeros(n)
     if n < 2:
         return vx, vy
-    same = _segments(pid)
+    same = same_participant(pid)
     dt = np.diff(t)
     with np.errstate(divide="ignore", invalid="ignore"):
         fx = np.where(same & (dt > 0), np.diff(x) / dt, np.nan)  # forward difference i -> i+1
@@ -104,7 +104,7 @@ def heading_from_velocity(pid: np.ndarray, vx: np.ndarray, vy: np.ndarray,
     moving = np.hypot(vx, vy) >= min_speed
     n = len(h)
     idx = np.where(moving, np.arange(n), -1)
-    starts = np.r_[0, np.flatnonzero(~_segments(pid)) + 1] if n else np.array([], int)
+    starts = np.r_[0, np.flatnonzero(~same_participant(pid)) + 1] if n else np.array([], int)
     group = np.repeat(np.arange(len(starts)), np.diff(np.r_[starts, n])) if n else np.array([], int)
     # forward fill within each participant
     idx_ff = np.maximum.accumulate(np.where(idx >= 0, idx, -1))
@@ -116,12 +116,6 @@ def heading_from_velocity(pid: np.ndarray, vx: np.ndarray, vy: np.ndarray,
     src = np.where(idx_ff >= 0, idx_ff, np.where(ok_bf, idx_bf, -1))
     out = np.where(src >= 0, h[np.maximum(src, 0)], 0.0)
     return out
-
-
-def wrap_angle(a: np.ndarray) -> np.ndarray:
-    """Wrap to (-pi, pi]."""
-    w = np.mod(np.asarray(a, dtype=np.float64) + np.pi, 2 * np.pi) - np.pi
-    return np.where(w == -np.pi, np.pi, w)
 
 
 def build_recording(
@@ -152,9 +146,6 @@ def build_recording(
     ``conditions``, ``thresholds``, ``extras``...). ``reference=False`` keeps road coordinates as
     given (or null) instead of computing them from the map.
     """
-    from aveas_format.opendrive import load_map
-    from aveas_format.georef import LocalFrame
-
     map_bytes = load_map_bytes(map_source)
     net = load_map(map_bytes)
     method = AcquisitionMethod(method)
@@ -176,7 +167,7 @@ def build_recording(
     t = s.column("time").to_numpy() if s.num_rows else np.zeros(0)
     pid = s.column("participant_id").to_numpy() if s.num_rows else np.zeros(0, np.int64)
     if nominal_rate_hz is None:
-        same = _segments(pid)
+        same = same_participant(pid)
         dt = np.diff(t)[same]
         dt = dt[dt > 0]
         nominal_rate_hz = float(round(1.0 / np.median(dt), 6)) if len(dt) else 1.0
@@ -259,8 +250,6 @@ def _fill_states(s: pa.Table, frame, net) -> pa.Table:
         lon, lat = frame.to_wgs84(x, y)
         cols["lon"], cols["lat"] = pa.array(lon), pa.array(lat)
     if net is not None and "road_id" not in cols:
-        from aveas_format.referencing import road_coordinates
-
         ref = road_coordinates(net, pid, t, x, y, np.asarray(cols["heading"]))
         cols.update(ref)
     for c in ("road_id", "lane_id", "road_s", "road_t"):

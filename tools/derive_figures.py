@@ -1,4 +1,4 @@
-"""Figures of docs/derive.md: ``python -m aveas_format.derive.figures [OUTDIR]``.
+"""Figures of docs/derive.md: ``python tools/derive_figures.py [OUTDIR]`` (``make docs`` runs it).
 
 - ``derive_cut_in_ttc.png``: TTC over time for a cut-in: while the cutting car is a neighbour its
   TTC is the exact 2D box TTC, once it is in the ego lane the lane-based 1D TTC (with 1-sigma bands).
@@ -13,13 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
-from aveas_format.io.atomic import save_figure_atomic
+from aveas_format.safeio import save_figure_atomic
 
 
 def cut_in_recording():
     """Ego (id 0) in lane -1 at 30 m/s; a car (id 1) 30 m ahead (centres) in lane -2 at 26 m/s changes into
     lane -1 between t = 2 s and t = 5 s (cosine profile)."""
-    from aveas_format.io.builder import build_recording
+    from aveas_format.mapref.build import build_recording
     from aveas_format.opendrive.builder import straight_highway
     from aveas_format.sample import SITE_CRS
 
@@ -118,7 +118,7 @@ def kinematics_figure(path: Path) -> Path:
 
 
 def main(outdir: str | Path | None = None) -> list[Path]:
-    out = Path(outdir) if outdir else Path(__file__).resolve().parents[2] / "docs" / "figures"
+    out = Path(outdir) if outdir else Path(__file__).resolve().parents[1] / "docs" / "figures"
     out.mkdir(parents=True, exist_ok=True)
     return [cut_in_figure(out / "derive_cut_in_ttc.png"),
             kinematics_figure(out / "derive_kinematics.png")]

@@ -1,8 +1,8 @@
-"""Fill the map-referenced columns of a states table: lon/lat and OpenDRIVE road coordinates.
+"""OpenDRIVE road coordinates of a states table.
 
 Converters produce positions in the local frame; this module adds what the format requires on top
-(FORMAT.md 5): ``lon``/``lat`` through the recording's CRS and ``road_id``, ``lane_id``,
-``road_s``, ``road_t``, ``lane_offset`` through the map. Where a point lies on several roads
+(FORMAT.md 5): ``road_id``, ``lane_id``, ``road_s``, ``road_t``, ``lane_offset`` through the map
+(``lon``/``lat`` come from :mod:`aveas_format.mapref.crs`). Where a point lies on several roads
 (junctions), the trajectory-aware projection chooses by continuity with the participant's previous
 sample and agreement with its heading.
 """
@@ -34,16 +34,3 @@ def road_coordinates(net, participant_id: np.ndarray, time: np.ndarray, x: np.nd
         "lane_offset": pa.array(np.asarray(proj.lane_offset, np.float64), pa.float64(), mask=off),
     }
 
-
-def reference_states(states: pa.Table, net, frame) -> pa.Table:
-    """``states`` with lon/lat (through ``frame``, a :class:`~aveas_format.georef.LocalFrame`) and
-    road coordinates (through ``net``) filled in, replacing any existing values."""
-    x = states.column("x").to_numpy()
-    y = states.column("y").to_numpy()
-    lon, lat = frame.to_wgs84(x, y)
-    cols = dict(zip(states.column_names, states.columns))
-    cols["lon"], cols["lat"] = pa.array(lon), pa.array(lat)
-    heading = states.column("heading").to_numpy() if "heading" in cols else None
-    cols.update(road_coordinates(net, states.column("participant_id").to_numpy(),
-                                 states.column("time").to_numpy(), x, y, heading))
-    return pa.table(cols)

@@ -141,6 +141,12 @@ class LocalFrame:
         self._fwd = pyproj.Transformer.from_crs(self.parsed.crs, WGS84, always_xy=True)
         self._inv = pyproj.Transformer.from_crs(WGS84, self.parsed.crs, always_xy=True)
 
+    @classmethod
+    def of(cls, rec, *, warn: bool = True) -> LocalFrame:
+        """The local frame of a recording: the CRS of its recording.json with its map header's
+        ``<offset>``."""
+        return cls(rec.meta.crs, offset=rec.map.header.offset, warn=warn)
+
     def to_projected(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         ox, oy, _, hdg = self.offset
         x = np.asarray(x, dtype=np.float64)

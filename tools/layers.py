@@ -1,0 +1,207 @@
+"""The layers of the package, in one place, and its import graph read from the source.
+
+``LAYERS`` lists the units of ``aveas_format`` (top-level modules and subpackages) from the bottom
+up. A unit may import any unit of a lower layer; within a layer only the edges in ``SIDEWAYS`` are
+allowed; ``EXCEPTIONS`` names the few module-level imports that go up, each with its reason.
+``tests/test_layers.py`` checks the package against this table (lazy imports inside functions count
+too) and ``tools/docgen.py`` draws ``docs/figures/architecture_layers.png`` and the table in
+``docs/architecture.md`` from it, so the picture cannot drift from the code.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parent.parent / "aveas_format"
+
+#: bottom to top: (layer name, units, what the layer is for)
+LAYERS: list[tuple[str, tuple[str, ...], str]] = [
+    ("base", ("errors", "_version"), "the exception hierarchy and the version (standard library only)"),
+    ("foundation", ("safeio", "numeric", "parallel"),
+     "hardened readers and atomic writes, array helpers, the task runner"),
+    ("schema", ("schema",), "pydantic models and the one declaration per column (no pyarrow)"),
+    ("storage, map engine", ("io", "opendrive"),
+     "recordings on disk <-> Arrow tables; the OpenDRIVE engine (neither imports the other)"),
+    ("map-referencing", ("mapref",), "CRS, road coordinates, a recording from plain arrays"),
+    ("domain", ("converters", "derive", "validate", "sample"),
+     "foreign formats, derived tables, the validator, synthetic sample data"),
+    ("presentation", ("plot",), "every figure (matplotlib) and the HTML report"),
+    ("consumers", ("dataset", "sim", "fit"), "archives of recordings, the SUMO runner, the fitter"),
+    ("public API", ("__init__",), "aveas_format.open / build_recording / validate, imported lazily"),
+    ("interface", ("cli",), "the command line: one module per command"),
+    ("entry point", ("__main__",), "python -m aveas_format"),
+]
+
+#: allowed imports between units of the same layer
+SIDEWAYS: dict[tuple[str, str], str] = {
+    ("validate", "derive"): "metadata.derived_stale compares derived tables with their inputs",
+    ("fit", "sim"): "the fitter simulates through the SUMO runner",
+    ("dataset", "converters"): "convert many sources at once",
+}
+
+#: module -> unit imports that break the order, each with its reason (docs/architecture.md)
+EXCEPTIONS: dict[tuple[str, str], str] = {
+    ("aveas_format.io.recording", "opendrive"):
+        "Recording.map parses map.xodr on first use (lazy import inside the property)",
+}
+
+
+def layer_of() -> dict[str, int]:
+    return {u: i for i, (_, units, _) in enumerate(LAYERS) for u in units}
+
+
+@dataclass(frozen=True)
+class Edge:
+    module: str  # importing module, dotted
+    target: str  # imported module, dotted
+    line: int
+
+    @property
+    def src_unit(self) -> str:
+        return unit(self.module)
+
+    @property
+    def dst_unit(self) -> str:
+        return unit(self.target)
+
+
+def unit(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "__init__"
+
+
+def _module_name(path: Path) -> str:
+    rel = path.relative_to(PACKAGE.parent).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__" and len(parts) > 1:
+        parts = parts[:-1]
+        return ".".join(parts) if len(parts) > 1 else "aveas_format.__init__"
+    return ".".join(parts)
+
+
+def imports(package: Path = PACKAGE) -> list[Edge]:
+    """Every import of a package module by a package module (module level and inside functions)."""
+    out: list[Edge] = []
+    for path in sorted(package.rglob("*.py")):
+        mod = _module_name(path)
+        pkg = mod.rsplit(".", 1)[0] if path.name != "__init__.py" else mod
+        if pkg == "aveas_format.__init__":
+            pkg = "aveas_format"
+        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = pkg.split(".")[: len(pkg.split(".")) - (node.level - 1)]
+                    target = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    target = node.module or ""
+                if not target.startswith("aveas_format"):
+                    continue
+                names = [target] if node.module else [f"{target}.{a.name}" for a in node.names]
+                if target == "aveas_format":  # ``from aveas_format import safeio``
+                    names = [f"aveas_format.{a.name}" for a in node.names]
+                out += [Edge(mod, n, node.lineno) for n in names]
+            elif isinstance(node, ast.Import):
+                out += [Edge(mod, a.name, node.lineno) for a in node.names
+                        if a.name.startswith("aveas_format")]
+    return out
+
+
+def violations(edges: list[Edge] | None = None) -> list[str]:
+    """Imports that break the layer order, as readable lines (empty when the package holds)."""
+    level = layer_of()
+    out = []
+    for e in edges if edges is not None else imports():
+        a, b = e.src_unit, e.dst_unit
+        if a == b:
+            continue
+        if a not in level or b not in level:
+            missing = a if a not in level else b
+            out.append(f"{e.module}:{e.line}: unit {missing!r} is in no layer of tools/layers.py")
+            continue
+        if (e.module, b) in EXCEPTIONS:
+            continue
+        if b == "__init__" and e.target == "aveas_format" and level[a] < level[b]:
+            out.append(f"{e.module}:{e.line}: imports the package root (import the module instead)")
+            continue
+        if level[b] < level[a] or (level[b] == level[a] and (a, b) in SIDEWAYS):
+            continue
+        how = "sideways" if level[a] == level[b] else "up"
+        out.append(f"{e.module}:{e.line}: imports {e.target} ({how}: {a} is in layer "
+                   f"{LAYERS[level[a]][0]!r}, {b} in {LAYERS[level[b]][0]!r})")
+    return out
+
+
+def unit_graph(edges: list[Edge] | None = None) -> dict[str, set[str]]:
+    """unit -> the units it imports (self-imports left out)."""
+    g: dict[str, set[str]] = defaultdict(set)
+    for e in edges if edges is not None else imports():
+        if e.src_unit != e.dst_unit:
+            g[e.src_unit].add(e.dst_unit)
+    return g
+
+
+def markdown_table(edges: list[Edge] | None = None) -> str:
+    """The layers top down with what each unit imports (generated into docs/architecture.md)."""
+    g = unit_graph(edges)
+    lines = ["| layer | unit | imports (read from the code) |", "|---|---|---|"]
+    for name, units, _ in reversed(LAYERS):
+        for u in units:
+            deps = ", ".join(f"`{d}`" for d in sorted(g.get(u, ()))) or "—"
+            shown = "aveas_format/__init__" if u == "__init__" else u
+            lines.append(f"| {name} | `{shown}` | {deps} |")
+    return "\n".join(lines)
+
+
+def figure(path: Path, edges: list[Edge] | None = None) -> Path:
+    """Draw the layers as bands with one box per unit and an arrow per unit import."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import FancyArrowPatch, FancyBboxPatch
+
+    g = unit_graph(edges)
+    pos: dict[str, tuple[float, float]] = {}
+    width = 11.0
+    fig, ax = plt.subplots(figsize=(11, 9))
+    for i, (name, units, _) in enumerate(LAYERS):
+        y = i * 1.15
+        ax.add_patch(FancyBboxPatch((-0.2, y - 0.42), width + 0.4, 0.84, boxstyle="round,pad=0.02",
+                                    fc="#f2f4f7" if i % 2 else "#e6ebf2", ec="none", zorder=0))
+        ax.text(-0.35, y, name, ha="right", va="center", fontsize=9, color="#444")
+        step = width / (len(units) + 1)
+        for k, u in enumerate(units):
+            x = step * (k + 1)
+            pos[u] = (x, y)
+            label = "aveas_format" if u == "__init__" else u
+            ax.text(x, y, label, ha="center", va="center", fontsize=9, zorder=3,
+                    bbox=dict(boxstyle="round,pad=0.3", fc="white", ec="#3b6ea5"))
+    for a, deps in g.items():
+        for b in deps:
+            if a not in pos or b not in pos:
+                continue
+            (x0, y0), (x1, y1) = pos[a], pos[b]
+            same = y0 == y1
+            ax.add_patch(FancyArrowPatch((x0, y0 - 0.18 if not same else y0),
+                                         (x1, y1 + 0.18 if not same else y1),
+                                         arrowstyle="-|>", mutation_scale=8, lw=0.6,
+                                         color="#c0392b" if same else "#7f8c8d", alpha=0.55,
+                                         connectionstyle="arc3,rad=0.25" if same else "arc3,rad=0.05",
+                                         zorder=1))
+    ax.set_xlim(-2.4, width + 0.4)
+    ax.set_ylim(-0.7, (len(LAYERS) - 1) * 1.15 + 0.7)
+    ax.axis("off")
+    ax.set_title("aveas_format: layers and the imports between units (generated from the code;\n"
+                 "grey: down a layer, red: the allowed sideways imports)", fontsize=10)
+    fig.tight_layout()
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    path.write_bytes(buf.getvalue())
+    return path
