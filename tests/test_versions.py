@@ -21,7 +21,8 @@ FROZEN = {"1.0.0": DATA / "versions" / "1.0.0" / "example.aveas"}
 def test_frozen_example_is_read_and_valid(version):
     rec = aveas_format.open(FROZEN[version])
     assert rec.meta.format_version == versions.FORMAT_VERSION
-    assert rec.migrated_from is None if version == versions.FORMAT_VERSION else version
+    expected = None if version == versions.FORMAT_VERSION else version
+    assert rec.migrated_from == expected
     assert rec.states.num_rows == 60 and rec.participants.num_rows == 3
     assert rec.meta.start_time == "2024-05-13T08:15:00.000000001Z"
     report = aveas_format.validate(FROZEN[version])
