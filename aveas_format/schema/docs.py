@@ -183,6 +183,53 @@ def metadata_markdown() -> str:
     return "\n".join(out)
 
 
+#: SHOULDs of the project where FORMAT.md is silent (docs/format.md section 12): each warning rule of
+#: ``aveas-format validate`` that no FORMAT.md sentence covers names one of these in ``enforces``
+QUALITY: dict[str, str] = {
+    "sizes": "A participant's length and width SHOULD lie within the plausible range of its class.",
+    "participants_in_states": "Every participant SHOULD appear in states.parquet.",
+    "sampling": "Each participant SHOULD be sampled at the recording's nominal rate.",
+    "gaps": "A trajectory SHOULD have no gap of several nominal steps that no unobserved region "
+            "explains.",
+    "no_overlap": "The footprints of two participants SHOULD NOT overlap (attached participants and "
+                  "accidents excepted).",
+    "one_track": "Each object SHOULD be tracked once (no duplicated tracks).",
+    "plausible_motion": "Jerk and yaw rate SHOULD stay within the plausible limits of the "
+                        "participant's class.",
+    "heading_motion": "A moving vehicle's heading SHOULD agree with its direction of motion "
+                      "(slow reversing excepted).",
+    "plausible_std": "Standard deviations SHOULD be plausible: not above the plausible maximum of "
+                     "their quantity, and for measured data not below the data's own jitter (0 "
+                     "means exact, as in simulation).",
+    "on_lanes": "Vehicles SHOULD be on drivable lanes of the map, moving in their lane's direction "
+                "of travel.",
+    "map_quality": "The map SHOULD pass the OpenDRIVE self-check without warnings.",
+    "regions_in_frame": "Unobserved regions SHOULD lie on the map, in the local frame.",
+    "unobserved_states": "A measured (not interpolated) state SHOULD NOT lie inside an unobserved "
+                         "region during the region's interval.",
+    "consistent_metadata": "acquisition.method, provenance and acquisition.sensors SHOULD agree "
+                           "with one another.",
+    "clear_rights": "rights.license and rights.owner SHOULD name a real licence and owner, "
+                    "consistent with right_of_use.",
+    "real_values": "Metadata SHOULD carry real values, not placeholders: the partner's name, a "
+                   "start_time that is a date of the recording (not the 1970 epoch default).",
+}
+
+
+def quality(key: str) -> str:
+    """The ``enforces`` text of a warning rule backed by :data:`QUALITY` (KeyError if unknown)."""
+    return f"docs/format.md 12 ({key}): {QUALITY[key]}"
+
+
+def quality_markdown() -> str:
+    lines = ["## 12. Quality expectations (SHOULD)", "",
+             "Where FORMAT.md is silent, the project adds these SHOULDs; each is a `warning` of "
+             "`aveas-format validate` (the rule's entry in docs/rules.md says which). Thresholds "
+             "are configurable (docs/validate.md).", ""]
+    lines += [f"- **{key}**: {text}" for key, text in QUALITY.items()]
+    return "\n".join(lines) + "\n"
+
+
 def render() -> str:
     files = [f"| `{spec.file}` | {spec.requirement.value} | {spec.doc} |"
              for spec in (*CORE_TABLES, *DERIVED_TABLES)]
@@ -200,6 +247,7 @@ def render() -> str:
     for spec in DERIVED_TABLES:
         parts.append(f"### {spec.file}\n\n{spec.doc}\n\n{table_markdown(spec)}\n")
     parts.append(_VERSIONING)
+    parts.append(quality_markdown())
     return "\n".join(parts)
 
 

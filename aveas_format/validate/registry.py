@@ -100,6 +100,11 @@ def rule(code: str, severity: str, title: str, message: str, enforces: str | Non
         raise ValueError(f"rule code {code!r} registered twice")
     if scope not in _SCOPES:
         raise ValueError(f"rule {code}: scope must be one of {_SCOPES}")
+    if severity in ("error", "warning") and not enforces:
+        raise ValueError(f"rule {code}: an {severity} rule must name the "
+                         f"{'MUST' if severity == 'error' else 'SHOULD'} it enforces (enforces=...)")
+    if severity == "warning" and "SHOULD" not in enforces:
+        raise ValueError(f"rule {code}: a warning enforces a SHOULD; enforces={enforces!r} names none")
 
     def register(fn: RuleFn) -> RuleFn:
         doc = " ".join((fn.__doc__ or "").split())

@@ -213,6 +213,14 @@ def test_registry_enforces_its_declarations():
         assert r.severity.value in ("error", "warning", "info")
         if r.severity.value == "error":
             assert r.enforces, f"{r.code}: an error rule must name the MUST it enforces"
+        if r.severity.value == "warning":
+            assert r.enforces and "SHOULD" in r.enforces, f"{r.code}: name the SHOULD it enforces"
+    with pytest.raises(ValueError, match="must name the MUST"):
+        rule("structure.new_error", "error", "t", "m")
+    with pytest.raises(ValueError, match="must name the SHOULD"):
+        rule("structure.new_warning", "warning", "t", "m")
+    with pytest.raises(ValueError, match="names none"):
+        rule("structure.new_warning", "warning", "t", "m", enforces="FORMAT.md 1: something")
     with pytest.raises(ValueError, match="family.snake_case"):
         rule("NoFamily", "error", "t", "m")
     with pytest.raises(ValueError, match="registered twice"):
@@ -230,7 +238,7 @@ def test_counts_are_complete_and_samples_bounded(written):
 
 
 def test_a_crashing_rule_is_a_tool_failure(written):
-    @rule("zzz.crash_for_test", "warning", "crash", "never")
+    @rule("zzz.crash_for_test", "warning", "crash", "never", enforces="a test rule SHOULD crash")
     def crash(ctx):
         """Raises on purpose."""
         raise RuntimeError("boom")

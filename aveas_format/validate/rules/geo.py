@@ -147,7 +147,9 @@ def location_outside_coverage(ctx: Context) -> Iterator[Hit]:
 
 @rule("geo.state_outside_coverage", "warning", "State outside the covered area",
       "states.parquet: row {row}: participant {participant_id} at x,y = {x},{y} lies outside "
-      "recording.json coverage ({n_samples} samples of this participant)", scope="rows")
+      "recording.json coverage ({n_samples} samples of this participant)", scope="rows",
+      enforces=("FORMAT.md 3: coverage is the area observed at any time, so observed states "
+                "SHOULD lie inside it"))
 def state_outside_coverage(ctx: Context) -> Iterator[Hits]:
     """A state lies more than ``[geo] coverage_margin_m`` outside the coverage polygon, which by
     definition contains everything observed. One finding per participant (its first such sample)."""

@@ -16,6 +16,7 @@ from collections.abc import Iterator
 import numpy as np
 import pyarrow as pa
 
+from aveas_format.schema.docs import quality
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hits, collector, rule
 from aveas_format.validate.views import StatesView, num
@@ -269,7 +270,8 @@ def _per_pair(S, p, mask: np.ndarray, value: np.ndarray):
 @rule("interactions.overlap", "warning", "Footprints of two participants overlap",
       "states.parquet: row {row}: participant {participant_id} and {other_id} overlap by {value} m "
       "at {time} s ({n_frames} frames): a tracking error unless it was an accident",
-      needs=("interactions.samples",))
+      needs=("interactions.samples",),
+      enforces=quality("no_overlap"))
 def overlap(ctx: Context) -> Iterator[Hits]:
     """The footprints (length x width around the reference point, oriented by heading, shrunk by
     ``[interactions] overlap_depth_m``) of two participants overlap at the same time. Exempt: a
@@ -293,7 +295,8 @@ def overlap(ctx: Context) -> Iterator[Hits]:
 @rule("interactions.duplicate_track", "warning", "One object tracked twice",
       "states.parquet: row {row}: participants {participant_id} and {other_id} move together "
       "(centres within {distance} m in {n_frames} frames of their common time): one object "
-      "tracked twice", needs=("interactions.samples",))
+      "tracked twice", needs=("interactions.samples",),
+      enforces=quality("one_track"))
 def duplicate_track(ctx: Context) -> Iterator[Hits]:
     """Two participants' reference points stay closer than min(``duplicate_distance_m``, half the
     narrower width) for at least ``duplicate_share`` of their common frames and at least

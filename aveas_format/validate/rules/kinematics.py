@@ -22,6 +22,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from aveas_format.numeric import wrap_angle
+from aveas_format.schema.docs import quality
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hits, rule
 from aveas_format.validate.rules.interactions import in_accident
@@ -146,7 +147,8 @@ def acceleration(ctx: Context) -> Iterator[Hits]:
 
 @rule("kinematics.jerk", "warning", "Jerk implausible for the class",
       "states.parquet: row {row}: participant {participant_id} ({class_}) has a jerk of {value} "
-      "m/s³ ({n_samples} samples), above the {limit} m/s³ plausible for its class", scope="rows")
+      "m/s³ ({n_samples} samples), above the {limit} m/s³ plausible for its class", scope="rows",
+      enforces=quality("plausible_motion"))
 def jerk(ctx: Context) -> Iterator[Hits]:
     """The change of acceleration (from the velocity columns, two successive windows) exceeds
     the class's ``jerk_max`` by more than z sigma: velocities that step instead of changing
@@ -172,7 +174,8 @@ def jerk(ctx: Context) -> Iterator[Hits]:
 
 @rule("kinematics.yaw_rate", "warning", "Yaw rate implausible for the class",
       "states.parquet: row {row}: participant {participant_id} ({class_}) turns at {value} rad/s "
-      "({source}; {n_samples} samples), above the {limit} rad/s plausible for its class", scope="rows")
+      "({source}; {n_samples} samples), above the {limit} rad/s plausible for its class", scope="rows",
+      enforces=quality("plausible_motion"))
 def yaw_rate(ctx: Context) -> Iterator[Hits]:
     """The yaw rate exceeds the class's ``yaw_rate_max`` by more than z sigma: from heading
     differences over ``window_s`` while moving faster than walking speed (heading is noise at rest),
@@ -208,7 +211,8 @@ def yaw_rate(ctx: Context) -> Iterator[Hits]:
 
 @rule("kinematics.heading_vs_motion", "warning", "Heading disagrees with the direction of motion",
       "states.parquet: row {row}: participant {participant_id} ({class_}) moves {value} rad away "
-      "from its heading at {speed} m/s ({n_samples} samples)", scope="rows")
+      "from its heading at {speed} m/s ({n_samples} samples)", scope="rows",
+      enforces=quality("heading_motion"))
 def heading_vs_motion(ctx: Context) -> Iterator[Hits]:
     """A vehicle (car, van, truck, bus, motorcycle, trailer, rail vehicle) moving faster than
     ``walking_speed`` has a heading more than ``heading_tolerance`` (+ z sigma) away from the

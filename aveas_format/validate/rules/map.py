@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from aveas_format.schema.docs import quality
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hit, Hits, rule
 from aveas_format.validate.views import StatesView
@@ -57,7 +58,8 @@ def opendrive_error(ctx: Context) -> Iterator[Hit]:
 
 
 @rule("map.opendrive_warning", "warning", "Map self-check: warning",
-      "{file}:{line}: {check}: {detail}")
+      "{file}:{line}: {check}: {detail}",
+      enforces=quality("map_quality"))
 def opendrive_warning(ctx: Context) -> Iterator[Hit]:
     """The map self-check finds a warning: gaps or heading jumps between geometries, a road length
     that disagrees with its plan view, lanes folding over in tight curves, a geoReference that
@@ -297,7 +299,8 @@ def _first_per_participant(sv: StatesView, mask: np.ndarray) -> tuple[np.ndarray
 
 
 @rule("map.off_drivable_lane", "warning", "Vehicle off any drivable lane",
-      "states.parquet: row {row}: {class_} {participant_id} is {where} ({n_samples} samples)", scope="rows")
+      "states.parquet: row {row}: {class_} {participant_id} is {where} ({n_samples} samples)", scope="rows",
+      enforces=quality("on_lanes"))
 def off_drivable_lane(ctx: Context) -> Iterator[Hits]:
     """A vehicle (car, van, truck, bus, motorcycle, trailer) is off the map (null road
     coordinates) or in a lane whose OpenDRIVE type is not drivable (shoulder, border, sidewalk...).
@@ -325,7 +328,8 @@ def off_drivable_lane(ctx: Context) -> Iterator[Hits]:
 
 @rule("map.wrong_way", "warning", "Driving against the lane direction",
       "states.parquet: row {row}: {class_} {participant_id} drives against the direction of lane "
-      "{lane_id} of road {road_id} for {duration} s", scope="rows")
+      "{lane_id} of road {road_id} for {duration} s", scope="rows",
+      enforces=quality("on_lanes"))
 def wrong_way(ctx: Context) -> Iterator[Hits]:
     """A vehicle faster than walking speed moves more than ``[map] wrong_way_angle`` away from
     the driving direction of its lane (right lanes along +s in right-hand traffic, left lanes

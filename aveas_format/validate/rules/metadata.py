@@ -12,6 +12,7 @@ from pathlib import Path
 
 from aveas_format.schema.metadata import timestamp_ns
 from aveas_format.schema.tables import TABLES
+from aveas_format.schema.docs import quality
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hit, rule
 
@@ -53,7 +54,8 @@ def provenance_mismatch(ctx: Context) -> Iterator[Hit]:
 
 
 @rule("metadata.method_vs_provenance", "warning", "Acquisition method and provenance disagree",
-      "recording.json: acquisition.method {method!r} with provenance {value!r}")
+      "recording.json: acquisition.method {method!r} with provenance {value!r}",
+      enforces=quality("consistent_metadata"))
 def method_vs_provenance(ctx: Context) -> Iterator[Hit]:
     """A simulation method (traffic_simulation, driving_simulator) with natural or staged
     provenance, or a measuring method with simulated provenance (a driving simulator's subject is
@@ -70,7 +72,8 @@ def method_vs_provenance(ctx: Context) -> Iterator[Hit]:
 
 @rule("metadata.method_vs_sensors", "warning", "Sensors cannot produce data of this method",
       "recording.json: acquisition.method {method!r} but no sensor of a kind that produces it "
-      "({expected}); sensors: {value}")
+      "({expected}); sensors: {value}",
+      enforces=quality("consistent_metadata"))
 def method_vs_sensors(ctx: Context) -> Iterator[Hit]:
     """acquisition.sensors is not empty but lists no sensor of a kind that can produce the data of
     the acquisition method (e.g. ``infrastructure_lidar`` without a lidar, ``aerial`` with only a
@@ -95,7 +98,9 @@ _SHOULD_FIELDS = (
 
 
 @rule("metadata.should_field_missing", "warning", "Recommended metadata field missing",
-      "recording.json: {column} is missing (FORMAT.md 3: SHOULD)")
+      "recording.json: {column} is missing (FORMAT.md 3: SHOULD)",
+      enforces=("FORMAT.md 3: acquisition.platform, .sensors, .not_observable, .site and source "
+                "SHOULD be given"))
 def should_field_missing(ctx: Context) -> Iterator[Hit]:
     """A recording.json field that FORMAT.md 3 marks SHOULD is absent or empty:
     acquisition.platform, .sensors, .not_observable, .site, and source (coverage: see
@@ -113,7 +118,8 @@ def _placeholder(ctx: Context, v: str | None) -> bool:
 
 
 @rule("metadata.rights_unclear", "warning", "Rights of use unclear",
-      "recording.json: rights.{column_}: {why}")
+      "recording.json: rights.{column_}: {why}",
+      enforces=quality("clear_rights"))
 def rights_unclear(ctx: Context) -> Iterator[Hit]:
     """``rights.license`` or ``rights.owner`` is a placeholder ("unknown", "unspecified", ...;
     ``[metadata] placeholders``), or ``right_of_use`` is commercial while the licence is a
@@ -132,7 +138,8 @@ def rights_unclear(ctx: Context) -> Iterator[Hit]:
 
 
 @rule("metadata.partner_placeholder", "warning", "Partner unknown",
-      "recording.json: acquisition.partner {value!r} does not name an institution")
+      "recording.json: acquisition.partner {value!r} does not name an institution",
+      enforces=quality("real_values"))
 def partner_placeholder(ctx: Context) -> Iterator[Hit]:
     """``acquisition.partner`` is a placeholder ("unknown", ...): FORMAT.md 3 requires the
     institution that acquired the data."""
@@ -142,7 +149,8 @@ def partner_placeholder(ctx: Context) -> Iterator[Hit]:
 
 
 @rule("metadata.start_time_implausible", "warning", "start_time implausible",
-      "recording.json: start_time {value} is {why}")
+      "recording.json: start_time {value} is {why}",
+      enforces=quality("real_values"))
 def start_time_implausible(ctx: Context) -> Iterator[Hit]:
     """``start_time`` lies before ``[metadata] earliest_start`` (1990; 1970-01-01 is an epoch
     default, not a date) or more than a day in the future."""
@@ -181,7 +189,9 @@ def derived_undocumented(ctx: Context) -> Iterator[Hit]:
 
 
 @rule("metadata.derived_stale", "warning", "Derived table is stale",
-      "{file}: {table} is stale: {why}")
+      "{file}: {table} is stale: {why}",
+      enforces=("FORMAT.md 10: a derived table becomes stale when its inputs change; it SHOULD "
+                "be derived again"))
 def derived_stale(ctx: Context) -> Iterator[Hit]:
     """A derived table was computed from inputs that have changed since (FORMAT.md 10: it becomes
     stale), or with a method whose version has changed. Decided by

@@ -16,6 +16,7 @@ import pyarrow as pa
 from aveas_format.io.arrow import pmf_matrix
 from aveas_format.schema.pmf import pmf_problems
 from aveas_format.schema.taxonomy import CLASSES
+from aveas_format.schema.docs import quality
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hits, rule
 from aveas_format.validate.views import ints, num
@@ -63,7 +64,8 @@ def _class_index(cls: np.ndarray) -> np.ndarray:
 
 @rule("participants.size_implausible", "warning", "Size implausible for the class",
       "participants.parquet: row {row}: participant {participant_id} ({class_}) has {column} "
-      "{value} m, outside the plausible {low}-{high} m")
+      "{value} m, outside the plausible {low}-{high} m",
+      enforces=quality("sizes"))
 def size_implausible(ctx: Context) -> Iterator[Hits]:
     """A participant's length or width lies outside the plausible range of its class (e.g. a car
     2.5-7 m long; ranges configurable under ``[classes.<class>]``: ``length``, ``width``). Sizes
@@ -92,7 +94,9 @@ def size_implausible(ctx: Context) -> Iterator[Hits]:
 
 @rule("participants.size_std_missing", "warning", "Measured participant without size uncertainty",
       "participants.parquet: row {row}: participant {participant_id} is measured ({provenance}) "
-      "but {column} is {state}")
+      "but {column} is {state}",
+      enforces=("FORMAT.md 2: measured data (provenance natural or staged) SHOULD carry _std for "
+                "length and width"))
 def size_std_missing(ctx: Context) -> Iterator[Hits]:
     """A measured participant (provenance natural or staged) has no ``length_std`` / ``width_std``
     (column absent or null): FORMAT.md 2 says measured data SHOULD carry them."""
@@ -138,7 +142,8 @@ def attached_to_unknown(ctx: Context) -> Iterator[Hits]:
 
 
 @rule("participants.without_states", "warning", "Participant without states",
-      "participants.parquet: row {row}: participant {participant_id} has no row in states.parquet")
+      "participants.parquet: row {row}: participant {participant_id} has no row in states.parquet",
+      enforces=quality("participants_in_states"))
 def without_states(ctx: Context) -> Iterator[Hits]:
     """A participant is declared but never appears in states.parquet (a leftover of filtering, or
     states written for other ids)."""

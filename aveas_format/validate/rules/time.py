@@ -12,6 +12,7 @@ from collections.abc import Iterator
 import numpy as np
 import shapely
 
+from aveas_format.schema.docs import quality
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hit, Hits, rule
 from aveas_format.validate.views import num
@@ -79,7 +80,9 @@ def not_increasing(ctx: Context) -> Iterator[Hits]:
 
 
 @rule("time.nominal_rate_low", "warning", "Nominal sample rate below 10 Hz",
-      "recording.json: nominal_rate_hz = {value} Hz is below {minimum} Hz")
+      "recording.json: nominal_rate_hz = {value} Hz is below {minimum} Hz",
+      enforces=("FORMAT.md 3: nominal_rate_hz SHOULD be above 10 Hz (the paper: several Hz, "
+                "preferably more than 10 Hz)"))
 def nominal_rate_low(ctx: Context) -> Iterator[Hit]:
     """recording.json ``nominal_rate_hz`` is below ``[time] min_rate_hz`` (10 Hz): the paper asks
     for several Hz, preferably more than 10 Hz."""
@@ -93,7 +96,8 @@ def nominal_rate_low(ctx: Context) -> Iterator[Hit]:
 
 @rule("time.rate_below_nominal", "warning", "Participant sampled below the nominal rate",
       "states.parquet: row {row}: participant {participant_id} is sampled at {rate} Hz (median), "
-      "below nominal_rate_hz = {nominal} Hz", scope="rows")
+      "below nominal_rate_hz = {nominal} Hz", scope="rows",
+      enforces=quality("sampling"))
 def rate_below_nominal(ctx: Context) -> Iterator[Hits]:
     """A participant's median sample rate is more than ``[time] rate_tolerance`` (10 %) below the
     recording's ``nominal_rate_hz``. One finding per participant, at its first row."""
@@ -141,7 +145,8 @@ def _regions(ctx: Context):
 
 @rule("time.gap", "warning", "Gap in a trajectory",
       "states.parquet: row {row}: participant {participant_id}: no sample between {time_before} s "
-      "and {time} s ({dt} s, nominal step {step} s) and no unobserved region explains it", scope="rows")
+      "and {time} s ({dt} s, nominal step {step} s) and no unobserved region explains it", scope="rows",
+      enforces=quality("gaps"))
 def gap(ctx: Context) -> Iterator[Hits]:
     """Two consecutive samples of a participant are more than ``[time] gap_factor`` nominal steps
     apart and the gap is not explained by an unobserved region (one whose interval overlaps the gap

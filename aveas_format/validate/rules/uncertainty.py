@@ -11,6 +11,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from aveas_format.schema.docs import quality
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hit, Hits, rule
 from aveas_format.validate.views import StatesView, num
@@ -35,7 +36,9 @@ def seg_median(seg: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 @rule("uncertainty.std_missing", "warning", "Measured states without uncertainty",
       "states.parquet: row {row}: participant {participant_id} is measured but {column} is {state}"
-      "{more}", scope="rows")
+      "{more}", scope="rows",
+      enforces=("FORMAT.md 2: measured data (provenance natural or staged) SHOULD carry _std for "
+                "x, y, heading, vx, vy"))
 def std_missing(ctx: Context) -> Iterator[Hits | Hit]:
     """Measured participants (provenance natural or staged) have states without ``x_std``,
     ``y_std``, ``heading_std``, ``vx_std`` or ``vy_std`` (the column is absent, or null for the
@@ -72,7 +75,8 @@ def std_missing(ctx: Context) -> Iterator[Hits | Hit]:
 
 @rule("uncertainty.class_pmf_missing", "warning", "Measured participant without class PMF",
       "participants.parquet: row {row}: participant {participant_id} is measured but class_pmf is "
-      "{state}")
+      "{state}",
+      enforces="FORMAT.md 4: class_pmf SHOULD be given for measured data")
 def class_pmf_missing(ctx: Context) -> Iterator[Hits]:
     """A measured participant has no ``class_pmf`` (column absent or null): FORMAT.md 4 says
     class_pmf SHOULD be given for measured data (classification is uncertain)."""
@@ -95,7 +99,8 @@ def class_pmf_missing(ctx: Context) -> Iterator[Hits]:
 
 
 @rule("uncertainty.std_implausibly_large", "warning", "Standard deviation implausibly large",
-      "{file}: row {row}: {column} = {value} exceeds the plausible {maximum}", scope="rows")
+      "{file}: row {row}: {column} = {value} exceeds the plausible {maximum}", scope="rows",
+      enforces=quality("plausible_std"))
 def std_implausibly_large(ctx: Context) -> Iterator[Hits]:
     """A ``_std`` value exceeds the plausible maximum of ``[uncertainty] std_max`` (e.g. x_std
     above 10 m, heading_std above 1 rad): usually a variance stored as a standard deviation, or a
@@ -138,7 +143,8 @@ def _jitter(sv: StatesView, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 @rule("uncertainty.std_implausibly_small", "warning", "Standard deviation implausibly small",
-      "states.parquet: row {row}: participant {participant_id}: {column} = {value} {why}", scope="rows")
+      "states.parquet: row {row}: participant {participant_id}: {column} = {value} {why}", scope="rows",
+      enforces=quality("plausible_std"))
 def std_implausibly_small(ctx: Context) -> Iterator[Hits]:
     """A measured participant claims more precision than its data has: a ``_std`` of exactly 0
     (0 means exact, i.e. simulation), or a stated x/y standard deviation that is smaller than the

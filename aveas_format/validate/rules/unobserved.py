@@ -7,6 +7,7 @@ from collections.abc import Iterator
 import numpy as np
 import shapely
 
+from aveas_format.schema.docs import quality
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hit, Hits, rule
 from aveas_format.validate.views import num
@@ -85,7 +86,8 @@ def time_order(ctx: Context) -> Iterator[Hits]:
 
 @rule("unobserved.outside_map", "warning", "Region outside the map",
       "unobserved.parquet: row {row}: region {region_id} lies entirely outside the map's extent "
-      "{extent}")
+      "{extent}",
+      enforces=quality("regions_in_frame"))
 def outside_map(ctx: Context) -> Iterator[Hits]:
     """A region does not intersect the map's extent (the bounding box of its road surfaces, with a
     margin of 10 % of its size): a region in another frame (lon/lat instead of local x/y?)."""
@@ -114,7 +116,8 @@ def outside_map(ctx: Context) -> Iterator[Hits]:
 @rule("unobserved.state_inside", "warning", "Observed state inside an unobserved region",
       "states.parquet: row {row}: participant {participant_id} at x,y = {x},{y} is inside "
       "unobserved region {region_id} ({kind}) at {time} s but not marked interpolated "
-      "({n_samples} samples)", scope="rows")
+      "({n_samples} samples)", scope="rows",
+      enforces=quality("unobserved_states"))
 def state_inside(ctx: Context) -> Iterator[Hits]:
     """A state that is not ``interpolated`` lies inside an unobserved region during the region's
     interval: either the region is wrong or the state was not measured. The interval is read
@@ -177,7 +180,9 @@ def state_inside(ctx: Context) -> Iterator[Hits]:
 
 
 @rule("unobserved.table_missing", "warning", "No unobserved.parquet",
-      "unobserved.parquet: the recording has no unobserved regions table")
+      "unobserved.parquet: the recording has no unobserved regions table",
+      enforces=("FORMAT.md 1: unobserved.parquet SHOULD list the regions not observed "
+                "(occlusions, sensor limits)"))
 def table_missing(ctx: Context) -> Iterator[Hit]:
     """The recording has no unobserved.parquet: FORMAT.md 1 says it SHOULD list the regions not
     observed (occlusions, sensor limits), so that users can tell 'nobody there' from 'not seen'."""
@@ -188,7 +193,8 @@ def table_missing(ctx: Context) -> Iterator[Hit]:
 
 
 @rule("unobserved.coverage_missing", "warning", "No coverage polygon",
-      "recording.json: coverage is missing: the observed area is unknown")
+      "recording.json: coverage is missing: the observed area is unknown",
+      enforces="FORMAT.md 3: coverage (the area observed at any time) SHOULD be given")
 def coverage_missing(ctx: Context) -> Iterator[Hit]:
     """recording.json has no ``coverage``: FORMAT.md 3 says it SHOULD give the area observed at any
     time (everything else is unobserved)."""
