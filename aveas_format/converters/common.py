@@ -17,6 +17,7 @@ import pyarrow.parquet as pq
 from aveas_format._version import __version__
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.mapref.build import build_recording, load_map_bytes
+from aveas_format.numeric import central_differences
 
 __all__ = [
     "build_recording", "column", "factorize", "file_sha256", "load_map_bytes", "move_along_heading",
@@ -274,29 +275,10 @@ def nullable(a: np.ndarray) -> pa.Array:
 def velocity_with_std(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray,
                       x_std: np.ndarray | None = None, y_std: np.ndarray | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Velocity by central differences within each participant (one-sided at track ends, 0 for a
-    single sample) and its 1-sigma from independent position errors:
-    ``std(vx_i) = sqrt(x_std[i+1]^2 + x_std[i-1]^2) / (t[i+1] - t[i-1])``.
-    Rows must be sorted by (participant, time)."""
-    n = len(t)
-    x_std = np.zeros(n) if x_std is None else np.nan_to_num(np.asarray(x_std, np.float64))
-    y_std = np.zeros(n) if y_std is None else np.nan_to_num(np.asarray(y_std, np.float64))
-    if n == 0:
-        z = np.zeros(0)
-        return z, z, z, z
-    idx = np.arange(n)
-    prev = np.r_[False, (pid[1:] == pid[:-1]) & (t[1:] > t[:-1])]   # row i has a predecessor
-    nxt = np.r_[prev[1:], False]                                     # row i has a successor
-    lo = np.where(prev, idx - 1, idx)
-    hi = np.where(nxt, idx + 1, idx)
-    dt = t[hi] - t[lo]
-    ok = dt > 0
-    safe = np.where(ok, dt, 1.0)
-    vx = np.where(ok, (x[hi] - x[lo]) / safe, 0.0)
-    vy = np.where(ok, (y[hi] - y[lo]) / safe, 0.0)
-    vx_std = np.where(ok, np.hypot(x_std[hi], x_std[lo]) / safe, np.nan)
-    vy_std = np.where(ok, np.hypot(y_std[hi], y_std[lo]) / safe, np.nan)
-    return vx, vy, vx_std, vy_std
+    """Velocity from positions and its 1-sigma from independent position errors, within each
+    participant: :func:`aveas_format.numeric.central_differences` (0 with std NaN for a single
+    sample). Rows must be sorted by (participant, time)."""
+    return central_differences(pid, t, x, y, x_std, y_std)
 
 
 def footprint_corners(x: np.ndarray, y: np.ndarray, heading: np.ndarray, length: np.ndarray,

@@ -29,7 +29,7 @@ from aveas_format.schema.metadata import RecordingMeta
 from aveas_format.schema.tables import TABLES
 from aveas_format.mapref.crs import LocalFrame
 from aveas_format.mapref.roads import road_coordinates
-from aveas_format.numeric import same_participant, wrap_angle
+from aveas_format.numeric import central_differences, same_participant, wrap_angle
 from aveas_format.opendrive import load_map
 from aveas_format.schema.versions import FORMAT_VERSION
 
@@ -73,26 +73,10 @@ def load_map_bytes(source: str | bytes | Path) -> bytes:
 
 def velocity_from_positions(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray
                             ) -> tuple[np.ndarray, np.ndarray]:
-    """Velocity by central differences within each participant (one-sided at track ends).
-
-    Rows must be sorted by (participant, time). A participant with one sample gets velocity 0.
-    """
-    n = len(t)
-    vx = np.zeros(n)
-    vy = np.zeros(n)
-    if n < 2:
-        return vx, vy
-    same = same_participant(pid)
-    dt = np.diff(t)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        fx = np.where(same & (dt > 0), np.diff(x) / dt, np.nan)  # forward difference i -> i+1
-        fy = np.where(same & (dt > 0), np.diff(y) / dt, np.nan)
-    fwd_x = np.append(fx, np.nan)
-    fwd_y = np.append(fy, np.nan)
-    bwd_x = np.insert(fx, 0, np.nan)
-    bwd_y = np.insert(fy, 0, np.nan)
-    vx = np.nanmean(np.vstack([fwd_x, bwd_x]), axis=0) if n else vx
-    vy = np.nanmean(np.vstack([fwd_y, bwd_y]), axis=0) if n else vy
+    """Velocity from positions within each participant (:func:`aveas_format.numeric.central_differences`:
+    second order on uneven sampling, one-sided at track ends). A participant with one sample gets
+    velocity 0. Rows must be sorted by (participant, time)."""
+    vx, vy, _, _ = central_differences(pid, t, x, y)
     return np.nan_to_num(vx), np.nan_to_num(vy)
 
 
