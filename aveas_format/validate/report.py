@@ -8,6 +8,7 @@ and keeps rules that crashed apart as tool failures.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from enum import Enum
 from typing import Any
 
@@ -23,7 +24,18 @@ class Severity(str, Enum):
 
     @property
     def rank(self) -> int:
+        """The order of severities (error > warning > info), for sorting and ``--fail-on``."""
         return {"error": 3, "warning": 2, "info": 1}[self.value]
+
+
+def findings_exit_code(results: Iterable[Any], fail_on: str = "error") -> int:
+    """1 when a rule's results (anything with ``severity`` and ``count``: :class:`RuleResult`, a
+    dataset entry's per-rule summary) hold findings at or above ``fail_on``, else 0 (``never``:
+    always 0). One place for the single-recording and the dataset exit codes."""
+    if fail_on == "never":
+        return 0
+    threshold = Severity(fail_on).rank
+    return 1 if any(r.count and r.severity.rank >= threshold for r in results) else 0
 
 
 class Location(BaseModel):
@@ -140,12 +152,7 @@ class Report(BaseModel):
 
     def exit_code(self, fail_on: str = "error") -> int:
         """0 = nothing at/above ``fail_on``, 1 = findings, 3 = the tool failed (ARCHITECTURE.md)."""
-        if self.failures:
-            return 3
-        if fail_on == "never":
-            return 0
-        threshold = Severity(fail_on).rank
-        return 1 if any(r.count and r.severity.rank >= threshold for r in self.results) else 0
+        return 3 if self.failures else findings_exit_code(self.results, fail_on)
 
     def to_json(self) -> str:
         return self.model_dump_json(indent=2)

@@ -14,7 +14,10 @@ import shapely
 
 import aveas_format
 from aveas_format import dataset as ds
+from aveas_format.dataset import discovery
 from aveas_format.errors import AveasError
+from aveas_format.io import reader
+from aveas_format.io.reader import open_recording
 
 from dataset_tasks import validate_or_crash
 
@@ -53,8 +56,8 @@ def test_validate_dataset_with_the_process_pool(broken_dataset, tmp_path):
                               on_result=seen.append)
     assert len(seen) == 6 and rep.recordings == 6
     # the file that is not a recording is reported with its error; the others complete
-    assert [Path(f["path"]).name for f in rep.failed] == ["corrupt.aveas.zip"]
-    assert "not a recording" in rep.failed[0]["error"]
+    assert [Path(f.path).name for f in rep.failed] == ["corrupt.aveas.zip"]
+    assert "not a recording" in rep.failed[0].error
     assert len(rep.entries) == 5
     assert rep.exit_code() == 3
     d = json.loads(rep.to_json())
@@ -69,8 +72,8 @@ def test_validate_dataset_with_the_process_pool(broken_dataset, tmp_path):
     worst = [Path(w["path"]).name for w in d["worst"]]
     assert worst[:2] == ["corrupt.aveas.zip", "v2.aveas"]
     # per-recording reports written by the workers, equal to the API's
-    v2 = next(e for e in rep.entries if e["path"].endswith("v2.aveas"))
-    full = json.loads(Path(v2["report_file"]).read_text())
+    v2 = next(e for e in rep.entries if e.path.endswith("v2.aveas"))
+    full = json.loads(Path(v2.report_file).read_text())
     assert full["results"][0]["code"] == "structure.row_count"
     assert len(list((tmp_path / "reports").glob("*.json"))) == 5
     html = rep.to_html()
@@ -87,9 +90,9 @@ def test_a_recording_that_kills_its_worker_is_reported_and_the_rest_complete(dat
     poison = tmp_path / "poison.aveas"
     poison.mkdir()
     rep = ds.validate_dataset([*paths, str(poison)], workers=2, task=validate_or_crash)
-    assert [f["path"] for f in rep.failed] == [str(poison)]
-    assert "worker process died" in rep.failed[0]["error"]
-    assert sorted(e["path"] for e in rep.entries) == sorted(paths)
+    assert [f.path for f in rep.failed] == [str(poison)]
+    assert "worker process died" in rep.failed[0].error
+    assert sorted(e.path for e in rep.entries) == sorted(paths)
     assert rep.exit_code() == 3
 
 
@@ -145,13 +148,13 @@ def test_catalog_of_an_unreadable_recording_has_its_error(broken_dataset):
 def test_per_vehicle_stats_streams_partial_reads(dataset_root, monkeypatch):
     paths = ds.discover(dataset_root)
     reads = []
-    real_open = aveas_format.open
+    real_open = open_recording
 
     def spy(path, **kw):
         reads.append(kw)
         return real_open(path, **kw)
 
-    monkeypatch.setattr(aveas_format, "open", spy)
+    monkeypatch.setattr(reader, "open_recording", spy)
     t = ds.per_vehicle_stats(paths, "mean_speed",
                              filters={"partner": "KIT", "road_type": "motorway"}, workers=1)
     monkeypatch.undo()
@@ -186,12 +189,12 @@ def test_derive_dataset_writes_the_same_layout(dataset_root, tmp_path):
     paths = ds.discover(dataset_root / "kit")
     rep = ds.derive_dataset(paths, output_dir=tmp_path / "out", workers=2)
     assert not rep.failed and rep.exit_code() == 0
-    outs = sorted(Path(e["output"]).relative_to(tmp_path / "out").as_posix() for e in rep.entries)
+    outs = sorted(Path(e.output).relative_to(tmp_path / "out").as_posix() for e in rep.entries)
     assert outs == ["a1.aveas", "a2.aveas.zip", "u1.aveas"]
     u1 = aveas_format.open(tmp_path / "out" / "u1.aveas")
     assert "interactions" in u1.derived
-    e = next(e for e in rep.entries if e["path"].endswith("u1.aveas"))
-    assert e["min_ttc_s"] == pytest.approx(ds.catalog([tmp_path / "out" / "u1.aveas"],
+    e = next(e for e in rep.entries if e.path.endswith("u1.aveas"))
+    assert e.min_ttc_s == pytest.approx(ds.catalog([tmp_path / "out" / "u1.aveas"],
                                                       validate=False)["min_ttc_s"][0].as_py())
     with pytest.raises(AveasError):
         ds.derive_dataset(paths)
@@ -210,7 +213,7 @@ def test_remote_urls_are_listed_and_staged_per_task(dataset_root, monkeypatch):
         sub = pafs.SubTreeFileSystem(str(bucket_root), pafs.LocalFileSystem())
         return sub, uri[len("s3://bucket/"):]
 
-    monkeypatch.setattr(ds, "_filesystem_from_uri", from_uri)
+    monkeypatch.setattr(discovery, "_filesystem_from_uri", from_uri)
     urls = ds.discover("s3://bucket/archive")
     assert urls == [f"s3://bucket/archive/{r}" for r in (
         "kit/a1.aveas", "kit/a2.aveas.zip", "kit/u1.aveas", "tub/v1.aveas", "tub/v2.aveas")]

@@ -45,9 +45,9 @@ def test_a_recording_that_kills_its_dask_worker_is_reported_and_the_rest_complet
     poison = tmp_path / "poison.aveas"
     poison.mkdir()
     rep = ds.validate_dataset([*paths, str(poison)], scheduler=scheduler, task=validate_or_crash)
-    assert [f["path"] for f in rep.failed] == [str(poison)]
-    assert "worker process died" in rep.failed[0]["error"]
-    assert sorted(e["path"] for e in rep.entries) == sorted(paths)
+    assert [f.path for f in rep.failed] == [str(poison)]
+    assert "worker process died" in rep.failed[0].error
+    assert sorted(e.path for e in rep.entries) == sorted(paths)
     # the cluster recovered (the nannies restarted the workers): the next run is complete
     table = ds.catalog(paths, scheduler=scheduler, validate=False)
     assert table.num_rows == 5 and table.column("read_error").null_count == 5
