@@ -12,8 +12,8 @@ def test_every_unit_is_in_a_layer():
     assert units - set(layers.layer_of()) == set(), "add the new unit to tools/layers.py LAYERS"
 
 
-@pytest.mark.xfail(strict=True, reason="pending in this restructuring: dataset and plot import the "
-                   "package root, validate/html.py reaches into plot")
+@pytest.mark.xfail(strict=True, reason="pending in this restructuring: dataset imports the package "
+                   "root")
 def test_imports_follow_the_layers():
     assert layers.violations() == []
 

@@ -1,5 +1,8 @@
 """Figures of docs/derive.md: ``python tools/derive_figures.py [OUTDIR]`` (``make docs`` runs it).
 
+The scenes and their derivation are made here; the figures are drawn by
+:mod:`aveas_format.plot.derive`.
+
 - ``derive_cut_in_ttc.png``: TTC over time for a cut-in: while the cutting car is a neighbour its
   TTC is the exact 2D box TTC, once it is in the ego lane the lane-based 1D TTC (with 1-sigma bands).
 - ``derive_kinematics.png``: derived longitudinal/lateral acceleration with its 1-sigma band
@@ -47,74 +50,30 @@ def cut_in_recording():
 
 
 def cut_in_figure(path: Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from aveas_format.derive import derive
+    from aveas_format.plot.derive import ttc_figure
 
     rec = cut_in_recording()
     derive(rec, only="interactions")
-    rows = [r for r in rec.derived["interactions"].to_pylist()
-            if r["participant_id"] == 0 and r["other_id"] == 1 and r["ttc"] is not None]
-    fig, ax = plt.subplots(figsize=(7, 3.4))
-    for kind, colour, label in (("box_2d", "tab:orange", "2D boxes (neighbour)"),
-                                ("lane_1d", "tab:blue", "1D lane (leader)")):
-        rr = [r for r in rows if r["ttc_kind"] == kind]
-        if not rr:
-            continue
-        t = np.array([r["time"] for r in rr])
-        v = np.array([r["ttc"] for r in rr])
-        s = np.array([r["ttc_std"] or 0.0 for r in rr])
-        ax.plot(t, v, ".", ms=3, color=colour, label=label)
-        ax.fill_between(t, v - s, v + s, color=colour, alpha=0.25, lw=0)
-    ax.axvspan(2.0, 5.0, color="0.9", zorder=0, label="lane change of the other car")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("TTC of ego to the cutting car (s)")
-    ax.set_ylim(0, 10)
-    ax.legend(loc="upper right", fontsize=8)
-    ax.set_xlim(0, 8)
-    ax.set_title("Cut-in: ego 30 m/s, cutting car 26 m/s, 30 m ahead (centres)")
-    fig.tight_layout()
-    save_figure_atomic(fig, path, dpi=120)
-    plt.close(fig)
-    return path
+    fig = ttc_figure(rec.derived["interactions"], 0, 1, highlight=(2.0, 5.0, "lane change of the other car"),
+                     xlim=(0.0, 8.0), ylabel="TTC of ego to the cutting car (s)",
+                     title="Cut-in: ego 30 m/s, cutting car 26 m/s, 30 m ahead (centres)")
+    return save_figure_atomic(fig, path, dpi=120)
 
 
 def kinematics_figure(path: Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from aveas_format.derive import derive
+    from aveas_format.plot.derive import acceleration_figure
     from aveas_format.sample import highway_scene
 
     rec, truth = highway_scene(n_vehicles=60, duration_s=30.0, return_truth=True)
     derive(rec, only="kinematics")
     k = rec.derived["kinematics"]
-    pid = k.column("participant_id").to_numpy()
     # the car with the largest lateral acceleration (a lane change)
-    ay = np.abs(truth["ay"])
-    car = int(pid[np.argmax(ay)])
-    m = pid == car
-    t = k.column("time").to_numpy()[m]
-    fig, axes = plt.subplots(2, 1, figsize=(7, 4.6), sharex=True)
-    for a, col, tru in ((axes[0], "ax", truth["ax"][m]), (axes[1], "ay", truth["ay"][m])):
-        v = k.column(col).to_numpy(zero_copy_only=False)[m]
-        s = k.column(f"{col}_std").to_numpy(zero_copy_only=False)[m]
-        a.fill_between(t, v - s, v + s, color="tab:blue", alpha=0.25, lw=0, label="±1 std")
-        a.plot(t, v, color="tab:blue", lw=1, label=f"derived {col}")
-        a.plot(t, tru, color="k", lw=1, ls="--", label="truth")
-        a.set_ylabel(f"{col} (m/s²)")
-    axes[0].legend(loc="upper right", fontsize=8, ncol=3)
-    axes[1].set_xlabel("time (s)")
-    axes[0].set_title(f"CA Kalman + RTS from positions with σ = 0.1 m at 25 Hz (car {car})")
-    fig.tight_layout()
-    save_figure_atomic(fig, path, dpi=120)
-    plt.close(fig)
-    return path
+    car = int(k.column("participant_id").to_numpy()[np.argmax(np.abs(truth["ay"]))])
+    fig = acceleration_figure(k, car, truth=truth,
+                              title=f"CA Kalman + RTS from positions with σ = 0.1 m at 25 Hz (car {car})")
+    return save_figure_atomic(fig, path, dpi=120)
 
 
 def main(outdir: str | Path | None = None) -> list[Path]:

@@ -325,7 +325,7 @@ def plot(
     if output.parent and not output.parent.exists():
         raise fail(f"{output.parent}: no such directory", EXIT_USAGE)
     net = _load(map_file)
-    from aveas_format.opendrive.plot import save_map
+    from aveas_format.plot.map import save_map
 
     save_map(net, output, dpi=dpi, labels=labels, junction_road_labels=junction_road_labels, step=step)
     err.print(f"wrote {output}")

@@ -23,7 +23,7 @@ def plot(
     acceleration.png (histograms per class), sample_rate.png (sample rate over time)."""
     import aveas_format
     from aveas_format.plot import save_figures
-    from aveas_format.plot.figures import open_for_figures
+    from aveas_format.plot.recording import open_for_figures
 
     report = aveas_format.validate(recording) if findings else None
     rec = open_for_figures(recording, report)  # bounded: a subset of a large recording

@@ -89,7 +89,9 @@ def sensitivity_cmd(
 ) -> None:
     """Vary each Wiedemann 99 parameter over the paper's range and report the minimum mean TTC and
     the minimum TTC of the altered cars per value."""
-    from aveas_format.sim.sensitivity import plot_sensitivity, sensitivity
+    from aveas_format.plot.sensitivity import plot_sensitivity
+    from aveas_format.sim.scenario import W99_RANGES
+    from aveas_format.sim.sensitivity import sensitivity
 
     sc = _scenario(config, None, duration)
     output.mkdir(parents=True, exist_ok=True)
@@ -99,7 +101,7 @@ def sensitivity_cmd(
     from aveas_format.safeio import write_text_atomic
 
     write_text_atomic(output / "sensitivity.json", json.dumps(rows, indent=2))
-    plot_sensitivity(rows, output / "sensitivity.png")
+    plot_sensitivity(rows, output / "sensitivity.png", W99_RANGES)
     for r in rows:
         if "error" in r:
             err.print(f"{r['param']}={r['value']:.3g}: failed: {r['error']}")

@@ -102,7 +102,7 @@ def validate(
     if fmt is Format.json:
         text = render_json(report)
     elif fmt is Format.html:
-        from aveas_format.validate.html import render_html
+        from aveas_format.plot.report_html import render_html
 
         text = render_html(report, _open_for_figures(recording, report))
     else:
@@ -158,7 +158,7 @@ def _validate_dataset(specs: list[str], select: list[str] | None, ignore: list[s
 def _open_for_figures(path: Path, report=None):
     """The recording for the report's figures (the columns they draw; of a large recording, a
     subset of its participants), or None when it cannot be read."""
-    from aveas_format.plot.figures import open_for_figures
+    from aveas_format.plot.recording import open_for_figures
 
     try:
         return open_for_figures(path, report)

@@ -260,12 +260,13 @@ def fit_parameters(recorded: dict[str, np.ndarray], config: FitConfig | None = N
         write_parquet_atomic(pa.Table.from_pylist(runs), od / "runs.parquet")
         write_text_atomic(od / "best.json", json.dumps(res.best, indent=2))
         if figures:
-            from aveas_format.fit.objective import METRICS
-            from aveas_format.fit.plots import plot_histogram, plot_parameters
+            from aveas_format.fit.objective import METRICS, kde_logpdf
+            from aveas_format.plot.fit import plot_histogram, plot_parameters
 
             m = METRICS[config.metric]
             sim = metric_at(np.array([res.best[n] for n in config.names]), config)
-            plot_histogram(recorded, sim, od / "fit_histogram.png", bandwidth=config.bandwidth,
+            plot_histogram(recorded, sim, od / "fit_histogram.png",
+                           density=lambda s, grid: np.exp(kde_logpdf(s, grid, config.bandwidth)),
                            unit=m.unit, label=m.label or m.name)
             plot_parameters(runs, config.names, od / "fit_parameters.png")
     return res

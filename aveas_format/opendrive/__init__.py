@@ -29,7 +29,6 @@ from .model import (
 )
 from .fit import RoadFit, fit_reference_line, fit_road, road_from_lane_markings
 from .network import RoadNetwork
-from .plot import plot_map
 from .projection import Projection
 
 
@@ -65,6 +64,5 @@ __all__ = [
     "fit_reference_line",
     "fit_road",
     "load_map",
-    "plot_map",
     "road_from_lane_markings",
 ]

@@ -1,14 +1,49 @@
-"""Figures (matplotlib): the map with lanes and trajectories, histograms, report figures."""
+"""The presentation layer: every figure (matplotlib) and the HTML validation report.
 
-from aveas_format.plot.figures import (
-    acceleration_histogram,
-    figures,
-    map_figure,
-    png_bytes,
-    sample_rate_figure,
-    save_figures,
-    speed_histogram,
-)
+One module per subject; each takes data (tables, arrays, a Report, a RoadNetwork) and draws, and
+none imports ``fit``, ``sim`` or ``dataset`` (they sit above and call in). Figures are standalone
+``matplotlib.figure.Figure`` objects (no pyplot state, headless) written atomically with
+:func:`aveas_format.safeio.save_figure_atomic`.
 
-__all__ = ["acceleration_histogram", "figures", "map_figure", "png_bytes", "sample_rate_figure",
-           "save_figures", "speed_histogram"]
+- :mod:`~aveas_format.plot.map`: an OpenDRIVE map, lanes filled by type, reference lines, road
+  and junction ids (``plot_map``, ``save_map``; ``aveas-format map plot``).
+- :mod:`~aveas_format.plot.recording`: figures of a recording, the map with trajectories and
+  located findings, speed/acceleration histograms per class, sample rate (``aveas-format plot``).
+- :mod:`~aveas_format.plot.report_html`: the self-contained HTML validation report with those
+  figures (``aveas-format validate --format html``).
+- :mod:`~aveas_format.plot.derive`: time series of derived tables with 1-sigma bands (TTC,
+  accelerations; the figures of docs/derive.md).
+- :mod:`~aveas_format.plot.fit`: the fitter's figures (histogram vs simulated density, start/end
+  parameters per restart).
+- :mod:`~aveas_format.plot.sensitivity`: the W99 sensitivity study's figure.
+
+The names below are re-exported lazily (on first use), so importing one module, e.g.
+``aveas_format.plot.map``, does not load the others (the HTML report loads the validator).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_MODULES: dict[str, tuple[str, ...]] = {
+    "derive": ("acceleration_figure", "ttc_figure"),
+    "fit": ("plot_histogram", "plot_parameters"),
+    "map": ("BACKGROUND_LANE_COLORS", "LANE_COLORS", "plot_map", "save_map"),
+    "recording": ("acceleration_histogram", "figures", "map_figure", "open_for_figures",
+                  "png_bytes", "sample_rate_figure", "save_figures", "speed_histogram"),
+    "report_html": ("render_html", "report_figures"),
+    "sensitivity": ("plot_sensitivity",),
+}
+_HOME = {name: module for module, names in _MODULES.items() for name in names}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _HOME:
+        value = getattr(importlib.import_module(f"aveas_format.plot.{_HOME[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'aveas_format.plot' has no attribute {name!r}")
+
+
+__all__ = sorted(_HOME)

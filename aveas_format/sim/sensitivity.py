@@ -11,12 +11,11 @@ lane leader, and per value the study reports
   least ``min_ttc_samples`` TTC samples; default 1, every vehicle), and
 - ``min_ttc``: the smallest TTC of an altered vehicle in any time step.
 
-Runs are independent tasks through :func:`aveas_format.parallel.run_tasks`.
+Runs are independent tasks through :func:`aveas_format.parallel.run_tasks`. The figure is drawn by
+:func:`aveas_format.plot.sensitivity.plot_sensitivity` (``aveas-format sim sensitivity`` writes both).
 """
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import numpy as np
 
@@ -104,30 +103,3 @@ def sensitivity(base: Scenario | None = None, *, params: list[str] | None = None
                                           "error": r.error})
     rows.sort(key=lambda r: (r["param"], r["value"]))
     return rows
-
-
-def plot_sensitivity(rows: list[dict], path: str | Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
-    for p in sorted({r["param"] for r in rows}):
-        rs = [r for r in rows if r["param"] == p and "error" not in r]
-        if not rs:
-            continue
-        lo, hi = W99_RANGES[p]
-        x = [(r["value"] - lo) / (hi - lo) for r in rs]  # normalised position in the range
-        axes[0].plot(x, [r["min_mean_ttc"] for r in rs], marker="o", label=p)
-        axes[1].plot(x, [r["min_ttc"] for r in rs], marker="o", label=p)
-    axes[0].set_ylabel("min mean TTC (s)")
-    axes[1].set_ylabel("min TTC (s)")
-    axes[1].set_xlabel("position in the parameter's range (start -> end)")
-    axes[0].legend(ncol=5, fontsize=7)
-    fig.tight_layout()
-    from aveas_format.safeio import save_figure_atomic
-
-    save_figure_atomic(fig, path, dpi=120)
-    plt.close(fig)
-    return Path(path)

@@ -1,4 +1,4 @@
-"""Drawing maps (aveas_format.opendrive.plot)."""
+"""Drawing maps (aveas_format.plot.map)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from odr_helpers import REAL_MAPS, fixture_map, real_map
 
 from aveas_format.opendrive import load_map
 from aveas_format.opendrive.builder import curved_highway
-from aveas_format.opendrive.plot import LANE_COLORS, plot_map, save_map
+from aveas_format.plot.map import LANE_COLORS, plot_map, save_map
 
 
 def test_plot_into_given_axes_colours_lanes_by_type():

@@ -14,7 +14,7 @@ import aveas_format
 import validate_factory as vf
 from aveas_format.errors import FormatError
 from aveas_format.validate.config import ValidationConfig, config_toml
-from aveas_format.validate.html import render_html
+from aveas_format.plot.report_html import render_html
 from aveas_format.validate.report import report_json_schema
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "data" / "versions" / "1.0.0" / "example.aveas"
@@ -151,8 +151,8 @@ def test_figures_of_a_large_recording_read_a_participant_subset(tmp_path):
     import test_rule_corpus as corpus
     import validate_factory as vf
 
-    from aveas_format.plot.figures import open_for_figures
-    from aveas_format.validate.html import render_html
+    from aveas_format.plot.recording import open_for_figures
+    from aveas_format.plot.report_html import render_html
 
     path = corpus.c_out_of_range(vf.fresh()).write(tmp_path / "r.aveas")
     report = aveas_format.validate(path)

@@ -1,32 +1,32 @@
-"""Figures of a fit: recorded histogram vs simulated KDE per class (the paper's "IV_histogram") and
-start/end parameters per restart (the paper's "IV_Parameters")."""
+"""Figures of a fit: recorded histogram vs simulated density per class (the paper's "IV_histogram")
+and start/end parameters per restart (the paper's "IV_Parameters").
+
+The fitter (:mod:`aveas_format.fit.optimize`) calls these with its data; the density of the
+simulated values comes from the fitter as a callable (its KDE), so this module only draws.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
 
-from aveas_format.fit.objective import kde_logpdf
 from aveas_format.safeio import save_figure_atomic
 
+#: (histogram colour, density colour) per class
 COLOURS = {"car": ("tab:blue", "black"), "truck": ("tab:green", "tab:orange")}
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def plot_histogram(recorded: dict[str, np.ndarray], simulated: dict[str, np.ndarray], path: str | Path,
-                   *, bandwidth: str | float = "silverman", unit: str = "km/h",
+                   *, density: Callable[[np.ndarray, np.ndarray], np.ndarray], unit: str = "km/h",
                    label: str = "mean speed") -> Path:
-    plt = _plt()
-    fig, ax = plt.subplots(figsize=(8, 4))
+    """Histogram of the recorded values per class with the simulated density over it, written to
+    ``path``. ``density(samples, grid)`` is the density of ``samples`` at the points ``grid`` (the
+    fitter passes its KDE, so the curve is the one its likelihood uses)."""
+    fig = Figure(figsize=(8, 4))
+    ax = fig.subplots()
     parts = [np.asarray(v) for v in [*recorded.values(), *simulated.values()] if len(v)]
     allv = np.concatenate(parts) if parts else np.zeros(1)
     lo, hi = float(allv.min()), float(allv.max())
@@ -40,14 +40,13 @@ def plot_histogram(recorded: dict[str, np.ndarray], simulated: dict[str, np.ndar
             ax.hist(v, bins=bins, density=True, alpha=0.5, color=hc, label=f"recorded {c} (n={len(v)})")
         s = simulated.get(c, np.empty(0))
         if len(s):
-            ax.plot(grid, np.exp(kde_logpdf(s, grid, bandwidth)), color=kc, lw=2,
+            ax.plot(grid, density(s, grid), color=kc, lw=2,
                     label=f"simulated {c} KDE (n={len(s)})")
     ax.set_xlabel(f"{label} ({unit})")
     ax.set_ylabel("density")
     ax.legend()
     fig.tight_layout()
     save_figure_atomic(fig, path, dpi=120)
-    plt.close(fig)
     return Path(path)
 
 
@@ -67,11 +66,11 @@ def _axes_pairs(names: list[str]) -> list[tuple[str, str | None]]:
 
 def plot_parameters(runs: list[dict], names: list[str], path: str | Path) -> Path:
     """Start (grey) and end (colour) parameters of every restart, the best as a red star."""
-    plt = _plt()
     pairs = _axes_pairs(names)
     same_axes = all(x.startswith("mu_") for x, _ in pairs)  # the paper's figure: one (mu, sigma) plot
     n_ax = 1 if same_axes else len(pairs)
-    fig, axes = plt.subplots(1, n_ax, figsize=(5 * n_ax, 5), squeeze=False)
+    fig = Figure(figsize=(5 * n_ax, 5))
+    axes = fig.subplots(1, n_ax, squeeze=False)
     best = min(runs, key=lambda r: r["fun"]) if runs else None
     for k, (xn, yn) in enumerate(pairs):
         ax = axes[0, 0 if same_axes else k]
@@ -107,5 +106,4 @@ def plot_parameters(runs: list[dict], names: list[str], path: str | Path) -> Pat
         ax.legend(fontsize=8)
     fig.tight_layout()
     save_figure_atomic(fig, path, dpi=120)
-    plt.close(fig)
     return Path(path)

@@ -1,4 +1,6 @@
-"""The HTML report: one self-contained file (inline CSS, figures as base64 PNG, no scripts, no CDN).
+"""The HTML validation report: one self-contained file (inline CSS, figures as base64 PNG, no scripts,
+no CDN). It lives in the presentation layer with the figures it embeds; ``aveas_format.validate``
+renders text and JSON only.
 
 Sections: a summary by severity, tool failures, the figures (map with lanes, trajectories and the
 located findings; speed and acceleration per class; sample rate over time), then one section per
@@ -11,6 +13,8 @@ import base64
 import html
 from typing import Any
 
+from aveas_format.plot.recording import figures as recording_figures
+from aveas_format.plot.recording import png_bytes
 from aveas_format.validate.registry import load_rules
 from aveas_format.validate.report import Report, Severity
 
@@ -56,9 +60,7 @@ def report_figures(report: Report, rec: Any) -> dict[str, bytes]:
     """PNG bytes of the report figures (empty when the recording cannot be drawn)."""
     if rec is None:
         return {}
-    from aveas_format.plot.figures import figures, png_bytes
-
-    return {name: png_bytes(fig) for name, fig in figures(rec, report.findings()).items()}
+    return {name: png_bytes(fig) for name, fig in recording_figures(rec, report.findings()).items()}
 
 
 def render_html(report: Report, rec: Any = None, figures: dict[str, bytes] | None = None) -> str:

@@ -1,7 +1,7 @@
 """Draw an OpenDRIVE map with matplotlib: lanes filled by type, reference lines, road ids, junctions.
 
 >>> from aveas_format.opendrive import load_map
->>> from aveas_format.opendrive.plot import plot_map, save_map
+>>> from aveas_format.plot.map import plot_map, save_map
 >>> net = load_map("Town04.xodr")                        # doctest: +SKIP
 >>> ax = plot_map(net)                                  # doctest: +SKIP  (a new figure)
 >>> plot_map(net, ax=my_ax, labels=False)               # doctest: +SKIP  (into your axes)
@@ -19,10 +19,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from aveas_format.safeio import save_figure_atomic
+
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
 
-    from .network import RoadNetwork
+    from aveas_format.opendrive.network import RoadNetwork
 
 #: face colours of lanes by OpenDRIVE lane type (others: ``LANE_COLORS["other"]``)
 LANE_COLORS: dict[str, str] = {
@@ -57,6 +59,16 @@ LANE_COLORS: dict[str, str] = {
 }
 
 
+def _towards_white(color: str, amount: float) -> str:
+    """``#rrggbb`` moved ``amount`` (0..1) of the way to white."""
+    rgb = [int(color[i:i + 2], 16) for i in (1, 3, 5)]
+    return "#" + "".join(f"{round(c + (255 - c) * amount):02x}" for c in rgb)
+
+
+#: :data:`LANE_COLORS` lightened, for a map underneath other data (the recording figures)
+BACKGROUND_LANE_COLORS: dict[str, str] = {t: _towards_white(c, 0.7) for t, c in LANE_COLORS.items()}
+
+
 def _lane_type(net: RoadNetwork, road_id: str, section: int, lane_id: int) -> str:
     lane = net.roads[road_id].lane_sections[section].lane(lane_id)
     return lane.type if lane is not None else "none"
@@ -68,6 +80,7 @@ def plot_map(
     *,
     step: float = 1.0,
     lane_colors: Mapping[str, str] | None = None,
+    lane_edges: tuple[str, float] = ("#ffffff", 0.15),
     reference_lines: bool = True,
     labels: bool = True,
     junction_road_labels: bool = False,
@@ -78,7 +91,8 @@ def plot_map(
 ) -> Axes:
     """Draw ``net`` into ``ax`` (a new figure when None) and return the axes.
 
-    Lanes are filled by type (``lane_colors`` overrides :data:`LANE_COLORS`), reference lines
+    Lanes are filled by type (``lane_colors`` overrides :data:`LANE_COLORS`) and outlined
+    (``lane_edges``: colour, line width in points), reference lines
     drawn thin with an arrow at their end (the direction of s), road ids written at the middle of
     each road (junction roads only with ``junction_road_labels``), junction areas outlined (dashed)
     with their ids. ``step``: sampling of lane borders and reference lines in metres.
@@ -110,8 +124,8 @@ def plot_map(
         jid = net.roads[road_id].junction
         if jid is not None:
             by_junction.setdefault(jid, []).append(poly)
-    ax.add_collection(PolyCollection(verts, facecolors=faces, edgecolors="#ffffff", linewidths=0.15,
-                                     zorder=1))
+    ax.add_collection(PolyCollection(verts, facecolors=faces, edgecolors=lane_edges[0],
+                                     linewidths=lane_edges[1], zorder=1))
     if reference_lines or labels:
         segs, mids = [], []
         for rid, road in net.roads.items():
@@ -177,9 +191,7 @@ def save_map(net: RoadNetwork, path: str | Path, *, dpi: int = 150, **kw: Any) -
     ax = plot_map(net, **kw)
     fig = ax.figure
     fig.tight_layout()
-    from aveas_format.safeio import save_figure_atomic
-
     return save_figure_atomic(fig, path, dpi=dpi)
 
 
-__all__ = ["LANE_COLORS", "plot_map", "save_map"]
+__all__ = ["BACKGROUND_LANE_COLORS", "LANE_COLORS", "plot_map", "save_map"]

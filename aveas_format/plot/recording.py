@@ -3,7 +3,10 @@ acceleration histograms per class, the sample rate over time.
 
 Every function takes a :class:`~aveas_format.io.recording.Recording` and returns a matplotlib
 ``Figure``; :func:`figures` returns all of them by name and :func:`save_figures` writes them as PNG.
-Large recordings are subsampled for drawing (``max_points``); histograms use every sample.
+Large recordings are subsampled for drawing (``max_points``); histograms use every sample, and
+:func:`open_for_figures` reads a bounded subset of a large recording. The map underneath is drawn by
+:func:`aveas_format.plot.map.plot_map`. Figures are standalone ``Figure`` objects (no pyplot state),
+so drawing never switches the backend of an interactive session.
 """
 
 from __future__ import annotations
@@ -12,16 +15,12 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-import matplotlib
+import numpy as np
+import pyarrow as pa
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg", force=False)
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pyarrow as pa  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-
-from aveas_format.safeio import save_figure_atomic  # noqa: E402
+from aveas_format.plot.map import BACKGROUND_LANE_COLORS, plot_map
+from aveas_format.safeio import save_figure_atomic
 
 _SEV_STYLE = {"error": ("#d62728", "x"), "warning": ("#ff7f0e", "^"), "info": ("#1f77b4", "o")}
 
@@ -57,18 +56,15 @@ def _classes(rec, pid: np.ndarray) -> np.ndarray:
 
 
 def map_figure(rec, findings: Iterable[Any] = (), max_points: int = 200_000) -> Figure:
-    """The map's lanes (drivable grey, others light), trajectories (one colour per participant,
-    subsampled) and findings with a position (x/y, or the state row they name)."""
-    fig, ax = plt.subplots(figsize=(11, 6), dpi=100)
+    """The map underneath (:func:`~aveas_format.plot.map.plot_map`, lanes by type in the light
+    ``BACKGROUND_LANE_COLORS``, road ids), the trajectories (subsampled) and the
+    findings with a position (x/y, or the state row they name)."""
+    fig = Figure(figsize=(11, 6), dpi=100)
+    ax = fig.subplots()
     try:
-        net = rec.map
-        for _, _, _, poly in net.lane_polygons(step=2.0):
-            if poly is None or poly.is_empty:
-                continue
-            geoms = getattr(poly, "geoms", [poly])
-            for g in geoms:
-                xs, ys = g.exterior.xy
-                ax.fill(xs, ys, facecolor="#e6e6e6", edgecolor="#b0b0b0", linewidth=0.3, zorder=1)
+        plot_map(rec.map, ax, step=2.0, lane_colors=BACKGROUND_LANE_COLORS,
+                 lane_edges=("#b0b0b0", 0.3), reference_lines=False, junctions=False, legend=False,
+                 title="")
     except Exception:  # noqa: BLE001 — a figure without the map is still useful
         ax.text(0.01, 0.99, "map not available", transform=ax.transAxes, va="top")
     st = _states(rec)
@@ -80,20 +76,21 @@ def map_figure(rec, findings: Iterable[Any] = (), max_points: int = 200_000) -> 
         brk = np.flatnonzero(np.diff(pid) != 0) + 1
         xs = np.insert(x.astype(float), brk, np.nan)
         ys = np.insert(y.astype(float), brk, np.nan)
-        ax.plot(xs, ys, linewidth=0.6, color="#1f4e79", alpha=0.6, zorder=2)
+        ax.plot(xs, ys, linewidth=0.6, color="#1f4e79", alpha=0.6, zorder=2.5)
     pts = _finding_points(rec, findings, st)
     for sev, (color, marker) in _SEV_STYLE.items():
         sel = [(px, py) for s, px, py in pts if s == sev]
         if sel:
             arr = np.array(sel)
-            ax.scatter(arr[:, 0], arr[:, 1], c=color, marker=marker, s=40, zorder=3,
+            ax.scatter(arr[:, 0], arr[:, 1], c=color, marker=marker, s=40, zorder=6,
                        label=f"{sev} ({len(sel)})")
     if pts:
         ax.legend(loc="upper right", fontsize=8)
     x0, x1 = ax.get_xlim()
     y0, y1 = ax.get_ylim()
-    if max(x1 - x0, 1e-9) / max(y1 - y0, 1e-9) < 8:  # a long straight road stays readable
-        ax.set_aspect("equal", adjustable="datalim")
+    # equal axes (plot_map's), unless a long straight road would become a thin strip
+    ratio = max(x1 - x0, 1e-9) / max(y1 - y0, 1e-9)
+    ax.set_aspect("equal" if ratio < 8 else "auto", adjustable="datalim")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.set_title(f"{rec.meta.recording_id}: lanes, trajectories and located findings")
@@ -134,7 +131,8 @@ def _per_class_hist(ax, values: np.ndarray, cls: np.ndarray, bins: np.ndarray, x
 
 def speed_histogram(rec) -> Figure:
     """Distribution of speed over ground (from vx, vy) per class."""
-    fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
+    fig = Figure(figsize=(6, 4), dpi=100)
+    ax = fig.subplots()
     st = _states(rec)
     if st is not None:
         v = np.hypot(st["vx"], st["vy"])
@@ -149,7 +147,8 @@ def speed_histogram(rec) -> Figure:
 def acceleration_histogram(rec, window: float = 0.5) -> Figure:
     """Distribution of the planar acceleration magnitude (velocity differences over ``window`` s,
     the estimate of the kinematics rules) per class."""
-    fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
+    fig = Figure(figsize=(6, 4), dpi=100)
+    ax = fig.subplots()
     st = _states(rec)
     if st is not None and len(st["time"]) > 1:
         pid, t = st["participant_id"], st["time"]
@@ -173,7 +172,8 @@ def acceleration_histogram(rec, window: float = 0.5) -> Figure:
 
 def sample_rate_figure(rec, bin_s: float = 1.0) -> Figure:
     """Mean sample rate per participant present, per time bin, against nominal_rate_hz."""
-    fig, ax = plt.subplots(figsize=(8, 3.5), dpi=100)
+    fig = Figure(figsize=(8, 3.5), dpi=100)
+    ax = fig.subplots()
     st = _states(rec)
     if st is not None:
         t = st["time"]
@@ -207,18 +207,18 @@ def open_for_figures(path: str | Path, report: Any = None, max_rows: int = FIGUR
     recording with more than ``max_rows`` states, every k-th participant is read (the figures say
     so), and the positions of findings located by state row only are read from their row groups
     (written into the findings' ``x``/``y``), so memory stays bounded."""
-    import aveas_format
     from aveas_format.io.container import Container
+    from aveas_format.io.reader import open_recording
 
-    head = aveas_format.open(path, tables=["participants"], verify=False)
+    head = open_recording(path, tables=["participants"], verify=False)
     entry = head.meta.tables.get("states")
     ids = None
     if entry is not None and entry.rows > max_rows and head.participants.num_rows:
         pids = np.sort(head.participants.column("participant_id").to_numpy())
         k = -(-entry.rows // max_rows)
         ids = pids[::k].tolist()
-    rec = aveas_format.open(path, tables=["participants", "states"],
-                            columns={"states": _FIGURE_COLUMNS}, participants=ids, verify=False)
+    rec = open_recording(path, tables=["participants", "states"],
+                         columns={"states": _FIGURE_COLUMNS}, participants=ids, verify=False)
     if ids is not None:
         rec.__dict__["figure_note"] = (f"drawn from every {k}th participant ({len(ids)} of "
                                        f"{head.participants.num_rows}; {rec.states.num_rows:,} of "
@@ -269,16 +269,14 @@ def save_figures(rec, outdir: str | Path, findings: Iterable[Any] = ()) -> list[
     out.mkdir(parents=True, exist_ok=True)
     paths = []
     for name, fig in figures(rec, findings).items():
-        p = save_figure_atomic(fig, out / f"{name}.png")
-        plt.close(fig)
-        paths.append(p)
+        paths.append(save_figure_atomic(fig, out / f"{name}.png"))
     return paths
 
 
 def png_bytes(fig: Figure) -> bytes:
+    """The figure as PNG bytes (the HTML report inlines them)."""
     import io
 
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
-    plt.close(fig)
     return buf.getvalue()
