@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import layers
-import pytest
 
 
 def test_every_unit_is_in_a_layer():
@@ -12,8 +11,6 @@ def test_every_unit_is_in_a_layer():
     assert units - set(layers.layer_of()) == set(), "add the new unit to tools/layers.py LAYERS"
 
 
-@pytest.mark.xfail(strict=True, reason="pending in this restructuring: dataset imports the package "
-                   "root")
 def test_imports_follow_the_layers():
     assert layers.violations() == []
 
