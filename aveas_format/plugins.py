@@ -66,6 +66,7 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
 _done: set[str] = set()
 _loading: set[str] = set()
 _failed: dict[str, PluginError] = {}
+_installed: list[importlib.metadata.EntryPoints] = []  # every entry point, read once per process
 
 
 def load(kind: str) -> None:
@@ -99,6 +100,7 @@ def forget(kind: str | None = None) -> None:
     for k in [kind] if kind else list(KINDS):
         _done.discard(k)
         _failed.pop(k, None)
+    _installed.clear()
 
 
 def import_tree(package: str, skip: Iterable[str] = ()) -> list[str]:
@@ -124,7 +126,9 @@ def import_tree(package: str, skip: Iterable[str] = ()) -> list[str]:
 
 def entry_points(kind: str) -> list[importlib.metadata.EntryPoint]:
     """The installed entry points of ``kind``'s group, by name."""
-    eps = importlib.metadata.entry_points(group=KINDS[kind].group)
+    if not _installed:  # one scan of the installed distributions serves every kind
+        _installed.append(importlib.metadata.entry_points())
+    eps = _installed[0].select(group=KINDS[kind].group)
     return sorted(eps, key=lambda ep: (ep.name, ep.value))
 
 
