@@ -8,6 +8,8 @@ built-in exceptions so that callers can catch either (STYLE.md 11, as rasterio d
 - :class:`FormatVersionError`: an unknown or unsupported ``format_version``.
 - :class:`ChecksumError`: a table or the map does not match the SHA-256 in recording.json.
 - :class:`MapError` (also :class:`ValueError`): an OpenDRIVE map cannot be read; carries the XML line.
+- :class:`PluginError` (also :class:`ImportError`): a plugin (an entry point of a partner package)
+  cannot be loaded or registers a name that exists (:mod:`aveas_format.plugins`).
 
 Each error carries the ``path`` it is about (and, where known, ``line``/``row``/``column``) as
 attributes, and its message names them: the CLI prints ``str(error)`` as its one line on stderr.
@@ -62,12 +64,22 @@ class RecordingExistsError(AveasError, FileExistsError):
     """The output exists and ``overwrite`` was not given."""
 
 
+class PluginError(AveasError, ImportError):
+    """A plugin cannot be imported, or registers a converter, rule, derivation, table or command
+    under a name that exists; the message names the entry point and its distribution."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.path = None  # ImportError.__init__ resets it; a plugin error is about no file
+
+
 __all__ = [
     "AveasError",
     "ChecksumError",
     "FormatError",
     "FormatVersionError",
     "MapError",
+    "PluginError",
     "RecordingExistsError",
     "RecordingIOError",
 ]

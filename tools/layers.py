@@ -20,8 +20,8 @@ PACKAGE = Path(__file__).resolve().parent.parent / "aveas_format"
 #: bottom to top: (layer name, units, what the layer is for)
 LAYERS: list[tuple[str, tuple[str, ...], str]] = [
     ("base", ("errors", "_version"), "the exception hierarchy and the version (standard library only)"),
-    ("foundation", ("safeio", "numeric", "parallel"),
-     "hardened readers and atomic writes, array helpers, the task runner"),
+    ("foundation", ("safeio", "numeric", "parallel", "plugins"),
+     "hardened readers and atomic writes, array helpers, the task runner, the plugin loader"),
     ("schema", ("schema",), "pydantic models and the one declaration per column (no pyarrow)"),
     ("storage, map engine", ("io", "opendrive"),
      "recordings on disk <-> Arrow tables; the OpenDRIVE engine (neither imports the other)"),
@@ -43,6 +43,9 @@ SIDEWAYS: dict[tuple[str, str], str] = {
 }
 
 #: module -> unit imports that break the order, each with its reason (docs/architecture.md)
+#: (not an import, so not listed here: ``plugins`` imports the packages of the converters, rules,
+#: derivations and commands by name at run time; ``schema.tables`` asks it for the derivations,
+#: which declare the derived tables, when it meets one it does not know yet)
 EXCEPTIONS: dict[tuple[str, str], str] = {
     ("aveas_format.io.recording", "opendrive"):
         "Recording.map parses map.xodr on first use (lazy import inside the property)",

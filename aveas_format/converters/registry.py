@@ -7,6 +7,9 @@ finds it here; ``aveas-format convert --list`` prints the table.
 
 Exporters (recording -> foreign format) register with ``direction="export"`` and have the signature
 ``(recording, output, *, options) -> list[Path]``.
+
+:func:`load_converters` imports the converter modules of this package and of installed partner
+packages (entry-point group ``aveas_format.converters``) through :mod:`aveas_format.plugins`.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from aveas_format import plugins
 from aveas_format.errors import AveasError, FormatError
 
 
@@ -86,7 +90,8 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
 
     def register(fn: Callable[..., Any]) -> Callable[..., Any]:
         if key in CONVERTERS:
-            raise ValueError(f"converter {name!r} ({direction}) registered twice")
+            raise ValueError(f"converter {name!r} ({direction}) of {fn.__module__} registered twice: "
+                             f"{CONVERTERS[key].fn.__module__} has it")
         CONVERTERS[key] = Converter(name=name, direction=direction, description=description,
                                     patterns=patterns, method=method, options=options, fn=fn,
                                     needs_map=needs_map, version=version)
@@ -96,15 +101,8 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
 
 
 def load_converters() -> dict[str, Converter]:
-    """Import every converter module of the package (they register themselves)."""
-    import importlib
-    import pkgutil
-
-    import aveas_format.converters as pkg
-
-    for mod in sorted(m.name for m in pkgutil.iter_modules(pkg.__path__)):
-        if mod not in ("registry", "common"):
-            importlib.import_module(f"aveas_format.converters.{mod}")
+    """Every converter, built-in and of plugins (their modules register themselves on import)."""
+    plugins.load("converters")
     return CONVERTERS
 
 

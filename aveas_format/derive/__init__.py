@@ -4,7 +4,9 @@
 >>> derive(rec)                       # all derivations, in dependency order   # doctest: +SKIP
 >>> derive(rec, only="kinematics", jerk_density=2.0)                          # doctest: +SKIP
 
-Each derivation lives in its own module and registers itself in :mod:`.registry`; the definitions,
+Each derivation lives in its own module, declares the spec of the table it writes there and
+registers itself in :mod:`.registry`; the modules are found by :mod:`aveas_format.plugins` (no list
+to edit; partner packages add theirs through entry points, docs/extending.md). The definitions,
 conventions and uncertainty methods are documented in ``docs/derive.md``.
 """
 

@@ -34,6 +34,8 @@ from pydantic import Field
 
 from aveas_format.derive.registry import Derivation, Params, register
 from aveas_format.errors import FormatError
+from aveas_format.schema.columns import MUST, col, gaussian
+from aveas_format.schema.tables import derived_table
 
 
 class EncroachmentsParams(Params):
@@ -475,9 +477,28 @@ def _box_polygons_interval(cx, cy, h, L, W, vx, vy, area, P, normals, nvalid):
     return t_in, t_out
 
 
+TABLE = derived_table(
+    "encroachments",
+    doc="Post-encroachment times: one row per pair of participants passing through a common "
+    "conflict area.",
+    key=("conflict_id",),
+    sort=("conflict_id",),
+    columns=(
+        col("conflict_id", "int64", MUST, "conflict id, unique", minimum=0, nullable=False),
+        col("first_id", "int64", MUST, "participant that leaves the conflict area first", minimum=0,
+            nullable=False),
+        col("second_id", "int64", MUST, "participant that enters it second", minimum=0,
+            nullable=False),
+        col("time_first_exit", "float64", MUST, "time the first participant leaves the area", "s"),
+        col("time_second_enter", "float64", MUST, "time the second participant enters the area", "s"),
+        *gaussian("pet", "s", MUST, "post-encroachment time", minimum=0.0),
+        col("geometry", "binary", MUST, "conflict area, WKB polygon, local frame"),
+    ),
+)
+
 ENCROACHMENTS = register(Derivation(
     name="encroachments",
-    table="derived/encroachments",
+    spec=TABLE,
     version="1.0.0",
     params=EncroachmentsParams,
     fn=compute,

@@ -47,6 +47,9 @@ from pydantic import Field
 
 from aveas_format.derive.registry import Derivation, Params, register
 from aveas_format.errors import FormatError
+from aveas_format.schema.columns import MAY, MUST, col, enum_col, gaussian, pid_col, time_col
+from aveas_format.schema.enums import Relation, TtcKind
+from aveas_format.schema.tables import derived_table
 
 
 class InteractionsParams(Params):
@@ -955,9 +958,36 @@ def _table(S: _Samples, r: dict[str, np.ndarray]) -> pa.Table:
     return t
 
 
+TABLE = derived_table(
+    "interactions",
+    doc="Pairwise relations per time step: leaders, followers, neighbours and conflicting "
+    "participants with time to collision and headways.",
+    key=("participant_id", "time", "other_id", "relation"),
+    sort=("participant_id", "time", "other_id"),
+    columns=(
+        pid_col(),
+        time_col(),
+        col("other_id", "int64", MUST, "the other participant", minimum=0, nullable=False),
+        enum_col("relation", Relation.values(), MUST, "relation of `other_id` to `participant_id`",
+                 nullable=False),
+        *gaussian("ttc", "s", MAY, "time to collision (null = no collision course)", minimum=0.0),
+        enum_col("ttc_kind", TtcKind.values(), MAY, "how `ttc` was computed"),
+        *gaussian("ttc_ca", "s", MAY, "time to collision with constant accelerations (vehicles stop "
+                  "rather than reverse; null = no collision)", minimum=0.0),
+        *gaussian("gap", "m", MAY, "net bumper-to-bumper gap"),
+        col("thw", "float64", MAY, "time headway: net gap / speed of the follower (null = infinite)",
+            "s", minimum=0.0),
+        col("dhw", "float64", MAY, "distance headway: gross front-to-front spacing (gap + leader "
+            "length); in left/right_neighbour rows the signed front-to-front distance along the "
+            "lane (>= 0: the neighbour leads, < 0: it lags)", "m"),
+        col("closing_speed", "float64", MAY, "rate at which the gap closes (positive = closing)",
+            "m/s"),
+    ),
+)
+
 INTERACTIONS = register(Derivation(
     name="interactions",
-    table="derived/interactions",
+    spec=TABLE,
     version="1.1.0",
     params=InteractionsParams,
     fn=compute,

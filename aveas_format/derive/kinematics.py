@@ -41,6 +41,8 @@ from pydantic import Field
 
 from aveas_format.derive.registry import Derivation, Params, register
 from aveas_format.errors import FormatError
+from aveas_format.schema.columns import MUST, gaussian, pid_col, time_col
+from aveas_format.schema.tables import derived_table
 
 
 class KinematicsParams(Params):
@@ -931,9 +933,29 @@ def compute(rec, p: KinematicsParams) -> pa.Table:
     return pa.table(cols)
 
 
+TABLE = derived_table(
+    "kinematics",
+    doc="Speed, accelerations and jerk per participant and time, estimated from the positions with "
+    "their uncertainty.",
+    key=("participant_id", "time"),
+    sort=("participant_id", "time"),
+    columns=(
+        pid_col(),
+        time_col(),
+        *gaussian("speed", "m/s", MUST, "speed over ground", minimum=0.0, std_req=MUST),
+        *gaussian("ax", "m/s²", MUST, "acceleration x, local frame", std_req=MUST),
+        *gaussian("ay", "m/s²", MUST, "acceleration y, local frame", std_req=MUST),
+        *gaussian("a_lon", "m/s²", MUST, "longitudinal acceleration (along the heading)",
+                  std_req=MUST),
+        *gaussian("a_lat", "m/s²", MUST, "lateral acceleration (to the left of the heading)",
+                  std_req=MUST),
+        *gaussian("jerk_lon", "m/s³", MUST, "longitudinal jerk", std_req=MUST),
+    ),
+)
+
 KINEMATICS = register(Derivation(
     name="kinematics",
-    table="derived/kinematics",
+    spec=TABLE,
     version="1.1.0",
     params=KinematicsParams,
     fn=compute,

@@ -1,12 +1,17 @@
 """The registry of derivations and the ``derive`` driver (FORMAT.md section 10).
 
-A :class:`Derivation` declares its ``name``, the table it writes, the columns it needs from which
-tables, the derivations it builds on, a version, a pydantic parameter model and a function
-``(rec, params) -> pyarrow.Table``. :func:`derive` runs the requested derivations (and any missing
-prerequisite) in dependency order, stores each result in ``rec.derived`` (or ``rec.events``) and
-records method, version, parameters and the SHA-256 of every input table in ``rec.meta.derived``
-and in the table's own schema metadata (``aveas_derived``). :func:`stale_derived` compares those
-hashes with the recording's current tables.
+A :class:`Derivation` declares its ``name``, the table it writes (the spec of its derived table,
+which :func:`register` adds to :data:`aveas_format.schema.tables.TABLES`), the columns it needs from
+which tables, the derivations it builds on, a version, a pydantic parameter model and a function
+``(rec, params) -> pyarrow.Table``. The derivation modules of this package and of installed partner
+packages (entry-point group ``aveas_format.derivations``) are imported through
+:mod:`aveas_format.plugins`; each registers itself with ``register(Derivation(...))``.
+
+:func:`derive` runs the requested derivations (and any missing prerequisite) in dependency order,
+stores each result in ``rec.derived`` (or ``rec.events``) and records method, version, parameters
+and the SHA-256 of every input table in ``rec.meta.derived`` and in the table's own schema metadata
+(``aveas_derived``). :func:`stale_derived` compares those hashes with the recording's current
+tables.
 
 >>> import aveas_format
 >>> from aveas_format.derive import derive
@@ -26,7 +31,10 @@ from typing import Any
 import pyarrow as pa
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from aveas_format import plugins
 from aveas_format.errors import FormatError
+from aveas_format.schema.columns import TableSpec
+from aveas_format.schema.tables import TABLES, register_table
 
 #: schema-metadata key of a derived table that carries how it was made
 DERIVED_KEY = b"aveas_derived"
@@ -38,26 +46,41 @@ class Params(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Derivation:
     """Declaration of one derivation.
 
-    ``needs`` maps an input table (``states``, ``participants``, ``derived/kinematics``...) to the
-    columns it must have; ``optional`` lists input tables used when present. ``after`` names the
-    derivations whose tables it reads (they run first). ``method`` returns the method name for the
-    given parameters (e.g. ``ca_kalman_rts`` or ``savitzky_golay``).
+    ``spec`` declares the derived table it writes (made with
+    :func:`~aveas_format.schema.tables.derived_table`); ``table`` is then its name. A derivation of
+    events leaves ``spec`` out and writes ``table="events"``. ``needs`` maps an input table
+    (``states``, ``participants``, ``derived/kinematics``...) to the columns it must have;
+    ``optional`` lists input tables used when present. ``after`` names the derivations whose tables
+    it reads (they run first). ``method`` returns the method name for the given parameters (e.g.
+    ``ca_kalman_rts`` or ``savitzky_golay``).
     """
 
     name: str
-    table: str
     version: str
     params: type[Params]
     fn: Callable[[Any, Any], pa.Table]
     needs: Mapping[str, tuple[str, ...]]
     doc: str
+    spec: TableSpec | None = None
+    table: str = ""
     after: tuple[str, ...] = ()
     optional: tuple[str, ...] = ()
     method: Callable[[Any], str] = field(default=lambda p: "default")
+
+    def __post_init__(self) -> None:
+        if self.spec is not None:
+            if self.table and self.table != self.spec.name:
+                raise ValueError(f"derivation {self.name}: table {self.table!r} is not its spec's "
+                                 f"{self.spec.name!r}")
+            object.__setattr__(self, "table", self.spec.name)
+        elif self.table != "events":
+            raise ValueError(f"derivation {self.name}: declare the derived table it writes "
+                             "(spec=derived_table(...)); events is the one core table a derivation "
+                             "writes")
 
     def inputs(self) -> tuple[str, ...]:
         """Every table this derivation reads (required and optional)."""
@@ -68,24 +91,32 @@ REGISTRY: dict[str, Derivation] = {}
 
 
 def register(d: Derivation) -> Derivation:
-    """Add a derivation to :data:`REGISTRY` (its name must be new)."""
+    """Add a derivation to :data:`REGISTRY` and the spec of its table to the schema's tables (its
+    name and its table must be new)."""
+    here = d.fn.__module__
     if d.name in REGISTRY:
-        raise ValueError(f"derivation {d.name!r} is already registered")
+        raise ValueError(f"derivation {d.name!r} of {here} is already registered: "
+                         f"{REGISTRY[d.name].fn.__module__} has it")
+    owner = next((o for o in REGISTRY.values() if o.table == d.table), None)
+    if owner is not None:
+        raise ValueError(f"derivation {d.name!r} of {here} writes {d.table}, which derivation "
+                         f"{owner.name!r} of {owner.fn.__module__} writes")
+    if d.spec is not None:
+        register_table(d.spec)
     REGISTRY[d.name] = d
     return d
 
 
 def _load() -> dict[str, Derivation]:
-    """Import every derivation module (each registers itself) and return the registry."""
-    from aveas_format.derive import encroachments, events, interactions, kinematics, traffic  # noqa: F401
-
+    """Every derivation, built-in and of plugins (their modules register themselves on import)."""
+    plugins.load("derivations")
     return REGISTRY
 
 
 def derivations() -> dict[str, Derivation]:
     """All registered derivations by name, in dependency order."""
     reg = _load()
-    return {n: reg[n] for n in _order(list(reg))}
+    return {n: reg[n] for n in _order(sorted(reg))}
 
 
 def _order(names: list[str]) -> list[str]:
@@ -124,7 +155,6 @@ def table_sha256(rec, name: str) -> str | None:
     computed from the table's canonical Parquet serialisation (the writer's)."""
     from aveas_format.io.container import sha256_of
     from aveas_format.io.writer import parquet_bytes, prepare_table
-    from aveas_format.schema.tables import TABLES
 
     t = get_table(rec, name)
     if t is None:
@@ -180,7 +210,6 @@ def _params_for(d: Derivation, per: Mapping[str, Any], flat: Mapping[str, Any],
 def _empty(name: str) -> pa.Table:
     """A zero-row table of the required columns of derived table ``name``."""
     from aveas_format.io.arrow import arrow_schema
-    from aveas_format.schema.tables import TABLES
 
     spec = TABLES[name]
     return arrow_schema(spec, [c.name for c in spec.required]).empty_table()
@@ -200,13 +229,13 @@ def derive(rec, only: str | Iterable[str] | None = None, **params: Any) -> list[
     """
     reg = _load()
     if only is None:
-        wanted = list(reg)
+        wanted = sorted(reg)
     else:
         wanted = [only] if isinstance(only, str) else list(only)
         unknown = [n for n in wanted if n not in reg]
         if unknown:
             raise FormatError(f"unknown derivation(s) {', '.join(unknown)}; known: "
-                              f"{', '.join(reg)}")
+                              f"{', '.join(sorted(reg))}")
     per = {k: v for k, v in params.items() if k in reg}
     flat = {k: v for k, v in params.items() if k not in reg}
     order = _order(wanted)

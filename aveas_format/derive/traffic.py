@@ -25,6 +25,8 @@ import pyarrow as pa
 from pydantic import Field
 
 from aveas_format.derive.registry import Derivation, Params, register
+from aveas_format.schema.columns import MUST, col, gaussian, interval_cols
+from aveas_format.schema.tables import derived_table
 
 
 class TrafficParams(Params):
@@ -215,9 +217,28 @@ def local_density(rec, radius_m: float = 50.0) -> pa.Table:
                      "local_density": pa.array(dens, mask=~np.isfinite(dens))})
 
 
+TABLE = derived_table(
+    "traffic",
+    doc="Macroscopic traffic quantities per lane, road stretch and time window, after Edie's "
+    "generalized definitions.",
+    key=("road_id", "lane_id", "s_start", "time_start"),
+    sort=("road_id", "lane_id", "s_start", "time_start"),
+    columns=(
+        col("road_id", "dict<string>", MUST, "OpenDRIVE road", nullable=False),
+        col("lane_id", "int16", MUST, "OpenDRIVE lane", nullable=False),
+        col("s_start", "float64", MUST, "start of the road stretch", "m", nullable=False),
+        col("s_end", "float64", MUST, "end of the road stretch", "m", nullable=False),
+        *interval_cols(),
+        *gaussian("density", "veh/km", MUST, "density (Edie)", minimum=0.0),
+        *gaussian("flow", "veh/h", MUST, "flow (Edie)", minimum=0.0),
+        *gaussian("mean_speed", "m/s", MUST, "space-mean speed (flow / density)", minimum=0.0),
+        col("count", "int64", MUST, "participants seen in the space-time window", minimum=0),
+    ),
+)
+
 TRAFFIC = register(Derivation(
     name="traffic",
-    table="derived/traffic",
+    spec=TABLE,
     version="1.0.0",
     params=TrafficParams,
     fn=compute,

@@ -222,10 +222,10 @@ def _filter(table: pa.Table, participants: np.ndarray | None,
 
 
 def table_names_present(container: Container, meta: RecordingMeta) -> list[str]:
-    """Tables of the recording: those listed in recording.json plus known files present."""
-    files = set(container.names())
-    names = [n for n in TABLES if n in meta.tables or TABLES[n].file in files]
-    return names
+    """Tables of the recording: those listed in recording.json plus known files present (a table
+    ``NAME`` is stored in ``NAME.parquet``), in the order of ``TABLES``."""
+    files = [f.removesuffix(".parquet") for f in container.names() if f.endswith(".parquet")]
+    return TABLES.order([*meta.tables, *files])
 
 
 def open_recording(path: str | Path, *, tables: Iterable[str] | None = None,
@@ -264,7 +264,7 @@ def open_recording(path: str | Path, *, tables: Iterable[str] | None = None,
                                        path=container.location(TABLES[name].file))
         wanted = present if tables is None else [t for t in present if t in set(tables)]
         if tables is not None:
-            unknown = sorted(set(tables) - set(TABLES))
+            unknown = sorted({t for t in tables if t not in TABLES})
             if unknown:
                 raise FormatError(f"unknown tables {unknown}; known: {sorted(TABLES)}")
         col_map: dict[str, Sequence[str]] = (

@@ -217,3 +217,22 @@ def pmf(name: str, set_name: str, req: Requirement, doc: str, condition: str | N
 def enum_col(name: str, categories: tuple[str, ...], req: Requirement, doc: str, **kw: Any) -> Column:
     return Column(name=name, type="dict<string>", requirement=req, categories=categories,
                   doc=f"{doc}; one of {', '.join(categories)}", **kw)
+
+
+def pid_col(doc: str = "participant, refers to participants.participant_id") -> Column:
+    """The ``participant_id`` column of a per-participant table."""
+    return col("participant_id", "int64", MUST, doc, minimum=0, nullable=False)
+
+
+def time_col(doc: str = "seconds since recording.json:start_time") -> Column:
+    """The ``time`` column of a time-series table."""
+    return col("time", "float64", MUST, doc, "s", nullable=False)
+
+
+def interval_cols(req: Requirement = MUST) -> list[Column]:
+    """The ``time_start``/``time_end`` columns of a table of validity intervals."""
+    return [
+        col("time_start", "float64", req, "start of the validity interval", "s", nullable=False),
+        col("time_end", "float64", req, "end of the validity interval (>= time_start)", "s",
+            nullable=False),
+    ]

@@ -1,12 +1,22 @@
 """The tables of a recording, declared column by column (FORMAT.md sections 4-10).
 
 ``TABLES`` maps a table name to its :class:`~aveas_format.schema.columns.TableSpec`. Core tables are
-named after their file (``states`` -> ``states.parquet``); derived tables are named ``derived/NAME``
-(-> ``derived/NAME.parquet``), and recording.json's ``tables`` uses the same names.
+named after their file (``states`` -> ``states.parquet``) and declared here; derived tables are named
+``derived/NAME`` (-> ``derived/NAME.parquet``) and declared by the derivation that writes them
+(``aveas_format/derive/NAME.py``, or a partner package's), which registers the spec here through
+:func:`register_table` (via ``derive.registry.register``). recording.json's ``tables`` uses the same
+names.
+
+``TABLES`` loads the derivations (:func:`aveas_format.plugins.load`) the first time it is asked for a
+derived table it does not know yet, or for the list of every table: ``io`` and ``validate`` find the
+derived specs without importing ``derive`` (docs/extending.md).
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator, Mapping
+
+from aveas_format import plugins
 from aveas_format.schema.columns import (
     MAY,
     MUST,
@@ -17,39 +27,24 @@ from aveas_format.schema.columns import (
     corr,
     enum_col,
     gaussian,
+    interval_cols,
+    pid_col,
     pmf,
     prob,
     std_of,
+    time_col,
 )
 from aveas_format.schema.enums import (
     EventKind,
     EventOrigin,
     Provenance,
-    Relation,
     Role,
-    TtcKind,
     UnobservedKind,
 )
 from aveas_format.schema.taxonomy import CLASSES
 
 PI = 3.141592653589793
 MEASURED = "measured"  # condition: provenance natural or staged
-
-
-def _pid(doc: str = "participant, refers to participants.participant_id") -> Column:
-    return col("participant_id", "int64", MUST, doc, minimum=0, nullable=False)
-
-
-def _time(doc: str = "seconds since recording.json:start_time") -> Column:
-    return col("time", "float64", MUST, doc, "s", nullable=False)
-
-
-def _interval(req=MUST) -> list[Column]:
-    return [
-        col("time_start", "float64", req, "start of the validity interval", "s", nullable=False),
-        col("time_end", "float64", req, "end of the validity interval (>= time_start)", "s",
-            nullable=False),
-    ]
 
 
 PARTICIPANTS = TableSpec(
@@ -91,8 +86,8 @@ STATES = TableSpec(
     key=("participant_id", "time"),
     sort=("participant_id", "time"),
     columns=(
-        _pid(),
-        _time(),
+        pid_col(),
+        time_col(),
         *gaussian("x", "m", MUST, "reference point (footprint centre), local frame", nullable=False,
                   std_req=SHOULD, std_condition=MEASURED),
         *gaussian("y", "m", MUST, "reference point (footprint centre), local frame", nullable=False,
@@ -145,7 +140,7 @@ UNOBSERVED = TableSpec(
     sort=("region_id",),
     columns=(
         col("region_id", "int64", MUST, "region id, unique", minimum=0, nullable=False),
-        *_interval(),
+        *interval_cols(),
         enum_col("kind", UnobservedKind.values(), MUST, "why the region was not observed",
                  nullable=False),
         col("geometry", "binary", MUST, "WKB Polygon or MultiPolygon, local frame", nullable=False),
@@ -165,7 +160,7 @@ EVENTS = TableSpec(
     columns=(
         col("event_id", "int64", MUST, "event id, unique", minimum=0, nullable=False),
         enum_col("kind", EventKind.values(), MUST, "kind of event", nullable=False),
-        *_interval(),
+        *interval_cols(),
         col("participant_ids", "list<int64>", MUST, "participants involved", nullable=False),
         col("roles", "list<string>", MAY, "role of each participant in the event (same length as "
             "participant_ids)"),
@@ -186,7 +181,7 @@ ENVIRONMENT = TableSpec(
     key=("time_start",),
     sort=("time_start",),
     columns=(
-        *_interval(),
+        *interval_cols(),
         pmf("weather", "weather", MAY, "weather"),
         pmf("lighting", "lighting", MAY, "lighting"),
         pmf("road_surface", "road_surface", MAY, "road surface"),
@@ -207,8 +202,8 @@ INTERIOR = TableSpec(
     key=("participant_id", "time"),
     sort=("participant_id", "time"),
     columns=(
-        _pid(),
-        _time(),
+        pid_col(),
+        time_col(),
         *gaussian("steering_angle", "rad", MAY, "road-wheel steering angle, left positive"),
         *gaussian("steering_wheel_angle", "rad", MAY, "steering-wheel angle, left positive"),
         *gaussian("accelerator_pedal", None, MAY, "accelerator pedal position", minimum=0.0,
@@ -228,108 +223,90 @@ INTERIOR = TableSpec(
     ),
 )
 
-# --- derived tables (FORMAT.md section 10) -----------------------------------------------------
-
-KINEMATICS = TableSpec(
-    name="derived/kinematics",
-    file="derived/kinematics.parquet",
-    requirement=MAY,
-    derived=True,
-    doc="Speed, accelerations and jerk per participant and time, estimated from the positions with "
-    "their uncertainty.",
-    key=("participant_id", "time"),
-    sort=("participant_id", "time"),
-    columns=(
-        _pid(),
-        _time(),
-        *gaussian("speed", "m/s", MUST, "speed over ground", minimum=0.0, std_req=MUST),
-        *gaussian("ax", "m/s²", MUST, "acceleration x, local frame", std_req=MUST),
-        *gaussian("ay", "m/s²", MUST, "acceleration y, local frame", std_req=MUST),
-        *gaussian("a_lon", "m/s²", MUST, "longitudinal acceleration (along the heading)",
-                  std_req=MUST),
-        *gaussian("a_lat", "m/s²", MUST, "lateral acceleration (to the left of the heading)",
-                  std_req=MUST),
-        *gaussian("jerk_lon", "m/s³", MUST, "longitudinal jerk", std_req=MUST),
-    ),
-)
-
-INTERACTIONS = TableSpec(
-    name="derived/interactions",
-    file="derived/interactions.parquet",
-    requirement=MAY,
-    derived=True,
-    doc="Pairwise relations per time step: leaders, followers, neighbours and conflicting "
-    "participants with time to collision and headways.",
-    key=("participant_id", "time", "other_id", "relation"),
-    sort=("participant_id", "time", "other_id"),
-    columns=(
-        _pid(),
-        _time(),
-        col("other_id", "int64", MUST, "the other participant", minimum=0, nullable=False),
-        enum_col("relation", Relation.values(), MUST, "relation of `other_id` to `participant_id`",
-                 nullable=False),
-        *gaussian("ttc", "s", MAY, "time to collision (null = no collision course)", minimum=0.0),
-        enum_col("ttc_kind", TtcKind.values(), MAY, "how `ttc` was computed"),
-        *gaussian("ttc_ca", "s", MAY, "time to collision with constant accelerations (vehicles stop "
-                  "rather than reverse; null = no collision)", minimum=0.0),
-        *gaussian("gap", "m", MAY, "net bumper-to-bumper gap"),
-        col("thw", "float64", MAY, "time headway: net gap / speed of the follower (null = infinite)",
-            "s", minimum=0.0),
-        col("dhw", "float64", MAY, "distance headway: gross front-to-front spacing (gap + leader "
-            "length); in left/right_neighbour rows the signed front-to-front distance along the "
-            "lane (>= 0: the neighbour leads, < 0: it lags)", "m"),
-        col("closing_speed", "float64", MAY, "rate at which the gap closes (positive = closing)",
-            "m/s"),
-    ),
-)
-
-ENCROACHMENTS = TableSpec(
-    name="derived/encroachments",
-    file="derived/encroachments.parquet",
-    requirement=MAY,
-    derived=True,
-    doc="Post-encroachment times: one row per pair of participants passing through a common "
-    "conflict area.",
-    key=("conflict_id",),
-    sort=("conflict_id",),
-    columns=(
-        col("conflict_id", "int64", MUST, "conflict id, unique", minimum=0, nullable=False),
-        col("first_id", "int64", MUST, "participant that leaves the conflict area first", minimum=0,
-            nullable=False),
-        col("second_id", "int64", MUST, "participant that enters it second", minimum=0,
-            nullable=False),
-        col("time_first_exit", "float64", MUST, "time the first participant leaves the area", "s"),
-        col("time_second_enter", "float64", MUST, "time the second participant enters the area", "s"),
-        *gaussian("pet", "s", MUST, "post-encroachment time", minimum=0.0),
-        col("geometry", "binary", MUST, "conflict area, WKB polygon, local frame"),
-    ),
-)
-
-TRAFFIC = TableSpec(
-    name="derived/traffic",
-    file="derived/traffic.parquet",
-    requirement=MAY,
-    derived=True,
-    doc="Macroscopic traffic quantities per lane, road stretch and time window, after Edie's "
-    "generalized definitions.",
-    key=("road_id", "lane_id", "s_start", "time_start"),
-    sort=("road_id", "lane_id", "s_start", "time_start"),
-    columns=(
-        col("road_id", "dict<string>", MUST, "OpenDRIVE road", nullable=False),
-        col("lane_id", "int16", MUST, "OpenDRIVE lane", nullable=False),
-        col("s_start", "float64", MUST, "start of the road stretch", "m", nullable=False),
-        col("s_end", "float64", MUST, "end of the road stretch", "m", nullable=False),
-        *_interval(),
-        *gaussian("density", "veh/km", MUST, "density (Edie)", minimum=0.0),
-        *gaussian("flow", "veh/h", MUST, "flow (Edie)", minimum=0.0),
-        *gaussian("mean_speed", "m/s", MUST, "space-mean speed (flow / density)", minimum=0.0),
-        col("count", "int64", MUST, "participants seen in the space-time window", minimum=0),
-    ),
-)
-
 CORE_TABLES: tuple[TableSpec, ...] = (PARTICIPANTS, STATES, UNOBSERVED, EVENTS, ENVIRONMENT, INTERIOR)
-DERIVED_TABLES: tuple[TableSpec, ...] = (KINEMATICS, INTERACTIONS, ENCROACHMENTS, TRAFFIC)
-TABLES: dict[str, TableSpec] = {t.name: t for t in (*CORE_TABLES, *DERIVED_TABLES)}
+
+DERIVED_PREFIX = "derived/"
+
+
+class TableRegistry(Mapping[str, TableSpec]):
+    """Every table of the format by name: the core tables in their declared order, then the derived
+    tables by name. Looking up an unknown ``derived/NAME``, or listing the tables, first loads the
+    derivations (built-in and plugins), whose modules register the derived specs."""
+
+    def __init__(self, core: tuple[TableSpec, ...]) -> None:
+        self._core = {t.name: t for t in core}
+        self._derived: dict[str, TableSpec] = {}
+
+    def register(self, spec: TableSpec) -> TableSpec:
+        """Add the spec of a derived table (its name must be new)."""
+        name = spec.name
+        short = name.removeprefix(DERIVED_PREFIX)
+        if not (spec.derived and name.startswith(DERIVED_PREFIX) and short and "/" not in short
+                and spec.file == f"{name}.parquet"):
+            raise ValueError(f"table {name!r}: a derived table is named derived/NAME, stored in "
+                             "derived/NAME.parquet and declared with derived=True (derived_table())")
+        if name in self._core or name in self._derived:
+            raise ValueError(f"table {name!r} is declared twice")
+        self._derived[name] = spec
+        return spec
+
+    def unregister(self, name: str) -> None:
+        """Remove a derived table (tests that register one of their own)."""
+        del self._derived[name]
+
+    def _load(self) -> None:
+        plugins.load("derivations")
+
+    def order(self, names: Iterable[str]) -> list[str]:
+        """Known ``names`` in the registry's order, without loading the derivations unless one
+        of them names a derived table (``io`` reading a recording of core tables only)."""
+        rank = {n: i for i, n in enumerate(self._core)}  # derived tables after them, by name
+        return sorted({n for n in names if n in self}, key=lambda n: (rank.get(n, len(rank)), n))
+
+    def __getitem__(self, name: str) -> TableSpec:
+        spec = self._core.get(name)
+        if spec is None:
+            spec = self._derived.get(name)
+        if spec is None and name.startswith(DERIVED_PREFIX):
+            self._load()
+            spec = self._derived.get(name)
+        if spec is None:
+            raise KeyError(name)
+        return spec
+
+    def __iter__(self) -> Iterator[str]:
+        self._load()
+        return iter([*self._core, *sorted(self._derived)])
+
+    def __len__(self) -> int:
+        self._load()
+        return len(self._core) + len(self._derived)
+
+    def __repr__(self) -> str:
+        return f"TableRegistry({list(self)})"
+
+
+TABLES = TableRegistry(CORE_TABLES)
+
+
+def derived_table(name: str, doc: str, columns: Iterable[Column], *, key: tuple[str, ...] = (),
+                  sort: tuple[str, ...] = ()) -> TableSpec:
+    """The spec of the derived table ``derived/NAME`` (FORMAT.md 10: optional, stored in
+    ``derived/NAME.parquet``); a derivation passes it as ``Derivation(spec=...)``."""
+    return TableSpec(name=f"{DERIVED_PREFIX}{name}", file=f"{DERIVED_PREFIX}{name}.parquet",
+                     requirement=MAY, derived=True, doc=doc, key=key, sort=sort,
+                     columns=tuple(columns))
+
+
+def register_table(spec: TableSpec) -> TableSpec:
+    """Register the spec of a derived table in :data:`TABLES` (``derive.registry.register`` does
+    it for the table a derivation declares)."""
+    return TABLES.register(spec)
+
+
+def derived_tables() -> tuple[TableSpec, ...]:
+    """Every derived table, by name (loads the derivations)."""
+    return tuple(TABLES[n] for n in TABLES if n.startswith(DERIVED_PREFIX))
 
 
 def table_spec(name: str) -> TableSpec:

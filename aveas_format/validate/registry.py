@@ -5,6 +5,9 @@ A rule is a generator function decorated with :func:`rule`, which declares its s
 enforces. It yields :class:`Hit` (one finding) or :class:`Hits` (a vectorised batch: the true total
 and arrays of location fields, of which the runner keeps a bounded sample). Rules never raise on
 bad data; an exception is a tool failure.
+
+:func:`load_rules` imports the rule modules of :mod:`aveas_format.validate.rules` and of installed
+partner packages (entry-point group ``aveas_format.rules``) through :mod:`aveas_format.plugins`.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from aveas_format import plugins
 from aveas_format.validate.report import Severity
 
 _CODE = re.compile(r"^[a-z]+\.[a-z][a-z0-9_]*$")
@@ -85,7 +89,9 @@ _SCOPES = ("recording", "rows")
 
 def rule(code: str, severity: str, title: str, message: str, enforces: str | None = None,
          scope: str = "recording", needs: tuple[str, ...] = ()) -> Callable[[RuleFn], RuleFn]:
-    """Register a rule (decorator). The function's docstring is the rule's doc.
+    """Register a rule (decorator). The function's docstring is the rule's doc. The registry
+    enforces its own docs (STYLE.md 6), for built-in and plugin rules alike: a unique code, a
+    title, a message, a doc, and for an error the FORMAT.md sentence it enforces.
 
     ``scope="rows"`` declares that the rule only looks within the rows it is given: per row, or
     within one participant's trajectory (the runner hands it every participant's samples in one
@@ -97,9 +103,11 @@ def rule(code: str, severity: str, title: str, message: str, enforces: str | Non
     if not _CODE.match(code):
         raise ValueError(f"rule code {code!r} must look like 'family.snake_case'")
     if code in REGISTRY:
-        raise ValueError(f"rule code {code!r} registered twice")
+        raise ValueError(f"rule code {code!r} registered twice: {REGISTRY[code].fn.__module__} has it")
     if scope not in _SCOPES:
         raise ValueError(f"rule {code}: scope must be one of {_SCOPES}")
+    if not title or not message:
+        raise ValueError(f"rule {code} needs a title and a message template")
     if severity in ("error", "warning") and not enforces:
         raise ValueError(f"rule {code}: an {severity} rule must name the "
                          f"{'MUST' if severity == 'error' else 'SHOULD'} it enforces (enforces=...)")
@@ -145,14 +153,14 @@ def collector(key: str, merge: Callable[[list[Any]], Any]) -> Callable[[Callable
 
 
 def load_rules() -> dict[str, Rule]:
-    """Import every rule module (they register themselves) and return the registry."""
-    from aveas_format.validate import rules  # noqa: F401
-
+    """Every rule, built-in and of plugins (their modules register themselves on import)."""
+    plugins.load("rules")
     return REGISTRY
 
 
 def select_rules(select: list[str] | None = None, ignore: list[str] | None = None) -> list[Rule]:
-    """Rules matching ``select`` (codes or families; default all) minus ``ignore``.
+    """Rules matching ``select`` (codes or families; default all) minus ``ignore``, by code (the
+    same order whichever rule module happened to be imported first).
 
     Raises ValueError naming an unknown code or family.
     """
@@ -165,5 +173,5 @@ def select_rules(select: list[str] | None = None, ignore: list[str] | None = Non
     for p in (select or []) + (ignore or []):
         if p not in reg and p not in families:
             raise ValueError(f"unknown rule or family {p!r}; families: {', '.join(sorted(families))}")
-    chosen = [r for r in reg.values() if not select or match(r, select)]
+    chosen = [reg[c] for c in sorted(reg) if not select or match(reg[c], select)]
     return [r for r in chosen if not ignore or not match(r, ignore)]

@@ -1,12 +1,7 @@
-"""Rule modules, one per family; importing this package registers every rule."""
+"""The built-in rules, one module per family (``structure``, ``participants``, ``time``, ...).
 
-from aveas_format.validate.rules import structure  # noqa: F401
-from aveas_format.validate.rules import participants  # noqa: F401
-from aveas_format.validate.rules import time  # noqa: F401
-from aveas_format.validate.rules import kinematics  # noqa: F401
-from aveas_format.validate.rules import uncertainty  # noqa: F401
-from aveas_format.validate.rules import geo  # noqa: F401
-from aveas_format.validate.rules import map  # noqa: F401
-from aveas_format.validate.rules import unobserved  # noqa: F401
-from aveas_format.validate.rules import interactions  # noqa: F401
-from aveas_format.validate.rules import metadata  # noqa: F401
+Each module registers its rules with :func:`aveas_format.validate.registry.rule` when it is
+imported; :func:`~aveas_format.validate.registry.load_rules` imports every module of this package
+(and the rule modules of partner packages) through :mod:`aveas_format.plugins`, so a new family is
+one new module here: no list to edit (docs/extending.md).
+"""
