@@ -135,6 +135,8 @@ def converters_markdown() -> str:
     lines.append("")
     for c in convs:
         module = inspect.getmodule(c.fn)
+        if module is not None and module.__name__.count(".") > 2:  # in a converter package: its docstring
+            module = sys.modules[".".join(module.__name__.split(".")[:3])]
         doc = inspect.cleandoc(module.__doc__ or "") if module else ""
         lines += [f"## {c.name}", "", doc, ""]
         fields = c.options.model_fields

@@ -306,7 +306,7 @@ def test_cli_export_and_convert(rich, tmp_path):
 
 def test_poses_and_utm_names():
     """The VCD pose example gives one camera as a matrix and its twin as Euler angles."""
-    from aveas_format.converters.openlabel import _pose, _utm_crs
+    from aveas_format.converters.openlabel.frames import _pose, _utm_crs
 
     cs = json.loads((OPENLABEL_DATA / "vcd__openlabel100_test_poses.json").read_text())
     cs = cs["openlabel"]["coordinate_systems"]

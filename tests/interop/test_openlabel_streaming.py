@@ -163,7 +163,7 @@ def test_not_utf8(tmp_path):
 
 
 def test_size_limit(scene_file, monkeypatch):
-    import aveas_format.converters.openlabel as ol
+    import aveas_format.converters.openlabel.stream as ol
 
     monkeypatch.setattr(ol, "MAX_BULK_JSON_BYTES", 1000)
     _err(scene_file, "exceeds the limit of 1,000")

@@ -1,0 +1,453 @@
+"""The frames of an OpenLABEL file into per-box columns, and the geometry of generic files.
+
+:class:`_FrameRows` takes the frames one ``(key, frame)`` at a time (streamed, or from a parsed
+dict) and keeps per box the values of one state in numpy column chunks: the box centre and yaw in
+the root coordinate system, the profile's velocity, acceleration, uncertainty, road, light and
+interior attributes, and the box's ``aveas_format`` extension item; :meth:`_FrameRows.finish`
+sorts them by frame into :class:`_FrameData`.
+
+Generic files place cuboids in any coordinate system: :class:`_Frames` chains them to the root
+through ``coordinate_systems`` ``pose_wrt_parent`` and per-frame ``frame_properties.transforms``
+(:func:`_pose`: ``matrix4x4``, quaternion or Euler angles); :func:`_utm_crs` reads a UTM root's
+zone from its name.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aveas_format.converters.openlabel.profile import (EXT, LIGHTS, _LONGITUDINAL, _attrs, _enum_value, _first,
+                                                       _to_utc)
+from aveas_format.errors import FormatError
+
+#: an extension value the box does not carry (``None`` is a value: null)
+_MISSING = object()
+
+
+# -- geometry of generic files -------------------------------------------------------------------
+
+def _quat_matrix(qx: float, qy: float, qz: float, qw: float) -> np.ndarray:
+    n = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw) or 1.0
+    qx, qy, qz, qw = qx / n, qy / n, qz / n, qw / n
+    return np.array([
+        [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qz * qw), 2 * (qx * qz + qy * qw)],
+        [2 * (qx * qy + qz * qw), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qx * qw)],
+        [2 * (qx * qz - qy * qw), 2 * (qy * qz + qx * qw), 1 - 2 * (qx * qx + qy * qy)]])
+
+
+def _euler_matrix(rx: float, ry: float, rz: float) -> np.ndarray:
+    """ZYX (yaw, pitch, roll) — OpenLABEL's default sequence."""
+    cx, sx, cy, sy, cz, sz = math.cos(rx), math.sin(rx), math.cos(ry), math.sin(ry), math.cos(rz), math.sin(rz)
+    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    return Rz @ Ry @ Rx
+
+
+def _axis_rotation(axis: str, angle: float) -> np.ndarray:
+    c, s_ = math.cos(angle), math.sin(angle)
+    if axis == "X":
+        return np.array([[1, 0, 0], [0, c, -s_], [0, s_, c]])
+    if axis == "Y":
+        return np.array([[c, 0, s_], [0, 1, 0], [-s_, 0, c]])
+    return np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
+
+
+def _pose(tf: dict[str, Any] | list | None) -> np.ndarray | None:
+    """A 4x4 matrix of an OpenLABEL pose/transform: ``matrix4x4`` (row-major), or ``quaternion``
+    (x, y, z, w) / ``euler_angles`` (values in the order of ``sequence``, default ZYX, i.e.
+    (rz, ry, rx)) with ``translation``."""
+    if tf is None:
+        return None
+    if isinstance(tf, list):
+        tf = {"matrix4x4": tf}
+    m = np.eye(4)
+    if tf.get("matrix4x4") is not None:
+        return np.asarray(tf["matrix4x4"], float).reshape(4, 4)
+    if tf.get("quaternion") is not None:
+        m[:3, :3] = _quat_matrix(*tf["quaternion"])
+    elif tf.get("euler_angles") is not None:
+        seq = str(tf.get("sequence") or "ZYX").upper()
+        R = np.eye(3)
+        for axis, angle in zip(seq, tf["euler_angles"]):
+            R = R @ _axis_rotation(axis, float(angle))
+        m[:3, :3] = R
+    if tf.get("translation") is not None:
+        m[:3, 3] = np.asarray(tf["translation"], float)[:3]
+    return m
+
+
+class _Frames:
+    """Chains coordinate systems to the root (static poses + per-frame transforms)."""
+
+    def __init__(self, cs: dict[str, Any] | None) -> None:
+        self.cs = cs or {}
+        self.parent = {k: (v or {}).get("parent") or None for k, v in self.cs.items()}
+        self.static = {k: _pose((v or {}).get("pose_wrt_parent")) for k, v in self.cs.items()}
+
+    def root_of(self, name: str | None) -> str | None:
+        seen = set()
+        while name and self.parent.get(name) and name not in seen:
+            seen.add(name)
+            name = self.parent[name]
+        return name
+
+    def to_root(self, name: str | None, transforms: dict[str, Any] | None) -> np.ndarray:
+        m = np.eye(4)
+        if not name:
+            return m
+        tfs = {}
+        for tf in (transforms or {}).values():
+            if isinstance(tf, dict) and tf.get("src") and tf.get("dst"):
+                tfs[(tf["src"], tf["dst"])] = _pose(tf.get("transform_src_to_dst"))
+        seen = set()
+        while name in self.parent and self.parent[name] and name not in seen:
+            seen.add(name)
+            par = self.parent[name]
+            step = tfs.get((name, par))
+            if step is None and (par, name) in tfs and tfs[(par, name)] is not None:
+                step = np.linalg.inv(tfs[(par, name)])
+            if step is None:
+                step = self.static.get(name)
+            if step is None:
+                step = np.eye(4)
+            m = step @ m
+            name = par
+        return m
+
+
+def _utm_crs(name: str, cs_type: str | None) -> str | None:
+    """EPSG code of a UTM coordinate system named like ``utm-30t`` / ``UTM32N`` (band letters C-M
+    are southern, N-X northern; no letter = northern)."""
+    mt = re.search(r"utm[-_ ]?(\d{1,2})\s*([c-xC-X])?(?![a-zA-Z])", name or "", re.I)
+    if not mt:
+        return None
+    zone = int(mt[1])
+    south = bool(mt[2]) and mt[2].upper() < "N"
+    return f"EPSG:{32700 + zone if south else 32600 + zone}"
+
+
+# -- the frames: one at a time into column chunks ------------------------------------------------
+
+
+#: boxes per chunk of the column buffers (Python lists -> numpy arrays)
+_CHUNK = 4096
+_FLOAT_COLS = ("cub_ts", "px", "py", "pz", "yaw", "vu", "vv", "yr", "au", "av", "x_std", "y_std",
+               "z_std", "heading_std", "vu_std", "vv_std", "yr_std", "au_std", "av_std", "road_s",
+               "road_t", "lane_position", *LIGHTS)
+_OBJ_COLS = ("csroot", "road_id", "lane_id")
+
+
+def _as_obj(lst: list) -> np.ndarray:
+    a = np.empty(len(lst), object)
+    for i, v in enumerate(lst):
+        a[i] = v
+    return a
+
+
+def _as_float(lst: list) -> np.ndarray:
+    """float64 where every value converts (as ``np.asarray(values, float)`` would), else the values
+    as an object array (converted, or refused with the same error, where the column is used)."""
+    try:
+        a = np.asarray(lst, float)
+        if a.ndim == 1:
+            return a
+    except (TypeError, ValueError, OverflowError):
+        pass
+    return _as_obj(lst)
+
+
+def _ext_rep(vals: list) -> tuple:
+    """One extension column (values or ``_MISSING``): ``("f", values, present, null)`` where all
+    present values are floats or null, else ``("o", object array)``."""
+    n = len(vals)
+    if all(v is _MISSING or v is None or type(v) is float for v in vals):
+        return ("f", np.fromiter((v if type(v) is float else np.nan for v in vals), float, n),
+                np.fromiter((v is not _MISSING for v in vals), bool, n),
+                np.fromiter((v is None for v in vals), bool, n))
+    return ("o", _as_obj(vals))
+
+
+def _rep_list(rep: tuple) -> list:
+    if rep[0] == "o":
+        return rep[1].tolist()
+    _, fv, pr, nl = rep
+    return [(None if b else v) if p else _MISSING for v, p, b in zip(fv.tolist(), pr, nl)]
+
+
+def _rep_take(rep: tuple, idx: np.ndarray) -> tuple:
+    return (rep[0], *(a[idx] for a in rep[1:]))
+
+
+def _rep_concat(reps: list[tuple]) -> tuple:
+    if all(r[0] == "f" for r in reps):
+        return ("f", *(np.concatenate([r[i] for r in reps]) for i in (1, 2, 3)))
+    return ("o", np.concatenate([r[1] if r[0] == "o" else _as_obj(_rep_list(r)) for r in reps]))
+
+
+class _FrameData:
+    """What :class:`_FrameRows` collected, in sorted frame order."""
+
+    def __init__(self, **kw: Any) -> None:
+        self.__dict__.update(kw)
+
+
+class _FrameRows:
+    """The frames of an OpenLABEL file, one ``(key, frame)`` at a time in any order: per box the
+    values of one state in column chunks (numpy), per frame its key, timestamp and object ids.
+    :meth:`finish` sorts the rows by frame key (numerically where digits, as the dict path always
+    did) and, where a key repeats, keeps the last frame of that key (as ``json.loads`` does)."""
+
+    def __init__(self, objects: Any, cs: _Frames, path: Path | None) -> None:
+        self.objects, self.cs, self.path = objects, cs, path
+        self.keys: list = []  # per frame occurrence (file order)
+        self.stamps: list = []
+        self.frame_uids: list[np.ndarray] = []
+        self.uid_index: dict[str, int] = {}
+        self.buf: dict[str, list] = {c: [] for c in (*_FLOAT_COLS, *_OBJ_COLS, "uidx", "occ",
+                                                     "hv", "hr")}
+        self.ext_buf: list = []
+        self.chunks: list[dict[str, np.ndarray]] = []
+        self.ext_chunks: list[tuple[int, dict[str, tuple]]] = []
+        self.sizes: list[tuple[int, str, list]] = []
+        self.interior: list[tuple[int, str, dict]] = []
+        self._need_size: dict[str, bool] = {}
+
+    def _needs_size(self, u: str) -> bool:
+        need = self._need_size.get(u)
+        if need is None:
+            try:
+                obj = self.objects.get(u) or {}
+                need = _first(_attrs(obj.get("object_data")), "dimensions/size") is None
+            except Exception:  # noqa: BLE001 - a damaged object: keep the sizes (they are unused)
+                need = True
+            self._need_size[u] = need
+        return need
+
+    def _flush(self) -> None:
+        b = self.buf
+        if not b["occ"]:
+            return
+        ch = {c: _as_float(b[c]) for c in _FLOAT_COLS}
+        ch.update({c: _as_obj(b[c]) for c in _OBJ_COLS})
+        ch["uidx"] = np.asarray(b["uidx"], np.int64)
+        ch["occ"] = np.asarray(b["occ"], np.int64)
+        ch["hv"] = np.asarray(b["hv"], bool)
+        ch["hr"] = np.asarray(b["hr"], bool)
+        self.chunks.append(ch)
+        es = self.ext_buf
+        keys = dict.fromkeys(c for e in es if e for c in e)
+        self.ext_chunks.append((len(es), {c: _ext_rep([e.get(c, _MISSING) if e else _MISSING
+                                                       for e in es]) for c in keys}))
+        for v in b.values():
+            v.clear()
+        self.ext_buf = []
+
+    def add(self, k: Any, fr: Any) -> None:
+        j = len(self.keys)
+        fr = fr or {}
+        ts = _frame_timestamp(fr)
+        self.keys.append(k)
+        self.stamps.append(ts)
+        ui = self.uid_index
+        fobjs = fr.get("objects") or {}
+        self.frame_uids.append(np.fromiter((ui.setdefault(u, len(ui)) for u in fobjs), np.int64))
+        cs, path, b = self.cs, self.path, self.buf
+        transforms = (fr.get("frame_properties") or {}).get("transforms")
+        for u, oif in fobjs.items():
+            od = (oif or {}).get("object_data") or {}
+            cubs = od.get("cuboid") or []
+            if isinstance(cubs, dict):
+                cubs = [cubs]
+            cub = next((c for c in cubs if c.get("name") == "bounding_box"), cubs[0] if cubs else None)
+            if cub is None or cub.get("val") is None:
+                continue
+            pw, yaw, dims, csname = _box_in_root(cub, cs, transforms, k, u, path)
+            attrs = _attrs(od)
+            b["uidx"].append(ui[u])
+            b["occ"].append(j)
+            cub_ts = _first(_attrs(cub.get("attributes")), "timestamp")
+            b["cub_ts"].append(float(cub_ts) if isinstance(cub_ts, (int, float)) else np.nan)
+            b["px"].append(pw[0])
+            b["py"].append(pw[1])
+            b["pz"].append(pw[2] - dims[2] / 2.0)
+            b["yaw"].append(yaw)
+            b["csroot"].append(cs.root_of(csname))
+            if self._needs_size(u):
+                self.sizes.append((j, u, dims))
+            vel = _first(attrs, "velocity")
+            acc = _first(attrs, "acceleration")
+            b["vu"].append(vel[0] if vel else np.nan)
+            b["vv"].append(vel[1] if vel else np.nan)
+            b["yr"].append(vel[5] if vel and len(vel) > 5 else np.nan)
+            b["hv"].append(vel is not None)
+            b["au"].append(acc[0] if acc else np.nan)
+            b["av"].append(acc[1] if acc else np.nan)
+            bsd = _first(attrs, "bounding_box/ustddev")
+            b["x_std"].append(bsd[0] if bsd else np.nan)
+            b["y_std"].append(bsd[1] if bsd else np.nan)
+            b["z_std"].append(bsd[2] if bsd else np.nan)
+            b["heading_std"].append(bsd[5] if bsd else np.nan)
+            vsd = _first(attrs, "velocity/ustddev")
+            b["vu_std"].append(vsd[0] if vsd else np.nan)
+            b["vv_std"].append(vsd[1] if vsd else np.nan)
+            b["yr_std"].append(vsd[5] if vsd and len(vsd) > 5 else np.nan)
+            asd = _first(attrs, "acceleration/ustddev")
+            b["au_std"].append(asd[0] if asd else np.nan)
+            b["av_std"].append(asd[1] if asd else np.nan)
+            road = _first(attrs, "used_road_link", _first(attrs, "open_drive/road_id"))
+            lrc = _first(attrs, "open_drive/local_road_coordinates")
+            lane = _first(attrs, "open_drive/lane_id")
+            b["hr"].append(road is not None and lrc is not None)
+            b["road_id"].append(str(road) if road is not None and lrc is not None else None)
+            b["road_s"].append(lrc[0] if road is not None and lrc else np.nan)
+            b["road_t"].append(lrc[1] if road is not None and lrc else np.nan)
+            try:
+                b["lane_id"].append(int(str(_enum_value(lane))) if lane is not None and road is not None else None)
+            except ValueError:
+                b["lane_id"].append(None)
+            b["lane_position"].append(_first(attrs, "open_drive/lane_position", np.nan))
+            for c, name in LIGHTS.items():
+                bl = _first(attrs, name)
+                b[c].append(np.nan if bl is None else float(bool(bl)))
+            irow = _interior_row(attrs)
+            if irow:
+                self.interior.append((j, u, irow))
+            any(n.startswith("impact/") for n in attrs)  # (as before: attribute names are text)
+            e = cub.get(EXT)
+            self.ext_buf.append(e if isinstance(e, dict) else None)
+            if len(b["occ"]) >= _CHUNK:
+                self._flush()
+
+    def finish(self) -> _FrameData:
+        self._flush()
+        last: dict = {}
+        for j, k in enumerate(self.keys):
+            last[k] = j
+        fkeys = sorted(last, key=lambda k: (int(k) if str(k).lstrip("-").isdigit() else 0, str(k)))
+        rank_of = np.full(len(self.keys), -1, np.int64)
+        for r, k in enumerate(fkeys):
+            rank_of[last[k]] = r
+        names = list(self.uid_index)
+        seen: dict[str, None] = {}
+        objects = self.objects
+        for k in fkeys:
+            for i in self.frame_uids[last[k]].tolist():
+                u = names[i]
+                if u not in objects and u not in seen:
+                    seen[u] = None
+        rows: dict[str, np.ndarray] = {}
+        ext: dict[str, tuple] = {}
+        has_vel, has_road = True, False
+        if self.chunks:
+            rank = rank_of[np.concatenate([ch.pop("occ") for ch in self.chunks])]
+            sel = np.flatnonzero(rank >= 0)
+            sel = sel[np.argsort(rank[sel], kind="stable")]
+            ident = len(sel) == len(rank) and bool((sel == np.arange(len(sel))).all())
+            for c in list(self.chunks[0]):  # one column at a time, freeing its chunks
+                a = np.concatenate([ch.pop(c) for ch in self.chunks])
+                rows[c] = a if ident else a[sel]
+            self.chunks = []
+            rows["rank"] = rank if ident else rank[sel]
+            hv, hr = rows.pop("hv"), rows.pop("hr")
+            has_vel, has_road = bool(hv.all()), bool(hr.any())
+            keys = dict.fromkeys(c for _, reps in self.ext_chunks for c in reps)
+            for c in keys:
+                parts = [reps.get(c) or ("f", np.full(m, np.nan), np.zeros(m, bool), np.zeros(m, bool))
+                         for m, reps in self.ext_chunks]
+                ext[c] = _rep_concat(parts) if ident else _rep_take(_rep_concat(parts), sel)
+        else:
+            rows = {c: np.asarray([]) for c in (*_FLOAT_COLS, *_OBJ_COLS)}
+            rows["uidx"] = rows["rank"] = np.asarray([], np.int64)
+        sizes: dict[str, list] = defaultdict(list)
+        for j, u, dims in self.sizes:
+            if rank_of[j] >= 0:
+                sizes[u].append(dims)
+
+        def interior(pid_of: dict, time_of: dict) -> dict[str, list]:
+            out: dict[str, list] = defaultdict(list)
+            keep = sorted((int(rank_of[j]), i) for i, (j, _, _) in enumerate(self.interior)
+                          if rank_of[j] >= 0)
+            for r, i in keep:
+                _, u, irow = self.interior[i]
+                out["participant_id"].append(pid_of[u])
+                out["time"].append(time_of[fkeys[r]])
+                for c in ("automation_longitudinal_p", "automation_lateral_p", "steering_angle",
+                          "steering_angle_std", "brake_pedal", "accelerator_pedal", "gear"):
+                    out[c].append(irow.get(c))
+            return out
+
+        return _FrameData(fkeys=fkeys, stamps={k: self.stamps[last[k]] for k in fkeys},
+                          seen_in_frames=list(seen), uid_names=names, rows=rows, ext=ext,
+                          sizes=sizes, interior=interior, has_vel=has_vel, has_road=has_road)
+
+
+def _frame_timestamp(fr: dict[str, Any]) -> Any:
+    """``frame_properties.timestamp``: a number, a numeric string or an ISO 8601 time (-> Unix
+    seconds); None where absent or unreadable."""
+    ts = (fr.get("frame_properties") or {}).get("timestamp")
+    if isinstance(ts, str):
+        try:
+            ts = float(ts)
+        except ValueError:
+            try:
+                from aveas_format.schema.metadata import timestamp_ns
+
+                ts = timestamp_ns(_to_utc(ts)) / 1e9
+            except (ValueError, FormatError):
+                ts = None
+    return ts
+
+
+def _box_in_root(cub: dict[str, Any], cs: _Frames, transforms: dict[str, Any] | None, k: Any, u: str,
+                 path: Path | None) -> tuple[Any, float, list[float], str | None]:
+    """The cuboid of object ``u`` in frame ``k``: its centre and yaw in the root coordinate system,
+    its size and its coordinate system, ``(centre, yaw, (length, width, height), coordinate_system)``."""
+    v = [float(a) for a in cub["val"]]
+    csname = cub.get("coordinate_system")
+    if len(v) == 9 and v[3] == 0.0 and v[4] == 0.0 and not csname:
+        # the common case (the AVEAS profile): a level box in the root frame
+        pw, yaw, dims = v[:3], v[5], v[6:9]
+    elif len(v) == 10:
+        R = _quat_matrix(v[3], v[4], v[5], v[6])
+        dims = v[7:10]
+    elif len(v) == 9:
+        R = _euler_matrix(v[3], v[4], v[5])
+        dims = v[6:9]
+    else:
+        raise FormatError(f"frame {k} object {u}: cuboid with {len(v)} values", path=path)
+    if len(v) == 10 or not (v[3] == 0.0 and v[4] == 0.0 and not csname):
+        M = cs.to_root(csname, transforms)
+        Rw = M[:3, :3] @ R
+        pw = M[:3, :3] @ np.asarray(v[:3]) + M[:3, 3]
+        yaw = math.atan2(Rw[1, 0], Rw[0, 0])
+    return pw, yaw, dims, csname
+
+
+def _interior_row(attrs: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
+    """The interior signals of a box (the lateral automated-control flag carries the longitudinal
+    name in ``aveas-openlabel``'s files: a second longitudinal item is the lateral one)."""
+    lon_items = attrs.get(_LONGITUDINAL) or []
+    lat_items = attrs.get("interior/automated_control/lateral") or []
+    irow = {}
+    if lon_items:
+        irow["automation_longitudinal_p"] = float(bool(lon_items[0].get("val")))
+    if lat_items:
+        irow["automation_lateral_p"] = float(bool(lat_items[0].get("val")))
+    elif len(lon_items) > 1:
+        irow["automation_lateral_p"] = float(bool(lon_items[1].get("val")))
+    for c, name in (("steering_angle", "interior/steering_angle"),
+                    ("steering_angle_std", "interior/steering_angle/ustddev"),
+                    ("brake_pedal", "interior/brake_pedal"),
+                    ("accelerator_pedal", "interior/accelerator_pedal"),
+                    ("gear", "interior/gear")):
+        val = _first(attrs, name)
+        if val is not None:
+            irow[c] = val
+    return irow

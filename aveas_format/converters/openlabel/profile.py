@@ -1,0 +1,382 @@
+"""The AVEAS OpenLABEL profile, shared by both directions: what maps to what, and the encodings.
+
+- the mapping tables: format class <-> object type (``CLASS_TO_TYPE``, and ``GENERIC_TYPES`` for
+  generic files), event kinds, acquisition methods, lights, lighting and road-surface categories;
+  which states and participants columns the profile's attributes carry (the rest goes into the
+  ``aveas_format`` extension, ``EXT``);
+- conditions <-> environment-context attributes (PMF vectors, Beaufort force), both ways;
+- timestamps (the profile's ``acquisition_date`` format, any ISO 8601 -> UTC), enum values as
+  ``aveas-openlabel`` writes them, world <-> vehicle frame of velocities and their 1-sigma;
+- attribute lookup in an OpenLABEL ``object_data``/``context_data`` (``_attrs``, ``_first``);
+- the extension's table encoding (:func:`table_to_json` / :func:`table_from_json`, lossless:
+  non-finite floats, binary and the derived-table metadata survive JSON);
+- :class:`_no_gc`, which both directions use around building or walking millions of small dicts.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+import re
+from collections import defaultdict
+from datetime import datetime, timezone
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from aveas_format.errors import FormatError
+from aveas_format.schema.taxonomy import LIGHTING, ROAD_SURFACE
+
+#: the namespace of everything this library adds to an OpenLABEL file
+EXT = "aveas_format"
+EXT_VERSION = "1"
+
+#: format class -> AVEAS OpenLABEL object type (same 13 classes, same order)
+CLASS_TO_TYPE: dict[str, str] = {
+    "animal": "animal", "bicycle": "vehicle/bicycle", "bus": "vehicle/bus", "car": "vehicle/car",
+    "pedestrian": "human/pedestrian", "mobility_device": "vehicle/mobility_device",
+    "motorcycle": "vehicle/motorcycle", "other": "other", "pushable_pullable": "pushable_pullable",
+    "railvehicle": "vehicle/railvehicle", "trailer": "vehicle/trailer", "truck": "vehicle/truck",
+    "van": "vehicle/van",
+}
+TYPE_TO_CLASS = {v: k for k, v in CLASS_TO_TYPE.items()}
+#: generic OpenLABEL / dataset type names -> class (lower-case, after the AVEAS names)
+GENERIC_TYPES: dict[str, str] = {
+    "car": "car", "egocar": "car", "ego": "car", "ego_vehicle": "car", "vehicle": "car",
+    "passenger_car": "car", "sedan": "car", "suv": "car", "taxi": "car", "emergency_vehicle": "car",
+    "police_car": "car", "van": "van", "truck": "truck", "lorry": "truck", "trailer": "trailer",
+    "bus": "bus", "pedestrian": "pedestrian", "person": "pedestrian", "human": "pedestrian",
+    "adult": "pedestrian", "child": "pedestrian", "bicycle": "bicycle", "cyclist": "bicycle",
+    "bike": "bicycle", "motorcycle": "motorcycle", "motorbike": "motorcycle",
+    "motorcyclist": "motorcycle", "scooter": "mobility_device", "wheelchair": "mobility_device",
+    "mobility_device": "mobility_device", "tram": "railvehicle", "train": "railvehicle",
+    "railvehicle": "railvehicle", "animal": "animal", "dog": "animal", "stroller": "pushable_pullable",
+    "pushable_pullable": "pushable_pullable", "other": "other",
+}
+#: classes without ``is_recorder`` in the profile
+_NO_RECORDER = {"animal", "pushable_pullable", "trailer"}
+#: classes whose frames carry the mandatory road attributes in the profile
+_ROAD_CLASSES = {"bicycle", "bus", "car", "mobility_device", "motorcycle", "other", "railvehicle",
+                 "trailer", "truck", "van"}
+#: format event kinds <-> AVEAS event types
+EVENT_TO_TYPE = {"lane_change": "lane change", "parking": "parking", "turning": "turning",
+                 "overtaking": "overtaking", "following": "following"}
+TYPE_TO_EVENT = {v: k for k, v in EVENT_TO_TYPE.items()}
+#: acquisition methods (format -> profile); the exact method is kept in the extension
+METHOD_TO_PROFILE = {
+    "aerial": "aerial", "traffic_simulation": "aerial", "accident_reconstruction": "aerial",
+    "infrastructure_lidar": "stationary", "infrastructure_lwir": "stationary",
+    "infrastructure_camera": "stationary", "road_vehicle": "in-vehicle",
+    "driving_simulator": "in-vehicle",
+}
+PROFILE_TO_METHOD = {"aerial": "aerial", "stationary": "infrastructure_camera",
+                     "in-vehicle": "road_vehicle"}
+#: lights: format column -> profile boolean attribute
+LIGHTS = {
+    "light_brake_p": "lights/brake", "light_indicator_left_p": "lights/indicator/left",
+    "light_indicator_right_p": "lights/indicator/right", "light_front_p": "lights/front",
+    "light_high_beam_p": "lights/high_beam",
+}
+_LONGITUDINAL = "interior/automated_control/longitudinal"
+#: format lighting PMF <-> profile lighting_conditions (profile order: darkness, artificial,
+#: civil_twilight, day)
+LIGHTING_TO_PROFILE = {"day": "day", "twilight": "civil_twilight", "darkness_lit": "artificial",
+                       "darkness_unlit": "darkness"}
+PROFILE_LIGHTING = ("darkness", "artificial", "civil_twilight", "day")
+PROFILE_ROAD = ("dry", "wet", "slippery")
+_BEAUFORT = (0.5, 1.5, 3.3, 5.5, 7.9, 10.7, 13.8, 17.1, 20.7, 24.4, 28.4, 32.6)  # upper m/s bounds
+_DEFAULT_THRESHOLDS = {"ttc_s": 3.0, "pet_s": 1.5, "thw_s": 1.0}
+
+#: states columns the profile attributes carry (possibly as a placeholder where null)
+_PROFILE_STATE_COLS = {"participant_id", "time", "x", "y", "z", "heading", "vx", "vy", "ax", "ay",
+                       "yaw_rate", "lon", "lat", "road_id", "lane_id", "road_s", "road_t",
+                       "x_std", "y_std", "z_std", "heading_std"}
+_PROFILE_PART_COLS = {"participant_id", "source_id", "class", "class_pmf", "length", "width",
+                      "height", "length_std", "width_std", "height_std", "attached_to"}
+
+
+# ================================================================================================
+# helpers
+# ================================================================================================
+
+def _clean(v: Any) -> Any:
+    """JSON-safe: NaN -> None, numpy scalars -> Python."""
+    if isinstance(v, (np.floating, float)):
+        v = float(v)
+        return None if math.isnan(v) or math.isinf(v) else v
+    if isinstance(v, np.integer):
+        return int(v)
+    if isinstance(v, np.bool_):
+        return bool(v)
+    if isinstance(v, (bytes, bytearray)):
+        return {"base64": base64.b64encode(bytes(v)).decode()}
+    if isinstance(v, dict):
+        return {k: _clean(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_clean(x) for x in v]
+    return v
+
+
+#: schema-metadata key of a derived table (aveas_format.derive.registry.DERIVED_KEY)
+_DERIVED_KEY = b"aveas_derived"
+_NONFINITE = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
+
+
+def table_to_json(table: pa.Table | None) -> dict[str, Any] | None:
+    """A table as ``{"columns": {name: [values]}, "rows": n}`` (binary as base64, dictionary as
+    plain). JSON has no NaN or infinity: the row indices of such float values go to
+    ``"nonfinite": {name: {"NaN"|"Infinity"|"-Infinity": [rows]}}`` (the list holds null there), and
+    the table's ``aveas_derived`` schema metadata (how a derived table was made) to
+    ``"derived_info"``."""
+    if table is None:
+        return None
+    cols = {}
+    nonfinite: dict[str, dict[str, list[int]]] = {}
+    for name in table.column_names:
+        col = table.column(name)
+        if pa.types.is_dictionary(col.type):
+            col = col.cast(col.type.value_type)
+        if pa.types.is_floating(col.type) and table.num_rows:
+            x = col.to_numpy(zero_copy_only=False).astype(np.float64)
+            valid = ~np.asarray(col.is_null().to_numpy(zero_copy_only=False), bool)
+            bad = {key: np.flatnonzero(valid & m).tolist()
+                   for key, m in (("NaN", np.isnan(x)), ("Infinity", np.isposinf(x)),
+                                  ("-Infinity", np.isneginf(x)))}
+            bad = {k: v for k, v in bad.items() if v}
+            if bad:
+                nonfinite[name] = bad
+        cols[name] = _clean(col.to_pylist())
+    out: dict[str, Any] = {"columns": cols, "rows": table.num_rows}
+    if nonfinite:
+        out["nonfinite"] = nonfinite
+    info = (table.schema.metadata or {}).get(_DERIVED_KEY)
+    if info is not None:
+        out["derived_info"] = info.decode("utf-8", "replace")
+    return out
+
+
+def table_from_json(obj: dict[str, Any] | None, name: str) -> pa.Table | None:
+    """Inverse of :func:`table_to_json`, conformed to the format's declared types."""
+    if not obj:
+        return None
+    from aveas_format.io.arrow import conform
+    from aveas_format.schema.tables import TABLES
+
+    spec = TABLES[name]
+    nonfinite = obj.get("nonfinite") or {}
+    arrays = {}
+    for cname, vals in (obj.get("columns") or {}).items():
+        fix = nonfinite.get(cname)
+        if fix:
+            vals = list(vals)
+            for key, rows in fix.items():
+                for i in rows:
+                    if 0 <= int(i) < len(vals):
+                        vals[int(i)] = _NONFINITE.get(key, math.nan)
+        if any(isinstance(v, dict) and set(v) == {"base64"} for v in vals if v is not None):
+            arrays[cname] = pa.array([None if v is None else base64.b64decode(v["base64"])
+                                      for v in vals], pa.binary())
+        else:
+            try:
+                arrays[cname] = pa.array(vals)
+            except (pa.ArrowInvalid, pa.ArrowTypeError):
+                arrays[cname] = pa.array([None if v is None else json.dumps(v) for v in vals])
+    if not arrays:
+        return None
+    n = int(obj.get("rows", len(next(iter(arrays.values())))))
+    arrays = {k: (v if len(v) == n else pa.nulls(n)) for k, v in arrays.items()}
+    table = conform(pa.table(arrays), spec)
+    info = obj.get("derived_info")
+    if isinstance(info, str):
+        md = dict(table.schema.metadata or {})
+        md[_DERIVED_KEY] = info.encode()
+        table = table.replace_schema_metadata(md)
+    return table
+
+
+def _iso_ms(ts: str) -> str:
+    """recording start_time -> the profile's yyyy-MM-ddTHH:mm:ss.FFFZ."""
+    m = re.match(r"^(\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2})(?:\.(\d+))?Z$", ts)
+    if not m:
+        return ts
+    return f"{m[1]}.{(m[2] or '').ljust(3, '0')[:3]}Z"
+
+
+def _to_utc(ts: str) -> str:
+    """Any ISO 8601 timestamp (with offset) -> UTC ``...Z`` keeping the fraction digits."""
+    s = ts.strip()
+    m = re.match(r"^(\d{4}-\d{2}-\d{2})[T ](\d{2}:\d{2}:\d{2})(?:\.(\d{1,9}))?(Z|[+-]\d{2}(?::?\d{2})?)?$", s)
+    if not m:
+        raise FormatError(f"acquisition_date {ts!r} is not an ISO 8601 timestamp")
+    date, hms, frac, tz = m.groups()
+    tz = tz or "Z"
+    if tz in ("Z", "+00", "+0000", "+00:00", "-00:00"):
+        return f"{date}T{hms}{'.' + frac if frac else ''}Z"
+    if len(tz) == 3:
+        tz += ":00"
+    elif ":" not in tz:
+        tz = tz[:3] + ":" + tz[3:]
+    dt = datetime.fromisoformat(f"{date}T{hms}{tz}").astimezone(timezone.utc)
+    return dt.strftime("%Y-%m-%dT%H:%M:%S") + (f".{frac}" if frac else "") + "Z"
+
+
+def _enum_value(v: Any) -> Any:
+    """aveas-openlabel writes str enums as ``"Road__ClassificationValue.STRAIGHT"``: -> "straight"."""
+    if isinstance(v, str) and "." in v:
+        head, tail = v.split(".", 1)
+        if head.endswith("Value") and re.fullmatch(r"[A-Z0-9_]+", tail):
+            return tail.lower()
+    return v
+
+
+def _beaufort(speed: float) -> int:
+    return int(np.searchsorted(np.asarray(_BEAUFORT), speed, side="right"))
+
+
+def _beaufort_speed(force: float) -> float:
+    edges = (0.0,) + _BEAUFORT + (36.0,)
+    k = int(min(max(round(force), 0), 12))
+    return round(0.5 * (edges[k] + edges[k + 1]), 2)
+
+
+def _rot_body(vx: np.ndarray, vy: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World -> vehicle frame (x forward, y left)."""
+    c, s = np.cos(h), np.sin(h)
+    return c * vx + s * vy, -s * vx + c * vy
+
+
+def _rot_world(u: np.ndarray, v: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    c, s = np.cos(h), np.sin(h)
+    return c * u - s * v, s * u + c * v
+
+
+def _body_std(sx: np.ndarray, sy: np.ndarray, corr: np.ndarray | None, h: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """1-sigma of the vehicle-frame components of a world-frame Gaussian vector."""
+    r = np.zeros_like(sx) if corr is None else np.nan_to_num(corr)
+    c, s = np.cos(h), np.sin(h)
+    cxy = r * sx * sy
+    vu = c * c * sx * sx + s * s * sy * sy + 2 * c * s * cxy
+    vv = s * s * sx * sx + c * c * sy * sy - 2 * c * s * cxy
+    return np.sqrt(np.maximum(vu, 0)), np.sqrt(np.maximum(vv, 0))
+
+
+# ================================================================================================
+# attributes of object_data / context_data
+# ================================================================================================
+
+def _attrs(od: dict[str, Any] | None) -> dict[str, list[dict[str, Any]]]:
+    """name -> list of items (all types), in file order."""
+    out: dict[str, list] = defaultdict(list)
+    for kind in ("boolean", "num", "text", "vec"):
+        items = (od or {}).get(kind) or []
+        if isinstance(items, dict):
+            items = [items]
+        for it in items:
+            if isinstance(it, dict) and "name" in it:
+                out[it["name"]].append(it)
+    return out
+
+
+def _first(attrs, name, default=None):
+    items = attrs.get(name)
+    return items[0].get("val", default) if items else default
+
+
+# ================================================================================================
+# conditions <-> environment contexts
+# ================================================================================================
+
+def _pmf_vector(pmf: dict | None, cats: tuple[str, ...], mapping: dict[str, str],
+                out_cats: tuple[str, ...]) -> list[float] | None:
+    if not pmf:
+        return None
+    vals = dict.fromkeys(out_cats, 0.0)
+    for c in cats:
+        vals[mapping[c]] += float(pmf.get(c, 0.0) or 0.0)
+    tot = sum(vals.values())
+    return [v / tot for v in vals.values()] if tot > 0 else None
+
+
+def _environment_data(cond: dict[str, Any]) -> dict[str, list]:
+    data: dict[str, list] = {"num": [], "text": [], "vec": []}
+    lighting = _pmf_vector(cond.get("lighting"), LIGHTING, LIGHTING_TO_PROFILE, PROFILE_LIGHTING)
+    if lighting:
+        data["text"].append({"name": "lighting_conditions",
+                             "val": PROFILE_LIGHTING[int(np.argmax(lighting))]})
+        data["vec"].append({"name": "environment/lighting_conditions/uncertainties", "val": lighting})
+    road = _pmf_vector(cond.get("road_surface"), ROAD_SURFACE,
+                       {"dry": "dry", "wet": "wet", "slippery": "slippery", "snow_ice": "slippery"},
+                       PROFILE_ROAD)
+    if road:
+        data["text"].append({"name": "road_condition", "val": PROFILE_ROAD[int(np.argmax(road))]})
+        data["vec"].append({"name": "environment/road_condition/uncertainties", "val": road})
+    if cond.get("temperature_c") is not None:
+        data["num"].append({"name": "environment/temperature_celsius", "val": int(round(cond["temperature_c"]))})
+    if cond.get("temperature_c_std") is not None:
+        data["num"].append({"name": "environment/temperature/ustddev", "val": float(cond["temperature_c_std"])})
+    if cond.get("precipitation_mm_h") is not None:
+        data["num"].append({"name": "environment/precipitation_intensity",
+                            "val": int(round(cond["precipitation_mm_h"]))})
+    if cond.get("visibility_m") is not None:
+        data["num"].append({"name": "environment/visibility_range", "val": int(round(cond["visibility_m"]))})
+    if cond.get("cloud_cover_okta") is not None:
+        data["num"].append({"name": "environment/cloud_cover", "val": int(cond["cloud_cover_okta"])})
+    if cond.get("wind_speed_m_s") is not None:
+        data["num"].append({"name": "environment/wind/beaufort_force", "val": _beaufort(cond["wind_speed_m_s"])})
+    return data
+
+
+def _conditions_from(cd: dict[str, Any]) -> dict[str, Any]:
+    a = _attrs(cd)
+    out: dict[str, Any] = {}
+    lu = _first(a, "environment/lighting_conditions/uncertainties")
+    lv = _enum_value(_first(a, "lighting_conditions"))
+    inv = {v: k for k, v in LIGHTING_TO_PROFILE.items()}
+    if lu and len(lu) == 4:
+        out["lighting"] = {inv[c]: float(v) for c, v in zip(PROFILE_LIGHTING, lu)}
+    elif lv in inv:
+        out["lighting"] = {inv[lv]: 1.0}
+    ru = _first(a, "environment/road_condition/uncertainties")
+    rv = _enum_value(_first(a, "road_condition"))
+    if ru and len(ru) == 3:
+        out["road_surface"] = {c: float(v) for c, v in zip(PROFILE_ROAD, ru)}
+    elif rv in PROFILE_ROAD:
+        out["road_surface"] = {rv: 1.0}
+    for name, key in (("environment/temperature_celsius", "temperature_c"),
+                      ("environment/temperature/ustddev", "temperature_c_std"),
+                      ("environment/precipitation_intensity", "precipitation_mm_h"),
+                      ("environment/visibility_range", "visibility_m")):
+        v = _first(a, name)
+        if v is not None:
+            out[key] = float(v)
+    cc = _first(a, "environment/cloud_cover")
+    if cc is not None and 0 <= int(cc) <= 8:
+        out["cloud_cover_okta"] = int(cc)
+    bf = _first(a, "environment/wind/beaufort_force")
+    if bf is not None:
+        out["wind_speed_m_s"] = _beaufort_speed(float(bf))
+    return out
+
+
+# ================================================================================================
+# garbage collection
+# ================================================================================================
+
+class _no_gc:
+    """Pause the cyclic garbage collector while building or walking millions of small dicts
+    (it otherwise runs again and again over the growing, acyclic document)."""
+
+    def __enter__(self):
+        import gc
+
+        self._was = gc.isenabled()
+        gc.disable()
+
+    def __exit__(self, *exc):
+        import gc
+
+        if self._was:
+            gc.enable()

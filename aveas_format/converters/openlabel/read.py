@@ -1,0 +1,700 @@
+"""OpenLABEL -> recording (the import): AVEAS-profile files, this library's own (lossless through
+the ``aveas_format`` extension) and generic ASAM OpenLABEL with cuboids.
+
+:func:`import_openlabel` is the registered importer (``openlabel``): it streams the file
+(:mod:`.stream`) and finds the map; :func:`openlabel_to_recording` takes a parsed document. Both run
+:func:`_openlabel_to_recording` in steps: the CRS; the frames into per-box columns
+(:class:`~aveas_format.converters.openlabel.frames._FrameRows`); frame times and participant ids;
+the boxes into states columns (duplicates dropped, world -> the map's local frame, vehicle -> world
+frame, the file's road coordinates, the extension's exact values); participants; the events,
+interior, environment tables and conditions (from the extension, else the profile's events and
+contexts); the recording's metadata; :func:`build_recording`; the derived tables of our own export.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections import defaultdict
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from aveas_format.converters.common import load_map_bytes, source_block
+from aveas_format.converters.openlabel.frames import (_MISSING, _FrameData, _Frames, _FrameRows, _rep_list,
+                                                      _rep_take, _utm_crs)
+from aveas_format.converters.openlabel.profile import (
+    EXT,
+    GENERIC_TYPES,
+    LIGHTS,
+    PROFILE_TO_METHOD,
+    TYPE_TO_CLASS,
+    TYPE_TO_EVENT,
+    _attrs,
+    _body_std,
+    _conditions_from,
+    _enum_value,
+    _first,
+    _no_gc,
+    _rot_world,
+    _to_utc,
+    table_from_json,
+)
+from aveas_format.converters.openlabel.stream import _check_stream, _load_doc, _NotStrictJSON, _stream_doc
+from aveas_format.converters.registry import ImportOptions, converter
+from aveas_format.errors import FormatError
+from aveas_format.schema.taxonomy import CLASSES
+
+
+class OpenLabelImportOptions(ImportOptions):
+    world_crs: str | None = None
+    """CRS (PROJ/EPSG) of the root coordinate system of generic files, e.g. EPSG:32630; default:
+    read from a ``geo_utm`` root named like ``utm-30t``, else the root is the map frame."""
+    method: str | None = None
+    """Acquisition method (default: from ``acquisition_method``; ``road_vehicle`` where a generic
+    file has an ego object, else ``infrastructure_camera``)."""
+    rate_hz: float = 10.0
+    """Frame rate of files without frame timestamps."""
+    road_coordinates: str = "auto"
+    """``file`` (take the file's road coordinates), ``map`` (compute them through the map) or
+    ``auto`` (the file's where it has them, else the map's)."""
+    provenance: str | None = None
+    """natural / staged / simulated (default: from the file; ``staged`` where the scenario
+    context says so, else natural)."""
+
+
+def _find_map(path: Path, ol: dict[str, Any], map_source, options) -> bytes:
+    if map_source is not None:
+        return load_map_bytes(map_source)
+    name = (ol.get("metadata") or {}).get("opendrive")
+    if name:
+        cand = (path.parent / str(name))
+        if cand.is_file():
+            return cand.read_bytes()
+        # case-insensitive match next to the file
+        for q in path.parent.iterdir():
+            if q.name.lower() == str(name).lower():
+                return q.read_bytes()
+    raise FormatError("no map: pass --map MAP.xodr (metadata.opendrive "
+                      + (f"{name!r} is not next to the file)" if name else "is absent)"), path=path)
+
+
+@converter("openlabel", description="ASAM OpenLABEL 1.0 JSON (AVEAS profile and generic cuboids)",
+           patterns=("*.json",), method=None, options=OpenLabelImportOptions, needs_map=False)
+def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImportOptions):
+    if len(inputs) != 1:
+        raise FormatError(f"openlabel: expected one input file, got {len(inputs)}")
+    path = Path(inputs[0])
+    import importlib.util
+
+    if importlib.util.find_spec("ijson") is None:  # a dependency; without it: read whole, as before
+        warnings.warn("ijson is not installed: the OpenLABEL file is read whole (pip install ijson)",
+                      stacklevel=2)
+    else:
+        with _no_gc():
+            try:
+                try:
+                    ol, frames = _stream_doc(path)
+                    map_bytes = _find_map(path, ol, map_source, options)
+                    return _openlabel_to_recording(ol, map_bytes, options=options, path=path,
+                                                   frames=frames)
+                except (_NotStrictJSON, FormatError) as e:
+                    if isinstance(e, _NotStrictJSON) or str(e.message).startswith(
+                            ("broken JSON", "not UTF-8", "JSON ")):
+                        raise
+                    _check_stream(path)
+                    raise
+                except Exception:
+                    # as when the file was parsed whole: a JSON error anywhere in the file comes
+                    # before what the frames read so far made of it (checked only on failure)
+                    _check_stream(path)
+                    raise
+            except _NotStrictJSON:
+                pass
+    with _no_gc():
+        ol = _load_doc(path)
+    map_bytes = _find_map(path, ol, map_source, options)
+    return openlabel_to_recording(ol, map_bytes, options=options, path=path)
+
+
+def openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=None, path: Path | None = None):
+    """A recording from a parsed OpenLABEL document (the object under ``openlabel``)."""
+    with _no_gc():
+        return _openlabel_to_recording(ol, map_bytes, options=options, path=path)
+
+
+def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=None,
+                            path: Path | None = None, frames=None):
+    """``frames``: a function yielding ``(key, frame)`` in file order (the streamed import); else
+    the frames are ``ol["frames"]``. Both go through :class:`_FrameRows`."""
+    from aveas_format.mapref.build import build_recording
+    from aveas_format.mapref.crs import LocalFrame
+    from aveas_format.opendrive import load_map
+
+    options = options or OpenLabelImportOptions()
+    if "openlabel" in ol and isinstance(ol["openlabel"], dict):
+        ol = ol["openlabel"]
+    md = ol.get("metadata") or {}
+    ext = md.get(EXT) if isinstance(md.get(EXT), dict) else None
+    rmeta = dict((ext or {}).get("recording") or {})
+    net = load_map(map_bytes)
+    crs = _crs(net, rmeta, md, path)
+    local = LocalFrame(crs, offset=net.header.offset, warn=False)
+
+    # frames (streamed one at a time, or from the dict) into per-box columns, and time
+    objects = ol.get("objects") or {}
+    acc = _FrameRows(objects, _Frames(ol.get("coordinate_systems")), path)
+    for k, fr in (frames() if frames is not None else (ol.get("frames") or {}).items()):
+        acc.add(k, fr)
+    fd = acc.finish()
+    fnum, time_of, start_time = _frame_times(fd.fkeys, fd.stamps, ext, md, options)
+    uids = list(objects)
+    uids += fd.seen_in_frames
+    obj_ext, pid_of = _participant_ids(objects, uids)
+
+    # per object and frame: one state per box
+    rows = _box_rows(fd, pid_of, time_of)
+    interior = fd.interior(pid_of, time_of)
+    n = len(rows["time"])
+    if n == 0 and uids:
+        raise _no_boxes_error(objects, path)
+    start_time = _box_timestamps(rows, ext, options, start_time)
+    state_ext = _drop_repeats(rows, fd.ext)
+    n = len(rows["time"])
+    x, y, heading = _to_local(rows, ol, local, options.world_crs)
+    states = _state_columns(rows, x, y, heading, fd.has_vel)
+    use_file = options.road_coordinates == "file" or (options.road_coordinates == "auto" and fd.has_road)
+    if use_file and n:
+        _file_road_coordinates(states, rows, net)
+    _apply_state_extension(states, state_ext)
+    del rows, state_ext  # the per-box columns are in ``states`` now
+    fd.rows = fd.ext = None
+    states = _state_arrays(states, ext)
+
+    participants, ego_seen = _participants(uids, objects, pid_of, obj_ext, fd.sizes, ext)
+    if n == 0:
+        states = {c: pa.array([], pa.int64() if c == "participant_id" else pa.float64())
+                  for c in ("participant_id", "time", "x", "y", "heading", "vx", "vy")}
+    tables, conditions, staged = _tables(ol, ext, {fnum[k]: time_of[k] for k in fd.fkeys}, pid_of,
+                                         interior)
+    meta_args, kw = _recording_metadata(options, md, rmeta, ext, path, n, ego_seen, staged, conditions)
+    rec = build_recording(
+        map_source=map_bytes, participants=participants, states=states, **tables, crs=crs,
+        **meta_args, start_time=start_time,
+        recording_id=options.recording_id or rmeta.get("recording_id"),
+        reference=not use_file,
+        source=source_block("openlabel", [path] if path is not None else [], options),
+        **kw)
+    if ext is not None:
+        _restore_derived(rec, ext)
+    return rec
+
+
+# ================================================================================================
+# CRS, time, participant ids
+# ================================================================================================
+
+def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], path: Path | None) -> str:
+    """The CRS: the map's ``<geoReference>``, else the recording's, else ``projection_string``."""
+    from aveas_format.mapref.crs import parse_crs
+
+    crs = net.header.geo_reference or rmeta.get("crs")
+    if not crs:
+        ps = md.get("projection_string")
+        if ps:
+            try:
+                parse_crs(ps)
+                crs = ps
+            except FormatError:
+                warnings.warn(f"projection_string {ps!r} is not a usable CRS", stacklevel=3)
+    if not crs:
+        raise FormatError("neither the map (<geoReference>) nor metadata.projection_string gives "
+                          "a usable CRS", path=path)
+    return crs
+
+
+def _frame_times(fkeys: list, stamps: dict[Any, Any], ext: dict[str, Any] | None, md: dict[str, Any],
+                 options: OpenLabelImportOptions) -> tuple[dict, dict, str]:
+    """``(frame number by key, time by key, start_time)``: the frames' timestamps (seconds since
+    ``acquisition_date`` in our own files, else relative to the first; Unix seconds set the start
+    time), else frame numbers at ``rate_hz``."""
+    fnum = {k: (int(k) if str(k).lstrip("-").isdigit() else i) for i, k in enumerate(fkeys)}
+    start_time = None
+    if ext and ext.get("start_time"):
+        start_time = ext["start_time"]
+        time_of = {k: float(stamps[k]) if stamps[k] is not None else 0.0 for k in fkeys}
+    else:
+        have = [v for v in stamps.values() if v is not None]
+        if fkeys and len(have) == len(fkeys):
+            t0 = min(have)
+            time_of = {k: float(stamps[k] - t0) for k in fkeys}
+            if t0 > 1e8:  # Unix seconds
+                dt = datetime.fromtimestamp(t0, tz=timezone.utc)
+                start_time = dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+        else:
+            f0 = min(fnum.values()) if fnum else 0
+            time_of = {k: (fnum[k] - f0) / options.rate_hz for k in fkeys}
+        if start_time is None and md.get("acquisition_date"):
+            start_time = _to_utc(str(md["acquisition_date"]))
+    start_time = options.start_time or start_time or "1970-01-01T00:00:00Z"
+    return fnum, time_of, start_time
+
+
+def _participant_ids(objects: dict[str, Any], uids: list[str]) -> tuple[dict, dict[str, int]]:
+    """``(extension item by object, participant id by object)``: the ids our own export wrote, else
+    the object keys where all are numbers, else 0, 1, ... in order."""
+    obj_ext = {}
+    for u in uids:
+        size_items = _attrs((objects.get(u) or {}).get("object_data")).get("dimensions/size") or []
+        e = size_items[0].get(EXT) if size_items and isinstance(size_items[0].get(EXT), dict) else None
+        obj_ext[u] = e
+    if all(e is not None and "participant_id" in e for e in obj_ext.values()) and uids:
+        pid_of = {u: int(obj_ext[u]["participant_id"]) for u in uids}
+    elif all(str(u).isdigit() for u in uids):
+        pid_of = {u: int(u) for u in uids}
+    else:
+        pid_of = {u: i for i, u in enumerate(uids)}
+    return obj_ext, pid_of
+
+
+# ================================================================================================
+# the boxes -> states columns
+# ================================================================================================
+
+def _box_rows(fd: _FrameData, pid_of: dict[str, int], time_of: dict) -> dict[str, np.ndarray]:
+    """The per-box columns of the frames, with ``participant_id`` and ``time`` in place of the
+    object and frame indices."""
+    rows = fd.rows
+    uidx, rank = rows.pop("uidx"), rows.pop("rank")
+    rows["participant_id"] = np.asarray([pid_of.get(u, 0) for u in fd.uid_names])[uidx] \
+        if fd.uid_names else np.asarray([])
+    rows["time"] = np.asarray([time_of[k] for k in fd.fkeys], float)[rank] if fd.fkeys else np.asarray([])
+    return rows
+
+
+def _no_boxes_error(objects: dict[str, Any], path: Path | None) -> FormatError:
+    static = sum(1 for o in objects.values()
+                 if isinstance(o, dict) and isinstance(o.get("object_data"), dict)
+                 and "cuboid" in o["object_data"])
+    hint = (f" ({static} object(s) carry a static cuboid in object_data, which has no time: "
+            "a trajectory needs frames)" if static else "")
+    return FormatError(f"no frame has a cuboid for any object{hint}", path=path)
+
+
+def _box_timestamps(rows: dict[str, np.ndarray], ext: dict[str, Any] | None,
+                    options: OpenLabelImportOptions, start_time: str) -> str:
+    """Per-box measurement timestamps (cuboid attribute "timestamp", Unix seconds) beat the
+    frame's: the ASAM example repeats frame timestamps while its boxes' differ. Sets
+    ``rows["time"]``; returns the start time."""
+    cts = np.asarray(rows["cub_ts"], float)
+    if ext is None and len(rows["time"]) and np.isfinite(cts).all() and cts.min() > 1e8:
+        t0 = float(cts.min())
+        rows["time"] = cts - t0
+        if not options.start_time:
+            start_time = datetime.fromtimestamp(t0, tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    return start_time
+
+
+def _drop_repeats(rows: dict[str, np.ndarray], state_ext: dict[str, tuple]) -> dict[str, tuple]:
+    """One state per participant and time: later duplicates are dropped (from ``rows``, in place,
+    and from the extension columns, returned), with a warning."""
+    n = len(rows["time"])
+    if n:
+        key = np.rec.fromarrays([np.asarray(rows["participant_id"]), np.asarray(rows["time"], float)])
+        _, first_idx = np.unique(key, return_index=True)
+        if len(first_idx) < n:
+            keep = np.sort(first_idx)
+            warnings.warn(f"OpenLABEL: {n - len(keep)} boxes repeat a (participant, time) and were "
+                          "dropped", stacklevel=3)
+            for c in list(rows):
+                rows[c] = rows[c][keep]
+            state_ext = {c: _rep_take(r, keep) for c, r in state_ext.items()}
+    return state_ext
+
+
+def _to_local(rows: dict[str, np.ndarray], ol: dict[str, Any], local, root_crs: str | None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Box centres and yaw in the map's local frame: through WGS84 where the root coordinate system
+    has a CRS (``world_crs``, or a UTM root's name), else the root is the map frame."""
+    from aveas_format.mapref.crs import parse_crs
+    from aveas_format.numeric import wrap_angle
+
+    n = len(rows["time"])
+    px, py = np.asarray(rows["px"], float), np.asarray(rows["py"], float)
+    yaw = np.asarray(rows["yaw"], float)
+    roots = {r for r in rows["csroot"] if r}
+    wcrs = root_crs
+    if wcrs is None and len(roots) == 1:
+        r = next(iter(roots))
+        wcrs = _utm_crs(r, ((ol.get("coordinate_systems") or {}).get(r) or {}).get("type"))
+    if wcrs is not None and n:
+        import pyproj
+
+        tr = pyproj.Transformer.from_crs(parse_crs(wcrs).crs, "EPSG:4326", always_xy=True)
+        lon, lat = tr.transform(px, py)
+        lon2, lat2 = tr.transform(px + np.cos(yaw), py + np.sin(yaw))
+        x, y = local.from_wgs84(np.asarray(lon), np.asarray(lat))
+        x2, y2 = local.from_wgs84(np.asarray(lon2), np.asarray(lat2))
+        heading = np.arctan2(y2 - y, x2 - x)
+    else:
+        x, y, heading = px, py, yaw
+    return x, y, wrap_angle(heading)
+
+
+def _state_columns(rows: dict[str, np.ndarray], x: np.ndarray, y: np.ndarray, heading: np.ndarray,
+                   has_vel: bool) -> dict[str, Any]:
+    """The states' columns from the profile's attributes: position, velocity and acceleration
+    (vehicle -> world frame) with their 1-sigma, yaw rate, lights."""
+    n = len(rows["time"])
+    pid = np.asarray(rows["participant_id"], np.int64)
+    t = np.asarray(rows["time"], float)
+    states: dict[str, Any] = {"participant_id": pid, "time": t, "x": x, "y": y, "heading": heading,
+                              "z": np.asarray(rows["pz"], float)}
+    if has_vel and n:
+        vx, vy = _rot_world(np.asarray(rows["vu"], float), np.asarray(rows["vv"], float), heading)
+        states["vx"], states["vy"] = vx, vy
+        yr = np.asarray(rows["yr"], float)
+        if np.isfinite(yr).any():
+            states["yaw_rate"] = yr
+        au, av = np.asarray(rows["au"], float), np.asarray(rows["av"], float)
+        if np.isfinite(au).all() and np.isfinite(av).all():
+            states["ax"], states["ay"] = _rot_world(au, av, heading)
+        for c in ("x_std", "y_std", "z_std", "heading_std"):
+            a = np.asarray(rows[c], float)
+            if np.isfinite(a).any():
+                states[c] = a
+        su, sv = np.asarray(rows["vu_std"], float), np.asarray(rows["vv_std"], float)
+        if np.isfinite(su).any():
+            sx, sy = _body_std(su, sv, None, -heading)  # vehicle -> world (independent components)
+            states["vx_std"], states["vy_std"] = sx, sy
+        ysd = np.asarray(rows["yr_std"], float)
+        if np.isfinite(ysd).any():
+            states["yaw_rate_std"] = ysd
+        su, sv = np.asarray(rows["au_std"], float), np.asarray(rows["av_std"], float)
+        if np.isfinite(su).any() and "ax" in states:
+            states["ax_std"], states["ay_std"] = _body_std(su, sv, None, -heading)
+    for c in LIGHTS:
+        a = np.asarray(rows[c], float)
+        if not np.isnan(a).all():
+            states[c] = pa.array(a, mask=np.isnan(a), type=pa.float32())
+    return states
+
+
+def _file_road_coordinates(states: dict[str, Any], rows: dict[str, np.ndarray], net) -> None:
+    """The file's road coordinates into ``states`` (the lane offset from ``lane_position`` and the
+    lane's width in the map)."""
+    n = len(rows["time"])
+    states["road_id"] = pa.array(rows["road_id"].tolist(), pa.string())
+    states["lane_id"] = pa.array(rows["lane_id"].tolist(), pa.int16())
+    states["road_s"] = np.asarray(rows["road_s"], float)
+    states["road_t"] = np.asarray(rows["road_t"], float)
+    lp = np.asarray(rows["lane_position"], float)
+    if np.isfinite(lp).any():
+        ok = np.isfinite(lp) & np.array([r is not None for r in rows["road_id"]])
+        lo = np.full(n, np.nan)
+        idx = np.flatnonzero(ok)
+        for r in {rows["road_id"][i] for i in idx}:
+            m = idx[[rows["road_id"][i] == r for i in idx]]
+            try:
+                inner, outer = net.lane_borders(r, states["road_s"][m],
+                                                np.asarray([rows["lane_id"][i] or 0 for i in m]))
+                lo[m] = lp[m] * np.abs(outer - inner)
+            except Exception:  # noqa: BLE001 — a road the map lacks
+                pass
+        states["lane_offset"] = lo
+
+
+def _apply_state_extension(states: dict[str, Any], state_ext: dict[str, tuple]) -> None:
+    """The extension of this library's own export into ``states``: its columns and the exact
+    values (and nulls) where the profile's would differ."""
+    for c in sorted(state_ext):
+        base = states.get(c)
+        rep = state_ext[c]
+        if rep[0] == "f":  # floats (the common case): vectorised, same result as below
+            _, fv, pr, nl = rep
+            if base is None and (pr & ~nl).any():
+                states[c] = pa.array(fv, mask=~(pr & ~nl), type=pa.float64())
+                continue
+            if (isinstance(base, np.ndarray) and base.dtype == np.float64 and base.ndim == 1
+                    and len(base) == len(fv)):
+                null = np.where(pr, nl, np.isnan(base))
+                if not null.all():
+                    states[c] = pa.array(np.where(pr, fv, base), mask=null, type=pa.float64())
+                    continue
+        vals = _rep_list(rep)
+        if base is None:
+            states[c] = pa.array([None if v is _MISSING else v for v in vals])
+        else:
+            cur = base.to_pylist() if isinstance(base, (pa.Array, pa.ChunkedArray)) else [
+                None if (isinstance(b, float) and math.isnan(b)) else b for b in np.asarray(base).tolist()]
+            states[c] = pa.array([cur[i] if v is _MISSING else v for i, v in enumerate(vals)])
+
+
+def _state_arrays(states: dict[str, Any], ext: dict[str, Any] | None) -> dict[str, pa.Array]:
+    """The states' columns as Arrow arrays (only those our own export had, where it says)."""
+    cols_keep = (ext or {}).get("states_columns")
+    if cols_keep:
+        for c in list(states):
+            if c not in cols_keep:
+                del states[c]
+    return {c: (v if isinstance(v, (pa.Array, pa.ChunkedArray)) else pa.array(
+        np.asarray(v), from_pandas=True)) for c, v in states.items()}
+
+
+# ================================================================================================
+# participants
+# ================================================================================================
+
+def _participants(uids: list[str], objects: dict[str, Any], pid_of: dict[str, int], obj_ext: dict,
+                  sizes: dict[str, list], ext: dict[str, Any] | None) -> tuple[dict[str, Any], bool]:
+    """``(participants columns, whether an object is the recording vehicle)``."""
+    part, ego_seen = _profile_participants(uids, objects, pid_of, sizes)
+    if all(v is None for v in part["class_pmf"]):
+        del part["class_pmf"]
+    else:
+        from aveas_format.schema.pmf import one_hot
+
+        part["class_pmf"] = [v if v is not None else one_hot([c], "class")[0].tolist()
+                             for v, c in zip(part["class_pmf"], part["class"])]
+        m = np.asarray(part["class_pmf"], np.float32)
+        part["class_pmf"] = pa.array(list(m), pa.list_(pa.float32()))
+        # the class is the PMF's argmax (a foreign file may disagree; the PMF wins)
+        part["class"] = [CLASSES[int(np.argmax(r))] if not obj_ext.get(u) else c
+                         for r, c, u in zip(m, part["class"], uids)]
+    for c in ("attached_to", "height", "length_std", "width_std", "height_std"):
+        if c in part and all(v is None for v in part[c]):
+            del part[c]
+    p_ext_rows = [obj_ext.get(u) for u in uids]
+    if any(e for e in p_ext_rows):
+        _apply_participants_extension(part, p_ext_rows)
+    pcols = (ext or {}).get("participants_columns")
+    if pcols:
+        for c in list(part):
+            if c not in pcols:
+                del part[c]
+    participants = {c: (v if isinstance(v, (pa.Array, pa.ChunkedArray)) else pa.array(v))
+                    for c, v in part.items()}
+    if not uids:  # a file without objects (e.g. the profile's minimum example)
+        participants = {"participant_id": pa.array([], pa.int64()), "class": pa.array([], pa.string()),
+                        "length": pa.array([], pa.float64()), "width": pa.array([], pa.float64())}
+    return participants, ego_seen
+
+
+def _profile_participants(uids: list[str], objects: dict[str, Any], pid_of: dict[str, int],
+                          sizes: dict[str, list]) -> tuple[dict[str, list], bool]:
+    """The participants' columns from the objects' types and static attributes (the size, else the
+    median of the object's boxes)."""
+    part: dict[str, list] = defaultdict(list)
+    ego_seen = False
+    for u in uids:
+        obj = objects.get(u) or {}
+        attrs = _attrs(obj.get("object_data"))
+        otype = str(obj.get("type") or "other")
+        cls = TYPE_TO_CLASS.get(otype)
+        if cls is None:
+            key = otype.lower().split("/")[-1].replace(" ", "_").replace("-", "_")
+            cls = GENERIC_TYPES.get(key, "other")
+        is_ego = otype.lower() in ("egocar", "ego", "ego_vehicle") or bool(_first(attrs, "is_recorder", False))
+        ego_seen |= is_ego
+        size = _first(attrs, "dimensions/size")
+        if size is None:
+            arr = np.asarray(sizes.get(u) or [[1.0, 1.0, 1.0]], float)
+            size = np.median(arr, axis=0).tolist()
+        ssd = _first(attrs, "dimensions/size/ustddev")
+        pmf = _first(attrs, "classification/uncertainties")
+        part["participant_id"].append(pid_of[u])
+        part["source_id"].append(str(obj.get("name") or u))
+        part["class"].append(cls)
+        part["length"].append(float(size[0]))
+        part["width"].append(float(size[1]))
+        part["height"].append(float(size[2]) if len(size) > 2 and size[2] else None)
+        part["length_std"].append(float(ssd[0]) if ssd else None)
+        part["width_std"].append(float(ssd[1]) if ssd else None)
+        part["height_std"].append(float(ssd[2]) if ssd and len(ssd) > 2 else None)
+        part["class_pmf"].append([float(v) for v in pmf] if pmf and len(pmf) == len(CLASSES) else None)
+        att = _first(attrs, "attached_to")
+        part["attached_to"].append(pid_of.get(str(att)) if att is not None else None)
+        part["role"].append("recording_vehicle" if is_ego else "observed")
+    return part, ego_seen
+
+
+def _apply_participants_extension(part: dict[str, Any], p_ext_rows: list) -> None:
+    """The participants' extension items of this library's own export into ``part``."""
+    keys = sorted({c for e in p_ext_rows if e for c in e} - {"participant_id"})
+    for c in keys:
+        vals = [e.get(c, _MISSING) if e else _MISSING for e in p_ext_rows]
+        cur = part.get(c)
+        if c == "class_pmf":
+            mats = [None if v is _MISSING else v for v in vals]
+            if cur is not None:
+                curl = cur.to_pylist()
+                mats = [curl[i] if v is _MISSING else v for i, v in enumerate(vals)]
+            part[c] = pa.array(mats, pa.list_(pa.float32()))
+            continue
+        if cur is None:
+            part[c] = [None if v is _MISSING else v for v in vals]
+        else:
+            part[c] = [cur[i] if v is _MISSING else v for i, v in enumerate(vals)]
+
+
+# ================================================================================================
+# tables and metadata
+# ================================================================================================
+
+def _tables(ol: dict[str, Any], ext: dict[str, Any] | None, frame_time: dict[int, float],
+            pid_of: dict[str, int], interior: dict[str, list]) -> tuple[dict[str, Any], dict | None, bool]:
+    """``(events, unobserved, environment and interior tables, static conditions, staged)``: the
+    tables from the extension, else from the profile's events, interior attributes and contexts."""
+    tables_ext = (ext or {}).get("tables") or {}
+    events = table_from_json(tables_ext.get("events"), "events")
+    unobserved = table_from_json(tables_ext.get("unobserved"), "unobserved")
+    environment = table_from_json(tables_ext.get("environment"), "environment")
+    interior_t = table_from_json(tables_ext.get("interior"), "interior")
+    if ext is None:
+        events = _profile_events(ol, frame_time, pid_of)
+        if interior:
+            interior_t = pa.table({c: pa.array(v) for c, v in interior.items()
+                                   if c in ("participant_id", "time") or any(x is not None for x in v)})
+    conditions, environment_rows, staged = _profile_contexts(ol, frame_time)
+    if ext is None and environment_rows:
+        environment = pa.table({k: [r.get(k) for r in environment_rows]
+                                for k in sorted({k for r in environment_rows for k in r})})
+    tables = {"unobserved": unobserved, "events": events, "environment": environment, "interior": interior_t}
+    return tables, conditions, staged
+
+
+def _recording_metadata(options: OpenLabelImportOptions, md: dict[str, Any], rmeta: dict[str, Any],
+                        ext: dict[str, Any] | None, path: Path | None, n: int, ego_seen: bool,
+                        staged: bool, conditions: dict[str, Any] | None
+                        ) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``(method, partner, provenance, acquisition, rights; the other recording.json fields)``:
+    the options beat our own export's recording.json, which beats the profile's metadata."""
+    method = options.method or ((rmeta.get("acquisition") or {}).get("method")) or \
+        PROFILE_TO_METHOD.get(str(_enum_value(md.get("acquisition_method"))), None) or \
+        ("road_vehicle" if ego_seen else "infrastructure_camera")
+    partner = options.partner or (rmeta.get("acquisition") or {}).get("partner") or \
+        md.get("acquisition_partner") or md.get("annotator") or "unknown"
+    provenance = options.provenance or rmeta.get("provenance") or ("staged" if staged else "natural")
+    acq = dict(rmeta.get("acquisition") or {})
+    acq.pop("method", None)
+    acq.pop("partner", None)
+    if not acq and path is not None:
+        acq = {"platform": f"imported from OpenLABEL {path.name}"}
+    rights = rmeta.get("rights") or {
+        "right_of_use": str(_enum_value(md.get("right_of_use") or options.right_of_use)),
+        "license": options.license, "owner": options.owner or partner}
+    if options.owner or options.license != "unspecified":
+        rights = {**rights, "license": options.license if options.license != "unspecified"
+                  else rights.get("license", "unspecified"), "owner": options.owner or rights.get("owner") or partner}
+    kw: dict[str, Any] = {}
+    for key in ("title", "description", "coverage", "conditions", "thresholds", "extras", "location",
+                "duration_s", "nominal_rate_hz"):
+        if rmeta.get(key) is not None:
+            kw[key] = rmeta[key]
+    if "thresholds" not in kw and ext is None and any(
+            md.get(k) is not None for k in ("threshold_gttc", "threshold_pret", "threshold_thw")):
+        kw["thresholds"] = {"ttc_s": md.get("threshold_gttc"), "pet_s": md.get("threshold_pret"),
+                            "thw_s": md.get("threshold_thw")}
+        kw["thresholds"] = {k: float(v) for k, v in kw["thresholds"].items() if v and v > 0}
+    if ext is not None:
+        given = set(ext.get("thresholds_given") or [])
+        if "thresholds" in kw:
+            kw["thresholds"] = {k: v for k, v in kw["thresholds"].items() if k in given}
+            if not kw["thresholds"]:
+                del kw["thresholds"]
+    if "conditions" not in kw and conditions:
+        kw["conditions"] = conditions
+    if "title" not in kw and ext is None and md.get("name"):  # ours: recording.json has it (or none)
+        kw["title"] = str(md["name"])
+    if options.title:
+        kw["title"] = options.title
+    if not n:
+        kw.setdefault("duration_s", 0.0)
+        kw.setdefault("nominal_rate_hz", options.rate_hz)
+    meta_args = {"method": method, "partner": partner, "provenance": provenance, "acquisition": acq,
+                 "rights": rights}
+    return meta_args, kw
+
+
+def _restore_derived(rec, ext: dict[str, Any]) -> None:
+    """The derived tables and recording.json ``derived`` entries of this library's own export."""
+    from aveas_format.schema.metadata import DerivedEntry
+    from aveas_format.schema.tables import TABLES
+
+    for name, obj in sorted((ext.get("derived") or {}).items()):
+        spec = TABLES.get(f"derived/{name}")
+        if spec is None or not isinstance(obj, dict):
+            warnings.warn(f"OpenLABEL extension: unknown derived table {name!r} skipped", stacklevel=3)
+            continue
+        table = table_from_json(obj, spec.name)
+        if table is not None:
+            # types as declared, columns and rows in the order they had (as exported)
+            rec.derived[name] = table.select([c for c in obj.get("columns") or {}
+                                              if c in table.column_names])
+    entries = []
+    for e in ext.get("derived_entries") or []:
+        try:
+            entries.append(DerivedEntry.model_validate(e))
+        except Exception as err:  # noqa: BLE001 — a damaged entry: the table is then reported stale
+            warnings.warn(f"OpenLABEL extension: derived entry skipped ({err})", stacklevel=3)
+    if entries:
+        rec.meta.derived = entries
+
+
+
+def _profile_events(ol: dict[str, Any], frame_time: dict[int, float], pid_of: dict[str, int]):
+    evs = ol.get("events") or {}
+    rows = []
+    for k, ev in evs.items():
+        etype = str(_enum_value((ev or {}).get("type") or ""))
+        kind = TYPE_TO_EVENT.get(etype) or TYPE_TO_EVENT.get(etype.replace("_", " "))
+        if kind is None and etype.replace(" ", "_") in {"near_miss", "accident", "lane_change", "cut_in",
+                                                        "overtaking", "following", "turning", "parking",
+                                                        "hard_braking", "handover_to_driver",
+                                                        "driver_intervention"}:
+            kind = etype.replace(" ", "_")
+        if kind is None:
+            continue
+        attrs = _attrs(ev.get("event_data"))
+        a = _first(attrs, "event_participant/role_a_id")
+        b = _first(attrs, "event_participants/role_b_ids") or []
+        ids = [pid_of[str(v)] for v in ([a] if a is not None else []) + list(b) if str(v) in pid_of]
+        fi = (ev.get("frame_intervals") or [{}])[0]
+        fs, fe = fi.get("frame_start"), fi.get("frame_end")
+        if fs is None or fs not in frame_time:
+            continue
+        rows.append({"event_id": int(k) if str(k).isdigit() else len(rows), "kind": kind,
+                     "time_start": frame_time[fs], "time_end": frame_time.get(fe, frame_time[fs]),
+                     "participant_ids": ids,
+                     "roles": (["role_a"] if a is not None else []) + ["role_b"] * (len(ids) - (a is not None)),
+                     "origin": "annotated"})
+    if not rows:
+        return None
+    return pa.table({k: [r[k] for r in rows] for k in rows[0]})
+
+
+def _profile_contexts(ol: dict[str, Any], frame_time: dict[int, float]):
+    conditions: dict[str, Any] = {}
+    env_rows: list[dict[str, Any]] = []
+    staged = False
+    for ctx in (ol.get("contexts") or {}).values():
+        ctx = ctx or {}
+        name, typ = str(ctx.get("name", "")), str(ctx.get("type", ""))
+        cd = ctx.get("context_data") or {}
+        if "scenario" in name.lower() or typ == "ScenarioContext":
+            staged |= bool(_first(_attrs(cd), "scenario/is_staged", False))
+        elif "environment" in name.lower() or typ == "EnvironmentContext":
+            c = _conditions_from(cd)
+            fis = ctx.get("frame_intervals")
+            if fis:
+                for fi in fis:
+                    fs, fe = fi.get("frame_start"), fi.get("frame_end")
+                    if fs in frame_time:
+                        env_rows.append({"time_start": frame_time[fs],
+                                         "time_end": frame_time.get(fe, frame_time[fs]), **c})
+            else:
+                conditions.update(c)
+    return conditions or None, env_rows, staged
