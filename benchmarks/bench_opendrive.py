@@ -141,7 +141,7 @@ def bench_projection(path: Path, n: int, repeat: int, threads: int | None, basel
 def bench_fit(repeat: int) -> list[dict]:
     """Fit a 600 m, 3-lane road (line, clothoid, arc) to lane-centre points with 5 cm noise."""
     from aveas_format.opendrive.builder import curved_highway
-    from aveas_format.opendrive.fit import fit_road
+    from aveas_format.opendrive.roadfit import fit_road
 
     truth = load_map(curved_highway(length=600.0, radius=250.0, straight=120.0, spiral=80.0, lanes_right=3))
     rng = np.random.default_rng(0)

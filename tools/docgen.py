@@ -135,9 +135,12 @@ def converters_markdown() -> str:
     lines.append("")
     for c in convs:
         module = inspect.getmodule(c.fn)
-        if module is not None and module.__name__.count(".") > 2:  # in a converter package: its docstring
+        # a converter in a package is documented by the package's docstring; a closing paragraph
+        # starting with "Modules (" (what lives where) is left out
+        if module is not None and module.__name__.count(".") > 2:
             module = sys.modules[".".join(module.__name__.split(".")[:3])]
         doc = inspect.cleandoc(module.__doc__ or "") if module else ""
+        doc = doc.split("\n\nModules (", 1)[0]  # the package's module map is for developers
         lines += [f"## {c.name}", "", doc, ""]
         fields = c.options.model_fields
         if fields:

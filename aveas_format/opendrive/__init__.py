@@ -27,7 +27,7 @@ from .model import (
     RoadObject,
     RoadType,
 )
-from .fit import RoadFit, fit_reference_line, fit_road, road_from_lane_markings
+from .roadfit import RoadFit, fit_reference_line, fit_road, road_from_lane_markings
 from .network import RoadNetwork
 from .projection import Projection
 

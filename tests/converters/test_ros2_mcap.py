@@ -178,6 +178,11 @@ def _opts(**kw):
 
 def test_registered():
     assert "ros2-mcap" in load_converters()
+    # the subpackage registers once (loading again imports nothing new), from the module whose
+    # docstring docs/converters.md shows
+    convs = load_converters()
+    assert [k for k, c in convs.items() if c.name == "ros2-mcap"] == ["ros2-mcap"]
+    assert convs["ros2-mcap"].fn.__module__ == "aveas_format.converters.ros2_mcap.converter"
 
 
 def test_scene(scene_mcap, road_map, tmp_path):

@@ -1,4 +1,4 @@
-"""Fitting OpenDRIVE roads to annotated polylines (aveas_format.opendrive.fit)."""
+"""Fitting OpenDRIVE roads to annotated polylines (aveas_format.opendrive.roadfit)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from lxml import etree
 from aveas_format.errors import MapError
 from aveas_format.opendrive import load_map
 from aveas_format.opendrive.builder import curved_highway
-from aveas_format.opendrive.fit import fit_reference_line, fit_road, road_from_lane_markings
+from aveas_format.opendrive.roadfit import fit_reference_line, fit_road, road_from_lane_markings
 
 #: stated tolerances: fitted reference line vs. the true line it was fitted to
 NOISE = 0.05  # m, standard deviation of the noise on x and y

@@ -1,0 +1,79 @@
+"""ROS 2 recordings of a road vehicle in MCAP (rosbag2's default storage) -> recording.
+
+Reads the MCAP files with ``mcap`` and decodes the CDR messages with ``rosbags``' generated
+deserialisers (``mcap-ros2-support``'s generic decoder for schemas rosbags does not parse); no ROS
+installation: the message definitions travel in the file. Several input files are read as one
+recording.
+
+Objects (the observed participants), from every topic of these types (or ``object_topics``):
+
+- ``autoware_perception_msgs/msg/TrackedObjects``: pose and twist **with covariance**, the
+  classification list (label + probability -> class PMF), shape dimensions (bounding box;
+  cylinder: diameter x diameter; polygon: the footprint's extent), the 16-byte UUID as source id.
+  The twist is in the object's own frame (Autoware's convention). ``orientation_availability``
+  UNAVAILABLE: heading from the direction of motion; SIGN_UNKNOWN: flipped where it opposes the
+  motion.
+- ``derived_object_msgs/msg/ObjectWithCovarianceArray``: pose/twist with covariance (twist in the
+  header frame), ``shape`` BOX/CYLINDER/SPHERE dimensions, ``classification`` with
+  ``classification_certainty`` (0..255; 0 = not set = certain) -> PMF: the certainty on the class,
+  the rest spread evenly over all 13 classes.
+- ``vision_msgs/msg/Detection3DArray``: ``bbox`` centre and size, the hypotheses' ``class_id``/
+  ``score`` -> PMF (``class_map`` maps ids; names such as car, person, bicycle are known), the
+  best hypothesis' pose covariance, ``id`` as track id (an empty id: one participant per
+  detection). No twist: velocity from positions.
+
+Class mapping: Autoware CAR/TRUCK/BUS/TRAILER/MOTORCYCLE/BICYCLE/PEDESTRIAN/ANIMAL -> the class of
+that name, UNKNOWN/HAZARD/OVER_DRIVABLE/UNDER_DRIVABLE -> other; derived_object_msgs PEDESTRIAN ->
+pedestrian, BIKE -> bicycle, CAR -> car, TRUCK -> truck, MOTORCYCLE -> motorcycle, the rest ->
+other. A participant's ``class_pmf`` is the mean of its per-message PMFs; length/width/height the
+mean of its dimensions, ``*_std`` their spread.
+
+Ego (the recording vehicle, a participant with role ``recording_vehicle``): ``nav_msgs/msg/
+Odometry`` (pose with covariance of ``child_frame_id`` in ``header.frame_id``, twist in the child
+frame) and/or ``sensor_msgs/msg/NavSatFix`` (lon/lat projected through the map's CRS, the ENU
+``position_covariance``; heading from the direction of motion). Its footprint centre lies
+``ego_center_offset`` m ahead of ``base_frame`` (Autoware's base_link is the rear-axle centre).
+
+Frames: every pose is transformed into ``map_frame`` through the transform tree of ``/tf`` and
+``/tf_static`` (``tf2_msgs/msg/TFMessage``), the odometry (``header.frame_id`` ->
+``child_frame_id``) and, without both, the NavSatFix ego track (map -> base_frame); dynamic
+transforms are interpolated (linear, slerp) at each message's stamp. ``frame_offset`` = (x, y, yaw)
+places ``map_frame`` in the OpenDRIVE map's local frame.
+
+Uncertainty: the 6x6 covariances are reduced to (x, y, yaw) and (vx, vy, yaw rate) and propagated
+with the full Jacobian of the frame change: ``C' = J_obj C J_obj^T + J_frame C_frame J_frame^T``,
+where the frame's pose covariance is the ego odometry's (for objects in the vehicle's frames);
+the twist covariance is rotated into the local frame with the heading's variance added through
+the rotation's derivative. All-zero covariances mean "unknown" (null ``_std``). Velocity from a
+twist in the header frame is absolute unless ``relative_velocity`` (then the ego velocity and
+``omega x r`` are added).
+
+Time: ``header.stamp`` (not the log time; a zero stamp falls back to the log time with a
+warning); time zero = the earliest stamp, which also gives ``start_time``. Decoding is per
+message; everything after it is vectorised per frame. Duplicate (participant, stamp) samples keep
+the first. Provenance ``natural``, role ``observed`` for objects.
+
+Modules (what lives where, from the bottom up):
+
+- ``options``: :class:`Ros2McapOptions` and the message-type tables (supported types, preferred
+  topics, class labels).
+- ``decode``: opening the MCAP files and decoding their CDR messages (``_channels``; ``_Decoders``:
+  rosbags' generated deserialisers, mcap-ros2-support's decoder as the fallback; the errors a
+  corrupt file raises).
+- ``tree``: the transform samples (``_Edges``) and the transform tree (``_Tree``: interpolated
+  lookups chained to the map frame, with the ego's pose covariance).
+- ``messages``: the per-message readers (object arrays, odometry, NavSatFix, tf) -> flat rows.
+- ``read``: which topics to read and the one pass over their messages (``_read``).
+- ``frames``: the frame and covariance maths (``_cov3``, ``_to_map``, ``_twist_to_map``,
+  ``_apply_offset``).
+- ``converter``: ``convert_ros2_mcap`` (registered as ``ros2-mcap``) and its steps: the ego track,
+  the objects in the map frame, the states, the participants.
+
+Importing this package registers the converter (once: the registry imports the package, the
+package imports ``converter``).
+"""
+
+from aveas_format.converters.ros2_mcap.converter import convert_ros2_mcap
+from aveas_format.converters.ros2_mcap.options import Ros2McapOptions
+
+__all__ = ["Ros2McapOptions", "convert_ros2_mcap"]
