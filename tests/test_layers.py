@@ -32,3 +32,10 @@ def test_exceptions_are_still_needed():
     assert set(layers.EXCEPTIONS) <= edges
     used = {(e.src_unit, e.dst_unit) for e in layers.imports()}
     assert set(layers.SIDEWAYS) <= used
+
+
+def test_architecture_doc_shows_the_generated_picture_and_table():
+    doc = (layers.PACKAGE.parent / "docs" / "architecture.md").read_text(encoding="utf-8")
+    assert "figures/architecture_layers.png" in doc
+    assert (layers.PACKAGE.parent / "docs" / "figures" / "architecture_layers.png").stat().st_size > 10_000
+    assert layers.markdown_table() in doc  # tests/test_docs.py also checks it is current

@@ -154,6 +154,18 @@ def converters_markdown() -> str:
     return "\n".join(lines)
 
 
+_LAYERS = re.compile(r"(<!-- layers:start[^>]*-->\n).*?(<!-- layers:end -->)", re.DOTALL)
+
+
+def architecture_markdown() -> str:
+    """docs/architecture.md with its generated block (the layers and what each unit imports)."""
+    import layers
+
+    text = (DOCS / "architecture.md").read_text(encoding="utf-8")
+    table = layers.markdown_table().replace("\\", "\\\\")
+    return _LAYERS.sub(lambda m: m.group(1) + table + "\n" + m.group(2), text)
+
+
 def generated() -> dict[Path, str]:
     """Every generated doc: path -> text."""
     from aveas_format.schema.docs import render
@@ -163,6 +175,7 @@ def generated() -> dict[Path, str]:
         DOCS / "rules.md": rules_markdown(),
         DOCS / "cli.md": cli_markdown(),
         DOCS / "converters.md": converters_markdown(),
+        DOCS / "architecture.md": architecture_markdown(),
     }
 
 
@@ -273,8 +286,10 @@ def main() -> int:
         return tutorial_figures()
     if "--figures" in sys.argv[1:]:
         import derive_figures
+        import layers
 
-        for path in derive_figures.main(DOCS / "figures"):
+        for path in [*derive_figures.main(DOCS / "figures"),
+                     layers.figure(DOCS / "figures" / "architecture_layers.png")]:
             print(f"wrote {path}", file=sys.stderr)
         return 0
     for path, text in generated().items():
