@@ -1,10 +1,11 @@
-"""Shared fixtures (helpers live in tests/aveas_testing.py)."""
+"""Fixtures shared by more than one test folder (helper functions live in tests/helpers_*.py; see
+tests/README.md)."""
 
 from __future__ import annotations
 
 import pytest
 
-from aveas_testing import CONFORMANCE, small_recording
+from helpers_common import CONFORMANCE, small_recording
 
 
 @pytest.fixture
@@ -23,3 +24,14 @@ def conformance_path():
     if not CONFORMANCE.is_dir():
         pytest.skip(f"shared conformance recording not found at {CONFORMANCE}")
     return CONFORMANCE
+
+
+@pytest.fixture(scope="session")
+def sumo():
+    """The SUMO binary of the runner and fitter tests (tests/sim, tests/fit); skips without SUMO."""
+    from aveas_format.sim import SumoNotFoundError, find_sumo
+
+    try:
+        return find_sumo("sumo")
+    except SumoNotFoundError:
+        pytest.skip('SUMO not installed (pip install "aveas-format[sim]")')

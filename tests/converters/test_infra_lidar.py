@@ -17,7 +17,7 @@ import aveas_format
 from aveas_format.converters import convert, load_converters
 from aveas_format.opendrive.builder import straight_highway
 
-from aveas_testing import SHARED
+from helpers_common import SHARED
 
 CALIB = SHARED / "data" / "tum_traffic_calib" / "s110_lidar_ouster_south.json"
 ASAM_CUBOIDS = SHARED / "data" / "openlabel" / "asam_spec__openlabel100_example_cuboids.json"

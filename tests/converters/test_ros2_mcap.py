@@ -16,7 +16,7 @@ import aveas_format
 from aveas_format.converters import convert, load_converters
 from aveas_format.opendrive.builder import straight_highway
 
-from aveas_testing import SHARED
+from helpers_common import SHARED
 
 pytest.importorskip("mcap_ros2")
 from mcap_ros2.writer import Writer  # noqa: E402

@@ -13,7 +13,7 @@ import aveas_format
 from aveas_format.converters import convert, load_converters
 from aveas_format.opendrive.builder import straight_highway
 
-from aveas_testing import SHARED
+from helpers_common import SHARED
 
 SUMO = SHARED / "data" / "sumo"
 

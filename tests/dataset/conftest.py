@@ -4,14 +4,9 @@ from __future__ import annotations
 
 import json
 import shutil
-import sys
 from pathlib import Path
 
 import pytest
-
-# dataset_tasks (test-only task functions) must be importable here and in worker processes, which
-# inherit sys.path (multiprocessing spawn, Dask nannies)
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 #: (relative path, partner, method, road_type, seed, derived)
 LAYOUT = [

@@ -15,7 +15,7 @@ from aveas_format.dataset import conversion_groups, convert_dataset
 from aveas_format.errors import AveasError
 from aveas_format.opendrive.builder import straight_highway
 
-from aveas_testing import SHARED
+from helpers_common import SHARED
 
 FCD = SHARED / "data" / "sumo" / "fcd_cartesian_excerpt.xml"
 

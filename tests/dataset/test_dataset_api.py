@@ -19,7 +19,7 @@ from aveas_format.errors import AveasError
 from aveas_format.io import reader
 from aveas_format.io.reader import open_recording
 
-from dataset_tasks import validate_or_crash
+from helpers_dataset import validate_or_crash
 
 
 def test_discover_directories_globs_lists_and_urls(dataset_root, tmp_path):

@@ -8,7 +8,7 @@ import pytest
 
 from aveas_format import dataset as ds
 
-from dataset_tasks import validate_or_crash
+from helpers_dataset import validate_or_crash
 
 distributed = pytest.importorskip("distributed")
 dask = pytest.importorskip("dask")

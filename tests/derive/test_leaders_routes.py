@@ -15,7 +15,7 @@ from aveas_format.opendrive.model import (Connection, Geometry, Junction, Lane, 
                                           LaneSection, Road, RoadLink)
 from aveas_format.sample import SITE_CRS
 
-from .helpers import recording, row
+from helpers_derive import recording, row
 
 W = 3.5  # lane width
 L = 4.0  # vehicle length

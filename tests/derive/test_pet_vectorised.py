@@ -18,7 +18,7 @@ from aveas_format.derive.encroachments import (EncroachmentsParams, occupancy, s
                                                track_directions)
 from aveas_format.derive.interactions import InteractionsParams, _Samples
 
-from .helpers import VECTORS, recording, road_map, vectors
+from helpers_derive import VECTORS, recording, road_map, vectors
 
 ROOT = Path(__file__).resolve().parents[2]
 

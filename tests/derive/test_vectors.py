@@ -10,7 +10,7 @@ import shapely
 from aveas_format.derive import derive
 from aveas_format.derive.interactions import ttc_boxes
 
-from .helpers import VECTORS, recording, road_map, row, value, vectors
+from helpers_derive import VECTORS, recording, road_map, row, value, vectors
 
 pytestmark = pytest.mark.skipif(not VECTORS.is_file(), reason="shared vectors.json not found")
 LANE_Y = -1.75  # centre of lane -1 of the test map

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from odr_helpers import REAL_MAPS, fixture_map, real_map, require_real_maps
+from helpers_opendrive import REAL_MAPS, fixture_map, real_map, require_real_maps
 
 from aveas_format.opendrive import RoadNetwork
 

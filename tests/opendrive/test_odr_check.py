@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from odr_helpers import fixture_map
+from helpers_opendrive import fixture_map
 
 from aveas_format.opendrive import load_map
 from aveas_format.opendrive.builder import straight_highway

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from odr_helpers import CONTINUOUS_MAPS, fixture_map, real_map, require_real_maps
+from helpers_opendrive import CONTINUOUS_MAPS, fixture_map, real_map, require_real_maps
 from scipy.integrate import quad
 
 from aveas_format.opendrive import load_map

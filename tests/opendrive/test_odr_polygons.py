@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import shapely
-from odr_helpers import real_map, require_real_maps
+from helpers_opendrive import real_map, require_real_maps
 
 from aveas_format.opendrive import load_map
 from aveas_format.opendrive.builder import straight_highway

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from odr_helpers import fixture_map, real_map, require_real_maps
+from helpers_opendrive import fixture_map, real_map, require_real_maps
 
 from aveas_format.opendrive import load_map
 from aveas_format.opendrive.builder import curved_highway, straight_highway
@@ -296,7 +296,7 @@ def test_property_fixture_roads(road, a, b):
 
 
 def test_lane_type_lookup():
-    from odr_helpers import fixture_map
+    from helpers_opendrive import fixture_map
 
     net = fixture_map("geometry_types.xodr")
     rid = next(iter(net.roads))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from odr_helpers import (
+from helpers_opendrive import (
     DATA,
     REAL_MAPS,
     SHARED_XODR,

@@ -6,7 +6,7 @@ from functools import lru_cache
 
 import numpy as np
 import pytest
-from odr_helpers import xsd_16
+from helpers_opendrive import xsd_16
 from lxml import etree
 
 from aveas_format.errors import MapError

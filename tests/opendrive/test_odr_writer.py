@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from lxml import etree
-from odr_helpers import fixture_map, xsd_16
+from helpers_opendrive import fixture_map, xsd_16
 
 from aveas_format.opendrive import load_map
 from aveas_format.opendrive.builder import curved_highway, straight_highway

@@ -353,7 +353,7 @@ def _xosc_template() -> tuple[bytes, bytes]:
         import tempfile
 
         from aveas_format.converters import get_converter
-        from aveas_testing import small_recording
+        from helpers_common import small_recording
 
         with tempfile.TemporaryDirectory() as tmp:
             get_converter("openscenario", "export")(small_recording(n=2, steps=N), Path(tmp) / "s.xosc")

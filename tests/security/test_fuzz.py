@@ -19,8 +19,8 @@ import aveas_format
 from aveas_format.errors import AveasError
 from aveas_format.opendrive import load_map
 
-from aveas_testing import DATA, STRAIGHT_MAP, small_recording
-from fuzzing import OPS, mutate
+from helpers_common import DATA, STRAIGHT_MAP, small_recording
+from helpers_fuzz import OPS, mutate
 
 FUZZ = DATA / "fuzz"
 SETTINGS = settings(max_examples=int(__import__("os").environ.get("AVEAS_FUZZ_EXAMPLES", "40")), deadline=None,

@@ -17,8 +17,8 @@ from aveas_format.converters import convert
 from aveas_format.errors import AveasError
 from aveas_format.opendrive.builder import straight_highway
 
-from aveas_testing import SHARED
-from fuzzing import OPS, mutate
+from helpers_common import SHARED
+from helpers_fuzz import OPS, mutate
 
 N = int(os.environ.get("AVEAS_FUZZ_EXAMPLES", "25"))
 SETTINGS = settings(max_examples=N, deadline=None, derandomize=not os.environ.get("AVEAS_FUZZ_EXAMPLES"),
@@ -63,7 +63,7 @@ def test_openlabel(tmp_path_factory, ops):
 @pytest.fixture(scope="module")
 def xosc(tmp_path_factory):
     from aveas_format.converters import get_converter
-    from aveas_testing import small_recording
+    from helpers_common import small_recording
 
     d = tmp_path_factory.mktemp("x")
     get_converter("openscenario", "export")(small_recording(n=2, steps=10), d / "s.xosc")

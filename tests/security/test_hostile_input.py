@@ -18,7 +18,7 @@ from aveas_format.errors import AveasError, FormatError, MapError, RecordingIOEr
 from aveas_format.opendrive import load_map
 from aveas_format.safeio import load_json
 
-from aveas_testing import STRAIGHT_MAP
+from helpers_common import STRAIGHT_MAP
 
 
 def _xodr_with_doctype(doctype: str, body_ref: str) -> bytes:
@@ -108,7 +108,7 @@ def test_deeply_nested_recording_json(written):
 _WRITER = """
 import sys
 sys.path.insert(0, {tests!r})
-from aveas_testing import small_recording
+from helpers_common import small_recording
 rec = small_recording(n=400, steps=2500)
 print("ready", flush=True)
 while True:

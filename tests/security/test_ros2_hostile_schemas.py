@@ -7,7 +7,7 @@ from __future__ import annotations
 import time
 
 import pytest
-from aveas_testing import STRAIGHT_MAP
+from helpers_common import STRAIGHT_MAP
 
 from aveas_format.converters import convert
 from aveas_format.errors import AveasError

@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from sim.sim_helpers import PAPER, small_scenario
+from helpers_sim import PAPER, small_scenario
 
 import aveas_format
 from aveas_format.sim import SimulationError, SumoNotFoundError, find_sumo, simulate

@@ -7,9 +7,10 @@ from pathlib import Path
 
 import pytest
 
+# test_rule_corpus is imported by name by test_streaming and test_validate_reports
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import validate_factory as vf  # noqa: E402
+import helpers_validate as vf  # noqa: E402
 
 
 @pytest.fixture

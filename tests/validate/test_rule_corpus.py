@@ -1,6 +1,6 @@
 """The corpus of broken recordings: one per rule, each caught by exactly the intended rule.
 
-Every case mutates the clean recording of the fixture factory (``validate_factory``) in one way and
+Every case mutates the clean recording of the fixture factory (``helpers_validate``) in one way and
 states, as data, what the report must contain: the set of codes with findings is exactly the intended
 one, and its first finding is at the expected (row, participant_id). The clean recording itself has
 no finding at all (the passing fixture of every rule).
@@ -17,7 +17,7 @@ import pytest
 import shapely
 
 import aveas_format
-import validate_factory as vf
+import helpers_validate as vf
 from aveas_format.validate import load_rules
 
 # --- participants --------------------------------------------------------------------------------

@@ -12,7 +12,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 import test_rule_corpus as corpus
-import validate_factory as vf
+import helpers_validate as vf
 
 import aveas_format
 from aveas_format.errors import AveasError

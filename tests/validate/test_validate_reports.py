@@ -11,7 +11,7 @@ import jsonschema
 import pytest
 
 import aveas_format
-import validate_factory as vf
+import helpers_validate as vf
 from aveas_format.errors import FormatError
 from aveas_format.validate.config import ValidationConfig, config_toml
 from aveas_format.plot.report_html import render_html
@@ -149,7 +149,7 @@ def test_figures_of_a_large_recording_read_a_participant_subset(tmp_path):
     """Above the figure row budget, figures draw every k-th participant (and say so); findings
     located by state row only get their x/y from the file."""
     import test_rule_corpus as corpus
-    import validate_factory as vf
+    import helpers_validate as vf
 
     from aveas_format.plot.recording import open_for_figures
     from aveas_format.plot.report_html import render_html

@@ -11,7 +11,6 @@ built tables (inconsistencies between columns).
 from __future__ import annotations
 
 import copy
-from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -22,8 +21,9 @@ from aveas_format.mapref.build import build_recording
 from aveas_format.schema.pmf import one_hot
 from aveas_format.schema.tables import TABLES
 
-DATA = Path(__file__).resolve().parent.parent / "data"
-MAP = (DATA / "straight.xodr").read_text()
+from helpers_common import STRAIGHT_MAP
+
+MAP = STRAIGHT_MAP.read_text()
 CRS = "+proj=tmerc +lat_0=48.9 +lon_0=8.35 +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
 RATE = 25.0
 STEPS = 150  # 6 s

@@ -1,16 +1,17 @@
-"""Comparison helpers for the interoperability tests."""
+"""Comparison helpers and a rich recording for the interoperability tests of the converters
+(OpenLABEL, OpenSCENARIO, MCAP export)."""
 
 from __future__ import annotations
 
 import math
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 
-SHARED = Path(__file__).resolve().parents[3] / "shared"
+from helpers_common import SHARED
+
 OPENLABEL_DATA = SHARED / "data" / "openlabel"
 
 

@@ -1,4 +1,4 @@
-"""Module-level task functions for tests/test_parallel.py (picklable by worker processes)."""
+"""Module-level task functions for tests/parallel/test_parallel.py (picklable by worker processes)."""
 
 from __future__ import annotations
 

@@ -7,10 +7,10 @@ import json
 
 import numpy as np
 import pytest
-from aveas_testing import STRAIGHT_MAP
+from helpers_common import STRAIGHT_MAP
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from sim.sim_helpers import cli_simulated_recording, small_scenario
+from helpers_sim import cli_simulated_recording, small_scenario
 
 from aveas_format.fit import METRICS, FitConfig, fit_desired_speed, fit_parameters
 from aveas_format.fit.metrics import per_vehicle

@@ -12,7 +12,7 @@ import pytest
 import aveas_format
 from aveas_format.schema import versions
 
-from aveas_testing import DATA
+from helpers_common import DATA
 
 FROZEN = {"1.0.0": DATA / "versions" / "1.0.0" / "example.aveas"}
 

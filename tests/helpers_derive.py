@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 
@@ -11,7 +10,9 @@ from aveas_format.mapref.build import build_recording
 from aveas_format.opendrive.builder import straight_highway
 from aveas_format.sample import SITE_CRS
 
-VECTORS = Path(__file__).resolve().parents[3] / "shared" / "data" / "criticality" / "vectors.json"
+from helpers_common import SHARED
+
+VECTORS = SHARED / "data" / "criticality" / "vectors.json"
 
 
 def vectors() -> dict:

@@ -6,7 +6,7 @@ import pytest
 
 from aveas_format.parallel import run_tasks
 
-from parallel_tasks import crash_on_two, fail_on_three, square
+from helpers_parallel import crash_on_two, fail_on_three, square
 
 
 @pytest.mark.parametrize("workers", [1, 2])

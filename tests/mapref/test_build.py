@@ -12,7 +12,7 @@ from aveas_format.mapref import LocalFrame
 from aveas_format.mapref.build import heading_from_velocity, velocity_from_positions
 from aveas_format.numeric import wrap_angle
 
-from aveas_testing import STRAIGHT_MAP
+from helpers_common import STRAIGHT_MAP
 
 
 def test_readme_example(tmp_path):

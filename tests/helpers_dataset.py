@@ -1,4 +1,5 @@
-"""Module-level task functions for tests/dataset (picklable by worker processes and Dask)."""
+"""Module-level task functions for tests/dataset (picklable by worker processes and Dask: they
+import this module by name, which works because tests/ is on sys.path and spawned workers inherit it)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Helpers of the SUMO runner/fitter tests."""
+"""Helpers of the SUMO runner and fitter tests (tests/sim, tests/fit)."""
 
 from __future__ import annotations
 

@@ -24,7 +24,7 @@ from aveas_format.schema import versions
 from aveas_format.schema.pmf import argmax, normalise, pmf_problems
 from aveas_format.schema.taxonomy import CLASSES, PMF_TOLERANCE
 
-from aveas_testing import small_recording
+from helpers_common import small_recording
 
 K = len(CLASSES)
 SETTINGS = settings(max_examples=25, deadline=None,
@@ -116,7 +116,7 @@ def test_openlabel_round_trip_keeps_pmfs(data, tmp_path):
 
 @pytest.fixture
 def as_0_9_0(monkeypatch):
-    """Register the made-up 0.9.0 -> 1.0.0 step of tests/test_versions.py (a renamed metadata key)
+    """Register the made-up 0.9.0 -> 1.0.0 step of tests/schema/test_versions.py (a renamed metadata key)
     and return a function that turns a written 1.0.0 recording into a 0.9.0 one."""
     def meta_step(meta):
         meta["acquisition"]["partner"] = meta["acquisition"].pop("institution")

@@ -17,7 +17,7 @@ from aveas_format.schema.enums import Requirement
 from aveas_format.schema.metadata import WeatherPmf, timestamp_ns
 from aveas_format.schema.pmf import argmax, normalise, one_hot, pmf_problems
 
-from aveas_testing import CONFORMANCE, minimal_meta
+from helpers_common import CONFORMANCE, minimal_meta
 
 AVEAS_OPENLABEL_ORDER = ["animal", "bicycle", "bus", "car", "pedestrian", "mobility_device",
                          "motorcycle", "other", "pushable_pullable", "railvehicle", "trailer",

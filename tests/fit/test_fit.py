@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 import pytest
-from sim.sim_helpers import PAPER, cli_simulated_recording, small_scenario
+from helpers_sim import PAPER, cli_simulated_recording, small_scenario
 
 from aveas_format.fit import FitConfig, fit_desired_speed, load_runs
 from aveas_format.sim import simulate

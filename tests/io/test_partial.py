@@ -9,7 +9,7 @@ import aveas_format
 from aveas_format.io import writer
 from aveas_format.io.reader import ReadPlan
 
-from aveas_testing import small_recording
+from helpers_common import small_recording
 
 
 @pytest.fixture

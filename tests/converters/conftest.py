@@ -1,18 +1,16 @@
-"""Fixtures of the interoperability tests: a rich recording, the official schemas."""
+"""Fixtures of the converter tests: a rich recording (for the OpenLABEL, OpenSCENARIO and MCAP
+exports), the official OpenLABEL schema."""
 
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from helpers import rich_recording  # noqa: E402
+from helpers_converters import rich_recording
 
 
 @pytest.fixture(scope="session")

@@ -19,7 +19,7 @@ from aveas_format.converters import convert, get_converter
 from aveas_format.converters.openlabel import openlabel_to_recording, recording_to_openlabel
 from aveas_format.opendrive.builder import straight_highway
 
-from helpers import OPENLABEL_DATA, assert_recordings_equal, assert_tables_equal
+from helpers_converters import OPENLABEL_DATA, assert_recordings_equal, assert_tables_equal
 
 STRAIGHT = aveas_format.__path__[0] + "/../tests/data/straight.xodr"
 SITE = "+proj=tmerc +lat_0=48.9 +lon_0=8.35 +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"

@@ -18,7 +18,7 @@ from aveas_format.converters import convert, get_converter
 from aveas_format.converters.openlabel import openlabel_to_recording
 from aveas_format.sample import highway_scene
 
-from helpers import OPENLABEL_DATA
+from helpers_converters import OPENLABEL_DATA
 
 STRAIGHT = aveas_format.__path__[0] + "/../tests/data/straight.xodr"
 

@@ -11,8 +11,10 @@ from lxml import etree
 
 from aveas_format.opendrive import RoadNetwork, load_map
 
+from helpers_common import SHARED
+
 DATA = Path(__file__).resolve().parent / "opendrive" / "data"
-SHARED_XODR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "xodr"
+SHARED_XODR = SHARED / "data" / "xodr"
 REAL_MAPS = sorted(p.name for p in SHARED_XODR.glob("*.xodr")) if SHARED_XODR.is_dir() else []
 #: maps whose consecutive geometries meet to <= 1e-6 m in the file itself
 CONTINUOUS_MAPS = {

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.figure import Figure
-from odr_helpers import REAL_MAPS, fixture_map, real_map
+from helpers_opendrive import REAL_MAPS, fixture_map, real_map
 
 from aveas_format.opendrive import load_map
 from aveas_format.opendrive.builder import curved_highway

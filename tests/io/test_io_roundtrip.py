@@ -20,8 +20,8 @@ from aveas_format.schema import TABLES, RecordingMeta
 from aveas_format.schema.columns import Column
 from aveas_format.schema.taxonomy import CATEGORY_SETS
 
-from aveas_testing import STRAIGHT_MAP
-from aveas_testing import minimal_meta
+from helpers_common import STRAIGHT_MAP
+from helpers_common import minimal_meta
 
 
 def random_column(c: Column, n: int, rng: np.random.Generator) -> pa.Array:
