@@ -1,10 +1,10 @@
 """The real-file suite: every importer run over files other tools wrote (`../shared/data/`).
 
 One test module per source kind (`test_<kind>.py`) parametrises over every matching file with
-:func:`real_files`; without `../shared` beside the checkout each such test is skipped with one
-reason. A test converts, validates (no error findings unless the file itself is defective, and then
-the finding is asserted), exports and re-imports, and checks plausibility against the source
-(object and frame counts, positions on the map, speeds and sizes within the class's range).
+``helpers_realdata.real_files``. A test converts, validates (no error findings unless the file itself
+is defective, and then the finding is asserted), exports and re-imports, and checks plausibility
+against the source (object and frame counts, positions on the map, speeds and sizes within the
+class's range).
 """
 
 from __future__ import annotations
@@ -13,21 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from aveas_testing import SHARED
-
-DATA = SHARED / "data"
-REAL = DATA / "real"
-ABSENT = f"real-file suite: the shared data folder is not at {DATA} (clone ../shared beside the checkout)"
-
-
-def real_files(*patterns: str) -> list:
-    """``pytest.param(path, id=...)`` for every file under ``../shared/data`` matching one of the
-    glob ``patterns`` (relative to ``../shared/data``), sorted; one skipped param when the folder is
-    absent, so that parametrised tests report one clear reason."""
-    if not DATA.is_dir():
-        return [pytest.param(None, id="shared-data-absent", marks=pytest.mark.skip(reason=ABSENT))]
-    paths = sorted({p for pat in patterns for p in DATA.glob(pat) if p.is_file()})
-    return [pytest.param(p, id=str(p.relative_to(DATA))) for p in paths]
+from helpers_realdata import ABSENT, DATA
 
 
 @pytest.fixture
