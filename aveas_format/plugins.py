@@ -60,7 +60,7 @@ KINDS: dict[str, Kind] = {k.name: k for k in (
     Kind("converters", "aveas_format.converters", ("registry", "common")),
     Kind("rules", "aveas_format.validate.rules"),
     Kind("derivations", "aveas_format.derive", ("registry",)),
-    Kind("commands", "aveas_format.cli", ("app", "common")),
+    Kind("commands", "aveas_format.cli", ("app", "common", "options")),
 )}
 
 _done: set[str] = set()

@@ -8,56 +8,51 @@ from pathlib import Path
 import typer
 
 from aveas_format.cli.app import app
-from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors
+from aveas_format.cli.common import err, handle_errors
+from aveas_format.cli.options import (
+    check_rules,
+    comma_list,
+    dataset_argument,
+    discover_dataset,
+    ignore_option,
+    overwrite_option,
+    print_failure,
+    refuse_overwrite,
+    scheduler_option,
+    select_option,
+    validate_option,
+    workers_option,
+)
 
 
 @app.command()
 @handle_errors
 def catalog(
-    dataset: list[str] = typer.Argument(..., metavar="DATASET...", help="Recordings: a "
-                                        "directory of recordings, paths, globs or URLs."),
+    dataset: list[str] = dataset_argument(),
     output: Path = typer.Option(..., "--output", "-o", help="The catalog file: .parquet "
                                 "(default), .csv or .jsonl."),
-    validate: bool = typer.Option(True, "--validate/--no-validate", help="Run the validator "
-                                  "for the validity columns (errors, warnings, valid)."),
-    select: list[str] = typer.Option(None, "--select", help="Validate only these rules."),
-    ignore: list[str] = typer.Option(None, "--ignore", help="Skip these rules."),
-    workers: int = typer.Option(0, "--workers", "-j", min=0, help="Local worker processes "
-                                "(0 = one per core, 1 = in this process)."),
-    scheduler: str = typer.Option(None, "--scheduler", help="Address of a Dask scheduler "
-                                  "(tcp://HOST:PORT) (needs aveas-format[dask])."),
-    overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUTPUT if it exists."),
+    validate: bool = validate_option(help="Run the validator for the validity columns (errors, "
+                                     "warnings, valid)."),
+    select: list[str] = select_option(help="Validate only these rules."),
+    ignore: list[str] = ignore_option(help="Skip these rules."),
+    workers: int = workers_option(),
+    scheduler: str = scheduler_option(),
+    overwrite: bool = overwrite_option(help="Replace OUTPUT if it exists."),
 ) -> None:
     """Catalog a dataset: one row per recording (id, partner, method, provenance, site, start
     time, duration, participants per class, rate, coverage area, validity, criticality) from
     recording.json and small tables only. Exit 3 when a recording could not be read (it still
     gets a row, with `read_error`)."""
     from aveas_format.dataset import catalog as build
-    from aveas_format.dataset import discover, write_catalog
+    from aveas_format.dataset import write_catalog
 
-    if output.exists() and not overwrite:
-        raise fail(f"{output}: exists; pass --overwrite to replace it", EXIT_USAGE)
-
-    def split(v: list[str] | None) -> list[str] | None:
-        return [p.strip() for item in v for p in item.split(",") if p.strip()] if v else None
-
+    refuse_overwrite(output, overwrite)
+    only, skip = comma_list(select), comma_list(ignore)
     if validate:
-        from aveas_format.validate.registry import select_rules
-
-        try:
-            select_rules(split(select), split(ignore))
-        except ValueError as e:
-            raise fail(str(e), EXIT_USAGE) from None
-    paths = discover(dataset)
-    err.print(f"cataloguing {len(paths)} recordings "
-              + (f"on {scheduler}" if scheduler else f"with {workers or 'all'} worker(s)"))
-
-    def stream(r) -> None:
-        if not r.ok:
-            err.print(f"failed {r.item}: {r.error}", markup=False, highlight=False)
-
+        check_rules(only, skip)
+    paths = discover_dataset(dataset, "cataloguing", workers, scheduler)
     table = build(paths, validate=validate, workers=workers or None, scheduler=scheduler,
-                  progress=True, select=split(select), ignore=split(ignore), on_result=stream)
+                  progress=True, select=only, ignore=skip, on_result=print_failure)
     write_catalog(table, output)
     failed = table.num_rows - table.column("read_error").null_count
     err.print(f"{table.num_rows} recordings -> {output}"

@@ -1,13 +1,11 @@
-"""Shared pieces of the CLI: the console, error handling, options."""
+"""Shared pieces of the CLI: the consoles, exit codes and error handling (the options several
+commands share are declared in :mod:`aveas_format.cli.options`)."""
 
 from __future__ import annotations
 
 import functools
-import json
 import sys
 import traceback
-import typing
-from pathlib import Path
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -65,43 +63,3 @@ def handle_errors(fn: F) -> F:
                        "traceback and please report it)") from None
 
     return wrapper  # type: ignore[return-value]
-
-
-def parse_option_pairs(pairs: list[str], model: type) -> dict[str, Any]:
-    """``["net_file=a.net.xml", "vtypes=a.rou.xml,b.rou.xml", "geo=true"]`` -> dict.
-
-    Values are read as JSON where they parse (numbers, booleans, lists), else as strings; a
-    comma-separated string becomes a list for list-typed options.
-    """
-    out_: dict[str, Any] = {}
-    fields = getattr(model, "model_fields", {})
-    for pair in pairs:
-        if "=" not in pair:
-            raise ValueError(f"--option {pair!r}: expected KEY=VALUE")
-        key, raw = pair.split("=", 1)
-        key = key.strip().replace("-", "_")
-        try:
-            value: Any = json.loads(raw)
-        except json.JSONDecodeError:
-            value = raw
-        ann = fields[key].annotation if key in fields else None
-        if typing.get_origin(ann) in (list, tuple) and isinstance(value, str):
-            value = [v for v in value.split(",") if v]
-        out_[key] = value
-    return out_
-
-
-def converter_options(options_file: Path | None, pairs: list[str] | None, model: type) -> dict[str, Any]:
-    """Options of a converter/exporter from ``--options FILE.json`` and ``-O KEY=VALUE`` pairs
-    (pairs win); a usage error (exit 2) when the file or a pair cannot be read."""
-    raw: dict[str, Any] = {}
-    if options_file:
-        try:
-            raw.update(json.loads(options_file.read_text()))
-        except (OSError, json.JSONDecodeError) as e:
-            raise fail(f"{options_file}: cannot read options: {e}", EXIT_USAGE) from None
-    try:
-        raw.update(parse_option_pairs(pairs or [], model))
-    except ValueError as e:
-        raise fail(str(e), EXIT_USAGE) from None
-    return raw

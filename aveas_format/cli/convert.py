@@ -7,7 +7,20 @@ import typer
 from rich.table import Table
 
 from aveas_format.cli.app import app
-from aveas_format.cli.common import EXIT_USAGE, converter_options, err, fail, handle_errors, out
+from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, out
+from aveas_format.cli.options import (
+    converter_options,
+    option_pairs_option,
+    options_file_option,
+    overwrite_option,
+    print_failure,
+    refuse_overwrite,
+    run_summary,
+    scheduler_option,
+    validate_option,
+    validate_written,
+    workers_option,
+)
 
 
 @app.command()
@@ -18,22 +31,20 @@ def convert(
     map_file: Path = typer.Option(None, "--map", "-m", help="The OpenDRIVE map the data refers to."),
     output: Path = typer.Option(None, "--output", "-o", help="Output recording (NAME.aveas or "
                                 "NAME.aveas.zip)."),
-    option: list[str] = typer.Option(None, "--option", "-O", help="Converter option KEY=VALUE "
-                                     "(repeatable; see docs/converters.md)."),
-    options_file: Path = typer.Option(None, "--options", help="Converter options as a JSON file."),
-    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output."),
+    option: list[str] = option_pairs_option("Converter"),
+    options_file: Path = options_file_option("Converter"),
+    overwrite: bool = overwrite_option(),
     list_: bool = typer.Option(False, "--list", help="List the converters and exit."),
     each: bool = typer.Option(False, "--each", help="Many recordings: each INPUT (a file, or a "
                               "directory of files) becomes OUTPUT/NAME.aveas; OUTPUT is a directory."),
     group: str = typer.Option(None, "--group", help="With --each: group input files into "
                               "recordings by the first capture group of this regular expression on "
                               "their names, e.g. '^(\\d+)_' for levelX."),
-    workers: int = typer.Option(0, "--workers", "-j", min=0, help="With --each: local worker "
-                                "processes (0 = one per core)."),
-    scheduler: str = typer.Option(None, "--scheduler", help="With --each: address of a Dask "
-                                  "scheduler (tcp://HOST:PORT)."),
-    validate_: bool = typer.Option(True, "--validate/--no-validate", help="Validate the result "
-                                   "and report errors (exit 1 when it has any)."),
+    workers: int = workers_option(scope="With --each",
+                                  help="local worker processes (0 = one per core)."),
+    scheduler: str = scheduler_option(scope="With --each",
+                                      help="address of a Dask scheduler (tcp://HOST:PORT)."),
+    validate_: bool = validate_option(),
 ) -> None:
     """Convert source data into a recording: `aveas-format convert --from sumo-fcd fcd.xml --map
     net.xodr -o run.aveas`."""
@@ -55,8 +66,7 @@ def convert(
         _convert_many(source, [str(i) for i in inputs], map_file, raw, output, group, overwrite,
                       validate_, workers, scheduler)
         return
-    if output.exists() and not overwrite:
-        raise fail(f"{output}: exists; pass --overwrite to replace it", EXIT_USAGE)
+    refuse_overwrite(output, overwrite)
     from aveas_format.converters.registry import convert as run
 
     rec = run(source, inputs, map_source=map_file, options=raw)
@@ -64,14 +74,7 @@ def convert(
     err.print(f"wrote {path}: {rec.participants.num_rows} participants, "
               f"{rec.states.num_rows:,} states")
     if validate_:
-        import aveas_format
-        from aveas_format.validate.render import render_text
-
-        report = aveas_format.validate(path)
-        if report.counts["error"]:
-            out.print(render_text(report), end="")
-            raise typer.Exit(1)
-        err.print(f"valid: {report.counts['warning']} warnings, {report.counts['info']} info")
+        validate_written(path)
 
 
 def _convert_many(source: str, inputs: list[str], map_file: Path | None, raw: dict, output: Path,
@@ -85,23 +88,14 @@ def _convert_many(source: str, inputs: list[str], map_file: Path | None, raw: di
 
     if output.exists() and not output.is_dir():
         raise fail(f"{output}: with --each, --output is a directory", EXIT_USAGE)
-
-    def stream(r) -> None:
-        if not r.ok:
-            err.print(f"failed {r.item}: {r.error}", markup=False, highlight=False)
-
     rep = convert_dataset(inputs, source=source, output_dir=output,
                           map_source=str(map_file) if map_file else None, options=raw,
                           group=group, overwrite=overwrite, validate=validate_,
                           workers=workers or None, scheduler=scheduler, progress=True,
-                          on_result=stream)
+                          on_result=print_failure)
     d = rep.to_dict()
-    print(json.dumps({"recordings": d["recordings"], "completed": d["completed"],
-                      "failed": d["failed"], "seconds": d["seconds"],
-                      "results": [{k: e.get(k) for k in ("path", "output", "participants", "states",
-                                                          "counts")} for e in d["entries"]],
-                      "failures": [{"path": f["path"], "error": f["error"]}
-                                   for f in d["failures"]]}, indent=2))
+    print(json.dumps(run_summary(d, ("path", "output", "participants", "states", "counts")),
+                     indent=2))
     err.print(f"converted {d['completed']} of {d['recordings']} -> {output}"
               + (f", {d['failed']} failed" if d["failed"] else ""))
     raise typer.Exit(rep.exit_code())

@@ -5,11 +5,23 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import NoReturn
 
 import typer
 
 from aveas_format.cli.app import app
 from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors
+from aveas_format.cli.options import (
+    discover_dataset,
+    overwrite_option,
+    print_failure,
+    recordings_argument,
+    refuse_overwrite,
+    run_summary,
+    scheduler_option,
+    single_recording,
+    workers_option,
+)
 
 
 def _parse_params(items: list[str]) -> dict[str, dict]:
@@ -32,17 +44,14 @@ def _parse_params(items: list[str]) -> dict[str, dict]:
 @app.command()
 @handle_errors
 def derive(
-    recordings: list[str] = typer.Argument(..., metavar="RECORDING...", help="A recording "
-                                           "(NAME.aveas directory or NAME.aveas.zip), or a "
-                                           "dataset: a directory of recordings, several paths, "
-                                           "globs or URLs (then --output is a directory)."),
+    recordings: list[str] = recordings_argument(urls="URLs (then --output is a directory)"),
     only: list[str] = typer.Option(None, "--only", help="Run only this derivation (repeatable): "
                                    "kinematics, interactions, encroachments, traffic, events. "
                                    "Missing prerequisites run too."),
     output: Path | None = typer.Option(None, "--output", "-o", help="Write the result here."),
     in_place: bool = typer.Option(False, "--in-place", help="Replace the input recording "
                                   "(atomically)."),
-    overwrite: bool = typer.Option(False, "--overwrite", help="Replace OUTPUT if it exists."),
+    overwrite: bool = overwrite_option(help="Replace OUTPUT if it exists."),
     ttc: float | None = typer.Option(None, "--ttc", help="TTC threshold (s) for near-miss "
                                      "events (default: recording.json thresholds.ttc_s, else 1.5)."),
     pet: float | None = typer.Option(None, "--pet", help="PET threshold (s) for near-miss "
@@ -52,10 +61,8 @@ def derive(
     param: list[str] = typer.Option(None, "--param", help="A derivation parameter as "
                                     "NAME.PARAM=VALUE (repeatable; VALUE in JSON), e.g. "
                                     "traffic.cell_duration_s=30."),
-    workers: int = typer.Option(0, "--workers", "-j", min=0, help="Dataset: local worker "
-                                "processes (0 = one per core, 1 = in this process)."),
-    scheduler: str = typer.Option(None, "--scheduler", help="Dataset: address of a Dask "
-                                  "scheduler (tcp://HOST:PORT) (needs aveas-format[dask])."),
+    workers: int = workers_option(scope="Dataset"),
+    scheduler: str = scheduler_option(scope="Dataset"),
     report: Path = typer.Option(None, "--report", help="Dataset: also write the dataset report "
                                 "to FILE (.json or .html)."),
 ) -> None:
@@ -65,18 +72,13 @@ def derive(
     from aveas_format.derive import derive as run_derive
     from aveas_format.derive.registry import derivations
 
-    from aveas_format.dataset import is_dataset_spec
-
-    dataset = is_dataset_spec(recordings)
+    recording = single_recording(recordings)  # None: a dataset
     if output is None and not in_place:
         raise fail("give --output PATH or --in-place", EXIT_USAGE)
     if output is not None and in_place:
         raise fail("give either --output or --in-place, not both", EXIT_USAGE)
-    recording = Path(recordings[0])
-    target = recording if in_place else output
-    assert target is not None
-    if not dataset and not in_place and target.exists() and not overwrite:
-        raise fail(f"{target}: exists; pass --overwrite to replace it", EXIT_USAGE)
+    if recording is not None and output is not None:
+        refuse_overwrite(output, overwrite)
     known = derivations()
     for name in only or []:
         if name not in known:
@@ -94,9 +96,11 @@ def derive(
         ev["pet_s"] = pet
     if hard_braking is not None:
         ev["hard_braking_mps2"] = hard_braking
-    if dataset:
+    if recording is None:
         _derive_dataset(recordings, output, in_place, overwrite, list(only) if only else None,
                         params, workers, scheduler, report)
+    target = recording if in_place else output
+    assert target is not None  # --output or --in-place, checked above
     rec = aveas_format.open(recording)
     ran = run_derive(rec, only=list(only) if only else None, **params)
     path = rec.write(target, overwrite=in_place or overwrite)
@@ -109,34 +113,23 @@ def derive(
 
 def _derive_dataset(specs: list[str], output: Path | None, in_place: bool, overwrite: bool,
                     only: list[str] | None, params: dict, workers: int, scheduler: str | None,
-                    report: Path | None) -> None:
+                    report: Path | None) -> NoReturn:
     """Derive every recording of a dataset, one task each, into the directory OUTPUT (same
     relative layout) or in place; exit 3 when any recording failed."""
-    from aveas_format.dataset import derive_dataset, discover, is_recording
+    from aveas_format.dataset import derive_dataset, is_recording
     from aveas_format.safeio import write_text_atomic
 
     if output is not None and output.exists() and (not output.is_dir() or is_recording(output)):
         raise fail(f"{output}: for a dataset, --output is a directory (of recordings)",
                    EXIT_USAGE)
-    paths = discover(specs)
-    err.print(f"deriving {len(paths)} recordings "
-              + (f"on {scheduler}" if scheduler else f"with {workers or 'all'} worker(s)"))
-
-    def stream(r) -> None:
-        if not r.ok:
-            err.print(f"failed {r.item}: {r.error}", markup=False, highlight=False)
-
+    paths = discover_dataset(specs, "deriving", workers, scheduler)
     rep = derive_dataset(paths, output_dir=output, in_place=in_place, overwrite=overwrite,
                          only=only, params=params, workers=workers or None, scheduler=scheduler,
-                         progress=True, specs=list(specs), on_result=stream)
+                         progress=True, specs=list(specs), on_result=print_failure)
     d = rep.to_dict()
-    summary = {"recordings": d["recordings"], "completed": d["completed"], "failed": d["failed"],
-               "exit_code": d["exit_code"], "seconds": d["seconds"],
-               "results": [{k: e.get(k) for k in ("path", "recording_id", "output", "derived",
-                                                   "tables", "events", "min_ttc_s", "min_pet_s",
-                                                   "near_misses", "hard_braking")}
-                           for e in d["entries"]],
-               "failures": [{"path": f["path"], "error": f["error"]} for f in d["failures"]]}
+    summary = run_summary(d, ("path", "recording_id", "output", "derived", "tables", "events",
+                              "min_ttc_s", "min_pet_s", "near_misses", "hard_braking"),
+                          exit_code=True)
     print(json.dumps(summary, indent=2))
     if report is not None:
         write_text_atomic(report, rep.to_html() if report.suffix.lower() in (".html", ".htm")

@@ -8,7 +8,14 @@ import typer
 from rich.table import Table
 
 from aveas_format.cli.app import app
-from aveas_format.cli.common import EXIT_USAGE, converter_options, err, fail, handle_errors, out
+from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, out
+from aveas_format.cli.options import (
+    converter_options,
+    option_pairs_option,
+    options_file_option,
+    overwrite_option,
+    refuse_overwrite,
+)
 
 
 @app.command()
@@ -19,10 +26,9 @@ def export(
                                "mcap, osi (see --list)."),
     output: Path = typer.Option(None, "--output", "-o", help="Output file (companion files such "
                                 "as the map are written next to it)."),
-    option: list[str] = typer.Option(None, "--option", "-O", help="Exporter option KEY=VALUE "
-                                     "(repeatable; see docs/converters.md)."),
-    options_file: Path = typer.Option(None, "--options", help="Exporter options as a JSON file."),
-    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output."),
+    option: list[str] = option_pairs_option("Exporter"),
+    options_file: Path = options_file_option("Exporter"),
+    overwrite: bool = overwrite_option(),
     list_: bool = typer.Option(False, "--list", help="List the exporters and exit."),
 ) -> None:
     """Export a recording to a foreign format: `aveas-format export --to openlabel run.aveas -o
@@ -43,8 +49,7 @@ def export(
         raise fail("--to NAME, RECORDING and --output are required (or --list)", EXIT_USAGE)
     conv = get_converter(target, "export")
     raw = converter_options(options_file, option, conv.options)
-    if output.exists() and not overwrite:
-        raise fail(f"{output}: exists; pass --overwrite to replace it", EXIT_USAGE)
+    refuse_overwrite(output, overwrite)
     if output.parent and not output.parent.exists():
         raise fail(f"{output.parent}: no such directory", EXIT_USAGE)
     import aveas_format

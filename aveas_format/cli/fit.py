@@ -8,7 +8,8 @@ from pathlib import Path
 import typer
 
 from aveas_format.cli.app import app
-from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, out, parse_option_pairs
+from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, out
+from aveas_format.cli.options import SIMULATION_WORKERS, parse_option_pairs, scheduler_option
 
 fit_app = typer.Typer(help="Fit behaviour-model parameters to recordings (maximum likelihood "
                       "with SUMO; docs/fitting.md).", no_args_is_help=True)
@@ -96,9 +97,7 @@ _OUTPUT = typer.Option(..., "--output", "-o", help="Output directory (runs.jsonl
                        "best.json, figures); an existing one is resumed.")
 _CONFIG = typer.Option(None, "--config", "-c", help="Scenario TOML of the simulation (default: the "
                        "paper's autobahn).")
-_WORKERS = typer.Option(1, "--workers", "-w", help="Local processes (0 = one per core).")
-_SCHEDULER = typer.Option(None, "--scheduler", help="Dask scheduler address tcp://... (overrides "
-                          "--workers).")
+_SCHEDULER = scheduler_option(help="Dask scheduler address tcp://... (overrides --workers).")
 _MAXFEV = typer.Option(120, "--maxfev", help="Evaluations per restart at most.")
 _SEED = typer.Option(0, "--seed", help="Seed of the starting points.")
 _ROAD = typer.Option(None, "--road", help="Use only samples on this road id.")
@@ -112,7 +111,7 @@ def desired_speed(
     output: Path = _OUTPUT,
     config: Path = _CONFIG,
     restarts: int = typer.Option(100, "--restarts", "-r", min=1, help="Nelder-Mead starts."),
-    workers: int = _WORKERS,
+    workers: int = SIMULATION_WORKERS,
     scheduler: str = _SCHEDULER,
     maxfev: int = _MAXFEV,
     seed: int = _SEED,
@@ -140,7 +139,7 @@ def car_following(
                                "time_headway, min_ttc, a_lon_std or mean_speed."),
     config: Path = _CONFIG,
     restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Nelder-Mead starts."),
-    workers: int = _WORKERS,
+    workers: int = SIMULATION_WORKERS,
     scheduler: str = _SCHEDULER,
     maxfev: int = _MAXFEV,
     seed: int = _SEED,

@@ -8,7 +8,15 @@ from pathlib import Path
 import typer
 
 from aveas_format.cli.app import app
-from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, out
+from aveas_format.cli.common import err, handle_errors, out
+from aveas_format.cli.options import (
+    SIMULATION_WORKERS,
+    overwrite_option,
+    refuse_overwrite,
+    scheduler_option,
+    validate_option,
+    validate_written,
+)
 
 sim_app = typer.Typer(help="Simulate traffic with Eclipse SUMO (needs `pip install "
                       "\"aveas-format[sim]\"`).", no_args_is_help=True)
@@ -38,15 +46,14 @@ def run(
     duration: float = typer.Option(None, "--duration", help="Override the demand period (s)."),
     workdir: Path = typer.Option(None, "--workdir", help="Keep SUMO's files here (default: a "
                                  "temporary directory)."),
-    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing output."),
-    validate_: bool = typer.Option(True, "--validate/--no-validate", help="Validate the result."),
+    overwrite: bool = overwrite_option(),
+    validate_: bool = validate_option(help="Validate the result."),
 ) -> None:
     """Run a scenario with SUMO and write the result as a recording: `aveas-format sim run --config
     scenario.toml -o sim.aveas`."""
     from aveas_format.sim.runner import simulate
 
-    if output.exists() and not overwrite:
-        raise fail(f"{output}: exists; pass --overwrite to replace it", EXIT_USAGE)
+    refuse_overwrite(output, overwrite)
     sc = _scenario(config, seed, duration)
     res = simulate(sc, recording=True, workdir=workdir)
     path = res.recording.write(output, overwrite=overwrite)
@@ -58,14 +65,7 @@ def run(
             err.print(f"  {c}: {len(v)} vehicles on the measurement section, mean speed "
                       f"{v.mean():.1f} km/h (sd {v.std(ddof=1) if len(v) > 1 else 0:.1f})")
     if validate_:
-        import aveas_format
-        from aveas_format.validate.render import render_text
-
-        report = aveas_format.validate(path)
-        if report.counts["error"]:
-            out.print(render_text(report), end="")
-            raise typer.Exit(1)
-        err.print(f"valid: {report.counts['warning']} warnings, {report.counts['info']} info")
+        validate_written(path)
 
 
 @sim_app.command("sensitivity")
@@ -82,8 +82,8 @@ def sensitivity_cmd(
                                    "parameter."),
     duration: float = typer.Option(None, "--duration", help="Override the demand period (s) "
                                    "(the paper: 4 h)."),
-    workers: int = typer.Option(1, "--workers", "-w", help="Local processes (0 = one per core)."),
-    scheduler: str = typer.Option(None, "--scheduler", help="Dask scheduler address tcp://..."),
+    workers: int = SIMULATION_WORKERS,
+    scheduler: str = scheduler_option(help="Dask scheduler address tcp://..."),
     min_ttc_samples: int = typer.Option(1, "--min-ttc-samples", min=1, help="TTC samples a vehicle "
                                         "needs for its mean TTC to count in the minimum mean TTC."),
 ) -> None:

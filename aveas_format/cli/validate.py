@@ -2,14 +2,28 @@
 
 from __future__ import annotations
 
+import functools
 import json
 from enum import Enum
 from pathlib import Path
+from typing import NoReturn
 
 import typer
 
 from aveas_format.cli.app import app
-from aveas_format.cli.common import EXIT_USAGE, fail, handle_errors
+from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors
+from aveas_format.cli.options import (
+    check_rules,
+    comma_list,
+    discover_dataset,
+    ignore_option,
+    print_failure,
+    recordings_argument,
+    scheduler_option,
+    select_option,
+    single_recording,
+    workers_option,
+)
 
 
 class FailOn(str, Enum):
@@ -32,13 +46,9 @@ def _print_and_exit(text: str) -> None:
 @app.command()
 @handle_errors
 def validate(
-    recordings: list[str] = typer.Argument(None, metavar="RECORDING...", help="A recording "
-                                           "(NAME.aveas directory or NAME.aveas.zip), or a "
-                                           "dataset: a directory of recordings, several paths, "
-                                           "globs or file:// / s3:// URLs."),
-    select: list[str] = typer.Option(None, "--select", help="Run only these rules (codes or "
-                                     "families, repeatable or comma-separated)."),
-    ignore: list[str] = typer.Option(None, "--ignore", help="Skip these rules (codes or families)."),
+    recordings: list[str] = recordings_argument(None, urls="file:// / s3:// URLs"),
+    select: list[str] = select_option(),
+    ignore: list[str] = ignore_option(),
     fail_on: FailOn = typer.Option(FailOn.error, "--fail-on", help="Exit 1 when a finding at or "
                                    "above this severity exists."),
     fmt: Format = typer.Option(Format.text, "--format", help="Report format: text (greppable "
@@ -53,11 +63,10 @@ def validate(
                                        "the JSON report and exit."),
     print_config: bool = typer.Option(False, "--print-config", help="Print the default "
                                       "thresholds as TOML and exit."),
-    workers: int = typer.Option(0, "--workers", "-j", min=0, help="Dataset: local worker "
-                                "processes (0 = one per core, 1 = in this process)."),
-    scheduler: str = typer.Option(None, "--scheduler", help="Dataset: address of a Dask "
-                                  "scheduler (tcp://HOST:PORT) to run on instead of local "
-                                  "processes (needs aveas-format[dask])."),
+    workers: int = workers_option(scope="Dataset"),
+    scheduler: str = scheduler_option(scope="Dataset", help="address of a Dask scheduler "
+                                      "(tcp://HOST:PORT) to run on instead of local processes "
+                                      "(needs aveas-format[dask])."),
     reports_dir: Path = typer.Option(None, "--reports-dir", help="Dataset: write every "
                                      "recording's JSON report and the dataset report (JSON + "
                                      "HTML) into this directory."),
@@ -79,22 +88,17 @@ def validate(
     from aveas_format.validate import validate as run
     from aveas_format.validate.render import render_json, render_text
 
-    def split(v: list[str] | None) -> list[str] | None:
-        return [p.strip() for item in v for p in item.split(",") if p.strip()] if v else None
-
     try:
         cfg = ValidationConfig.load(config)
     except FormatError as e:
         raise fail(str(e), EXIT_USAGE) from None
-    from aveas_format.dataset import is_dataset_spec
-
-    if is_dataset_spec(recordings):
-        _validate_dataset(recordings, split(select), split(ignore), cfg, max_sample, fail_on.value,
-                          fmt, output, workers, scheduler, reports_dir, top)
-    recording = Path(recordings[0])
+    only, skip = comma_list(select), comma_list(ignore)
+    recording = single_recording(recordings)
+    if recording is None:
+        _validate_dataset(recordings, only, skip, cfg, max_sample, fail_on.value, fmt, output,
+                          workers, scheduler, reports_dir, top)
     try:
-        report = run(recording, select=split(select), ignore=split(ignore), config=cfg,
-                     max_sample=max_sample)
+        report = run(recording, select=only, ignore=skip, config=cfg, max_sample=max_sample)
     except ValueError as e:
         if "unknown rule or family" in str(e):
             raise fail(str(e), EXIT_USAGE) from None
@@ -119,29 +123,17 @@ def validate(
 def _validate_dataset(specs: list[str], select: list[str] | None, ignore: list[str] | None,
                       cfg, max_sample: int, fail_on: str, fmt: Format, output: Path | None,
                       workers: int, scheduler: str | None, reports_dir: Path | None,
-                      top: int) -> None:
+                      top: int) -> NoReturn:
     """Validate every recording of a dataset, one task each; exit with the worst code."""
-    from aveas_format.cli.common import err
-    from aveas_format.dataset import discover, validate_dataset
+    from aveas_format.dataset import validate_dataset
     from aveas_format.safeio import write_text_atomic
-    from aveas_format.validate.registry import select_rules
 
-    try:
-        select_rules(select, ignore)
-    except ValueError as e:
-        raise fail(str(e), EXIT_USAGE) from None
-    paths = discover(specs)
-    err.print(f"validating {len(paths)} recordings "
-              + (f"on {scheduler}" if scheduler else f"with {workers or 'all'} worker(s)"))
-
-    def stream(r) -> None:
-        if not r.ok:
-            err.print(f"[red]failed[/red] {r.item}: {r.error}", markup=True, highlight=False)
-
+    check_rules(select, ignore)
+    paths = discover_dataset(specs, "validating", workers, scheduler)
     rep = validate_dataset(paths, select=select, ignore=ignore, config=cfg, max_sample=max_sample,
                            reports_dir=reports_dir, fail_on=fail_on, workers=workers or None,
                            scheduler=scheduler, progress=True, specs=list(specs),
-                           on_result=stream)
+                           on_result=functools.partial(print_failure, red=True))
     if reports_dir:
         write_text_atomic(reports_dir / "dataset-report.json", rep.to_json(top))
         write_text_atomic(reports_dir / "dataset-report.html", rep.to_html(top))
