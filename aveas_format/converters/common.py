@@ -128,7 +128,7 @@ def _numeric(table: pa.Table, numeric: Sequence[str], path: Path, header_lines: 
             num = _try_float(s)
             if num is None:
                 vals = s.to_pylist()
-                bad = next(i for i, v in enumerate(vals) if v not in (None, "") and not _is_float(v))
+                bad = next(i for i, v in enumerate(vals) if v not in (None, "") and not is_float(v))
                 raise FormatError(f"column {c!r}: {vals[bad]!r} is not a number", path=path,
                                   line=bad + 1 + header_lines if header_lines else None,
                                   row=None if header_lines else bad)
@@ -145,7 +145,9 @@ def _try_float(s: pa.ChunkedArray) -> pa.ChunkedArray | None:
         return None
 
 
-def _is_float(v: str) -> bool:
+def is_float(v: str) -> bool:
+    """Does ``float(v)`` accept the string ``v`` (for locating the first value that is not a
+    number)?"""
     try:
         float(v)
         return True

@@ -48,6 +48,7 @@ from aveas_format.converters.common import (
     unobserved_table,
     covariance_std_corr,
     factorize,
+    is_float,
     load_map_bytes,
     map_area,
     nullable,
@@ -240,21 +241,13 @@ def _read_mot(path: Path) -> pa.Table:
         col = raw.column(c)
         if not (pa.types.is_integer(col.type) or pa.types.is_floating(col.type)):
             vals = col.cast(pa.string()).to_pylist()
-            bad = next((i for i, v in enumerate(vals) if v is None or not _num(v)), 0)
+            bad = next((i for i, v in enumerate(vals) if v is None or not is_float(v)), 0)
             raise FormatError(f"field {names.index(c) + 1} ({c}): {vals[bad]!r} is not a number",
                               path=path, line=bad + 1)
         if col.null_count:
             bad = int(np.flatnonzero(col.is_null().to_numpy(zero_copy_only=False))[0])
             raise FormatError(f"field {names.index(c) + 1} ({c}) is empty", path=path, line=bad + 1)
     return raw
-
-
-def _num(v: str) -> bool:
-    try:
-        float(v)
-        return True
-    except ValueError:
-        return False
 
 
 def _read_tracks(path: Path, opts: InfraLwirOptions):

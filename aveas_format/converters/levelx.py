@@ -82,6 +82,7 @@ import pyarrow.compute as pc
 from aveas_format.converters.common import (
     class_pmf,
     column,
+    is_float,
     load_map_bytes,
     outside_coverage,
     projected_to_local,
@@ -646,7 +647,7 @@ def _lanelets(tr: pa.Table, pid: np.ndarray, path: Path, attrs: list[dict[str, A
         ids = pc.cast(flat, pa.float64()).to_numpy()
     except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
         vals = flat.to_pylist()
-        bad = next(i for i, v in enumerate(vals) if not _isnum(v))
+        bad = next(i for i, v in enumerate(vals) if not is_float(v))
         raise FormatError(f"column 'laneletId': {vals[bad]!r} is not a ';'-separated list of ids",
                           path=path, line=int(rows[bad]) + 2) from None
     ok = np.isfinite(ids) & (ids >= 0)
@@ -654,14 +655,6 @@ def _lanelets(tr: pa.Table, pid: np.ndarray, path: Path, attrs: list[dict[str, A
     split = np.searchsorted(pairs[:, 0], np.arange(len(attrs) + 1))
     for p in range(len(attrs)):
         attrs[p]["lanelets"] = pairs[split[p]:split[p + 1], 1].tolist()
-
-
-def _isnum(v: str) -> bool:
-    try:
-        float(v)
-        return True
-    except ValueError:
-        return False
 
 
 @converter("ind", description="levelX inD / rounD / uniD drone recordings (tracks, tracksMeta, "
