@@ -17,7 +17,6 @@ import pyarrow.parquet as pq
 from aveas_format._version import __version__
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.mapref.build import build_recording, load_map_bytes
-from aveas_format.numeric import central_differences
 
 __all__ = [
     "build_recording", "column", "factorize", "file_sha256", "load_map_bytes", "move_along_heading",
@@ -272,15 +271,6 @@ def covariance_std_corr(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
 def nullable(a: np.ndarray) -> pa.Array:
     """A float array with NaN as null (for ``_std``/``_corr`` columns: null = unknown)."""
     return pa.array(np.asarray(a, np.float64), from_pandas=True)
-
-
-def velocity_with_std(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray,
-                      x_std: np.ndarray | None = None, y_std: np.ndarray | None = None
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Velocity from positions and its 1-sigma from independent position errors, within each
-    participant: :func:`aveas_format.numeric.central_differences` (0 with std NaN for a single
-    sample). Rows must be sorted by (participant, time)."""
-    return central_differences(pid, t, x, y, x_std, y_std)
 
 
 def footprint_corners(x: np.ndarray, y: np.ndarray, heading: np.ndarray, length: np.ndarray,

@@ -77,11 +77,11 @@ from aveas_format.converters.common import (
     rotate_covariance_2d,
     sector_polygon,
     utc_iso_from_ns,
-    velocity_with_std,
     wrap_recording,
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.numeric import central_differences
 from aveas_format.safeio import MAX_BULK_JSON_BYTES, load_json
 from aveas_format.schema.taxonomy import CLASSES
 
@@ -447,7 +447,7 @@ def convert_infra_lidar(inputs: list[Path], *, map_source, options: InfraLidarOp
     pid, time = pid[~dup], t_rel[~dup]
     x, y = pos[sel, 0], pos[sel, 1]
     sx, sy, rho = sx[sel], sy[sel], rho[sel]
-    vx, vy, vxs, vys = velocity_with_std(pid, time, x, y, sx, sy)
+    vx, vy, vxs, vys = central_differences(pid, time, x, y, sx, sy)
     mp = len(uniq)
     types = np.asarray(rows["type"], dtype=object)[sel]
     pmf = group_mean(pid, _class_pmf(types, np.asarray(rows["score"], np.float64)[sel], o.class_map), mp)

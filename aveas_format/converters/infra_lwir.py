@@ -54,11 +54,11 @@ from aveas_format.converters.common import (
     nullable,
     read_numeric_table,
     reject_non_utf8,
-    velocity_with_std,
     wrap_recording,
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.numeric import central_differences
 from aveas_format.schema.taxonomy import CLASSES
 
 CLS = {c: i for i, c in enumerate(CLASSES)}
@@ -365,7 +365,7 @@ def convert_infra_lwir(inputs: list[Path], *, map_source, options: InfraLwirOpti
     def kinematics(x, y):
         from aveas_format.mapref.build import heading_from_velocity
 
-        vx, vy, vxs, vys = velocity_with_std(pid, time, x, y, sx, sy)
+        vx, vy, vxs, vys = central_differences(pid, time, x, y, sx, sy)
         hd = heading_from_velocity(pid, vx, vy)
         return vx, vy, vxs, vys, hd
 
