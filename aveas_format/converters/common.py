@@ -19,7 +19,7 @@ from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.mapref.build import build_recording, load_map_bytes
 
 __all__ = [
-    "build_recording", "column", "factorize", "file_sha256", "load_map_bytes", "move_along_heading",
+    "build_recording", "factorize", "file_sha256", "load_map_bytes", "move_along_heading",
     "navigation_deg_to_heading", "read_table", "source_block", "wrap_recording",
 ]
 
@@ -152,11 +152,6 @@ def is_float(v: str) -> bool:
         return True
     except ValueError:
         return False
-
-
-def column(table: pa.Table, name: str) -> np.ndarray:
-    """A numeric column as float64 numpy (nulls -> NaN)."""
-    return pc.fill_null(table.column(name).cast(pa.float64()), np.nan).to_numpy()
 
 
 # --- reference points and angles -----------------------------------------------------------------

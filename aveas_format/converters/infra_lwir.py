@@ -43,7 +43,6 @@ import pyarrow.csv as pacsv
 
 from aveas_format.converters.common import (
     class_of,
-    column,
     coverage_regions,
     unobserved_table,
     covariance_std_corr,
@@ -58,6 +57,7 @@ from aveas_format.converters.common import (
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.io.arrow import column_numpy
 from aveas_format.numeric import central_differences
 from aveas_format.schema.taxonomy import CLASSES
 
@@ -204,8 +204,8 @@ def _is_landmarks(path: Path) -> bool:
 
 def _read_landmarks(path: Path):
     t = read_numeric_table(path, required=("u", "v", "x", "y"), numeric=("u", "v", "x", "y"))
-    uv = np.c_[column(t, "u"), column(t, "v")]
-    xy = np.c_[column(t, "x"), column(t, "y")]
+    uv = np.c_[column_numpy(t, "u"), column_numpy(t, "v")]
+    xy = np.c_[column_numpy(t, "x"), column_numpy(t, "y")]
     bad = ~np.isfinite(np.c_[uv, xy]).all(axis=1)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
@@ -286,8 +286,8 @@ def _read_tracks(path: Path, opts: InfraLwirOptions):
             cls = [opts.default_class] * t.num_rows
         frame_based = True
         header = 0
-    tv = column(t, tc)
-    left, top, w, h = column(t, lc), column(t, tpc), column(t, wc), column(t, hc)
+    tv = column_numpy(t, tc)
+    left, top, w, h = column_numpy(t, lc), column_numpy(t, tpc), column_numpy(t, wc), column_numpy(t, hc)
     for c, arr in ((tc, tv), (lc, left), (tpc, top), (wc, w), (hc, h)):
         bad = ~np.isfinite(arr) | ((arr <= 0) if c in (wc, hc) else False)
         if bad.any():
