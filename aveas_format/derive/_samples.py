@@ -4,7 +4,7 @@ segmentation of ``(participant_id, time)``-sorted rows and ragged index arithmet
 - :class:`Samples`: the states columns that the pair computations need (positions, heading,
   velocities and their uncertainty), the participants' sizes per row and the accelerations and
   smoothed speed of ``derived/kinematics`` per row (``interactions``, ``encroachments``);
-- :func:`road_coordinates` / :func:`string_values`: road id, lane and ``road_s`` per row
+- :func:`road_columns` / :func:`string_values`: road id, lane and ``road_s`` per row
   (``interactions``, ``traffic``) and string columns as object arrays (``events``);
 - :func:`segments`: tracks split at a new participant or a time gap (``kinematics``, ``events``);
 - :func:`ragged`: the index expansion of concatenated segments, and :func:`searchsorted_segments`:
@@ -104,7 +104,7 @@ def _kinematics_columns(rec, pid: np.ndarray, t: np.ndarray, cols: tuple[str, ..
     return tuple(np.where(ok, column_numpy(k, c)[rows], np.nan) for c in cols)
 
 
-# --- road coordinates and strings -----------------------------------------------------------------
+# --- road columns and strings --------------------------------------------------------------------
 
 def string_values(table: pa.Table, name: str) -> np.ndarray:
     """A (dictionary) string column as an object array of str, None where null."""
@@ -113,7 +113,7 @@ def string_values(table: pa.Table, name: str) -> np.ndarray:
     return np.asarray(a.to_numpy(zero_copy_only=False), dtype=object)
 
 
-def road_coordinates(states: pa.Table) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def road_columns(states: pa.Table) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(road_id, lane_id, road_s, on)`` per states row: the road ids (object array, None where
     null), the lane ids and ``road_s`` (float, NaN where null) and ``on``, the rows on a road (a
     road id with a finite lane id and ``road_s``)."""

@@ -24,7 +24,7 @@ import numpy as np
 import pyarrow as pa
 from pydantic import Field
 
-from aveas_format.derive._samples import ragged, road_coordinates, searchsorted_segments
+from aveas_format.derive._samples import ragged, road_columns, searchsorted_segments
 from aveas_format.derive.registry import Derivation, Params, register
 from aveas_format.io.arrow import column_numpy
 from aveas_format.schema.columns import MUST, col, gaussian, interval_cols
@@ -119,7 +119,7 @@ def compute(rec, p: TrafficParams) -> pa.Table:
     s = rec.states
     pid = s.column("participant_id").to_numpy()
     t = column_numpy(s, "time", missing=np.nan)
-    road_np, lane, rs, on = road_coordinates(s)
+    road_np, lane, rs, on = road_columns(s)
     sx, sy = (column_numpy(s, c, nonfinite=0.0, missing=0.0) for c in ("x_std", "y_std"))
     sigma = np.sqrt(0.5 * (sx ** 2 + sy ** 2))
     roads = sorted({r for r in road_np[on]})
@@ -182,7 +182,7 @@ def local_density(rec, radius_m: float = 50.0) -> pa.Table:
     s = rec.states
     pid = s.column("participant_id").to_numpy()
     t = column_numpy(s, "time", missing=np.nan)
-    road_np, lane, rs, on = road_coordinates(s)
+    road_np, lane, rs, on = road_columns(s)
     idx = np.flatnonzero(on)
     count = np.full(len(t), -1, np.int64)
     if len(idx):

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from aveas_format.derive._samples import Samples, ragged, road_coordinates, searchsorted_segments
+from aveas_format.derive._samples import Samples, ragged, road_columns, searchsorted_segments
 from aveas_format.derive.interactions._lanes import LaneGraph, lane_graph, lane_positions
 from aveas_format.derive.interactions._ttc import follower_leader_metrics
 from aveas_format.derive.interactions._velocities import range_rate, var_along
@@ -58,7 +58,7 @@ def lane_samples(rec, S: Samples, p: InteractionsParams) -> LaneSamples | None:
     s = rec.states
     if not {"road_id", "lane_id", "road_s"} <= set(s.column_names):
         return None
-    road_np, lane, rs, on = road_coordinates(s)
+    road_np, lane, rs, on = road_columns(s)
     on &= lane != 0
     if not on.any():
         return None
