@@ -17,10 +17,9 @@ import pyarrow.parquet as pq
 from aveas_format._version import __version__
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.mapref.build import build_recording, load_map_bytes
-from aveas_format.numeric import central_differences
 
 __all__ = [
-    "build_recording", "column", "factorize", "file_sha256", "load_map_bytes", "move_along_heading",
+    "build_recording", "factorize", "file_sha256", "load_map_bytes", "move_along_heading",
     "navigation_deg_to_heading", "read_table", "source_block", "wrap_recording",
 ]
 
@@ -128,7 +127,7 @@ def _numeric(table: pa.Table, numeric: Sequence[str], path: Path, header_lines: 
             num = _try_float(s)
             if num is None:
                 vals = s.to_pylist()
-                bad = next(i for i, v in enumerate(vals) if v not in (None, "") and not _is_float(v))
+                bad = next(i for i, v in enumerate(vals) if v not in (None, "") and not is_float(v))
                 raise FormatError(f"column {c!r}: {vals[bad]!r} is not a number", path=path,
                                   line=bad + 1 + header_lines if header_lines else None,
                                   row=None if header_lines else bad)
@@ -145,17 +144,14 @@ def _try_float(s: pa.ChunkedArray) -> pa.ChunkedArray | None:
         return None
 
 
-def _is_float(v: str) -> bool:
+def is_float(v: str) -> bool:
+    """Does ``float(v)`` accept the string ``v`` (for locating the first value that is not a
+    number)?"""
     try:
         float(v)
         return True
     except ValueError:
         return False
-
-
-def column(table: pa.Table, name: str) -> np.ndarray:
-    """A numeric column as float64 numpy (nulls -> NaN)."""
-    return pc.fill_null(table.column(name).cast(pa.float64()), np.nan).to_numpy()
 
 
 # --- reference points and angles -----------------------------------------------------------------
@@ -270,15 +266,6 @@ def covariance_std_corr(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
 def nullable(a: np.ndarray) -> pa.Array:
     """A float array with NaN as null (for ``_std``/``_corr`` columns: null = unknown)."""
     return pa.array(np.asarray(a, np.float64), from_pandas=True)
-
-
-def velocity_with_std(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray,
-                      x_std: np.ndarray | None = None, y_std: np.ndarray | None = None
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Velocity from positions and its 1-sigma from independent position errors, within each
-    participant: :func:`aveas_format.numeric.central_differences` (0 with std NaN for a single
-    sample). Rows must be sorted by (participant, time)."""
-    return central_differences(pid, t, x, y, x_std, y_std)
 
 
 def footprint_corners(x: np.ndarray, y: np.ndarray, heading: np.ndarray, length: np.ndarray,

@@ -43,7 +43,6 @@ import numpy as np
 import pyarrow as pa
 
 from aveas_format.converters.common import (
-    column,
     factorize,
     load_map_bytes,
     move_along_heading,
@@ -53,6 +52,7 @@ from aveas_format.converters.common import (
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError
+from aveas_format.io.arrow import column_numpy
 from aveas_format.schema.taxonomy import CLASSES, DRIVER_FOCUS
 
 DEFAULT_SIZE = {"car": (4.5, 1.8, 1.5), "van": (5.5, 2.0, 2.2), "truck": (12.0, 2.5, 3.5),
@@ -100,7 +100,7 @@ def convert_driving_simulator(inputs: list[Path], *, map_source, options: Drivin
         numeric = [c for c in t.column_names if c not in ("id", "class", "driver_focus")]
         t = read_numeric_table(p, numeric=numeric)
         for c in ("time", "x", "y", "heading"):
-            bad = np.flatnonzero(~np.isfinite(column(t, c)))
+            bad = np.flatnonzero(~np.isfinite(column_numpy(t, c)))
             if len(bad):
                 raise FormatError(f"column {c!r} is empty", path=p, line=int(bad[0]) + 2)
         if not ({"vx", "vy"} <= set(t.column_names) or "speed" in t.column_names):
@@ -114,7 +114,7 @@ def convert_driving_simulator(inputs: list[Path], *, map_source, options: Drivin
     def num(name: str, default: float = np.nan) -> np.ndarray:
         if name not in names:
             return np.full(len(lines), default)
-        return np.concatenate([column(t, name) for _, t in parts])
+        return np.concatenate([column_numpy(t, name) for _, t in parts])
 
     def text(name: str) -> np.ndarray | None:
         if name not in names:

@@ -59,7 +59,6 @@ import pyarrow as pa
 
 from aveas_format.converters.common import (
     class_of,
-    column,
     coverage_regions,
     unobserved_table,
     covariance_std_corr,
@@ -77,11 +76,12 @@ from aveas_format.converters.common import (
     rotate_covariance_2d,
     sector_polygon,
     utc_iso_from_ns,
-    velocity_with_std,
     wrap_recording,
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.io.arrow import column_numpy
+from aveas_format.numeric import central_differences
 from aveas_format.safeio import MAX_BULK_JSON_BYTES, load_json
 from aveas_format.schema.taxonomy import CLASSES
 
@@ -327,11 +327,11 @@ def _read_tracks(path: Path, opts: InfraLidarOptions, rows: dict[str, list],
         pick(c)
     t = read_numeric_table(path, numeric=num)
     n = t.num_rows
-    tv = column(t, tcol)
+    tv = column_numpy(t, tcol)
     time = tv / opts.rate_hz if tcol.startswith("frame") else tv
-    vals = {c: column(t, c) for c in ("x", "y", "yaw")}
-    z = column(t, "z") if "z" in names else np.zeros(n)
-    length, width, height = column(t, lc), column(t, wc), column(t, hc)
+    vals = {c: column_numpy(t, c) for c in ("x", "y", "yaw")}
+    z = column_numpy(t, "z", missing=0.0)
+    length, width, height = column_numpy(t, lc), column_numpy(t, wc), column_numpy(t, hc)
     for c, arr in (("x", vals["x"]), ("y", vals["y"]), ("yaw", vals["yaw"]), (tcol, tv), (lc, length),
                    (wc, width)):
         bad = ~np.isfinite(arr) | ((arr <= 0) if c in (lc, wc) else False)
@@ -356,8 +356,8 @@ def _read_tracks(path: Path, opts: InfraLidarOptions, rows: dict[str, list],
     cols = {"time": time, "track": ids, "type": cls, "cx": vals["x"], "cy": vals["y"], "cz": z,
             "qx": np.zeros(n), "qy": np.zeros(n), "qz": np.sin(half), "qw": np.cos(half),
             "l": length, "w": width, "h": height,
-            "points": column(t, "num_points") if "num_points" in names else np.full(n, np.nan),
-            "score": column(t, "score") if "score" in names else np.full(n, np.nan),
+            "points": column_numpy(t, "num_points", missing=np.nan),
+            "score": column_numpy(t, "score", missing=np.nan),
             "cs": [key] * n, "src": [src] * n}
     for k in _ROWS:
         rows[k].extend(list(cols[k]))
@@ -447,7 +447,7 @@ def convert_infra_lidar(inputs: list[Path], *, map_source, options: InfraLidarOp
     pid, time = pid[~dup], t_rel[~dup]
     x, y = pos[sel, 0], pos[sel, 1]
     sx, sy, rho = sx[sel], sy[sel], rho[sel]
-    vx, vy, vxs, vys = velocity_with_std(pid, time, x, y, sx, sy)
+    vx, vy, vxs, vys = central_differences(pid, time, x, y, sx, sy)
     mp = len(uniq)
     types = np.asarray(rows["type"], dtype=object)[sel]
     pmf = group_mean(pid, _class_pmf(types, np.asarray(rows["score"], np.float64)[sel], o.class_map), mp)

@@ -43,21 +43,22 @@ import pyarrow.csv as pacsv
 
 from aveas_format.converters.common import (
     class_of,
-    column,
     coverage_regions,
     unobserved_table,
     covariance_std_corr,
     factorize,
+    is_float,
     load_map_bytes,
     map_area,
     nullable,
     read_numeric_table,
     reject_non_utf8,
-    velocity_with_std,
     wrap_recording,
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.io.arrow import column_numpy
+from aveas_format.numeric import central_differences
 from aveas_format.schema.taxonomy import CLASSES
 
 CLS = {c: i for i, c in enumerate(CLASSES)}
@@ -203,8 +204,8 @@ def _is_landmarks(path: Path) -> bool:
 
 def _read_landmarks(path: Path):
     t = read_numeric_table(path, required=("u", "v", "x", "y"), numeric=("u", "v", "x", "y"))
-    uv = np.c_[column(t, "u"), column(t, "v")]
-    xy = np.c_[column(t, "x"), column(t, "y")]
+    uv = np.c_[column_numpy(t, "u"), column_numpy(t, "v")]
+    xy = np.c_[column_numpy(t, "x"), column_numpy(t, "y")]
     bad = ~np.isfinite(np.c_[uv, xy]).all(axis=1)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
@@ -240,21 +241,13 @@ def _read_mot(path: Path) -> pa.Table:
         col = raw.column(c)
         if not (pa.types.is_integer(col.type) or pa.types.is_floating(col.type)):
             vals = col.cast(pa.string()).to_pylist()
-            bad = next((i for i, v in enumerate(vals) if v is None or not _num(v)), 0)
+            bad = next((i for i, v in enumerate(vals) if v is None or not is_float(v)), 0)
             raise FormatError(f"field {names.index(c) + 1} ({c}): {vals[bad]!r} is not a number",
                               path=path, line=bad + 1)
         if col.null_count:
             bad = int(np.flatnonzero(col.is_null().to_numpy(zero_copy_only=False))[0])
             raise FormatError(f"field {names.index(c) + 1} ({c}) is empty", path=path, line=bad + 1)
     return raw
-
-
-def _num(v: str) -> bool:
-    try:
-        float(v)
-        return True
-    except ValueError:
-        return False
 
 
 def _read_tracks(path: Path, opts: InfraLwirOptions):
@@ -293,8 +286,8 @@ def _read_tracks(path: Path, opts: InfraLwirOptions):
             cls = [opts.default_class] * t.num_rows
         frame_based = True
         header = 0
-    tv = column(t, tc)
-    left, top, w, h = column(t, lc), column(t, tpc), column(t, wc), column(t, hc)
+    tv = column_numpy(t, tc)
+    left, top, w, h = column_numpy(t, lc), column_numpy(t, tpc), column_numpy(t, wc), column_numpy(t, hc)
     for c, arr in ((tc, tv), (lc, left), (tpc, top), (wc, w), (hc, h)):
         bad = ~np.isfinite(arr) | ((arr <= 0) if c in (wc, hc) else False)
         if bad.any():
@@ -372,7 +365,7 @@ def convert_infra_lwir(inputs: list[Path], *, map_source, options: InfraLwirOpti
     def kinematics(x, y):
         from aveas_format.mapref.build import heading_from_velocity
 
-        vx, vy, vxs, vys = velocity_with_std(pid, time, x, y, sx, sy)
+        vx, vy, vxs, vys = central_differences(pid, time, x, y, sx, sy)
         hd = heading_from_velocity(pid, vx, vy)
         return vx, vy, vxs, vys, hd
 

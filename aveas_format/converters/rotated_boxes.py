@@ -55,7 +55,6 @@ import numpy as np
 import pyarrow as pa
 
 from aveas_format.converters.common import (
-    column,
     factorize,
     load_map_bytes,
     outside_coverage,
@@ -66,6 +65,7 @@ from aveas_format.converters.common import (
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.io.arrow import column_numpy
 from aveas_format.safeio import xml_parser
 from aveas_format.schema.taxonomy import CLASSES
 
@@ -223,10 +223,10 @@ def _boxes(t: pa.Table, options: RotatedBoxOptions, A: np.ndarray, c: np.ndarray
     names = set(t.column_names)
     shift = 0.5 if options.pixel_origin == "center" else 0.0
     if set(_CENTRE) <= names:
-        u = column(t, "cx") + shift
-        v = column(t, "cy") + shift
-        w, h = column(t, "w"), column(t, "h")
-        ang = column(t, "angle")
+        u = column_numpy(t, "cx") + shift
+        v = column_numpy(t, "cy") + shift
+        w, h = column_numpy(t, "w"), column_numpy(t, "h")
+        ang = column_numpy(t, "angle")
         if options.angle_unit == "deg":
             ang = np.radians(ang)
         du, dv = np.cos(ang), np.sin(ang)           # along w
@@ -241,8 +241,8 @@ def _boxes(t: pa.Table, options: RotatedBoxOptions, A: np.ndarray, c: np.ndarray
         length = np.where(along_w, len_w, len_h)
         width = np.where(along_w, len_h, len_w)
     elif set(_CORNERS) <= names:
-        px = np.stack([column(t, f"x{i}") + shift for i in range(1, 5)])
-        py = np.stack([column(t, f"y{i}") + shift for i in range(1, 5)])
+        px = np.stack([column_numpy(t, f"x{i}") + shift for i in range(1, 5)])
+        py = np.stack([column_numpy(t, f"y{i}") + shift for i in range(1, 5)])
         wx = A[0, 0] * px + A[0, 1] * py + c[0]
         wy = A[1, 0] * px + A[1, 1] * py + c[1]
         X, Y = wx.mean(axis=0), wy.mean(axis=0)
@@ -278,7 +278,7 @@ def _row_pmf(t: pa.Table, options: RotatedBoxOptions, path: Path) -> np.ndarray:
             if label not in cmap:
                 raise FormatError(f"column {col!r}: class {label!r} unknown; map it with the "
                                   "class_map option", path=path)
-            s = np.nan_to_num(column(t, col))
+            s = np.nan_to_num(column_numpy(t, col))
             if (s < 0).any():
                 i = int(np.flatnonzero(s < 0)[0])
                 raise FormatError(f"column {col!r}: negative score", path=path, line=i + 2)
@@ -295,7 +295,7 @@ def _row_pmf(t: pa.Table, options: RotatedBoxOptions, path: Path) -> np.ndarray:
                 raise FormatError(f"column 'class': {lab!r} is not a known class; map it with the "
                                   "class_map option", path=path, line=line)
             idx[j] = CLASSES.index(cmap[key])
-        score = np.clip(np.nan_to_num(column(t, "score"), nan=1.0), 0, 1) if "score" in \
+        score = np.clip(np.nan_to_num(column_numpy(t, "score"), nan=1.0), 0, 1) if "score" in \
             t.column_names else np.ones(n)
         pm = np.repeat(((1.0 - score) / (k - 1))[:, None], k, axis=1)
         pm[np.arange(n), idx[labels]] = score
@@ -371,18 +371,18 @@ def convert_rotated_boxes(inputs: list[Path], *, map_source, options: RotatedBox
     probe = read_numeric_table(path)
     numeric = numeric + tuple(c_ for c_ in probe.column_names if c_.startswith("score_"))
     if "track_id" not in probe.column_names:
-        raise FormatError(f"required column(s) ['track_id'] missing; found {probe.column_names}",
+        raise FormatError(f"required column_numpy(s) ['track_id'] missing; found {probe.column_names}",
                           path=path)
     tab = read_numeric_table(path, numeric=[c_ for c_ in numeric if c_ != "track_id"])
     if tab.num_rows == 0:
         raise FormatError("no rows", path=path)
     if "time" in tab.column_names:
-        t = column(tab, "time")
+        t = column_numpy(tab, "time")
     elif "frame" in tab.column_names:
         if not options.frame_rate:
             raise FormatError("the table has 'frame' but no 'time': pass the frame_rate option",
                               path=path)
-        t = column(tab, "frame") / options.frame_rate
+        t = column_numpy(tab, "frame") / options.frame_rate
     else:
         raise FormatError("the table needs a 'time' (s) or 'frame' column", path=path)
     bad = np.flatnonzero(~np.isfinite(t))
@@ -400,11 +400,9 @@ def convert_rotated_boxes(inputs: list[Path], *, map_source, options: RotatedBox
     X, Y, axis_w, length, width = _boxes(tab, options, A, c, path)
     pmf_rows = _row_pmf(tab, options, path)
     n = tab.num_rows
-    su = column(tab, "cx_std") if "cx_std" in tab.column_names else np.full(n, options.pixel_std)
-    sv = column(tab, "cy_std") if "cy_std" in tab.column_names else np.full(n, options.pixel_std)
-    ruv = np.nan_to_num(column(tab, "cxcy_corr")) if "cxcy_corr" in tab.column_names else np.zeros(n)
-    su = np.where(np.isfinite(su), su, options.pixel_std)
-    sv = np.where(np.isfinite(sv), sv, options.pixel_std)
+    su, sv = (column_numpy(tab, c, nonfinite=options.pixel_std, missing=options.pixel_std)
+              for c in ("cx_std", "cy_std"))
+    ruv = np.nan_to_num(column_numpy(tab, "cxcy_corr", missing=0.0))
 
     map_bytes = load_map_bytes(map_source)
     header = load_map(map_bytes).header
@@ -449,7 +447,7 @@ def convert_rotated_boxes(inputs: list[Path], *, map_source, options: RotatedBox
         "vxvy_corr": pa.array(xy_corr.astype(np.float32), mask=nan),
     }
     if "frame" in tab.column_names:
-        states["source_frame"] = column(tab, "frame")[o].astype(np.int64)
+        states["source_frame"] = column_numpy(tab, "frame")[o].astype(np.int64)
 
     m = len(source_ids)
     counts = np.bincount(pid, minlength=m)

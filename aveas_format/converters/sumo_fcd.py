@@ -34,7 +34,6 @@ import pyarrow as pa
 from lxml import etree
 
 from aveas_format.converters.common import (
-    column,
     factorize,
     load_map_bytes,
     move_along_heading,
@@ -44,6 +43,7 @@ from aveas_format.converters.common import (
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.io.arrow import column_numpy
 from aveas_format.safeio import iterparse, xml_parser
 
 # SUMO's vType defaults per vClass: (length, width, height) in m
@@ -192,10 +192,10 @@ def _read_tabular(path: Path) -> dict[str, list]:
     t = t.filter(pa.compute.is_valid(t.column(f"{prefix}id")))
     n = t.num_rows
     return {
-        "time": column(t, tcol).tolist(), "id": t.column(f"{prefix}id").cast(pa.string()).to_pylist(),
-        "x": column(t, f"{prefix}x").tolist(), "y": column(t, f"{prefix}y").tolist(),
-        "angle": column(t, f"{prefix}angle").tolist(),
-        "speed": (column(t, f"{prefix}speed") if f"{prefix}speed" in names else np.full(n, np.nan)).tolist(),
+        "time": column_numpy(t, tcol).tolist(), "id": t.column(f"{prefix}id").cast(pa.string()).to_pylist(),
+        "x": column_numpy(t, f"{prefix}x").tolist(), "y": column_numpy(t, f"{prefix}y").tolist(),
+        "angle": column_numpy(t, f"{prefix}angle").tolist(),
+        "speed": column_numpy(t, f"{prefix}speed", missing=np.nan).tolist(),
         "type": (t.column(f"{prefix}type").cast(pa.string()).to_pylist() if f"{prefix}type" in names
                  else ["DEFAULT_VEHTYPE"] * n),
         "kind": ["vehicle"] * n,

@@ -19,7 +19,6 @@ from aveas_format.converters.common import (
     load_map_bytes,
     nullable,
     utc_iso_from_ns,
-    velocity_with_std,
     wrap_recording,
 )
 from aveas_format.converters.registry import converter
@@ -29,6 +28,7 @@ from aveas_format.converters.ros2_mcap.options import CLS, NCLS, Ros2McapOptions
 from aveas_format.converters.ros2_mcap.read import _read
 from aveas_format.converters.ros2_mcap.tree import _Tree
 from aveas_format.errors import FormatError
+from aveas_format.numeric import central_differences
 from aveas_format.schema.taxonomy import CLASSES
 
 #: the uncertainty columns of states, null where unknown
@@ -135,7 +135,7 @@ def _ego_from_navsatfix(ego_fix: dict[str, list], fix: str, tree: _Tree, o: Ros2
     ts = (t - t[0]) / 1e9
     sx = np.sqrt(np.clip(fc[:, 0, 0], 0, None))
     sy = np.sqrt(np.clip(fc[:, 1, 1], 0, None))
-    vx, vy, vxs, vys = velocity_with_std(pid0, ts, mx, my, sx, sy)
+    vx, vy, vxs, vys = central_differences(pid0, ts, mx, my, sx, sy)
     from aveas_format.mapref.build import heading_from_velocity
 
     heading = heading_from_velocity(pid0, vx, vy)
@@ -307,7 +307,7 @@ def _object_states(rows: dict[str, np.ndarray], t0: int, n_ego: int, o: Ros2Mcap
     # velocities where the source has none: from positions
     psx = np.sqrt(np.clip(r["cov"][:, 0, 0], 0, None))
     psy = np.sqrt(np.clip(r["cov"][:, 1, 1], 0, None))
-    fvx, fvy, fvxs, fvys = velocity_with_std(codes, ts, r["x"], r["y"], psx, psy)
+    fvx, fvy, fvxs, fvys = central_differences(codes, ts, r["x"], r["y"], psx, psy)
     nov = np.isnan(r["vel"]).any(axis=1)
     r["vel"][nov] = np.c_[fvx, fvy][nov]
     r["vcov"][nov] = 0.0
