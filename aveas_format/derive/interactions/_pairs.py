@@ -66,7 +66,7 @@ def lane_samples(rec, S: Samples, p: InteractionsParams) -> LaneSamples | None:
     G = lane_graph(net)
     idx = np.flatnonzero(on)
     rid = road_np[idx].astype(str)
-    chain, u, theta, adj_chain, adj_u = lane_positions(net, G.chains, rid,
+    chain, u, theta, adj_chain, adj_u = lane_positions(net, G, rid,
                                                        lane[idx].astype(np.int64), rs[idx])
     good = chain >= 0
     good &= np.abs(np.angle(np.exp(1j * (S.h[idx] - theta)))) <= p.max_heading_deviation
