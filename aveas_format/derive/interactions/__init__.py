@@ -71,9 +71,10 @@ class InteractionsParams(Params):
     neighbour_range: float = Field(100.0, gt=0, description="largest distance (m) along the "
                                    "lanes between the fronts of a participant and its left/right "
                                    "lead or lag")
-    search_radius: float = Field(120.0, gt=0, description="centre distance (m) within which "
-                                 "pairs are candidates for a 2D conflict (those that cannot "
-                                 "touch within `horizon` at their relative speed are dropped)")
+    search_radius: float | None = Field(None, gt=0, description="largest centre distance (m) "
+                                        "of a candidate pair for a 2D conflict; default: none, "
+                                        "the pairs that can touch within `horizon` at their "
+                                        "relative speed are searched, however far apart")
     horizon: float = Field(10.0, gt=0, description="largest 2D TTC (s) reported for conflicting "
                            "pairs")
     samples: int = Field(32, ge=0, description="Monte Carlo samples for the 2D ttc_std (0: none)")

@@ -1,7 +1,9 @@
 """2D time to collision of oriented boxes for pairs that are not lane leader and follower.
 
-Candidate pairs come from a vectorised uniform grid per time step (:func:`candidate_pairs`, within
-``search_radius``); pairs that cannot touch within ``horizon`` at their relative speed are dropped;
+Candidate pairs are those that could touch within ``horizon`` at their relative speed
+(:func:`candidate_pairs`: swept boxes on a vectorised uniform grid per time step; optionally also
+within ``search_radius`` of each other); pairs that cannot touch within ``horizon`` at their
+relative speed are dropped;
 :func:`ttc_boxes` gives the exact first contact of the two rectangles under constant velocity
 (separating axes on the relative motion) and :func:`box_std` its std from Monte Carlo samples of
 positions, velocities, headings and sizes. :func:`box_conflicts` gives the neighbour rows of the
@@ -57,39 +59,93 @@ def ttc_boxes(ax, ay, ah, al, aw, avx, avy, bx, by, bh, bl, bw, bvx, bvy):
     return np.where(hit, np.maximum(t_in, 0.0), np.inf)
 
 
-def candidate_pairs(tstep: np.ndarray, x: np.ndarray, y: np.ndarray, radius: float
+def candidate_pairs(tstep: np.ndarray, x: np.ndarray, y: np.ndarray, vx: np.ndarray,
+                    vy: np.ndarray, reach: np.ndarray, horizon: float, cell: float = 40.0
                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Index pairs ``(i, j)``, ``i < j`` by row, at the same time step with centre distance <=
-    ``radius``: a vectorised uniform grid (cell = radius; the 3x3 neighbourhood of each cell)."""
+    """Index pairs ``(i, j)``, ``i < j``, at the same time step that could touch within
+    ``horizon`` s at constant velocity: a necessary condition, exact in the relative speed.
+
+    Per time step the samples are seen in a frame moving at the step's mean velocity ``u``; in it
+    each sample sweeps the segment from its centre ``p`` to ``p + (v - u) horizon``. Two footprints
+    (discs of radius ``reach``: half their diagonals) that touch at some ``t <= horizon`` lie in the
+    bounding boxes of their swept segments grown by ``reach``, so pairs whose boxes do not overlap
+    can never touch; on a one-way highway the boxes are short (the speed differences), while two
+    opposing streams get long boxes (their large relative speed), which is what the horizon asks
+    for. The boxes are found on a vectorised uniform grid (``cell`` m; each box is entered in the
+    cells it covers and a pair is reported once, in the cell of its overlap's lower corner)."""
     n = len(x)
+    empty = (np.zeros(0, np.int64), np.zeros(0, np.int64))
     if n < 2:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    cx = np.floor((x - x.min()) / radius).astype(np.int64)
-    cy = np.floor((y - y.min()) / radius).astype(np.int64)
-    ny = int(cy.max()) + 3
-    nx = int(cx.max()) + 3
-    cell = ((tstep.astype(np.int64) * nx) + (cx + 1)) * ny + (cy + 1)
-    order = np.argsort(cell, kind="stable")
-    cs = cell[order]
+        return empty
+    ts = np.asarray(tstep, np.int64)
+    cnt = np.bincount(ts).astype(float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ux = np.bincount(ts, vx) / cnt
+        uy = np.bincount(ts, vy) / cnt
+    ex, ey = (vx - ux[ts]) * horizon, (vy - uy[ts]) * horizon
+    x0 = np.minimum(x, x + ex) - reach
+    x1 = np.maximum(x, x + ex) + reach
+    y0 = np.minimum(y, y + ey) - reach
+    y1 = np.maximum(y, y + ey) + reach
+    ox, oy = float(np.min(x0)), float(np.min(y0))
+    c0x = np.floor((x0 - ox) / cell).astype(np.int64)
+    c1x = np.floor((x1 - ox) / cell).astype(np.int64)
+    c0y = np.floor((y0 - oy) / cell).astype(np.int64)
+    c1y = np.floor((y1 - oy) / cell).astype(np.int64)
+    nx = c1x - c0x + 1
+    ny_ = c1y - c0y + 1
+    k, pos = ragged(nx * ny_)
+    gx = c0x[k] + pos // ny_[k]
+    gy = c0y[k] + pos % ny_[k]
+    wy = int(c1y.max()) + 1
+    wx = int(c1x.max()) + 1
+    key = (ts[k] * wx + gx) * wy + gy
+    order = np.argsort(key, kind="stable")
+    ks, kk = key[order], k[order]
+    brk = np.r_[True, ks[1:] != ks[:-1]]
+    start = np.flatnonzero(brk)
+    size = np.diff(np.r_[start, len(ks)])
+    multi = size > 1
+    start, size = start[multi], size[multi]
     I, J = [], []
-    for ox in (-1, 0, 1):
-        for oy in (-1, 0, 1):
-            target = cell + ox * ny + oy
-            lo = np.searchsorted(cs, target, side="left")
-            hi = np.searchsorted(cs, target, side="right")
-            cnt = hi - lo
-            if int(cnt.sum()) == 0:
-                continue
-            ii, pos = ragged(cnt)
-            jj = order[lo[ii] + pos]
-            keep = ii < jj
-            I.append(ii[keep])
-            J.append(jj[keep])
+    # all pairs within each cell: cell c with m members gives m(m-1)/2 pairs (in chunks)
+    npairs = size * (size - 1) // 2
+    for lo, hi in _chunk_ranges(npairs, 4_000_000):
+        grp, q = ragged(npairs[lo:hi])
+        m = size[lo:hi][grp]
+        # q-th pair (a < b) of m members, row-major over a
+        a = (m - 0.5 - np.sqrt((m - 0.5) ** 2 - 2.0 * q)).astype(np.int64)
+        a = np.clip(a, 0, m - 2)
+        first_q = a * (2 * m - a - 1) // 2
+        fix = first_q > q
+        a = np.where(fix, a - 1, a)
+        first_q = a * (2 * m - a - 1) // 2
+        nxt = (a + 1) * (2 * m - a - 2) // 2
+        up = q >= nxt
+        a = np.where(up, a + 1, a)
+        first_q = a * (2 * m - a - 1) // 2
+        b = a + 1 + (q - first_q)
+        s0 = start[lo:hi][grp]
+        i, j = kk[s0 + a], kk[s0 + b]
+        cellx = gx[order[s0 + a]]
+        celly = gy[order[s0 + a]]
+        # the boxes overlap, and this cell holds the lower corner of their overlap
+        ok = ((x0[i] <= x1[j]) & (x0[j] <= x1[i]) & (y0[i] <= y1[j]) & (y0[j] <= y1[i])
+              & (cellx == np.maximum(c0x[i], c0x[j])) & (celly == np.maximum(c0y[i], c0y[j])))
+        I.append(np.minimum(i[ok], j[ok]))
+        J.append(np.maximum(i[ok], j[ok]))
     if not I:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    i, j = np.concatenate(I), np.concatenate(J)
-    near = np.hypot(x[j] - x[i], y[j] - y[i]) <= radius
-    return i[near], j[near]
+        return empty
+    return np.concatenate(I), np.concatenate(J)
+
+
+def _chunk_ranges(counts: np.ndarray, budget: int) -> list[tuple[int, int]]:
+    """Consecutive ranges of items holding about ``budget`` of ``counts`` each."""
+    if not len(counts):
+        return []
+    group = (np.cumsum(counts) - counts) // max(budget, 1)
+    cut = np.r_[0, np.flatnonzero(np.diff(group)) + 1, len(counts)]
+    return list(zip(cut[:-1].tolist(), cut[1:].tolist()))
 
 
 def pair_key(i: np.ndarray, j: np.ndarray, n: int) -> np.ndarray:
@@ -109,7 +165,11 @@ def box_rows(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
              ) -> dict[str, np.ndarray]:
     """2D TTC (``i``, ``j``, ``ttc``) of the candidate pairs that are not lane leader/follower and
     can touch within the horizon."""
-    i, j = candidate_pairs(S.tstep, S.x, S.y, p.search_radius)
+    reach_all = 0.5 * np.hypot(S.L, S.W)
+    i, j = candidate_pairs(S.tstep, S.x, S.y, S.vx, S.vy, reach_all, p.horizon)
+    if p.search_radius is not None:
+        near = np.hypot(S.x[j] - S.x[i], S.y[j] - S.y[i]) <= p.search_radius
+        i, j = i[near], j[near]
     if lane:
         lf = np.isin(lane["rel"], ["leader", "follower"])
         lane_keys = np.unique(pair_key(lane["i"][lf], lane["j"][lf], S.n))
