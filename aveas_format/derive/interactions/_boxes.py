@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from aveas_format.derive._samples import Samples, ragged
+from aveas_format.derive.interactions._surrogates import box_surrogates, sample_std
 from aveas_format.derive.interactions._velocities import range_rate
 
 if TYPE_CHECKING:
@@ -186,75 +187,114 @@ def box_rows(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
     return {"i": i, "j": j, "ttc": ttc}
 
 
-def box_std(S: Samples, i: np.ndarray, j: np.ndarray, p: InteractionsParams) -> np.ndarray:
-    """Std of the 2D TTC over Monte Carlo samples of both participants' states and sizes (finite
-    samples only; NaN where fewer than half of the samples collide)."""
+def _draw(S: Samples, k: np.ndarray, K: int, rng: np.random.Generator):
+    """``K`` Monte Carlo draws of the states of rows ``k``: x, y, heading, length, width, vx, vy
+    (each ``(K, len(k))``)."""
+    z1, z2 = rng.standard_normal((2, K, len(k)))
+    r = np.clip(S.rxy[k], -0.999, 0.999)
+    x = S.x[k] + S.sx[k] * z1
+    y = S.y[k] + S.sy[k] * (r * z1 + np.sqrt(1 - r * r) * z2)
+    w1, w2 = rng.standard_normal((2, K, len(k)))
+    rv = np.clip(S.rv[k], -0.999, 0.999)
+    vx = S.vx[k] + S.svx[k] * w1
+    vy = S.vy[k] + S.svy[k] * (rv * w1 + np.sqrt(1 - rv * rv) * w2)
+    h = S.h[k] + S.sh[k] * rng.standard_normal((K, len(k)))
+    L = np.maximum(S.L[k] + S.sL[k] * rng.standard_normal((K, len(k))), 0.1)
+    W = np.maximum(S.W[k] + S.sW[k] * rng.standard_normal((K, len(k))), 0.1)
+    return x, y, h, L, W, vx, vy
+
+
+def box_std(S: Samples, i: np.ndarray, j: np.ndarray, p: InteractionsParams
+            ) -> dict[str, np.ndarray]:
+    """Std of the 2D TTC and of the surrogates derived from it (``ttc``, ``drac``, ``mdrac``,
+    ``psd_i``, ``psd_j``: PSD of either participant) over Monte Carlo samples of both
+    participants' states and sizes (finite samples only; NaN where fewer than half of the
+    samples are finite)."""
+    keys = ("ttc", "drac", "mdrac", "psd_i", "psd_j")
     if p.samples == 0 or len(i) == 0:
-        return np.full(len(i), np.nan)
+        return {k: np.full(len(i), np.nan) for k in keys}
     rng = np.random.default_rng(p.seed)
-    K = p.samples
-
-    def draw(k):
-        z1, z2 = rng.standard_normal((2, K, len(k)))
-        r = np.clip(S.rxy[k], -0.999, 0.999)
-        x = S.x[k] + S.sx[k] * z1
-        y = S.y[k] + S.sy[k] * (r * z1 + np.sqrt(1 - r * r) * z2)
-        w1, w2 = rng.standard_normal((2, K, len(k)))
-        rv = np.clip(S.rv[k], -0.999, 0.999)
-        vx = S.vx[k] + S.svx[k] * w1
-        vy = S.vy[k] + S.svy[k] * (rv * w1 + np.sqrt(1 - rv * rv) * w2)
-        h = S.h[k] + S.sh[k] * rng.standard_normal((K, len(k)))
-        L = np.maximum(S.L[k] + S.sL[k] * rng.standard_normal((K, len(k))), 0.1)
-        W = np.maximum(S.W[k] + S.sW[k] * rng.standard_normal((K, len(k))), 0.1)
-        return x, y, h, L, W, vx, vy
-
-    a = draw(i)
-    b = draw(j)
+    a = _draw(S, i, p.samples, rng)
+    b = _draw(S, j, p.samples, rng)
     tt = ttc_boxes(*a, *b)
-    fin = np.isfinite(tt)
-    cnt = fin.sum(0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        m = np.where(fin, tt, 0.0).sum(0) / cnt
-        v = np.where(fin, (tt - m) ** 2, 0.0).sum(0) / np.maximum(cnt - 1, 1)
-    return np.where(cnt >= K / 2, np.sqrt(v), np.nan)
+    w = np.hypot(b[5] - a[5], b[6] - a[6])
+    drac, mdrac, psd_i = box_surrogates(tt, w, np.hypot(a[5], a[6]), p.reaction_time,
+                                        p.max_deceleration)
+    psd_j = box_surrogates(tt, w, np.hypot(b[5], b[6]), p.reaction_time, p.max_deceleration)[2]
+    return {k: sample_std(v) for k, v in zip(keys, (tt, drac, mdrac, psd_i, psd_j))}
+
+
+def _surrogate_values(S: Samples, i: np.ndarray, j: np.ndarray, ttc: np.ndarray,
+                      p: InteractionsParams) -> dict[str, np.ndarray]:
+    """``drac``, ``mdrac``, ``psd_i``, ``psd_j`` of pairs (i, j) with box TTC ``ttc``."""
+    w = np.hypot(S.vx[j] - S.vx[i], S.vy[j] - S.vy[i])
+    drac, mdrac, psd_i = box_surrogates(ttc, w, np.hypot(S.vx[i], S.vy[i]), p.reaction_time,
+                                        p.max_deceleration)
+    psd_j = box_surrogates(ttc, w, np.hypot(S.vx[j], S.vy[j]), p.reaction_time,
+                           p.max_deceleration)[2]
+    return {"drac": drac, "mdrac": mdrac, "psd_i": psd_i, "psd_j": psd_j}
 
 
 def box_conflicts(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
                   ) -> dict[str, np.ndarray]:
-    """The 2D TTC (up to ``horizon``, with its std) of the pairs :func:`box_rows` finds: the
-    neighbour rows of ``lane`` take that of their pair (``lane`` is updated in place), the other
-    pairs become ``conflicting`` rows, one per direction (returned; empty if there are none)."""
+    """The 2D TTC (up to ``horizon``, with its std) and the surrogates derived from it of the
+    pairs :func:`box_rows` finds: the neighbour rows of ``lane`` take those of their pair
+    (``lane`` is updated in place), the other pairs become ``conflicting`` rows, one per direction
+    (returned; empty if there are none)."""
     box = box_rows(S, lane, p)
     fin = np.isfinite(box["ttc"]) & (box["ttc"] <= p.horizon)
     bi, bj, bt = box["i"][fin], box["j"][fin], box["ttc"][fin]
-    bstd = box_std(S, bi, bj, p)
+    sd = box_std(S, bi, bj, p)
+    val = _surrogate_values(S, bi, bj, bt, p)
     key = pair_key(bi, bj, S.n)
     korder = np.argsort(key)
     ks = key[korder]
     if lane:
-        # neighbours get the 2D TTC of their pair
+        # neighbours get the 2D TTC (and surrogates) of their pair
         nb = ~np.isin(lane["rel"], ["leader", "follower"])
         lk = pair_key(lane["i"], lane["j"], S.n)
         pos, found = lookup(ks, lk)
         hit = nb & found
-        lane["ttc"] = np.where(hit, bt[korder][pos] if len(ks) else np.inf, lane["ttc"])
-        lane["ttc_std"] = np.where(hit, bstd[korder][pos] if len(ks) else np.nan,
-                                   lane["ttc_std"])
+        at = korder[pos] if len(ks) else np.zeros(len(lk), np.int64)
+        # the row's participant is the pair's i or j: its own PSD
+        is_i = (bi[at] == lane["i"]) if len(ks) else np.ones(len(lk), bool)
+
+        def take(v: np.ndarray) -> np.ndarray:
+            return v[at] if len(ks) else np.full(len(lk), np.nan)
+
+        lane["ttc"] = np.where(hit, take(bt) if len(ks) else np.inf, lane["ttc"])
+        lane["ttc_std"] = np.where(hit, take(sd["ttc"]), lane["ttc_std"])
+        for k in ("drac", "mdrac"):
+            lane[k] = np.where(hit, take(val[k]), lane[k])
+            lane[f"{k}_std"] = np.where(hit, take(sd[k]), lane[f"{k}_std"])
+        lane["psd"] = np.where(hit, np.where(is_i, take(val["psd_i"]), take(val["psd_j"])),
+                               lane["psd"])
+        lane["psd_std"] = np.where(hit, np.where(is_i, take(sd["psd_i"]), take(sd["psd_j"])),
+                                   lane["psd_std"])
         lane["kind"] = np.where(hit, "box_2d", lane["kind"])
         _, is_nb = lookup(np.unique(lk[nb]), key)
     else:
         is_nb = np.zeros(len(key), bool)
-    ci, cj, ct, cs = bi[~is_nb], bj[~is_nb], bt[~is_nb], bstd[~is_nb]
+    c = ~is_nb
+    ci, cj, ct = bi[c], bj[c], bt[c]
     if not len(ci):
         return {}
     m = len(ci)
     rr = range_rate(S, ci, cj)
     nan = np.full(2 * m, np.nan)
+
+    def both(v: np.ndarray) -> np.ndarray:
+        return np.r_[v[c], v[c]]
+
     return {
         "i": np.r_[ci, cj], "j": np.r_[cj, ci],
         "rel": np.full(2 * m, "conflicting", object),
         "gap": nan, "gap_var": nan, "closing": np.r_[rr, rr], "ttc": np.r_[ct, ct],
-        "ttc_std": np.r_[cs, cs], "thw": nan, "dhw": nan,
+        "ttc_std": both(sd["ttc"]), "thw": nan, "dhw": nan,
         "ttc_ca": np.full(2 * m, np.inf), "ttc_ca_std": nan,
+        "drac": both(val["drac"]), "drac_std": both(sd["drac"]),
+        "mdrac": both(val["mdrac"]), "mdrac_std": both(sd["mdrac"]),
+        "psd": np.r_[val["psd_i"][c], val["psd_j"][c]],
+        "psd_std": np.r_[sd["psd_i"][c], sd["psd_j"][c]],
         "kind": np.full(2 * m, "box_2d", object),
     }

@@ -10,12 +10,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from aveas_format.derive.interactions._surrogates import lane_surrogates
+
 
 def follower_leader_metrics(gap: np.ndarray, gap_var: np.ndarray, leader_length: np.ndarray,
-                            follower: tuple[np.ndarray, ...], leader: tuple[np.ndarray, ...]
+                            follower: tuple[np.ndarray, ...], leader: tuple[np.ndarray, ...],
+                            reaction_time: float = 1.0, max_deceleration: float = 3.4
                             ) -> dict[str, np.ndarray]:
     """The 1D metrics of follower/leader pairs along their lane: ``closing``, ``ttc``,
-    ``ttc_std``, ``ttc_ca``, ``ttc_ca_std``, ``thw`` and ``dhw`` (with ``gap`` and ``gap_var``).
+    ``ttc_std``, ``ttc_ca``, ``ttc_ca_std``, ``thw`` and ``dhw`` (with ``gap`` and ``gap_var``),
+    and the surrogates ``drac``, ``mdrac``, ``psd`` with their ``_std``
+    (:func:`._surrogates.lane_surrogates`).
 
     ``follower`` and ``leader`` are ``(v, a, v_var, a_var)``: speed and acceleration along the lane
     and their variances. ``ttc_std`` is NaN where the pair is not closing."""
@@ -32,7 +37,8 @@ def follower_leader_metrics(gap: np.ndarray, gap_var: np.ndarray, leader_length:
         thw = np.where((vf > 0) & (gap >= 0), gap / vf, np.inf)
     return {"gap": gap, "gap_var": gap_var, "closing": dv, "ttc": ttc,
             "ttc_std": np.where(np.isfinite(ttc), ttc_std, np.nan), "thw": thw,
-            "dhw": gap + leader_length, "ttc_ca": ttc_ca, "ttc_ca_std": ttc_ca_std}
+            "dhw": gap + leader_length, "ttc_ca": ttc_ca, "ttc_ca_std": ttc_ca_std,
+            **lane_surrogates(gap, gap_var, dv, dvvar, vf, vfv, reaction_time, max_deceleration)}
 
 
 def ttc_constant_velocity(gap, v_follower, v_leader):
