@@ -73,6 +73,13 @@ def find(
     rows = found.to_pylist()
     cuts: list[list[str]] = []
     if cut is not None:
+        from aveas_format.dataset.find import cut_name
+
+        for r in rows:  # before writing any: nothing is replaced without --overwrite
+            for suffix in (".aveas", ".xosc"):
+                p = cut / f"{cut_name(r)}{suffix}"
+                if p.exists() and not overwrite:
+                    raise fail(f"{p}: exists; pass --overwrite to replace it", EXIT_USAGE)
         for r in rows:
             cuts.append([str(p) for p in cut_out(r, cut, before_s=before, after_s=after,
                                                  overwrite=overwrite)])

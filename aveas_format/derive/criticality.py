@@ -20,7 +20,8 @@ leader (1D), its neighbours and conflicting participants (2D). Definitions:
 - **max DRAC**, **min PSD**: over the same rows; **min PET**: over ``derived/encroachments`` rows
   the participant is in; counts: samples with ``TTC <= TTC*``, derived near misses and
   hard-braking events the participant is in; ``worst_events``: the ids of up to five of those
-  near misses, most critical (smallest TTC/PET) first.
+  near misses, most critical first (smallest TTC/PET, then those from DRAC alone, largest
+  first).
 
 Uncertainty: ``min_ttc_std`` is the std of the minimum's row. TET and TIT take their std from
 ``samples`` Monte Carlo draws of every TTC below ``TTC* + 4 σ``, ``TTC_t + σ_t z`` with one ``z``
@@ -293,13 +294,12 @@ def _pet_measures(en: pa.Table, ids: np.ndarray, out: dict) -> None:
 
 
 def _severity(kind: str, attrs: dict) -> tuple[int, float]:
-    """Sort key of an event, most critical first: near misses by their extreme value."""
-    if kind != "near_miss":
-        return (1, float(attrs.get("min_value_mps2", 0.0) or 0.0))
+    """Sort key of a near miss, most critical first: by TTC or PET (smaller first), then those
+    from DRAC alone (larger first)."""
     v = attrs.get("min_value_s", attrs.get("value_s"))
-    if v is None:
-        v = -float(attrs.get("max_value_mps2", 0.0) or 0.0)
-    return (0, float(v))
+    if v is not None:
+        return (0, float(v))
+    return (1, -float(attrs.get("max_value_mps2", 0.0) or 0.0))
 
 
 def _event_measures(rec, ids: np.ndarray) -> tuple[dict, list[list[int]], list[int]]:
