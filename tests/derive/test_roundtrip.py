@@ -25,10 +25,10 @@ def derived_scene():
 def test_all_derivations_run(derived_scene):
     rec, ran = derived_scene
     assert set(ran) == {"kinematics", "interactions", "encroachments", "traffic", "events",
-                        "criticality_summary"}
+                        "conflicts", "criticality_summary"}
     assert ran.index("kinematics") < ran.index("interactions") < ran.index("events")
     assert set(rec.derived) == {"kinematics", "interactions", "encroachments", "traffic",
-                                "criticality_summary"}
+                                "conflicts", "criticality_summary"}
     entries = {e.table: e for e in rec.meta.derived}
     assert set(entries) == {f"derived/{n}" for n in rec.derived}
     k = entries["derived/kinematics"]
