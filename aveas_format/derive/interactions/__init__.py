@@ -129,6 +129,12 @@ def _f(v: np.ndarray) -> pa.Array:
 
 def _table(S: Samples, r: dict[str, np.ndarray]) -> pa.Table:
     i, j = r["i"].astype(np.int64), r["j"].astype(np.int64)
+    if len(i):
+        # the table's order (participant, time, other, relation), sorted on the index arrays
+        rel_code = np.unique(r["rel"].astype(str), return_inverse=True)[1]
+        order = np.lexsort((rel_code, S.pid[j], S.t[i], S.pid[i]))
+        r = {k: v[order] for k, v in r.items()}
+        i, j = i[order], j[order]
     ttc = r["ttc"]
     kind = np.where(np.isfinite(ttc), r["kind"], None)
     t = pa.table({
@@ -148,13 +154,6 @@ def _table(S: Samples, r: dict[str, np.ndarray]) -> pa.Table:
         "ttc_ca_std": _f(np.where(np.isfinite(r["ttc_ca"]), r["ttc_ca_std"], np.nan)),
         **{k: _f(r[k]) for k in SURROGATE_KEYS},
     })
-    if t.num_rows:
-        import pyarrow.compute as pc
-
-        order = pc.sort_indices(t, sort_keys=[("participant_id", "ascending"),
-                                              ("time", "ascending"), ("other_id", "ascending"),
-                                              ("relation", "ascending")])
-        t = t.take(order)
     return t
 
 
