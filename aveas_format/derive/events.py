@@ -30,6 +30,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 from pydantic import Field
+from scipy.special import ndtr
 
 from aveas_format.derive._samples import ragged, segments, string_values
 from aveas_format.derive.registry import Derivation, Params, register
@@ -116,7 +117,7 @@ def _surrogates_of(r: dict[str, np.ndarray], rows: np.ndarray, p: EventsParams) 
     sd = np.sqrt(np.nan_to_num(r["drac_std"][rows]) ** 2 + p.madr_std_mps2 ** 2)
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.where(sd > 0, (d - p.madr_mps2) / sd, np.where(d > p.madr_mps2, np.inf, -np.inf))
-    prob = 0.5 * (1.0 + np.vectorize(math.erf)(z / math.sqrt(2.0))) if len(z) else z
+    prob = ndtr(z)
     dt = np.diff(t)
     step = np.r_[dt, dt[-1:] if len(dt) else [0.0]]
     span = float(step.sum())
