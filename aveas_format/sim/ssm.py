@@ -316,10 +316,105 @@ def follower_pairs(run: SsmRun, time_decimals: int = 3) -> pa.Table:
     return pa.table(rows)
 
 
+def _agreement(a: np.ndarray, b: np.ndarray, rel: float) -> dict[str, Any]:
+    """Samples where both are finite, the share within ``rel`` of SUMO's ``b`` and the median
+    relative difference."""
+    share, n = _share_within(a, b, rel)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.abs(a - b) / np.abs(b)
+    r = r[np.isfinite(r)]
+    return {"both_finite": n, "within": share,
+            "median_rel": float(np.median(r)) if len(r) else None}
+
+
+def _lookup(table: pa.Table, keys: tuple[str, ...], values: tuple[str, ...],
+            time_decimals: int) -> dict[tuple, tuple]:
+    """``{(key..., rounded time): (value, ...)}`` of a table's rows (the first row per key)."""
+    cols = [table.column(k).to_pylist() for k in keys]
+    t = np.round(table.column("time").to_numpy(zero_copy_only=False).astype(float),
+                 time_decimals).tolist()
+    vals = [table.column(v).to_numpy(zero_copy_only=False).astype(float) for v in values]
+    out: dict[tuple, tuple] = {}
+    for r, key in enumerate(zip(*cols, t)):
+        out.setdefault(key, tuple(v[r] for v in vals))
+    return out
+
+
+def _matched(sumo: pa.Table, keys: tuple[str, ...], ours: dict[tuple, tuple],
+             time_decimals: int) -> tuple[np.ndarray, int]:
+    """For each row of SUMO's table the values of ours at the same keys and time (NaN rows where
+    there is none) and the number matched."""
+    cols = [sumo.column(k).to_pylist() for k in keys]
+    t = np.round(sumo.column("time").to_numpy(zero_copy_only=False).astype(float),
+                 time_decimals).tolist()
+    width = len(next(iter(ours.values()))) if ours else 1
+    nan = (np.nan,) * width
+    got = [ours.get(key, None) for key in zip(*cols, t)]
+    return np.array([g if g is not None else nan for g in got], float).reshape(-1, width), \
+        sum(g is not None for g in got)
+
+
+def _globals_vs_leader(run: SsmRun, rel: float, time_decimals: int = 3) -> dict[str, Any]:
+    """SUMO's SGAP and TGAP (global measures per vehicle and step) against ``gap`` and ``thw``
+    of our ``leader`` rows of the same vehicle and time."""
+    import pyarrow.compute as pc
+
+    rec = run.recording
+    src = {v: k for k, v in _ids(rec).items()}
+    it = rec.derived["interactions"]
+    it = it.filter(pc.equal(it.column("relation"), "leader"))
+    it = it.append_column("ego", pa.array([src.get(i) for i in
+                                           it.column("participant_id").to_pylist()], pa.string()))
+    ours, _ = _matched(run.ssm["globals"], ("ego",),
+                       _lookup(it, ("ego",), ("gap", "thw"), time_decimals), time_decimals)
+    g = run.ssm["globals"]
+    return {"sgap": _agreement(ours[:, 0], g.column("sgap").to_numpy(), rel),
+            "tgap": _agreement(ours[:, 1], g.column("tgap").to_numpy(), rel)}
+
+
+def _crossings(run: SsmRun, rel: float, time_decimals: int = 3) -> dict[str, Any]:
+    """SUMO's crossing encounters (types 10/11) against ``derived/conflicts`` of the same ego,
+    foe and time (ttc, drac, ppet), and SUMO's PETs against the conflicts' observed ``pet``,
+    straight-on pairs (the junction's route ids WE, EW, SN, NS) and the others apart."""
+    import pyarrow.compute as pc
+
+    rec = run.recording
+    src = {v: k for k, v in _ids(rec).items()}
+    c = rec.derived["conflicts"]
+    for name, col_ in (("ego", "participant_id"), ("foe", "other_id")):
+        c = c.append_column(name, pa.array([src.get(i) for i in c.column(col_).to_pylist()],
+                                           pa.string()))
+    e = run.ssm["encounters"]
+    e = e.filter(pc.is_in(e.column("type"), pa.array(list(CROSSING), pa.int64())))
+    ours, n = _matched(e, ("ego", "foe"), _lookup(c, ("ego", "foe"), ("ttc", "drac", "ppet"),
+                                                  time_decimals), time_decimals)
+    out: dict[str, Any] = {"sumo_samples": e.num_rows, "matched": n}
+    for k, m in (("ttc", 0), ("drac", 1), ("ppet", 2)):
+        out[k] = _agreement(ours[:, m], e.column(k).to_numpy(), rel)
+    pet_ours: dict[tuple, float] = {}
+    for ego, foe, v in zip(*(c.column(k).to_pylist() for k in ("ego", "foe", "pet"))):
+        pet_ours.setdefault((ego, foe), np.nan if v is None else v)
+    straight = {"WE", "EW", "SN", "NS"}
+    P = run.ssm["pet"].to_pydict()
+    diffs: dict[str, list] = {"pet_straight": [], "pet_turning": []}
+    for ego, foe, v in zip(P["ego"], P["foe"], P["pet"]):
+        key = ("pet_straight" if ego.split(".")[0] in straight and foe.split(".")[0] in straight
+               else "pet_turning")
+        diffs[key].append(abs(v - pet_ours.get((ego, foe), np.nan)))
+    for k, d in diffs.items():
+        d = np.asarray(d, float)
+        fin = d[np.isfinite(d)]
+        out[k] = {"sumo": len(d), "matched": len(fin),
+                  "max_abs_s": float(fin.max()) if len(fin) else None}
+    return out
+
+
 def compare(run: SsmRun, rel: float = 0.01) -> dict[str, Any]:
     """Agreement of the measures computed both ways: per measure the number of samples where both
     are finite and the share within ``rel`` (relative), overall and on one lane (SUMO's ego and
-    foe on the same lane, i.e. not across a lane boundary or a junction's internal lanes)."""
+    foe on the same lane, i.e. not across a lane boundary or a junction's internal lanes);
+    ``sgap``/``tgap`` against our leader rows' gap and thw; ``crossing`` (where the recording has
+    ``derived/conflicts``): crossing TTC, DRAC, PPET and the PETs (docs/derive.md)."""
     fp = follower_pairs(run)
     out: dict[str, Any] = {"follower_samples": fp.num_rows}
     same = np.asarray(fp.column("same_lane").to_pylist(), bool)
@@ -335,6 +430,9 @@ def compare(run: SsmRun, rel: float = 0.01) -> dict[str, Any]:
                   "same_lane_within": s1,
                   "same_lane_max_rel": float(r.max()) if len(r) else None,
                   "same_lane_median_rel": float(np.median(r)) if len(r) else None}
+    out.update(_globals_vs_leader(run, rel))
+    if "conflicts" in run.recording.derived:
+        out["crossing"] = _crossings(run, rel)
     return out
 
 
