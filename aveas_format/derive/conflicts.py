@@ -182,13 +182,16 @@ def compute(rec, p: ConflictsParams) -> pa.Table:
                                              "pet")}
     if len(valid) >= 2:
         tree = shapely.STRtree(lines[valid])
-        qa, qb = tree.query(lines[valid], predicate="intersects")
+        qa, qb = tree.query(lines[valid])  # overlapping bounding boxes (cheap)
         keep = qa < qb
         qa, qb = valid[qa[keep]], valid[qb[keep]]
-        # pairs that travel the same way everywhere cannot cross at min_angle (car following)
+        # pairs that travel the same way everywhere cannot cross at min_angle (car following):
+        # dropped before the exact intersection test, which is costly for long parallel paths
         mean_dir, spread = track_directions(S, tracks)
         dd = np.abs(np.angle(np.exp(1j * (mean_dir[qa] - mean_dir[qb]))))
         ok = dd + spread[qa] + spread[qb] >= p.min_angle
+        qa, qb = qa[ok], qb[ok]
+        ok = shapely.intersects(lines[qa], lines[qb]) if len(qa) else np.zeros(0, bool)
         pairs = list(zip(qa[ok].tolist(), qb[ok].tolist()))
     else:
         pairs = []

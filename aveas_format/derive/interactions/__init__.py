@@ -131,7 +131,10 @@ def _table(S: Samples, r: dict[str, np.ndarray]) -> pa.Table:
     i, j = r["i"].astype(np.int64), r["j"].astype(np.int64)
     if len(i):
         # the table's order (participant, time, other, relation), sorted on the index arrays
-        rel_code = np.unique(r["rel"].astype(str), return_inverse=True)[1]
+        rel = r["rel"]
+        rel_code = np.zeros(len(rel), np.int8)
+        for k, v in enumerate(sorted({str(x) for x in Relation})):  # a handful of values
+            rel_code[rel == v] = k
         order = np.lexsort((rel_code, S.pid[j], S.t[i], S.pid[i]))
         r = {k: v[order] for k, v in r.items()}
         i, j = i[order], j[order]
