@@ -26,6 +26,8 @@ from __future__ import annotations
 
 import shutil
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -151,6 +153,21 @@ class SsmRun:
     workdir: Path | None
 
 
+@contextmanager
+def _workdir(workdir: str | Path | None) -> Iterator[tuple[Path, bool]]:
+    """``(directory, kept)``: ``workdir`` (created), or a temporary directory removed after."""
+    if workdir is not None:
+        wd = Path(workdir)
+        wd.mkdir(parents=True, exist_ok=True)
+        yield wd, True
+        return
+    tmp = tempfile.mkdtemp(prefix="aveas-ssm-")
+    try:
+        yield Path(tmp), False
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 _JUNCTION_NODES = """<nodes>
   <node id="C" x="0" y="0" type="priority"/>
   <node id="W" x="-{a}" y="0"/><node id="E" x="{a}" y="0"/>
@@ -194,14 +211,7 @@ def junction_scenario(workdir: str | Path | None = None, *, duration: float = 12
     the SUMO network. ``workdir`` keeps the files."""
     from aveas_format.converters import convert
 
-    tmp = None
-    if workdir is None:
-        tmp = tempfile.mkdtemp(prefix="aveas-ssm-")
-        wd = Path(tmp)
-    else:
-        wd = Path(workdir)
-        wd.mkdir(parents=True, exist_ok=True)
-    try:
+    with _workdir(workdir) as (wd, keep):
         (wd / "n.nod.xml").write_text(_JUNCTION_NODES.format(a=f"{arm_m:g}"))
         (wd / "n.edg.xml").write_text(_junction_edges(1, speed))
         nc = str(find_sumo("netconvert"))
@@ -233,10 +243,7 @@ def junction_scenario(workdir: str | Path | None = None, *, duration: float = 12
                       options={"net_file": str(wd / "net.net.xml"),
                                "vtypes": [str(wd / "routes.rou.xml")],
                                "partner": "aveas-format sim", "title": "SUMO junction with SSM"})
-        return SsmRun(rec, read_ssm(wd / "ssm.xml"), {"car": 2.5}, None if tmp else wd)
-    finally:
-        if tmp is not None:
-            shutil.rmtree(tmp, ignore_errors=True)
+        return SsmRun(rec, read_ssm(wd / "ssm.xml"), {"car": 2.5}, wd if keep else None)
 
 
 def autobahn_scenario(workdir: str | Path | None = None, *, duration: float = 120.0,
@@ -247,23 +254,14 @@ def autobahn_scenario(workdir: str | Path | None = None, *, duration: float = 12
     from aveas_format.sim.runner import simulate
     from aveas_format.sim.scenario import Network, Scenario
 
-    tmp = None
-    if workdir is None:
-        tmp = tempfile.mkdtemp(prefix="aveas-ssm-")
-        wd = Path(tmp)
-    else:
-        wd = Path(workdir)
-    try:
+    with _workdir(workdir) as (wd, keep):
         sc = Scenario(network=Network(length=length, inflow=inflow), duration=duration,
                       step_length=step, seed=seed, drain=False, extra_args=ssm_args("ssm.xml"))
         res = simulate(sc, recording=True, workdir=wd, timeout=timeout)
         if not (wd / "ssm.xml").exists():
             raise SimulationError("sumo wrote no SSM output", path=wd / "ssm.xml")
         gaps = {c.name: c.w99()["cc0"] for c in sc.classes}
-        return SsmRun(res.recording, read_ssm(wd / "ssm.xml"), gaps, None if tmp else wd)
-    finally:
-        if tmp is not None:
-            shutil.rmtree(tmp, ignore_errors=True)
+        return SsmRun(res.recording, read_ssm(wd / "ssm.xml"), gaps, wd if keep else None)
 
 
 def _ids(rec) -> dict[str, int]:
