@@ -119,16 +119,19 @@ def _ttc_ca(g, vf, af, vl, al):
         # piece 1, [0, b1]: both move; gap = g + (vl - vf) t + (al - af) t²/2
         r = _first_root(g, vl - vf, 0.5 * (al - af), 0.0, np.where(np.isfinite(b1), b1, 1e300))
         out = np.where(r < out, r, out)
-        # piece 2, [b1, b2]: the one that stopped first stands at x(T) = v T + a T²/2
-        f_stopped = Tf <= Tl
-        T = np.where(np.isfinite(b1), b1, 0.0)
-        x_stop = np.where(f_stopped, vf * T + 0.5 * af * T * T, vl * T + 0.5 * al * T * T)
-        A = np.where(f_stopped, g - x_stop, g + x_stop)
-        B = np.where(f_stopped, vl, -vf)
-        C = np.where(f_stopped, 0.5 * al, -0.5 * af)
-        b2 = np.maximum(Tf, Tl)
-        r2 = _first_root(A, B, C, T, np.where(np.isfinite(b2), b2, 1e300))
-        out = np.where(np.isfinite(b1) & (out == np.inf) & (r2 < out), r2, out)
+        # piece 2, [b1, b2]: the one that stopped first stands at x(T) = v T + a T²/2; only
+        # where one stops and piece 1 found no contact (a subset: computed on it alone)
+        k = np.flatnonzero(np.isfinite(b1) & (out == np.inf))
+        if len(k):
+            gk, vfk, afk, vlk, alk, Tfk, Tlk = (a[k] for a in (g, vf, af, vl, al, Tf, Tl))
+            f_stopped = Tfk <= Tlk
+            T = b1[k]
+            x_stop = np.where(f_stopped, vfk * T + 0.5 * afk * T * T, vlk * T + 0.5 * alk * T * T)
+            A = np.where(f_stopped, gk - x_stop, gk + x_stop)
+            B = np.where(f_stopped, vlk, -vfk)
+            C = np.where(f_stopped, 0.5 * alk, -0.5 * afk)
+            b2 = np.maximum(Tfk, Tlk)
+            out[k] = _first_root(A, B, C, T, np.where(np.isfinite(b2), b2, 1e300))
     out = np.where(g < 0, np.inf, out)
     return out, np.minimum(out, Tf), np.minimum(out, Tl)
 
