@@ -203,9 +203,14 @@ def _hour_child(path: str, workers: int, window_s: float) -> None:
     info = derive_by_windows(path, Path(path).parent / "derived-out", window_s=window_s,
                              workers=workers)
     secs = time.perf_counter() - t0
+    import resource
+
+    cpu = sum(getattr(resource.getrusage(w), f) for w in (resource.RUSAGE_SELF,
+                                                          resource.RUSAGE_CHILDREN)
+              for f in ("ru_utime", "ru_stime"))
     hwm = next((int(ln.split()[1]) for ln in Path("/proc/self/status").read_text().splitlines()
                 if ln.startswith("VmHWM")), None)
-    print(json.dumps({"seconds": secs, "vmhwm_kb": hwm, **info}))
+    print(json.dumps({"seconds": secs, "cpu_s": cpu, "vmhwm_kb": hwm, **info}))
 
 
 def bench_hour(duration_s: float = 3600.0, workers: int = 2, window_s: float = 300.0) -> list[dict]:
@@ -225,6 +230,9 @@ def bench_hour(duration_s: float = 3600.0, workers: int = 2, window_s: float = 3
              "note": (f"{duration_s:g} s, ~100 concurrent vehicles at 25 Hz ({n:,} states; built "
                       f"and written in {tb:.0f} s); every measure with std, {info['windows']} "
                       f"windows of {window_s:g} s on {workers} workers; "
+                      f"CPU time of the deriving process and its workers {info['cpu_s']:.0f} s "
+                      f"(/{workers} = {info['cpu_s'] / workers:.0f} s: the wall time on "
+                      f"{workers} idle cores, less the idle gaps); "
                       f"{info['interactions']:,} interaction rows, {info['conflicts']:,} conflict "
                       f"rows; peak memory of the deriving process (VmHWM, workers excluded) "
                       f"{info['vmhwm_kb'] / 1024:.0f} MB, largest worker "
