@@ -10,6 +10,7 @@ from aveas_format.cli.app import app
 from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, out
 from aveas_format.cli.options import (
     converter_options,
+    crs_option,
     option_pairs_option,
     options_file_option,
     overwrite_option,
@@ -31,6 +32,7 @@ def convert(
     map_file: Path = typer.Option(None, "--map", "-m", help="The OpenDRIVE map the data refers to."),
     output: Path = typer.Option(None, "--output", "-o", help="Output recording (NAME.aveas or "
                                 "NAME.aveas.zip)."),
+    crs: str = crs_option(),
     option: list[str] = option_pairs_option("Converter"),
     options_file: Path = options_file_option("Converter"),
     overwrite: bool = overwrite_option(),
@@ -62,6 +64,8 @@ def convert(
         raise fail("--from NAME, INPUT... and --output are required (or --list)", EXIT_USAGE)
     conv = get_converter(source)
     raw = converter_options(options_file, option, conv.options)
+    if crs:
+        raw["crs"] = crs
     if each or group:
         _convert_many(source, [str(i) for i in inputs], map_file, raw, output, group, overwrite,
                       validate_, workers, scheduler)

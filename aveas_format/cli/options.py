@@ -5,6 +5,7 @@ spelling out ``typer.Option(...)`` again, and calls the helper that goes with th
 
 - **Output**: :func:`overwrite_option` (``--overwrite``) and :func:`refuse_overwrite`, the check
   before writing (never overwrite without ``--overwrite``).
+- **The CRS of an import** (``convert``): :func:`crs_option` (``--crs``).
 - **Options of a converter or exporter** (``convert``, ``export``): :func:`option_pairs_option`
   (``--option/-O KEY=VALUE``) and :func:`options_file_option` (``--options FILE.json``), read by
   :func:`converter_options`; :func:`parse_option_pairs` also reads ``fit``'s metric options.
@@ -69,6 +70,15 @@ def option_pairs_option(kind: str) -> Any:
 def options_file_option(kind: str) -> Any:
     """``--options FILE.json`` of a ``kind`` (``Converter``, ``Exporter``)."""
     return typer.Option(None, "--options", help=f"{kind} options as a JSON file.")
+
+
+def crs_option() -> Any:
+    """``--crs CRS`` of the importers: the recording's CRS where the map has no
+    ``<geoReference>`` (the common import option ``crs``)."""
+    return typer.Option(None, "--crs", help="The recording's CRS (PROJ string, EPSG:code or WKT) "
+                        "where the map has no <geoReference>, e.g. '+proj=tmerc +lat_0=48.1 "
+                        "+lon_0=11.5 +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m' (a transverse "
+                        "Mercator at the site).")
 
 
 def parse_option_pairs(pairs: list[str], model: type) -> dict[str, Any]:

@@ -40,7 +40,12 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
-from aveas_format.converters.common import load_map_bytes, source_block
+from aveas_format.converters.common import (
+    companion_map,
+    companion_map_path,
+    load_map_bytes,
+    source_block,
+)
 from aveas_format.converters.registry import ConverterOptions, ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.safeio import xml_parser
@@ -238,11 +243,13 @@ def export_openscenario(rec, output: Path, *, options: OpenScenarioExportOptions
     from aveas_format.safeio import write_bytes_atomic
 
     output = Path(output)
-    map_name = options.map_file or f"{output.stem}.xodr"
+    companion = companion_map_path(output, options)
+    map_name = companion.name if companion is not None else (options.map_file or f"{output.stem}.xodr")
     data = recording_to_openscenario(rec, logic_file=map_name, options=options)
     written = [write_bytes_atomic(output, data)]
-    if options.write_map and rec.map_source is not None:
-        written.append(write_bytes_atomic(output.parent / map_name, rec.map_source))
+    if companion is not None and rec.map_source is not None:
+        # the recording's crs travels in the map's <geoReference> (OpenSCENARIO has no place for it)
+        written.append(write_bytes_atomic(companion, companion_map(rec)))
     return written
 
 
