@@ -82,7 +82,8 @@ def crs_option() -> Any:
 
 
 def parse_option_pairs(pairs: list[str], model: type) -> dict[str, Any]:
-    """``["net_file=a.net.xml", "vtypes=a.rou.xml,b.rou.xml", "geo=true"]`` -> dict.
+    """``["net_file=a.net.xml", "vtypes=a.rou.xml,b.rou.xml", "geo=true", "parameter.Speed=60"]``
+    -> dict (``KEY.NAME=VALUE`` sets the entry ``NAME`` of the dict option ``KEY``).
 
     Values are read as JSON where they parse (numbers, booleans, lists), else as strings; a
     comma-separated string becomes a list for list-typed options.
@@ -98,6 +99,10 @@ def parse_option_pairs(pairs: list[str], model: type) -> dict[str, Any]:
             value: Any = json.loads(raw)
         except json.JSONDecodeError:
             value = raw
+        if "." in key:  # KEY.NAME=VALUE: one entry of a dict option (parameter.Speed=60)
+            head, name = key.split(".", 1)
+            out_.setdefault(head, {})[name] = raw if isinstance(value, (dict, list)) else value
+            continue
         ann = fields[key].annotation if key in fields else None
         if typing.get_origin(ann) in (list, tuple) and isinstance(value, str):
             value = [v for v in value.split(",") if v]

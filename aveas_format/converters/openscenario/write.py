@@ -1,4 +1,4 @@
-"""ASAM OpenSCENARIO XML 1.2 / 1.3 <-> recording (recorded motion as timed polylines).
+"""The OpenSCENARIO export: a recording -> a scenario that replays it (timed polylines).
 
 **Export** (``aveas-format export --to openscenario REC -o OUT.xosc``) writes a scenario that
 replays the recording (or a time window of it, or chosen participants) and the map next to it
@@ -21,19 +21,10 @@ Participants that appear after the window start wait at their first position unt
 vertex (OpenSCENARIO has no spawn time in 1.2); choose a window or a set of participants to avoid
 that. The system under test can be given an external controller by the simulation tool (the
 entity of ``role = system_under_test`` / ``recording_vehicle`` is marked in its ``Properties``).
-
-**Import** (``aveas-format convert --from openscenario FILE.xosc``) reads the trajectories of such
-a file back: entities with their bounding boxes and categories, each ``FollowTrajectoryAction``
-polyline with vertex times (``WorldPosition`` or ``LanePosition`` through the map), the time
-reference's offset and scale, and the ``Init`` teleport of entities without a trajectory (one
-sample at t = 0). The map is ``--map`` or the ``LogicFile`` next to the file. Speeds come from the
-positions (finite differences); provenance ``simulated``.
 """
 
 from __future__ import annotations
 
-import math
-import warnings
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -43,12 +34,9 @@ from lxml import etree
 from aveas_format.converters.common import (
     companion_map,
     companion_map_path,
-    load_map_bytes,
-    source_block,
 )
-from aveas_format.converters.registry import ConverterOptions, ImportOptions, converter
-from aveas_format.errors import FormatError, RecordingIOError
-from aveas_format.safeio import xml_parser
+from aveas_format.converters.registry import ConverterOptions, converter
+from aveas_format.errors import FormatError
 
 VEHICLE_CATEGORY = {"car": "car", "van": "van", "truck": "truck", "bus": "bus", "trailer": "trailer",
                     "motorcycle": "motorbike", "bicycle": "bicycle", "railvehicle": "tram"}
@@ -253,193 +241,4 @@ def export_openscenario(rec, output: Path, *, options: OpenScenarioExportOptions
     return written
 
 
-# ================================================================================================
-# import
-# ================================================================================================
-
-class OpenScenarioImportOptions(ImportOptions):
-    provenance: str = "simulated"
-    """natural / staged / simulated: what the trajectories are (default simulated)."""
-    method: str = "traffic_simulation"
-    """Acquisition method of the recording."""
-
-
-def _float(el, name: str, default: float = 0.0) -> float:
-    v = el.get(name)
-    if v is None:
-        return default
-    if v.startswith("$"):
-        raise FormatError(f"parameter reference {v!r} in <{el.tag}> is not supported (resolve "
-                          "parameters first)", line=el.sourceline)
-    try:
-        return float(v)
-    except ValueError:
-        raise FormatError(f"<{el.tag}> {name}={v!r} is not a number", line=el.sourceline) from None
-
-
-def _pos_xyzh(pos, net) -> tuple[float, float, float, float | None]:
-    wp = pos.find("WorldPosition")
-    if wp is not None:
-        return (_float(wp, "x"), _float(wp, "y"), _float(wp, "z"),
-                _float(wp, "h") if wp.get("h") is not None else None)
-    lp = pos.find("LanePosition")
-    if lp is not None:
-        road, lane = lp.get("roadId"), int(lp.get("laneId"))
-        s = _float(lp, "s")
-        off = _float(lp, "offset")
-        inner, outer = net.lane_borders(road, np.array([s]), np.array([lane]))
-        t = 0.5 * (inner[0] + outer[0]) + off
-        x, y, z, hdg = net.road_to_world(road, np.array([s]), np.array([t]))
-        ori = lp.find("Orientation")
-        h = float(hdg[0])
-        if ori is not None and ori.get("h") is not None:
-            h = _float(ori, "h") if ori.get("type") == "absolute" else h + _float(ori, "h")
-        return float(x[0]), float(y[0]), float(z[0]), h
-    rp = pos.find("RoadPosition")
-    if rp is not None:
-        x, y, z, hdg = net.road_to_world(rp.get("roadId"), np.array([_float(rp, "s")]),
-                                         np.array([_float(rp, "t")]))
-        return float(x[0]), float(y[0]), float(z[0]), float(hdg[0])
-    raise FormatError(f"position kind {[c.tag for c in pos]} is not supported (World, Lane, Road)",
-                      line=pos.sourceline)
-
-
-@converter("openscenario", description="ASAM OpenSCENARIO XML: FollowTrajectoryAction polylines",
-           patterns=("*.xosc",), method="traffic_simulation", options=OpenScenarioImportOptions,
-           needs_map=False)
-def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenarioImportOptions):
-    from aveas_format.mapref.build import build_recording
-    from aveas_format.opendrive import load_map
-
-    if len(inputs) != 1:
-        raise FormatError(f"openscenario: expected one input file, got {len(inputs)}")
-    path = Path(inputs[0])
-    try:
-        root = etree.parse(str(path), xml_parser()).getroot()
-    except OSError as e:
-        raise RecordingIOError(f"cannot read: {e}", path=path) from None
-    except etree.XMLSyntaxError as e:
-        raise FormatError(f"malformed XML: {e.msg}", path=path, line=e.lineno) from None
-    if root.tag != "OpenSCENARIO":
-        raise FormatError(f"not OpenSCENARIO: root element <{root.tag}>", path=path)
-    if map_source is None:
-        lf = root.find("RoadNetwork/LogicFile")
-        if lf is None or not lf.get("filepath"):
-            raise FormatError("no map: pass --map MAP.xodr (the file has no RoadNetwork/LogicFile)",
-                              path=path)
-        cand = path.parent / lf.get("filepath")
-        if not cand.is_file():
-            raise FormatError(f"no map: pass --map MAP.xodr (LogicFile {lf.get('filepath')!r} is not "
-                              "next to the file)", path=path)
-        map_source = cand
-    map_bytes = load_map_bytes(map_source)
-    net = load_map(map_bytes)
-
-    names: list[str] = []
-    part: dict[str, list] = {k: [] for k in ("participant_id", "source_id", "class", "length", "width",
-                                             "height", "role")}
-    for so in root.iterfind("Entities/ScenarioObject"):
-        name = so.get("name")
-        el = next((c for c in so if c.tag in ("Vehicle", "Pedestrian", "MiscObject")), None)
-        if el is None:
-            continue  # catalog references / entity selections: not supported
-        props = {pr.get("name"): pr.get("value") for pr in el.iterfind("Properties/Property")}
-        cat = el.get("vehicleCategory") or el.get("pedestrianCategory")
-        cls = props.get("aveas:class") or CATEGORY_TO_CLASS.get(cat or "", "other")
-        dims = el.find("BoundingBox/Dimensions")
-        if dims is None:
-            raise FormatError(f"entity {name!r} has no BoundingBox", path=path, line=el.sourceline)
-        q = props.get("aveas:participant_id")
-        part["participant_id"].append(int(q) if q and q.isdigit() else len(names))
-        part["source_id"].append(props.get("aveas:source_id") or name)
-        part["class"].append(cls)
-        part["length"].append(_float(dims, "length"))
-        part["width"].append(_float(dims, "width"))
-        part["height"].append(_float(dims, "height"))
-        role = props.get("aveas:role")
-        part["role"].append(role if role and role != "None" else "simulated_agent")
-        names.append(name)
-    index = {n: i for i, n in enumerate(names)}
-    samples: dict[str, list[tuple[float, float, float, float, float | None]]] = {n: [] for n in names}
-    for fta in root.iter("FollowTrajectoryAction"):
-        ev = fta.getparent()
-        while ev is not None and ev.tag != "ManeuverGroup":
-            ev = ev.getparent()
-        refs = [e.get("entityRef") for e in ev.iterfind("Actors/EntityRef")] if ev is not None else []
-        pl = fta.find("Trajectory/Shape/Polyline")
-        if pl is None:
-            pl = fta.find("TrajectoryRef/Trajectory/Shape/Polyline")
-        if pl is None:
-            continue  # clothoids / NURBS: not supported
-        timing = fta.find("TimeReference/Timing")
-        scale = _float(timing, "scale", 1.0) if timing is not None else 1.0
-        offset = _float(timing, "offset", 0.0) if timing is not None else 0.0
-        for vtx in pl.iterfind("Vertex"):
-            if vtx.get("time") is None:
-                raise FormatError("a polyline vertex without time", path=path, line=vtx.sourceline)
-            x, y, z, h = _pos_xyzh(vtx.find("Position"), net)
-            for ref in refs:
-                if ref in samples:
-                    samples[ref].append((_float(vtx, "time") * scale + offset, x, y, z, h))
-    for pr in root.iterfind("Storyboard/Init/Actions/Private"):
-        ref = pr.get("entityRef")
-        if ref in samples and not samples[ref]:
-            tp = pr.find("PrivateAction/TeleportAction/Position")
-            if tp is not None:
-                samples[ref].append((0.0, *_pos_xyzh(tp, net)))
-    rows: dict[str, list] = {k: [] for k in ("participant_id", "time", "x", "y", "z", "heading")}
-    dropped: list[tuple[str, float]] = []
-    for n, smp in samples.items():
-        # one state per entity and time: a vertex repeating a time is dropped (the first is kept),
-        # with a warning below, never silently
-        first: dict[float, tuple] = {}
-        for s_ in smp:
-            if round(s_[0], 9) in first:
-                dropped.append((n, s_[0]))
-            else:
-                first[round(s_[0], 9)] = s_
-        smp = sorted(first.values(), key=lambda s_: s_[0])
-        for tt, x, y, z, h in smp:
-            rows["participant_id"].append(part["participant_id"][index[n]])
-            rows["time"].append(tt)
-            rows["x"].append(x)
-            rows["y"].append(y)
-            rows["z"].append(z)
-            rows["heading"].append(h if h is not None else math.nan)
-    if not rows["time"]:
-        raise FormatError("no trajectory (FollowTrajectoryAction polyline) found", path=path)
-    if dropped:
-        warnings.warn(f"{path.name}: {len(dropped)} trajectory vertices repeat an entity's time "
-                      f"(e.g. entity {dropped[0][0]!r} at {dropped[0][1]!r} s) and were dropped; "
-                      "the first vertex of each time is kept", stacklevel=2)
-    states = {k: np.asarray(v, np.int64 if k == "participant_id" else np.float64) for k, v in rows.items()}
-    if np.isnan(states["heading"]).any():
-        del states["heading"]  # from the direction of motion
-    order = np.lexsort((states["time"], states["participant_id"]))
-    states = {k: v[order] for k, v in states.items()}
-    has = set(states["participant_id"].tolist())
-    keep = [i for i, q in enumerate(part["participant_id"]) if q in has]
-    participants = {k: np.asarray([v[i] for i in keep], dtype=object if k in ("source_id", "class", "role")
-                                  else np.int64 if k == "participant_id" else np.float64)
-                    for k, v in part.items()}
-    hdr = root.find("FileHeader")
-    title = options.title or (hdr.get("description") if hdr is not None else None)
-    provenance = options.provenance
-    roles = participants["role"]
-    if provenance == "simulated":
-        participants["role"] = np.asarray(["simulated_agent" if r in ("observed",) else r for r in roles],
-                                          dtype=object)
-    partner = options.partner or (hdr.get("author") if hdr is not None else None) or "unknown"
-    meta = {"title": title} if title else {}
-    return build_recording(
-        map_source=map_bytes, participants=participants, states=states, method=options.method,
-        partner=partner, provenance=provenance, start_time=options.start_time or "1970-01-01T00:00:00Z",
-        recording_id=options.recording_id,
-        rights={"right_of_use": options.right_of_use, "license": options.license,
-                "owner": options.owner or partner},
-        acquisition={"platform": f"OpenSCENARIO {path.name}",
-                     "sensors": [{"id": "scenario", "kind": "simulator"}]},
-        source=source_block("openscenario", [path], options), **meta)
-
-
-__all__ = ["export_openscenario", "import_openscenario", "recording_to_openscenario"]
+__all__ = ["export_openscenario", "recording_to_openscenario"]
