@@ -28,9 +28,12 @@ fixed rate (``rate_hz``) and what the file prescribes is carried out:
   step) are recorded: timed vertices as they are, without samples added between them (a gap between
   vertices stays a gap, as in a recording exported with one). An untimed trajectory of an entity at rest cannot be timed: that entity is
   not converted (one warning line naming it and why).
+- Steps are ``1 / rate_hz`` apart, with extra steps where a trajectory or speed ramp ends or a
+  condition's delay runs out between two steps (so that chained events start when the element
+  they wait for ends).
 - The replay ends when the storyboard's ``StopTrigger`` holds; when every act has ended and no
-  trajectory runs, it waits at most ``GRACE`` (10 s) for that (not at all without a stop
-  trigger); and it ends after ``max_duration`` s in any case.
+  trajectory runs, it waits for a stop at a simulation time, else at most ``GRACE`` (10 s) (not
+  at all without a stop trigger); and it ends after ``max_duration`` s in any case.
 """
 
 from __future__ import annotations
@@ -106,7 +109,8 @@ class Replay:
         self.state: dict[Any, tuple[str, float | None, float | None]] = {}  # -> kind, start, end
         self.cond_true: dict[Any, float] = {}
         self.ignored_actions: dict[str, int] = {}
-        self.clipped: dict[str, int] = {}  # entity -> timed vertices after the end of the replay
+        self.clipped: dict[str, int] = {}
+        self.wakeups: set[float] = set()  # times between steps at which something happens  # entity -> timed vertices after the end of the replay
         self.ignored_conditions: dict[str, int] = {}
         self.named: dict[str, object] = {}
         for el in root.iter("Story", "Act", "ManeuverGroup", "Maneuver", "Event", "Action"):
@@ -386,6 +390,7 @@ class Replay:
         key = c
         if now and key not in self.cond_true:
             self.cond_true[key] = self.t
+            self.wakeups.add(self.t + (attr(c, "delay", 0.0) or 0.0))
         if key not in self.cond_true:
             return False
         return self.t >= self.cond_true[key] + (attr(c, "delay", 0.0) or 0.0) - 1e-9
@@ -399,7 +404,8 @@ class Replay:
             if k.tag == "SimulationTimeCondition":
                 # "greaterThan v" holds for every t > v: the event starts at v (not one step later)
                 rule = "greaterOrEqual" if k.get("rule") == "greaterThan" else k.get("rule")
-                return _compare(self.t, rule, attr(k, "value"), self.dt / 2)
+                self.wakeups.add(attr(k, "value"))
+                return _compare(self.t, rule, attr(k, "value"), 1e-9)
             if k.tag == "StoryboardElementStateCondition":
                 return self._element_state(k.get("storyboardElementRef"), k.get("state"))
             if k.tag == "ParameterCondition":
@@ -499,6 +505,9 @@ class Replay:
         stop = sb.find("StopTrigger")
         done_at: float | None = None
         has_stop = stop is not None and stop.find("ConditionGroup") is not None
+        # a stop at a simulation time is waited for (up to max_duration), whatever else ended
+        stop_time = max([attr(c, "value") for c in stop.iter("SimulationTimeCondition")], default=0.0) \
+            if has_stop else 0.0
         while True:
             for a in acts:
                 if a not in self.state and self._trigger(a.find("StartTrigger")):
@@ -519,10 +528,17 @@ class Replay:
                 done_at = self.t if done_at is None else done_at
             else:
                 done_at = None
-            if (done_at is not None and (not has_stop or self.t >= done_at + GRACE)) \
+            if (done_at is not None and (not has_stop or (self.t >= done_at + GRACE
+                                                         and self.t >= stop_time))) \
                     or self.t >= self.max_duration:
                 break
-            t1 = self.t + self.dt
+            # the next step, or earlier where a trajectory or ramp ends or a condition fires between
+            # steps (events chained to an end start then, not at the next step)
+            soon = [w for w in self.wakeups if w > self.t + 1e-6]
+            soon += [float(e.traj.t[-1]) for e in self.ents.values()
+                     if e.traj is not None and e.traj.t[-1] > self.t + 1e-6]
+            soon += [e.ramp[1] for e in self.ents.values() if e.ramp is not None and e.ramp[1] > self.t + 1e-6]
+            t1 = min([self.t + self.dt, *soon])
             for e in self.ents.values():
                 self._advance(e, t1)
             self.t = round(t1, 9)

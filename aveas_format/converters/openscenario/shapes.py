@@ -11,7 +11,8 @@ on a trajectory, the path's tangent).
 
 Shapes (:func:`shape_path`): ``Polyline`` (vertices, straight segments), ``Clothoid`` (curvature,
 ``curvatureDot``/``curvaturePrime``, length, optional ``startTime``/``stopTime``),
-``ClothoidSpline`` (1.3: segments of linear curvature, ``hOffset``, ``timeStart``/``timeEnd``) and
+``ClothoidSpline`` (1.3: segments of linear curvature from the first segment's ``PositionStart``,
+``hOffset``, ``timeStart``/``timeEnd``) and
 ``Nurbs`` (rational B-spline of any order, control point weights and times, knot vector; evaluated
 with :class:`scipy.interpolate.BSpline` on homogeneous coordinates). The result is a dense path:
 arc length, x, y, z, tangent heading, the heading given by the file where there is one, and the
@@ -235,7 +236,9 @@ def shape_path(shape, res: Resolver, start: Pose) -> Path_:
             time = t0 + (t1 - t0) * s / max(length, 1e-9)
         return _path(x, y, np.full(len(s), p0.z), h, time)
     if kind.tag == "ClothoidSpline":
-        p = res.position(_pos_of(kind)) if _pos_of(kind, False) is not None else start
+        segs = kind.findall("ClothoidSplineSegment")
+        ps = segs[0].find("PositionStart") if segs else None
+        p = res.position(ps) if ps is not None else start
         xs, ys, hs, ts = [np.array([p.x])], [np.array([p.y])], [np.array([p.h or 0.0])], []
         x0, y0, h0 = p.x, p.y, p.h or 0.0
         times = []
