@@ -75,10 +75,23 @@ def convert(
 
     rec = run(source, inputs, map_source=map_file, options=raw)
     path = rec.write(output, overwrite=overwrite)
-    err.print(f"wrote {path}: {rec.participants.num_rows} participants, "
-              f"{rec.states.num_rows:,} states")
+    n = rec.states.num_rows
+    on_map = (n - rec.states.column("road_id").null_count) / n if n else 0.0
+    err.print(f"wrote {path}: {rec.participants.num_rows} participants, {n:,} states, "
+              f"{on_map:.1%} on the map")
     if validate_:
-        validate_written(path)
+        validate_written(path)  # map.mostly_off_road among the rules
+    else:
+        _off_map_note(path)
+
+
+def _off_map_note(path: Path) -> None:
+    """Without --validate, still say when the recording is mostly off its map (wrong map, CRS,
+    offset, axes or unit): the one finding a conversion must not keep quiet about."""
+    import aveas_format
+
+    for f in aveas_format.validate(path, select=["map.mostly_off_road"]).findings():
+        err.print(f"warning: {f.message}", markup=False, highlight=False)
 
 
 def _convert_many(source: str, inputs: list[str], map_file: Path | None, raw: dict, output: Path,
