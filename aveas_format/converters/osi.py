@@ -31,6 +31,14 @@ OpenDRIVE map). Where the GroundTruth carries a ``proj_string`` that differs fro
 geoReference, positions go from the OSI frame (through ``proj_frame_offset``) to the projected CRS
 and then into the map's frame. Provenance ``simulated``, role ``simulated_agent``, every ``_std`` 0;
 method ``traffic_simulation`` (option ``method`` for driving-simulator traces).
+
+Where the map has no ``<geoReference>``, the trace's ``proj_string`` (with its
+``proj_frame_offset``, a translation) is the recording's CRS, or ``--crs`` gives it; the OSI export
+writes ``proj_string`` and the map next to the trace, so that its re-import needs nothing else.
+
+Tested on: omega-prime's esmini-written traces ``alks_cut-in.osi`` and ``acc-test.osi`` on
+``straight_500m.xodr`` (``../shared/data/real/omega-prime``; also with the map's geoReference
+removed), and this toolkit's own OSI exports of every real OpenSCENARIO file.
 """
 
 from __future__ import annotations

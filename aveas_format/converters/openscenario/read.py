@@ -100,11 +100,6 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
     reference point (positions are moved to the footprint centre). Class from the category (or the
     ``aveas:class`` property of this toolkit's own export). An entity that cannot be converted is
     one warning line naming it and why; an error only when none can.
-
-    Tested on: esmini's ``resources/xosc/trajectory-test.xosc``,
-    ``lane-change_trajectory_wp.xosc``, ``pedestrian_traj_synch.xosc`` (catalogs in
-    ``resources/xosc/Catalogs``) and ``EnvironmentSimulator/Unittest/xosc/traj_use_cases.xosc``
-    (``../shared/data/real/esmini``), plus excerpts of esmini files in ``tests/data/third_party``.
     """
     from aveas_format.converters.openscenario.params import Catalogs, declare, resolve_tree
     from aveas_format.converters.openscenario.replay import Replay
