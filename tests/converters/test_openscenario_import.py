@@ -347,3 +347,39 @@ def test_esmini_clothoid_lane_change(tmp_path):
     assert s["heading"][-1] == pytest.approx(0.0, abs=1e-3)
     report = aveas_format.validate(rec)
     assert report.counts["error"] == 0, [f.message for f in report.findings() if f.severity.value == "error"]
+
+
+def test_maneuver_and_trajectory_catalogs(tmp_path):
+    """A ManeuverGroup's maneuver and a FollowTrajectoryAction's trajectory from catalogs, each with
+    its parameters assigned by the reference."""
+    cat = tmp_path / "cat"
+    cat.mkdir()
+    (cat / "Trajectories.xosc").write_text("""<OpenSCENARIO><FileHeader revMajor="1" revMinor="2"
+date="x" description="c" author="me"/><Catalog name="TrajectoryCatalog">
+<Trajectory name="straight" closed="false"><ParameterDeclarations>
+<ParameterDeclaration name="X1" parameterType="double" value="50"/></ParameterDeclarations>
+<Shape><Polyline><Vertex><Position><WorldPosition x="0" y="-1.75"/></Position></Vertex>
+<Vertex><Position><WorldPosition x="$X1" y="-1.75"/></Position></Vertex></Polyline></Shape>
+</Trajectory></Catalog></OpenSCENARIO>""")
+    (cat / "Maneuvers.xosc").write_text(f"""<OpenSCENARIO><FileHeader revMajor="1" revMinor="2"
+date="x" description="c" author="me"/><Catalog name="ManeuverCatalog">
+<Maneuver name="drive"><ParameterDeclarations>
+<ParameterDeclaration name="Len" parameterType="double" value="50"/></ParameterDeclarations>
+<Event name="go" priority="override"><Action name="go_a"><PrivateAction><RoutingAction>
+<FollowTrajectoryAction><TrajectoryRef><CatalogReference catalogName="TrajectoryCatalog"
+entryName="straight"><ParameterAssignments><ParameterAssignment parameterRef="X1" value="$Len"/>
+</ParameterAssignments></CatalogReference></TrajectoryRef><TimeReference><None/></TimeReference>
+<TrajectoryFollowingMode followingMode="position"/></FollowTrajectoryAction></RoutingAction>
+</PrivateAction></Action></Event></Maneuver></Catalog></OpenSCENARIO>""")
+    st = ('<Story name="s"><Act name="act"><ManeuverGroup maximumExecutionCount="1" name="mg">'
+          '<Actors selectTriggeringEntities="false"><EntityRef entityRef="A"/></Actors>'
+          '<CatalogReference catalogName="ManeuverCatalog" entryName="drive"><ParameterAssignments>'
+          '<ParameterAssignment parameterRef="Len" value="80"/></ParameterAssignments>'
+          '</CatalogReference></ManeuverGroup></Act></Story>')
+    p = xosc(tmp_path, ent("A"), teleport("A", '<WorldPosition x="0" y="-1.75" h="0"/>', 10), st)
+    p.write_text(p.read_text().replace("<CatalogLocations/>", (
+        "<CatalogLocations><ManeuverCatalog><Directory path=\"cat\"/></ManeuverCatalog>"
+        "<TrajectoryCatalog><Directory path=\"cat\"/></TrajectoryCatalog></CatalogLocations>")))
+    rec, warned = run(p)
+    s = states_of(rec)
+    assert s["x"][-1] == pytest.approx(80.0) and rec.meta.duration_s == pytest.approx(8.0)

@@ -111,7 +111,7 @@ def evaluate(expr: str, scope: dict[str, str], line: int | None = None) -> float
         return ev(tree)
     except FormatError:
         raise
-    except (ArithmeticError, ValueError, TypeError) as e:
+    except (ArithmeticError, ValueError, TypeError, RecursionError) as e:
         raise FormatError(f"expression ${{{expr}}}: {type(e).__name__}: {e}", line=line) from None
 
 

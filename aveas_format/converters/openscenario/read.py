@@ -68,6 +68,22 @@ def _map_of(root, path: Path, map_source):
     return cand
 
 
+def _inline_catalog_maneuvers(root, catalogs, path: Path) -> None:
+    """``ManeuverGroup/CatalogReference`` (maneuver catalogs) replaced by the resolved
+    ``Maneuver``; one that cannot be resolved is an error naming the line (its events would be
+    lost otherwise)."""
+    for mg in list(root.iter("ManeuverGroup")):
+        for ref in mg.findall("CatalogReference"):
+            try:
+                entry = catalogs.resolve(ref)
+            except FormatError as e:
+                raise FormatError(e.message, path=path, **e.where) from None
+            if entry.tag != "Maneuver":
+                raise FormatError(f"catalog entry {ref.get('entryName')!r} is a <{entry.tag}>, not "
+                                  "a Maneuver", path=path, line=ref.sourceline)
+            mg.replace(ref, entry)
+
+
 def _entity(so, catalogs) -> tuple[Any, str | None]:
     """The Vehicle / Pedestrian / MiscObject element of a ScenarioObject, or (None, why not)."""
     el = next((c for c in so if c.tag in _KINDS), None)
@@ -122,6 +138,7 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
         catalogs = Catalogs(root, path.parent, scope)
     except FormatError as e:
         raise FormatError(e.message, path=e.path or path, **e.where) from None
+    _inline_catalog_maneuvers(root, catalogs, path)
     map_bytes = load_map_bytes(_map_of(root, path, map_source))
     net = load_map(map_bytes)
     crs = net.header.geo_reference or options.crs

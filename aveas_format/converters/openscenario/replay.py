@@ -232,7 +232,9 @@ class Replay:
         if traj is None:
             traj = fta.find("TrajectoryRef/Trajectory")
         if traj is None:
-            ref = fta.find("TrajectoryRef/CatalogReference") or fta.find("CatalogReference")
+            ref = fta.find("TrajectoryRef/CatalogReference")
+            if ref is None:
+                ref = fta.find("CatalogReference")
             if ref is not None and self.catalogs is not None:
                 traj = self.catalogs.resolve(ref)
         if traj is None or traj.find("Shape") is None:
