@@ -383,3 +383,31 @@ entryName="straight"><ParameterAssignments><ParameterAssignment parameterRef="X1
     rec, warned = run(p)
     s = states_of(rec)
     assert s["x"][-1] == pytest.approx(80.0) and rec.meta.duration_s == pytest.approx(8.0)
+
+
+def test_clothoid_spline_segments_hoffset_position_start_and_times(tmp_path):
+    """ClothoidSpline (1.3) as esmini's lane-change_clothoid_spline_based_trajectory.xosc uses it:
+    an arc, a line and an arc continuing each other; a later segment restarting at its own
+    PositionStart; hOffset turning a segment's start; timeStart/timeEnd timing the segments."""
+    seg = '<ClothoidSplineSegment curvatureStart="{k}" curvatureEnd="{k}" length="{L}"{extra}>{ps}</ClothoidSplineSegment>'
+    ps = ('<PositionStart><WorldPosition x="{x}" y="{y}" h="0"/></PositionStart>')
+    shape = ('<ClothoidSpline timeEnd="6">'
+             + seg.format(k=0.01, L=15, extra=' timeStart="0"', ps=ps.format(x=10, y=-5.25))
+             + seg.format(k=0.0, L=5, extra=' timeStart="2"', ps="")
+             + seg.format(k=0.0, L=10, extra=' timeStart="3" hOffset="-0.15"',
+                          ps=ps.format(x=40, y=-1.75))
+             + "</ClothoidSpline>")
+    timing = '<Timing domainAbsoluteRelative="relative" scale="1" offset="0"/>'
+    init = teleport("A", '<WorldPosition x="10" y="-5.25" h="0"/>').replace(
+        "</Private>", follow(shape, timing) + "</Private>")
+    rec, _ = run(xosc(tmp_path, ent("A"), init))
+    s = states_of(rec)
+    assert s["time"][-1] == pytest.approx(6.0)
+    # arc of radius 100 over 15 m then 5 m straight: heading 0.15 there
+    i2 = int(np.argmin(np.abs(s["time"] - 2.0)))
+    assert s["heading"][i2] == pytest.approx(0.15, abs=0.01)
+    assert s["x"][i2] == pytest.approx(10 + 100 * math.sin(0.15), abs=0.05)
+    # the third segment restarts at (40, -1.75) with heading 0 - 0.15 and runs 10 m straight
+    assert (s["x"][-1], s["y"][-1]) == pytest.approx((40 + 10 * math.cos(0.15), -1.75 - 10 * math.sin(0.15)),
+                                                     abs=0.01)
+    assert s["heading"][-1] == pytest.approx(-0.15, abs=1e-6)

@@ -11,8 +11,8 @@ on a trajectory, the path's tangent).
 
 Shapes (:func:`shape_path`): ``Polyline`` (vertices, straight segments), ``Clothoid`` (curvature,
 ``curvatureDot``/``curvaturePrime``, length, optional ``startTime``/``stopTime``),
-``ClothoidSpline`` (1.3: segments of linear curvature from the first segment's ``PositionStart``,
-``hOffset``, ``timeStart``/``timeEnd``) and
+``ClothoidSpline`` (1.3: segments of linear curvature, each from the previous end or its own
+``PositionStart``, ``hOffset``, ``timeStart``/``timeEnd``) and
 ``Nurbs`` (rational B-spline of any order, control point weights and times, knot vector; evaluated
 with :class:`scipy.interpolate.BSpline` on homogeneous coordinates). The result is a dense path:
 arc length, x, y, z, tangent heading, the heading given by the file where there is one, and the
@@ -242,7 +242,13 @@ def shape_path(shape, res: Resolver, start: Pose) -> Path_:
         xs, ys, hs, ts = [np.array([p.x])], [np.array([p.y])], [np.array([p.h or 0.0])], []
         x0, y0, h0 = p.x, p.y, p.h or 0.0
         times = []
-        for seg in kind.iterfind("ClothoidSplineSegment"):
+        for k, seg in enumerate(kind.iterfind("ClothoidSplineSegment")):
+            ps = seg.find("PositionStart")
+            if k and ps is not None:  # a segment may start elsewhere (a discontinuous spline)
+                q = res.position(ps)
+                x0, y0, h0 = q.x, q.y, q.h if q.h is not None else h0
+                xs.append(np.array([x0])), ys.append(np.array([y0])), hs.append(np.array([h0]))
+                ts[-1] += 1
             h0 += attr(seg, "hOffset")
             length = attr(seg, "length")
             k0, k1 = attr(seg, "curvatureStart"), attr(seg, "curvatureEnd")
