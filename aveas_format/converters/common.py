@@ -208,6 +208,7 @@ def wrap_recording(converter: str, inputs: Sequence[Path], options: Any, *, map_
     meta.update(kw)
     if getattr(o, "crs", None) and getattr(o, "crs_is_recording_crs", True) and not meta.get("crs"):
         meta["crs"] = o.crs
+        meta["check_map_crs"] = True  # the user's CRS must agree with the map's geoReference
     return build_recording(map_source=map_bytes, participants=participants, states=states,
                            partner=partner, source=source_block(converter, inputs, options, version),
                            **meta)

@@ -146,6 +146,7 @@ def build_recording(
     recording_id: str | None = None,
     rights: Mapping[str, Any] | None = None,
     reference: bool = True,
+    check_map_crs: bool = False,
     **meta: Any,
 ) -> Recording:
     """A valid in-memory recording from plain arrays (see module doc).
@@ -153,7 +154,11 @@ def build_recording(
     ``map_source`` is the OpenDRIVE text/bytes or a path to a .xodr file. Extra keyword arguments are
     recording.json fields (``title``, ``acquisition`` overrides as a dict, ``coverage``,
     ``conditions``, ``thresholds``, ``extras``...). ``reference=False`` keeps road coordinates as
-    given (or null) instead of computing them from the map.
+    given (or null) instead of computing them from the map. ``crs`` defaults to the map's
+    geoReference (one of them is needed: :class:`~aveas_format.errors.MissingCrsError`);
+    ``check_map_crs=True`` (a CRS a user gave, the importers' ``crs`` option) refuses a ``crs``
+    that differs from the map's geoReference. Without it a differing ``crs`` is taken as given
+    (``validate`` reports it: geo.crs_mismatch).
     """
     map_bytes = load_map_bytes(map_source)
     net = load_map(map_bytes)
@@ -161,7 +166,8 @@ def build_recording(
     if provenance is None:
         provenance = "simulated" if method in _SIMULATED_METHODS else "natural"
     rec_prov = RecordingProvenance(provenance)
-    crs = check_crs(crs, net.header.geo_reference)
+    if check_map_crs or not crs:
+        crs = check_crs(crs, net.header.geo_reference)
 
     p = _table(participants, "participants")
     s = _table(states, "states")
