@@ -67,14 +67,12 @@ class Traj:
     h: np.ndarray
     timed: bool
 
+    def __post_init__(self) -> None:
+        self.h = np.unwrap(np.asarray(self.h, np.float64))  # interpolated without 2 pi jumps
+
     def at(self, t: float) -> Pose:
         return Pose(float(np.interp(t, self.t, self.x)), float(np.interp(t, self.t, self.y)),
-                    float(np.interp(t, self.t, self.z)), float(_interp_angle(t, self.t, self.h)))
-
-
-def _interp_angle(t, tt, h):
-    hu = np.unwrap(h)
-    return float(np.interp(t, tt, hu))
+                    float(np.interp(t, self.t, self.z)), float(np.interp(t, self.t, self.h)))
 
 
 @dataclass
@@ -573,20 +571,23 @@ class Replay:
         self.state[ev] = ("event", self.t, end)
 
     def _update_ends(self, acts, events) -> None:
+        """Acts, maneuver groups and maneuvers end when all their events have ended."""
+        if not hasattr(self, "_groups"):  # (element, its events) of every group, once
+            self._groups = {a: [(m, list(m.iter("Event"))) for mg in a.iterfind("ManeuverGroup")
+                                for m in [mg, *mg.iterfind("Maneuver")]] for a in acts}
         for a in acts:
             st = self.state.get(a)
             if st is None or st[2] is not None:
                 continue
-            evs = events[a]
-            ends = [self.state.get(ev, (None, None, None))[2] for _, ev in evs]
+            ends = [self.state.get(ev, (None, None, None))[2] for _, ev in events[a]]
             if all(x is not None and x <= self.t + 1e-9 for x in ends):
                 self.state[a] = ("act", st[1], max([st[1], *ends]))
-            for mg in a.iterfind("ManeuverGroup"):
-                for m in [mg, *mg.iterfind("Maneuver")]:
-                    es = [self.state.get(ev, (None, None, None))[2]
-                          for ev in m.iter("Event")]
-                    if es and all(x is not None and x <= self.t + 1e-9 for x in es):
-                        self.state[m] = ("group", None, max(es))
+            for m, evs in self._groups[a]:
+                if m in self.state:
+                    continue
+                es = [self.state.get(ev, (None, None, None))[2] for ev in evs]
+                if es and all(x is not None and x <= self.t + 1e-9 for x in es):
+                    self.state[m] = ("group", None, max(es))
 
 
 def _fill_heading(h: np.ndarray, tangent: np.ndarray) -> np.ndarray:
