@@ -411,3 +411,21 @@ def test_clothoid_spline_segments_hoffset_position_start_and_times(tmp_path):
     assert (s["x"][-1], s["y"][-1]) == pytest.approx((40 + 10 * math.cos(0.15), -1.75 - 10 * math.sin(0.15)),
                                                      abs=0.01)
     assert s["heading"][-1] == pytest.approx(-0.15, abs=1e-6)
+
+
+def test_end_of_road_stop_trigger_and_closed_polyline(tmp_path):
+    """An EndOfRoadCondition ends the replay (A drives off the end of the 1000 m road at 50 m/s:
+    20 s, + 1 s duration); B drives a closed square, back to its first vertex."""
+    eor = ('<ConditionGroup><Condition name="eor" delay="0" conditionEdge="rising"><ByEntityCondition>'
+           '<TriggeringEntities triggeringEntitiesRule="any"><EntityRef entityRef="A"/>'
+           '</TriggeringEntities><EntityCondition><EndOfRoadCondition duration="1"/></EntityCondition>'
+           '</ByEntityCondition></Condition></ConditionGroup>')
+    sq = poly(vertex(100, -2), vertex(110, -2), vertex(110, -8), vertex(100, -8))
+    init = (teleport("A", '<LanePosition roadId="1" laneId="-1" s="0" offset="0"/>', 50)
+            + teleport("B", '<WorldPosition x="100" y="-2" h="0"/>', 2).replace(
+                "</Private>", follow(sq).replace('closed="false"', 'closed="true"') + "</Private>"))
+    rec, _ = run(xosc(tmp_path, ent("A") + ent("B"), init, stop=eor))
+    assert rec.meta.duration_s == pytest.approx(21.0, abs=0.06)
+    b = states_of(rec, 1)
+    k = int(np.argmin(np.abs(b["time"] - 16.0)))  # 32 m around the square at 2 m/s
+    assert (b["x"][k], b["y"][k]) == pytest.approx((100.0, -2.0), abs=0.01)

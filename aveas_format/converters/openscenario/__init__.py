@@ -32,8 +32,9 @@ closed-loop dynamics). Precisely:
   their ``StartTrigger`` holds (condition groups OR-ed, conditions AND-ed, ``delay`` applied):
   ``SimulationTimeCondition``, ``StoryboardElementStateCondition``, ``ParameterCondition`` and the
   entity conditions ``ReachPosition``, ``Distance``, ``RelativeDistance``, ``TimeHeadway``,
-  ``TimeToCollision``, ``Speed``, ``RelativeSpeed``, ``TraveledDistance``, ``StandStill``
-  (Euclidean, between reference points; ``freespace`` subtracts half lengths). Other conditions
+  ``TimeToCollision``, ``Speed``, ``RelativeSpeed``, ``TraveledDistance``, ``StandStill``,
+  ``EndOfRoad``, ``Offroad`` (Euclidean, between reference points; ``freespace`` subtracts half
+  lengths). Other conditions
   never hold. The storyboard's ``StopTrigger`` ends the replay (else the end of the acts, or
   ``max_duration``).
 - *Actions replayed*: ``TeleportAction``, ``SpeedAction`` (absolute / relative target; step, or a
@@ -44,7 +45,7 @@ closed-loop dynamics). Precisely:
   lane change and lane offset actions, longitudinal distance actions, routing, controllers,
   appearance, global actions. Between trajectories an entity with a speed follows its lane at
   that speed (it stops at the end of a road without a road successor; junctions are not entered).
-- *Trajectories*: shapes ``Polyline``, ``Clothoid`` (``curvatureDot``/``curvaturePrime``,
+- *Trajectories*: shapes ``Polyline`` (``closed`` ones return to their first vertex), ``Clothoid`` (``curvatureDot``/``curvaturePrime``,
   ``startTime``/``stopTime``), ``ClothoidSpline`` (1.3) and ``Nurbs`` (rational B-spline of any
   order, weights, knots, control point times); positions ``WorldPosition``, ``LanePosition``,
   ``RoadPosition``, ``GeoPosition`` (through the recording's CRS), ``RelativeWorldPosition``,

@@ -9,8 +9,9 @@ fixed rate (``rate_hz``) and what the file prescribes is carried out:
   ``delay`` applied. Evaluated: ``SimulationTimeCondition``, ``StoryboardElementStateCondition``,
   ``ParameterCondition``, and the entity conditions ``ReachPosition``, ``Distance``,
   ``RelativeDistance``, ``TimeHeadway``, ``TimeToCollision``, ``Speed``, ``RelativeSpeed``,
-  ``TraveledDistance``, ``StandStill`` (reference points, Euclidean distances; ``freespace``
-  subtracts half the lengths). A condition of another kind never holds (noted in a warning).
+  ``TraveledDistance``, ``StandStill``, ``EndOfRoad`` (lane following reached the end of its road)
+  and ``Offroad`` (reference points, Euclidean distances; ``freespace`` subtracts half the
+  lengths). A condition of another kind never holds (noted in a warning).
 - **Actions** carried out: ``TeleportAction``, ``SpeedAction`` (absolute or relative target;
   step, or a linear / cubic / sinusoidal ramp over time, rate or distance),
   ``FollowTrajectoryAction`` and, simplified, ``SynchronizeAction`` (the constant speed that brings
@@ -51,7 +52,8 @@ from aveas_format.errors import FormatError
 GRACE = 10.0
 ENTITY_CONDITIONS = ("ReachPositionCondition", "DistanceCondition", "RelativeDistanceCondition",
                      "TimeHeadwayCondition", "TimeToCollisionCondition", "SpeedCondition",
-                     "RelativeSpeedCondition", "TraveledDistanceCondition", "StandStillCondition")
+                     "RelativeSpeedCondition", "TraveledDistanceCondition", "StandStillCondition",
+                     "EndOfRoadCondition", "OffroadCondition")
 
 
 class EntityError(FormatError):
@@ -87,6 +89,8 @@ class Entity:
     lane: tuple[str, float, float, float, float] | None = None
     travelled: float = 0.0
     motion_h: float | None = None  # direction of motion when the last trajectory ended
+    road_end_since: float | None = None  # when lane following reached the end of its road
+    offroad_since: float | None = None
     rows: list[tuple[float, float, float, float, float]] = field(default_factory=list)
     rest_since: float | None = None
     error: str | None = None
@@ -142,7 +146,7 @@ class Replay:
                 self._drop_rows_from(e, t)
                 if p.h is None:
                     p.h = e.pose.h if e.pose is not None else 0.0
-                e.pose, e.lane, e.motion_h = p, None, None
+                e.pose, e.lane, e.motion_h, e.road_end_since = p, None, None, None
                 self._rest_mark(e, t, force=True)
                 return t
             if child.tag == "SynchronizeAction":
@@ -279,7 +283,7 @@ class Replay:
             # way to spawn it (no spawn time before 1.3; this toolkit's export does it): its
             # recording starts with the trajectory
             e.rows.clear()
-        e.traj, e.lane, e.rest_since = tr, None, None
+        e.traj, e.lane, e.rest_since, e.road_end_since = tr, None, None, None
         return float(tr.t[-1])
 
     catalogs = None
@@ -372,6 +376,8 @@ class Replay:
         length = self.net.roads[road].length
         if s_new < 0 or s_new > length:
             s_new, e.v, e.ramp = min(max(s_new, 0.0), length), 0.0, None  # end of the road
+            if e.road_end_since is None:
+                e.road_end_since = self.t
         x, y, z, hdg = self.net.road_to_world(road, np.array([s_new]), np.array([t]))
         e.pose = Pose(float(x[0]), float(y[0]), float(z[0]), float(hdg[0]) + face)
         e.lane = (road, s_new, t, direction, face)
@@ -447,6 +453,13 @@ class Replay:
                 return abs(e.v) < 1e-3 and e.traj is None
             if tag == "TraveledDistanceCondition":
                 return e.travelled >= attr(k, "value")
+            if tag == "EndOfRoadCondition":
+                return e.road_end_since is not None and self.t - e.road_end_since >= attr(k, "duration")
+            if tag == "OffroadCondition":
+                on = bool(self.net.world_to_road(np.array([p.x]), np.array([p.y])).on_road[0])
+                e.offroad_since = None if on else (e.offroad_since if e.offroad_since is not None
+                                                   else self.t)
+                return e.offroad_since is not None and self.t - e.offroad_since >= attr(k, "duration")
             other = self.ents.get(k.get("entityRef")) if k.get("entityRef") else None
             if tag == "RelativeSpeedCondition":
                 return other is not None and _compare(e.v - other.v, k.get("rule"), attr(k, "value"), 1e-6)

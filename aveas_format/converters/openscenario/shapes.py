@@ -220,6 +220,9 @@ def shape_path(shape, res: Resolver, start: Pose) -> Path_:
         if not vs:
             raise ShapeError("<Polyline> without vertices", line=kind.sourceline)
         poses = [res.position(_pos_of(v)) for v in vs]
+        if shape.getparent() is not None and shape.getparent().get("closed") == "true" and len(vs) > 1:
+            poses.append(poses[0])  # a closed trajectory returns to its first vertex
+            vs = [*vs, vs[0]]
         return _path([p.x for p in poses], [p.y for p in poses], [p.z for p in poses],
                      [np.nan if p.h is None else p.h for p in poses],
                      [attr(v, "time", np.nan) for v in vs])
