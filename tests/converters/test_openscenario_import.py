@@ -258,15 +258,15 @@ def test_triggers_chain_and_entity_conditions(tmp_path):
 
 
 def test_not_replayed_actions_are_named(tmp_path):
-    lc = ('<PrivateAction><LateralAction><LaneChangeAction><LaneChangeActionDynamics '
-          'dynamicsShape="sinusoidal" value="2" dynamicsDimension="time"/><LaneChangeTarget>'
-          '<RelativeTargetLane entityRef="A" value="1"/></LaneChangeTarget></LaneChangeAction>'
+    lo = ('<PrivateAction><LateralAction><LaneOffsetAction continuous="false">'
+          '<LaneOffsetActionDynamics dynamicsShape="linear" maxLateralAcc="0.5"/><LaneOffsetTarget>'
+          '<AbsoluteTargetLaneOffset value="0.5"/></LaneOffsetTarget></LaneOffsetAction>'
           '</LateralAction></PrivateAction>')
     init = teleport("A", '<LanePosition roadId="1" laneId="-2" s="0" offset="0"/>', 10)
-    rec, warned = run(xosc(tmp_path, ent("A"), init, story(event("lc", lc)),
+    rec, warned = run(xosc(tmp_path, ent("A"), init, story(event("lo", lo)),
                            stop="<ConditionGroup>" + sim_time(3) + "</ConditionGroup>"))
-    assert any("not replayed: LaneChangeAction" in w for w in warned), warned
-    assert rec.meta.extras["openscenario"]["actions_not_replayed"] == {"LaneChangeAction": 1}
+    assert any("not replayed: LaneOffsetAction" in w for w in warned), warned
+    assert rec.meta.extras["openscenario"]["actions_not_replayed"] == {"LaneOffsetAction": 1}
 
 
 # --- positions and shapes -------------------------------------------------------------------------
@@ -429,3 +429,23 @@ def test_end_of_road_stop_trigger_and_closed_polyline(tmp_path):
     b = states_of(rec, 1)
     k = int(np.argmin(np.abs(b["time"] - 16.0)))  # 32 m around the square at 2 m/s
     assert (b["x"][k], b["y"][k]) == pytest.approx((100.0, -2.0), abs=0.01)
+
+
+def test_lane_change_action(tmp_path):
+    """A cut-in: B changes from lane -2 to the lane left of it (-1) over 3 s, sinusoidal, while
+    following its lane at 20 m/s; heading turns with the sideways motion; the recording is valid."""
+    lc = ('<PrivateAction><LateralAction><LaneChangeAction><LaneChangeActionDynamics '
+          'dynamicsShape="sinusoidal" value="3" dynamicsDimension="time"/><LaneChangeTarget>'
+          '<RelativeTargetLane entityRef="B" value="1"/></LaneChangeTarget></LaneChangeAction>'
+          '</LateralAction></PrivateAction>')
+    init = teleport("B", '<LanePosition roadId="1" laneId="-2" s="10" offset="0"/>', 20)
+    stop = "<ConditionGroup>" + sim_time(8) + "</ConditionGroup>"
+    rec, warned = run(xosc(tmp_path, ent("B"), init, story(event("lc", lc, sim_time(2)), "B"), stop=stop))
+    assert not any("not replayed" in w for w in warned)
+    b = states_of(rec)
+    y_at = lambda t: b["y"][int(np.argmin(np.abs(b["time"] - t)))]  # noqa: E731
+    assert y_at(1.9) == pytest.approx(-5.25) and y_at(5.1) == pytest.approx(-1.75)
+    assert y_at(3.5) == pytest.approx(-3.5, abs=0.01)  # half way at half time (sinusoidal)
+    h_mid = b["heading"][int(np.argmin(np.abs(b["time"] - 3.5)))]
+    assert h_mid == pytest.approx(math.atan2(3.5 * math.pi / 6, 20), abs=0.01)  # peak lateral speed
+    assert aveas_format.validate(rec).counts["error"] == 0

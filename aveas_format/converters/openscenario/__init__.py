@@ -39,10 +39,12 @@ closed-loop dynamics). Precisely:
   ``max_duration``).
 - *Actions replayed*: ``TeleportAction``, ``SpeedAction`` (absolute / relative target; step, or a
   linear, cubic or sinusoidal ramp over time, rate or distance), ``FollowTrajectoryAction``
-  (inline, ``TrajectoryRef`` or from a trajectory catalog) and, simplified, ``SynchronizeAction``
+  (inline, ``TrajectoryRef`` or from a trajectory catalog), ``LaneChangeAction`` (during lane
+  following: absolute or relative target lane, ``targetLaneOffset``; shape over time, distance or
+  rate; the heading follows the sideways motion) and, simplified, ``SynchronizeAction``
   (the constant speed that reaches the target when the master reaches its own; ``FinalSpeed`` not
   applied). Not replayed, and named in one warning and in recording.json ``extras.openscenario``:
-  lane change and lane offset actions, longitudinal distance actions, routing, controllers,
+  lane offset actions, longitudinal distance actions, routing, controllers,
   appearance, global actions. Between trajectories an entity with a speed follows its lane at
   that speed (it stops at the end of a road without a road successor; junctions are not entered).
 - *Trajectories*: shapes ``Polyline`` (``closed`` ones return to their first vertex), ``Clothoid`` (``curvatureDot``/``curvaturePrime``,

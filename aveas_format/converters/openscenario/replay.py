@@ -14,7 +14,9 @@ fixed rate (``rate_hz``) and what the file prescribes is carried out:
   lengths). A condition of another kind never holds (noted in a warning).
 - **Actions** carried out: ``TeleportAction``, ``SpeedAction`` (absolute or relative target;
   step, or a linear / cubic / sinusoidal ramp over time, rate or distance),
-  ``FollowTrajectoryAction`` and, simplified, ``SynchronizeAction`` (the constant speed that brings
+  ``FollowTrajectoryAction``, ``LaneChangeAction`` (during lane following: absolute or relative
+  target lane, ``targetLaneOffset``, shape over time, distance or rate) and, simplified,
+  ``SynchronizeAction`` (the constant speed that brings
   the entity to its target position when the master reaches its own; ``FinalSpeed`` not applied). Other actions (lane changes, synchronisation, routing, controllers...)
   are not replayed; the warning names them.
 - **Between trajectories** an entity with a speed follows its lane (road coordinates advanced at
@@ -91,6 +93,8 @@ class Entity:
     motion_h: float | None = None  # direction of motion when the last trajectory ended
     road_end_since: float | None = None  # when lane following reached the end of its road
     offroad_since: float | None = None
+    lane_id: int = 0  # of lane following
+    lat: tuple[float, float, float, float, str] | None = None  # lane change: t0, t1, from, to, shape
     rows: list[tuple[float, float, float, float, float]] = field(default_factory=list)
     rest_since: float | None = None
     error: str | None = None
@@ -146,9 +150,12 @@ class Replay:
                 self._drop_rows_from(e, t)
                 if p.h is None:
                     p.h = e.pose.h if e.pose is not None else 0.0
-                e.pose, e.lane, e.motion_h, e.road_end_since = p, None, None, None
+                e.pose, e.lane, e.motion_h, e.road_end_since, e.lat = p, None, None, None, None
                 self._rest_mark(e, t, force=True)
                 return t
+            lca = child.find("LaneChangeAction")
+            if child.tag == "LateralAction" and lca is not None:
+                return self._lane_change(e, lca)
             if child.tag == "SynchronizeAction":
                 return self._synchronize(e, child)
             sa = child.find("SpeedAction")
@@ -198,6 +205,49 @@ class Replay:
             e.v, e.ramp = v1, None
             return self.t
         e.ramp = (self.t, self.t + dur, v0, v1, shape)
+        return self.t + dur
+
+    def _lane_change(self, e: Entity, lca) -> float:
+        """``LaneChangeAction`` during lane following: the lateral position moves from the current
+        one to the target lane's centre (+ ``targetLaneOffset``) along the dynamics shape, over
+        its time, distance (at the current speed) or rate (m/s sideways)."""
+        if e.pose is None or e.traj is not None:
+            raise EntityError("LaneChangeAction while on a trajectory or without a position",
+                              line=lca.sourceline)
+        self._acquire_lane(e)
+        road, s, t, direction, _ = e.lane
+        if not road:
+            raise EntityError("LaneChangeAction off the roads", line=lca.sourceline)
+        tgt = lca.find("LaneChangeTarget")
+        absl = tgt.find("AbsoluteTargetLane") if tgt is not None else None
+        rel = tgt.find("RelativeTargetLane") if tgt is not None else None
+        if absl is not None:
+            lane = int(attr(absl, "value"))
+        elif rel is not None:
+            ref = self.ents.get(rel.get("entityRef"))
+            if ref is None or ref.pose is None:
+                raise EntityError(f"LaneChangeAction: no entity {rel.get('entityRef')!r}",
+                                  line=rel.sourceline)
+            self._acquire_lane(ref)
+            base, step = ref.lane_id, int(attr(rel, "value"))
+            # positive: to the left as seen in the reference's driving direction
+            lane = base + step * (1 if ref.lane and ref.lane[3] > 0 else -1)
+            if base != 0 and (lane == 0 or (lane > 0) != (base > 0)):
+                lane += 1 if lane - base > 0 else -1
+        else:
+            raise EntityError("LaneChangeAction without a target lane", line=lca.sourceline)
+        t_to = self.res.lane_t(road, s, lane, lca) + attr(lca, "targetLaneOffset")
+        dyn = lca.find("LaneChangeActionDynamics")
+        shape = dyn.get("dynamicsShape", "sinusoidal") if dyn is not None else "sinusoidal"
+        dim = dyn.get("dynamicsDimension", "time") if dyn is not None else "time"
+        val = attr(dyn, "value") if dyn is not None else 0.0
+        dur = (val if dim == "time" else val / max(abs(e.v), 1e-9) if dim == "distance"
+               else abs(t_to - t) / val if dim == "rate" and val > 0 else 0.0)
+        if shape == "step" or dur <= 0:
+            e.lane, e.lat = (road, s, t_to, *e.lane[3:]), None
+            return self.t
+        e.lat = (self.t, self.t + dur, t, t_to, shape)
+        e.lane_id = lane
         return self.t + dur
 
     def _synchronize(self, e: Entity, sa) -> float:
@@ -283,7 +333,7 @@ class Replay:
             # way to spawn it (no spawn time before 1.3; this toolkit's export does it): its
             # recording starts with the trajectory
             e.rows.clear()
-        e.traj, e.lane, e.rest_since, e.road_end_since = tr, None, None, None
+        e.traj, e.lane, e.rest_since, e.road_end_since, e.lat = tr, None, None, None, None
         return float(tr.t[-1])
 
     catalogs = None
@@ -335,9 +385,7 @@ class Replay:
         if e.ramp is not None:
             a, b, va, vb, shape = e.ramp
             u = min(max((t1 - a) / max(b - a, 1e-9), 0.0), 1.0)
-            f = {"linear": u, "cubic": 3 * u * u - 2 * u ** 3,
-                 "sinusoidal": 0.5 - 0.5 * math.cos(math.pi * u)}.get(shape, u)
-            e.v = va + (vb - va) * f
+            e.v = va + (vb - va) * _shape(shape, u)
             if u >= 1.0:
                 e.ramp = None
         d = 0.5 * (v0 + e.v) * (t1 - self.t)
@@ -347,11 +395,12 @@ class Replay:
         if e.rest_since is not None and e.rest_since < self.t - 1e-9:
             self._record(e, self.t, e.pose)  # the end of a rest
         e.rest_since = None
-        self._move_along_lane(e, d)
+        self._move_along_lane(e, d, t1)
         e.travelled += abs(d)
         self._record(e, t1, e.pose)
 
-    def _move_along_lane(self, e: Entity, d: float) -> None:
+    def _acquire_lane(self, e: Entity) -> None:
+        """The road coordinates lane following starts from (``e.lane``; road "" off the roads)."""
         p = e.pose
         if e.lane is None:
             pr = self.net.world_to_road(np.array([p.x]), np.array([p.y]),
@@ -367,6 +416,11 @@ class Replay:
                     direction = 1.0 if math.cos((p.h or rh) - rh) >= 0 else -1.0
                 face = 0.0 if math.cos((p.h if p.h is not None else rh) - rh) >= 0 else math.pi
                 e.lane = (str(pr.road_id[0]), float(pr.s[0]), float(pr.t[0]), direction, face)
+                e.lane_id = int(pr.lane_id[0])
+
+    def _move_along_lane(self, e: Entity, d: float, t1: float) -> None:
+        p = e.pose
+        self._acquire_lane(e)
         road, s, t, direction, face = e.lane
         if not road:  # off the roads: along the heading (or on in the trajectory's direction)
             h, dd = (e.motion_h, abs(d)) if e.motion_h is not None else (p.h or 0.0, d)
@@ -378,8 +432,18 @@ class Replay:
             s_new, e.v, e.ramp = min(max(s_new, 0.0), length), 0.0, None  # end of the road
             if e.road_end_since is None:
                 e.road_end_since = self.t
+        t_old = t
+        if e.lat is not None:  # a lane change under way: t along its shape
+            a, b, t_from, t_to, shape = e.lat
+            u = min(max((t1 - a) / max(b - a, 1e-9), 0.0), 1.0)
+            t = t_from + (t_to - t_from) * _shape(shape, u)
+            if u >= 1.0:
+                e.lat = None
         x, y, z, hdg = self.net.road_to_world(road, np.array([s_new]), np.array([t]))
-        e.pose = Pose(float(x[0]), float(y[0]), float(z[0]), float(hdg[0]) + face)
+        h = float(hdg[0]) + face
+        if t != t_old and abs(d) > 1e-9:  # heading along the motion while moving sideways
+            h = float(hdg[0]) + math.atan2(t - t_old, direction * d) + (0.0 if d > 0 else math.pi)
+        e.pose = Pose(float(x[0]), float(y[0]), float(z[0]), h)
         e.lane = (road, s_new, t, direction, face)
 
     # -- conditions ------------------------------------------------------------------------------
@@ -601,6 +665,14 @@ class Replay:
                 es = [self.state.get(ev, (None, None, None))[2] for ev in evs]
                 if es and all(x is not None and x <= self.t + 1e-9 for x in es):
                     self.state[m] = ("group", None, max(es))
+
+
+def _shape(shape: str, u: float) -> float:
+    """The OpenSCENARIO dynamics shapes on [0, 1] (step: at once)."""
+    if shape == "step":
+        return 1.0
+    return {"linear": u, "cubic": 3 * u * u - 2 * u ** 3,
+            "sinusoidal": 0.5 - 0.5 * math.cos(math.pi * u)}.get(shape, u)
 
 
 def _fill_heading(h: np.ndarray, tangent: np.ndarray) -> np.ndarray:
