@@ -16,9 +16,9 @@ fixed rate (``rate_hz``) and what the file prescribes is carried out:
   step, or a linear / cubic / sinusoidal ramp over time, rate or distance),
   ``FollowTrajectoryAction``, ``LaneChangeAction`` (during lane following: absolute or relative
   target lane, ``targetLaneOffset``, shape over time, distance or rate) and, simplified,
-  ``SynchronizeAction`` (the constant speed that brings
-  the entity to its target position when the master reaches its own; ``FinalSpeed`` not applied). Other actions (lane changes, synchronisation, routing, controllers...)
-  are not replayed; the warning names them.
+  ``SynchronizeAction`` (the constant speed that brings the entity to its target position when
+  the master reaches its own; ``FinalSpeed`` not applied). Other actions (lane offsets,
+  longitudinal distance, routing, controllers...) are not replayed; the warning names them.
 - **Between trajectories** an entity with a speed follows its lane (road coordinates advanced at
   its speed, lateral offset kept; it stops at the end of a road without a road successor) or, off
   the roads, its heading. An entity at rest is recorded where it rests at the start and end of the
