@@ -295,9 +295,7 @@ class Replay:
         start = e.pose or Pose(0.0, 0.0, 0.0, 0.0)
         path = shape_path(traj.find("Shape"), self.res, start)
         timing = fta.find("TimeReference/Timing")
-        h = np.where(np.isfinite(path.h), path.h, path.tangent) if np.isfinite(path.h).any() else path.tangent
-        if np.isfinite(path.h).any() and not np.isfinite(path.h).all():
-            h = _fill_heading(path.h, path.tangent)
+        h = _fill_heading(path.h, path.tangent)  # the file's headings, else the path's tangent
         if timing is not None and np.isfinite(path.time).all():
             scale, off = attr(timing, "scale", 1.0), attr(timing, "offset", 0.0)
             tt = path.time * scale + off

@@ -41,10 +41,6 @@ from aveas_format.errors import FormatError
 VEHICLE_CATEGORY = {"car": "car", "van": "van", "truck": "truck", "bus": "bus", "trailer": "trailer",
                     "motorcycle": "motorbike", "bicycle": "bicycle", "railvehicle": "tram"}
 PEDESTRIAN_CATEGORY = {"pedestrian": "pedestrian", "animal": "animal", "mobility_device": "wheelchair"}
-CATEGORY_TO_CLASS = {"car": "car", "van": "van", "truck": "truck", "bus": "bus", "trailer": "trailer",
-                     "semitrailer": "trailer", "motorbike": "motorcycle", "bicycle": "bicycle",
-                     "train": "railvehicle", "tram": "railvehicle", "pedestrian": "pedestrian",
-                     "animal": "animal", "wheelchair": "mobility_device"}
 _MASS = {"car": 1500.0, "van": 2500.0, "truck": 20000.0, "bus": 15000.0, "trailer": 8000.0,
          "motorbike": 250.0, "bicycle": 90.0, "tram": 40000.0, "pedestrian": 75.0, "animal": 30.0,
          "wheelchair": 120.0}
