@@ -14,6 +14,7 @@ from aveas_format.converters import convert, load_converters
 from aveas_format.opendrive.builder import straight_highway
 
 from helpers_common import SHARED
+from helpers_realdata import sumo_excerpt_map
 
 SUMO = SHARED / "data" / "sumo"
 
@@ -22,21 +23,15 @@ SUMO = SHARED / "data" / "sumo"
 def westward_map(tmp_path_factory):
     """A one-lane road under the excerpts' vehicle: it drives west along y = 401.65."""
     p = tmp_path_factory.mktemp("maps") / "west.xodr"
-    p.write_text(straight_highway(length=2000.0, lanes_right=1, x0=1600.0, y0=401.65 - 1.75,
-                                  hdg=math.pi, geo_reference="+proj=tmerc +lat_0=48.8 +lon_0=11.1 "
-                                  "+k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"))
+    p.write_text(sumo_excerpt_map("cartesian"))
     return p
 
 
 @pytest.fixture(scope="module")
 def geo_map(tmp_path_factory):
-    """A wide lane for the geo excerpt (its road drifts 2 m north over 70 m in this frame), in a
-    local frame centred on its first sample."""
+    """A wide lane for the geo excerpt, in a local frame centred on its first sample."""
     p = tmp_path_factory.mktemp("maps") / "geo.xodr"
-    p.write_text(straight_highway(length=1000.0, lanes_right=1, lane_width=6.0, x0=500.0, y0=-3.0,
-                                  hdg=math.pi,
-                                  geo_reference="+proj=tmerc +lat_0=48.836229 +lon_0=11.090774 +k=1 "
-                                  "+x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"))
+    p.write_text(sumo_excerpt_map("geo"))
     return p
 
 

@@ -354,8 +354,13 @@ def _no_boxes_error(objects: dict[str, Any], path: Path | None) -> FormatError:
     static = sum(1 for o in objects.values()
                  if isinstance(o, dict) and isinstance(o.get("object_data"), dict)
                  and "cuboid" in o["object_data"])
+    flat = sum(1 for o in objects.values()
+               if isinstance(o, dict) and isinstance(o.get("object_data"), dict)
+               and o["object_data"].get("bbox") and not o["object_data"].get("cuboid"))
     hint = (f" ({static} object(s) carry a static cuboid in object_data, which has no time: "
-            "a trajectory needs frames)" if static else "")
+            "a trajectory needs frames)" if static else
+            f" ({flat} objects carry 2D boxes (bbox) only: image coordinates, no position on the "
+            "ground)" if flat else "")
     return FormatError(f"no frame has a cuboid for any object{hint}", path=path)
 
 
