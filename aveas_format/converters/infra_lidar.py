@@ -8,8 +8,12 @@ Inputs (mixed freely; the kind is recognised per file):
   coordinate system; the 9-value Euler form ``[x, y, z, rx, ry, rz, l, w, h]`` is read too). Both
   the ASAM-conformant form (``cuboid`` a list, the object's ``type`` in the top-level ``objects``)
   and the TUM deviations (a single ``cuboid`` object, ``type`` inside ``object_data``) are
-  accepted. The object uid is the track id. ``frame_properties.timestamp`` (s since the epoch)
-  gives the time, else the frame number / ``rate_hz``. ``num_points`` and ``score`` attributes
+  accepted. The object uid is the track id. ``frame_properties.timestamp`` gives the time (its
+  unit inferred as in the ``openlabel`` importer: seconds, ms, us or ns since the epoch, or since
+  the start; ``timestamp_unit`` fixes it; recorded in the ``source`` block), else the frame
+  number / ``rate_hz``. Tracks whose ``type`` is no road user (see "Labels that are not road
+  users") are skipped with a count unless ``keep_non_road_users``; ignore types (DontCare) and
+  boxes with sentinel sizes (<= 0, > 400 m) always, with a note. ``num_points`` and ``score`` attributes
   (``attributes.num`` of the cuboid or of object_data) feed the uncertainty and the class PMF.
 - A plain **tracks table** (CSV/Parquet) of an in-house tracker: ``time`` (s) or ``frame``,
   ``track_id`` (or ``id``), ``class`` (or ``type``), ``x, y, z, yaw, length, width, height`` (or
@@ -23,8 +27,13 @@ Inputs (mixed freely; the kind is recognised per file):
 Frames: a cuboid's coordinate system is its ``coordinate_system``, else option
 ``coordinate_system``, else the one sensor coordinate system with a ``pose_wrt_parent``. The
 sensor-to-base transform is the sensor pose file if given, else the chain of ``pose_wrt_parent``
-(OpenLABEL: the pose of a coordinate system in its parent, ``X_parent = P X_child``) up to the
-root; ``frame_offset`` = (x, y, yaw) places that base frame in the OpenDRIVE map's local frame, whose
+(OpenLABEL: the pose of a coordinate system in its parent, ``X_parent = P X_child``) and of each
+frame's ``frame_properties.transforms`` up to the root. Where a frame's transforms move the
+cuboids' coordinate system, the sensor moves: each frame's boxes go through that frame's
+transform, and the unobserved regions (range, field of view, shadows) follow the sensor frame by
+frame; a chain that ends in a ``geo_*`` root (a sensor on a vehicle in world coordinates, as in
+the ASAM cuboid example) is refused with a message naming ``--from openlabel``; a sensor pose
+file together with moving frames is refused too (it would fix the pose the frames move); ``frame_offset`` = (x, y, yaw) places that base frame in the OpenDRIVE map's local frame, whose
 ground is at base z = 0. Reference point: the cuboid's centre projected to the ground
 (``z = centre - h/2``); heading = yaw of the cuboid's x axis in the map.
 
@@ -45,6 +54,12 @@ Unobserved regions: the map's extent outside the sensor's range (``sensor_range`
 recording; per frame, the ground shadow of every box seen from the sensor (``occlusion``, with
 ``occluder_id``; a box of height h at ground distance d hides the ground to d H / (H - h) for a
 sensor H above the ground), valid from its frame to the next.
+
+Tested on: the TUM Traffic dev-kit's calibration ``../shared/data/tum_traffic_calib/
+s110_lidar_ouster_south.json`` (the real LiDAR-to-base pose) with label files in TUM's layout
+written here from an analytic truth (tests/converters/test_infra_lidar.py: static and moving
+sensor, epoch-microsecond timestamps, DontCare and barriers), and the ASAM spec's
+``asam_spec__openlabel100_example_cuboids.json`` (refused: a moving vehicle in UTM).
 """
 
 from __future__ import annotations

@@ -35,6 +35,11 @@ Unobserved regions: the ground footprint of the image (``image_size``, up to the
 ground lies ``range_m`` from the bottom centre's ground point) -> the map's extent outside it is
 ``field_of_view``, beyond ``range_m`` ``sensor_range``. Time = (frame - 1) / ``rate_hz``.
 Provenance ``natural``, method ``infrastructure_lwir``.
+
+Tested on: ``tests/data/third_party/mot17_09_gt_excerpt.txt`` (MOT17-09 ground truth: a
+pedestrian, a reflection, a static person; tests/realdata/test_mot.py) and MOT files written here
+from an analytic camera (tests/converters/test_infra_lwir.py). The landmarks are ours: MOT has no
+ground reference.
 """
 
 from __future__ import annotations

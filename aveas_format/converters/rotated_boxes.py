@@ -14,7 +14,12 @@ Track table, one row per box and frame (pixel coordinates of the image, u to the
 - Class: ``score_<class>`` columns (any of the 13 format classes, or labels named in ``class_map``)
   -> per-row PMF (normalised), or ``class`` with an optional ``score`` (the label's probability, the
   rest spread over the other classes). DOTA labels ``small-vehicle`` -> car and ``large-vehicle``
-  -> truck are known. A participant's ``class_pmf`` is the mean of its rows' PMFs.
+  -> truck are known; DOTA's other categories (plane, ship, storage-tank, baseball-diamond,
+  tennis-court, basketball-court, ground-track-field, harbor, bridge, helicopter, roundabout,
+  soccer-ball-field, swimming-pool, container-crane, airport, helipad) are no road users: a track
+  whose ``class`` is one is skipped with a count in a warning, unless ``keep_non_road_users``
+  (then class other; ``score_<category>`` columns of them count as other). An unknown label is an
+  error naming the line. A participant's ``class_pmf`` is the mean of its rows' PMFs.
 - Optional per-row pixel noise ``cx_std``, ``cy_std`` (px) and ``cxcy_corr``; else ``pixel_std``.
 
 Georeference conventions: a world file's C, F are the map coordinates of the **centre** of the
@@ -41,6 +46,10 @@ regression. Method ``aerial``, provenance ``natural``, role ``observed``; lights
 not observable. ``coverage`` is the image footprint when ``image_size`` is given; the map's area
 outside it is then an ``outside_coverage`` region of ``unobserved`` for the whole recording
 (occlusions are not in the data and not claimed).
+
+Tested on: fixtures made from an analytic truth (world files, GDAL ``.aux.xml``, DOTA-style corner
+columns and categories; tests/converters/test_rotated_boxes.py). No real detector output or DOTA
+label file is in ``../shared/data`` (the DOTA dev-kit's example labels carry no licence).
 """
 
 from __future__ import annotations
