@@ -226,3 +226,16 @@ def test_tum_deviations_single_cuboid_and_type_in_object_data(tmp_path):
 ])
 def test_label_vocabularies(label, cls, kind):
     assert label_kind(label) == (cls, kind)
+
+
+def test_cli_shows_the_note_as_one_warning_line(tmp_path):
+    import subprocess
+    import sys
+
+    src = write(tmp_path, kitti_doc(n=5))
+    res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "openlabel", str(src),
+                          "--map", str(STRAIGHT_MAP), "-o", str(tmp_path / "k.aveas"), "--no-validate"],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert "warning: OpenLABEL labels.json: skipped 1 objects: 1 DontCare" in res.stderr
+    assert "UserWarning" not in res.stderr and "wrote " in res.stderr
