@@ -307,10 +307,10 @@ def convert_sumo_fcd(inputs: list[Path], *, map_source, options: SumoFcdOptions)
     t, pid, x, y, heading = t[order], pid[order], x[order], y[order], heading[order]
     speed = np.nan_to_num(np.asarray(rows["speed"], np.float64)[order])
     speed_lat = np.asarray(rows["speed_lat"], np.float64)[order]
-    length = size[pid, 0]
-    motion = _lane_motion(net, pid, t, x, y, heading, length, speed, speed_lat, options)
+    # the footprint centre: half the length behind the front bumper, along the FCD angle
+    x, y = move_along_heading(x, y, heading, -size[pid, 0] / 2.0)
+    motion = _lane_motion(net, pid, t, x, y, heading, speed, speed_lat, options)
     x, y, heading = motion["x"], motion["y"], motion["heading"]
-    x, y = move_along_heading(x, y, heading, -length / 2.0)
     n = len(t)
     states = {
         "participant_id": pid, "time": t, "x": x, "y": y, "heading": heading,
@@ -353,11 +353,11 @@ def _smoothstep(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _lane_motion(net, pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray,
-                 heading: np.ndarray, length: np.ndarray, speed: np.ndarray, speed_lat: np.ndarray,
+                 heading: np.ndarray, speed: np.ndarray, speed_lat: np.ndarray,
                  options: SumoFcdOptions) -> dict[str, np.ndarray]:
     """Velocity as SUMO defines it, instantaneous lane changes, and their reconstruction.
 
-    Rows sorted by (participant, time); x, y the front bumper. SUMO's ``speed`` is the speed along
+    Rows sorted by (participant, time); x, y the footprint centre. SUMO's ``speed`` is the speed along
     the lane; the vehicle's lateral speed is ``speedLat`` where the file has it, else the lateral
     motion of the positions (an instantaneous lane change has none: SUMO moves the vehicle
     across without lateral speed). The lane's direction is the map's at the vehicle's footprint
@@ -368,8 +368,7 @@ def _lane_motion(net, pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarr
     from aveas_format.numeric import instant_lateral_steps, same_participant
 
     n = len(t)
-    cx, cy = move_along_heading(x, y, heading, -length / 2.0)
-    proj = net.world_to_road_track(cx, cy, heading, time=t, track_id=pid)
+    proj = net.world_to_road_track(x, y, heading, time=t, track_id=pid)
     on = np.asarray(proj.n_candidates) > 0
     road_h = np.asarray(proj.road_heading, np.float64)
     # the lane's direction: the road's, turned to the vehicle's side of travel
