@@ -137,6 +137,9 @@ class MapConfig(_Section):
                                   "no road of the map for more than this share is an error "
                                   "(map.mostly_off_road: wrong map, CRS, offset, axes or unit)")
     off_road_min_states: int = Field(10, ge=1, description="... checked from this many states on")
+    off_road_walk_m: float = Field(30.0, ge=0, description="in a recording without vehicles, a "
+                                   "state counts as off the map only this far from every lane "
+                                   "(pedestrians walk beside the roads)")
 
 
 class InteractionsConfig(_Section):

@@ -404,6 +404,22 @@ def _on_map_share(net, x: np.ndarray, y: np.ndarray) -> float:
     return float(np.mean(net.world_to_road(x, y).on_road))
 
 
+def _far_from_lanes(net, xy: np.ndarray, dist_m: float) -> np.ndarray:
+    """Which of the points ``xy`` are farther than ``dist_m`` from every lane of ``net`` (one bulk
+    nearest-neighbour query over the lane polygons)."""
+    import shapely
+
+    polys = [p for *_, p in net.lane_polygons(step=2.0)]
+    if not polys:
+        return np.ones(len(xy), dtype=bool)
+    tree = shapely.STRtree(polys)
+    (i, _), d = tree.query_nearest(shapely.points(xy[:, 0], xy[:, 1]), return_distance=True,
+                                   all_matches=False)
+    far = np.ones(len(xy), dtype=bool)
+    far[i] = d > dist_m
+    return far
+
+
 def off_road_causes(net, xy: np.ndarray) -> list[str]:
     """Which of the cheap explanations puts off-road positions ``xy`` on the map: swapped axes, a
     unit (mm, cm, feet, km) or the map header's ``<offset>`` applied the wrong way; each as
@@ -438,9 +454,9 @@ def off_road_causes(net, xy: np.ndarray) -> list[str]:
       enforces="FORMAT.md 1-2: positions are in the frame of map.xodr, the map of the recorded "
                "site", needs=("map.off_road",))
 def mostly_off_road(ctx: Context) -> Iterator[Hit]:
-    """More than ``[map] off_road_share`` (default half) of the vehicles' states (of all states
-    where there are no vehicles) are on no road of the map (null road coordinates): the positions
-    are not in the map's frame. The message names the
+    """More than ``[map] off_road_share`` (default half) of the vehicles' states are on no road of
+    the map (null road coordinates) — in a recording without vehicles, of all states farther than
+    ``[map] off_road_walk_m`` from every lane: the positions are not in the map's frame. The message names the
     likely causes (a map of another site, the wrong CRS, the map header's ``<offset>``, x/y
     swapped, another unit) and says which of the cheap ones (swapped axes, mm/cm/feet/km, the
     offset) would put the sampled positions on the map."""
@@ -450,13 +466,18 @@ def mostly_off_road(ctx: Context) -> Iterator[Hit]:
         return
     n, off, xy = got
     cfg = ctx.config.map
+    sv = ctx.states_view
+    who = "vehicle" if sv is not None and sv.vehicle.any() else "participant"
+    if who == "participant" and off and len(xy):
+        # no vehicles: pedestrians and the like walk beside the roads; off the map means far
+        # from every lane (estimated on the evenly spaced sample of the off-road states)
+        far = _far_from_lanes(net, xy, cfg.off_road_walk_m)
+        off, xy = int(round(off * float(np.mean(far)))), xy[far]
     if n < cfg.off_road_min_states or off <= cfg.off_road_share * n:
         return
     found = off_road_causes(net, xy)
     causes = ("likely a map of another site, the wrong CRS, the map header's <offset>, x/y swapped "
               "or another unit; of those tried (swapped axes, mm/cm/feet/km, the offset): "
               + ("; ".join(found) if found else "none puts the positions on the map"))
-    sv = ctx.states_view
-    who = "vehicle" if sv is not None and sv.vehicle.any() else "participant"
     yield Hit(file="states.parquet", table="states", column="x,y", n=n, off=off, who=who,
               share=round(100.0 * off / n, 1), causes=causes)
