@@ -32,6 +32,10 @@ Collision: the ``case.csv`` step and participants become an ``accident`` event (
 Uncertainty: the stated tolerances are 95 % bounds, std = tol / 1.96 (x, y, vx, vy, ax, ay,
 heading); options give the defaults. Provenance ``natural``, method ``accident_reconstruction``,
 sampling as given. Lights, interior and the trajectory far from the crash are not observable.
+
+Tested on: PCM-style tables written here from an analytic collision (a car at 10 m/s and a
+crossing pedestrian, first contact at 3 s; tests/converters/test_accident.py); no real GIDAS
+case is in ``../shared/data``.
 """
 
 from __future__ import annotations
@@ -52,7 +56,7 @@ from aveas_format.converters.common import (
     wrap_recording,
 )
 from aveas_format.converters.registry import ImportOptions, converter
-from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.errors import FormatError
 from aveas_format.io.arrow import column_numpy
 from aveas_format.schema.taxonomy import CLASSES
 

@@ -30,6 +30,9 @@ where no ``vx``/``vy``. The subject gets role ``subject_role`` (default ``record
 provenance ``subject_provenance`` (default ``staged``: a person driving in an experiment); the
 traffic is ``simulated_agent`` / ``simulated``; the recording is ``mixed`` when the two differ. The
 simulator's state is exact: every ``_std`` is 0. Method ``driving_simulator``.
+
+Tested on: simulator logs (CSV/Parquet) written here from an analytic truth
+(tests/converters/test_driving_simulator.py); no log of a real simulator is in ``../shared/data``.
 """
 
 from __future__ import annotations

@@ -66,6 +66,11 @@ Accelerations are copied (``ax``, ``ay``). Method ``aerial``, provenance ``natur
 ``observed``; an aerial camera sees no lights and no interior (``acquisition.not_observable``).
 The recordingMeta row is kept in ``extras.levelx``; its date fields (month, weekday, hour) give no
 absolute time, so ``start_time`` is the option's (default 1970-01-01).
+
+Tested on: fixtures written here in the datasets' exact CSV layouts (tracks, tracksMeta,
+recordingMeta) from an analytic truth, with maps built from their lane markings (highD) or
+written here (tests/converters/test_levelx.py); no recording of the levelX datasets is in
+``../shared/data``.
 """
 
 from __future__ import annotations
