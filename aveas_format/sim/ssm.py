@@ -60,8 +60,8 @@ def ssm_args(file: str = "ssm.xml", *, range_m: float = 100.0, extra_time: float
             "--device.ssm.mdrac.prt", f"{mdrac_prt:g}",
             "--device.ssm.trajectories", "true", "--device.ssm.write-lane-positions", "true",
             "--device.ssm.file", file,
-            # all outputs (FCD too) with 6 decimals: 2 (the default) make a 0.1 m/s closing
-            # speed uncertain by 10 %
+            # all outputs (FCD too) with 6 decimals (OUTPUT_RESOLUTION): 2 (the default) make a
+            # 0.1 m/s closing speed uncertain by 10 %
             "--precision", "6"]
 
 
@@ -269,11 +269,24 @@ def _ids(rec) -> dict[str, int]:
     return dict(zip(p.column("source_id").to_pylist(), p.column("participant_id").to_pylist()))
 
 
+#: half a unit of the last decimal SUMO writes (``--precision 6``): a value of 3e-6 (a DRAC at a
+#: closing speed of millimetres per second) is known to ±17 % only
+OUTPUT_RESOLUTION = 0.5e-6
+
+
+#: TTCs up to this (s) are resolved by the 6-decimal speeds (closing speeds >= ~2.5e-3 m/s at
+#: the junction's gaps)
+TTC_RESOLVED_S = 1000.0
+
+
 def _share_within(a: np.ndarray, b: np.ndarray, rel: float) -> tuple[float, int]:
+    """The share of samples (both finite, SUMO's positive) within ``rel`` of SUMO's value or
+    within its output's rounding, and their number."""
     ok = np.isfinite(a) & np.isfinite(b) & (b > 0)
     if not ok.any():
         return float("nan"), 0
-    return float(np.mean(np.abs(a[ok] - b[ok]) <= rel * np.abs(b[ok]))), int(ok.sum())
+    tol = np.maximum(rel * np.abs(b[ok]), OUTPUT_RESOLUTION)
+    return float(np.mean(np.abs(a[ok] - b[ok]) <= tol)), int(ok.sum())
 
 
 def follower_pairs(run: SsmRun, time_decimals: int = 3) -> pa.Table:
@@ -428,6 +441,11 @@ def compare(run: SsmRun, rel: float = 0.01) -> dict[str, Any]:
                   "same_lane_within": s1,
                   "same_lane_max_rel": float(r.max()) if len(r) else None,
                   "same_lane_median_rel": float(np.median(r)) if len(r) else None}
+        if m == "ttc":
+            # a TTC of 10^4 s and more is a closing speed of 10^-3 m/s and less, which the FCD's
+            # 6 decimals (our input) round by 0.1 % and more
+            low = same & (b <= TTC_RESOLVED_S)
+            out[m]["same_lane_below_resolved_within"] = _share_within(a[low], b[low], rel)[0]
     out.update(_globals_vs_leader(run, rel))
     if "conflicts" in run.recording.derived:
         out["crossing"] = _crossings(run, rel)

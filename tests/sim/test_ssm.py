@@ -19,7 +19,8 @@ def test_ssm_args_log_every_measure():
 
 def test_junction_followers_and_straight_crossings_agree(sumo, tmp_path):
     """A 4-way priority junction, 90 s at 0.1 s: lane-follower TTC, DRAC and MDRAC on one lane
-    agree with SUMO's sample by sample (>= 97 % within 1 %, median error ~1e-7), SGAP/TGAP with
+    agree with SUMO's sample by sample (within 1 % or the outputs' 6-decimal rounding: all DRAC,
+    all TTC up to 1000 s; median error ~1e-7), SGAP/TGAP with
     our gap/thw; the PET of straight crossings at the crossing point of the paths
     (derived/conflicts) equals SUMO's."""
     run = junction_scenario(tmp_path / "j", duration=90.0, seed=1)
@@ -31,7 +32,9 @@ def test_junction_followers_and_straight_crossings_agree(sumo, tmp_path):
         assert c[m]["same_lane_both_finite"] >= 1000, c
         assert c[m]["same_lane_median_rel"] < 1e-4, (m, c[m])
     assert c["ttc"]["same_lane_within"] >= 0.97, c["ttc"]
-    assert c["drac"]["same_lane_within"] >= 0.90, c["drac"]
+    # the rest on one lane: TTCs of 10^4-10^5 s (closing speeds of 10^-5 m/s, rounded in the FCD)
+    assert c["ttc"]["same_lane_below_resolved_within"] >= 0.999, c["ttc"]
+    assert c["drac"]["same_lane_within"] >= 0.99, c["drac"]
     # SUMO's SGAP and TGAP are our leader rows' gap and thw
     for m in ("sgap", "tgap"):
         assert c[m]["both_finite"] >= 1000 and c[m]["within"] >= 0.85, (m, c[m])
