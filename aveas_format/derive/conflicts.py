@@ -18,7 +18,7 @@ speed and, only when it is braking (``a < 0``), the current deceleration (a vehi
 before the point never enters). With A the participant expected to enter first:
 
 - ``ttc`` ``= d_B / v_B`` where A's expected exit is later than B's expected entry (their
-  occupancies would overlap), else null;
+  occupancies would overlap), else null; 0 once B is inside while A is (then ``drac`` is null);
 - ``drac`` ``= 2 (v_B − d_B / t_A,exit) / t_A,exit`` in that case: the constant deceleration
   that brings B to the entry exactly when A leaves;
 - ``ppet`` ``= t_B,entry − t_A,exit`` (predicted post-encroachment time; negative: the
@@ -132,8 +132,9 @@ def crossing_measures(dA, vA, aA, xA, dB, vB, aB, xB):
     v2 = np.where(a_first, vB, vA)
     overlap = t1_out > t2_in
     with np.errstate(divide="ignore", invalid="ignore"):
-        ttc = np.where(overlap & (v2 > 0), d2 / v2, np.nan)
-        drac = np.where(overlap & np.isfinite(t1_out) & (t1_out > 0),
+        # the second already inside while the first is: contact now (TTC 0, no DRAC avoids it)
+        ttc = np.where(overlap & (v2 > 0), np.maximum(d2, 0.0) / v2, np.nan)
+        drac = np.where(overlap & np.isfinite(t1_out) & (t1_out > 0) & (d2 > 0),
                         2 * (v2 - d2 / t1_out) / t1_out, np.nan)
         ppet = np.where(np.isfinite(t2_in) & np.isfinite(t1_out), t2_in - t1_out, np.nan)
     return ttc, np.where(drac >= 0, drac, np.nan), ppet, a_first
