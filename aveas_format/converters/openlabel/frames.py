@@ -361,7 +361,8 @@ class _FrameRows:
         attrs = _attrs(od)
         b["uidx"].append(ui[u])
         b["occ"].append(j)
-        cub_ts = _first(_attrs(cub.get("attributes")), "timestamp")
+        cub_attrs = cub.get("attributes")
+        cub_ts = _first(_attrs(cub_attrs), "timestamp") if cub_attrs else None
         b["cub_ts"].append(float(cub_ts) if isinstance(cub_ts, (int, float)) else np.nan)
         b["px"].append(pw[0])
         b["py"].append(pw[1])
