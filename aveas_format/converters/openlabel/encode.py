@@ -69,6 +69,12 @@ def texts(values: list) -> list[bytes]:
     return [cache[v] if v in cache else cache.setdefault(v, dumps(str(v))) for v in values]
 
 
+def _stack(parts: list, idx: np.ndarray) -> np.ndarray:
+    """The rows ``idx`` of a vector given as its components (arrays over all rows, or a number)."""
+    return np.column_stack([np.full(len(idx), c, dtype=np.float64) if np.isscalar(c) else c[idx]
+                            for c in parts])
+
+
 def _join(pieces: list, m: int) -> list[bytes]:
     """Per row the concatenation of the pieces (a bytes: the same in every row; a list: one per row)."""
     return list(map(b"".join, zip(*[repeat(p, m) if isinstance(p, bytes) else p for p in pieces])))
@@ -144,14 +150,14 @@ def _objects_text(r: dict[str, Any], idx: np.ndarray) -> list[bytes]:
     m = len(idx)
     pid = r["pid"][idx]
     on = r["on"][idx]
-    vec = [_join([b',{"name":"velocity","val":[', numbers(r["vel"][idx]),
-                  b']},{"name":"acceleration","val":[', numbers(r["acc"][idx]), b"]}"], m)]
+    vec = [_join([b',{"name":"velocity","val":[', numbers(_stack(r["vel"], idx)),
+                  b']},{"name":"acceleration","val":[', numbers(_stack(r["acc"], idx)), b"]}"], m)]
     if r["box_std"] is not None:
-        vec.append(_item("bounding_box/ustddev", numbers(r["box_std"][idx]), vec=True))
+        vec.append(_item("bounding_box/ustddev", numbers(_stack(r["box_std"], idx)), vec=True))
     if r["vel_std"] is not None:
-        vec.append(_item("velocity/ustddev", numbers(r["vel_std"][idx]), r["vel_ok"][idx], vec=True))
+        vec.append(_item("velocity/ustddev", numbers(_stack(r["vel_std"], idx)), r["vel_ok"][idx], vec=True))
     if r["acc_std"] is not None:
-        vec.append(_item("acceleration/ustddev", numbers(r["acc_std"][idx]), r["acc_ok"][idx], vec=True))
+        vec.append(_item("acceleration/ustddev", numbers(_stack(r["acc_std"], idx)), r["acc_ok"][idx], vec=True))
     text, num, boolean = [], [], []
     if on.any():
         text.append(_item("used_road_link", texts([r["road_id"][i] for i in idx.tolist()]), on))
@@ -178,7 +184,7 @@ def _objects_text(r: dict[str, Any], idx: np.ndarray) -> list[bytes]:
                                  np.isfinite(a)))
     _irregular(r, idx, pid, vec, num, boolean)
     return _join([b'"', numbers(pid), b'":{"object_data":{"cuboid":[{"name":"bounding_box","val":[',
-                  numbers(r["box"][idx]), b"]", _extension(r, idx), b'}],"vec":[', _list(vec, m),
+                  numbers(_stack(r["box"], idx)), b"]", _extension(r, idx), b'}],"vec":[', _list(vec, m),
                   b'],"boolean":[', _list(boolean, m), b'],"num":[', _list(num, m),
                   b'],"text":[', _list(text, m), b"]}}"], m)
 

@@ -358,9 +358,10 @@ def _exact_values(s: pa.Table, cols: _Columns) -> dict[str, np.ndarray]:
 
 
 def _uncertainty(p: pa.Table, cols: _Columns) -> tuple:
-    """The ``/ustddev`` vectors, as arrays with one row per state (``box_std``, ``vel_std``,
-    ``acc_std``; velocity and acceleration only in rows where ``vel_ok``/``acc_ok``) and per
-    participant (``size_std``): ``(box_std, size_std, vel_std, vel_ok, acc_std, acc_ok)``."""
+    """The ``/ustddev`` vectors, as lists of their components (arrays over the states, 0.0 where
+    constant: ``box_std``, ``vel_std``, ``acc_std``; velocity and acceleration only in rows where
+    ``vel_ok``/``acc_ok``) and per participant (``size_std``):
+    ``(box_std, size_std, vel_std, vel_ok, acc_std, acc_ok)``."""
     n, stds, h = cols.n, cols.stds, cols.h
 
     def _z(a):
@@ -368,9 +369,7 @@ def _uncertainty(p: pa.Table, cols: _Columns) -> tuple:
 
     box_std = vel_std = acc_std = None
     if any(stds[c] is not None for c in ("x_std", "y_std", "heading_std")):
-        zero = np.zeros(n)
-        box_std = np.column_stack([_z(stds["x_std"]), _z(stds["y_std"]), _z(stds["z_std"]), zero, zero,
-                                   _z(stds["heading_std"])])
+        box_std = [_z(stds["x_std"]), _z(stds["y_std"]), _z(stds["z_std"]), 0.0, 0.0, _z(stds["heading_std"])]
     size_std = {}
     for j, q in enumerate(cols.part_ids.tolist()):
         size_std[q] = [float(v) if v is not None else 0.0 for v in (
@@ -380,13 +379,11 @@ def _uncertainty(p: pa.Table, cols: _Columns) -> tuple:
     if stds["vx_std"] is not None and stds["vy_std"] is not None:
         vel_ok = np.isfinite(stds["vx_std"]) & np.isfinite(stds["vy_std"])
         su, sv = _body_std(_z(stds["vx_std"]), _z(stds["vy_std"]), cols.vxvy, h)
-        zero = np.zeros(n)
-        vel_std = np.column_stack([su, sv, zero, zero, zero, _z(stds["yaw_rate_std"])])
+        vel_std = [su, sv, 0.0, 0.0, 0.0, _z(stds["yaw_rate_std"])]
     if stds["ax_std"] is not None and stds["ay_std"] is not None:
         acc_ok = np.isfinite(stds["ax_std"]) & np.isfinite(stds["ay_std"])
         su, sv = _body_std(_z(stds["ax_std"]), _z(stds["ay_std"]), cols.axay, h)
-        zero = np.zeros(n)
-        acc_std = np.column_stack([su, sv, zero, zero, zero, zero])
+        acc_std = [su, sv, 0.0, 0.0, 0.0, 0.0]
     return box_std, size_std, vel_std, vel_ok, acc_std, acc_ok
 
 
@@ -411,12 +408,11 @@ def _frame_inputs(rec, cols: _Columns, thr_out: dict[str, float], extension: boo
     length, width, height = _by_row(cols.length), _by_row(cols.width), _by_row(cols.height)
     hh = np.where(np.isfinite(height), height, 0.0)
     z = np.zeros(n) if cols.z is None else np.where(np.isfinite(cols.z), cols.z, 0.0)
-    zero = np.zeros(n)
-    yr = zero if cols.yaw_rate is None else np.where(np.isfinite(cols.yaw_rate), cols.yaw_rate, 0.0)
+    yr = 0.0 if cols.yaw_rate is None else np.where(np.isfinite(cols.yaw_rate), cols.yaw_rate, 0.0)
     box_std, size_std, vel_std, vel_ok, acc_std, acc_ok = _uncertainty(p, cols)
     if box_std is not None:
         sz = np.asarray([size_std[q] for q in cols.part_ids.tolist()], dtype=np.float64)
-        box_std = np.column_stack([box_std, sz[prow]])
+        box_std = [*box_std, *(sz[:, k][prow] for k in range(3))]
     road_class = np.asarray([c in _ROAD_CLASSES for c in cols.classes], dtype=bool)[prow]
     ext = None
     if extension:
@@ -427,9 +423,10 @@ def _frame_inputs(rec, cols: _Columns, thr_out: dict[str, float], extension: boo
                "exact": _exact_values(s, cols) if n else {}}
     return {
         "pid": pid, "t": cols.t, "times": cols.times, "frame_of_row": cols.frame_of_row, "on": cols.on,
-        "box": np.column_stack([cols.x, cols.y, z + hh / 2, zero, zero, cols.h, length, width, hh]),
-        "vel": np.column_stack([cols.vu, cols.vv, zero, zero, zero, yr]),
-        "acc": np.column_stack([cols.au, cols.av, zero, zero, zero, zero]),
+        # vectors as lists of their components (stacked per chunk: no n x 9 matrices)
+        "box": [cols.x, cols.y, z + hh / 2, 0.0, 0.0, cols.h, length, width, hh],
+        "vel": [cols.vu, cols.vv, 0.0, 0.0, 0.0, yr],
+        "acc": [cols.au, cols.av, 0.0, 0.0, 0.0, 0.0],
         "box_std": box_std, "vel_std": vel_std, "vel_ok": vel_ok, "acc_std": acc_std, "acc_ok": acc_ok,
         "road_id": cols.road_id, "lane_id": cols.lane_id, "road_s": cols.road_s,
         "road_t": cols.road_t if cols.road_t is not None else np.full(n, np.nan),
