@@ -37,11 +37,18 @@ CHUNK_ROWS = 16384
 
 
 def dumps(v: Any) -> bytes:
-    """Compact JSON of a Python value (NaN/inf -> null, numpy scalars -> Python)."""
-    v = _clean(v)
-    if orjson is not None:
-        return orjson.dumps(v)
-    return json.dumps(v, separators=(",", ":"), allow_nan=False).encode()
+    """Compact JSON of a Python value as :func:`~aveas_format.converters.openlabel.profile._clean`
+    makes it JSON-safe (NaN/inf -> null, numpy scalars -> Python, bytes -> ``{"base64": ...}``)."""
+    if orjson is not None:  # orjson does the same itself, without walking the value in Python
+        return orjson.dumps(v, default=_clean_other, option=orjson.OPT_SERIALIZE_NUMPY)
+    return json.dumps(_clean(v), separators=(",", ":"), allow_nan=False).encode()
+
+
+def _clean_other(v: Any) -> Any:
+    """What orjson leaves to its ``default``: bytes and other numpy scalars, as ``_clean``."""
+    if isinstance(v, (bytes, bytearray, np.generic)):
+        return _clean(v)
+    raise TypeError(f"not JSON serialisable: {type(v).__name__}")
 
 
 def _dump_array(a: np.ndarray) -> bytes:
