@@ -361,7 +361,7 @@ date="x" description="c" author="me"/><Catalog name="TrajectoryCatalog">
 <Shape><Polyline><Vertex><Position><WorldPosition x="0" y="-1.75"/></Position></Vertex>
 <Vertex><Position><WorldPosition x="$X1" y="-1.75"/></Position></Vertex></Polyline></Shape>
 </Trajectory></Catalog></OpenSCENARIO>""")
-    (cat / "Maneuvers.xosc").write_text(f"""<OpenSCENARIO><FileHeader revMajor="1" revMinor="2"
+    (cat / "Maneuvers.xosc").write_text("""<OpenSCENARIO><FileHeader revMajor="1" revMinor="2"
 date="x" description="c" author="me"/><Catalog name="ManeuverCatalog">
 <Maneuver name="drive"><ParameterDeclarations>
 <ParameterDeclaration name="Len" parameterType="double" value="50"/></ParameterDeclarations>
