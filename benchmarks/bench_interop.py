@@ -23,17 +23,13 @@ import tempfile
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_validate_memory import HWM_MB_SRC, tiled  # noqa: E402
+
 _CHILD = """
 import json, sys, time
 from pathlib import Path
-
-
-def hwm_mb():
-    for line in open("/proc/self/status"):
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
-
+""" + HWM_MB_SRC + """
 import aveas_format
 from aveas_format.converters import convert, get_converter
 
@@ -134,9 +130,6 @@ def main(n_vehicles: int = 60, duration_s: float = 30.0) -> list[dict]:
 def large(target_states: int) -> list[dict]:
     """The OpenLABEL export and import of a recording of ``target_states`` states, each in a fresh
     process (peak memory = its VmHWM; the export's includes the recording it reads)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from bench_validate_memory import tiled
-
     from aveas_format.sample import highway_scene
 
     tmp = Path(tempfile.mkdtemp(prefix="aveas-bench-interop-large-"))
