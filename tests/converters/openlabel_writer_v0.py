@@ -14,11 +14,9 @@ environment contexts, :func:`_events` the profile's events and :func:`_extension
 
 from __future__ import annotations
 
-import json
 import math
 from collections import defaultdict
 from datetime import datetime, timezone
-from pathlib import Path
 from typing import Any
 
 import numpy as np

@@ -26,7 +26,6 @@ import pyarrow as pa
 
 from aveas_format.converters.openlabel.profile import (
     _DEFAULT_THRESHOLDS,
-    _LONGITUDINAL,
     _NO_RECORDER,
     _PROFILE_PART_COLS,
     _PROFILE_STATE_COLS,
