@@ -46,7 +46,8 @@ def _parse_params(items: list[str]) -> dict[str, dict]:
 def derive(
     recordings: list[str] = recordings_argument(urls="URLs (then --output is a directory)"),
     only: list[str] = typer.Option(None, "--only", help="Run only this derivation (repeatable): "
-                                   "kinematics, interactions, encroachments, traffic, events. "
+                                   "kinematics, interactions, encroachments, traffic, events, "
+                                   "criticality_summary. "
                                    "Missing prerequisites run too."),
     output: Path | None = typer.Option(None, "--output", "-o", help="Write the result here."),
     in_place: bool = typer.Option(False, "--in-place", help="Replace the input recording "
@@ -58,6 +59,8 @@ def derive(
                                      "events (default: recording.json thresholds.pet_s, else 1.5)."),
     hard_braking: float | None = typer.Option(None, "--hard-braking", help="a_lon threshold "
                                               "(m/s², negative) for hard-braking events."),
+    drac: float | None = typer.Option(None, "--drac", help="DRAC threshold (m/s²) for near-miss "
+                                      "events (default: none, DRAC makes no events of its own)."),
     param: list[str] = typer.Option(None, "--param", help="A derivation parameter as "
                                     "NAME.PARAM=VALUE (repeatable; VALUE in JSON), e.g. "
                                     "traffic.cell_duration_s=30."),
@@ -96,6 +99,8 @@ def derive(
         ev["pet_s"] = pet
     if hard_braking is not None:
         ev["hard_braking_mps2"] = hard_braking
+    if drac is not None:
+        ev["drac_mps2"] = drac
     if recording is None:
         _derive_dataset(recordings, output, in_place, overwrite, list(only) if only else None,
                         params, workers, scheduler, report)

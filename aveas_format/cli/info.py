@@ -49,8 +49,6 @@ def info(
          else "-"),
         ("coverage", s["coverage"] or "not given"),
     ]
-    if "criticality" in s:
-        rows.append(("criticality", json.dumps(s["criticality"], default=str)))
     t = Table(show_header=False, show_edge=False, pad_edge=False, box=None)
     t.add_column(style="bold")
     t.add_column()
@@ -65,3 +63,54 @@ def info(
         for c, v in cov.items():
             ct.add_row(c, f"{100 * v:.1f} %")
         out.print(ct)
+    if "criticality" in s:
+        _print_criticality(rec, s["criticality"])
+
+
+def _pm(value, std, fmt: str = ".2f") -> str:
+    """``1.23 ± 0.05`` (``-`` where there is no value)."""
+    if value is None:
+        return "-"
+    return f"{value:{fmt}}" + (f" ± {std:{fmt}}" if std is not None else "")
+
+
+def _print_criticality(rec, crit: dict) -> None:
+    """The criticality of the recording (derived/criticality_summary, else the events' summary)
+    and of its most critical participants: a small table."""
+    th = crit.get("thresholds") or {}
+    cs = rec.derived.get("criticality_summary")
+    if cs is None or not cs.num_rows:
+        m = crit.get("min_ttc_s") or {}
+        out.print(f"criticality: min TTC {_pm(m.get('value'), m.get('std'))} s, "
+                  f"{crit.get('near_misses', 0)} near misses, {crit.get('hard_braking', 0)} "
+                  "hard braking (derive criticality_summary for TET/TIT, CPI, DRAC, PSD)")
+        return
+    rows = cs.to_pylist()
+    whole = next((r for r in rows if str(r["scope"]) == "recording"), None)
+    per = sorted((r for r in rows if str(r["scope"]) == "participant" and r["min_ttc"] is not None),
+                 key=lambda r: r["min_ttc"])[:3]
+    cols = ([whole] if whole else []) + per
+    t = Table(title=f"criticality (TTC threshold {th.get('ttc_s', 1.5):g} s; ± 1 std; the "
+              "participants with the smallest TTC)", show_edge=False, title_justify="left")
+    t.add_column("measure")
+    for r in cols:
+        t.add_column("recording" if r["participant_id"] is None
+                     else f"participant {r['participant_id']}", justify="right")
+
+    def line(label, fn):
+        t.add_row(label, *(fn(r) for r in cols))
+
+    line("min TTC (s)", lambda r: _pm(r["min_ttc"], r["min_ttc_std"]))
+    line("  at (s), with", lambda r: "-" if r["min_ttc_time"] is None else
+         f"{r['min_ttc_time']:.2f}, {r['min_ttc_other_id']}")
+    line("samples below", lambda r: str(r["ttc_samples_below"]))
+    line("TET (s)", lambda r: _pm(r["tet"], r["tet_std"]))
+    line("TIT (s²)", lambda r: _pm(r["tit"], r["tit_std"]))
+    line("max DRAC m/s²", lambda r: _pm(r["max_drac"], r["max_drac_std"]))
+    line("min PSD", lambda r: _pm(r["min_psd"], r["min_psd_std"]))
+    line("min PET (s)", lambda r: _pm(r["min_pet"], r["min_pet_std"]))
+    line("CPI", lambda r: _pm(r["cpi"], r["cpi_std"], ".2g"))
+    line("near misses", lambda r: str(r["near_misses"]))
+    line("hard braking", lambda r: str(r["hard_braking"]))
+    line("worst events", lambda r: ", ".join(map(str, (r["worst_events"] or [])[:3])) or "-")
+    out.print(t)

@@ -5,6 +5,8 @@ spelling out ``typer.Option(...)`` again, and calls the helper that goes with th
 
 - **Output**: :func:`overwrite_option` (``--overwrite``) and :func:`refuse_overwrite`, the check
   before writing (never overwrite without ``--overwrite``).
+- **Format**: :func:`format_option` (``--format text|json``, :class:`OutputFormat`) for a command
+  that prints something a machine may read.
 - **The CRS of an import** (``convert``): :func:`crs_option` (``--crs``).
 - **Options of a converter or exporter** (``convert``, ``export``): :func:`option_pairs_option`
   (``--option/-O KEY=VALUE``) and :func:`options_file_option` (``--options FILE.json``), read by
@@ -32,6 +34,7 @@ from __future__ import annotations
 import json
 import typing
 from collections.abc import Sequence
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
@@ -56,6 +59,22 @@ def refuse_overwrite(path: Path, overwrite: bool) -> None:
     """A usage error (exit 2) when ``path`` exists and ``--overwrite`` was not given."""
     if path.exists() and not overwrite:
         raise fail(f"{path}: exists; pass --overwrite to replace it", EXIT_USAGE)
+
+
+# ----------------------------------------------------------------------------------------------
+# format
+class OutputFormat(str, Enum):
+    """``--format`` of a command that prints text for people or JSON for machines."""
+
+    text = "text"
+    json = "json"
+
+
+def format_option(default: Enum = OutputFormat.text, *flags: str,
+                  help: str = "Output format: text (for people) or json (for machines).") -> Any:
+    """``--format FORMAT`` (the command's Enum of formats, :class:`OutputFormat` by default; extra
+    ``flags`` such as ``-f`` where a command had them)."""
+    return typer.Option(default, "--format", *flags, help=help)
 
 
 # ----------------------------------------------------------------------------------------------

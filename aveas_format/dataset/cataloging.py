@@ -17,6 +17,14 @@ from aveas_format.dataset.report import read_facts_if_local, recording_facts
 from aveas_format.parallel import TaskResult
 
 
+#: the recording row of derived/criticality_summary in the catalog: catalog column <- summary column
+SUMMARY_COLUMNS = {"min_ttc_std_s": "min_ttc_std", "min_ttc_time_s": "min_ttc_time",
+                   "min_pet_std_s": "min_pet_std", "tet_s": "tet", "tet_std_s": "tet_std",
+                   "tit_s2": "tit", "tit_std_s2": "tit_std", "cpi": "cpi", "cpi_std": "cpi_std",
+                   "max_drac_mps2": "max_drac", "max_drac_std_mps2": "max_drac_std",
+                   "min_psd": "min_psd", "min_psd_std": "min_psd_std"}
+
+
 def _classes() -> list[str]:
     """The classes of the taxonomy, one ``n_CLASS`` column each in the catalog."""
     from aveas_format.schema.taxonomy import CLASSES
@@ -45,6 +53,8 @@ def catalog_schema():
         ("warnings", pa.int64()), ("infos", pa.int64()), ("rules_failed", pa.list_(pa.string())),
         ("min_ttc_s", pa.float64()), ("min_pet_s", pa.float64()), ("near_misses", pa.int64()),
         ("hard_braking", pa.int64()),
+        *[(c, pa.float64()) for c in SUMMARY_COLUMNS],
+        ("ttc_samples_below", pa.int64()), ("worst_events", pa.list_(pa.int64())),
         ("read_error", pa.string()),
     ]
     return pa.schema([pa.field(n, t) for n, t in fields])
@@ -86,7 +96,7 @@ def catalog_row(path: str, *, validate: bool = True, select: list[str] | None = 
             meta, _ = read_meta(c)
             present = table_names_present(c, meta)
         small = [t for t in ("participants", "derived/interactions", "derived/encroachments",
-                             "events") if t in present]
+                             "events", "derived/criticality_summary") if t in present]
         rec = open_recording(local, tables=small, verify=False, columns={
             "derived/interactions": ["ttc"], "derived/encroachments": ["pet"],
             "events": ["kind", "origin"]})
@@ -116,6 +126,7 @@ def catalog_row(path: str, *, validate: bool = True, select: list[str] | None = 
             row[f"n_{cl}"] = per_class.get(cl, 0)
         row["min_ttc_s"] = _finite_min(rec.derived.get("interactions"), "ttc")
         row["min_pet_s"] = _finite_min(rec.derived.get("encroachments"), "pet")
+        _summary_columns(row, rec.derived.get("criticality_summary"))
         ev = rec.events
         if ev is not None and ev.num_rows:
             kind = np.asarray(ev.column("kind").cast("string").to_pylist(), dtype=object)
@@ -135,6 +146,19 @@ def catalog_row(path: str, *, validate: bool = True, select: list[str] | None = 
                        valid=(not rep.failures and c["error"] == 0),
                        rules_failed=sorted(rep.codes() | {f.code for f in rep.failures}))
     return row
+
+
+def _summary_columns(row: dict[str, Any], cs: Any) -> None:
+    """The catalog's criticality columns from the recording row of derived/criticality_summary
+    (its minimum TTC, PET and counts are those of the whole recording, like the columns filled
+    from derived/interactions and events)."""
+    rec_row = None
+    if cs is not None and cs.num_rows:
+        rec_row = next((r for r in cs.to_pylist() if str(r["scope"]) == "recording"), None)
+    for c, k in SUMMARY_COLUMNS.items():
+        row[c] = None if rec_row is None else rec_row.get(k)
+    row["ttc_samples_below"] = None if rec_row is None else rec_row.get("ttc_samples_below")
+    row["worst_events"] = None if rec_row is None else rec_row.get("worst_events")
 
 
 def catalog(paths: Iterable[str | Path], *, validate: bool = True, workers: int | None = 1,
@@ -179,10 +203,14 @@ def write_catalog(table: Any, path: str | Path) -> Path:
     if suffix == ".csv":
         import pyarrow.csv as pacsv
 
-        flat = table.drop_columns(["participants_per_class", "tables", "derived", "rules_failed"])
+        flat = table.drop_columns(["participants_per_class", "tables", "derived", "rules_failed",
+                                   "worst_events"])
         for name in ("tables", "derived", "rules_failed"):
             flat = flat.append_column(name, pa.array(
                 [";".join(v) if v else None for v in table.column(name).to_pylist()], pa.string()))
+        flat = flat.append_column("worst_events", pa.array(
+            [";".join(map(str, v)) if v else None for v in table.column("worst_events").to_pylist()],
+            pa.string()))
         pacsv.write_csv(flat, tmp)
     elif suffix in (".jsonl", ".ndjson"):
         with open(tmp, "w", encoding="utf-8") as f:

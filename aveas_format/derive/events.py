@@ -6,6 +6,11 @@ per-recording criticality summary.
   conflicting rows are used (follower rows repeat them).
 - **near_miss (PET)**: rows of ``derived/encroachments`` with ``pet <= pet_s``; the event spans
   ``time_first_exit .. time_second_enter``.
+- **near_miss (DRAC)**: where a DRAC threshold is given (``drac_mps2``), episodes of a pair whose
+  DRAC (``derived/interactions``) is at least that (the same rows and merging as for TTC).
+  The attributes of every TTC or DRAC near miss also give the other surrogates of the pair in
+  the episode: the largest DRAC and MDRAC, the smallest PSD (each with its std) and the CPI of
+  the episode, ``Σ dt P(DRAC > MADR) / duration`` (``madr_mps2``, ``madr_std_mps2``).
 - **hard_braking**: episodes of at least ``min_duration_s`` with ``a_lon <= hard_braking_mps2`` in
   ``derived/kinematics``.
 
@@ -25,12 +30,13 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 from pydantic import Field
+from scipy.special import ndtr
 
 from aveas_format.derive._samples import ragged, segments, string_values
 from aveas_format.derive.registry import Derivation, Params, register
 from aveas_format.io.arrow import column_numpy
 
-VERSION = "1.0.0"
+VERSION = "1.1.0"
 DEFAULT_THRESHOLD_S = 1.5
 
 
@@ -45,6 +51,11 @@ class EventsParams(Params):
                                      "braking (m/s²)")
     min_duration_s: float = Field(0.2, ge=0, description="shortest hard-braking episode (s)")
     merge_gap_s: float = Field(0.5, ge=0, description="episodes closer than this merge (s)")
+    drac_mps2: float | None = Field(None, gt=0, description="DRAC threshold (m/s²) for near-miss "
+                                    "events (none: DRAC makes no events of its own)")
+    madr_mps2: float = Field(8.45, gt=0, description="mean maximum available deceleration "
+                             "(m/s²) of the episodes' CPI")
+    madr_std_mps2: float = Field(1.4, ge=0, description="its standard deviation (m/s²)")
 
 
 def thresholds(rec, p: EventsParams) -> tuple[float, float]:
@@ -71,20 +82,58 @@ def _episodes(key: np.ndarray, t: np.ndarray, gap: float) -> np.ndarray:
     return ragged(segments(key, t, gap)[1])[0]
 
 
-def _ttc_events(rec, ttc_thr: float, p: EventsParams) -> list[dict]:
-    it = rec.derived.get("interactions")
-    if it is None or it.num_rows == 0:
-        return []
+def _pair_rows(it: pa.Table) -> dict[str, np.ndarray]:
+    """The rows of derived/interactions that describe a pair once (leader rows; conflicting and
+    neighbour rows with participant_id < other_id) as arrays."""
     rel = string_values(it, "relation")
     pid = it.column("participant_id").to_numpy()
     oid = it.column("other_id").to_numpy()
-    t, ttc, std = (column_numpy(it, c, missing=np.nan) for c in ("time", "ttc", "ttc_std"))
-    kind = string_values(it, "ttc_kind")
     use = ((rel == "leader") | ((rel == "conflicting") & (pid < oid))
            | (np.isin(rel, ["left_neighbour", "right_neighbour"]) & (pid < oid)))
-    m = use & np.isfinite(ttc) & (ttc <= ttc_thr)
+    r = {"rel": rel[use], "pid": pid[use], "oid": oid[use],
+         "kind": string_values(it, "ttc_kind")[use]}
+    for c in ("time", "ttc", "ttc_std", "drac", "drac_std", "mdrac", "mdrac_std", "psd", "psd_std"):
+        r[c] = (column_numpy(it, c, missing=np.nan)[use] if c in it.column_names
+                else np.full(int(use.sum()), np.nan))
+    return r
+
+
+def _num(v) -> float | None:
+    return float(v) if np.isfinite(v) else None
+
+
+def _surrogates_of(r: dict[str, np.ndarray], rows: np.ndarray, p: EventsParams) -> dict:
+    """The other surrogates of an episode's rows: max DRAC / MDRAC, min PSD (with std) and CPI."""
+    out: dict = {}
+    for c, largest in (("drac", True), ("mdrac", True), ("psd", False)):
+        v = r[c][rows]
+        if np.isfinite(v).any():
+            k = rows[int(np.nanargmax(v) if largest else np.nanargmin(v))]
+            name = f"{'max' if largest else 'min'}_{c}"
+            out[name] = float(r[c][k])
+            out[f"{name}_std"] = _num(r[f"{c}_std"][k])
+    t = r["time"][rows]
+    d = np.nan_to_num(r["drac"][rows], nan=-np.inf)
+    sd = np.sqrt(np.nan_to_num(r["drac_std"][rows]) ** 2 + p.madr_std_mps2 ** 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.where(sd > 0, (d - p.madr_mps2) / sd, np.where(d > p.madr_mps2, np.inf, -np.inf))
+    prob = ndtr(z)
+    dt = np.diff(t)
+    step = np.r_[dt, dt[-1:] if len(dt) else [0.0]]
+    span = float(step.sum())
+    out["cpi"] = float((prob * step).sum() / span) if span > 0 else None
+    return out
+
+
+def _threshold_events(rec, r: dict[str, np.ndarray], metric: str, thr: float,
+                      p: EventsParams) -> list[dict]:
+    """Near misses of one metric: episodes of a pair with ``ttc <= thr`` (``metric="ttc"``) or
+    ``drac >= thr`` (``"drac"``)."""
+    v = r[metric]
+    m = np.isfinite(v) & ((v <= thr) if metric == "ttc" else (v >= thr))
     if not m.any():
         return []
+    pid, oid, t, rel = r["pid"], r["oid"], r["time"], r["rel"]
     a, b = pid[m], oid[m]
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     key = lo * (int(hi.max()) + 1) + hi
@@ -92,20 +141,34 @@ def _ttc_events(rec, ttc_thr: float, p: EventsParams) -> list[dict]:
     ep = _episodes(key[o], t[m][o], p.merge_gap_s)
     out = []
     rows = np.flatnonzero(m)[o]
+    unit = "s" if metric == "ttc" else "mps2"
     for e in np.unique(ep):
-        r = rows[ep == e]
-        k = r[np.argmin(ttc[r])]
+        rr = rows[ep == e]
+        k = rr[np.argmin(v[rr])] if metric == "ttc" else rr[np.argmax(v[rr])]
         roles = (["follower", "leader"] if rel[k] == "leader" else ["participant", "other"])
-        sd = float(std[k]) if np.isfinite(std[k]) else None
+        sd = _num(r[f"{metric}_std"][k])
+        extreme = "min" if metric == "ttc" else "max"
+        attrs = {"metric": metric, "ttc_kind": r["kind"][k], "relation": rel[k],
+                 f"threshold_{unit}": thr, f"{extreme}_value_{unit}": float(v[k]),
+                 f"{extreme}_value_std_{unit}": sd, f"time_of_{extreme}": float(t[k]),
+                 **_surrogates_of(r, rr, p), "method": f"derive.events {VERSION}"}
         out.append({
-            "kind": "near_miss", "time_start": float(t[r].min()), "time_end": float(t[r].max()),
+            "kind": "near_miss", "time_start": float(t[rr].min()), "time_end": float(t[rr].max()),
             "participant_ids": [int(pid[k]), int(oid[k])], "roles": roles,
-            "confidence": _confidence(ttc_thr, float(ttc[k]), sd),
-            "attributes": {"metric": "ttc", "ttc_kind": kind[k], "relation": rel[k],
-                           "threshold_s": ttc_thr, "min_value_s": float(ttc[k]),
-                           "min_value_std_s": sd, "time_of_min": float(t[k]),
-                           "method": f"derive.events {VERSION}"},
+            "confidence": _confidence(thr, float(v[k]), sd, below=metric == "ttc"),
+            "attributes": attrs,
         })
+    return out
+
+
+def _ttc_events(rec, ttc_thr: float, p: EventsParams) -> list[dict]:
+    it = rec.derived.get("interactions")
+    if it is None or it.num_rows == 0:
+        return []
+    r = _pair_rows(it)
+    out = _threshold_events(rec, r, "ttc", ttc_thr, p)
+    if p.drac_mps2 is not None:
+        out += _threshold_events(rec, r, "drac", p.drac_mps2, p)
     return out
 
 
@@ -207,11 +270,12 @@ def compute(rec, p: EventsParams) -> pa.Table:
 
 def criticality_summary(rec) -> dict:
     """Per-recording criticality facts for ``aveas-format info``: minimum TTC (with the pair, time
-    and kind), minimum PET, counts of derived near misses (by metric) and hard-braking events, and
-    the thresholds. Uses what the recording's derived tables and events hold; empty values where a
-    table is missing."""
+    and kind), minimum PET, counts of derived near misses (by metric) and hard-braking events, the
+    thresholds and, where ``derived/criticality_summary`` exists, its recording row (TET, TIT, CPI,
+    max DRAC, min PSD with their std, samples below the TTC threshold, the worst events). Uses
+    what the recording's derived tables and events hold; empty values where a table is missing."""
     out: dict = {"min_ttc_s": None, "min_pet_s": None, "near_misses": 0, "near_misses_ttc": 0,
-                 "near_misses_pet": 0, "hard_braking": 0}
+                 "near_misses_pet": 0, "near_misses_drac": 0, "hard_braking": 0}
     th = rec.meta.thresholds
     out["thresholds"] = th.model_dump(exclude_none=True) if th is not None else {}
     it = rec.derived.get("interactions")
@@ -234,6 +298,15 @@ def criticality_summary(rec) -> dict:
                                 "first_id": row["first_id"], "second_id": row["second_id"],
                                 "time": row["time_first_exit"]}
         out["encroachments"] = en.num_rows
+    cs = rec.derived.get("criticality_summary")
+    if cs is not None and cs.num_rows:
+        rows = [r for r in cs.to_pylist() if str(r["scope"]) == "recording"]
+        if rows:
+            r = rows[0]
+            for k in ("tet", "tit", "cpi", "max_drac", "min_psd"):
+                out[k] = None if r.get(k) is None else {"value": r[k], "std": r.get(f"{k}_std")}
+            out["ttc_samples_below"] = r.get("ttc_samples_below")
+            out["worst_events"] = r.get("worst_events") or []
     ev = rec.events
     if ev is not None and ev.num_rows:
         d = ev.to_pydict()
@@ -244,7 +317,7 @@ def criticality_summary(rec) -> dict:
             if str(kind) == "near_miss":
                 out["near_misses"] += 1
                 metric = (json.loads(attr) or {}).get("metric") if attr else None
-                if metric in ("ttc", "pet"):
+                if metric in ("ttc", "pet", "drac"):
                     out[f"near_misses_{metric}"] += 1
             elif str(kind) == "hard_braking":
                 out["hard_braking"] += 1
@@ -260,6 +333,6 @@ EVENTS = register(Derivation(
     needs={},
     optional=("derived/interactions", "derived/encroachments", "derived/kinematics"),
     after=("kinematics", "interactions", "encroachments"),
-    doc="near-miss (TTC, PET) and hard-braking events from thresholds",
+    doc="near-miss (TTC, PET, DRAC) and hard-braking events from thresholds",
     method=lambda p: "thresholds",
 ))

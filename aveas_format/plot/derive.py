@@ -3,6 +3,7 @@
 - :func:`ttc_figure`: the TTC of one participant to another over time (``derived/interactions``),
   one series per ``ttc_kind`` (2D box TTC while the other is a neighbour, lane-based 1D TTC while it
   is the leader), each with its ±1 std band.
+- :func:`ttc_drac_figure`: TTC and DRAC of one pair over time, each with its ±1 std band.
 - :func:`acceleration_figure`: derived longitudinal/lateral acceleration of one participant
   (``derived/kinematics``) with its ±1 std band, optionally against the truth.
 
@@ -94,4 +95,46 @@ def acceleration_figure(kinematics: pa.Table, participant_id: int, *,
     return fig
 
 
-__all__ = ["TTC_KINDS", "acceleration_figure", "ttc_figure"]
+def ttc_drac_figure(interactions: pa.Table, participant_id: int, other_id: int, *,
+                    xlim: tuple[float, float] | None = None, ttc_max: float = 10.0,
+                    title: str | None = None) -> Figure:
+    """TTC (top) and DRAC (bottom) of ``participant_id`` to ``other_id`` over time with ±1 std
+    bands, by ``ttc_kind`` (the rows of ``derived/interactions`` of that pair; DRAC is drawn
+    where it is defined, i.e. while the pair closes in)."""
+    fig = Figure(figsize=(7, 4.8))
+    axes = fig.subplots(2, 1, sharex=True)
+    pair = (_ids(interactions, "participant_id") == participant_id) & (
+        _ids(interactions, "other_id") == other_id)
+    kind = np.asarray(interactions.column("ttc_kind").to_pylist(), dtype=object)
+    time = column_numpy(interactions, "time")
+    for a, col, unit in ((axes[0], "ttc", "s"), (axes[1], "drac", "m/s²")):
+        if col not in interactions.column_names:
+            continue
+        v = column_numpy(interactions, col)
+        sd = column_numpy(interactions, f"{col}_std", null=0.0)
+        for k, (colour, label) in TTC_KINDS.items():
+            m = pair & (kind == k) & np.isfinite(v)
+            if not m.any():
+                continue
+            o = np.argsort(time[m])
+            t, y, e = time[m][o], v[m][o], np.nan_to_num(sd[m][o])
+            if len(t) > 2:  # no line across gaps (where the pair had no such row)
+                gap = np.flatnonzero(np.diff(t) > 3 * np.median(np.diff(t)))
+                t, y, e = (np.insert(a, gap + 1, np.nan) for a in (t, y, e))
+            a.plot(t, y, ".-", ms=3, lw=0.8, color=colour, label=label)
+            a.fill_between(t, y - e, y + e, color=colour, alpha=0.25, lw=0)
+        a.set_ylabel(f"{col.upper()} ({unit})")
+    axes[0].set_ylim(0.0, ttc_max)
+    axes[1].set_ylim(bottom=0.0)
+    axes[1].set_xlabel("time (s)")
+    handles, labels = axes[0].get_legend_handles_labels()
+    if handles:
+        axes[0].legend(loc="upper right", fontsize=8)
+    if xlim is not None:
+        axes[1].set_xlim(*xlim)
+    axes[0].set_title(title or f"participant {participant_id} to {other_id}: TTC and DRAC ± 1 std")
+    fig.tight_layout()
+    return fig
+
+
+__all__ = ["TTC_KINDS", "acceleration_figure", "ttc_drac_figure", "ttc_figure"]

@@ -102,6 +102,9 @@ def render_html(report: Report, rec: Any = None, figures: dict[str, bytes] | Non
                        f"<td><span class='badge {r.severity.value}'>{r.severity.value}</span></td>"
                        f"<td class='num'>{r.count}</td><td>{_e(r.title)}</td></tr>")
         out.append("</table>")
+    from aveas_format.plot.criticality import criticality_section
+
+    out.append(criticality_section(rec))
     if report.failures:
         out.append("<h2>Tool failures</h2><p>These rules crashed: a bug of the tool, not a finding "
                    "about the data (exit code 3).</p>")

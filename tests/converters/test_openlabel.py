@@ -360,7 +360,8 @@ def test_derived_tables_round_trip(scene, tmp_path, openlabel_schema):
 
     rec = highway_scene(n_vehicles=8, duration_s=4.0) if scene == "highway" else _crossing_scene()
     derive(rec)
-    assert set(rec.derived) == {"kinematics", "interactions", "encroachments", "traffic"}
+    assert set(rec.derived) == {"kinematics", "interactions", "encroachments", "traffic",
+                                "conflicts", "criticality_summary"}
     assert stale_derived(rec) == []
     paths = _export(rec, tmp_path)
     doc = json.loads(paths[0].read_text())

@@ -32,7 +32,8 @@ def test_derive_cli(tmp_path):
                             "--param", "traffic.cell_duration_s=2"])
     assert r.exit_code == 0, r.output
     back = aveas_format.open(src)
-    assert set(back.derived) == {"kinematics", "interactions", "encroachments", "traffic"}
+    assert set(back.derived) == {"kinematics", "interactions", "encroachments", "traffic",
+                                 "conflicts", "criticality_summary"}
     assert {t["time_end"] - t["time_start"] for t in back.derived["traffic"].to_pylist()} == {2.0}
     r = runner.invoke(app, ["derive", str(src), "--in-place", "--param", "kinematics.nope=1"])
     assert r.exit_code == 3 and "nope" in r.output

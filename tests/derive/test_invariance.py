@@ -34,7 +34,15 @@ def test_box_ttc_invariant(th, dx, dy, ax, ay, ah, bx, by, bh, avx, avy, bvx, bv
     va = _rot(avx, avy, th, 0, 0)
     vb = _rot(bvx, bvy, th, 0, 0)
     moved = float(ttc_boxes(*pa_, ah + th, 4.5, 1.8, *va, *pb_, bh + th, 5.0, 2.0, *vb))
-    if np.isinf(base) or np.isinf(moved):
+    # grazing contact (edges exactly touching, or a relative speed of 1e-130 m/s towards each
+    # other): a micrometre less of size changes the answer, and so may the rounding of a move
+    shrunk = float(ttc_boxes(ax, ay, ah, 4.5 - 1e-6, 1.8 - 1e-6, avx, avy, bx, by, bh, 5.0 - 1e-6,
+                             2.0 - 1e-6, bvx, bvy))
+    grazing = np.isinf(shrunk) != np.isinf(base) or (
+        np.isfinite(base) and abs(shrunk - base) > 1e-3 * max(1.0, base))
+    if grazing:
+        pass
+    elif np.isinf(base) or np.isinf(moved):
         # grazing contact may flip under rounding; otherwise both are inf
         assert np.isinf(base) == np.isinf(moved) or min(base, moved) > 0
     else:

@@ -189,7 +189,10 @@ def test_diverge_leader_follows_own_route_right():
     derive(rec, only="interactions", box_2d=False)
     lead = _rel(rec, 0, "leader")
     assert list(lead) == [1]
-    assert lead[1]["gap"] == pytest.approx((100 - 85) + 5 - L, abs=1e-9)
+    # B is 5 m (in s) into the right-turn connecting road (curvature -0.02): its lane centre, 1.75 m
+    # right of the reference line, is on the inside of the turn, so gaps along it are (1 - 0.035)
+    # times the distance in s (the lane centre's own arc length, not the reference line's)
+    assert lead[1]["gap"] == pytest.approx((100 - 85) + 5 * (1 - 0.02 * 1.75) - L, abs=1e-6)
     assert list(_rel(rec, 1, "follower")) == [0] and _rel(rec, 2, "follower") == {}
 
 
@@ -232,7 +235,9 @@ def test_merge_leader_and_followers_from_both_lanes():
     l1, l2 = _rel(rec, 0, "leader"), _rel(rec, 1, "leader")
     assert list(l1) == [2] and list(l2) == [2]
     assert l1[2]["gap"] == pytest.approx(30 + 10 - L, abs=1e-9)
-    assert l2[2]["gap"] == pytest.approx(25 + 10 - L, abs=1e-9)
+    # A2's lane on the left-turn connecting road 13 (20 m in s, curvature +0.02) is on the outside
+    # of the turn: its centre is 20 * (1 + 0.02 * 1.75) = 20.7 m long
+    assert l2[2]["gap"] == pytest.approx(5 + 20 * (1 + 0.02 * 1.75) + 10 - L, abs=1e-6)
     fol = _rel(rec, 2, "follower")
     assert sorted(fol) == [0, 1]  # one follower per approaching lane
     assert fol[0]["gap"] == pytest.approx(l1[2]["gap"]) and fol[1]["gap"] == pytest.approx(

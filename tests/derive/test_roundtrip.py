@@ -24,9 +24,11 @@ def derived_scene():
 
 def test_all_derivations_run(derived_scene):
     rec, ran = derived_scene
-    assert set(ran) == {"kinematics", "interactions", "encroachments", "traffic", "events"}
+    assert set(ran) == {"kinematics", "interactions", "encroachments", "traffic", "events",
+                        "conflicts", "criticality_summary"}
     assert ran.index("kinematics") < ran.index("interactions") < ran.index("events")
-    assert set(rec.derived) == {"kinematics", "interactions", "encroachments", "traffic"}
+    assert set(rec.derived) == {"kinematics", "interactions", "encroachments", "traffic",
+                                "conflicts", "criticality_summary"}
     entries = {e.table: e for e in rec.meta.derived}
     assert set(entries) == {f"derived/{n}" for n in rec.derived}
     k = entries["derived/kinematics"]

@@ -56,7 +56,7 @@ from pydantic import Field
 from aveas_format.derive._samples import Samples
 from aveas_format.derive.interactions._boxes import box_conflicts, candidate_pairs, ttc_boxes
 from aveas_format.derive.interactions._lanes import LaneGraph, lane_chains, lane_graph
-from aveas_format.derive.interactions._pairs import lane_rows
+from aveas_format.derive.interactions._pairs import SURROGATE_KEYS, lane_rows
 from aveas_format.derive.interactions._ttc import ttc_constant_acceleration, ttc_constant_velocity
 from aveas_format.derive.interactions._velocities import smoothed_velocities
 from aveas_format.derive.registry import Derivation, Params, register
@@ -71,9 +71,10 @@ class InteractionsParams(Params):
     neighbour_range: float = Field(100.0, gt=0, description="largest distance (m) along the "
                                    "lanes between the fronts of a participant and its left/right "
                                    "lead or lag")
-    search_radius: float = Field(120.0, gt=0, description="centre distance (m) within which "
-                                 "pairs are candidates for a 2D conflict (those that cannot "
-                                 "touch within `horizon` at their relative speed are dropped)")
+    search_radius: float | None = Field(None, gt=0, description="largest centre distance (m) "
+                                        "of a candidate pair for a 2D conflict; default: none, "
+                                        "the pairs that can touch within `horizon` at their "
+                                        "relative speed are searched, however far apart")
     horizon: float = Field(10.0, gt=0, description="largest 2D TTC (s) reported for conflicting "
                            "pairs")
     samples: int = Field(32, ge=0, description="Monte Carlo samples for the 2D ttc_std (0: none)")
@@ -87,6 +88,10 @@ class InteractionsParams(Params):
     route_range: float = Field(250.0, gt=0, description="how far (m) beyond the end of its lane "
                                "chain a leader is searched along the participant's route (across "
                                "diverges, merges and junctions)")
+    reaction_time: float = Field(1.0, ge=0, description="perception-reaction time (s) of MDRAC "
+                                 "(SUMO's device.ssm.mdrac.prt)")
+    max_deceleration: float = Field(3.4, gt=0, description="deceleration (m/s²) of the minimum "
+                                    "stopping distance in PSD")
     velocities: Literal["auto", "states", "smoothed"] = Field(
         "auto", description="velocity along the direction of motion: the states' (measured) or "
         "derived/kinematics' smoothed speed; auto: the one with the smaller std per sample")
@@ -110,7 +115,8 @@ def compute(rec, p: InteractionsParams) -> pa.Table:
                           (("i", np.int64), ("j", np.int64), ("rel", object), ("gap", float),
                            ("gap_var", float), ("closing", float), ("ttc", float),
                            ("ttc_std", float), ("thw", float), ("dhw", float), ("ttc_ca", float),
-                           ("ttc_ca_std", float), ("kind", object))})
+                           ("ttc_ca_std", float), ("kind", object),
+                           *((k, float) for k in SURROGATE_KEYS))})
     allr = {k: np.concatenate([q[k] for q in parts]) for k in parts[0]}
     return _table(S, allr)
 
@@ -123,6 +129,15 @@ def _f(v: np.ndarray) -> pa.Array:
 
 def _table(S: Samples, r: dict[str, np.ndarray]) -> pa.Table:
     i, j = r["i"].astype(np.int64), r["j"].astype(np.int64)
+    if len(i):
+        # the table's order (participant, time, other, relation), sorted on the index arrays
+        rel = r["rel"]
+        rel_code = np.zeros(len(rel), np.int8)
+        for k, v in enumerate(sorted({str(x) for x in Relation})):  # a handful of values
+            rel_code[rel == v] = k
+        order = np.lexsort((rel_code, S.pid[j], S.t[i], S.pid[i]))
+        r = {k: v[order] for k, v in r.items()}
+        i, j = i[order], j[order]
     ttc = r["ttc"]
     kind = np.where(np.isfinite(ttc), r["kind"], None)
     t = pa.table({
@@ -140,14 +155,8 @@ def _table(S: Samples, r: dict[str, np.ndarray]) -> pa.Table:
         "closing_speed": _f(r["closing"]),
         "ttc_ca": _f(r["ttc_ca"]),
         "ttc_ca_std": _f(np.where(np.isfinite(r["ttc_ca"]), r["ttc_ca_std"], np.nan)),
+        **{k: _f(r[k]) for k in SURROGATE_KEYS},
     })
-    if t.num_rows:
-        import pyarrow.compute as pc
-
-        order = pc.sort_indices(t, sort_keys=[("participant_id", "ascending"),
-                                              ("time", "ascending"), ("other_id", "ascending"),
-                                              ("relation", "ascending")])
-        t = t.take(order)
     return t
 
 
@@ -175,13 +184,22 @@ TABLE = derived_table(
             "lane (>= 0: the neighbour leads, < 0: it lags)", "m"),
         col("closing_speed", "float64", MAY, "rate at which the gap closes (positive = closing)",
             "m/s"),
+        *gaussian("drac", "m/s²", MAY, "deceleration rate to avoid a crash: closing speed² / (2 "
+                  "gap) for lane pairs, |relative velocity| / (2 TTC) for 2D pairs (null = not "
+                  "closing)", minimum=0.0),
+        *gaussian("mdrac", "m/s²", MAY, "DRAC after the reaction time `reaction_time`: closing "
+                  "speed / (2 (TTC - reaction time)) (null where TTC <= reaction time or not "
+                  "closing)", minimum=0.0),
+        *gaussian("psd", None, MAY, "proportion of stopping distance: distance to the potential "
+                  "collision point / minimum stopping distance at `max_deceleration` (< 1: "
+                  "cannot stop before it)", minimum=0.0),
     ),
 )
 
 INTERACTIONS = register(Derivation(
     name="interactions",
     spec=TABLE,
-    version="1.1.0",
+    version="1.2.0",
     params=InteractionsParams,
     fn=compute,
     needs={"states": ("participant_id", "time", "x", "y", "heading", "vx", "vy"),
@@ -190,7 +208,7 @@ INTERACTIONS = register(Derivation(
     after=("kinematics",),
     doc="lane leaders/followers and neighbours with gap, THW, DHW, closing speed and 1D TTC "
         "(constant velocity and constant acceleration); 2D TTC of oriented boxes for conflicting "
-        "pairs",
+        "pairs; DRAC, MDRAC and PSD of every pair with a TTC",
     method=lambda p: "lane_1d+box_2d" if p.box_2d else "lane_1d",
 ))
 

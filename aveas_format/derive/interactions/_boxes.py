@@ -1,7 +1,9 @@
 """2D time to collision of oriented boxes for pairs that are not lane leader and follower.
 
-Candidate pairs come from a vectorised uniform grid per time step (:func:`candidate_pairs`, within
-``search_radius``); pairs that cannot touch within ``horizon`` at their relative speed are dropped;
+Candidate pairs are those that could touch within ``horizon`` at their relative speed
+(:func:`candidate_pairs`: swept boxes on a vectorised uniform grid per time step; optionally also
+within ``search_radius`` of each other); pairs that cannot touch within ``horizon`` at their
+relative speed are dropped;
 :func:`ttc_boxes` gives the exact first contact of the two rectangles under constant velocity
 (separating axes on the relative motion) and :func:`box_std` its std from Monte Carlo samples of
 positions, velocities, headings and sizes. :func:`box_conflicts` gives the neighbour rows of the
@@ -16,6 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from aveas_format.derive._samples import Samples, ragged
+from aveas_format.derive.interactions._surrogates import box_surrogates, sample_std
 from aveas_format.derive.interactions._velocities import range_rate
 
 if TYPE_CHECKING:
@@ -57,39 +60,93 @@ def ttc_boxes(ax, ay, ah, al, aw, avx, avy, bx, by, bh, bl, bw, bvx, bvy):
     return np.where(hit, np.maximum(t_in, 0.0), np.inf)
 
 
-def candidate_pairs(tstep: np.ndarray, x: np.ndarray, y: np.ndarray, radius: float
+def candidate_pairs(tstep: np.ndarray, x: np.ndarray, y: np.ndarray, vx: np.ndarray,
+                    vy: np.ndarray, reach: np.ndarray, horizon: float, cell: float = 40.0
                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Index pairs ``(i, j)``, ``i < j`` by row, at the same time step with centre distance <=
-    ``radius``: a vectorised uniform grid (cell = radius; the 3x3 neighbourhood of each cell)."""
+    """Index pairs ``(i, j)``, ``i < j``, at the same time step that could touch within
+    ``horizon`` s at constant velocity: a necessary condition, exact in the relative speed.
+
+    Per time step the samples are seen in a frame moving at the step's mean velocity ``u``; in it
+    each sample sweeps the segment from its centre ``p`` to ``p + (v - u) horizon``. Two footprints
+    (discs of radius ``reach``: half their diagonals) that touch at some ``t <= horizon`` lie in the
+    bounding boxes of their swept segments grown by ``reach``, so pairs whose boxes do not overlap
+    can never touch; on a one-way highway the boxes are short (the speed differences), while two
+    opposing streams get long boxes (their large relative speed), which is what the horizon asks
+    for. The boxes are found on a vectorised uniform grid (``cell`` m; each box is entered in the
+    cells it covers and a pair is reported once, in the cell of its overlap's lower corner)."""
     n = len(x)
+    empty = (np.zeros(0, np.int64), np.zeros(0, np.int64))
     if n < 2:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    cx = np.floor((x - x.min()) / radius).astype(np.int64)
-    cy = np.floor((y - y.min()) / radius).astype(np.int64)
-    ny = int(cy.max()) + 3
-    nx = int(cx.max()) + 3
-    cell = ((tstep.astype(np.int64) * nx) + (cx + 1)) * ny + (cy + 1)
-    order = np.argsort(cell, kind="stable")
-    cs = cell[order]
+        return empty
+    ts = np.asarray(tstep, np.int64)
+    cnt = np.bincount(ts).astype(float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ux = np.bincount(ts, vx) / cnt
+        uy = np.bincount(ts, vy) / cnt
+    ex, ey = (vx - ux[ts]) * horizon, (vy - uy[ts]) * horizon
+    x0 = np.minimum(x, x + ex) - reach
+    x1 = np.maximum(x, x + ex) + reach
+    y0 = np.minimum(y, y + ey) - reach
+    y1 = np.maximum(y, y + ey) + reach
+    ox, oy = float(np.min(x0)), float(np.min(y0))
+    c0x = np.floor((x0 - ox) / cell).astype(np.int64)
+    c1x = np.floor((x1 - ox) / cell).astype(np.int64)
+    c0y = np.floor((y0 - oy) / cell).astype(np.int64)
+    c1y = np.floor((y1 - oy) / cell).astype(np.int64)
+    nx = c1x - c0x + 1
+    ny_ = c1y - c0y + 1
+    k, pos = ragged(nx * ny_)
+    gx = c0x[k] + pos // ny_[k]
+    gy = c0y[k] + pos % ny_[k]
+    wy = int(c1y.max()) + 1
+    wx = int(c1x.max()) + 1
+    key = (ts[k] * wx + gx) * wy + gy
+    order = np.argsort(key, kind="stable")
+    ks, kk = key[order], k[order]
+    brk = np.r_[True, ks[1:] != ks[:-1]]
+    start = np.flatnonzero(brk)
+    size = np.diff(np.r_[start, len(ks)])
+    multi = size > 1
+    start, size = start[multi], size[multi]
     I, J = [], []
-    for ox in (-1, 0, 1):
-        for oy in (-1, 0, 1):
-            target = cell + ox * ny + oy
-            lo = np.searchsorted(cs, target, side="left")
-            hi = np.searchsorted(cs, target, side="right")
-            cnt = hi - lo
-            if int(cnt.sum()) == 0:
-                continue
-            ii, pos = ragged(cnt)
-            jj = order[lo[ii] + pos]
-            keep = ii < jj
-            I.append(ii[keep])
-            J.append(jj[keep])
+    # all pairs within each cell: cell c with m members gives m(m-1)/2 pairs (in chunks)
+    npairs = size * (size - 1) // 2
+    for lo, hi in _chunk_ranges(npairs, 4_000_000):
+        grp, q = ragged(npairs[lo:hi])
+        m = size[lo:hi][grp]
+        # q-th pair (a < b) of m members, row-major over a
+        a = (m - 0.5 - np.sqrt((m - 0.5) ** 2 - 2.0 * q)).astype(np.int64)
+        a = np.clip(a, 0, m - 2)
+        first_q = a * (2 * m - a - 1) // 2
+        fix = first_q > q
+        a = np.where(fix, a - 1, a)
+        first_q = a * (2 * m - a - 1) // 2
+        nxt = (a + 1) * (2 * m - a - 2) // 2
+        up = q >= nxt
+        a = np.where(up, a + 1, a)
+        first_q = a * (2 * m - a - 1) // 2
+        b = a + 1 + (q - first_q)
+        s0 = start[lo:hi][grp]
+        i, j = kk[s0 + a], kk[s0 + b]
+        cellx = gx[order[s0 + a]]
+        celly = gy[order[s0 + a]]
+        # the boxes overlap, and this cell holds the lower corner of their overlap
+        ok = ((x0[i] <= x1[j]) & (x0[j] <= x1[i]) & (y0[i] <= y1[j]) & (y0[j] <= y1[i])
+              & (cellx == np.maximum(c0x[i], c0x[j])) & (celly == np.maximum(c0y[i], c0y[j])))
+        I.append(np.minimum(i[ok], j[ok]))
+        J.append(np.maximum(i[ok], j[ok]))
     if not I:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    i, j = np.concatenate(I), np.concatenate(J)
-    near = np.hypot(x[j] - x[i], y[j] - y[i]) <= radius
-    return i[near], j[near]
+        return empty
+    return np.concatenate(I), np.concatenate(J)
+
+
+def _chunk_ranges(counts: np.ndarray, budget: int) -> list[tuple[int, int]]:
+    """Consecutive ranges of items holding about ``budget`` of ``counts`` each."""
+    if not len(counts):
+        return []
+    group = (np.cumsum(counts) - counts) // max(budget, 1)
+    cut = np.r_[0, np.flatnonzero(np.diff(group)) + 1, len(counts)]
+    return list(zip(cut[:-1].tolist(), cut[1:].tolist()))
 
 
 def pair_key(i: np.ndarray, j: np.ndarray, n: int) -> np.ndarray:
@@ -109,7 +166,11 @@ def box_rows(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
              ) -> dict[str, np.ndarray]:
     """2D TTC (``i``, ``j``, ``ttc``) of the candidate pairs that are not lane leader/follower and
     can touch within the horizon."""
-    i, j = candidate_pairs(S.tstep, S.x, S.y, p.search_radius)
+    reach_all = 0.5 * np.hypot(S.L, S.W)
+    i, j = candidate_pairs(S.tstep, S.x, S.y, S.vx, S.vy, reach_all, p.horizon)
+    if p.search_radius is not None:
+        near = np.hypot(S.x[j] - S.x[i], S.y[j] - S.y[i]) <= p.search_radius
+        i, j = i[near], j[near]
     if lane:
         lf = np.isin(lane["rel"], ["leader", "follower"])
         lane_keys = np.unique(pair_key(lane["i"][lf], lane["j"][lf], S.n))
@@ -126,75 +187,114 @@ def box_rows(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
     return {"i": i, "j": j, "ttc": ttc}
 
 
-def box_std(S: Samples, i: np.ndarray, j: np.ndarray, p: InteractionsParams) -> np.ndarray:
-    """Std of the 2D TTC over Monte Carlo samples of both participants' states and sizes (finite
-    samples only; NaN where fewer than half of the samples collide)."""
+def _draw(S: Samples, k: np.ndarray, K: int, rng: np.random.Generator):
+    """``K`` Monte Carlo draws of the states of rows ``k``: x, y, heading, length, width, vx, vy
+    (each ``(K, len(k))``)."""
+    z1, z2 = rng.standard_normal((2, K, len(k)))
+    r = np.clip(S.rxy[k], -0.999, 0.999)
+    x = S.x[k] + S.sx[k] * z1
+    y = S.y[k] + S.sy[k] * (r * z1 + np.sqrt(1 - r * r) * z2)
+    w1, w2 = rng.standard_normal((2, K, len(k)))
+    rv = np.clip(S.rv[k], -0.999, 0.999)
+    vx = S.vx[k] + S.svx[k] * w1
+    vy = S.vy[k] + S.svy[k] * (rv * w1 + np.sqrt(1 - rv * rv) * w2)
+    h = S.h[k] + S.sh[k] * rng.standard_normal((K, len(k)))
+    L = np.maximum(S.L[k] + S.sL[k] * rng.standard_normal((K, len(k))), 0.1)
+    W = np.maximum(S.W[k] + S.sW[k] * rng.standard_normal((K, len(k))), 0.1)
+    return x, y, h, L, W, vx, vy
+
+
+def box_std(S: Samples, i: np.ndarray, j: np.ndarray, p: InteractionsParams
+            ) -> dict[str, np.ndarray]:
+    """Std of the 2D TTC and of the surrogates derived from it (``ttc``, ``drac``, ``mdrac``,
+    ``psd_i``, ``psd_j``: PSD of either participant) over Monte Carlo samples of both
+    participants' states and sizes (finite samples only; NaN where fewer than half of the
+    samples are finite)."""
+    keys = ("ttc", "drac", "mdrac", "psd_i", "psd_j")
     if p.samples == 0 or len(i) == 0:
-        return np.full(len(i), np.nan)
+        return {k: np.full(len(i), np.nan) for k in keys}
     rng = np.random.default_rng(p.seed)
-    K = p.samples
-
-    def draw(k):
-        z1, z2 = rng.standard_normal((2, K, len(k)))
-        r = np.clip(S.rxy[k], -0.999, 0.999)
-        x = S.x[k] + S.sx[k] * z1
-        y = S.y[k] + S.sy[k] * (r * z1 + np.sqrt(1 - r * r) * z2)
-        w1, w2 = rng.standard_normal((2, K, len(k)))
-        rv = np.clip(S.rv[k], -0.999, 0.999)
-        vx = S.vx[k] + S.svx[k] * w1
-        vy = S.vy[k] + S.svy[k] * (rv * w1 + np.sqrt(1 - rv * rv) * w2)
-        h = S.h[k] + S.sh[k] * rng.standard_normal((K, len(k)))
-        L = np.maximum(S.L[k] + S.sL[k] * rng.standard_normal((K, len(k))), 0.1)
-        W = np.maximum(S.W[k] + S.sW[k] * rng.standard_normal((K, len(k))), 0.1)
-        return x, y, h, L, W, vx, vy
-
-    a = draw(i)
-    b = draw(j)
+    a = _draw(S, i, p.samples, rng)
+    b = _draw(S, j, p.samples, rng)
     tt = ttc_boxes(*a, *b)
-    fin = np.isfinite(tt)
-    cnt = fin.sum(0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        m = np.where(fin, tt, 0.0).sum(0) / cnt
-        v = np.where(fin, (tt - m) ** 2, 0.0).sum(0) / np.maximum(cnt - 1, 1)
-    return np.where(cnt >= K / 2, np.sqrt(v), np.nan)
+    w = np.hypot(b[5] - a[5], b[6] - a[6])
+    drac, mdrac, psd_i = box_surrogates(tt, w, np.hypot(a[5], a[6]), p.reaction_time,
+                                        p.max_deceleration)
+    psd_j = box_surrogates(tt, w, np.hypot(b[5], b[6]), p.reaction_time, p.max_deceleration)[2]
+    return {k: sample_std(v) for k, v in zip(keys, (tt, drac, mdrac, psd_i, psd_j))}
+
+
+def _surrogate_values(S: Samples, i: np.ndarray, j: np.ndarray, ttc: np.ndarray,
+                      p: InteractionsParams) -> dict[str, np.ndarray]:
+    """``drac``, ``mdrac``, ``psd_i``, ``psd_j`` of pairs (i, j) with box TTC ``ttc``."""
+    w = np.hypot(S.vx[j] - S.vx[i], S.vy[j] - S.vy[i])
+    drac, mdrac, psd_i = box_surrogates(ttc, w, np.hypot(S.vx[i], S.vy[i]), p.reaction_time,
+                                        p.max_deceleration)
+    psd_j = box_surrogates(ttc, w, np.hypot(S.vx[j], S.vy[j]), p.reaction_time,
+                           p.max_deceleration)[2]
+    return {"drac": drac, "mdrac": mdrac, "psd_i": psd_i, "psd_j": psd_j}
 
 
 def box_conflicts(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
                   ) -> dict[str, np.ndarray]:
-    """The 2D TTC (up to ``horizon``, with its std) of the pairs :func:`box_rows` finds: the
-    neighbour rows of ``lane`` take that of their pair (``lane`` is updated in place), the other
-    pairs become ``conflicting`` rows, one per direction (returned; empty if there are none)."""
+    """The 2D TTC (up to ``horizon``, with its std) and the surrogates derived from it of the
+    pairs :func:`box_rows` finds: the neighbour rows of ``lane`` take those of their pair
+    (``lane`` is updated in place), the other pairs become ``conflicting`` rows, one per direction
+    (returned; empty if there are none)."""
     box = box_rows(S, lane, p)
     fin = np.isfinite(box["ttc"]) & (box["ttc"] <= p.horizon)
     bi, bj, bt = box["i"][fin], box["j"][fin], box["ttc"][fin]
-    bstd = box_std(S, bi, bj, p)
+    sd = box_std(S, bi, bj, p)
+    val = _surrogate_values(S, bi, bj, bt, p)
     key = pair_key(bi, bj, S.n)
     korder = np.argsort(key)
     ks = key[korder]
     if lane:
-        # neighbours get the 2D TTC of their pair
+        # neighbours get the 2D TTC (and surrogates) of their pair
         nb = ~np.isin(lane["rel"], ["leader", "follower"])
         lk = pair_key(lane["i"], lane["j"], S.n)
         pos, found = lookup(ks, lk)
         hit = nb & found
-        lane["ttc"] = np.where(hit, bt[korder][pos] if len(ks) else np.inf, lane["ttc"])
-        lane["ttc_std"] = np.where(hit, bstd[korder][pos] if len(ks) else np.nan,
-                                   lane["ttc_std"])
+        at = korder[pos] if len(ks) else np.zeros(len(lk), np.int64)
+        # the row's participant is the pair's i or j: its own PSD
+        is_i = (bi[at] == lane["i"]) if len(ks) else np.ones(len(lk), bool)
+
+        def take(v: np.ndarray) -> np.ndarray:
+            return v[at] if len(ks) else np.full(len(lk), np.nan)
+
+        lane["ttc"] = np.where(hit, take(bt) if len(ks) else np.inf, lane["ttc"])
+        lane["ttc_std"] = np.where(hit, take(sd["ttc"]), lane["ttc_std"])
+        for k in ("drac", "mdrac"):
+            lane[k] = np.where(hit, take(val[k]), lane[k])
+            lane[f"{k}_std"] = np.where(hit, take(sd[k]), lane[f"{k}_std"])
+        lane["psd"] = np.where(hit, np.where(is_i, take(val["psd_i"]), take(val["psd_j"])),
+                               lane["psd"])
+        lane["psd_std"] = np.where(hit, np.where(is_i, take(sd["psd_i"]), take(sd["psd_j"])),
+                                   lane["psd_std"])
         lane["kind"] = np.where(hit, "box_2d", lane["kind"])
         _, is_nb = lookup(np.unique(lk[nb]), key)
     else:
         is_nb = np.zeros(len(key), bool)
-    ci, cj, ct, cs = bi[~is_nb], bj[~is_nb], bt[~is_nb], bstd[~is_nb]
+    c = ~is_nb
+    ci, cj, ct = bi[c], bj[c], bt[c]
     if not len(ci):
         return {}
     m = len(ci)
     rr = range_rate(S, ci, cj)
     nan = np.full(2 * m, np.nan)
+
+    def both(v: np.ndarray) -> np.ndarray:
+        return np.r_[v[c], v[c]]
+
     return {
         "i": np.r_[ci, cj], "j": np.r_[cj, ci],
         "rel": np.full(2 * m, "conflicting", object),
         "gap": nan, "gap_var": nan, "closing": np.r_[rr, rr], "ttc": np.r_[ct, ct],
-        "ttc_std": np.r_[cs, cs], "thw": nan, "dhw": nan,
+        "ttc_std": both(sd["ttc"]), "thw": nan, "dhw": nan,
         "ttc_ca": np.full(2 * m, np.inf), "ttc_ca_std": nan,
+        "drac": both(val["drac"]), "drac_std": both(sd["drac"]),
+        "mdrac": both(val["mdrac"]), "mdrac_std": both(sd["mdrac"]),
+        "psd": np.r_[val["psd_i"][c], val["psd_j"][c]],
+        "psd_std": np.r_[sd["psd_i"][c], sd["psd_j"][c]],
         "kind": np.full(2 * m, "box_2d", object),
     }

@@ -5,6 +5,14 @@ Lanes are chained across lane sections and roads wherever the map's links give a
 continuation (:func:`lane_graph`); where they do not (diverges, junction entries, merges) the
 :class:`LaneGraph` keeps the chains' successors and predecessors. :func:`lane_positions` gives each
 sample its chain, its travel coordinate ``u`` along the chain and the same in the adjacent lanes.
+
+Distances along a lane are measured along the **lane centre's own arc length** (:class:`LaneArcs`),
+not along the road's reference line: on a curved road a lane at lateral offset ``t`` has the length
+``∫ sqrt((1 - κ t)² + t'²) ds``, shorter on the inside of the curve and longer on the outside (a
+left-turn lane of a junction is longer than its connecting road's reference line, a right-turn lane
+shorter). The arc length is tabulated per lane of every lane section on a grid of ``ARC_STEP`` in
+``s`` (trapezoidal rule on ``sqrt((1 - κ t)² + t'²)``, exact on arcs with lanes of constant width)
+and interpolated linearly in between.
 """
 
 from __future__ import annotations
@@ -12,6 +20,71 @@ from __future__ import annotations
 import numpy as np
 
 from aveas_format.errors import FormatError
+
+#: the step (m in s) of the tabulated lane-centre arc lengths
+ARC_STEP = 0.5
+
+
+class LaneArcs:
+    """The lane-centre arc length of every lane of every lane section, tabulated in ``s``.
+
+    ``node[(road_id, section_index, lane_id)]`` is the lane's index; :meth:`along` gives, for
+    samples of lanes ``idx`` at ``s``, the arc length of the lane centre from the section's start;
+    ``length[idx]`` is the whole lane's arc length over its section."""
+
+    def __init__(self, net, keys: list[tuple[str, int, int]], s0: np.ndarray, s1: np.ndarray) -> None:
+        self.node = {k: i for i, k in enumerate(keys)}
+        n = len(keys)
+        counts = np.maximum(np.ceil((s1 - s0) / ARC_STEP).astype(np.int64), 1) + 1
+        first = np.r_[0, np.cumsum(counts)[:-1]]
+        total = int(counts.sum()) if n else 0
+        seg = np.repeat(np.arange(n), counts)
+        pos = np.arange(total) - first[seg] if n else np.zeros(0, np.int64)
+        frac = pos / np.maximum(counts[seg] - 1, 1)
+        sg = s0[seg] + frac * (s1 - s0)[seg]
+        cum = np.zeros(total)
+        roads = np.array([k[0] for k in keys], dtype=object)
+        lids = np.array([k[2] for k in keys], np.int64)
+        for r in np.unique(roads) if n else ():
+            m = np.flatnonzero(roads[seg] == r)
+            inner, outer = net.lane_borders(r, sg[m], lids[seg[m]])
+            tc = np.nan_to_num(0.5 * (inner + outer))
+            kappa = np.asarray(net.reference_line(r, sg[m])[3])
+            same = seg[m][1:] == seg[m][:-1]
+            ds = np.where(same, np.diff(sg[m]), 0.0)
+            # |d(ref + t n)/ds| = sqrt((1 - κ t)² + t'²), integrated by the trapezoidal rule
+            # (exact on arcs with lanes of constant width, where the integrand is constant)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                slope = np.where(same & (ds > 0), np.diff(tc) / ds, 0.0)
+            dt_ds = np.zeros(len(m))
+            dt_ds[1:] += np.where(same, slope, 0.0)
+            dt_ds[:-1] += np.where(same, slope, 0.0)
+            nb = np.zeros(len(m))
+            nb[1:] += same
+            nb[:-1] += same
+            dt_ds /= np.maximum(nb, 1)
+            speed = np.hypot(1.0 - kappa * tc, dt_ds)
+            d = 0.5 * (speed[1:] + speed[:-1]) * ds
+            c = np.r_[0.0, np.cumsum(d)]
+            # restart the cumulative sum at each lane's first grid point
+            starts = np.r_[True, ~same]
+            c -= np.maximum.accumulate(np.where(starts, c, 0.0))
+            cum[m] = c
+        self.s0, self.s1 = s0, s1
+        # one increasing key over all lanes: s shifted by each lane's offset
+        self._shift = np.r_[0.0, np.cumsum((s1 - s0) + 1.0)[:-1]] - s0 if n else np.zeros(0)
+        self._key = sg + self._shift[seg] if n else np.zeros(0)
+        self._cum = cum
+        last = first + counts - 1
+        self.length = cum[last] if n else np.zeros(0)
+
+    def along(self, idx: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """Arc length of the centre of lanes ``idx`` from their section's start to ``s``."""
+        idx = np.asarray(idx, np.int64)
+        if not len(idx):
+            return np.zeros(0)
+        sc = np.clip(s, self.s0[idx], self.s1[idx])
+        return np.interp(sc + self._shift[idx], self._key, self._cum)
 
 
 def lane_chains(net) -> dict[tuple[str, int, int], tuple[int, float, int]]:
@@ -33,12 +106,15 @@ class LaneGraph:
     direction of travel; ``succ[c]``: the chains entered at the end of chain ``c``, each as
     ``(chain, entry_u)`` (``entry_u`` is 0 at a chain's head; diverges and junction entries have
     several, merges lead several chains into one); ``pred[c]``: the chains whose end leads into
-    ``c``; ``roads[c]``: the roads chain ``c`` runs on."""
+    ``c``; ``roads[c]``: the roads chain ``c`` runs on; ``arcs``: the lanes' centre arc lengths
+    (:class:`LaneArcs`), in which offsets and lengths are measured."""
 
     def __init__(self, chains: dict[tuple[str, int, int], tuple[int, float, int]],
                  length: np.ndarray, succ: list[list[tuple[int, float]]],
-                 pred: list[list[int]], roads: list[frozenset[str]]) -> None:
+                 pred: list[list[int]], roads: list[frozenset[str]],
+                 arcs: LaneArcs | None = None) -> None:
         self.chains = chains
+        self.arcs = arcs
         self.length = length
         self.succ = succ
         self.pred = pred
@@ -65,6 +141,11 @@ def lane_graph(net) -> LaneGraph:
                 d = (1 if lane.id < 0 else -1) * (1 if rht else -1)
                 nodes[(rid, si, lane.id)] = {"len": max(s1 - s0, 0.0), "dir": d, "lane": lane,
                                              "s0": s0, "s1": s1}
+    keys = list(nodes)
+    arcs = LaneArcs(net, keys, np.array([nodes[k]["s0"] for k in keys], float),
+                    np.array([max(nodes[k]["s1"], nodes[k]["s0"]) for k in keys], float))
+    for k in keys:
+        nodes[k]["len"] = float(arcs.length[arcs.node[k]])
 
     def neighbours_along(key, forward: bool) -> set[tuple[str, int, int]]:
         """Lanes reached by leaving ``key`` at its end (forward=True: successor side of s)."""
@@ -141,7 +222,7 @@ def lane_graph(net) -> LaneGraph:
     for (rid, _, _), (c, _, _) in out.items():
         roads[c].add(rid)
     return LaneGraph(out, np.asarray(lengths, float), csucc, cpred,
-                     [frozenset(r) for r in roads])
+                     [frozenset(r) for r in roads], arcs)
 
 
 def _has_explicit_links(road, si: int, nsi: int) -> bool:
@@ -171,15 +252,27 @@ def chain_lookup(chains: dict[tuple[str, int, int], tuple[int, float, int]], roa
     return vals[0].astype(np.int64), vals[1], vals[2].astype(np.int64)
 
 
-def lane_positions(net, chains: dict[tuple[str, int, int], tuple[int, float, int]],
-                   rid: np.ndarray, lid: np.ndarray, sv: np.ndarray
+def _node_lookup(arcs: LaneArcs, road_id: str, section: np.ndarray, lane_id: np.ndarray
+                 ) -> np.ndarray:
+    """The :class:`LaneArcs` index of each (section, lane) of one road (0 where none)."""
+    out = np.zeros(len(lane_id), np.int64)
+    for si, lid in set(zip(section.tolist(), lane_id.tolist())):
+        k = arcs.node.get((road_id, si, lid))
+        if k is not None:
+            out[(section == si) & (lane_id == lid)] = k
+    return out
+
+
+def lane_positions(net, G: LaneGraph, rid: np.ndarray, lid: np.ndarray, sv: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(chain, u, theta, adj_chain, adj_u)`` of samples on roads ``rid``, lanes ``lid`` at
     ``road_s`` ``sv``: the chain (-1 where the lane is not in the map), the travel coordinate along
-    it, the direction of travel (rad), and chain and travel coordinate in the adjacent lanes,
-    ``[0]`` left and ``[1]`` right of the direction of travel (-1 and NaN where there is none).
+    it (the lane centre's arc length, :class:`LaneArcs`), the direction of travel (rad), and chain
+    and travel coordinate in the adjacent lanes, ``[0]`` left and ``[1]`` right of the direction of
+    travel (-1 and NaN where there is none; the adjacent lane's own arc length at the same ``s``).
 
     A loop over roads and lane keys, not samples. Raises FormatError for a road not in the map."""
+    chains, arcs = G.chains, G.arcs
     n = len(rid)
     chain = np.full(n, -1, np.int64)
     u = np.full(n, np.nan)
@@ -194,12 +287,10 @@ def lane_positions(net, chains: dict[tuple[str, int, int], tuple[int, float, int
                               "map")
         road_obj = net.roads[r]
         starts = np.array([q.s for q in road_obj.lane_sections])
-        ends = np.r_[starts[1:], road_obj.length]
         si = np.clip(np.searchsorted(starts, sv[m], side="right") - 1, 0, len(starts) - 1)
         c, off, d = chain_lookup(chains, r, si, lid[m])
         chain[m], direction[m] = c, d
-        along = np.where(d > 0, sv[m] - starts[si], ends[si] - sv[m])
-        u[m] = off + along
+        u[m] = off + _along(arcs, r, si, lid[m], sv[m], d)
         hdg[m] = np.asarray(net.reference_line(r, sv[m])[2])
         for k, side in enumerate((+1, -1)):
             # left of the direction of travel: towards larger lane ids for right lanes (dir +1)
@@ -208,6 +299,16 @@ def lane_positions(net, chains: dict[tuple[str, int, int], tuple[int, float, int
             ca, offa, da = chain_lookup(chains, r, si, np.where(ok, adj, 0))
             ok &= (ca >= 0) & (da == d)
             adj_chain[k, m] = np.where(ok, ca, -1)
-            adj_u[k, m] = np.where(ok, offa + along, np.nan)
+            adj_u[k, m] = np.where(ok, offa + _along(arcs, r, si, np.where(ok, adj, lid[m]),
+                                                      sv[m], d), np.nan)
     theta = hdg + np.where(direction < 0, np.pi, 0.0)
     return chain, u, theta, adj_chain, adj_u
+
+
+def _along(arcs: LaneArcs, road_id: str, si: np.ndarray, lid: np.ndarray, s: np.ndarray,
+           d: np.ndarray) -> np.ndarray:
+    """Distance along the lane centre in the direction of travel ``d`` from the lane's entry into
+    its section (its start for d = +1, its end for d = -1) to ``s``."""
+    node = _node_lookup(arcs, road_id, si, np.asarray(lid, np.int64))
+    a = arcs.along(node, s)
+    return np.where(d > 0, a, arcs.length[node] - a)

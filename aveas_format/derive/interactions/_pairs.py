@@ -25,7 +25,9 @@ if TYPE_CHECKING:
 
 #: the columns of a block of relation rows (before ``kind``)
 ROW_KEYS = ("i", "j", "rel", "gap", "gap_var", "closing", "ttc", "ttc_std", "thw", "dhw", "ttc_ca",
-            "ttc_ca_std")
+            "ttc_ca_std", "drac", "drac_std", "mdrac", "mdrac_std", "psd", "psd_std")
+#: the surrogate columns (``._surrogates``), NaN where a relation has none
+SURROGATE_KEYS = ("drac", "drac_std", "mdrac", "mdrac_std", "psd", "psd_std")
 
 
 @dataclass
@@ -66,7 +68,7 @@ def lane_samples(rec, S: Samples, p: InteractionsParams) -> LaneSamples | None:
     G = lane_graph(net)
     idx = np.flatnonzero(on)
     rid = road_np[idx].astype(str)
-    chain, u, theta, adj_chain, adj_u = lane_positions(net, G.chains, rid,
+    chain, u, theta, adj_chain, adj_u = lane_positions(net, G, rid,
                                                        lane[idx].astype(np.int64), rs[idx])
     good = chain >= 0
     good &= np.abs(np.angle(np.exp(1j * (S.h[idx] - theta)))) <= p.max_heading_deviation
@@ -117,7 +119,8 @@ def _leader_rows(rows: dict[str, list], S: Samples, L: LaneSamples, p: Interacti
     gap = du - 0.5 * (S.L[li] + S.L[fi])
     gvar = L.vp[a] + L.vp[b] + 0.25 * (S.sL[li] ** 2 + S.sL[fi] ** 2)
     m = follower_leader_metrics(gap, gvar, S.L[li], (L.v[a], L.a[a], L.vv[a], L.va[a]),
-                                (L.v[b], L.a[b], L.vv[b], L.va[b]))
+                                (L.v[b], L.a[b], L.vv[b], L.va[b]), p.reaction_time,
+                                p.max_deceleration)
     for (i, j, rel) in ((fi, li, "leader"), (li, fi, "follower")):
         _append(rows, i, j, rel, m)
 
@@ -156,7 +159,8 @@ def _neighbour_rows(rows: dict[str, list], S: Samples, L: LaneSamples, p: Intera
             _append(rows, i, j, rel, {
                 "gap": gap, "gap_var": gvar, "closing": range_rate(S, i, j),
                 "ttc": np.full(len(i), np.inf), "ttc_std": nan, "thw": nan, "dhw": dh,
-                "ttc_ca": np.full(len(i), np.inf), "ttc_ca_std": nan})
+                "ttc_ca": np.full(len(i), np.inf), "ttc_ca_std": nan,
+                **{k: nan for k in SURROGATE_KEYS}})
 
 
 def leaders(L: LaneSamples, t: np.ndarray, route_range: float

@@ -1,0 +1,257 @@
+"""Criticality measures (issue 20): per 10^6 follower pairs, and all measures for an hour of a busy
+highway streamed by time window.
+
+1. ``pairs``: TTC + DRAC + MTTC + PSD, each with its std, for 10^6 follower/leader pairs: ours
+   (:func:`aveas_format.derive.interactions._ttc.follower_leader_metrics`, which also computes THW,
+   DHW and MDRAC) against a straightforward vectorised NumPy implementation of the same formulas
+   written below (whole arrays, MTTC piece by piece, its std by central finite differences as the
+   derivations did before), and against the same with analytic derivatives (the same std formula
+   as ours, whole arrays): both ratios from the same run.
+2. ``highway_hour``: ~100 concurrent vehicles at 25 Hz for 1 h (~9M states, a vectorised
+   generator below) written as a recording, then every measure (kinematics, interactions with
+   DRAC/MDRAC/PSD and their std, conflicts, the criticality summary) streamed by time window
+   (:func:`aveas_format.derive.streamed.derive_by_windows`) on 2 worker processes, in a fresh
+   process whose peak memory (VmHWM) is reported. Target: <= 120 s.
+
+Run alone: ``.venv/bin/python benchmarks/bench_criticality.py [pairs|hour]``.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+
+
+# --- the baseline: straightforward NumPy ----------------------------------------------------------
+
+def _mttc_baseline(g, vf, af, vl, al):
+    """MTTC with constant accelerations, vehicles stop rather than reverse: three pieces between
+    the stop times, the first root of each quadratic, whole arrays."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        Tf = np.where((af < 0) & (vf > 0), -vf / af, np.where((vf <= 0) & (af <= 0), 0.0, np.inf))
+        Tl = np.where((al < 0) & (vl > 0), -vl / al, np.where((vl <= 0) & (al <= 0), 0.0, np.inf))
+        b1, b2 = np.minimum(Tf, Tl), np.maximum(Tf, Tl)
+        out = np.full(g.shape, np.inf)
+        for lo, hi in ((np.zeros_like(g), b1), (b1, b2), (b2, np.full_like(g, np.inf))):
+            mid = np.where(np.isfinite(hi), 0.5 * (lo + hi), lo + 1.0)
+            fm, lm = mid < Tf, mid < Tl
+            xf0 = np.where(fm, 0.0, np.nan_to_num(vf * Tf + 0.5 * af * Tf * Tf, posinf=0.0))
+            xl0 = np.where(lm, 0.0, np.nan_to_num(vl * Tl + 0.5 * al * Tl * Tl, posinf=0.0))
+            A = g + xl0 - xf0
+            B = np.where(lm, vl, 0.0) - np.where(fm, vf, 0.0)
+            C = np.where(lm, 0.5 * al, 0.0) - np.where(fm, 0.5 * af, 0.0)
+            hi_ = np.where(np.isfinite(hi), hi, 1e300)
+            g0 = A + B * lo + C * lo * lo
+            disc = B * B - 4 * A * C
+            sq = np.sqrt(np.maximum(disc, 0.0))
+            lin = np.abs(C) < 1e-12
+            r_lin = np.where(B < 0, -A / B, np.inf)
+            r1 = np.where(disc >= 0, (-B - sq) / (2 * C), np.inf)
+            r2 = np.where(disc >= 0, (-B + sq) / (2 * C), np.inf)
+            cand = np.stack([np.where(lin, r_lin, r1), np.where(lin, np.inf, r2)])
+            cand = np.where((cand >= lo) & (cand <= hi_), cand, np.inf).min(axis=0)
+            r = np.where(g0 <= 0, lo, cand)
+            out = np.where((lo < hi) & (r < out), r, out)
+        return np.where(g < 0, np.inf, out)
+
+
+def baseline(g, gv, vf, af, vfv, afv, vl, al, vlv, alv, d_max=3.4, analytic=False):
+    """TTC, DRAC, MTTC and PSD with their std (delta method), whole arrays."""
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        dv = vf - vl
+        dvv = vfv + vlv
+        ttc = np.where((dv > 0) & (g >= 0), g / dv, np.inf)
+        ttc_std = np.sqrt(gv / dv ** 2 + g ** 2 * dvv / dv ** 4)
+        drac = np.where((dv > 0) & (g > 0), dv ** 2 / (2 * g), np.nan)
+        drac_std = np.sqrt((dv / g) ** 2 * dvv + (dv ** 2 / (2 * g ** 2)) ** 2 * gv)
+        psd = np.where(vf > 0, 2 * d_max * g / vf ** 2, np.nan)
+        psd_std = np.sqrt((2 * d_max / vf ** 2) ** 2 * gv + (4 * d_max * g / vf ** 3) ** 2 * vfv)
+        mttc = _mttc_baseline(g, vf, af, vl, al)
+        args = [g, vf, af, vl, al]
+        var = np.zeros(len(g))
+        if analytic:
+            Tf = np.where((af < 0) & (vf > 0), -vf / af, np.where((vf <= 0) & (af <= 0), 0, np.inf))
+            Tl = np.where((al < 0) & (vl > 0), -vl / al, np.where((vl <= 0) & (al <= 0), 0, np.inf))
+            tf, tl = np.minimum(mttc, Tf), np.minimum(mttc, Tl)
+            rate = (vl + al * tl) - (vf + af * tf)
+            var = (gv + tf ** 2 * vfv + tf ** 4 / 4 * afv + tl ** 2 * vlv + tl ** 4 / 4 * alv) / rate ** 2
+        else:
+            for k, v in enumerate((gv, vfv, afv, vlv, alv)):
+                h = np.maximum(1e-4, 1e-3 * np.abs(args[k]))
+                up, dn = list(args), list(args)
+                up[k], dn[k] = args[k] + h, args[k] - h
+                d = (_mttc_baseline(*up) - _mttc_baseline(*dn)) / (2 * h)
+                var += np.where(np.isfinite(d), d * d * v, 0.0)
+        mttc_std = np.where(np.isfinite(mttc), np.sqrt(var), np.nan)
+    return ttc, ttc_std, drac, drac_std, mttc, mttc_std, psd, psd_std
+
+
+def _pairs(n: int, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    vf = rng.uniform(5, 40, n)
+    return dict(g=rng.uniform(1, 80, n), gv=np.full(n, 0.04), vf=vf, af=rng.normal(0, 1, n),
+                vfv=np.full(n, 0.01), afv=np.full(n, 0.04), vl=vf - rng.normal(1, 3, n),
+                al=rng.normal(0, 1.5, n), vlv=np.full(n, 0.01), alv=np.full(n, 0.04))
+
+
+def bench_pairs(n: int = 1_000_000, repeat: int = 3) -> list[dict]:
+    from aveas_format.derive.interactions._ttc import follower_leader_metrics
+
+    p = _pairs(n)
+
+    def ours():
+        return follower_leader_metrics(p["g"], p["gv"], np.full(n, 4.5),
+                                       (p["vf"], p["af"], p["vfv"], p["afv"]),
+                                       (p["vl"], p["al"], p["vlv"], p["alv"]))
+
+    def best(fn):
+        ts = []
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            r = fn()
+            ts.append(time.perf_counter() - t0)
+        return min(ts), r
+
+    t_ours, m = best(ours)
+    t_base, b = best(lambda: baseline(**p))
+    t_an, _ = best(lambda: baseline(**p, analytic=True))
+    # the same numbers (values exactly, std to the finite differences' accuracy)
+    same = {k: bool(np.allclose(m[k], v, rtol=1e-9, equal_nan=True)) for k, v in
+            (("ttc", b[0]), ("drac", b[2]), ("ttc_ca", b[4]), ("psd", b[6]))}
+    note = (f"{n:,} follower pairs, TTC + DRAC + MTTC + PSD with std (ours also THW, DHW, "
+            f"MDRAC); values equal to the baseline's: {same}")
+    return [{"benchmark": "criticality.pairs", "rows": n, "seconds": round(t_ours, 3),
+             "rows_per_s": round(n / t_ours), "baseline_s": round(t_base, 3),
+             "speedup_vs_baseline": round(t_base / t_ours, 1),
+             "note": note + f"; baseline with analytic MTTC derivatives {t_an:.3f} s -> "
+                            f"{t_an / t_ours:.1f}x"}]
+
+
+# --- an hour of a busy highway ----------------------------------------------------------------------
+
+def highway_hour(path: Path, duration_s: float = 3600.0, concurrent: int = 100,
+                 length_m: float = 3000.0, rate_hz: float = 25.0, seed: int = 5) -> int:
+    """Write a recording of a 3-lane, ``length_m`` straight motorway with ``concurrent`` vehicles
+    on it on average for ``duration_s`` (vectorised: each vehicle's speed oscillates around its
+    desired speed, so followers close in and fall back; a few change lanes). Returns the number
+    of states."""
+    from aveas_format.mapref.build import build_recording
+    from aveas_format.opendrive.builder import straight_highway
+    from aveas_format.sample import SITE_CRS
+
+    rng = np.random.default_rng(seed)
+    v_mean = 30.0
+    travel = length_m / v_mean
+    n_veh = int(concurrent * (duration_s + travel) / travel)
+    t_in = np.sort(rng.uniform(-travel, duration_s, n_veh))
+    lane = rng.choice([-1, -2, -3], n_veh, p=[0.35, 0.4, 0.25])
+    v0 = np.array([36.0, 30.0, 24.0])[-lane - 1] * rng.normal(1, 0.05, n_veh)
+    amp = rng.uniform(0.5, 3.0, n_veh)
+    om = rng.uniform(0.05, 0.2, n_veh)
+    ph = rng.uniform(0, 2 * np.pi, n_veh)
+    dt = 1.0 / rate_hz
+    # each vehicle's samples while it is on the road and within the hour
+    t_end = t_in + length_m / v0 * 1.05
+    k0 = np.ceil(np.maximum(t_in, 0) / dt).astype(np.int64)
+    k1 = np.floor(np.minimum(t_end, duration_s - dt) / dt).astype(np.int64)
+    cnt = np.maximum(k1 - k0 + 1, 0)
+    veh = np.repeat(np.arange(n_veh), cnt)
+    first = np.cumsum(cnt) - cnt
+    t = (k0[veh] + np.arange(int(cnt.sum())) - first[veh]) * dt
+    tau = t - t_in[veh]
+    s = v0[veh] * tau - amp[veh] / om[veh] * (np.cos(om[veh] * tau + ph[veh]) - np.cos(ph[veh]))
+    v = v0[veh] + amp[veh] * np.sin(om[veh] * tau + ph[veh])
+    a = amp[veh] * om[veh] * np.cos(om[veh] * tau + ph[veh])
+    on = (s > 1.0) & (s < length_m - 1.0)
+    veh, t, s, v, a = veh[on], t[on], s[on], v[on], a[on]
+    y = (lane[veh] + 0.5) * 3.5
+    n = len(t)
+    L = np.clip(rng.normal(4.6, 0.4, n_veh), 3.5, 6.0)
+    Wd = np.clip(rng.normal(1.85, 0.08, n_veh), 1.6, 2.1)
+    states = {"participant_id": veh, "time": t, "x": s + rng.normal(0, 0.1, n),
+              "y": y + rng.normal(0, 0.1, n), "heading": rng.normal(0, 0.01, n),
+              "vx": v + rng.normal(0, 0.2, n), "vy": rng.normal(0, 0.2, n),
+              "x_std": np.full(n, 0.1), "y_std": np.full(n, 0.1),
+              "vx_std": np.full(n, 0.2), "vy_std": np.full(n, 0.2),
+              "heading_std": np.full(n, 0.01)}
+    del a
+    ids = np.unique(veh)
+    parts = {"participant_id": ids, "class": ["car"] * len(ids), "length": L[ids],
+             "width": Wd[ids], "length_std": np.full(len(ids), 0.1),
+             "width_std": np.full(len(ids), 0.05)}
+    rec = build_recording(map_source=straight_highway(length_m, lanes_right=3,
+                                                      geo_reference=SITE_CRS),
+                          participants=parts, states=states, method="aerial", partner="bench",
+                          reference=True)
+    rec.write(path, overwrite=True)
+    return n
+
+
+def _hour_child(path: str, workers: int, window_s: float) -> None:
+    """In a fresh process: derive the recording by windows; print seconds and peak memory."""
+    from aveas_format.derive.streamed import derive_by_windows
+
+    t0 = time.perf_counter()
+    info = derive_by_windows(path, Path(path).parent / "derived-out", window_s=window_s,
+                             workers=workers)
+    secs = time.perf_counter() - t0
+    import resource
+
+    cpu = sum(getattr(resource.getrusage(w), f) for w in (resource.RUSAGE_SELF,
+                                                          resource.RUSAGE_CHILDREN)
+              for f in ("ru_utime", "ru_stime"))
+    hwm = next((int(ln.split()[1]) for ln in Path("/proc/self/status").read_text().splitlines()
+                if ln.startswith("VmHWM")), None)
+    print(json.dumps({"seconds": secs, "cpu_s": cpu, "vmhwm_kb": hwm, **info}))
+
+
+def bench_hour(duration_s: float = 3600.0, workers: int = 2, window_s: float = 300.0) -> list[dict]:
+    with tempfile.TemporaryDirectory(prefix="aveas-bench-hour-") as d:
+        path = Path(d) / "hour.aveas"
+        t0 = time.perf_counter()
+        n = highway_hour(path, duration_s=duration_s)
+        tb = time.perf_counter() - t0
+        res = subprocess.run([sys.executable, __file__, "_child", str(path), str(workers),
+                              str(window_s)], capture_output=True, text=True, check=False)
+        if res.returncode != 0:
+            raise RuntimeError(res.stderr[-3000:])
+        info = json.loads(res.stdout.strip().splitlines()[-1])
+    return [{"benchmark": "criticality.highway_hour", "rows": n,
+             "seconds": round(info["seconds"], 1), "rows_per_s": round(n / info["seconds"]),
+             "baseline_s": None, "speedup_vs_baseline": None,
+             "note": (f"{duration_s:g} s, ~100 concurrent vehicles at 25 Hz ({n:,} states; built "
+                      f"and written in {tb:.0f} s); every measure with std, {info['windows']} "
+                      f"windows of {window_s:g} s on {workers} workers; "
+                      f"CPU time of the deriving process and its workers {info['cpu_s']:.0f} s "
+                      f"(/{workers} = {info['cpu_s'] / workers:.0f} s: the wall time on "
+                      f"{workers} idle cores, less the idle gaps); "
+                      f"{info['interactions']:,} interaction rows, {info['conflicts']:,} conflict "
+                      f"rows; peak memory of the deriving process (VmHWM, workers excluded) "
+                      f"{info['vmhwm_kb'] / 1024:.0f} MB, largest worker "
+                      f"{info['worker_peak_kb'] / 1024:.0f} MB; target <= 120 s")}]
+
+
+def main() -> list[dict]:
+    return bench_pairs() + bench_hour()
+
+
+if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] == "_child":
+        _hour_child(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]))
+    elif len(sys.argv) > 1 and sys.argv[1] == "pairs":
+        for r in bench_pairs():
+            print(r)
+    elif len(sys.argv) > 1 and sys.argv[1] == "hour":
+        for r in bench_hour(float(sys.argv[2]) if len(sys.argv) > 2 else 3600.0):
+            print(r)
+    else:
+        for r in main():
+            print(r)
