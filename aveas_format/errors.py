@@ -10,6 +10,8 @@ built-in exceptions so that callers can catch either (STYLE.md 11, as rasterio d
 - :class:`MapError` (also :class:`ValueError`): an OpenDRIVE map cannot be read; carries the XML line.
 - :class:`PluginError` (also :class:`ImportError`): a plugin (an entry point of a partner package)
   cannot be loaded or registers a name that exists (:mod:`aveas_format.plugins`).
+- :class:`MissingExtraError` (also :class:`ImportError`): an optional dependency is not installed;
+  the message names the extra that brings it (:func:`require`).
 
 Each error carries the ``path`` it is about (and, where known, ``line``/``row``/``column``) as
 attributes, and its message names them: the CLI prints ``str(error)`` as its one line on stderr.
@@ -73,13 +75,36 @@ class PluginError(AveasError, ImportError):
         self.path = None  # ImportError.__init__ resets it; a plugin error is about no file
 
 
+class MissingExtraError(AveasError, ImportError):
+    """An optional dependency is not installed; the message is one line naming the extra."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(message)
+        self.path = None
+
+
+def require(module: str, extra: str, feature: str | None = None):  # -> the module
+    """Import an optional dependency, or raise :class:`MissingExtraError` in one line:
+    ``to_geopandas needs geopandas: pip install "aveas-format[geo]"``."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        top = module.split(".")[0]
+        raise MissingExtraError(f"{feature or 'this'} needs {top}: "
+                                f'pip install "aveas-format[{extra}]"') from None
+
+
 __all__ = [
     "AveasError",
     "ChecksumError",
     "FormatError",
     "FormatVersionError",
     "MapError",
+    "MissingExtraError",
     "PluginError",
     "RecordingExistsError",
     "RecordingIOError",
+    "require",
 ]

@@ -502,7 +502,7 @@ def test_each_broken_recording_is_caught_by_exactly_its_rule(scene, case, code, 
     rec = case(scene)
     report = aveas_format.validate(rec)
     assert report.failures == [], report.failures[0].traceback
-    assert report.codes() == {code}, report.flatten(("code", "row", "participant_id", "message"))
+    assert report.codes == {code}, report.flatten(("code", "row", "participant_id", "message"))
     first = report.results[0].sample[0]
     if where is not None:
         assert (first.location.row, first.location.participant_id) == where, first.message
@@ -514,7 +514,7 @@ def test_each_broken_recording_is_caught_by_exactly_its_rule(scene, case, code, 
 def test_derived_stale_asks_the_derivation_package(clean, monkeypatch):
     """metadata.derived_stale reports what ``derive.registry.stale_derived`` says (a list of names
     or a dict name -> reason), and nothing where the derivation package is missing."""
-    assert "metadata.derived_stale" not in aveas_format.validate(clean).codes()
+    assert "metadata.derived_stale" not in aveas_format.validate(clean).codes
     mod = types.ModuleType("aveas_format.derive.registry")
     mod.stale_derived = lambda rec: {"kinematics": "states changed since it was derived"}
     monkeypatch.setitem(sys.modules, "aveas_format.derive.registry", mod)
@@ -527,7 +527,7 @@ def test_derived_stale_asks_the_derivation_package(clean, monkeypatch):
                                                   "derived/kinematics.parquet"],
                                                  ["metadata.derived_stale", "events.parquet"]]
     monkeypatch.setitem(sys.modules, "aveas_format.derive.registry", None)  # import fails
-    assert aveas_format.validate(clean, select=["metadata.derived_stale"]).codes() == set()
+    assert aveas_format.validate(clean, select=["metadata.derived_stale"]).codes == set()
 
 
 def test_every_rule_has_a_failing_case():
@@ -545,8 +545,8 @@ def test_overlap_is_exempt_for_accidents_and_attached_participants():
                     "time_start": np.array([0.0]), "time_end": np.array([5.96]),
                     "participant_ids": pa.array([[0, 4]], pa.list_(pa.int64())),
                     "origin": ["annotated"]}
-    assert aveas_format.validate(vf.build(sc)).codes() == set()
+    assert aveas_format.validate(vf.build(sc)).codes == set()
     sc = vf.fresh()
     c_overlap(sc)
     sc["participants"]["attached_to"] = pa.array([None, None, None, None, 0], pa.int64())
-    assert aveas_format.validate(vf.build(sc), select=["interactions"]).codes() == set()
+    assert aveas_format.validate(vf.build(sc), select=["interactions"]).codes == set()
