@@ -118,3 +118,16 @@ def test_figures_draw_64_bit_ids(pair):
         lb = [line.get_xydata() for line in fb[name].axes[0].get_lines()]
         assert len(ls) == len(lb) and all(np.array_equal(a, b, equal_nan=True)
                                           for a, b in zip(ls, lb)), name
+
+
+def test_derivation_figures_select_exactly_one_64_bit_participant():
+    """The TTC and acceleration figures pick a participant by its exact id: 2**60 + 1 and
+    2**60 + 2 are one float64, yet only one of them is drawn."""
+    from aveas_format.derive import derive
+    from aveas_format.plot.derive import acceleration_figure
+
+    big = _recording(BIG, 2**61 + 7)
+    derive(big, only="kinematics")
+    ax = acceleration_figure(big.derived["kinematics"], BIG[0]).axes[0]
+    n = int((np.asarray(big.derived["kinematics"].column("participant_id")) == BIG[0]).sum())
+    assert n == 150 and max(len(line.get_xdata()) for line in ax.get_lines()) == n
