@@ -1,0 +1,144 @@
+"""The HTML validation report (aveas_format.plot.report_html): summary, rule docs and links,
+markup, `validate -o DIR/`, and a headless Chromium screenshot."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import aveas_format
+import helpers_validate as vf
+from aveas_format.plot.report_html import recording_facts, render_html
+from aveas_format.validate.render import inline_markup, rule_anchor
+
+
+@pytest.fixture(scope="module")
+def broken():
+    sc = vf.fresh()
+    sc["tracks"][0]["x"][75:] += 3.0           # kinematics.position_jump (error)
+    sc["participants"]["length"][1] = 9.0       # participants.size_implausible (warning)
+    rec = vf.build(sc)
+    return rec, aveas_format.validate(rec)
+
+
+def test_inline_markup_is_rendered_or_removed():
+    doc = "over ``window_s`` (see :func:`~aveas_format.numeric.wrap_angle`), **not** *per* `row`; 2 * 3"
+    assert inline_markup(doc) == "over window_s (see aveas_format.numeric.wrap_angle), not per row; 2 * 3"
+    assert inline_markup(doc, html=True) == (
+        "over <code>window_s</code> (see <code>aveas_format.numeric.wrap_angle</code>), "
+        "<b>not</b> <i>per</i> <code>row</code>; 2 * 3")
+    assert inline_markup("a ``<b>`` & c", html=True) == "a <code>&lt;b&gt;</code> &amp; c"
+    assert rule_anchor("geo.crs_mismatch") == "geocrs_mismatch"
+
+
+def test_summary_block_describes_the_recording(broken):
+    rec, report = broken
+    facts = dict(recording_facts(rec))
+    assert facts["Participants"] == "4: 2 car, 1 truck, 1 van"
+    assert facts["Duration"] == "5.96 s"
+    assert facts["Sample rate"] == "25 Hz nominal, 25 Hz observed (median)"
+    assert facts["Map"] == "map.xodr (OpenDRIVE 1.6): 1 roads, 0 junctions"
+    assert facts["Coverage"].startswith("0.014 km² (14,000 m²), x 0.0...1,000.0 m")
+    assert facts["Provenance"] == "natural" and facts["CRS"] == rec.meta.crs
+    assert facts["Acquisition"].startswith("aerial, by Test Institute; drone")
+    page = render_html(report, rec)
+    summary = page[page.index("<h2>Summary</h2>"):page.index("<h2>Rules with findings</h2>")]
+    assert "<th>Participants</th><td>4: 2 car, 1 truck, 1 van</td>" in summary
+    assert re.search(r"<div class='count error'><b>1</b>error<br><small>1 rule</small>", summary)
+    assert re.search(r"<div class='count warning'><b>1</b>warning<br>", summary)
+    assert "<div class='count zero'><b>0</b>info" in summary
+
+
+def test_rule_codes_carry_their_doc_link_and_no_raw_markup(broken):
+    rec, report = broken
+    page = render_html(report, rec)
+    jump = aveas_format.validate.load_rules()["kinematics.position_jump"]
+    assert "``" not in page  # no raw reStructuredText anywhere
+    # the table row: tooltip = the plain doc, link = the rule's section in the page
+    assert (f"<a href='#kinematicsposition_jump' title='{inline_markup(jump.doc)}'>"
+            in page.replace("&#x27;", "'"))
+    assert "<details class='rule error' id='kinematicsposition_jump' open>" in page
+    assert "<code>jump_tolerance_m</code>" in page
+    assert "http://" not in page and "https://" not in page and "<script" not in page
+    linked = render_html(report, rec, docs_url="https://example.org/aveas/docs/")
+    assert "href='https://example.org/aveas/docs/rules.md#kinematicsposition_jump'" in linked
+    assert linked.count("rules.md#participantssize_implausible") == 2  # table and section
+
+
+def test_title_is_the_recording_name_and_sections_have_a_place(broken):
+    rec, report = broken
+    page = render_html(report, rec, sections=[("Criticality", "<p>min TTC 1.2 s</p>")])
+    assert "<h1>clean recording for the rule tests <span class='badge error'>INVALID" in page
+    assert page.index("<h2>Summary</h2>") < page.index("<h2>Criticality</h2><p>min TTC 1.2 s") \
+        < page.index("<h2>Rules with findings</h2>")
+
+
+def test_report_without_a_readable_recording_says_so(broken):
+    _, report = broken
+    page = render_html(report, None)
+    assert "could not be read for a summary" in page and "No figures" in page
+
+
+def test_cli_output_directory_writes_json_and_html_and_refuses_to_replace(broken, tmp_path):
+    rec, _ = broken
+    path = rec.write(tmp_path / "b.aveas")
+    out = tmp_path / "report"
+
+    def run(*args):
+        return subprocess.run([sys.executable, "-m", "aveas_format", "validate", str(path), *args],
+                              capture_output=True, text=True, timeout=300)
+
+    res = run("-o", f"{out}/")
+    assert res.returncode == 1, res.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["report.html", "report.json"]
+    assert aveas_format.validate.Report.from_json((out / "report.json").read_text()).codes == \
+        {"kinematics.position_jump", "participants.size_implausible"}
+    assert "<h2>Summary</h2>" in (out / "report.html").read_text()
+    assert "INVALID" in res.stderr and f"wrote {out / 'report.json'}" in res.stderr
+    before = (out / "report.json").read_bytes()
+    res = run("-o", str(out))  # an existing directory, no trailing slash
+    assert res.returncode == 2 and "report.json: exists; pass --overwrite" in res.stderr
+    assert (out / "report.json").read_bytes() == before
+    assert run("-o", str(out), "--overwrite").returncode == 1
+    single = tmp_path / "r.html"
+    assert run("--format", "html", "-o", single).returncode == 1
+    res = run("--format", "html", "-o", single)
+    assert res.returncode == 2 and "pass --overwrite" in res.stderr
+
+
+def test_headless_chromium_screenshot_of_the_report(broken, tmp_path):
+    """The page renders in a real browser: the verdict badge, the summary cards and the embedded
+    map figure are painted (Debian: apt-get install chromium)."""
+    import report_figures
+
+    if report_figures.find_chromium() is None:
+        pytest.skip("chromium not installed (Debian: apt-get install chromium)")
+    from PIL import Image
+
+    rec, report = broken
+    page = tmp_path / "report.html"
+    page.write_text(render_html(report, rec), encoding="utf-8")
+    png = report_figures.screenshot(page, tmp_path / "report.png", width=1280, height=3000)
+    with Image.open(png) as im:
+        rgb = np.asarray(im.convert("RGB")).astype(int)
+    assert rgb.shape[1] == 1280 and 1500 < rgb.shape[0] <= 3000  # cropped below the content
+
+    def share(color, rows):
+        r, g, b = (int(color[i:i + 2], 16) for i in (1, 3, 5))
+        part = rgb[rows]
+        return float(((abs(part[..., 0] - r) < 10) & (abs(part[..., 1] - g) < 10)
+                      & (abs(part[..., 2] - b) < 10)).mean())
+
+    assert share("#c62828", slice(0, 450)) > 0.002   # INVALID badge + error card
+    assert share("#ef6c00", slice(0, 450)) > 0.002   # the warning card
+    # the map figure: its lanes (light grey) and the trajectories in the class colours
+    from aveas_format.plot.map import BACKGROUND_LANE_COLORS
+    from aveas_format.plot.recording import CLASS_COLORS
+
+    below = slice(600, None)
+    assert share(BACKGROUND_LANE_COLORS["driving"], below) > 0.05
+    assert all(share(CLASS_COLORS[c], below) > 0.0001 for c in ("car", "truck", "van"))
