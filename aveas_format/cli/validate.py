@@ -107,6 +107,10 @@ def validate(
     if recording is None:
         if out_dir is not None and reports_dir is None:  # -o DIR/ of a dataset: its reports dir
             reports_dir, output = out_dir, None
+            for name in ("dataset-report.json", "dataset-report.html"):
+                refuse_overwrite(out_dir / name, overwrite)
+        if output is not None:
+            refuse_overwrite(output, overwrite)
         _validate_dataset(recordings, only, skip, cfg, max_sample, fail_on.value, fmt, output,
                           workers, scheduler, reports_dir, top)
     targets = ([out_dir / "report.json", out_dir / "report.html"] if out_dir is not None else

@@ -142,3 +142,19 @@ def test_headless_chromium_screenshot_of_the_report(broken, tmp_path):
     below = slice(600, None)
     assert share(BACKGROUND_LANE_COLORS["driving"], below) > 0.05
     assert all(share(CLASS_COLORS[c], below) > 0.0001 for c in ("car", "truck", "van"))
+
+
+def test_cli_output_directory_of_a_dataset_is_its_reports_dir(broken, tmp_path):
+    rec, _ = broken
+    (tmp_path / "data").mkdir()
+    rec.write(tmp_path / "data" / "a.aveas")
+    rec.write(tmp_path / "data" / "b.aveas")
+    out = tmp_path / "reports"
+    cmd = [sys.executable, "-m", "aveas_format", "validate", str(tmp_path / "data"), "-j", "1",
+           "-o", f"{out}/"]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 1, res.stderr
+    names = sorted(p.name for p in out.iterdir())
+    assert {"dataset-report.html", "dataset-report.json"} <= set(names) and len(names) == 4
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 2 and "dataset-report.json: exists; pass --overwrite" in res.stderr
