@@ -105,11 +105,11 @@ REGION_STYLES: dict[str, tuple[str, str]] = {
 }
 
 
-def _draw_regions(ax, rec) -> list[Any]:
+def _draw_regions(ax, rec, max_regions: int = 5000) -> list[Any]:
     """The coverage polygon (dashed outline) and the unobserved regions, hatched by kind and
     filled the darker the longer they last; a region unobserved for less than a quarter of the
     recording is a dotted outline only (a sensor outage of 0.4 s over the whole area must not
-    hide the map); legend handles."""
+    hide the map); at most ``max_regions`` of each kind are drawn (every k-th); legend handles."""
     import shapely
     from matplotlib.collections import PolyCollection
     from matplotlib.lines import Line2D
@@ -145,6 +145,7 @@ def _draw_regions(ax, rec) -> list[Any]:
         edge, hatch = REGION_STYLES.get(kind, ("#404040", "//"))
         for brief in (False, True):  # hatched when unobserved for a quarter of the time or more
             part = sel[(share[sel] < 0.25) == brief]
+            part = part[::max(1, len(part) // max_regions)]  # e.g. per-frame occlusions
             rings, alphas = [], []
             for k in part:
                 for ring in _polygons([geoms[k]]):
