@@ -19,6 +19,7 @@ import numpy as np
 import pyarrow as pa
 from matplotlib.figure import Figure
 
+from aveas_format.io.arrow import column_numpy
 from aveas_format.plot.map import BACKGROUND_LANE_COLORS, plot_map
 from aveas_format.safeio import save_figure_atomic
 
@@ -66,10 +67,7 @@ def _states(rec) -> dict[str, np.ndarray] | None:
     out = {"participant_id": np.asarray(s.column("participant_id").to_numpy(zero_copy_only=False),
                                         dtype=np.int64)}
     for c in ("time", "x", "y", "vx", "vy"):
-        a = s.column(c)
-        if a.null_count:
-            a = a.cast(pa.float64()).fill_null(np.nan)
-        out[c] = np.asarray(a.to_numpy(zero_copy_only=False), dtype=np.float64)
+        out[c] = column_numpy(s, c)
     order = np.lexsort((out["time"], out["participant_id"]))
     if np.any(np.diff(order) != 1):
         out = {k: v[order] for k, v in out.items()}
@@ -135,9 +133,7 @@ def _draw_regions(ax, rec, max_regions: int = 5000) -> list[Any]:
         return handles
     kinds = (np.asarray(u.column("kind").cast(pa.string()).to_pylist(), dtype=object)
              if "kind" in u.column_names else np.full(u.num_rows, "occlusion", dtype=object))
-    ts, te = (np.asarray(u.column(c).cast(pa.float64()).fill_null(np.nan).to_numpy(), np.float64)
-              if c in u.column_names else np.full(u.num_rows, np.nan)
-              for c in ("time_start", "time_end"))
+    ts, te = (column_numpy(u, c, missing=np.nan) for c in ("time_start", "time_end"))
     total = float(rec.meta.duration_s or 0.0) or float(np.nanmax(te) if np.isfinite(te).any() else 1)
     share = np.clip(np.nan_to_num((te - ts) / max(total, 1e-9), nan=1.0), 0.0, 1.0)
     for kind in sorted({str(k) for k in kinds}):
