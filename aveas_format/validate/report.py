@@ -8,7 +8,7 @@ and keeps rules that crashed apart as tool failures.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from enum import Enum
 from typing import Any
 
@@ -131,16 +131,17 @@ class ReportModel(BaseModel):
 
 
 class ExitCode(int):
-    """The exit code at the default ``--fail-on error`` (an ``int``); call it with another
-    threshold: ``report.exit_code("warning")``."""
+    """An exit code at the report's own threshold (an ``int``: ``--fail-on error`` for a
+    :class:`Report`, the dataset's ``fail_on`` for a dataset report); call it with another
+    threshold: ``report.exit_code("warning")`` (``report.exit_code()`` is the value itself)."""
 
-    def __new__(cls, value: int, at: Any) -> ExitCode:
-        self = super().__new__(cls, value)
-        self._at = at
+    def __new__(cls, at: Callable[[str], int], fail_on: str = "error") -> ExitCode:
+        self = super().__new__(cls, at(fail_on))
+        self._at, self._fail_on = at, fail_on
         return self
 
-    def __call__(self, fail_on: str = "error") -> int:
-        return int(self._at(fail_on))
+    def __call__(self, fail_on: str | None = None) -> int:
+        return int(self._at(fail_on or self._fail_on))
 
 
 def _field(name: str, doc: str) -> property:
@@ -209,7 +210,7 @@ class Report:
     def exit_code(self) -> ExitCode:
         """0 = nothing at/above ``fail_on``, 1 = findings, 3 = the tool failed (docs/cli.md):
         an int at ``fail_on="error"``; ``report.exit_code("warning")`` at another threshold."""
-        return ExitCode(self._exit_code("error"), self._exit_code)
+        return ExitCode(self._exit_code)
 
     def _exit_code(self, fail_on: str) -> int:
         return 3 if self.failures else findings_exit_code(self.results, fail_on)
