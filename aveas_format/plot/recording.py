@@ -194,14 +194,22 @@ def _draw_trajectories(ax, st, cls: np.ndarray, max_points: int, max_arrows: int
                   edgecolors="white", linewidths=0.3)
         handles.append(Line2D([], [], color="#333333", marker=">", linestyle="-", markersize=6,
                               label="direction of travel"))
+    # a participant standing there has no arrow and a trajectory too short to see: a dot
+    still = np.isfinite(st["x"][mid]) & np.isfinite(st["y"][mid]) & ~ok
+    if still.any():
+        colors = [CLASS_COLORS.get(c, _UNKNOWN_CLASS) for c in seg_cls[::every][still]]
+        ax.scatter(st["x"][mid][still], st["y"][mid][still], c=colors, s=16, marker="o",
+                   edgecolors="white", linewidths=0.4, zorder=4)
+        handles.append(Line2D([], [], color="#333333", marker="o", linestyle="none",
+                              markersize=4, label="standing (speed < 0.5 m/s)"))
     return handles
 
 
-def _draw_findings(ax, rec, findings: list[Any], st) -> list[Any]:
-    """Located findings: one marker shape per rule, coloured by severity; legend handles."""
+def _draw_findings(ax, pts: list[tuple[str, str, float, float]]) -> list[Any]:
+    """Located findings (:func:`_finding_points`): one marker shape per rule, coloured by
+    severity; legend handles."""
     from matplotlib.lines import Line2D
 
-    pts = _finding_points(rec, findings)
     by_rule: dict[str, list[tuple[float, float]]] = {}
     severity: dict[str, str] = {}
     for code, sev, px, py in pts:
@@ -239,10 +247,19 @@ def map_figure(rec, findings: Iterable[Any] = (), max_points: int = 200_000) -> 
     if st is not None:
         handles = _draw_trajectories(ax, st, _classes(rec, st["participant_id"]), max_points) + \
             handles
-    finding_handles = _draw_findings(ax, rec, list(findings), st)
+    pts = _finding_points(rec, findings)
+    finding_handles = _draw_findings(ax, pts)
     ax.autoscale_view()
     x0, x1 = ax.get_xlim()
     y0, y1 = ax.get_ylim()
+    # the data, not the whole map: a crossing recorded on a city map stays readable
+    box = _data_bounds(rec, st, pts)
+    if box is not None:
+        pad = max(0.08 * max(box[2] - box[0], box[3] - box[1]), 15.0)
+        x0, x1 = max(x0, box[0] - pad), min(x1, box[2] + pad)
+        y0, y1 = max(y0, box[1] - pad), min(y1, box[3] + pad)
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
     # equal axes (plot_map's), unless a long straight road would become a thin strip
     ratio = max(x1 - x0, 1e-9) / max(y1 - y0, 1e-9)
     ax.set_aspect("equal" if ratio < 8 else "auto", adjustable="datalim")
@@ -257,6 +274,34 @@ def map_figure(rec, findings: Iterable[Any] = (), max_points: int = 200_000) -> 
                    loc="outside right lower", fontsize=8, title_fontsize=8, frameon=False,
                    alignment="left")
     return fig
+
+
+def _data_bounds(rec, st, pts: list[tuple[str, str, float, float]]
+                 ) -> tuple[float, float, float, float] | None:
+    """(xmin, ymin, xmax, ymax) of what the recording observed: the positions, the located
+    findings and the coverage polygon; None without any."""
+    xs, ys = [], []
+    if st is not None:
+        ok = np.isfinite(st["x"]) & np.isfinite(st["y"])
+        if ok.any():
+            xs += [float(st["x"][ok].min()), float(st["x"][ok].max())]
+            ys += [float(st["y"][ok].min()), float(st["y"][ok].max())]
+    for _, _, px, py in pts:
+        if np.isfinite(px) and np.isfinite(py):
+            xs.append(px)
+            ys.append(py)
+    cov = getattr(rec.meta, "coverage", None)
+    if cov:
+        import shapely
+
+        try:
+            b = shapely.from_wkt(cov).bounds
+        except Exception:  # noqa: BLE001 — a malformed coverage is a geo.* finding
+            b = (np.nan,) * 4
+        if all(np.isfinite(b)):
+            xs += [b[0], b[2]]
+            ys += [b[1], b[3]]
+    return (min(xs), min(ys), max(xs), max(ys)) if xs else None
 
 
 def _finding_points(rec, findings: Iterable[Any]) -> list[tuple[str, str, float, float]]:
@@ -310,12 +355,22 @@ def _per_class_hist(ax, values: np.ndarray, cls: np.ndarray, xlabel: str, unit: 
                 label=f"{c} (n={int(sel.sum()):,})")
     ax.set_xlim(lo, hi)
     ax.set_ylabel(f"density [1/({unit})]")
-    if ok.any():
+    if not ok.any():
+        _no_data(ax, f"no {xlabel.split(' [')[0]}: no finite value")
+    else:
         ax.legend(fontsize=8)
         note = (f"{outside:,} of {int(ok.sum()):,} values outside [{lo:.3g}, {hi:.3g}] "
                 "(0.5-99.5 %), in the end bins" if outside else f"all {int(ok.sum()):,} values")
         xlabel = f"{xlabel}\n{note}"
     ax.set_xlabel(xlabel, fontsize=9)
+
+
+def _no_data(ax, text: str) -> None:
+    """Say in the middle of an empty plot why it is empty."""
+    ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", fontsize=10,
+            color="#444444", wrap=True)
+    ax.set_xticks([])
+    ax.set_yticks([])
 
 
 def speed_histogram(rec) -> Figure:
@@ -327,6 +382,8 @@ def speed_histogram(rec) -> Figure:
         v = np.hypot(st["vx"], st["vy"])
         _per_class_hist(ax, v, _classes(rec, st["participant_id"]), "speed [m/s]", "m/s",
                         include=0.0)
+    else:
+        _no_data(ax, "no states with x, y, vx, vy")
     ax.set_title("Speed per class")
     return fig
 
@@ -368,6 +425,10 @@ def acceleration_histogram(rec, window: float = 0.5) -> Figure:
             for x, text, ha in ((0.02, "← braking", "left"), (0.98, "accelerating →", "right")):
                 ax.text(x, 0.97, text, transform=ax.transAxes, ha=ha, va="top", fontsize=8,
                         color="#444444")
+        else:
+            _no_data(ax, f"no participant has two samples {window:g} s or more apart")
+    else:
+        _no_data(ax, "no states with x, y, vx, vy")
     ax.set_title("Longitudinal acceleration per class")
     return fig
 

@@ -61,6 +61,41 @@ def test_map_figure_by_class_direction_regions_and_one_marker_per_rule(broken):
     assert any(np.allclose(p.get_paths()[0].vertices.min(0), [900.0, -10.5]) for p in polys)
 
 
+def _short_scene(steps: int):
+    """The four participants for ``steps`` samples near x = 20-160 m of the 1000 m test map,
+    without a coverage polygon; the truck stands still."""
+    sc = vf.fresh()
+    sc["meta"]["coverage"] = None
+    sc["unobserved"] = None
+    sc["tracks"] = [vf.track(x0, lane, 0.0 if cls == "truck" else v, steps=steps)
+                    for cls, lane, x0, v, _, _ in vf.VEHICLES]
+    sc["meta"]["duration_s"] = (steps - 1) / vf.RATE
+    return sc
+
+
+def test_map_figure_shows_the_data_not_the_whole_map_and_a_dot_for_who_stands():
+    """A few seconds on a long road: the axes hold the trajectories (with a margin), not the
+    1000 m of map; the standing truck (no arrow, a trajectory of zero length) is a dot."""
+    fig = map_figure(vf.build(_short_scene(50)))
+    ax = fig.axes[0]
+    x0, x1 = ax.get_xlim()
+    assert -30 < x0 < 20 and 190 < x1 < 320  # data: x 20..~200 m; the map: 0..1000 m
+    dots = [c for c in ax.collections if type(c).__name__ == "PathCollection"]
+    assert len(dots) == 1 and np.allclose(dots[0].get_offsets(), [[20.0, -1.75]])
+    assert matplotlib.colors.to_hex(dots[0].get_facecolors()[0]) == CLASS_COLORS["truck"]
+    assert "standing (speed < 0.5 m/s)" in _legend_texts(fig)
+    (quiver,) = [c for c in ax.collections if type(c).__name__ == "Quiver"]
+    assert quiver.N == 3
+
+
+def test_empty_histograms_say_why():
+    rec = vf.build(_short_scene(5))  # 0.16 s per participant: no 0.5 s acceleration baseline
+    ax = acceleration_histogram(rec).axes[0]
+    assert [t.get_text() for t in ax.texts] == ["no participant has two samples 0.5 s or more "
+                                                "apart"]
+    assert len(speed_histogram(rec).axes[0].texts) == 0  # speeds there are
+
+
 def test_recording_name_prefers_title_then_file_name(broken, tmp_path):
     rec, _ = broken
     assert recording_name(rec) == "clean recording for the rule tests"
