@@ -252,10 +252,10 @@ def render_html(report: Report, rec: Any = None, figures: dict[str, bytes] | Non
     if figures:
         if "map" in figures:
             out.append(_img(figures["map"], "The map with the trajectories coloured by class, "
-                                            "arrows in the direction of travel, the coverage and "
-                                            "unobserved regions, and every finding with a "
-                                            "position (one marker shape per rule, coloured by "
-                                            "severity)"))
+                                            "arrows in the direction of travel (a dot: standing "
+                                            "still), the coverage and unobserved regions, and "
+                                            "every finding with a position (one marker shape "
+                                            "per rule, coloured by severity)"))
         out.append("<div class='grid'>")
         for key, cap in (("speed", "Speed per class"),
                          ("acceleration", "Longitudinal acceleration per class (negative: "
