@@ -144,6 +144,13 @@ class ExitCode(int):
         return int(self._at(fail_on or self._fail_on))
 
 
+class Codes(set):
+    """A set of rule codes; ``report.codes()`` (the former method) still gives it."""
+
+    def __call__(self) -> Codes:
+        return self
+
+
 def _field(name: str, doc: str) -> property:
     return property(lambda self: getattr(self._model, name),
                     lambda self, value: setattr(self._model, name, value), doc=doc)
@@ -197,9 +204,9 @@ class Report:
         return max(sev, key=lambda s: s.rank) if sev else None
 
     @property
-    def codes(self) -> set[str]:
-        """Codes of the rules with findings."""
-        return {r.code for r in self.results if r.count}
+    def codes(self) -> Codes:
+        """Codes of the rules with findings (a set)."""
+        return Codes(r.code for r in self.results if r.count)
 
     @property
     def status(self) -> str:

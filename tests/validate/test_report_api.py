@@ -54,6 +54,8 @@ def test_facts_are_properties(report):
     assert report.status == "invalid"
     assert report.exit_code == 1 and isinstance(report.exit_code, int)
     assert report.exit_code("warning") == 1 and report.exit_code("never") == 0  # thresholds
+    # the former method spellings still work where that is cheap
+    assert report.codes() == report.codes and report.exit_code() == 1
 
 
 def test_no_pydantic_internals_on_the_public_surface(report):
