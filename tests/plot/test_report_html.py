@@ -77,6 +77,21 @@ def test_title_is_the_recording_name_and_sections_have_a_place(broken):
         < page.index("<h2>Rules with findings</h2>")
 
 
+def test_text_from_the_recording_is_escaped():
+    """A title, partner or finding value is data, never markup: a report mailed around must not
+    run what a recording wrote into it."""
+    sc = vf.fresh()
+    sc["meta"]["title"] = "<script>alert(1)</script> 'q' \"d\""
+    sc["meta"]["partner"] = "<img src=x onerror=alert(2)>"
+    sc["participants"]["source_id"][1] = "</td><script>alert(3)</script>"
+    sc["participants"]["length"][1] = 9.0
+    rec = vf.build(sc)
+    page = render_html(aveas_format.validate(rec), rec)
+    assert "<script" not in page and "<img src=x" not in page
+    assert "<h1>&lt;script&gt;alert(1)&lt;/script&gt; &#x27;q&#x27; &quot;d&quot; <span" in page
+    assert "&lt;img src=x onerror=alert(2)&gt;" in page
+
+
 def test_report_without_a_readable_recording_says_so(broken):
     _, report = broken
     page = render_html(report, None)
