@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 import time
+from pathlib import Path
 from collections.abc import Callable, Iterable
 from typing import Any
 
@@ -257,6 +258,8 @@ class DatasetReport:
                          "top_rules": [r.code for r in e.rules[:5]],
                          # the full report, which only validation entries have
                          "report_file": getattr(e, "report_file", None)})
+            if rows[-1]["report_file"]:  # its HTML page, next to it (dataset-report.html too)
+                rows[-1]["report_html"] = Path(rows[-1]["report_file"]).with_suffix(".html").name
         return rows[:n]
 
     def _valid(self) -> int:

@@ -199,13 +199,14 @@ def _summary(report: Report, rec: Any, rec_error: str | None) -> list[str]:
 
 
 def render_html(report: Report, rec: Any = None, figures: dict[str, bytes] | None = None, *,
-                docs_url: str | None = None,
-                sections: Sequence[tuple[str, str]] = ()) -> str:
+                docs_url: str | None = None, sections: Sequence[tuple[str, str]] = (),
+                no_figures: str = "not requested") -> str:
     """The report as one HTML page. ``rec`` (a Recording) adds the summary of the recording and
     the figures; without it (or when it cannot be drawn) the page says so. ``docs_url``: the
     base URL of the docs (``https://.../docs``): each rule then links to its entry in
     ``rules.md`` there; without it the page stands alone (every rule's doc is in the page).
-    ``sections``: ``(title, HTML body)`` inserted after the summary (e.g. a criticality summary)."""
+    ``sections``: ``(title, HTML body)`` inserted after the summary (e.g. a criticality summary).
+    ``no_figures``: why there are none when ``figures`` is given empty."""
     reg = load_rules()
     fig_error = None
     if figures is None:
@@ -269,7 +270,7 @@ def render_html(report: Report, rec: Any = None, figures: dict[str, bytes] | Non
         if note:
             out.append(f"<p class='muted'>Figures {_e(note)}; the findings cover every row.</p>")
     else:
-        out.append(f"<p class='muted'>No figures: {_e(fig_error or 'not requested')}.</p>")
+        out.append(f"<p class='muted'>No figures: {_e(fig_error or no_figures)}.</p>")
     out.append("<h2>Findings by rule</h2>")
     if not report.results:
         out.append("<p>No findings.</p>")

@@ -170,6 +170,15 @@ def test_cli_output_directory_of_a_dataset_is_its_reports_dir(broken, tmp_path):
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert res.returncode == 1, res.stderr
     names = sorted(p.name for p in out.iterdir())
-    assert {"dataset-report.html", "dataset-report.json"} <= set(names) and len(names) == 4
+    assert {"dataset-report.html", "dataset-report.json"} <= set(names) and len(names) == 6
+    # each recording's report as JSON and as HTML (its summary, no figures), linked from the
+    # dataset's page by a relative link (the directory can be moved or mailed as it is)
+    pages = [n for n in names if n.startswith(("a-", "b-")) and n.endswith(".html")]
+    assert len(pages) == 2 and all(n[:-5] + ".json" in names for n in pages)
+    page = (out / pages[0]).read_text()
+    assert "<h2>Summary</h2>" in page and "Participants" in page
+    assert "No figures: not drawn in a dataset&#x27;s reports" in page
+    index = (out / "dataset-report.html").read_text()
+    assert all(f"<a href='{n}'>" in index for n in pages)
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert res.returncode == 2 and "dataset-report.json: exists; pass --overwrite" in res.stderr
