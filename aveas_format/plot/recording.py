@@ -13,15 +13,18 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pyarrow as pa
-from matplotlib.figure import Figure
 
+from aveas_format.errors import require
 from aveas_format.io.arrow import column_numpy
 from aveas_format.plot.map import BACKGROUND_LANE_COLORS, plot_map
 from aveas_format.safeio import save_figure_atomic
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.figure import Figure
 
 #: colour of each severity (findings are drawn in it; their marker shape is their rule's)
 SEVERITY_COLORS = {"error": "#d62728", "warning": "#ff7f0e", "info": "#1f77b4"}
@@ -36,6 +39,15 @@ CLASS_COLORS: dict[str, str] = {
     "pushable_pullable": "#ff9896", "animal": "#ff7f0e", "other": "#000000",
 }
 _UNKNOWN_CLASS = "#555555"
+
+
+def _figure(figsize: tuple[float, float]) -> Figure:
+    """A standalone matplotlib figure (no pyplot state); matplotlib is the ``[plot]`` extra, so
+    this module imports without it (the HTML report then has no figures and says why)."""
+    require("matplotlib", "plot", "drawing figures")
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=figsize, dpi=100, layout="constrained")
 
 
 def recording_name(rec) -> str:
@@ -234,7 +246,7 @@ def map_figure(rec, findings: Iterable[Any] = (), max_points: int = 200_000) -> 
     trajectories coloured by class (subsampled) with arrows in the direction of travel, and the
     findings with a position (x/y, or the state row they name), one marker shape per rule and
     coloured by severity. Titled with the recording's name (:func:`recording_name`)."""
-    fig = Figure(figsize=(12, 6), dpi=100, layout="constrained")
+    fig = _figure((12, 6))
     ax = fig.subplots()
     try:
         plot_map(rec.map, ax, step=2.0, lane_colors=BACKGROUND_LANE_COLORS,
@@ -375,7 +387,7 @@ def _no_data(ax, text: str) -> None:
 
 def speed_histogram(rec) -> Figure:
     """Distribution of speed over ground (from vx, vy) per class, over its robust range."""
-    fig = Figure(figsize=(6, 4), dpi=100, layout="constrained")
+    fig = _figure((6, 4))
     ax = fig.subplots()
     st = _states(rec)
     if st is not None:
@@ -412,7 +424,7 @@ def longitudinal_acceleration(st: dict[str, np.ndarray], window: float = 0.5
 def acceleration_histogram(rec, window: float = 0.5) -> Figure:
     """Distribution of the signed longitudinal acceleration (:func:`longitudinal_acceleration`)
     per class, braking left of zero, accelerating right of it."""
-    fig = Figure(figsize=(6, 4), dpi=100, layout="constrained")
+    fig = _figure((6, 4))
     ax = fig.subplots()
     st = _states(rec)
     if st is not None:
@@ -435,7 +447,7 @@ def acceleration_histogram(rec, window: float = 0.5) -> Figure:
 
 def sample_rate_figure(rec, bin_s: float = 1.0) -> Figure:
     """Mean sample rate per participant present, per time bin, against nominal_rate_hz."""
-    fig = Figure(figsize=(8, 3.5), dpi=100, layout="constrained")
+    fig = _figure((8, 3.5))
     ax = fig.subplots()
     st = _states(rec)
     if st is not None:

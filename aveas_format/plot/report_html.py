@@ -214,7 +214,7 @@ def render_html(report: Report, rec: Any = None, figures: dict[str, bytes] | Non
             figures = report_figures(report, rec)
         except Exception as e:  # noqa: BLE001 — figures are a bonus; the findings are the report
             figures = {}
-            fig_error = f"{type(e).__name__}: {e}"
+            fig_error = str(e) if isinstance(e, ImportError) else f"{type(e).__name__}: {e}"
         else:
             fig_error = None if rec is not None else "the recording could not be read for figures"
     status = {"tool failure": ("failure", "TOOL FAILURE"), "invalid": ("error", "INVALID"),

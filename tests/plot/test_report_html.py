@@ -92,6 +92,30 @@ def test_text_from_the_recording_is_escaped():
     assert "&lt;img src=x onerror=alert(2)&gt;" in page
 
 
+def test_the_report_without_matplotlib_has_everything_but_the_figures(broken, tmp_path):
+    """matplotlib is the [plot] extra: without it the page is complete, minus the figures, and
+    says which extra draws them (a dataset's reports directory is written the same way)."""
+    rec, _ = broken
+    path = rec.write(tmp_path / "b.aveas")
+    code = f"""
+import sys
+sys.modules["matplotlib"] = None  # as if not installed
+import aveas_format
+from aveas_format.io.reader import open_recording
+from aveas_format.plot.report_html import render_html
+rec = open_recording({str(path)!r})
+page = render_html(aveas_format.validate(rec), rec)
+assert "matplotlib" not in sys.modules or sys.modules["matplotlib"] is None
+print(page)
+"""
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    page = res.stdout
+    assert "<h2>Summary</h2>" in page and "kinematics.position_jump" in page
+    assert "No figures: drawing figures needs matplotlib: pip install " \
+           "&quot;aveas-format[plot]&quot;." in page
+
+
 def test_report_without_a_readable_recording_says_so(broken):
     _, report = broken
     page = render_html(report, None)
