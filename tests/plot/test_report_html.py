@@ -6,12 +6,14 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
 
 import aveas_format
 import helpers_validate as vf
+from helpers_realdata import real_files, third_party
 from aveas_format.plot.report_html import recording_facts, render_html
 from aveas_format.validate.render import inline_markup, rule_anchor
 
@@ -206,3 +208,43 @@ def test_cli_output_directory_of_a_dataset_is_its_reports_dir(broken, tmp_path):
     assert all(f"<a href='{n}'>" in index for n in pages)
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert res.returncode == 2 and "dataset-report.json: exists; pass --overwrite" in res.stderr
+
+
+# --- files other tools wrote ---------------------------------------------------------------------
+
+def _real_recording(path):
+    from aveas_format.converters import convert
+    from helpers_common import STRAIGHT_MAP
+
+    if path.suffix == ".gz":  # SUMO's FCD of its default lane-change run, on its own network
+        run = path.parent
+        return convert("sumo-fcd", [path], map_source=run / "road.xodr",
+                       options={"vtypes": [run / "r.rou.xml"]})
+    with warnings.catch_warnings():  # the converter's note of a skipped DontCare label
+        warnings.simplefilter("ignore", UserWarning)
+        return convert("openlabel", [path], map_source=STRAIGHT_MAP)  # KITTI: no map of theirs
+
+
+@pytest.mark.parametrize("path", [
+    *real_files("real/sumo/fcd_default_lanechanges.xml.gz"),
+    *third_party("vcd__openlabel100_kitti_tracking_0016_excerpt.json"),
+])
+def test_report_of_a_real_recording(path, tmp_path):
+    """The report of a file SUMO / KITTI wrote: the summary counts its participants per class, the
+    four figures are drawn, the map figure frames the data (KITTI's dozen people and cars near the
+    camera, not the 1000 m stand-in road), every finding has its rule's section."""
+    from aveas_format.plot.recording import map_figure
+
+    rec = _real_recording(path)
+    report = aveas_format.validate(rec)
+    page = render_html(report, rec)
+    classes = dict(zip(*np.unique(np.asarray(rec.participants.column("class").to_pylist()),
+                                  return_counts=True)))
+    facts = dict(recording_facts(rec))
+    assert facts["Participants"].startswith(f"{rec.participants.num_rows:,}: ")
+    assert all(f"{n:,} {c}" in facts["Participants"] for c, n in classes.items())
+    assert page.count("<img alt=") == 4 and "No figures" not in page
+    assert all(f"id='{rule_anchor(r.code)}'" in page for r in report.results)
+    x = np.asarray(rec.states.column("x"))
+    x0, x1 = map_figure(rec).axes[0].get_xlim()
+    assert x0 <= x.min() and x1 >= x.max() and (x1 - x0) < 2 * (x.max() - x.min()) + 60
