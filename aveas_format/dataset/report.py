@@ -291,7 +291,7 @@ class DatasetReport:
         (``pip install "aveas-format[pandas]"``)."""
         from aveas_format.errors import require
 
-        pd = require("pandas", "pandas", "DatasetReport.to_pandas")
+        pd = require("pandas", extra="pandas", what="DatasetReport.to_pandas")
         facts = [k for k in RecordingRef.model_fields if k != "path"]
         rows: list[dict[str, Any]] = []
         for e in self.entries:

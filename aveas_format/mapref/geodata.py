@@ -36,7 +36,7 @@ def states_geodataframe(rec, columns: list[str] | None = None, *, classes: bool 
     """The states as a GeoDataFrame: one Point per row in the recording's CRS (x/y placed in
     it), the columns of states.parquet (or ``columns``) and, with ``classes``, each participant's
     ``class``."""
-    gpd = require("geopandas", "geo", "to_geopandas")
+    gpd = require("geopandas", extra="geo", what="to_geopandas")
     s = rec.states
     if s is None:
         raise ValueError("the recording has no states table")
@@ -64,7 +64,7 @@ def states_geodataframe(rec, columns: list[str] | None = None, *, classes: bool 
 def unobserved_geodataframe(rec):
     """The unobserved regions (unobserved.parquet) as a GeoDataFrame of polygons in the
     recording's CRS; an empty one (with the CRS) when the recording has none."""
-    gpd = require("geopandas", "geo", "unobserved_geodataframe")
+    gpd = require("geopandas", extra="geo", what="unobserved_geodataframe")
     import shapely
 
     frame = _frame(rec)

@@ -44,7 +44,7 @@ _UNKNOWN_CLASS = "#555555"
 def _figure(figsize: tuple[float, float]) -> Figure:
     """A standalone matplotlib figure (no pyplot state); matplotlib is the ``[plot]`` extra, so
     this module imports without it (the HTML report then has no figures and says why)."""
-    require("matplotlib", "plot", "drawing figures")
+    require("matplotlib", extra="plot", what="drawing figures")
     from matplotlib.figure import Figure
 
     return Figure(figsize=figsize, dpi=100, layout="constrained")

@@ -240,7 +240,7 @@ class Report:
         (``pip install "aveas-format[pandas]"``)."""
         from aveas_format.errors import require
 
-        pd = require("pandas", "pandas", "Report.to_pandas")
+        pd = require("pandas", extra="pandas", what="Report.to_pandas")
         rows = [(r, f) for r in self.results for f in r.sample]
         data: dict[str, Any] = {
             "code": pd.array([f.code for _, f in rows], dtype="string"),

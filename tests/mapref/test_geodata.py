@@ -64,7 +64,7 @@ def test_no_unobserved_table_gives_an_empty_frame_with_the_crs():
 def test_missing_geopandas_is_one_line_naming_the_extra(rec, monkeypatch):
     import builtins
 
-    from aveas_format.errors import MissingExtraError
+    from aveas_format.errors import MissingDependencyError
 
     real = builtins.__import__
 
@@ -75,7 +75,9 @@ def test_missing_geopandas_is_one_line_naming_the_extra(rec, monkeypatch):
 
     monkeypatch.setattr(builtins, "__import__", no_geopandas)
     monkeypatch.delitem(__import__("sys").modules, "geopandas")
-    with pytest.raises(MissingExtraError) as e:
+    with pytest.raises(MissingDependencyError) as e:
         rec.to_geopandas()
-    assert str(e.value) == 'to_geopandas needs geopandas: pip install "aveas-format[geo]"'
+    assert str(e.value) == ('geopandas, an optional dependency for to_geopandas, is not installed: '
+                            'pip install "aveas-format[geo]"')
+    assert (e.value.module, e.value.extra) == ("geopandas", "geo")
     assert isinstance(e.value, ImportError)

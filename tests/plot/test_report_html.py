@@ -114,8 +114,8 @@ print(page)
     assert res.returncode == 0, res.stderr
     page = res.stdout
     assert "<h2>Summary</h2>" in page and "kinematics.position_jump" in page
-    assert "No figures: drawing figures needs matplotlib: pip install " \
-           "&quot;aveas-format[plot]&quot;." in page
+    assert "No figures: matplotlib, an optional dependency for drawing figures, is not " \
+           "installed: pip install &quot;aveas-format[plot]&quot;." in page
 
 
 def test_report_without_a_readable_recording_says_so(broken):
