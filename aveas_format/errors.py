@@ -10,6 +10,11 @@ built-in exceptions so that callers can catch either (STYLE.md 11, as rasterio d
 - :class:`MapError` (also :class:`ValueError`): an OpenDRIVE map cannot be read; carries the XML line.
 - :class:`PluginError` (also :class:`ImportError`): a plugin (an entry point of a partner package)
   cannot be loaded or registers a name that exists (:mod:`aveas_format.plugins`).
+- :class:`MissingDependencyError` (also :class:`ImportError`): an optional dependency is not
+  installed; the message names the extra that brings it (:func:`require`).
+
+:func:`require` imports an optional dependency or raises :class:`MissingDependencyError` naming
+the extra (``pip install "aveas-format[geo]"``), the one guard of every optional import.
 
 Each error carries the ``path`` it is about (and, where known, ``line``/``row``/``column``) as
 attributes, and its message names them: the CLI prints ``str(error)`` as its one line on stderr.
@@ -19,7 +24,9 @@ This module imports nothing outside the standard library: every layer may use it
 
 from __future__ import annotations
 
+import importlib
 from pathlib import PurePath
+from types import ModuleType
 
 
 class AveasError(Exception):
@@ -79,13 +86,39 @@ class PluginError(AveasError, ImportError):
         self.path = None  # ImportError.__init__ resets it; a plugin error is about no file
 
 
+class MissingDependencyError(AveasError, ImportError):
+    """An optional dependency is not installed; the message names the extra that installs it."""
+
+    def __init__(self, message: str, *, module: str, extra: str) -> None:
+        super().__init__(message)
+        self.path = None  # ImportError.__init__ resets it; the error is about no file
+        self.module, self.extra = module, extra
+
+
+def require(module: str, *, extra: str, what: str | None = None) -> ModuleType:
+    """Import the optional dependency ``module`` and return it; without it, a
+    :class:`MissingDependencyError` in one line naming the extra, e.g. ``geopandas, an optional
+    dependency for to_geopandas, is not installed: pip install "aveas-format[geo]"``.
+    ``what`` names the feature (default: the extra)."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as e:
+        missing = getattr(e, "name", None) or module
+        raise MissingDependencyError(
+            f"{missing}, an optional dependency for {what or 'aveas-format[' + extra + ']'}, is "
+            f'not installed: pip install "aveas-format[{extra}]"', module=missing,
+            extra=extra) from None
+
+
 __all__ = [
     "AveasError",
     "ChecksumError",
     "FormatError",
     "FormatVersionError",
     "MapError",
+    "MissingDependencyError",
     "PluginError",
     "RecordingExistsError",
     "RecordingIOError",
+    "require",
 ]

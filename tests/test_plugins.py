@@ -183,7 +183,7 @@ def test_partner_plugin_registers_a_converter_a_rule_and_a_derivation(install, h
     assert back.derived["partner_speed"].num_rows == 82
     assert "derived/partner_speed" in json.loads((path / "recording.json").read_text())["tables"]
     report = validate(path)
-    assert report.failures == [] and not any(c.startswith("structure.") for c in report.codes())
+    assert report.failures == [] and not any(c.startswith("structure.") for c in report.codes)
 
 
 def test_a_plugin_that_cannot_be_imported_is_one_clear_error(install):

@@ -24,6 +24,7 @@ DOCS = Path(__file__).resolve().parent.parent / "docs"
 
 def rules_markdown() -> str:
     from aveas_format.validate.registry import load_rules
+    from aveas_format.validate.render import rule_anchor
 
     reg = load_rules()
     lines = [
@@ -41,7 +42,7 @@ def rules_markdown() -> str:
         "|---|---|---|",
     ]
     for r in sorted(reg.values(), key=lambda r: r.code):
-        lines.append(f"| [`{r.code}`](#{r.code.replace('.', '')}) | {r.severity.value} | {r.title} |")
+        lines.append(f"| [`{r.code}`](#{rule_anchor(r.code)}) | {r.severity.value} | {r.title} |")
     lines.append("")
     family = None
     for r in sorted(reg.values(), key=lambda r: r.code):
@@ -291,8 +292,10 @@ def main() -> int:
     if "--figures" in sys.argv[1:]:
         import derive_figures
         import layers
+        import report_figures
 
         for path in [*derive_figures.main(DOCS / "figures"),
+                     *report_figures.main(DOCS / "figures"),
                      layers.figure(DOCS / "figures" / "architecture_layers.png")]:
             print(f"wrote {path}", file=sys.stderr)
         return 0

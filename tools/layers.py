@@ -49,6 +49,9 @@ SIDEWAYS: dict[tuple[str, str], str] = {
 EXCEPTIONS: dict[tuple[str, str], str] = {
     ("aveas_format.io.recording", "opendrive"):
         "Recording.map parses map.xodr on first use (lazy import inside the property)",
+    ("aveas_format.io.recording", "mapref"):
+        "Recording.to_geopandas / unobserved_geodataframe place x/y in the recording's CRS "
+        "through mapref's LocalFrame (lazy import inside the methods)",
 }
 
 

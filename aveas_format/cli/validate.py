@@ -14,6 +14,8 @@ from aveas_format.cli.app import app
 from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors
 from aveas_format.cli.options import (
     check_rules,
+    overwrite_option,
+    refuse_overwrite,
     comma_list,
     discover_dataset,
     ignore_option,
@@ -53,8 +55,14 @@ def validate(
                                    "above this severity exists."),
     fmt: Format = typer.Option(Format.text, "--format", help="Report format: text (greppable "
                                "lines + summary), json, or html (self-contained, with figures)."),
-    output: Path = typer.Option(None, "--output", "-o", help="Write the report to FILE instead of "
-                                "stdout."),
+    output_: str = typer.Option(None, "--output", "-o", metavar="PATH",
+                                help="Write the report to FILE instead of "
+                                "stdout; to a DIRECTORY (an existing one, or a path ending in /): "
+                                "write report.json and report.html there in one run."),
+    overwrite: bool = overwrite_option("Replace existing report files."),
+    docs_url: str = typer.Option(None, "--docs-url", help="HTML: base URL of the aveas-format "
+                                 "docs; each rule then links to its entry in rules.md there "
+                                 "(without it the page stands alone)."),
     config: Path = typer.Option(None, "--config", help="TOML file of rule thresholds (see "
                                 "`--print-config` for every key and its default)."),
     max_sample: int = typer.Option(50, "--max-sample", min=1, max=1000,
@@ -94,21 +102,45 @@ def validate(
         raise fail(str(e), EXIT_USAGE) from None
     only, skip = comma_list(select), comma_list(ignore)
     recording = single_recording(recordings)
+    out_dir = _output_dir(output_)
+    output = Path(output_) if output_ and out_dir is None else None
     if recording is None:
+        if out_dir is not None and reports_dir is None:  # -o DIR/ of a dataset: its reports dir
+            reports_dir, output = out_dir, None
+            for name in ("dataset-report.json", "dataset-report.html"):
+                refuse_overwrite(out_dir / name, overwrite)
+        if output is not None:
+            refuse_overwrite(output, overwrite)
         _validate_dataset(recordings, only, skip, cfg, max_sample, fail_on.value, fmt, output,
                           workers, scheduler, reports_dir, top)
+    targets = ([out_dir / "report.json", out_dir / "report.html"] if out_dir is not None else
+               [output] if output is not None else [])
+    for target in targets:
+        refuse_overwrite(target, overwrite)
     try:
         report = run(recording, select=only, ignore=skip, config=cfg, max_sample=max_sample)
     except ValueError as e:
         if "unknown rule or family" in str(e):
             raise fail(str(e), EXIT_USAGE) from None
         raise
+    if out_dir is not None:
+        from aveas_format.plot.report_html import render_html
+        from aveas_format.safeio import write_text_atomic
+
+        out_dir.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(out_dir / "report.json", render_json(report))
+        write_text_atomic(out_dir / "report.html", render_html(
+            report, _open_for_figures(recording, report), docs_url=docs_url))
+        err.print(render_text(report).rstrip().rsplit("\n", 1)[-1], markup=False, highlight=False)
+        err.print(f"wrote {out_dir / 'report.json'}, {out_dir / 'report.html'}", markup=False,
+                  highlight=False)
+        raise typer.Exit(report.exit_code(fail_on.value))
     if fmt is Format.json:
         text = render_json(report)
     elif fmt is Format.html:
         from aveas_format.plot.report_html import render_html
 
-        text = render_html(report, _open_for_figures(recording, report))
+        text = render_html(report, _open_for_figures(recording, report), docs_url=docs_url)
     else:
         text = render_text(report)
     if output:
@@ -118,6 +150,17 @@ def validate(
     else:
         print(text, end="" if text.endswith("\n") else "\n")
     raise typer.Exit(report.exit_code(fail_on.value))
+
+
+def _output_dir(typed: str | None) -> Path | None:
+    """The directory ``-o`` names (an existing directory, or a path typed with a trailing
+    separator: ``-o report/``), else None (a file, or stdout)."""
+    import os
+
+    if not typed:
+        return None
+    path = Path(typed)
+    return path if path.is_dir() or typed.endswith(("/", os.sep)) else None
 
 
 def _validate_dataset(specs: list[str], select: list[str] | None, ignore: list[str] | None,

@@ -144,7 +144,7 @@ def catalog_row(path: str, *, validate: bool = True, select: list[str] | None = 
             c = rep.counts
             row.update(errors=c["error"], warnings=c["warning"], infos=c["info"],
                        valid=(not rep.failures and c["error"] == 0),
-                       rules_failed=sorted(rep.codes() | {f.code for f in rep.failures}))
+                       rules_failed=sorted(rep.codes | {f.code for f in rep.failures}))
     return row
 
 

@@ -1,4 +1,5 @@
-"""The dataset report as a self-contained HTML page (standard library only)."""
+"""The dataset report as a self-contained HTML page (standard library only). In a reports
+directory, the worst recordings link to their own HTML reports (files next to the page)."""
 
 from __future__ import annotations
 
@@ -14,8 +15,8 @@ def render_dataset_html(d: dict[str, Any]) -> str:
         if not rows:
             return "<p><em>none</em></p>"
         h = "".join(f"<th>{e(str(x))}</th>" for x in head)
-        body = "".join("<tr>" + "".join(f"<td>{e('' if v is None else str(v))}</td>" for v in r)
-                       + "</tr>" for r in rows)
+        body = "".join("<tr>" + "".join(f"<td>{_cell(v)}</td>" for v in r) + "</tr>"
+                       for r in rows)
         return f"<table><thead><tr>{h}</tr></thead><tbody>{body}</tbody></table>"
 
     c = d["counts"]
@@ -49,7 +50,7 @@ def render_dataset_html(d: dict[str, Any]) -> str:
         "<h2>Worst recordings</h2>",
         table(["recording", "id", "partner", "status", "errors", "warnings", "infos", "rules",
                "error"],
-              [[w["path"], w.get("recording_id"), w.get("partner"), w["status"],
+              [[_link(w["path"], w.get("report_html")), w.get("recording_id"), w.get("partner"), w["status"],
                 *((w["counts"] or {}).get(k) for k in ("error", "warning", "info")),
                 ", ".join(w.get("top_rules") or []), w.get("error")] for w in d["worst"]]),
         *([] if d["kind"] == "validate" else [
@@ -65,6 +66,21 @@ def render_dataset_html(d: dict[str, Any]) -> str:
         "</body></html>\n",
     ]
     return "".join(parts)
+
+
+class _Html(str):
+    """A table cell that is HTML already (escaped where it holds text)."""
+
+
+def _link(text: str, href: str | None) -> str:
+    """``text`` linked to ``href`` (a file next to the page), or plain text without one."""
+    if not href:
+        return text
+    return _Html(f"<a href='{html.escape(href)}'>{html.escape(text)}</a>")
+
+
+def _cell(v: Any) -> str:
+    return v if isinstance(v, _Html) else html.escape("" if v is None else str(v))
 
 
 def _fmt(v: Any) -> str:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 import time
+from pathlib import Path
 from collections.abc import Callable, Iterable
 from typing import Any
 
@@ -27,7 +28,7 @@ from aveas_format._version import __version__
 from aveas_format.dataset.discovery import is_url
 from aveas_format.dataset.html import render_dataset_html
 from aveas_format.parallel import TaskResult, run_tasks
-from aveas_format.validate.report import RuleResult, Severity, findings_exit_code
+from aveas_format.validate.report import ExitCode, RuleResult, Severity, findings_exit_code
 
 # ------------------------------------------------------------------------------------------
 # facts from recording.json
@@ -186,12 +187,24 @@ class DatasetReport:
                 out[k] = out.get(k, 0) + v
         return out
 
-    def exit_code(self) -> int:
+    @property
+    def max_severity(self) -> Severity | None:
+        """The most severe finding's severity over the dataset (None without findings)."""
+        sev = [r.severity for e in self.entries for r in e.rules if r.count]
+        return max(sev, key=lambda s: s.rank) if sev else None
+
+    @property
+    def exit_code(self) -> ExitCode:
         """The worst over the dataset: 3 if any recording failed (unreadable, crashed, tool
-        failure), else 1 if any has findings at/above ``fail_on``, else 0."""
+        failure), else 1 if any has findings at/above ``fail_on``, else 0. An int at the
+        report's ``fail_on``; ``rep.exit_code("warning")`` at another threshold (as
+        :attr:`Report.exit_code <aveas_format.validate.report.Report.exit_code>`)."""
+        return ExitCode(self._exit_code, self.fail_on)
+
+    def _exit_code(self, fail_on: str) -> int:
         if self.failed or any(e.tool_failures for e in self.entries):
             return 3
-        return max((e.exit_code(self.fail_on) for e in self.entries), default=0)
+        return max((e.exit_code(fail_on) for e in self.entries), default=0)
 
     def by_rule(self) -> dict[str, RuleTotal]:
         """Per rule, worst first (severity, then findings, then code)."""
@@ -245,6 +258,8 @@ class DatasetReport:
                          "top_rules": [r.code for r in e.rules[:5]],
                          # the full report, which only validation entries have
                          "report_file": getattr(e, "report_file", None)})
+            if rows[-1]["report_file"]:  # its HTML page, next to it (dataset-report.html too)
+                rows[-1]["report_html"] = Path(rows[-1]["report_file"]).with_suffix(".html").name
         return rows[:n]
 
     def _valid(self) -> int:
@@ -253,7 +268,7 @@ class DatasetReport:
     def to_dict(self, top: int = 20) -> dict[str, Any]:
         return {
             "kind": self.kind, "dataset": self.specs, "tool_version": __version__,
-            "fail_on": self.fail_on, "exit_code": self.exit_code(),
+            "fail_on": self.fail_on, "exit_code": int(self.exit_code),
             "recordings": self.recordings, "completed": len(self.entries),
             "failed": len(self.failed), "valid": self._valid(), "counts": self.counts,
             "by_rule": {k: v.model_dump(mode="json") for k, v in self.by_rule().items()},
@@ -265,6 +280,46 @@ class DatasetReport:
 
     def to_json(self, top: int = 20) -> str:
         return json.dumps(self.to_dict(top), indent=2, default=str)
+
+    def to_pandas(self):  # -> pandas.DataFrame
+        """One row per recording (completed or failed), sorted by path: ``path``, the facts
+        (``recording_id``, ``partner``, ``method``, ``provenance``, ``site``, ``country``,
+        ``road_type``), ``status`` (``valid``, ``findings``, ``tool_failure`` or ``failed``),
+        ``exit_code``, the counts ``error``, ``warning``, ``info`` (nullable: none for a failed
+        recording), ``top_rule`` (its most severe rule with findings) and ``failure`` (the
+        error of a failed recording or of a crashed rule). Needs pandas
+        (``pip install "aveas-format[pandas]"``)."""
+        from aveas_format.errors import require
+
+        pd = require("pandas", extra="pandas", what="DatasetReport.to_pandas")
+        facts = [k for k in RecordingRef.model_fields if k != "path"]
+        rows: list[dict[str, Any]] = []
+        for e in self.entries:
+            code = e.exit_code(self.fail_on)
+            top = max((r for r in e.rules if r.count), default=None,
+                      key=lambda r: (r.severity.rank, r.count))
+            rows.append({"path": e.path, **{k: getattr(e, k) for k in facts},
+                         "status": {0: "valid", 1: "findings"}.get(code, "tool_failure"),
+                         "exit_code": code, **{s.value: e.counts.get(s.value, 0) for s in Severity},
+                         "top_rule": top.code if top else None,
+                         "failure": "; ".join(f"{t.code}: {t.error}" for t in e.tool_failures)
+                         or None})
+        for f in self.failed:
+            rows.append({"path": f.path, **{k: getattr(f, k) for k in facts}, "status": "failed",
+                         "exit_code": 3, **{s.value: None for s in Severity}, "top_rule": None,
+                         "failure": f.error})
+        rows.sort(key=lambda r: r["path"])
+        dtypes = {"exit_code": "Int64", **{s.value: "Int64" for s in Severity}}
+        columns = ["path", *facts, "status", "exit_code", *(s.value for s in Severity),
+                   "top_rule", "failure"]
+        return pd.DataFrame({c: pd.array([r[c] for r in rows], dtype=dtypes.get(c, "string"))
+                             for c in columns})
+
+    def __repr__(self) -> str:
+        c, failed = self.counts, len(self.failed)
+        return (f"<DatasetReport {self.kind}: {self.recordings} recordings, {self._valid()} valid"
+                f"{f', {failed} failed' if failed else ''}; {c['error']} errors, "
+                f"{c['warning']} warnings, {c['info']} info; exit code {int(self.exit_code)}>")
 
     def to_text(self) -> str:
         lines = []

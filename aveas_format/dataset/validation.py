@@ -42,11 +42,26 @@ def _report_name(path: str) -> str:
     return f"{base}-{hashlib.sha1(path.encode()).hexdigest()[:8]}"
 
 
+def _report_page(path: str, report: Any) -> str:
+    """The recording's HTML report, with the summary of the recording but without figures: in a
+    dataset's reports directory, drawing them would cost more than the validation."""
+    from aveas_format.io.reader import open_recording
+    from aveas_format.plot.report_html import render_html
+
+    try:
+        rec = open_recording(path, tables=["participants"], verify=False)
+    except Exception:  # noqa: BLE001 — the report says the recording could not be read
+        rec = None
+    return render_html(report, rec, figures={},
+                       no_figures="not drawn in a dataset's reports (aveas-format validate "
+                                  "RECORDING -o DIR/ draws them)")
+
+
 def validate_recording(path: str, *, select: list[str] | None = None,
                        ignore: list[str] | None = None, config: Any = None, max_sample: int = 50,
                        reports_dir: str | None = None) -> ValidationEntry:
     """Validate one recording (a task): a compact, picklable summary; the full report goes to
-    ``reports_dir/NAME-HASH.json`` when given."""
+    ``reports_dir/NAME-HASH.json`` and ``.html`` (without figures) when given."""
     from aveas_format.validate.runner import validate
 
     t0 = time.perf_counter()
@@ -54,12 +69,14 @@ def validate_recording(path: str, *, select: list[str] | None = None,
         facts = read_facts(local)
         report = validate(local, select=select, ignore=ignore, config=config,
                           max_sample=max_sample)
+        page = _report_page(local, report) if reports_dir else None
     report_file = None
     if reports_dir:
         from aveas_format.safeio import write_text_atomic
 
         report_file = str(Path(reports_dir) / f"{_report_name(path)}.json")
         write_text_atomic(report_file, report.to_json())
+        write_text_atomic(str(Path(report_file).with_suffix(".html")), page)
     return ValidationEntry(
         path=path, **facts,
         counts=report.counts,

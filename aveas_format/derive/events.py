@@ -136,7 +136,8 @@ def _threshold_events(rec, r: dict[str, np.ndarray], metric: str, thr: float,
     pid, oid, t, rel = r["pid"], r["oid"], r["time"], r["rel"]
     a, b = pid[m], oid[m]
     lo, hi = np.minimum(a, b), np.maximum(a, b)
-    key = lo * (int(hi.max()) + 1) + hi
+    # one key per pair; not lo * (max + 1) + hi, which overflows int64 for ids above 2**32
+    key = np.unique(np.column_stack([lo, hi]), axis=0, return_inverse=True)[1].ravel()
     o = np.lexsort((t[m], key))
     ep = _episodes(key[o], t[m][o], p.merge_gap_s)
     out = []

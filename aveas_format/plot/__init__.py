@@ -7,8 +7,10 @@ none imports ``fit``, ``sim`` or ``dataset`` (they sit above and call in). Figur
 
 - :mod:`~aveas_format.plot.map`: an OpenDRIVE map, lanes filled by type, reference lines, road
   and junction ids (``plot_map``, ``save_map``; ``aveas-format map plot``).
-- :mod:`~aveas_format.plot.recording`: figures of a recording, the map with trajectories and
-  located findings, speed/acceleration histograms per class, sample rate (``aveas-format plot``).
+- :mod:`~aveas_format.plot.recording`: figures of a recording: the map with trajectories by class,
+  direction of travel, coverage, unobserved regions and located findings (a marker per rule);
+  speed and signed longitudinal acceleration histograms per class over robust ranges; sample rate
+  (``aveas-format plot``).
 - :mod:`~aveas_format.plot.report_html`: the self-contained HTML validation report with those
   figures (``aveas-format validate --format html``).
 - :mod:`~aveas_format.plot.derive`: time series of derived tables with 1-sigma bands (TTC,
@@ -30,8 +32,9 @@ _MODULES: dict[str, tuple[str, ...]] = {
     "derive": ("acceleration_figure", "ttc_figure"),
     "fit": ("plot_histogram", "plot_parameters"),
     "map": ("BACKGROUND_LANE_COLORS", "LANE_COLORS", "plot_map", "save_map"),
-    "recording": ("acceleration_histogram", "figures", "map_figure", "open_for_figures",
-                  "png_bytes", "sample_rate_figure", "save_figures", "speed_histogram"),
+    "recording": ("CLASS_COLORS", "acceleration_histogram", "figures", "longitudinal_acceleration",
+                  "map_figure", "open_for_figures", "png_bytes", "recording_name", "robust_range",
+                  "sample_rate_figure", "save_figures", "speed_histogram"),
     "report_html": ("render_html", "report_figures"),
     "sensitivity": ("plot_sensitivity",),
 }

@@ -29,9 +29,13 @@ TTC_KINDS: dict[str, tuple[str, str]] = {
 }
 
 
-def _ids(t: pa.Table, name: str) -> np.ndarray:
-    """An id column as it is (int64; a column with nulls comes as float with NaN)."""
-    return np.asarray(t.column(name).to_numpy(zero_copy_only=False))
+def _is(t: pa.Table, name: str, value: int) -> np.ndarray:
+    """Rows whose id column equals ``value``, compared as int64 (never through float64, which
+    merges ids above 2**53); null ids match nothing."""
+    import pyarrow.compute as pc
+
+    eq = pc.equal(t.column(name), pa.scalar(int(value), t.column(name).type))
+    return np.asarray(pc.fill_null(eq, False).to_numpy(zero_copy_only=False), bool)
 
 
 def ttc_figure(interactions: pa.Table, participant_id: int, other_id: int, *,
@@ -43,8 +47,8 @@ def ttc_figure(interactions: pa.Table, participant_id: int, other_id: int, *,
     manoeuvre)."""
     fig = Figure(figsize=(7, 3.4))
     ax = fig.subplots()
-    pair = (_ids(interactions, "participant_id") == participant_id) & (
-        _ids(interactions, "other_id") == other_id)
+    pair = _is(interactions, "participant_id", participant_id) & _is(interactions, "other_id",
+                                                                    other_id)
     pair &= interactions.column("ttc").is_valid().to_numpy(zero_copy_only=False)
     kind = np.asarray(interactions.column("ttc_kind").to_pylist(), dtype=object)
     time, ttc = column_numpy(interactions, "time"), column_numpy(interactions, "ttc")
@@ -77,7 +81,7 @@ def acceleration_figure(kinematics: pa.Table, participant_id: int, *,
     ``truth``: ``{"ax": ..., "ay": ...}`` aligned with the rows of ``kinematics``, drawn dashed."""
     fig = Figure(figsize=(7, 4.6))
     axes = fig.subplots(2, 1, sharex=True)
-    m = _ids(kinematics, "participant_id") == participant_id
+    m = _is(kinematics, "participant_id", participant_id)
     t = column_numpy(kinematics, "time")[m]
     for a, col in ((axes[0], "ax"), (axes[1], "ay")):
         v = column_numpy(kinematics, col)[m]

@@ -26,18 +26,20 @@ if TYPE_CHECKING:  # pragma: no cover
 
     from aveas_format.opendrive.network import RoadNetwork
 
-#: face colours of lanes by OpenDRIVE lane type (others: ``LANE_COLORS["other"]``)
+#: face colours of lanes by OpenDRIVE lane type (others: ``LANE_COLORS["other"]``). Lanes where
+#: traffic joins are greens (entry, onRamp, mwyEntry), where it leaves oranges (exit, offRamp,
+#: mwyExit), ramps between roads blues; driving is grey, bidirectional a muted purple.
 LANE_COLORS: dict[str, str] = {
     "driving": "#8c8c8c",
-    "bidirectional": "#8c8c8c",
-    "entry": "#7f8fa6",
-    "exit": "#7f8fa6",
-    "onRamp": "#7f8fa6",
-    "offRamp": "#7f8fa6",
-    "connectingRamp": "#7f8fa6",
-    "slipLane": "#7f8fa6",
-    "mwyEntry": "#7f8fa6",
-    "mwyExit": "#7f8fa6",
+    "bidirectional": "#8a78b0",
+    "entry": "#4e9a5b",
+    "onRamp": "#8cc084",
+    "mwyEntry": "#2f6e3b",
+    "exit": "#d9792b",
+    "offRamp": "#f2b36f",
+    "mwyExit": "#a65513",
+    "connectingRamp": "#4f8fc0",
+    "slipLane": "#74c0c8",
     "shoulder": "#c9c3a5",
     "border": "#b5b09a",
     "stop": "#c9c3a5",

@@ -1,5 +1,5 @@
 """Figures of a recording (matplotlib, headless): the map with trajectories and findings, speed and
-acceleration histograms per class, the sample rate over time.
+longitudinal acceleration histograms per class, the sample rate over time.
 
 Every function takes a :class:`~aveas_format.io.recording.Recording` and returns a matplotlib
 ``Figure``; :func:`figures` returns all of them by name and :func:`save_figures` writes them as PNG.
@@ -13,30 +13,73 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pyarrow as pa
-from matplotlib.figure import Figure
 
+from aveas_format.errors import require
+from aveas_format.io.arrow import column_numpy
 from aveas_format.plot.map import BACKGROUND_LANE_COLORS, plot_map
 from aveas_format.safeio import save_figure_atomic
 
-_SEV_STYLE = {"error": ("#d62728", "x"), "warning": ("#ff7f0e", "^"), "info": ("#1f77b4", "o")}
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.figure import Figure
+
+#: colour of each severity (findings are drawn in it; their marker shape is their rule's)
+SEVERITY_COLORS = {"error": "#d62728", "warning": "#ff7f0e", "info": "#1f77b4"}
+#: marker shapes given to the rules with located findings, in the order of the legend
+_MARKERS = ("X", "^", "o", "s", "D", "v", "P", "*", "<", ">", "h", "p", "d", "8")
+#: colour of each participant class (the 13 classes of the taxonomy), distinguishable on the
+#: light lanes: vehicles in blues/greens/browns, vulnerable road users in reds/purples
+CLASS_COLORS: dict[str, str] = {
+    "car": "#1f4e9c", "van": "#17becf", "truck": "#2ca02c", "bus": "#8c564b",
+    "motorcycle": "#bcbd22", "trailer": "#7f7f7f", "railvehicle": "#393b79",
+    "bicycle": "#e377c2", "pedestrian": "#d62728", "mobility_device": "#9467bd",
+    "pushable_pullable": "#ff9896", "animal": "#ff7f0e", "other": "#000000",
+}
+_UNKNOWN_CLASS = "#555555"
+
+
+def _figure(figsize: tuple[float, float]) -> Figure:
+    """A standalone matplotlib figure (no pyplot state); matplotlib is the ``[plot]`` extra, so
+    this module imports without it (the HTML report then has no figures and says why)."""
+    require("matplotlib", extra="plot", what="drawing figures")
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=figsize, dpi=100, layout="constrained")
+
+
+def recording_name(rec) -> str:
+    """What a person calls the recording: its ``title``, else its file name, else its
+    ``recording_id`` (often a UUID)."""
+    title = getattr(rec.meta, "title", None)
+    if title:
+        return str(title)
+    path = getattr(rec, "path", None)
+    if path:
+        name = Path(str(path)).name
+        for suffix in (".aveas.zip", ".aveas"):
+            if name.endswith(suffix):
+                return name[: -len(suffix)]
+        return name
+    return str(rec.meta.recording_id)
 
 
 def _states(rec) -> dict[str, np.ndarray] | None:
+    """participant_id (int64: ids may need all 64 bits), time, x, y, vx, vy (float64, nulls as
+    NaN) in (participant_id, time) order; rows without a participant id are left out."""
     s = rec.states
     if s is None or not s.num_rows:
         return None
-    out = {}
-    for c in ("participant_id", "time", "x", "y", "vx", "vy"):
-        if c not in s.column_names:
-            return None
-        a = s.column(c)
-        if a.null_count:
-            a = a.cast(pa.float64()).fill_null(np.nan)
-        out[c] = np.asarray(a.to_numpy(zero_copy_only=False))
+    if any(c not in s.column_names for c in ("participant_id", "time", "x", "y", "vx", "vy")):
+        return None
+    if s.column("participant_id").null_count:
+        s = s.filter(s.column("participant_id").is_valid())
+    out = {"participant_id": np.asarray(s.column("participant_id").to_numpy(zero_copy_only=False),
+                                        dtype=np.int64)}
+    for c in ("time", "x", "y", "vx", "vy"):
+        out[c] = column_numpy(s, c)
     order = np.lexsort((out["time"], out["participant_id"]))
     if np.any(np.diff(order) != 1):
         out = {k: v[order] for k, v in out.items()}
@@ -45,9 +88,9 @@ def _states(rec) -> dict[str, np.ndarray] | None:
 
 def _classes(rec, pid: np.ndarray) -> np.ndarray:
     p = rec.participants
-    if p is None or "class" not in p.column_names:
+    if p is None or "class" not in p.column_names or not p.num_rows:
         return np.full(len(pid), "unknown", dtype=object)
-    ids = p.column("participant_id").to_numpy()
+    ids = np.asarray(p.column("participant_id").to_numpy(zero_copy_only=False), dtype=np.int64)
     cls = np.array(p.column("class").cast(pa.string()).to_pylist(), dtype=object)
     order = np.argsort(ids)
     pos = np.clip(np.searchsorted(ids[order], pid), 0, len(ids) - 1)
@@ -55,11 +98,155 @@ def _classes(rec, pid: np.ndarray) -> np.ndarray:
     return np.where(found, cls[order][pos], "unknown")
 
 
+def _polygons(geoms) -> list[np.ndarray]:
+    """Exterior rings of (multi)polygons, as vertex arrays for a PolyCollection."""
+    import shapely
+
+    parts = shapely.get_parts(np.asarray([g for g in geoms if g is not None], dtype=object))
+    return [np.asarray(p.exterior.coords) for p in parts
+            if p.geom_type == "Polygon" and not p.is_empty]
+
+
+#: edge colour and hatch of each kind of unobserved region
+REGION_STYLES: dict[str, tuple[str, str]] = {
+    "occlusion": ("#404040", "///"), "sensor_range": ("#7b3294", "\\\\"),
+    "field_of_view": ("#a6611a", "xx"), "sensor_outage": ("#b2182b", ".."),
+    "outside_coverage": ("#2166ac", "--"),
+}
+
+
+def _draw_regions(ax, rec, max_regions: int = 5000) -> list[Any]:
+    """The coverage polygon (dashed outline) and the unobserved regions, hatched by kind and
+    filled the darker the longer they last; a region unobserved for less than a quarter of the
+    recording is a dotted outline only (a sensor outage of 0.4 s over the whole area must not
+    hide the map); at most ``max_regions`` of each kind are drawn (every k-th); legend handles."""
+    import shapely
+    from matplotlib.collections import PolyCollection
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    handles: list[Any] = []
+    cov = getattr(rec.meta, "coverage", None)
+    if cov:
+        try:
+            rings = _polygons([shapely.from_wkt(cov)])
+        except Exception:  # noqa: BLE001 — a malformed coverage is a geo.* finding, not a crash
+            rings = []
+        if rings:
+            ax.add_collection(PolyCollection(rings, facecolors="none", edgecolors="#1b7837",
+                                             linewidths=1.2, linestyles="--", zorder=2.2))
+            handles.append(Line2D([], [], color="#1b7837", linestyle="--", label="coverage"))
+    u = rec.unobserved
+    if u is None or not u.num_rows or "geometry" not in u.column_names:
+        return handles
+    try:
+        geoms = shapely.from_wkb(np.asarray(u.column("geometry").to_pylist(), dtype=object))
+    except Exception:  # noqa: BLE001 — broken WKB is a structure finding
+        return handles
+    kinds = (np.asarray(u.column("kind").cast(pa.string()).to_pylist(), dtype=object)
+             if "kind" in u.column_names else np.full(u.num_rows, "occlusion", dtype=object))
+    ts, te = (column_numpy(u, c, missing=np.nan) for c in ("time_start", "time_end"))
+    total = float(rec.meta.duration_s or 0.0) or float(np.nanmax(te) if np.isfinite(te).any() else 1)
+    share = np.clip(np.nan_to_num((te - ts) / max(total, 1e-9), nan=1.0), 0.0, 1.0)
+    for kind in sorted({str(k) for k in kinds}):
+        sel = np.flatnonzero(kinds == kind)
+        edge, hatch = REGION_STYLES.get(kind, ("#404040", "//"))
+        for brief in (False, True):  # hatched when unobserved for a quarter of the time or more
+            part = sel[(share[sel] < 0.25) == brief]
+            part = part[::max(1, len(part) // max_regions)]  # e.g. per-frame occlusions
+            rings, alphas = [], []
+            for k in part:
+                for ring in _polygons([geoms[k]]):
+                    rings.append(ring)
+                    alphas.append(0.04 + 0.3 * share[k])
+            if rings:
+                ax.add_collection(PolyCollection(
+                    rings, facecolors=[(0.4, 0.4, 0.4, a) for a in alphas], edgecolors=edge,
+                    linewidths=1.0 if brief else 0.8, linestyles=":" if brief else "-",
+                    hatch=None if brief else hatch, zorder=2.3))
+        seconds = float(np.nansum(te[sel] - ts[sel]))
+        brief = bool((share[sel] < 0.25).all())
+        handles.append(Patch(facecolor=(0.4, 0.4, 0.4, 0.08 if brief else 0.25), edgecolor=edge,
+                             hatch=None if brief else hatch, linestyle=":" if brief else "-",
+                             label=f"unobserved: {kind} ({len(sel)}, {seconds:.3g} s)"))
+    return handles
+
+
+def _draw_trajectories(ax, st, cls: np.ndarray, max_points: int, max_arrows: int = 200) -> list[Any]:
+    """Trajectories coloured by class (subsampled to ``max_points``) with an arrow in the
+    direction of travel at the middle of each (up to ``max_arrows`` participants); legend handles."""
+    from matplotlib.lines import Line2D
+
+    n = len(st["x"])
+    step = max(1, n // max_points)
+    handles = []
+    starts = np.r_[0, np.flatnonzero(np.diff(st["participant_id"]) != 0) + 1]
+    ends = np.r_[starts[1:], n]
+    seg_cls = cls[starts]
+    for c in sorted(set(seg_cls), key=lambda c: (c == "unknown", c)):
+        color = CLASS_COLORS.get(c, _UNKNOWN_CLASS)
+        idx = np.flatnonzero(np.repeat(seg_cls == c, ends - starts))[::step]
+        pid = st["participant_id"][idx]
+        brk = np.flatnonzero(np.diff(pid) != 0) + 1
+        ax.plot(np.insert(st["x"][idx], brk, np.nan), np.insert(st["y"][idx], brk, np.nan),
+                linewidth=0.7, color=color, alpha=0.75, zorder=2.5)
+        handles.append(Line2D([], [], color=color, linewidth=2,
+                              label=f"{c} ({int((seg_cls == c).sum())})"))
+    # direction of travel: the velocity at the middle sample of each participant's trajectory
+    every = max(1, len(starts) // max_arrows)
+    mid = ((starts + ends) // 2)[::every]
+    vx, vy = st["vx"][mid], st["vy"][mid]
+    speed = np.hypot(vx, vy)
+    ok = np.isfinite(speed) & (speed > 0.5)
+    if ok.any():
+        colors = [CLASS_COLORS.get(c, _UNKNOWN_CLASS) for c in seg_cls[::every][ok]]
+        ax.quiver(st["x"][mid][ok], st["y"][mid][ok], vx[ok] / speed[ok], vy[ok] / speed[ok],
+                  color=colors, angles="xy", scale_units="inches", scale=1 / 0.15,
+                  width=0.0025, headwidth=4, headlength=4.5, headaxislength=4, zorder=4,
+                  edgecolors="white", linewidths=0.3)
+        handles.append(Line2D([], [], color="#333333", marker=">", linestyle="-", markersize=6,
+                              label="direction of travel"))
+    # a participant standing there has no arrow and a trajectory too short to see: a dot
+    still = np.isfinite(st["x"][mid]) & np.isfinite(st["y"][mid]) & ~ok
+    if still.any():
+        colors = [CLASS_COLORS.get(c, _UNKNOWN_CLASS) for c in seg_cls[::every][still]]
+        ax.scatter(st["x"][mid][still], st["y"][mid][still], c=colors, s=16, marker="o",
+                   edgecolors="white", linewidths=0.4, zorder=4)
+        handles.append(Line2D([], [], color="#333333", marker="o", linestyle="none",
+                              markersize=4, label="standing (speed < 0.5 m/s)"))
+    return handles
+
+
+def _draw_findings(ax, pts: list[tuple[str, str, float, float]]) -> list[Any]:
+    """Located findings (:func:`_finding_points`): one marker shape per rule, coloured by
+    severity; legend handles."""
+    from matplotlib.lines import Line2D
+
+    by_rule: dict[str, list[tuple[float, float]]] = {}
+    severity: dict[str, str] = {}
+    for code, sev, px, py in pts:
+        by_rule.setdefault(code, []).append((px, py))
+        severity[code] = sev
+    rank = {"error": 0, "warning": 1, "info": 2}
+    handles = []
+    for k, code in enumerate(sorted(by_rule, key=lambda c: (rank.get(severity[c], 3), c))):
+        arr = np.array(by_rule[code])
+        marker = _MARKERS[k % len(_MARKERS)]
+        color = SEVERITY_COLORS.get(severity[code], "#000000")
+        ax.scatter(arr[:, 0], arr[:, 1], c=color, marker=marker, s=55, zorder=6,
+                   edgecolors="white", linewidths=0.6)
+        handles.append(Line2D([], [], color=color, marker=marker, linestyle="none", markersize=8,
+                              markeredgecolor="white", label=f"{code} ({len(arr)})"))
+    return handles
+
+
 def map_figure(rec, findings: Iterable[Any] = (), max_points: int = 200_000) -> Figure:
     """The map underneath (:func:`~aveas_format.plot.map.plot_map`, lanes by type in the light
-    ``BACKGROUND_LANE_COLORS``, road ids), the trajectories (subsampled) and the
-    findings with a position (x/y, or the state row they name)."""
-    fig = Figure(figsize=(11, 6), dpi=100)
+    ``BACKGROUND_LANE_COLORS``), the coverage (dashed) and unobserved regions (hatched), the
+    trajectories coloured by class (subsampled) with arrows in the direction of travel, and the
+    findings with a position (x/y, or the state row they name), one marker shape per rule and
+    coloured by severity. Titled with the recording's name (:func:`recording_name`)."""
+    fig = _figure((12, 6))
     ax = fig.subplots()
     try:
         plot_map(rec.map, ax, step=2.0, lane_colors=BACKGROUND_LANE_COLORS,
@@ -67,38 +254,71 @@ def map_figure(rec, findings: Iterable[Any] = (), max_points: int = 200_000) -> 
                  title="")
     except Exception:  # noqa: BLE001 — a figure without the map is still useful
         ax.text(0.01, 0.99, "map not available", transform=ax.transAxes, va="top")
+    handles = _draw_regions(ax, rec)
     st = _states(rec)
     if st is not None:
-        n = len(st["x"])
-        step = max(1, n // max_points)
-        pid = st["participant_id"][::step]
-        x, y = st["x"][::step], st["y"][::step]
-        brk = np.flatnonzero(np.diff(pid) != 0) + 1
-        xs = np.insert(x.astype(float), brk, np.nan)
-        ys = np.insert(y.astype(float), brk, np.nan)
-        ax.plot(xs, ys, linewidth=0.6, color="#1f4e79", alpha=0.6, zorder=2.5)
-    pts = _finding_points(rec, findings, st)
-    for sev, (color, marker) in _SEV_STYLE.items():
-        sel = [(px, py) for s, px, py in pts if s == sev]
-        if sel:
-            arr = np.array(sel)
-            ax.scatter(arr[:, 0], arr[:, 1], c=color, marker=marker, s=40, zorder=6,
-                       label=f"{sev} ({len(sel)})")
-    if pts:
-        ax.legend(loc="upper right", fontsize=8)
+        handles = _draw_trajectories(ax, st, _classes(rec, st["participant_id"]), max_points) + \
+            handles
+    pts = _finding_points(rec, findings)
+    finding_handles = _draw_findings(ax, pts)
+    ax.autoscale_view()
     x0, x1 = ax.get_xlim()
     y0, y1 = ax.get_ylim()
+    # the data, not the whole map: a crossing recorded on a city map stays readable
+    box = _data_bounds(rec, st, pts)
+    if box is not None:
+        pad = max(0.08 * max(box[2] - box[0], box[3] - box[1]), 15.0)
+        x0, x1 = max(x0, box[0] - pad), min(x1, box[2] + pad)
+        y0, y1 = max(y0, box[1] - pad), min(y1, box[3] + pad)
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
     # equal axes (plot_map's), unless a long straight road would become a thin strip
     ratio = max(x1 - x0, 1e-9) / max(y1 - y0, 1e-9)
     ax.set_aspect("equal" if ratio < 8 else "auto", adjustable="datalim")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title(f"{rec.meta.recording_id}: lanes, trajectories and located findings")
-    fig.tight_layout()
+    ax.set_title(recording_name(rec), fontsize=11)
+    if handles:
+        fig.legend(handles=handles, title="class (participants), regions", loc="outside right upper",
+                   fontsize=8, title_fontsize=8, frameon=False, alignment="left")
+    if finding_handles:
+        fig.legend(handles=finding_handles, title="located findings: rule (shown)",
+                   loc="outside right lower", fontsize=8, title_fontsize=8, frameon=False,
+                   alignment="left")
     return fig
 
 
-def _finding_points(rec, findings: Iterable[Any], st) -> list[tuple[str, float, float]]:
+def _data_bounds(rec, st, pts: list[tuple[str, str, float, float]]
+                 ) -> tuple[float, float, float, float] | None:
+    """(xmin, ymin, xmax, ymax) of what the recording observed: the positions, the located
+    findings and the coverage polygon; None without any."""
+    xs, ys = [], []
+    if st is not None:
+        ok = np.isfinite(st["x"]) & np.isfinite(st["y"])
+        if ok.any():
+            xs += [float(st["x"][ok].min()), float(st["x"][ok].max())]
+            ys += [float(st["y"][ok].min()), float(st["y"][ok].max())]
+    for _, _, px, py in pts:
+        if np.isfinite(px) and np.isfinite(py):
+            xs.append(px)
+            ys.append(py)
+    cov = getattr(rec.meta, "coverage", None)
+    if cov:
+        import shapely
+
+        try:
+            b = shapely.from_wkt(cov).bounds
+        except Exception:  # noqa: BLE001 — a malformed coverage is a geo.* finding
+            b = (np.nan,) * 4
+        if all(np.isfinite(b)):
+            xs += [b[0], b[2]]
+            ys += [b[1], b[3]]
+    return (min(xs), min(ys), max(xs), max(ys)) if xs else None
+
+
+def _finding_points(rec, findings: Iterable[Any]) -> list[tuple[str, str, float, float]]:
+    """(code, severity, x, y) of each finding with a position: its x/y, or the states row it
+    names."""
     out = []
     rows_x = rows_y = None
     if rec.states is not None and "x" in rec.states.column_names:
@@ -108,71 +328,126 @@ def _finding_points(rec, findings: Iterable[Any], st) -> list[tuple[str, float, 
         loc = f.location
         sev = f.severity.value if hasattr(f.severity, "value") else str(f.severity)
         if loc.x is not None and loc.y is not None:
-            out.append((sev, loc.x, loc.y))
+            out.append((f.code, sev, loc.x, loc.y))
         elif loc.table == "states" and loc.row is not None and rows_x is not None and \
                 0 <= loc.row < len(rows_x):
             px, py = rows_x[loc.row].as_py(), rows_y[loc.row].as_py()
             if px is not None and py is not None:
-                out.append((sev, float(px), float(py)))
+                out.append((f.code, sev, float(px), float(py)))
     return out
 
 
-def _per_class_hist(ax, values: np.ndarray, cls: np.ndarray, bins: np.ndarray, xlabel: str) -> None:
+def robust_range(values: np.ndarray, lower: float = 0.5, upper: float = 99.5,
+                 include: float | None = None) -> tuple[float, float, int]:
+    """(lo, hi, outside): the ``lower``..``upper`` percentiles of the finite values (widened to
+    ``include``, e.g. 0), and how many finite values lie outside: histograms are drawn over this
+    range so that a few wild values do not squash the distribution into one bin."""
+    v = values[np.isfinite(values)]
+    if not len(v):
+        return 0.0, 1.0, 0
+    lo, hi = (float(x) for x in np.percentile(v, [lower, upper]))
+    if include is not None:
+        lo, hi = min(lo, include), max(hi, include)
+    if hi <= lo:
+        lo, hi = lo - 0.5, hi + 0.5
+    return lo, hi, int(((v < lo) | (v > hi)).sum())
+
+
+def _per_class_hist(ax, values: np.ndarray, cls: np.ndarray, xlabel: str, unit: str, *,
+                    include: float | None = None, bins: int = 60) -> None:
+    """Density histograms per class over the robust range of ``values``, the count of values
+    outside it written in the corner; ``unit`` of the values (the density is per ``unit``)."""
     ok = np.isfinite(values)
-    for c in sorted(set(cls[ok])):
+    lo, hi, outside = robust_range(values, include=include)
+    edges = np.linspace(lo, hi, bins + 1)
+    for c in sorted(set(cls[ok]), key=lambda c: (c == "unknown", c)):
         sel = ok & (cls == c)
-        ax.hist(values[sel], bins=bins, histtype="step", linewidth=1.4,
-                label=f"{c} (n={int(sel.sum())})", density=True)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("density")
-    if ok.any():
+        ax.hist(np.clip(values[sel], lo, hi), bins=edges, histtype="step", linewidth=1.4,
+                color=CLASS_COLORS.get(c, _UNKNOWN_CLASS), density=True,
+                label=f"{c} (n={int(sel.sum()):,})")
+    ax.set_xlim(lo, hi)
+    ax.set_ylabel(f"density [1/({unit})]")
+    if not ok.any():
+        _no_data(ax, f"no {xlabel.split(' [')[0]}: no finite value")
+    else:
         ax.legend(fontsize=8)
+        note = (f"{outside:,} of {int(ok.sum()):,} values outside [{lo:.3g}, {hi:.3g}] "
+                "(0.5-99.5 %), in the end bins" if outside else f"all {int(ok.sum()):,} values")
+        xlabel = f"{xlabel}\n{note}"
+    ax.set_xlabel(xlabel, fontsize=9)
+
+
+def _no_data(ax, text: str) -> None:
+    """Say in the middle of an empty plot why it is empty."""
+    ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", fontsize=10,
+            color="#444444", wrap=True)
+    ax.set_xticks([])
+    ax.set_yticks([])
 
 
 def speed_histogram(rec) -> Figure:
-    """Distribution of speed over ground (from vx, vy) per class."""
-    fig = Figure(figsize=(6, 4), dpi=100)
+    """Distribution of speed over ground (from vx, vy) per class, over its robust range."""
+    fig = _figure((6, 4))
     ax = fig.subplots()
     st = _states(rec)
     if st is not None:
         v = np.hypot(st["vx"], st["vy"])
-        top = np.nanpercentile(v, 99.9) if np.isfinite(v).any() else 1.0
-        _per_class_hist(ax, v, _classes(rec, st["participant_id"]),
-                        np.linspace(0, max(top, 1.0) * 1.05, 60), "speed [m/s]")
+        _per_class_hist(ax, v, _classes(rec, st["participant_id"]), "speed [m/s]", "m/s",
+                        include=0.0)
+    else:
+        _no_data(ax, "no states with x, y, vx, vy")
     ax.set_title("Speed per class")
-    fig.tight_layout()
     return fig
 
 
+def longitudinal_acceleration(st: dict[str, np.ndarray], window: float = 0.5
+                              ) -> tuple[np.ndarray, np.ndarray]:
+    """(sample index, signed longitudinal acceleration): the change of speed over ``window`` s
+    of the same participant divided by the time it took (the baseline of the kinematics rules,
+    so that measurement noise cannot fake large values); negative = braking."""
+    pid, t = st["participant_id"], st["time"]
+    if len(t) < 2:
+        return np.zeros(0, np.int64), np.zeros(0)
+    seg = np.r_[0, np.cumsum(np.diff(pid) != 0)]
+    span = float(np.nanmax(t) - np.nanmin(t)) + 2 * window + 1
+    key = seg * span + (t - np.nanmin(t))
+    j = np.searchsorted(key, key + window)
+    ok = j < len(t)
+    jj = np.minimum(j, len(t) - 1)
+    ok &= seg[jj] == seg
+    i = np.flatnonzero(ok)
+    jj = jj[i]
+    speed = np.hypot(st["vx"], st["vy"])
+    return i, (speed[jj] - speed[i]) / (t[jj] - t[i])
+
+
 def acceleration_histogram(rec, window: float = 0.5) -> Figure:
-    """Distribution of the planar acceleration magnitude (velocity differences over ``window`` s,
-    the estimate of the kinematics rules) per class."""
-    fig = Figure(figsize=(6, 4), dpi=100)
+    """Distribution of the signed longitudinal acceleration (:func:`longitudinal_acceleration`)
+    per class, braking left of zero, accelerating right of it."""
+    fig = _figure((6, 4))
     ax = fig.subplots()
     st = _states(rec)
-    if st is not None and len(st["time"]) > 1:
-        pid, t = st["participant_id"], st["time"]
-        seg = np.r_[0, np.cumsum(np.diff(pid) != 0)]
-        span = float(np.nanmax(t) - np.nanmin(t)) + 2 * window + 1
-        key = seg * span + (t - np.nanmin(t))
-        j = np.searchsorted(key, key + window)
-        ok = j < len(t)
-        jj = np.minimum(j, len(t) - 1)
-        ok &= seg[jj] == seg
-        i = np.flatnonzero(ok)
-        jj = jj[i]
-        a = np.hypot(st["vx"][jj] - st["vx"][i], st["vy"][jj] - st["vy"][i]) / (t[jj] - t[i])
-        top = np.nanpercentile(a, 99.9) if len(a) and np.isfinite(a).any() else 1.0
-        _per_class_hist(ax, a, _classes(rec, pid[i]), np.linspace(0, max(top, 1.0) * 1.05, 60),
-                        f"|acceleration| over {window:g} s [m/s²]")
-    ax.set_title("Acceleration per class")
-    fig.tight_layout()
+    if st is not None:
+        i, a = longitudinal_acceleration(st, window)
+        if len(a):
+            _per_class_hist(ax, a, _classes(rec, st["participant_id"][i]),
+                            f"longitudinal acceleration over {window:g} s [m/s²]", "m/s²",
+                            include=0.0)
+            ax.axvline(0.0, color="#444444", linewidth=0.8, linestyle=":")
+            for x, text, ha in ((0.02, "← braking", "left"), (0.98, "accelerating →", "right")):
+                ax.text(x, 0.97, text, transform=ax.transAxes, ha=ha, va="top", fontsize=8,
+                        color="#444444")
+        else:
+            _no_data(ax, f"no participant has two samples {window:g} s or more apart")
+    else:
+        _no_data(ax, "no states with x, y, vx, vy")
+    ax.set_title("Longitudinal acceleration per class")
     return fig
 
 
 def sample_rate_figure(rec, bin_s: float = 1.0) -> Figure:
     """Mean sample rate per participant present, per time bin, against nominal_rate_hz."""
-    fig = Figure(figsize=(8, 3.5), dpi=100)
+    fig = _figure((8, 3.5))
     ax = fig.subplots()
     st = _states(rec)
     if st is not None:
@@ -181,8 +456,13 @@ def sample_rate_figure(rec, bin_s: float = 1.0) -> Figure:
         b = np.floor(t[ok] / bin_s).astype(np.int64)
         b -= b.min() if len(b) else 0
         samples = np.bincount(b)
-        pairs = np.unique(b * (int(st["participant_id"].max()) + 1) + st["participant_id"][ok])
-        present = np.bincount(pairs // (int(st["participant_id"].max()) + 1), minlength=len(samples))
+        # participants present per bin: distinct (bin, participant) pairs, ids compared as int64
+        pid = st["participant_id"][ok]
+        o = np.lexsort((pid, b))
+        bs, ps = b[o], pid[o]
+        first = np.r_[True, (bs[1:] != bs[:-1]) | (ps[1:] != ps[:-1])] if len(bs) else \
+            np.zeros(0, bool)
+        present = np.bincount(bs[first], minlength=len(samples))
         rate = np.where(present > 0, samples / np.maximum(present, 1) / bin_s, np.nan)
         tb = (np.arange(len(samples)) + 0.5) * bin_s + (np.floor(np.nanmin(t) / bin_s) * bin_s)
         ax.step(tb, rate, where="mid", label="observed (per participant)")
@@ -193,7 +473,6 @@ def sample_rate_figure(rec, bin_s: float = 1.0) -> Figure:
     ax.set_ylim(bottom=0)
     ax.legend(fontsize=8)
     ax.set_title("Sample rate over time")
-    fig.tight_layout()
     return fig
 
 
@@ -217,7 +496,7 @@ def open_for_figures(path: str | Path, report: Any = None, max_rows: int = FIGUR
         pids = np.sort(head.participants.column("participant_id").to_numpy())
         k = -(-entry.rows // max_rows)
         ids = pids[::k].tolist()
-    rec = open_recording(path, tables=["participants", "states"],
+    rec = open_recording(path, tables=["participants", "states", "unobserved"],
                          columns={"states": _FIGURE_COLUMNS}, participants=ids, verify=False)
     if ids is not None:
         rec.__dict__["figure_note"] = (f"drawn from every {k}th participant ({len(ids)} of "

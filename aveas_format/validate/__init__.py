@@ -9,7 +9,14 @@ import sys
 import types
 
 from aveas_format.validate.registry import REGISTRY, Hit, Hits, Rule, load_rules, rule, select_rules
-from aveas_format.validate.report import Finding, Location, Report, RuleResult, Severity, ToolFailure
+from aveas_format.validate.report import (
+    Finding,
+    Location,
+    Report,
+    RuleResult,
+    Severity,
+    ToolFailure,
+)
 from aveas_format.validate.runner import validate
 
 

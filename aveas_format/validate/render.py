@@ -1,8 +1,13 @@
-"""Renderers of a validation report: text (greppable lines + a summary table) and JSON."""
+"""Renderers of a validation report: text (greppable lines + a summary table) and JSON, and the
+helpers every renderer of rule docs shares: :func:`inline_markup` (the reStructuredText inline
+markup of docstrings, rendered or removed) and :func:`rule_anchor` (a rule's anchor in
+docs/rules.md). The HTML report is :mod:`aveas_format.plot.report_html` (it embeds figures)."""
 
 from __future__ import annotations
 
+import html as _html
 import io
+import re
 
 from rich.console import Console
 from rich.table import Table
@@ -10,6 +15,40 @@ from rich.table import Table
 from aveas_format.validate.report import Report, Severity
 
 _STYLE = {Severity.ERROR: "bold red", Severity.WARNING: "yellow", Severity.INFO: "cyan"}
+
+
+#: reStructuredText inline markup of docstrings: ``literal``, :role:`target`, `interpreted`,
+#: **strong**, *emphasis* (in this order: a literal may hold asterisks)
+_INLINE = re.compile(r"``(?P<lit>.+?)``|:[\w:.-]+:`~?\.?(?P<role>[^`]+?)`|`(?P<interp>[^`]+?)`"
+                     r"|\*\*(?P<strong>[^*]+?)\*\*|(?<![\w*])\*(?P<em>[^*\s][^*]*?)\*(?![\w*])")
+_HTML_TAG = {"lit": "code", "role": "code", "interp": "code", "strong": "b", "em": "i"}
+
+
+def inline_markup(text: str, *, html: bool = False) -> str:
+    """The inline reStructuredText of a docstring (``window_s``, :func:`f`, **b**, *i*) rendered
+    as HTML (escaped, with ``<code>``, ``<b>``, ``<i>``) or, by default, removed (plain text for
+    terminals and tooltips): ``"``window_s`` (0.5 s)"`` -> ``"window_s (0.5 s)"``."""
+    out, pos = [], 0
+    for m in _INLINE.finditer(text):
+        kind = m.lastgroup
+        inner = m.group(kind)
+        if kind == "role":
+            inner = inner.rsplit("<", 1)[-1].rstrip(">") if inner.endswith(">") else inner
+        if html:
+            out.append(_html.escape(text[pos:m.start()]))
+            out.append(f"<{_HTML_TAG[kind]}>{_html.escape(inner)}</{_HTML_TAG[kind]}>")
+        else:
+            out.append(text[pos:m.start()] + inner)
+        pos = m.end()
+    tail = text[pos:]
+    out.append(_html.escape(tail) if html else tail)
+    return "".join(out)
+
+
+def rule_anchor(code: str) -> str:
+    """The anchor of a rule's section in docs/rules.md (``geo.crs_mismatch`` -> ``geocrs_mismatch``,
+    as GitHub and most Markdown renderers make it from the heading)."""
+    return re.sub(r"[^a-z0-9_-]", "", code.lower())
 
 
 def render_json(report: Report) -> str:

@@ -45,13 +45,32 @@ def num(table: pa.Table | None, name: str, spec: str | None = None) -> np.ndarra
 
 
 def ints(table: pa.Table | None, name: str) -> np.ndarray | None:
-    """An integer key column as int64 (None if absent, not integer, or holding nulls)."""
+    """An integer key column as int64 (None if absent, not integer, or holding nulls); see
+    :func:`nullable_ints` for a column that may hold nulls."""
     if table is None or name not in table.column_names:
         return None
     a = table.column(name)
     if not pa.types.is_integer(a.type) or a.null_count:
         return None
     return np.asarray(a.to_numpy(zero_copy_only=False), dtype=np.int64)
+
+
+def nullable_ints(table: pa.Table | None, name: str,
+                  spec: str | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+    """An integer column that may hold nulls (``attached_to``, ``occluder_id``...) exactly, as
+    (int64 values with 0 at nulls, valid mask); None if absent or not integer. Ids never go through
+    float64, which holds integers exactly only up to 2**53 (the format allows any int64 id)."""
+    if table is None or name not in table.column_names:
+        return None
+    if spec is not None and not _compatible(table, spec, name):
+        return None
+    a = table.column(name)
+    if not pa.types.is_integer(a.type):
+        return None
+    valid = np.asarray(a.is_valid().to_numpy(zero_copy_only=False), bool)
+    values = pc.fill_null(a, 0).to_numpy(zero_copy_only=False) if a.null_count else \
+        a.to_numpy(zero_copy_only=False)
+    return np.asarray(values, dtype=np.int64), valid
 
 
 def strings(table: pa.Table | None, name: str) -> tuple[np.ndarray, np.ndarray] | None:

@@ -484,5 +484,5 @@ def test_highd_unobserved_outside_the_footprint(tmp_path):
     assert region.is_valid and shapely.intersection(region, cover).area < 1e-6
     pts = shapely.points(rec.states["x"].to_numpy(), rec.states["y"].to_numpy())
     assert not shapely.contains(region, pts).any()
-    codes = aveas_format.validate(rec).codes()
+    codes = aveas_format.validate(rec).codes
     assert "unobserved.table_missing" not in codes and "unobserved.state_inside" not in codes

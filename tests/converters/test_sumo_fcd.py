@@ -170,10 +170,10 @@ def test_lane_change_instant_and_reconstructed(tmp_path):
     p.write_text(_fcd(rows))
     rec = convert("sumo-fcd", [p], map_source=ROAD)
     rep = aveas_format.validate(rec, select=["kinematics"])
-    assert rep.codes() == {"kinematics.instant_lane_change"}
+    assert rep.codes == {"kinematics.instant_lane_change"}
     assert "jumps up to 3.2 m across the lane in 0.5 s" in rep.findings()[0].message
     rec = convert("sumo-fcd", [p], map_source=ROAD, options={"lane_change_duration": 3.0})
-    assert aveas_format.validate(rec, select=["kinematics"]).codes() == set()
+    assert aveas_format.validate(rec, select=["kinematics"]).codes == set()
     s = rec.states
     t, y, vy, h = (s.column(c).to_numpy() for c in ("time", "y", "vy", "heading"))
     assert np.all(np.diff(y) >= -1e-9) and y[0] == pytest.approx(-8.0) and y[-1] == pytest.approx(-4.8)

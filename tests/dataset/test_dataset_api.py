@@ -60,6 +60,21 @@ def test_validate_dataset_with_the_process_pool(broken_dataset, tmp_path):
     assert "not a recording" in rep.failed[0].error
     assert len(rep.entries) == 5
     assert rep.exit_code() == 3
+    # as Report: exit_code, counts, max_severity are properties; a frame of the recordings
+    assert rep.exit_code == 3 and rep.max_severity.value == "error" and rep.counts["error"] >= 1
+    assert repr(rep).startswith("<DatasetReport validate: 6 recordings, 4 valid, 1 failed; ")
+    import pandas as pd
+
+    df = rep.to_pandas()
+    assert list(df["path"]) == sorted(paths) and len(df) == 6
+    row = df.set_index(df["path"].map(lambda p: Path(p).name))
+    assert row.loc["corrupt.aveas.zip", "status"] == "failed"
+    assert row.loc["corrupt.aveas.zip", "error"] is pd.NA
+    assert "not a recording" in row.loc["corrupt.aveas.zip", "failure"]
+    assert row.loc["v2.aveas", "status"] == "findings" and row.loc["v2.aveas", "exit_code"] == 1
+    assert row.loc["v2.aveas", "top_rule"] == "structure.row_count"
+    assert row.loc["v2.aveas", "partner"] == "TUB" and str(df["error"].dtype) == "Int64"
+    assert (df["status"] == "valid").sum() == 4
     d = json.loads(rep.to_json())
     assert d["by_rule"]["structure.row_count"] == {
         "severity": "error", "title": d["by_rule"]["structure.row_count"]["title"], "count": 1,
@@ -81,7 +96,8 @@ def test_validate_dataset_with_the_process_pool(broken_dataset, tmp_path):
     # without the broken members: exit 1 (findings), and 0 with fail_on="never"
     good = [p for p in paths if "corrupt" not in p]
     assert ds.validate_dataset(good, workers=1).exit_code() == 1
-    assert ds.validate_dataset(good, workers=1, fail_on="never").exit_code() == 0
+    lenient = ds.validate_dataset(good, workers=1, fail_on="never")
+    assert lenient.exit_code() == lenient.exit_code == 0 and lenient.exit_code("error") == 1
 
 
 def test_a_recording_that_kills_its_worker_is_reported_and_the_rest_complete(dataset_root,

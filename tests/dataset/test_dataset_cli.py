@@ -27,6 +27,7 @@ def test_validate_a_dataset_streams_reports_and_exits_with_the_worst(broken_data
     assert d["exit_code"] == 3 and d["by_rule"]["structure.row_count"]["count"] == 1
     assert "<h2>Worst recordings</h2>" in (tmp_path / "r" / "dataset-report.html").read_text()
     assert len(list((tmp_path / "r").glob("*.json"))) == 6  # 5 reports + the dataset's
+    assert len(list((tmp_path / "r").glob("*.html"))) == 6  # the same as HTML pages
     # JSON and HTML on stdout / to a file; several paths and globs; --fail-on
     res = cli("validate", broken_dataset / "kit", str(broken_dataset / "tub" / "v*.aveas"),
               "-j", "1", "--format", "json")

@@ -508,7 +508,7 @@ def test_each_broken_recording_is_caught_by_exactly_its_rule(scene, case, code, 
     rec = case(scene)
     report = aveas_format.validate(rec)
     assert report.failures == [], report.failures[0].traceback
-    assert report.codes() == {code}, report.flatten(("code", "row", "participant_id", "message"))
+    assert report.codes == {code}, report.flatten(("code", "row", "participant_id", "message"))
     first = report.results[0].sample[0]
     if where is not None:
         assert (first.location.row, first.location.participant_id) == where, first.message
@@ -520,7 +520,7 @@ def test_each_broken_recording_is_caught_by_exactly_its_rule(scene, case, code, 
 def test_derived_stale_asks_the_derivation_package(clean, monkeypatch):
     """metadata.derived_stale reports what ``derive.registry.stale_derived`` says (a list of names
     or a dict name -> reason), and nothing where the derivation package is missing."""
-    assert "metadata.derived_stale" not in aveas_format.validate(clean).codes()
+    assert "metadata.derived_stale" not in aveas_format.validate(clean).codes
     mod = types.ModuleType("aveas_format.derive.registry")
     mod.stale_derived = lambda rec: {"kinematics": "states changed since it was derived"}
     monkeypatch.setitem(sys.modules, "aveas_format.derive.registry", mod)
@@ -533,7 +533,7 @@ def test_derived_stale_asks_the_derivation_package(clean, monkeypatch):
                                                   "derived/kinematics.parquet"],
                                                  ["metadata.derived_stale", "events.parquet"]]
     monkeypatch.setitem(sys.modules, "aveas_format.derive.registry", None)  # import fails
-    assert aveas_format.validate(clean, select=["metadata.derived_stale"]).codes() == set()
+    assert aveas_format.validate(clean, select=["metadata.derived_stale"]).codes == set()
 
 
 def test_every_rule_has_a_failing_case():
@@ -551,11 +551,11 @@ def test_overlap_is_exempt_for_accidents_and_attached_participants():
                     "time_start": np.array([0.0]), "time_end": np.array([5.96]),
                     "participant_ids": pa.array([[0, 4]], pa.list_(pa.int64())),
                     "origin": ["annotated"]}
-    assert aveas_format.validate(vf.build(sc)).codes() == set()
+    assert aveas_format.validate(vf.build(sc)).codes == set()
     sc = vf.fresh()
     c_overlap(sc)
     sc["participants"]["attached_to"] = pa.array([None, None, None, None, 0], pa.int64())
-    assert aveas_format.validate(vf.build(sc), select=["interactions"]).codes() == set()
+    assert aveas_format.validate(vf.build(sc), select=["interactions"]).codes == set()
 
 
 # --- map.mostly_off_road: with map.off_drivable_lane by nature (each vehicle is off the map too) ---
@@ -577,12 +577,12 @@ def test_mostly_off_road_names_the_likely_cause(scene, transform, cause):
     causes, and the cheap ones are tried: swapped axes and units put the points back on the map."""
     rec = _moved(scene, transform)
     report = aveas_format.validate(rec, select=["map"])  # (geo and kinematics notice it too)
-    assert report.codes() == {"map.mostly_off_road", "map.off_drivable_lane"}, report.codes()
+    assert report.codes == {"map.mostly_off_road", "map.off_drivable_lane"}, report.codes
     f = report.findings()[[r.code for r in report.results].index("map.mostly_off_road")]
     assert f.severity.value == "error" and cause in f.message, f.message
     # the threshold is configurable
     assert "map.mostly_off_road" not in aveas_format.validate(
-        rec, config={"map": {"off_road_share": 1.0}}).codes()
+        rec, config={"map": {"off_road_share": 1.0}}).codes
 
 
 def test_mostly_off_road_counts_vehicles(scene):
@@ -590,4 +590,4 @@ def test_mostly_off_road_counts_vehicles(scene):
     n = len(scene["tracks"])
     for tr in scene["tracks"][: n // 2]:
         tr["y"] = np.asarray(tr["y"]) + 3000.0
-    assert "map.mostly_off_road" not in aveas_format.validate(vf.build(scene)).codes()
+    assert "map.mostly_off_road" not in aveas_format.validate(vf.build(scene)).codes

@@ -36,7 +36,7 @@ def test_instant_lane_changes_one_finding_per_vehicle():
     y[120:] -= 3.5
     rec = vf.build(sc)
     rep = aveas_format.validate(rec, select=["kinematics"])
-    assert rep.codes() == {"kinematics.instant_lane_change"}
+    assert rep.codes == {"kinematics.instant_lane_change"}
     (f,) = rep.findings()
     assert "changes lane instantaneously 3 time(s), first at 1.6 s: it jumps up to 3.5 m" in f.message
     assert "--lanechange.duration" in f.message and "lane_change_duration" in f.message
@@ -48,7 +48,7 @@ def test_instant_lane_changes_one_finding_per_vehicle():
     tr["y"] = tr["y"] - 3.5 * prof
     tr["vy"] = -3.5 * 30 * s ** 2 * (1 - s) ** 2 / 3.0
     tr["heading"] = np.arctan2(tr["vy"], tr["vx"])
-    assert aveas_format.validate(vf.build(sc), select=["kinematics"]).codes() == set()
+    assert aveas_format.validate(vf.build(sc), select=["kinematics"]).codes == set()
 
 
 def test_exact_values_at_a_limit_and_their_digits():

@@ -90,7 +90,7 @@ def test_a_corrupt_row_group_is_a_finding_not_a_crash(tmp_path, monkeypatch):
     f.write_bytes(bytes(data))
     report = aveas_format.validate(path, config=STREAM)
     assert report.failures == []
-    assert "structure.unreadable_table" in report.codes()
+    assert "structure.unreadable_table" in report.codes
     assert "batch" in next(r for r in report.results
                            if r.code == "structure.unreadable_table").sample[0].message
 
@@ -104,7 +104,7 @@ def test_unsorted_states_are_read_whole(tmp_path, monkeypatch):
     pq.write_table(t.take(np.arange(t.num_rows)[::-1]), f, row_group_size=23)
     report = aveas_format.validate(path, config=STREAM)
     assert "states" not in report.streamed
-    assert "structure.sort_order" in report.codes()
+    assert "structure.sort_order" in report.codes
 
 
 def test_zip_recordings_stream_too(tmp_path, monkeypatch):

@@ -19,7 +19,7 @@ import pyarrow as pa
 from aveas_format.schema.docs import quality
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hits, collector, rule
-from aveas_format.validate.views import StatesView, num
+from aveas_format.validate.views import StatesView, nullable_ints, num
 
 #: footprints larger than this (trains) are left out of the pair search
 _MAX_CELL = 50.0
@@ -193,13 +193,14 @@ def _compute_pairs(ctx: Context):
     pid = S["pid"]
     pv = ctx.participants_view
     # exclusions: attached participants, accidents
-    att = num(pv.table, "attached_to", "participants")
+    att = nullable_ints(pv.table, "attached_to", "participants")
     excluded = np.zeros(len(a), bool)
     if att is not None:
+        ids, has = att
         ia, ib = pv.index_of(pid[a]), pv.index_of(pid[b])
-        aa = np.where(ia >= 0, att[np.maximum(ia, 0)], np.nan)
-        ab = np.where(ib >= 0, att[np.maximum(ib, 0)], np.nan)
-        excluded |= (aa == pid[b]) | (ab == pid[a])
+        ia0, ib0 = np.maximum(ia, 0), np.maximum(ib, 0)
+        excluded |= (ia >= 0) & has[ia0] & (ids[ia0] == pid[b])
+        excluded |= (ib >= 0) & has[ib0] & (ids[ib0] == pid[a])
     excluded |= in_accident(ctx, pid[a], pid[b], S["t"][a])
     # duplicate tracks: close for most of the common time
     W = S["W"]

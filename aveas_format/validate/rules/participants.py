@@ -19,7 +19,7 @@ from aveas_format.schema.taxonomy import CLASSES
 from aveas_format.schema.docs import quality
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hits, rule
-from aveas_format.validate.views import ints, num
+from aveas_format.validate.views import ints, nullable_ints, num
 
 _F = "participants.parquet"
 
@@ -125,11 +125,10 @@ def attached_to_unknown(ctx: Context) -> Iterator[Hits]:
     """``attached_to`` names a participant id that does not exist, or the participant itself."""
     pv = ctx.participants_view
     t = pv.table
-    att = num(t, "attached_to", "participants")
-    if att is None or not pv.n:
+    col = nullable_ints(t, "attached_to", "participants")
+    if col is None or not pv.n:
         return
-    has = ~np.isnan(att)
-    a = np.where(has, att, -1).astype(np.int64)
+    a, has = col
     unknown = has & (pv.index_of(a) < 0)
     itself = has & (a == pv.pid)
     bad = unknown | itself
@@ -197,13 +196,13 @@ def unknown_reference(ctx: Context) -> Iterator[Hits]:
     if not pv.ok or ctx.table("participants") is None:
         return
     u = ctx.table("unobserved")
-    occ = num(u, "occluder_id", "unobserved")
+    occ = nullable_ints(u, "occluder_id", "unobserved")
     if occ is not None:
-        has = ~np.isnan(occ)
-        bad = has & (pv.index_of(np.where(has, occ, -1).astype(np.int64)) < 0)
+        ids, has = occ
+        bad = has & (pv.index_of(ids) < 0)
         if bad.any():
             rows = np.flatnonzero(bad)
-            yield Hits(total=len(rows), arrays={"row": rows, "participant_id": occ[rows].astype(np.int64)},
+            yield Hits(total=len(rows), arrays={"row": rows, "participant_id": ids[rows]},
                        const={"file": "unobserved.parquet", "table": "unobserved",
                               "column": "occluder_id"})
     e = ctx.table("events")

@@ -256,7 +256,8 @@ def _keys(t: pa.Table, rows: np.ndarray) -> dict[str, np.ndarray]:
     out: dict[str, np.ndarray] = {}
     for k in ("participant_id", "time"):
         if k in t.column_names:
-            out[k] = t.column(k).take(pa.array(rows[:1000])).to_numpy(zero_copy_only=False)
+            # to_pylist: exact int64 ids (a column with nulls would go through float64)
+            out[k] = np.array(t.column(k).take(pa.array(rows[:1000])).to_pylist(), dtype=object)
     return out
 
 
@@ -279,6 +280,15 @@ def null_values(ctx: Context) -> Iterator[Hits]:
                    const={"file": spec.file, "table": name, "column": c.name})
 
 
+def _exact_numbers(arr: pa.ChunkedArray) -> np.ndarray:
+    """A numeric column as numpy without losing precision: integers in their own type (nulls as
+    0, to be masked by the caller; float64 holds integers exactly only up to 2**53, and an id of
+    2**60 is valid), floats as float64 (nulls as NaN)."""
+    if pa.types.is_integer(arr.type):
+        return np.asarray(pc.fill_null(arr, 0).to_numpy(zero_copy_only=False))
+    return pc.fill_null(arr.cast(pa.float64()), np.nan).to_numpy(zero_copy_only=False)
+
+
 @rule("structure.value_range", "error", "Value outside the declared range",
       "{file}: row {row}: {column} = {value} outside {range}",
       enforces="FORMAT.md 2-10: declared ranges (sizes > 0, std >= 0, probabilities and correlations "
@@ -291,12 +301,14 @@ def value_range(ctx: Context) -> Iterator[Hits]:
             continue
         if not (pa.types.is_integer(arr.type) or pa.types.is_floating(arr.type)):
             continue
-        v = pc.fill_null(arr.cast(pa.float64()), np.nan).to_numpy(zero_copy_only=False)
-        bad = np.isinf(v)
+        v = _exact_numbers(arr)
+        bad = np.isinf(v) if v.dtype.kind == "f" else np.zeros(len(v), bool)
         if c.minimum is not None:
             bad |= (v <= c.minimum) if c.exclusive_minimum else (v < c.minimum)
         if c.maximum is not None:
             bad |= v > c.maximum
+        if v.dtype.kind != "f" and arr.null_count:
+            bad &= np.asarray(arr.is_valid().to_numpy(zero_copy_only=False), bool)
         if not bad.any():
             continue
         rows = np.flatnonzero(bad)

@@ -15,7 +15,7 @@ import shapely
 from aveas_format.schema.docs import quality
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hit, Hits, rule
-from aveas_format.validate.views import num
+from aveas_format.validate.views import ints, num
 
 
 def _duration(ctx: Context) -> float | None:
@@ -40,7 +40,7 @@ def out_of_range(ctx: Context) -> Iterator[Hits]:
         t = ctx.row_table(name)
         if t is None:
             continue
-        pid = num(t, "participant_id")
+        pid = ints(t, "participant_id")
         for c in cols:
             v = num(t, c, name)
             if v is None:
@@ -50,7 +50,7 @@ def out_of_range(ctx: Context) -> Iterator[Hits]:
                 rows = np.flatnonzero(bad)
                 arrays = {"row": rows, "value": v[rows], "time": v[rows]}
                 if pid is not None:
-                    arrays["participant_id"] = pid[rows].astype(np.int64)
+                    arrays["participant_id"] = pid[rows]
                 yield Hits(total=len(rows), arrays=arrays,
                            const={"file": f"{name}.parquet", "table": name, "column": c,
                                   "duration": d})

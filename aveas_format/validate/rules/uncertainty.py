@@ -14,7 +14,7 @@ import numpy as np
 from aveas_format.schema.docs import quality
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hit, Hits, rule
-from aveas_format.validate.views import StatesView, num
+from aveas_format.validate.views import StatesView, ints, num
 
 #: FORMAT.md 2: measured data SHOULD carry _std for x, y, heading, vx, vy (and length/width, see
 #: participants.size_std_missing)
@@ -110,7 +110,7 @@ def std_implausibly_large(ctx: Context) -> Iterator[Hits]:
         t = ctx.row_table(name)
         if t is None:
             continue
-        pid = num(t, "participant_id")
+        pid = ints(t, "participant_id")
         for c, mx in maxima.items():
             v = num(t, c, name)
             if v is None:
@@ -120,7 +120,7 @@ def std_implausibly_large(ctx: Context) -> Iterator[Hits]:
                 rows = np.flatnonzero(bad)
                 arrays = {"row": rows, "value": v[rows]}
                 if pid is not None:
-                    arrays["participant_id"] = pid[rows].astype(np.int64)
+                    arrays["participant_id"] = pid[rows]
                 yield Hits(total=len(rows), arrays=arrays,
                            const={"file": f"{name}.parquet", "table": name, "column": c,
                                   "maximum": mx})

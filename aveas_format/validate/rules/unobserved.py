@@ -10,7 +10,7 @@ import shapely
 from aveas_format.schema.docs import quality
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hit, Hits, rule
-from aveas_format.validate.views import num
+from aveas_format.validate.views import ints, num
 
 _F = {"file": "unobserved.parquet", "table": "unobserved"}
 
@@ -132,7 +132,7 @@ def state_inside(ctx: Context) -> Iterator[Hits]:
     if ts is None or te is None or x is None or y is None:
         return
     geoms, _ = g
-    rid = num(u, "region_id")
+    rid = ints(u, "region_id")
     kinds = u.column("kind").cast("string").to_pylist() if "kind" in u.column_names else \
         [None] * u.num_rows
     interp = sv.col("interpolated")
@@ -174,7 +174,7 @@ def state_inside(ctx: Context) -> Iterator[Hits]:
     i, r, counts = i[o], r[o], counts[o]
     yield Hits(total=len(i), arrays={
         "row": sv.row[i], "participant_id": sv.pid[i], "time": sv.t[i], "x": np.round(x[i], 2),
-        "y": np.round(y[i], 2), "region_id": rid[r].astype(np.int64) if rid is not None else r,
+        "y": np.round(y[i], 2), "region_id": rid[r] if rid is not None else r,
         "kind": np.array(kinds, dtype=object)[r], "n_samples": counts},
         const={"file": "states.parquet", "table": "states", "column": "x,y"})
 
