@@ -19,7 +19,6 @@ recording row's measures) is a query in DuckDB or pandas; docs/datasets.md has t
 
 from __future__ import annotations
 
-import functools
 import re
 from collections.abc import Callable, Iterable
 from pathlib import Path

@@ -174,7 +174,6 @@ def compute(rec, p: ConflictsParams) -> pa.Table:
     """The ``derived/conflicts`` table of ``rec``."""
     S = Samples(rec, p.time_resolution)
     tracks, fx, fy, arc = _front_paths(S)
-    pids = np.array([S.pid[sl.start] for sl in tracks], np.int64)
     lines = np.array([shapely.LineString(np.column_stack([fx[sl], fy[sl]]))
                       if sl.stop - sl.start >= 2 else None for sl in tracks], dtype=object)
     valid = np.flatnonzero(lines != None)  # noqa: E711 — object array

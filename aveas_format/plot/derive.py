@@ -107,8 +107,7 @@ def ttc_drac_figure(interactions: pa.Table, participant_id: int, other_id: int, 
     where it is defined, i.e. while the pair closes in)."""
     fig = Figure(figsize=(7, 4.8))
     axes = fig.subplots(2, 1, sharex=True)
-    pair = (_ids(interactions, "participant_id") == participant_id) & (
-        _ids(interactions, "other_id") == other_id)
+    pair = _is(interactions, "participant_id", participant_id) & _is(interactions, "other_id", other_id)
     kind = np.asarray(interactions.column("ttc_kind").to_pylist(), dtype=object)
     time = column_numpy(interactions, "time")
     for a, col, unit in ((axes[0], "ttc", "s"), (axes[1], "drac", "m/s²")):

@@ -22,8 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from aveas_format.converters.openlabel.profile import (EXT, LIGHTS, _LONGITUDINAL, _attrs, _enum_value, _first,
-                                                       _to_utc)
+from aveas_format.converters.openlabel.profile import (EXT, LIGHTS, _LONGITUDINAL, _attrs, _enum_value, _first)
 from aveas_format.errors import FormatError
 
 #: an extension value the box does not carry (``None`` is a value: null)

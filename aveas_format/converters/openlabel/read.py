@@ -16,14 +16,13 @@ from __future__ import annotations
 import math
 import warnings
 from collections import defaultdict
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 import pyarrow as pa
 
-from aveas_format.converters.common import (TIMESTAMP_UNITS, Timestamps, load_map_bytes, resolve_timestamps,
+from aveas_format.converters.common import (TIMESTAMP_UNITS, load_map_bytes, resolve_timestamps,
                                             source_block)
 from aveas_format.converters.labels import LabelFilter, implausible_size, label_kind
 from aveas_format.converters.openlabel.frames import (_MISSING, _FrameData, _Frames, _FrameRows, _rep_list,
