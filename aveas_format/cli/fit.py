@@ -217,7 +217,7 @@ def study(
     sizes: str = typer.Option("paper,all", "--sizes", help="paper (178 cars, 33 trucks "
                               "subsampled) and/or all (every vehicle of --duration)."),
     restarts: int = typer.Option(1, "--restarts", "-r", min=1, help="Restarts per fit."),
-    maxfev: int = typer.Option(150, "--maxfev", help="Evaluations per restart at most."),
+    maxfev: int = typer.Option(100, "--maxfev", help="Evaluations per restart at most."),
     method: str = _METHOD,
     workers: int = SIMULATION_WORKERS,
     scheduler: str = _SCHEDULER,

@@ -95,7 +95,9 @@ class FitConfig(BaseModel):
                          "2 n (n - 1) + 1 simulations; aveas_format.fit.uncertainty)")
     refine_rounds: int = Field(3, ge=1, le=10, description="rounds of the response-surface design")
     refine_step: float = Field(0.03, gt=0, le=0.25, description="the first response-surface "
-                               "design's half-width as a fraction of the bound widths")
+                               "design's half-width as a fraction of the bound widths (for mu/sigma "
+                               "under the mean-speed metric: two standard errors of the recorded "
+                               "values' mean and standard deviation instead)")
     bandwidth: str | float = "silverman"
     kde_backend: str = "numpy"
     variance_correction: bool = Field(True, description="shrink the simulated values towards their "
@@ -173,6 +175,19 @@ class FitConfig(BaseModel):
             else:
                 x.append(self.scenario.cls(c).w99()[kind])
         return np.clip(np.array(x, np.float64), b[:, 0], b[:, 1])
+
+    def surface_step(self, recorded: dict[str, np.ndarray]) -> np.ndarray:
+        """The first response-surface design's half-width per parameter: about two standard errors
+        where the data tell them (mu: 2 s / sqrt(n), sigma: 2 s / sqrt(2 n) of the recorded mean
+        speeds), else ``refine_step`` x the bound width."""
+        b = self.bounds_array()
+        step = (b[:, 1] - b[:, 0]) * self.refine_step
+        for i, n in enumerate(self.names):
+            kind, _, c = n.partition("_")
+            v = np.asarray(recorded.get(c, []), np.float64)
+            if self.metric == "mean_speed" and kind in ("mu", "sigma") and len(v) > 5:
+                step[i] = 2.0 * v.std(ddof=1) / np.sqrt(len(v) * (1 if kind == "mu" else 2))
+        return step
 
     def starts_array(self, recorded: dict[str, np.ndarray] | None = None) -> np.ndarray:
         """One starting point per restart (see ``starts``)."""
@@ -264,12 +279,19 @@ class FitResult:
         """The response surface converged (when refined), else the best restart did."""
         return bool(self.surface["converged"] if self.surface else self.best.get("converged", False))
 
-    def agreeing(self, tol: float | None = None) -> int:
-        """How many restarts ended within ``tol`` (default: 10 x xatol) of the best restart's end in
-        every parameter (the paper's robustness check: the same minimum from different starts)."""
-        tol = 10 * self.config.xatol if tol is None else tol
-        b = self.best
-        return sum(all(abs(r[n] - b[n]) <= tol for n in self.config.names) for r in self.runs)
+    def agreeing(self) -> int:
+        """How many restarts ended within two standard errors of the estimate in every parameter
+        (without standard errors: within 2 x xatol of the best restart's end) — the paper's
+        robustness check, the same minimum from different starts."""
+        names = self.config.names
+        est = self.best_params()
+        se = self.surface.get("se") if self.surface else None
+        if se is not None and np.all(np.isfinite(se)):
+            tol = dict(zip(names, 2.0 * np.asarray(se), strict=True))
+        else:
+            est = {n: self.best[n] for n in names}
+            tol = dict.fromkeys(names, 2.0 * self.config.xatol)
+        return sum(all(abs(r[n] - est[n]) <= tol[n] for n in names) for r in self.runs)
 
     def summary(self) -> dict:
         """What ``best.json`` holds: the estimate, whether the fit converged and why it stopped,
@@ -409,7 +431,7 @@ def _refine(res: FitResult, base: dict, workers: int | None, scheduler: str | No
         return out
 
     x = np.array([res.best[n] for n in config.names])
-    return response_surface(x, (b[:, 1] - b[:, 0]) * config.refine_step, evaluate_all, b,
+    return response_surface(x, config.surface_step(res.recorded), evaluate_all, b,
                             rounds=config.refine_rounds)
 
 

@@ -50,7 +50,7 @@ def paper_scenario(duration: float = 900.0, lane_change_duration: float = 0.0) -
 
 
 def _default_fit() -> FitConfig:
-    return FitConfig(scenario=paper_scenario(), restarts=1, maxfev=150)
+    return FitConfig(scenario=paper_scenario(), restarts=1, maxfev=100)
 
 
 class StudyConfig(BaseModel):

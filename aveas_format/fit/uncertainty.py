@@ -108,6 +108,10 @@ def response_surface(x0: np.ndarray, step: np.ndarray,
                "step": step.copy(), "evaluations": int(len(f_all)), "rounds": k + 1}
         if k + 1 < rounds:
             centre = np.clip(xm_c, lo, hi)
-            new = np.where(np.isfinite(se), 2.0 * se, step * 2.0)
+            # next steps: two standard errors; where the curvature is not resolved (not positive
+            # definite: from the diagonal alone, else twice the step) wider
+            diag = np.diag(h)
+            guide = se if pd else np.where(diag > 0, 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0)), np.nan)
+            new = np.where(np.isfinite(guide), 2.0 * guide, step * 2.0)
             step = np.clip(new, step / 3.0, np.minimum(step * 3.0, (hi - lo) / 4))
     return out
