@@ -168,9 +168,15 @@ def _bayes(f: Objective, x0: np.ndarray, *, maxfev: int, xatol: float, step: flo
     n_init = max(2 * len(x0) + 1, 8)
     init = [x0] + [np.clip(x0 + rng.normal(0, step, len(x0)) * width, b[:, 0], b[:, 1])
                    for _ in range(n_init - 1)]
-    res = gp_minimize(lambda x: f(np.asarray(x)), [tuple(v) for v in b], n_calls=max(maxfev, len(init) + 1),
-                      x0=[list(map(float, x)) for x in init], n_initial_points=0, acq_func="EI",
-                      noise=1e-6, random_state=int(seed), callback=[stopper])
+    # the Gaussian process's matrices are tiny: threaded BLAS only oversubscribes the cores (6x
+    # slower on 2 shared cores), so one thread (threadpoolctl comes with scikit-learn)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1):
+        res = gp_minimize(lambda x: f(np.asarray(x)), [tuple(v) for v in b],
+                          n_calls=max(maxfev, len(init) + 1),
+                          x0=[list(map(float, x)) for x in init], n_initial_points=0, acq_func="EI",
+                          noise=1e-6, random_state=int(seed), callback=[stopper])
     stop = "xatol reached (the last proposals stay at the best point)" if state["converged"] \
         else f"evaluation cap ({maxfev})"
     return _result(f, state["converged"], stop, len(res.x_iters))

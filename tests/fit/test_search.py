@@ -71,9 +71,9 @@ def test_each_optimiser_reaches_the_bowl_and_says_why_it_stopped(method):
         pytest.importorskip("cma")
     f = Objective(rough_bowl, BOUNDS)
     x0 = np.array([120.0, 12.0, 95.0, 3.0])
-    r = minimise(method, f, x0, maxfev=30 if method == "bayes" else 300, xatol=0.3, fatol=0.05,
+    r = minimise(method, f, x0, maxfev=20 if method == "bayes" else 300, xatol=0.3, fatol=0.05,
                  step=0.2, seed=1)
-    assert r.nfev == f.nfev and r.nfev <= (30 if method == "bayes" else 300) + 1
+    assert r.nfev == f.nfev and r.nfev <= (20 if method == "bayes" else 300) + 1
     assert np.all(np.abs(r.x - CENTRE) < 4 * np.sqrt(np.diag(COV))), (r.x, r.stop)
     assert r.stop and r.converged == (not r.stop.startswith("evaluation cap"))
     assert len(r.trace) == r.nfev
