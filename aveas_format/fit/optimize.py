@@ -45,7 +45,7 @@ from aveas_format.safeio import write_parquet_atomic, write_text_atomic
 from aveas_format.sim.scenario import W99_DEFAULTS, W99_RANGES, Scenario
 
 __all__ = ["FitConfig", "FitResult", "evaluate", "fit_desired_speed", "fit_parameters",
-           "initial_simplex", "load_runs", "metric_at", "run_restart"]
+           "initial_simplex", "load_runs", "metric_at", "run_restart", "run_stored"]
 
 
 class FitConfig(BaseModel):
@@ -345,6 +345,27 @@ def load_runs(outdir: Path, name: str = "runs.jsonl") -> list[dict]:
     return runs
 
 
+def run_stored(fn, tasks: list[dict], label, *, workers: int | None, scheduler: str | None,
+               progress: bool, description: str, store: Path | None) -> tuple[list, list[str]]:
+    """Run ``fn`` over ``tasks`` through :func:`aveas_format.parallel.run_tasks`; every result is
+    appended to the JSON-lines file ``store`` as soon as it arrives (so that an interrupted run
+    resumes, :func:`load_runs`). Returns the results and one message per failed task
+    (``label(task)``: what failed)."""
+    from aveas_format.parallel import run_tasks
+
+    values, failed = [], []
+    for r in run_tasks(fn, tasks, workers=workers, scheduler=scheduler, progress=progress,
+                       description=description):
+        if not r.ok:
+            failed.append(f"{label(r.item)}: {r.error}")
+            continue
+        values.append(r.value)
+        if store is not None:
+            with open(store, "a") as f:
+                f.write(json.dumps(r.value) + "\n")
+    return values, failed
+
+
 def _check_stored_config(od: Path, config: FitConfig) -> None:
     cfg_path = od / "config.json"
     cfg_json = config.model_dump(mode="json")
@@ -369,7 +390,6 @@ def fit_parameters(recorded: dict[str, np.ndarray], config: FitConfig | None = N
                    figures: bool = True) -> FitResult:
     """Run (or resume) the restarts, then the response surface; see the module docstring.
     ``recorded``: per class, the recorded values of ``config.metric``."""
-    from aveas_format.parallel import run_tasks
     from aveas_format.sim.runner import prepare_network
 
     config = config or FitConfig()
@@ -388,17 +408,10 @@ def fit_parameters(recorded: dict[str, np.ndarray], config: FitConfig | None = N
             "recorded": {c: v.tolist() for c, v in recorded.items()}}
     tasks = [{**base, "restart": i, "x0": starts[i].tolist()}
              for i in range(config.restarts) if i not in have]
-    runs = list(done)
-    failed = []
-    for r in run_tasks(run_restart, tasks, workers=workers, scheduler=scheduler, progress=progress,
-                       description="restarts"):
-        if not r.ok:
-            failed.append(f"restart {r.item['restart']}: {r.error}")
-            continue
-        runs.append(r.value)
-        if od is not None:
-            with open(od / "runs.jsonl", "a") as f:
-                f.write(json.dumps(r.value) + "\n")
+    new, failed = run_stored(run_restart, tasks, lambda t: f"restart {t['restart']}", workers=workers,
+                             scheduler=scheduler, progress=progress, description="restarts",
+                             store=None if od is None else od / "runs.jsonl")
+    runs = [*done, *new]
     runs.sort(key=lambda r: r["restart"])
     res = FitResult(config, runs, recorded, od, failed)
     if runs and config.refine:

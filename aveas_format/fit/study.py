@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from aveas_format.fit.optimize import FitConfig, fit_parameters
+from aveas_format.fit.optimize import FitConfig, fit_parameters, run_stored
 from aveas_format.safeio import write_text_atomic
 from aveas_format.sim.scenario import Scenario, VehicleClass
 
@@ -168,7 +168,6 @@ def recovery_study(config: StudyConfig | None = None, *, workers: int | None = 1
     """Run (or resume) the replicates; returns the rows and the summary. With ``outdir``:
     ``study.jsonl`` (one row per replicate, appended as each finishes; a re-run skips them),
     ``study.json`` (configuration and summary) and ``study.png``."""
-    from aveas_format.parallel import run_tasks
 
     cfg = config or StudyConfig()
     od = Path(outdir) if outdir is not None else None
@@ -193,16 +192,10 @@ def recovery_study(config: StudyConfig | None = None, *, workers: int | None = 1
     base = cfg.model_dump(mode="json")
     tasks = [{"config": base, "seed": k, "size": s} for k in seeds for s in cfg.sizes
              if (k, s) not in have]
-    failed = []
-    for r in run_tasks(run_replicate, tasks, workers=workers, scheduler=scheduler, progress=progress,
-                       description="replicates"):
-        if not r.ok:
-            failed.append(f"seed {r.item['seed']} ({r.item['size']}): {r.error}")
-            continue
-        rows.append(r.value)
-        if od is not None:
-            with open(od / "study.jsonl", "a") as f:
-                f.write(json.dumps(r.value) + "\n")
+    new, failed = run_stored(run_replicate, tasks, lambda t: f"seed {t['seed']} ({t['size']})",
+                             workers=workers, scheduler=scheduler, progress=progress,
+                             description="replicates", store=None if od is None else od / "study.jsonl")
+    rows += new
     rows.sort(key=lambda r: (r["size"], r["seed"]))
     summary = summarise(rows, cfg)
     summary["failed"] = failed
