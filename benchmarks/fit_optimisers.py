@@ -1,6 +1,6 @@
 """Optimisers compared on the same budget of simulations (docs/fitting.md, "Choosing the optimiser").
 
-    python benchmarks/fit_optimisers.py [OUT.json] [--budget 120] [--workers 2]
+    python benchmarks/fit_optimisers.py [OUT.json] [--budget 120] [--workers 2] [--plan M:S:K,...]
 
 One recording of the paper's experiment (seed 7: the paper's road and demand, 15 min, instantaneous
 lane changes, random desired speeds at the paper's estimates, subsampled to 178 cars and 33 trucks)
@@ -16,7 +16,7 @@ The reference is the response surface (``aveas_format.fit.uncertainty``) around 
 point: its minimum and standard errors. Each search reports its end point's distance from the
 reference in standard errors (the largest over the 4 parameters), -ln L at its end, whether it
 converged and why it stopped, and its seconds (of which simulation). Searches run as tasks through
-``run_tasks`` (``--workers``).
+``run_tasks`` (``--workers``); ``--plan`` runs a subset (method:start:seed, comma-separated).
 """
 
 from __future__ import annotations
@@ -93,6 +93,9 @@ def main(argv: list[str]) -> dict:
     plan = [("nelder-mead", "uniform", 1), ("nelder-mead", "uniform", 2), ("nelder-mead", "data", 1),
             ("cma", "uniform", 1), ("cma", "uniform", 2), ("cma", "data", 1),
             ("bayes", "data", 1)]
+    if "--plan" in argv:  # a subset, e.g. --plan cma:data:1,bayes:data:1
+        plan = [(m, s, int(k)) for m, s, k in (p.split(":") for p in
+                                               argv[argv.index("--plan") + 1].split(","))]
     tasks = [{"method": m, "start": s, "seed": k, "recorded": rl,
               "budget": budget // 2 if m == "bayes" else budget} for m, s, k in plan]
     rows = []
