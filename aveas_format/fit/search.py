@@ -142,8 +142,10 @@ def _cma(f: Objective, x0: np.ndarray, *, maxfev: int, xatol: float, fatol: floa
         xs = es.ask()
         es.tell(xs, [f(lo + np.asarray(u) * width) for u in xs])
     # on a rough objective the distribution's mean estimates the minimum better than the luckiest
-    # evaluated point: the restart ends there (one more evaluation)
-    mean = lo + np.clip(np.asarray(es.mean), 0.0, 1.0) * width
+    # evaluated point: the restart ends there (one more evaluation). The mean in the bounds is
+    # ``xfavorite`` (the boundary transformation of the internal mean, which may lie outside:
+    # clipping it would put the end on a bound the search never evaluated)
+    mean = lo + np.clip(np.asarray(es.result.xfavorite), 0.0, 1.0) * width
     fm = f(mean)
     return SearchResult(mean, fm, f.nfev, converged, stop, int(es.countiter), list(f.trace))
 

@@ -132,3 +132,25 @@ def test_the_variance_correction_removes_the_bandwidth_bias_of_sigma():
         best[corrected] = sigmas[int(np.argmin(nll))]
     assert best[True] == pytest.approx(rec["car"].std(), abs=0.3)
     assert best[False] < best[True] - 0.4
+
+
+def test_cma_ends_inside_the_bounds_where_it_searched():
+    """With the minimum just inside a bound, CMA-ES's internal mean wanders beyond the bound; the
+    restart must end at the mean in the bounds (the boundary transformation), near the minimum —
+    not at the bound itself, which the search never evaluated."""
+    pytest.importorskip("cma")
+    centre = CENTRE.copy()
+    centre[3] = BOUNDS[3, 0] + 0.3  # sigma_truck just above its lower bound
+
+    def f(x):
+        d = np.asarray(x) - centre
+        return float(0.5 * d @ np.linalg.solve(COV, d) + 800.0)
+
+    ends = []
+    for seed in range(4):
+        o = Objective(f, BOUNDS)
+        r = minimise("cma", o, np.array([120.0, 12.0, 95.0, 10.0]), maxfev=200, xatol=0.05,
+                     fatol=1e-4, step=0.2, seed=seed)
+        assert r.fun <= min(r.trace[:-1]) + 0.5, (r.x, r.fun, min(r.trace[:-1]))
+        ends.append(r.x[3])
+    assert all(BOUNDS[3, 0] < e < centre[3] + 0.5 for e in ends), ends
