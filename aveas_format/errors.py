@@ -48,6 +48,12 @@ class FormatError(AveasError, ValueError):
     """The content of a recording violates the format (wrong type, bad JSON, bad metadata...)."""
 
 
+class MissingCrsError(FormatError):
+    """The map has no ``<geoReference>`` and no ``crs`` was given: the recording's frame is
+    undefined (FORMAT.md: ``crs`` alone defines it then). The converter registry turns it into a
+    message showing the command that works."""
+
+
 class FormatVersionError(FormatError):
     """The recording's ``format_version`` is unknown, newer than this library, or malformed."""
 

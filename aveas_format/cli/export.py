@@ -25,7 +25,7 @@ def export(
     target: str = typer.Option(None, "--to", "-t", help="Exporter name: openlabel, openscenario, "
                                "mcap, osi (see --list)."),
     output: Path = typer.Option(None, "--output", "-o", help="Output file (companion files such "
-                                "as the map are written next to it)."),
+                                "as the map are written next to it; --overwrite covers them too)."),
     option: list[str] = option_pairs_option("Exporter"),
     options_file: Path = options_file_option("Exporter"),
     overwrite: bool = overwrite_option(),
@@ -50,6 +50,11 @@ def export(
     conv = get_converter(target, "export")
     raw = converter_options(options_file, option, conv.options)
     refuse_overwrite(output, overwrite)
+    from aveas_format.converters.common import companion_map_path
+
+    companion = companion_map_path(output, conv.parse_options(raw))
+    if companion is not None:  # companion files are outputs too
+        refuse_overwrite(companion, overwrite)
     if output.parent and not output.parent.exists():
         raise fail(f"{output.parent}: no such directory", EXIT_USAGE)
     import aveas_format

@@ -17,12 +17,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
 from aveas_format import plugins
-from aveas_format.errors import AveasError, FormatError
+from aveas_format.errors import AveasError, FormatError, MissingCrsError
 
 
 class ConverterOptions(BaseModel):
@@ -49,6 +49,13 @@ class ImportOptions(ConverterOptions):
     """Owner of the data (default: the partner)."""
     right_of_use: str = "research_only"
     """research_only or commercial."""
+    #: False where a converter's own ``crs`` option means its source's CRS (rotated boxes: the
+    #: world file's), which it projects into the map's frame itself
+    crs_is_recording_crs: ClassVar[bool] = True
+    crs: str | None = None
+    """The recording's CRS (PROJ, EPSG or WKT) where the map has no ``<geoReference>`` (it alone
+    then defines the frame, FORMAT.md); CLI ``--crs``, API ``convert(..., crs=)``. Must agree with
+    the map's geoReference where there is one."""
 
 
 @dataclass(frozen=True)
@@ -116,9 +123,14 @@ def get_converter(name: str, direction: str = "import") -> Converter:
 
 
 def convert(name: str, inputs: list[str | Path], *, map_source: str | Path | bytes | None = None,
-            options: dict[str, Any] | None = None):
-    """Run the importer ``name`` on ``inputs`` and return the Recording."""
+            options: dict[str, Any] | None = None, crs: str | None = None):
+    """Run the importer ``name`` on ``inputs`` and return the Recording.
+
+    ``crs`` is the recording's CRS where the map has no ``<geoReference>`` (the common import
+    option ``crs``; it wins over ``options["crs"]``)."""
     conv = get_converter(name)
+    if crs is not None:
+        options = {**(options or {}), "crs": crs}
     paths = [Path(p) for p in inputs]
     for p in paths:
         if not p.exists():
@@ -129,8 +141,23 @@ def convert(name: str, inputs: list[str | Path], *, map_source: str | Path | byt
         raise FormatError(f"converter {name} needs a map: pass --map MAP.xodr")
     try:
         return conv(paths, map_source=map_source, options=options)
+    except MissingCrsError as e:
+        from aveas_format.mapref.build import EXAMPLE_CRS
+
+        cmd = (f"aveas-format convert --from {name} {' '.join(_quote(p) for p in paths)}"
+               + (f" --map {_quote(map_source)}" if isinstance(map_source, (str, Path)) else "")
+               + f" --crs '{EXAMPLE_CRS}' -o OUT.aveas")
+        raise MissingCrsError("the map has no <geoReference>, so the recording's CRS must be given "
+                              f"(API: crs=): {cmd} (a transverse Mercator at the site: put its "
+                              "latitude and longitude in +lat_0/+lon_0)", path=e.path) from None
     except AveasError as e:
         if e.path is None and e.where.get("line") is not None and len(paths) == 1:
             # a located error without its file: name the (only) input
             raise type(e)(e.message, path=paths[0], **e.where) from None
         raise
+
+
+def _quote(p: Any) -> str:
+    import shlex
+
+    return shlex.quote(str(p))

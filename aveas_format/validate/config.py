@@ -98,6 +98,12 @@ class KinematicsConfig(_Section):
                                      "opposite to motion) is accepted below it")
     jump_tolerance_m: float = Field(1.0, ge=0, description="m; position step vs integrated velocity")
     jump_z: float = Field(5.0, ge=0, description="sigma multiplier for position jumps")
+    max_lateral_speed: float = Field(3.0, gt=0, description="m/s; a step of about one lane width "
+                                     "into the adjacent lane faster than this, unexplained by the "
+                                     "velocity, is an instantaneous lane change")
+    exact_rel_tolerance: float = Field(1e-4, ge=0, description="relative tolerance of the speed, "
+                                       "acceleration, jerk and yaw-rate limits for exact values "
+                                       "(std 0: simulated), e.g. 40.0003 m/s passes a 40 m/s limit")
 
 
 class UncertaintyConfig(_Section):
@@ -127,6 +133,13 @@ class MapConfig(_Section):
                                    "the lane direction is driving against it")
     min_wrong_way_s: float = Field(0.5, ge=0, description="s; shorter wrong-way episodes are "
                                    "ignored")
+    off_road_share: float = Field(0.5, ge=0, le=1, description="a recording whose states are on "
+                                  "no road of the map for more than this share is an error "
+                                  "(map.mostly_off_road: wrong map, CRS, offset, axes or unit)")
+    off_road_min_states: int = Field(10, ge=1, description="... checked from this many states on")
+    off_road_walk_m: float = Field(30.0, ge=0, description="in a recording without vehicles, a "
+                                   "state counts as off the map only this far from every lane "
+                                   "(pedestrians walk beside the roads)")
 
 
 class InteractionsConfig(_Section):
