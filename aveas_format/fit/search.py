@@ -136,7 +136,7 @@ def _cma(f: Objective, x0: np.ndarray, *, maxfev: int, xatol: float, fatol: floa
             converged = any(k in stops for k in _CMA_SETTLED)
             stop = ", ".join(f"{k}={v:g}" if isinstance(v, (int, float)) else k for k, v in stops.items())
             break
-        if f.nfev >= maxfev:
+        if f.nfev + es.popsize > maxfev:  # the next generation would not fit in the budget
             converged, stop = False, f"evaluation cap ({maxfev})"
             break
         xs = es.ask()
