@@ -1,87 +1,146 @@
-"""SUMO runner and fitter timings: one simulation (the paper's autobahn, 1 h of demand), one objective
-evaluation, one Nelder-Mead restart, and restarts on 1 vs 2 local worker processes.
+"""SUMO runner and fitter timings: where one objective evaluation of the paper's experiment spends
+its time, next to SUMO's own run time.
 
-The restart benchmarks use a shorter scenario (1.3 km road, 10 min of demand, 30 evaluations per
-restart) so that ``make bench`` stays short; docs/fitting.md scales them to the paper's setup.
-Skipped (no rows) when SUMO is not installed.
+The paper's setup: its autobahn (1.5 km inflow + 4 km), 1,680 cars/h + 320 trucks/h, 15 min of
+demand per evaluation (the run drains until every vehicle has left). For lane changes that take
+3 s (the runner's default) and instantaneous ones (``lane_change_duration = 0``):
+
+- ``SUMO alone``: the ``sumo`` process with the evaluation's network and routes, writing nothing
+  (the baseline: what the simulation itself costs);
+- ``evaluation``: what one evaluation costs now (routes, SUMO writing the section crossings,
+  reading them, per-vehicle mean speeds, KDE -ln L), and its ratio to SUMO alone (goal <= 1.3x);
+- ``evaluation, FCD path``: the previous way (SUMO writing FCD of every vehicle and step, read back
+  from Parquet, mean speeds from the FCD), for comparison;
+- per stage (``python benchmarks/bench_sim.py --profile`` prints the breakdown): netconvert (once
+  per fit), writing the routes, SUMO, reading its output, the per-vehicle metric, the KDE.
+
+Each number is the median of ``REPEATS`` runs in this process. Skipped (no rows) when SUMO is not
+installed.
 """
 
 from __future__ import annotations
 
+import statistics
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
+REPEATS = 5
 
-def _small(duration: float, seed: int):
-    from aveas_format.sim import Network, Scenario, VehicleClass
 
-    return Scenario(network=Network(length=1000, inflow=300), duration=duration, seed=seed, classes=[
-        VehicleClass(name="car", flow=1680, speed_mean_kmh=131.05, speed_std_kmh=17.48),
-        VehicleClass(name="truck", vclass="truck", flow=320, speed_mean_kmh=89.22, speed_std_kmh=6.2)])
+def _median(fn, n: int = REPEATS) -> tuple[float, object]:
+    times, out = [], None
+    for _ in range(n):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), out
+
+
+def profile(lane_change_duration: float, repeats: int = REPEATS) -> dict[str, float]:
+    """Seconds per stage of one evaluation (medians), SUMO alone, and the FCD path's total."""
+    from aveas_format.fit import FitConfig, recorded_mean_speeds  # noqa: F401 — import cost outside
+    from aveas_format.fit.objective import neg_log_likelihood
+    from aveas_format.fit.study import paper_scenario
+    from aveas_format.sim import find_sumo, prepare_network, simulate
+    from aveas_format.sim.runner import _NET_CACHE, _sumo_env
+
+
+    base = paper_scenario(900.0, lane_change_duration).model_copy(update={"seed": 1})
+    rec = simulate(base.model_copy(update={"seed": 7}), fcd=False).mean_speeds()
+    rng = np.random.default_rng(0)
+    recorded = {"car": rng.choice(rec["car"], 178, replace=False),
+                "truck": rng.choice(rec["truck"], 33, replace=False)}
+    cfg = FitConfig(scenario=base)
+    sc = cfg.scenario_at(np.array([130.0, 16.0, 89.0, 6.0]))
+    _NET_CACHE.clear()
+    t_net, net = _median(lambda: (_NET_CACHE.clear(), prepare_network(sc.network))[1], 1)
+    out: dict[str, float] = {"netconvert (once per fit)": t_net}
+    stages: dict[str, list[float]] = {}
+    totals, fcd_totals, alone = [], [], []
+    sumo = find_sumo("sumo")
+    with tempfile.TemporaryDirectory() as d:  # SUMO alone: the same network and routes, no output
+        wd = Path(d)
+        net.write(wd)
+        (wd / "routes.rou.xml").write_text(sc.routes_xml(net.from_edge, net.to_edge))
+        cmd = [str(sumo), "-n", "net.net.xml", "-r", "routes.rou.xml", "--step-length", "0.5",
+               "--seed", "1", "--no-step-log", "true"]
+        if lane_change_duration > 0:
+            cmd += ["--lanechange.duration", f"{lane_change_duration:g}"]
+        for _ in range(repeats):  # interleaved, so that all three see the same load
+            t0 = time.perf_counter()
+            subprocess.run(cmd, cwd=wd, capture_output=True, check=True, env=_sumo_env(sumo))
+            alone.append(time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            res = simulate(sc, fcd=False, network=net)
+            t1 = time.perf_counter()
+            ms = res.mean_speeds()
+            t2 = time.perf_counter()
+            neg_log_likelihood(recorded, ms, variance_correction=True)
+            t3 = time.perf_counter()
+            totals.append(t3 - t0)
+            for k, v in res.timings.items():
+                stages.setdefault(k, []).append(v)
+            stages.setdefault("metric", []).append(t2 - t1)
+            stages.setdefault("kde", []).append(t3 - t2)
+            stages.setdefault("other (temp dir, log)", []).append((t1 - t0) - sum(res.timings.values()))
+            t0 = time.perf_counter()
+            full = simulate(sc, fcd=True, network=net)
+            neg_log_likelihood(recorded, full.mean_speeds(), variance_correction=True)
+            fcd_totals.append(time.perf_counter() - t0)
+            stages.setdefault("fcd: sumo", []).append(full.timings["sumo"])
+            stages.setdefault("fcd: read", []).append(full.timings["read"])
+    for k, v in stages.items():
+        out[k] = statistics.median(v)
+    out["evaluation"] = statistics.median(totals)
+    out["evaluation, FCD path"] = statistics.median(fcd_totals)
+    out["SUMO alone"] = statistics.median(alone)
+    out["evaluation / SUMO alone (median of ratios)"] = statistics.median(
+        t / a for t, a in zip(totals, alone, strict=True))
+    out["vehicles"] = float(sum(len(v) for v in ms.values()))
+    return out
 
 
 def main() -> list[dict]:
-    from aveas_format.sim import Scenario, SumoNotFoundError, find_sumo, simulate
+    from aveas_format.sim import SumoNotFoundError, find_sumo
 
     try:
         find_sumo()
     except SumoNotFoundError as e:
         print(f"bench_sim skipped: {e}", file=sys.stderr)
         return []
-    from aveas_format.fit import FitConfig, evaluate, fit_desired_speed
-
     rows = []
-    paper = Scenario(seed=1)
-    simulate(paper)  # warm-up (netconvert cache, page cache)
-    t0 = time.perf_counter()
-    res = simulate(paper)
-    t_sim = time.perf_counter() - t0
-    n_veh = sum(len(v) for v in res.mean_speeds().values())
-    rows.append({"benchmark": "sim paper autobahn 1 h", "seconds": round(t_sim, 3),
-                 "rows_per_s": f"{res.fcd.num_rows / t_sim:,.0f}",
-                 "note": f"{n_veh} vehicles, {res.fcd.num_rows:,} FCD rows, step 0.5 s"})
-    t0 = time.perf_counter()
-    res = simulate(paper, recording=True)
-    t_rec = time.perf_counter() - t0
-    rows.append({"benchmark": "sim 1 h -> recording", "seconds": round(t_rec, 3),
-                 "rows_per_s": f"{res.recording.states.num_rows / t_rec:,.0f}",
-                 "note": "incl. converter (map matching)"})
-    ms = res.mean_speeds()
-    rng = np.random.default_rng(0)
-    recorded = {"car": rng.choice(ms["car"], 178, replace=False),
-                "truck": rng.choice(ms["truck"], 33, replace=False)}
     for lcd in (3.0, 0.0):
-        cfg = FitConfig(scenario=paper.model_copy(update={"lane_change_duration": lcd}))
-        t0 = time.perf_counter()
-        evaluate(np.array([130.0, 15.0, 88.0, 5.0]), cfg, recorded)
-        rows.append({"benchmark": f"fit: one evaluation (1 h, lc {lcd:g} s)",
-                     "seconds": round(time.perf_counter() - t0, 3),
-                     "note": "simulate + KDE -ln L; lane changes taking 3 s vs instantaneous"})
-
-    small_rec = simulate(_small(900, 7)).mean_speeds()
-    small_rec = {"car": small_rec["car"][:178], "truck": small_rec["truck"][:33]}
-    base = FitConfig(scenario=_small(600, 1).model_copy(update={"lane_change_duration": 0.0}),
-                     maxfev=30, seed=0)
-    t0 = time.perf_counter()
-    fit_desired_speed(small_rec, base.model_copy(update={"restarts": 1}), figures=False)
-    t_one = time.perf_counter() - t0
-    rows.append({"benchmark": "fit: one restart (30 evals)", "seconds": round(t_one, 3),
-                 "note": "1.3 km road, 10 min demand"})
-    times = {}
-    for w in (1, 2):
-        t0 = time.perf_counter()
-        fit_desired_speed(small_rec, base.model_copy(update={"restarts": 4}), workers=w, figures=False)
-        times[w] = time.perf_counter() - t0
-        rows.append({"benchmark": f"fit: 4 restarts, workers={w}", "seconds": round(times[w], 3),
-                     **({"baseline_s": round(times[1], 3),
-                         "speedup_vs_baseline": round(times[1] / times[w], 2)} if w > 1 else {})})
+        p = profile(lcd)
+        tag = f"lc {lcd:g} s"
+        note = f"paper's road, 15 min of demand, {p['vehicles']:.0f} vehicles"
+        rows.append({"benchmark": f"SUMO alone ({tag})", "seconds": round(p["SUMO alone"], 3),
+                     "note": note + ", no output"})
+        rows.append({"benchmark": f"fit evaluation ({tag})", "seconds": round(p["evaluation"], 3),
+                     "baseline_s": round(p["SUMO alone"], 3),
+                     "speedup_vs_baseline": round(p["SUMO alone"] / p["evaluation"], 2),
+                     "note": f"= {p['evaluation / SUMO alone (median of ratios)']:.2f}x SUMO alone "
+                             "(median of interleaved pairs; goal <= 1.3x)"})
+        rows.append({"benchmark": f"fit evaluation, FCD ({tag})",
+                      "seconds": round(p["evaluation, FCD path"], 3),
+                      "baseline_s": round(p["SUMO alone"], 3),
+                      "speedup_vs_baseline": round(p["SUMO alone"] / p["evaluation, FCD path"], 2),
+                      "note": "the previous path: FCD of every vehicle and step"})
     return rows
 
 
 if __name__ == "__main__":
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-    for r in main():
-        print(r)
+    if "--profile" in sys.argv:
+        for lcd in (3.0, 0.0):
+            print(f"# one evaluation, lane changes {lcd:g} s (medians of {REPEATS}, seconds)")
+            p = profile(lcd)
+            for k, v in p.items():
+                print(f"{k:<30} {v:8.4f}")
+    else:
+        for r in main():
+            print(r)

@@ -5,6 +5,9 @@ from __future__ import annotations
 from aveas_format.sim import Network, Scenario, VehicleClass
 
 PAPER = {"car": (131.05, 17.48), "truck": (89.22, 6.20)}
+#: fitting bounds around the paper's estimates (km/h)
+NARROW = {"mu_car": (115.0, 150.0), "sigma_car": (8.0, 28.0), "mu_truck": (80.0, 100.0),
+          "sigma_truck": (2.0, 12.0)}
 
 
 def small_scenario(duration: float = 300.0, seed: int = 1, length: float = 1000.0, inflow: float = 300.0,

@@ -44,7 +44,7 @@ def _recorded(recordings: list[Path], metric: str, road: str | None, s_range: st
 def _fit(recordings: list[Path], output: Path, config: Path | None, metric: str,
          parameters: list[str] | None, options: dict[str, float], restarts: int, workers: int,
          scheduler: str | None, maxfev: int, seed: int, bandwidth: str, bounds: str | None,
-         road: str | None, s_range: str | None) -> None:
+         road: str | None, s_range: str | None, search: dict) -> None:
     import numpy as np
     from pydantic import ValidationError
 
@@ -63,9 +63,13 @@ def _fit(recordings: list[Path], output: Path, config: Path | None, metric: str,
         parameters = [n for n in parameters if n.partition("_")[2] in used]
         if not parameters:
             raise fail("no parameter of a class with recorded values", EXIT_USAGE)
-    cfg: dict = {"scenario": Scenario.from_toml(config) if config else Scenario(),
-                 "classes": used, "restarts": restarts, "maxfev": maxfev, "seed": seed,
-                 "metric": metric, "parameters": parameters, "metric_options": options}
+    scenario = Scenario.from_toml(config) if config else Scenario()
+    duration = search.pop("duration", None)
+    if duration is not None:
+        scenario = scenario.model_copy(update={"duration": duration})
+    cfg: dict = {"scenario": scenario, "classes": used, "restarts": restarts, "maxfev": maxfev,
+                 "seed": seed, "metric": metric, "parameters": parameters, "metric_options": options,
+                 **search}
     try:
         cfg["bandwidth"] = float(bandwidth)
     except ValueError:
@@ -86,9 +90,18 @@ def _fit(recordings: list[Path], output: Path, config: Path | None, metric: str,
         err.print(f"failed: {f}")
     if not res.runs:
         raise fail("every restart failed")
-    b = res.best
-    out.print(json.dumps({"best": {n: round(b[n], 3) for n in fc.names}, "neg_log_likelihood":
-                          round(b["fun"], 4), "restarts": len(res.runs)}, indent=2))
+    s = res.summary()
+    out.print(json.dumps({"best": {n: round(s[n], 3) for n in fc.names},
+                          "se": s.get("se"), "neg_log_likelihood": round(s["fun"], 4),
+                          "converged": s["converged"], "stop": s["stop"], "method": s["method"],
+                          "restarts": s["restarts"], "restarts_converged": s["restarts_converged"],
+                          "restarts_agreeing": s["restarts_agreeing"],
+                          "evaluations": s["evaluations"]}, indent=2))
+    if not s["converged"]:
+        err.print(f"the fit did not converge: {s['stop']}")
+    for r in res.runs:
+        if not r.get("converged"):
+            err.print(f"restart {r['restart']} did not converge: {r.get('stop', '')}")
     err.print(f"wrote {output}/runs.parquet, best.json, fit_histogram.png, fit_parameters.png")
 
 
@@ -98,9 +111,20 @@ _OUTPUT = typer.Option(..., "--output", "-o", help="Output directory (runs.jsonl
 _CONFIG = typer.Option(None, "--config", "-c", help="Scenario TOML of the simulation (default: the "
                        "paper's autobahn).")
 _SCHEDULER = scheduler_option(help="Dask scheduler address tcp://... (overrides --workers).")
-_MAXFEV = typer.Option(120, "--maxfev", help="Evaluations per restart at most.")
+_MAXFEV = typer.Option(200, "--maxfev", help="Evaluations per restart at most.")
+_RESTARTS = typer.Option(4, "--restarts", "-r", min=1, help="Independent searches (the paper: 100 "
+                         "Nelder-Mead runs).")
 _SEED = typer.Option(0, "--seed", help="Seed of the starting points.")
 _ROAD = typer.Option(None, "--road", help="Use only samples on this road id.")
+_METHOD = typer.Option("cma", "--method", help="Optimiser: cma (CMA-ES, default), nelder-mead (the "
+                       "paper's) or bayes (Gaussian-process Bayesian optimisation).")
+_STARTS = typer.Option("data", "--starts", help="data: the first restart starts from the data, the "
+                       "others uniformly in the bounds; uniform: all uniformly (the paper's).")
+_REFINE = typer.Option(True, "--refine/--no-refine", help="Estimate and standard errors from a "
+                       "quadratic response surface around the best restart (75 more simulations "
+                       "for 4 parameters).")
+_DURATION = typer.Option(None, "--duration", help="Override the simulated demand period (s) of "
+                         "each evaluation (default: the scenario's, 3,600 s).")
 _S_RANGE = typer.Option(None, "--s-range", help="Use only samples with road_s in MIN,MAX.")
 
 
@@ -110,11 +134,15 @@ def desired_speed(
     recordings: list[Path] = _RECORDINGS,
     output: Path = _OUTPUT,
     config: Path = _CONFIG,
-    restarts: int = typer.Option(100, "--restarts", "-r", min=1, help="Nelder-Mead starts."),
+    restarts: int = _RESTARTS,
     workers: int = SIMULATION_WORKERS,
     scheduler: str = _SCHEDULER,
     maxfev: int = _MAXFEV,
     seed: int = _SEED,
+    method: str = _METHOD,
+    starts: str = _STARTS,
+    refine: bool = _REFINE,
+    duration: float = _DURATION,
     bandwidth: str = typer.Option("silverman", "--bandwidth", help="KDE bandwidth: silverman, "
                                   "scott or a number (km/h)."),
     bounds: str = typer.Option(None, "--bounds", help="JSON {\"mu_car\": [lo, hi], ...} (km/h)."),
@@ -124,7 +152,8 @@ def desired_speed(
     """Fit the desired-speed distributions N(mu, sigma) of cars and trucks to the per-vehicle mean
     speeds of recordings (the paper's experiment)."""
     _fit(recordings, output, config, "mean_speed", None, {}, restarts, workers, scheduler, maxfev,
-         seed, bandwidth, bounds, road, s_range)
+         seed, bandwidth, bounds, road, s_range,
+         {"method": method, "starts": starts, "refine": refine, "duration": duration})
 
 
 @fit_app.command("car-following")
@@ -138,11 +167,15 @@ def car_following(
     metric: str = typer.Option("time_headway", "--metric", "-m", help="Per-vehicle metric: "
                                "time_headway, min_ttc, a_lon_std or mean_speed."),
     config: Path = _CONFIG,
-    restarts: int = typer.Option(10, "--restarts", "-r", min=1, help="Nelder-Mead starts."),
+    restarts: int = _RESTARTS,
     workers: int = SIMULATION_WORKERS,
     scheduler: str = _SCHEDULER,
     maxfev: int = _MAXFEV,
     seed: int = _SEED,
+    method: str = _METHOD,
+    starts: str = _STARTS,
+    refine: bool = _REFINE,
+    duration: float = _DURATION,
     bandwidth: str = typer.Option("silverman", "--bandwidth", help="KDE bandwidth: silverman, "
                                   "scott or a number (in the metric's unit)."),
     bounds: str = typer.Option(None, "--bounds", help="JSON {\"cc1_car\": [lo, hi], ...} "
@@ -167,5 +200,55 @@ def car_following(
                        EXIT_USAGE)
     options = {k: float(v) for k, v in options.items()}
     _fit(recordings, output, config, metric, param or ["cc1_car", "cc1_truck"], options, restarts,
-         workers, scheduler, maxfev, seed, bandwidth, bounds, road, s_range)
+         workers, scheduler, maxfev, seed, bandwidth, bounds, road, s_range,
+         {"method": method, "starts": starts, "refine": refine, "duration": duration})
 
+
+
+@fit_app.command("study")
+@handle_errors
+def study(
+    output: Path = typer.Option(..., "--output", "-o", help="Output directory (study.jsonl, "
+                                "study.json, study.png); an existing one is resumed."),
+    seeds: int = typer.Option(10, "--seeds", "-n", min=2, help="Replicates k = 1..N."),
+    config: Path = _CONFIG,
+    duration: float = typer.Option(900.0, "--duration", help="Demand period (s) of the recordings "
+                                   "and of each evaluation."),
+    sizes: str = typer.Option("paper,all", "--sizes", help="paper (178 cars, 33 trucks "
+                              "subsampled) and/or all (every vehicle of --duration)."),
+    restarts: int = typer.Option(1, "--restarts", "-r", min=1, help="Restarts per fit."),
+    maxfev: int = typer.Option(100, "--maxfev", help="Evaluations per restart at most."),
+    method: str = _METHOD,
+    workers: int = SIMULATION_WORKERS,
+    scheduler: str = _SCHEDULER,
+) -> None:
+    """Parameter recovery as a statistic: simulate a recording at the paper's estimates with seed
+    k, fit it back, for k = 1..N; report bias, RMSE, 95 % coverage and the sampling floor per
+    parameter (exit 1 when a target of docs/fitting.md is missed)."""
+    from pydantic import ValidationError
+
+    from aveas_format.fit.optimize import FitConfig
+    from aveas_format.fit.study import StudyConfig, paper_scenario, recovery_study
+    from aveas_format.io.reader import format_validation_error
+    from aveas_format.sim.scenario import Scenario
+
+    sc = Scenario.from_toml(config).model_copy(update={"duration": duration}) if config \
+        else paper_scenario(duration)
+    try:
+        cfg = StudyConfig(seeds=seeds, sizes=[s.strip() for s in sizes.split(",") if s.strip()],
+                          fit=FitConfig(scenario=sc, restarts=restarts, maxfev=maxfev, method=method))
+    except ValidationError as e:
+        raise fail(f"study configuration: {format_validation_error(e)}", EXIT_USAGE) from None
+    bad = set(cfg.sizes) - {"paper", "all"}
+    if bad:
+        raise fail(f"--sizes: unknown {sorted(bad)} (paper, all)", EXIT_USAGE)
+    rows, summary = recovery_study(cfg, workers=workers, scheduler=scheduler, outdir=output,
+                                   progress=True)
+    for f in summary["failed"]:
+        err.print(f"failed: {f}")
+    if not rows:
+        raise fail("every replicate failed")
+    out.print(json.dumps(summary, indent=2))
+    err.print(f"wrote {output}/study.jsonl, study.json, study.png")
+    if not all(summary["targets"].values()):
+        raise typer.Exit(1)

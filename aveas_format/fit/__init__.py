@@ -30,7 +30,8 @@ from aveas_format.fit.optimize import (
     load_runs,
     run_restart,
 )
+from aveas_format.fit.search import METHODS
 
-__all__ = ["METRICS", "FitConfig", "FitResult", "Metric", "evaluate", "fit_desired_speed",
+__all__ = ["METHODS", "METRICS", "FitConfig", "FitResult", "Metric", "evaluate", "fit_desired_speed",
            "fit_parameters", "initial_simplex", "kde_logpdf", "load_runs", "neg_log_likelihood",
            "recorded_mean_speeds", "run_restart", "scott_bandwidth", "silverman_bandwidth"]

@@ -4,22 +4,28 @@ parameters against time headways, minimum TTCs or acceleration spreads (``FitCon
 ``FitConfig.parameters``).
 
 >>> from aveas_format.fit import FitConfig, fit_parameters
->>> result = fit_parameters({"car": v_car, "truck": v_truck}, FitConfig(restarts=100),
-...                         workers=8, outdir="fit-out")                         # doctest: +SKIP
->>> result.best                                                                  # doctest: +SKIP
+>>> result = fit_parameters({"car": v_car, "truck": v_truck}, FitConfig(restarts=4),
+...                         workers=2, outdir="fit-out")                         # doctest: +SKIP
+>>> result.best, result.summary()                                                # doctest: +SKIP
 >>> fit_parameters(headways, FitConfig(metric="time_headway", parameters=["cc1_car"]),
 ...                outdir="fit-cc1")                                             # doctest: +SKIP
 
-Nelder-Mead (SciPy) minimises -ln L (:mod:`.objective`) from ``restarts`` starting points drawn
-uniformly from the bounds; the initial simplex has edges of ``simplex_fraction`` x the bound widths
-(pointing inwards), the bounds are enforced by SciPy's bounded Nelder-Mead (points are clipped).
-Each evaluation runs SUMO with the same seed (common random numbers: same arrivals and same
-standard-normal draw per vehicle), so the objective is a smooth-ish deterministic function.
+Each restart minimises -ln L (:mod:`.objective`) with one of the optimisers of :mod:`.search`
+(CMA-ES by default; the paper's Nelder-Mead with ``method="nelder-mead"``) from its own starting
+point: the first from the data (``starts="data"``: the recorded values' moments for mu/sigma under
+the mean-speed metric, else the scenario's value; ``FitConfig.start`` overrides), the others drawn
+uniformly from the bounds. Every evaluation runs SUMO with the same seed (common random numbers:
+same arrivals and same standard-normal draw per vehicle, stratified by default), so the objective is
+a deterministic, nearly smooth function; the network is built once per fit and shipped with the
+tasks; with the mean-speed metric SUMO writes only the section crossings.
 
 Restarts are independent tasks run through :func:`aveas_format.parallel.run_tasks` (in-process,
 local processes or a Dask cluster). Each finished restart is appended to ``OUTDIR/runs.jsonl`` at
-once, so an interrupted fit resumes where it stopped (restarts already stored are skipped);
-``runs.parquet``, ``best.json`` and the figures are written at the end.
+once, so an interrupted fit resumes where it stopped (restarts already stored are skipped). At the
+end a quadratic response surface of -ln L around the best restart's end gives the estimate and a
+standard error per parameter (the quadratic profile likelihood, :mod:`.uncertainty`), and
+``runs.parquet``, ``best.json`` (the estimate, whether the fit converged and why it stopped, the
+standard errors, every restart's convergence) and the figures are written.
 """
 
 from __future__ import annotations
@@ -28,13 +34,18 @@ import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from aveas_format.fit.objective import neg_log_likelihood
+from aveas_format.fit.search import Objective, initial_simplex, minimise
 from aveas_format.safeio import write_parquet_atomic, write_text_atomic
 from aveas_format.sim.scenario import W99_DEFAULTS, W99_RANGES, Scenario
+
+__all__ = ["FitConfig", "FitResult", "evaluate", "fit_desired_speed", "fit_parameters",
+           "initial_simplex", "load_runs", "metric_at", "run_restart", "run_stored"]
 
 
 class FitConfig(BaseModel):
@@ -55,14 +66,43 @@ class FitConfig(BaseModel):
                                          "<cc>_<class>; default mu and sigma of every class")
     metric_options: dict[str, float] = Field(default_factory=dict, description="options of the "
                                              "metric (e.g. max_thw, min_following)")
-    restarts: int = Field(100, ge=1)
-    seed: int = Field(0, description="seed of the starting points")
-    maxfev: int = Field(120, ge=5, description="evaluations per restart at most")
-    xatol: float = Field(0.1, gt=0, description="km/h")
-    fatol: float = Field(0.05, gt=0)
-    simplex_fraction: float = Field(0.2, gt=0, le=1)
+    method: Literal["cma", "nelder-mead", "bayes"] = Field(
+        "cma", description="optimiser (aveas_format.fit.search): CMA-ES, the paper's Nelder-Mead, "
+        "or Gaussian-process Bayesian optimisation")
+    restarts: int = Field(4, ge=1, description="independent searches (the paper: 100 Nelder-Mead runs)")
+    starts: Literal["data", "uniform"] = Field("data", description="data: the first restart starts "
+                                               "from the data (see start), the others uniformly in "
+                                               "the bounds; uniform: all uniformly (the paper's)")
+    start: dict[str, float] | None = Field(None, description="the first restart's starting point "
+                                           "(default: the recorded values' mean and standard "
+                                           "deviation for mu/sigma under the mean-speed metric, "
+                                           "else the scenario's value)")
+    seed: int = Field(0, description="seed of the starting points and of the optimiser")
+    maxfev: int = Field(200, ge=5, description="evaluations per restart at most")
+    xatol: float = Field(0.5, gt=0, description="a restart has converged when its search has "
+                         "settled to within this in every parameter (km/h; CMA-ES: the spread of "
+                         "its distribution). Finer than about half a standard error the "
+                         "objective's jumps decide, and the response surface takes over")
+    fatol: float = Field(0.05, gt=0, description="convergence tolerance in -ln L")
+    simplex_fraction: float = Field(0.2, gt=0, le=1, description="initial step as a fraction of "
+                                    "the bound widths (Nelder-Mead's simplex, CMA-ES's sigma0)")
+    popsize: int | None = Field(None, ge=2, description="CMA-ES population (default 4 + 3 ln n)")
+    speed_sampling: Literal["random", "stratified", "scenario"] = Field(
+        "stratified", description="the simulated desired speeds: stratified quantiles (no sampling "
+        "error of the simulated mu and sigma), random draws, or as the scenario says")
+    refine: bool = Field(True, description="estimate and standard errors from a quadratic "
+                         "response surface of -ln L around the best restart's end (three rounds of "
+                         "2 n (n - 1) + 1 simulations; aveas_format.fit.uncertainty)")
+    refine_rounds: int = Field(3, ge=1, le=10, description="rounds of the response-surface design")
+    refine_step: float = Field(0.03, gt=0, le=0.25, description="the first response-surface "
+                               "design's half-width as a fraction of the bound widths (for mu/sigma "
+                               "under the mean-speed metric: two standard errors of the recorded "
+                               "values' mean and standard deviation instead)")
     bandwidth: str | float = "silverman"
     kde_backend: str = "numpy"
+    variance_correction: bool = Field(True, description="shrink the simulated values towards their "
+                                      "mean before smoothing so that the KDE's variance is theirs "
+                                      "(without it a fitted sigma is biased low by about h^2 / 2s)")
 
     @model_validator(mode="after")
     def _check(self) -> FitConfig:
@@ -75,6 +115,9 @@ class FitConfig(BaseModel):
             if kind not in ("mu", "sigma", *W99_DEFAULTS) or c not in self.classes:
                 raise ValueError(f"parameter {n!r}: expected mu_<class>, sigma_<class> or "
                                  f"cc0_<class> ... cc9_<class> with a class of {self.classes}")
+        unknown = set(self.start or {}) - set(self.names)
+        if unknown:
+            raise ValueError(f"start has parameters that are not fitted: {sorted(unknown)}")
         return self
 
     @property
@@ -109,69 +152,105 @@ class FitConfig(BaseModel):
         sc = self.scenario.with_desired_speeds({c: (mu, sd) for c, (mu, sd) in speeds.items()})
         for c, params in cf.items():
             sc = sc.with_cf_params(c, **params)
+        if self.speed_sampling != "scenario" and sc.random_numbers == "common":
+            sc.speed_sampling = self.speed_sampling
         return sc
 
-    def starts(self) -> np.ndarray:
+    def data_start(self, recorded: dict[str, np.ndarray]) -> np.ndarray:
+        """The first restart's start: ``start``, else per parameter the recorded values' mean
+        (mu_<class>) or standard deviation (sigma_<class>) under the mean-speed metric, else the
+        scenario's value; clipped into the bounds."""
+        b = self.bounds_array()
+        x = []
+        for n in self.names:
+            kind, _, c = n.partition("_")
+            v = np.asarray(recorded.get(c, []), np.float64)
+            if self.start and n in self.start:
+                x.append(self.start[n])
+            elif self.metric == "mean_speed" and kind in ("mu", "sigma") and len(v) > 1:
+                x.append(float(v.mean()) if kind == "mu" else float(v.std(ddof=1)))
+            elif kind in ("mu", "sigma"):
+                cls = self.scenario.cls(c)
+                x.append(cls.speed_mean_kmh if kind == "mu" else cls.speed_std_kmh)
+            else:
+                x.append(self.scenario.cls(c).w99()[kind])
+        return np.clip(np.array(x, np.float64), b[:, 0], b[:, 1])
+
+    def surface_step(self, recorded: dict[str, np.ndarray]) -> np.ndarray:
+        """The first response-surface design's half-width per parameter: about two standard errors
+        where the data tell them (mu: 2 s / sqrt(n), sigma: 2 s / sqrt(2 n) of the recorded mean
+        speeds), else ``refine_step`` x the bound width."""
+        b = self.bounds_array()
+        step = (b[:, 1] - b[:, 0]) * self.refine_step
+        for i, n in enumerate(self.names):
+            kind, _, c = n.partition("_")
+            v = np.asarray(recorded.get(c, []), np.float64)
+            if self.metric == "mean_speed" and kind in ("mu", "sigma") and len(v) > 5:
+                step[i] = 2.0 * v.std(ddof=1) / np.sqrt(len(v) * (1 if kind == "mu" else 2))
+        return step
+
+    def starts_array(self, recorded: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        """One starting point per restart (see ``starts``)."""
         b = self.bounds_array()
         rng = np.random.default_rng(self.seed)
-        return b[:, 0] + rng.random((self.restarts, len(b))) * (b[:, 1] - b[:, 0])
+        pts = b[:, 0] + rng.random((self.restarts, len(b))) * (b[:, 1] - b[:, 0])
+        if self.starts == "data":
+            pts[0] = self.data_start(recorded or {})
+        return pts
 
 
-def metric_at(theta: np.ndarray, config: FitConfig) -> dict[str, np.ndarray]:
-    """The simulated per-vehicle metric at ``theta``."""
+def metric_at(theta: np.ndarray, config: FitConfig, network=None) -> dict[str, np.ndarray]:
+    """The simulated per-vehicle metric at ``theta`` (``network``: a prepared SUMO network)."""
     from aveas_format.fit.objective import METRICS
     from aveas_format.sim.runner import simulate
 
     m = METRICS[config.metric]
-    res = simulate(config.scenario_at(theta), recording=m.needs_recording)
+    res = simulate(config.scenario_at(theta), recording=m.needs_recording,
+                   fcd=not m.section_only, network=network)
     return m.simulated(res, **config.metric_options)
 
 
-def evaluate(theta: np.ndarray, config: FitConfig, recorded: dict[str, np.ndarray]
+def evaluate(theta: np.ndarray, config: FitConfig, recorded: dict[str, np.ndarray], network=None
              ) -> tuple[float, dict[str, np.ndarray]]:
     """-ln L at ``theta`` (the parameters of ``config.names``) and the simulated metric."""
-    sim = metric_at(theta, config)
-    return neg_log_likelihood(recorded, sim, config.bandwidth, config.kde_backend), sim
+    sim = metric_at(theta, config, network)
+    return neg_log_likelihood(recorded, sim, config.bandwidth, config.kde_backend,
+                              config.variance_correction), sim
 
 
-def initial_simplex(x0: np.ndarray, bounds: np.ndarray, fraction: float) -> np.ndarray:
-    """x0 plus one vertex per parameter, moved by ``fraction`` of the bound width, inwards."""
-    w = (bounds[:, 1] - bounds[:, 0]) * fraction
-    sim = [x0]
-    for i in range(len(x0)):
-        v = x0.copy()
-        v[i] = x0[i] + w[i] if x0[i] + w[i] <= bounds[i, 1] else x0[i] - w[i]
-        sim.append(v)
-    return np.array(sim)
+def _task_inputs(task: dict) -> tuple[FitConfig, dict[str, np.ndarray]]:
+    config = task["config"]
+    config = config if isinstance(config, FitConfig) else FitConfig.model_validate(config)
+    return config, {c: np.asarray(v, np.float64) for c, v in task["recorded"].items()}
 
 
 def run_restart(task: dict) -> dict:
-    """One Nelder-Mead run (a module-level function: runs in worker processes and on Dask)."""
-    from scipy.optimize import minimize
-
-    config = FitConfig.model_validate(task["config"])
-    recorded = {c: np.asarray(v, np.float64) for c, v in task["recorded"].items()}
+    """One search from ``task["x0"]`` (a module-level function: runs in worker processes and on
+    Dask). Returns the start and end parameters, -ln L, evaluations, whether it converged and why
+    it stopped, the seconds it took and the trace of -ln L per evaluation."""
+    config, recorded = _task_inputs(task)
     x0 = np.asarray(task["x0"], np.float64)
     b = config.bounds_array()
+    net = task.get("network")
     t0 = time.perf_counter()
-    cache: dict[tuple, float] = {}
-
-    def f(x: np.ndarray) -> float:
-        key = tuple(np.round(x, 6))
-        if key not in cache:
-            cache[key] = evaluate(np.clip(x, b[:, 0], b[:, 1]), config, recorded)[0]
-        return cache[key]
-
-    r = minimize(f, x0, method="Nelder-Mead", bounds=[tuple(v) for v in b],
-                 options={"initial_simplex": initial_simplex(x0, b, config.simplex_fraction),
-                          "maxfev": config.maxfev, "xatol": config.xatol, "fatol": config.fatol})
-    out = {"restart": int(task["restart"]), "fun": float(r.fun), "nfev": int(r.nfev), "nit": int(r.nit),
-           "success": bool(r.success), "message": str(r.message),
+    f = Objective(lambda x: evaluate(x, config, recorded, net)[0], b)
+    r = minimise(config.method, f, x0, maxfev=config.maxfev, xatol=config.xatol, fatol=config.fatol,
+                 step=config.simplex_fraction, seed=config.seed * 1000 + int(task["restart"]),
+                 popsize=config.popsize)
+    out = {"restart": int(task["restart"]), "method": config.method, "fun": r.fun, "nfev": r.nfev,
+           "nit": r.nit, "converged": r.converged, "stop": r.stop,
            "seconds": round(time.perf_counter() - t0, 3)}
     for i, n in enumerate(config.names):
         out[f"start_{n}"] = float(x0[i])
         out[n] = float(np.clip(r.x[i], b[i, 0], b[i, 1]))
+    out["trace"] = r.trace
     return out
+
+
+def evaluate_point(task: dict) -> float:
+    """-ln L at ``task["theta"]`` (a module-level function for the response surface's tasks)."""
+    config, recorded = _task_inputs(task)
+    return evaluate(np.asarray(task["theta"], np.float64), config, recorded, task.get("network"))[0]
 
 
 @dataclass
@@ -181,17 +260,79 @@ class FitResult:
     recorded: dict[str, np.ndarray]
     outdir: Path | None = None
     failed: list[str] = field(default_factory=list)
+    #: the response surface (:func:`aveas_format.fit.uncertainty.response_surface`; empty without)
+    surface: dict = field(default_factory=dict)
 
     @property
     def best(self) -> dict:
+        """The restart with the lowest -ln L at its end."""
         return min(self.runs, key=lambda r: r["fun"])
 
     def best_params(self) -> dict[str, float]:
+        """The estimate: the response surface's minimum, else the best restart's end."""
+        if self.surface:
+            return {n: float(self.surface["x"][i]) for i, n in enumerate(self.config.names)}
         return {n: self.best[n] for n in self.config.names}
 
+    @property
+    def converged(self) -> bool:
+        """The response surface converged (when refined), else the best restart did."""
+        return bool(self.surface["converged"] if self.surface else self.best.get("converged", False))
 
-def load_runs(outdir: Path) -> list[dict]:
-    p = Path(outdir) / "runs.jsonl"
+    def agreeing(self) -> int:
+        """How many restarts ended within two standard errors of the estimate in every parameter
+        (without standard errors: within 2 x xatol of the best restart's end) — the paper's
+        robustness check, the same minimum from different starts."""
+        names = self.config.names
+        est = self.best_params()
+        se = self.surface.get("se") if self.surface else None
+        if se is not None and np.all(np.isfinite(se)):
+            tol = dict(zip(names, 2.0 * np.asarray(se), strict=True))
+        else:
+            est = {n: self.best[n] for n in names}
+            tol = dict.fromkeys(names, 2.0 * self.config.xatol)
+        return sum(all(abs(r[n] - est[n]) <= tol[n] for n in names) for r in self.runs)
+
+    def summary(self) -> dict:
+        """What ``best.json`` holds: the estimate, whether the fit converged and why it stopped,
+        the standard errors and 95 % intervals, the best restart and how the restarts agreed."""
+        names = self.config.names
+        b = self.best
+        est = self.best_params()
+        out: dict = {**est, "fun": self.surface["fun"] if self.surface else b["fun"],
+                     "converged": self.converged,
+                     "stop": self.surface["stop"] if self.surface else b.get("stop", ""),
+                     "estimate": "response surface" if self.surface else "best restart",
+                     "method": self.config.method, "restarts": len(self.runs),
+                     "restarts_converged": sum(bool(r.get("converged")) for r in self.runs),
+                     "restarts_at_cap": sum(not r.get("converged") for r in self.runs),
+                     "restarts_agreeing": self.agreeing(),
+                     "evaluations": sum(r["nfev"] for r in self.runs)
+                     + self.surface.get("evaluations", 0),
+                     "best_restart": {k: b[k] for k in ("restart", "fun", "nfev", "converged", "stop",
+                                                        *names, *(f"start_{n}" for n in names))
+                                      if k in b}}
+        if self.surface:
+            se = self.surface["se"]
+            out["se"] = {n: _num(se[i]) for i, n in enumerate(names)}
+            out["ci95"] = {n: [_num(est[n] - 1.96 * se[i]), _num(est[n] + 1.96 * se[i])]
+                           for i, n in enumerate(names)}
+            out["response_surface"] = {
+                "method": "quadratic fit of -ln L to Box-Behnken designs around the best restart "
+                          "(observed information; the quadratic profile likelihood)",
+                "rounds": self.surface["rounds"], "evaluations": self.surface["evaluations"],
+                "step": {n: _num(self.surface["step"][i]) for i, n in enumerate(names)},
+                "cov": [[_num(v) for v in row] for row in np.asarray(self.surface["cov"])]}
+        return out
+
+
+def _num(v: float) -> float | None:
+    return None if not np.isfinite(v) else round(float(v), 6)
+
+
+def load_runs(outdir: Path, name: str = "runs.jsonl") -> list[dict]:
+    """The rows stored in ``outdir/name`` (JSON lines; a line cut by an interruption is skipped)."""
+    p = Path(outdir) / name
     if not p.exists():
         return []
     runs = []
@@ -204,13 +345,52 @@ def load_runs(outdir: Path) -> list[dict]:
     return runs
 
 
+def run_stored(fn, tasks: list[dict], label, *, workers: int | None, scheduler: str | None,
+               progress: bool, description: str, store: Path | None) -> tuple[list, list[str]]:
+    """Run ``fn`` over ``tasks`` through :func:`aveas_format.parallel.run_tasks`; every result is
+    appended to the JSON-lines file ``store`` as soon as it arrives (so that an interrupted run
+    resumes, :func:`load_runs`). Returns the results and one message per failed task
+    (``label(task)``: what failed)."""
+    from aveas_format.parallel import run_tasks
+
+    values, failed = [], []
+    for r in run_tasks(fn, tasks, workers=workers, scheduler=scheduler, progress=progress,
+                       description=description):
+        if not r.ok:
+            failed.append(f"{label(r.item)}: {r.error}")
+            continue
+        values.append(r.value)
+        if store is not None:
+            with open(store, "a") as f:
+                f.write(json.dumps(r.value) + "\n")
+    return values, failed
+
+
+def _check_stored_config(od: Path, config: FitConfig) -> None:
+    cfg_path = od / "config.json"
+    cfg_json = config.model_dump(mode="json")
+    if cfg_path.exists():
+        old = json.loads(cfg_path.read_text())
+        try:  # fills fields added since the fit was stored with their defaults
+            old = FitConfig.model_validate(old).model_dump(mode="json")
+        except ValueError:
+            pass
+        if {k: v for k, v in old.items() if k != "restarts"} != \
+                {k: v for k, v in cfg_json.items() if k != "restarts"}:
+            from aveas_format.errors import AveasError
+
+            raise AveasError("holds a fit with a different configuration; use another "
+                             "output directory", path=od)
+    write_text_atomic(cfg_path, json.dumps(cfg_json, indent=2))
+
+
 def fit_parameters(recorded: dict[str, np.ndarray], config: FitConfig | None = None, *,
                    workers: int | None = 1, scheduler: str | None = None,
                    outdir: str | Path | None = None, progress: bool = False,
                    figures: bool = True) -> FitResult:
-    """Run (or resume) the restarts; see the module docstring. ``recorded``: per class, the
-    recorded values of ``config.metric``."""
-    from aveas_format.parallel import run_tasks
+    """Run (or resume) the restarts, then the response surface; see the module docstring.
+    ``recorded``: per class, the recorded values of ``config.metric``."""
+    from aveas_format.sim.runner import prepare_network
 
     config = config or FitConfig()
     recorded = {c: np.asarray(recorded.get(c, []), np.float64) for c in config.classes}
@@ -218,58 +398,70 @@ def fit_parameters(recorded: dict[str, np.ndarray], config: FitConfig | None = N
     done: list[dict] = []
     if od is not None:
         od.mkdir(parents=True, exist_ok=True)
-        cfg_path = od / "config.json"
-        cfg_json = config.model_dump(mode="json")
-        if cfg_path.exists():
-            old = json.loads(cfg_path.read_text())
-            try:  # fills fields added since the fit was stored with their defaults
-                old = FitConfig.model_validate(old).model_dump(mode="json")
-            except ValueError:
-                pass
-            if {k: v for k, v in old.items() if k != "restarts"} != \
-                    {k: v for k, v in cfg_json.items() if k != "restarts"}:
-                from aveas_format.errors import AveasError
-
-                raise AveasError("holds a fit with a different configuration; use another "
-                                 "output directory", path=od)
-        write_text_atomic(cfg_path, json.dumps(cfg_json, indent=2))
+        _check_stored_config(od, config)
         write_text_atomic(od / "recorded.json", json.dumps({c: v.tolist() for c, v in recorded.items()}))
         done = [r for r in load_runs(od) if r["restart"] < config.restarts]
     have = {r["restart"] for r in done}
-    starts = config.starts()
-    cfg = config.model_dump(mode="json")
-    rec_l = {c: v.tolist() for c, v in recorded.items()}
-    tasks = [{"config": cfg, "recorded": rec_l, "restart": i, "x0": starts[i].tolist()}
+    starts = config.starts_array(recorded)
+    network = prepare_network(config.scenario.network)  # once per fit, shipped with the tasks
+    base = {"config": config.model_dump(mode="json"), "network": network,
+            "recorded": {c: v.tolist() for c, v in recorded.items()}}
+    tasks = [{**base, "restart": i, "x0": starts[i].tolist()}
              for i in range(config.restarts) if i not in have]
-    runs = list(done)
-    failed = []
-    for r in run_tasks(run_restart, tasks, workers=workers, scheduler=scheduler, progress=progress,
-                       description="restarts"):
-        if not r.ok:
-            failed.append(f"restart {r.item['restart']}: {r.error}")
-            continue
-        runs.append(r.value)
-        if od is not None:
-            with open(od / "runs.jsonl", "a") as f:
-                f.write(json.dumps(r.value) + "\n")
+    new, failed = run_stored(run_restart, tasks, lambda t: f"restart {t['restart']}", workers=workers,
+                             scheduler=scheduler, progress=progress, description="restarts",
+                             store=None if od is None else od / "runs.jsonl")
+    runs = [*done, *new]
     runs.sort(key=lambda r: r["restart"])
     res = FitResult(config, runs, recorded, od, failed)
+    if runs and config.refine:
+        res.surface = _refine(res, base, workers, scheduler, progress)
     if od is not None and runs:
         import pyarrow as pa
 
         write_parquet_atomic(pa.Table.from_pylist(runs), od / "runs.parquet")
-        write_text_atomic(od / "best.json", json.dumps(res.best, indent=2))
+        write_text_atomic(od / "best.json", json.dumps(res.summary(), indent=2))
         if figures:
-            from aveas_format.fit.objective import METRICS, kde_logpdf
-            from aveas_format.plot.fit import plot_histogram, plot_parameters
-
-            m = METRICS[config.metric]
-            sim = metric_at(np.array([res.best[n] for n in config.names]), config)
-            plot_histogram(recorded, sim, od / "fit_histogram.png",
-                           density=lambda s, grid: np.exp(kde_logpdf(s, grid, config.bandwidth)),
-                           unit=m.unit, label=m.label or m.name)
-            plot_parameters(runs, config.names, od / "fit_parameters.png")
+            _figures(res, network)
     return res
+
+
+def _refine(res: FitResult, base: dict, workers: int | None, scheduler: str | None,
+            progress: bool) -> dict:
+    from aveas_format.fit.uncertainty import response_surface
+    from aveas_format.parallel import run_tasks
+
+    config = res.config
+    b = config.bounds_array()
+
+    def evaluate_all(points: list[np.ndarray]) -> list[float]:
+        out = [np.nan] * len(points)
+        tasks = [{**base, "theta": p.tolist()} for p in points]
+        for r in run_tasks(evaluate_point, tasks, workers=workers, scheduler=scheduler,
+                           progress=progress, description="response surface"):
+            if r.ok:
+                out[r.index] = r.value
+        return out
+
+    x = np.array([res.best[n] for n in config.names])
+    return response_surface(x, config.surface_step(res.recorded), evaluate_all, b,
+                            rounds=config.refine_rounds)
+
+
+def _figures(res: FitResult, network) -> None:
+    from aveas_format.fit.objective import METRICS, kde_logpdf
+    from aveas_format.plot.fit import plot_histogram, plot_parameters
+
+    config, od = res.config, res.outdir
+    m = METRICS[config.metric]
+    sim = metric_at(np.array(list(res.best_params().values())), config, network)
+    plot_histogram(res.recorded, sim, od / "fit_histogram.png",
+                   density=lambda s, grid: np.exp(kde_logpdf(s, grid, config.bandwidth,
+                                                             variance_correction=config.variance_correction)),
+                   unit=m.unit, label=m.label or m.name)
+    plot_parameters(res.runs, config.names, od / "fit_parameters.png",
+                    estimate=res.best_params() if res.surface else None,
+                    se=dict(zip(config.names, res.surface["se"], strict=True)) if res.surface else None)
 
 
 #: the paper's experiment (the default configuration fits the desired speeds)

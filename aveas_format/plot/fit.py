@@ -64,8 +64,11 @@ def _axes_pairs(names: list[str]) -> list[tuple[str, str | None]]:
     return pairs
 
 
-def plot_parameters(runs: list[dict], names: list[str], path: str | Path) -> Path:
-    """Start (grey) and end (colour) parameters of every restart, the best as a red star."""
+def plot_parameters(runs: list[dict], names: list[str], path: str | Path, *,
+                    estimate: dict[str, float] | None = None, se: dict[str, float] | None = None
+                    ) -> Path:
+    """Start (grey) and end (colour) parameters of every restart, the best as a red star; with
+    ``estimate`` (and ``se``) the fit's estimate as a black cross with its 95 % intervals."""
     pairs = _axes_pairs(names)
     same_axes = all(x.startswith("mu_") for x, _ in pairs)  # the paper's figure: one (mu, sigma) plot
     n_ax = 1 if same_axes else len(pairs)
@@ -83,6 +86,11 @@ def plot_parameters(runs: list[dict], names: list[str], path: str | Path) -> Pat
             if best is not None:
                 ax.scatter([best[f"start_{xn}"]], [best[xn]], marker="*", s=150, color="red",
                            zorder=5, label="best")
+            if estimate is not None:
+                ax.axhline(estimate[xn], color="black", lw=1, label="estimate")
+                if se is not None and np.isfinite(se.get(xn, np.nan)):
+                    ax.axhspan(estimate[xn] - 1.96 * se[xn], estimate[xn] + 1.96 * se[xn],
+                               color="black", alpha=0.1, label="95 % interval")
             ax.set_xlabel(f"start {xn}")
             ax.set_ylabel(f"end {xn}")
             ax.legend(fontsize=8)
@@ -96,7 +104,15 @@ def plot_parameters(runs: list[dict], names: list[str], path: str | Path) -> Pat
                    label=f"end ({c})" if same_axes else "end")
         if best is not None:
             ax.scatter([best[xn]], [best[yn]], marker="*", s=150, color="red", zorder=5,
-                       label="best" if k == 0 or not same_axes else None)
+                       label="best restart" if k == 0 or not same_axes else None)
+        if estimate is not None:
+            err = None
+            if se is not None:
+                err = ([1.96 * se.get(xn, np.nan)], [1.96 * se.get(yn, np.nan)])
+            ax.errorbar([estimate[xn]], [estimate[yn]], xerr=None if err is None else err[0],
+                        yerr=None if err is None else err[1], fmt="x", color="black", ms=9, mew=2,
+                        capsize=3, zorder=6,
+                        label="estimate (95 % interval)" if k == 0 or not same_axes else None)
         if same_axes:
             ax.set_xlabel("mu (km/h)")
             ax.set_ylabel("sigma (km/h)")
@@ -106,4 +122,39 @@ def plot_parameters(runs: list[dict], names: list[str], path: str | Path) -> Pat
         ax.legend(fontsize=8)
     fig.tight_layout()
     save_figure_atomic(fig, path, dpi=120)
+    return Path(path)
+
+
+def plot_recovery(rows: list[dict], truth: dict[str, float], names: list[str], sizes: list[str],
+                  path: str | Path) -> Path:
+    """The recovery study: per sample size (rows) and parameter (columns) every replicate's
+    estimate with its 95 % interval, the truth (line) and the sampling floor (the recorded
+    vehicles' own desired-speed moments, grey dots)."""
+    sizes = [s for s in sizes if any(r["size"] == s for r in rows)]
+    fig = Figure(figsize=(3.2 * len(names), 2.8 * max(len(sizes), 1)))
+    axes = fig.subplots(max(len(sizes), 1), len(names), squeeze=False)
+    for i, size in enumerate(sizes):
+        rs = sorted((r for r in rows if r["size"] == size), key=lambda r: r["seed"])
+        seeds = [r["seed"] for r in rs]
+        for j, n in enumerate(names):
+            ax = axes[i, j]
+            c = n.partition("_")[2]
+            col = COLOURS.get(c, ("tab:red",))[0]
+            est = np.array([r[n] for r in rs], np.float64)
+            se = np.array([np.nan if r.get(f"se_{n}") is None else r[f"se_{n}"] for r in rs], np.float64)
+            ax.errorbar(seeds, est, yerr=np.where(np.isfinite(se), 1.96 * se, 0), fmt="o", color=col,
+                        ms=4, capsize=2, label="estimate, 95 % interval")
+            floor = [r.get(f"floor_{n}") for r in rs]
+            if all(v is not None for v in floor):
+                ax.scatter(seeds, floor, marker="_", s=80, color="0.4", label="sampling floor")
+            ax.axhline(truth[n], color="black", lw=1, label="truth")
+            e = est - truth[n]
+            ax.set_title(f"{n} ({size}): bias {e.mean():+.2f}, RMSE {np.sqrt(np.mean(e ** 2)):.2f}",
+                         fontsize=8)
+            ax.set_xlabel("seed", fontsize=8)
+            ax.tick_params(labelsize=7)
+            if i == 0 and j == 0:
+                ax.legend(fontsize=6)
+    fig.tight_layout()
+    save_figure_atomic(fig, path, dpi=110)
     return Path(path)

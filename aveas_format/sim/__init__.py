@@ -15,10 +15,12 @@ from aveas_format.sim.runner import (
     build_network,
     fcd_mean_speeds,
     find_sumo,
+    prepare_network,
+    section_mean_speeds,
     simulate,
 )
 from aveas_format.sim.scenario import W99_DEFAULTS, W99_RANGES, Network, Scenario, VehicleClass
 
 __all__ = ["W99_DEFAULTS", "W99_RANGES", "Network", "Scenario", "SimResult", "SimulationError",
            "SumoNotFoundError", "VehicleClass", "build_network", "fcd_mean_speeds", "find_sumo",
-           "simulate"]
+           "prepare_network", "section_mean_speeds", "simulate"]

@@ -5,10 +5,12 @@
 >>> res.recording.write("sim.aveas"); res.mean_speeds()["car"]     # doctest: +SKIP
 
 Each run happens in its own temporary directory: ``netconvert`` builds the network (from the
-highway builder's OpenDRIVE or a given map), the routes are written from the scenario, ``sumo`` runs
-with FCD output (Parquet where the binary supports it), and the FCD is read back. With
-``recording=True`` the FCD goes through the ``sumo-fcd`` converter into a recording on the same
-OpenDRIVE map (so simulated data is in the format and validates like recorded data).
+highway builder's OpenDRIVE or a given map; once per process and network, :func:`prepare_network`),
+the routes are written from the scenario, ``sumo`` runs with FCD output (Parquet where the binary
+supports it), and the FCD is read back. With ``recording=True`` the FCD goes through the
+``sumo-fcd`` converter into a recording on the same OpenDRIVE map (so simulated data is in the
+format and validates like recorded data). With ``fcd=False`` (what the fitter's mean-speed metric
+uses) SUMO writes only the crossings of the measurement section's entry and exit.
 """
 
 from __future__ import annotations
@@ -19,9 +21,10 @@ import shutil
 import subprocess
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from pathlib import Path
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 import pyarrow as pa
@@ -100,12 +103,42 @@ def _tail(log: Path, n: int = 20) -> str:
 
 @dataclass
 class NetInfo:
+    """A built SUMO network: the ``.net.xml`` and OpenDRIVE bytes (picklable, so a fit builds it
+    once and ships it to every worker), the departure and arrival edges, the measurement section
+    and each edge's lanes as ``(lane id, length)``."""
+
     net_file: Path
     xodr: bytes
     from_edge: str
     to_edge: str
     measure_edges: list[str] | None
     measure_pos: tuple[float, float] | None
+    net_xml: bytes = b""
+    lanes: dict[str, list[tuple[str, float]]] = field(default_factory=dict)
+
+    def write(self, workdir: Path) -> NetInfo:
+        """Write ``net.net.xml`` and ``map.xodr`` into ``workdir``; the copy that points there."""
+        (workdir / "net.net.xml").write_bytes(self.net_xml)
+        (workdir / "map.xodr").write_bytes(self.xodr)
+        return replace(self, net_file=workdir / "net.net.xml")
+
+    def section(self) -> tuple[str, float, float] | None:
+        """``(edge, entry, exit)`` when the measurement section is a position range on one edge,
+        which two cross-sections delimit (the built highway's); else None."""
+        if not self.measure_edges or len(self.measure_edges) != 1 or self.measure_pos is None:
+            return None
+        edge = self.measure_edges[0]
+        lengths = [length for _, length in self.lanes.get(edge, [])]
+        if not lengths:
+            return None
+        lo, hi = self.measure_pos
+        hi = min(hi, min(lengths) - _EXIT_MARGIN)
+        return (edge, float(lo), float(hi)) if 0 < lo < hi else None
+
+
+#: the exit cross-section sits this far before the edge's end when the section reaches it (a
+#: vehicle arrives, and leaves the network, when its front reaches the end)
+_EXIT_MARGIN = 0.1
 
 
 def _map_bytes(path: Path) -> bytes:
@@ -119,28 +152,33 @@ def _map_bytes(path: Path) -> bytes:
     return rec.map_source
 
 
-_NET_CACHE: dict[str, tuple[bytes, NetInfo]] = {}
+_NET_CACHE: dict[str, NetInfo] = {}
 
 
-def build_network(net: Network, workdir: Path, *, timeout: float | None = 120) -> NetInfo:
-    """OpenDRIVE (built or given) -> ``net.net.xml`` with lane speeds and lane bans applied.
+def prepare_network(net: Network, *, timeout: float | None = 120) -> NetInfo:
+    """OpenDRIVE (built or given) -> SUMO network with lane speeds and lane bans applied, in memory.
 
-    The result is cached per process (keyed by the network settings and the map file's mtime), so
-    repeated runs of a fit do not call ``netconvert`` again."""
+    ``netconvert`` runs once per process and network (cached by the network settings and the map
+    file's mtime); a fit calls this once and passes the result to every evaluation."""
     key = net.model_dump_json()
     if net.map is not None and Path(net.map).exists():
         key += str(Path(net.map).stat().st_mtime_ns)
-    if key in _NET_CACHE:
-        data, info = _NET_CACHE[key]
-        (workdir / "net.net.xml").write_bytes(data)
-        (workdir / "map.xodr").write_bytes(info.xodr)
-        return NetInfo(workdir / "net.net.xml", info.xodr, info.from_edge, info.to_edge,
-                       info.measure_edges, info.measure_pos)
-    info = _build_network(net, workdir, timeout)
-    if len(_NET_CACHE) > 16:
-        _NET_CACHE.clear()
-    _NET_CACHE[key] = (info.net_file.read_bytes(), info)
-    return info
+    if key not in _NET_CACHE:
+        tmp = Path(tempfile.mkdtemp(prefix="aveas-net-"))
+        try:
+            info = _build_network(net, tmp, timeout)
+            info = replace(info, net_xml=info.net_file.read_bytes(), net_file=Path("net.net.xml"))
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+        if len(_NET_CACHE) > 16:
+            _NET_CACHE.clear()
+        _NET_CACHE[key] = info
+    return _NET_CACHE[key]
+
+
+def build_network(net: Network, workdir: Path, *, timeout: float | None = 120) -> NetInfo:
+    """:func:`prepare_network`, written into ``workdir`` (``net.net.xml``, ``map.xodr``)."""
+    return prepare_network(net, timeout=timeout).write(workdir)
 
 
 def _build_network(net: Network, workdir: Path, timeout: float | None) -> NetInfo:
@@ -177,10 +215,13 @@ def _build_network(net: Network, workdir: Path, timeout: float | None) -> NetInf
         e.set("speed", speed)
     tree.write(str(path), xml_declaration=True, encoding="UTF-8")
     ids = [e.get("id") for e in edges]
+    lanes = {e.get("id"): [(ln.get("id"), float(ln.get("length"))) for ln in e.findall("lane")]
+             for e in edges}
     if net.map is None:
         edge = next((i for i in ids if i.startswith("-")), ids[0])
         return NetInfo(path, xodr, net.from_edge or edge, net.to_edge or edge,
-                       net.measure_edges or [edge], net.measure_pos or (net.inflow, net.inflow + net.length))
+                       net.measure_edges or [edge], net.measure_pos or (net.inflow, net.inflow + net.length),
+                       lanes=lanes)
     froms = {e.get("from") for e in edges}
     tos = {e.get("to") for e in edges}
     sources = [e.get("id") for e in edges if e.get("from") not in tos]
@@ -195,26 +236,49 @@ def _build_network(net: Network, workdir: Path, timeout: float | None) -> NetInf
         if len(sinks) != 1:
             raise AveasError(f"cannot choose the arrival edge among {sinks or ids}: set network.to_edge")
         te = sinks[0]
-    return NetInfo(path, xodr, fe, te, net.measure_edges, net.measure_pos)
+    return NetInfo(path, xodr, fe, te, net.measure_edges, net.measure_pos, lanes=lanes)
 
 
 @dataclass
 class SimResult:
-    """The outcome of one run: the FCD (columns id, type, speed [m/s], edge, pos, time) and, when
-    asked for, the recording and the per-vehicle speed factors."""
+    """The outcome of one run: the FCD (columns id, type, speed [m/s], edge, pos, time), or with
+    ``fcd=False`` only the measurement-section crossings (``section``: id, type, t_in, t_out), and
+    when asked for the recording and the per-vehicle speed factors. ``timings`` (s): ``network``,
+    ``routes``, ``sumo`` (the SUMO process), ``read`` (reading its output), ``recording``."""
 
     scenario: Scenario
-    fcd: pa.Table
+    fcd: pa.Table | None
     net: NetInfo
     runtime_s: float
     log: str = ""
     recording: object | None = None
     speed_factors: dict[str, float] = field(default_factory=dict)
+    section: pa.Table | None = None
+    timings: dict[str, float] = field(default_factory=dict)
 
     def mean_speeds(self, *, min_samples: int = 2) -> dict[str, np.ndarray]:
-        """Per class (vType id): each vehicle's mean speed (km/h) on the measurement section."""
-        return fcd_mean_speeds(self.fcd, self.net.measure_edges, self.net.measure_pos,
-                               [c.name for c in self.scenario.classes], min_samples=min_samples)
+        """Per class (vType id): each vehicle's mean speed (km/h) on the measurement section:
+        section length / time between the entry and exit cross-sections when SUMO wrote the
+        crossings, else the mean of its FCD speed samples there (the same quantity: the time mean
+        of the speed over the section)."""
+        classes = [c.name for c in self.scenario.classes]
+        if self.section is not None:
+            return section_mean_speeds(self.section, self.net.section(), classes)
+        return fcd_mean_speeds(self.fcd, self.net.measure_edges, self.net.measure_pos, classes,
+                               min_samples=min_samples)
+
+
+def section_mean_speeds(crossings: pa.Table, section: tuple[str, float, float], classes: list[str]
+                        ) -> dict[str, np.ndarray]:
+    """Per class: (exit - entry) / (t_out - t_in) in km/h of every vehicle that crossed both."""
+    _, lo, hi = section
+    dt = (crossings["t_out"].to_numpy(zero_copy_only=False)
+          - crossings["t_in"].to_numpy(zero_copy_only=False))
+    types = crossings["type"].to_numpy(zero_copy_only=False)
+    ok = np.isfinite(dt) & (dt > 0)
+    v = np.full(len(dt), np.nan)
+    v[ok] = (hi - lo) / dt[ok] * 3.6
+    return {c: v[ok & (types == c)] for c in classes}
 
 
 def fcd_mean_speeds(fcd: pa.Table, edges: list[str] | None, pos: tuple[float, float] | None,
@@ -246,9 +310,18 @@ def fcd_mean_speeds(fcd: pa.Table, edges: list[str] | None, pos: tuple[float, fl
 
 
 def simulate(scenario: Scenario, *, recording: bool = False, speed_factors: bool = False,
-             workdir: str | Path | None = None, timeout: float | None = 600) -> SimResult:
+             fcd: bool = True, network: NetInfo | None = None, workdir: str | Path | None = None,
+             timeout: float | None = 600) -> SimResult:
     """Run ``scenario``; see the module docstring. ``workdir`` keeps the files (default: a
-    temporary directory, removed afterwards)."""
+    temporary directory, removed afterwards).
+
+    ``fcd=False`` has SUMO write only what the per-vehicle mean speeds need: the crossings of two
+    instant induction loops per lane at the ends of the measurement section when it is a position
+    range on one edge (:meth:`NetInfo.section`), else the FCD of the measurement edges only.
+    ``network``: a :func:`prepare_network` result to reuse (default: built, or taken from this
+    process's cache)."""
+    if recording and not fcd:
+        raise ValueError("a recording needs the FCD (fcd=True)")
     sumo = find_sumo("sumo")
     tmp = None
     if workdir is None:
@@ -258,19 +331,32 @@ def simulate(scenario: Scenario, *, recording: bool = False, speed_factors: bool
         wd = Path(workdir)
         wd.mkdir(parents=True, exist_ok=True)
     try:
+        timings: dict[str, float] = {}
         t0 = time.perf_counter()
-        net = build_network(scenario.network, wd, timeout=timeout)
+        net = (network or prepare_network(scenario.network, timeout=timeout)).write(wd)
+        t1 = time.perf_counter()
+        timings["network"] = t1 - t0
         (wd / "routes.rou.xml").write_text(scenario.routes_xml(net.from_edge, net.to_edge))
-        parquet = _supports_parquet(sumo)
-        fcd_name = "fcd.parquet" if parquet else "fcd.xml"
-        attrs = "id,type,speed,lane,pos" + (",x,y,angle" if recording else "")
+        t2 = time.perf_counter()
+        timings["routes"] = t2 - t1
         cmd = [str(sumo), "-n", "net.net.xml", "-r", "routes.rou.xml", "--step-length",
-               f"{scenario.step_length:g}", "--seed", str(scenario.seed), "--fcd-output", fcd_name,
-               "--fcd-output.attributes", attrs, "--no-step-log", "true", "--duration-log.statistics",
-               "true", "--log", "sumo.log"]
+               f"{scenario.step_length:g}", "--seed", str(scenario.seed), "--no-step-log", "true",
+               "--duration-log.statistics", "true", "--log", "sumo.log"]
+        section = None if fcd else net.section()
+        fcd_name = None
+        if section is not None:
+            (wd / "section.add.xml").write_text(_section_loops_xml(net, section))
+            cmd += ["--additional-files", "section.add.xml"]
+        else:
+            fcd_name = "fcd.parquet" if _supports_parquet(sumo) else "fcd.xml"
+            attrs = "id,type,speed,lane,pos" + (",x,y,angle" if recording else "")
+            cmd += ["--fcd-output", fcd_name, "--fcd-output.attributes", attrs]
+            if not fcd and net.measure_edges:
+                (wd / "section.edges.txt").write_text("".join(f"edge:{e}\n" for e in net.measure_edges))
+                cmd += ["--fcd-output.filter-edges.input-file", "section.edges.txt"]
         if scenario.lane_change_duration > 0:
             cmd += ["--lanechange.duration", f"{scenario.lane_change_duration:g}"]
-        if scenario.fcd_period:
+        if scenario.fcd_period and fcd_name:
             cmd += ["--device.fcd.period", f"{scenario.fcd_period:g}"]
         if not scenario.drain:
             cmd += ["--end", f"{scenario.duration:g}"]
@@ -278,24 +364,63 @@ def simulate(scenario: Scenario, *, recording: bool = False, speed_factors: bool
             cmd += ["--vehroute-output", "vehroutes.xml", "--vehroute-output.speedfactor", "true"]
         cmd += scenario.extra_args
         _run(cmd, wd, wd / "sumo.stdout.log", "sumo", timeout)
-        runtime = time.perf_counter() - t0
-        fcd = _read_fcd(wd / fcd_name)
+        t3 = time.perf_counter()
+        timings["sumo"] = t3 - t2
+        runtime = t3 - t0
+        crossings = _read_section(wd / "section.xml") if section is not None else None
+        table = _read_fcd(wd / fcd_name) if fcd_name else None
         log = (wd / "sumo.log").read_text(errors="replace") if (wd / "sumo.log").exists() else ""
-        res = SimResult(scenario, fcd, net, runtime, log)
+        res = SimResult(scenario, table, net, runtime, log, section=crossings, timings=timings)
         if speed_factors:
             res.speed_factors = _read_speed_factors(wd / "vehroutes.xml")
+        t4 = time.perf_counter()
+        timings["read"] = t4 - t3
         if recording:
             from aveas_format.converters import convert
 
             res.recording = convert("sumo-fcd", [wd / fcd_name], map_source=net.xodr, options={
                 "net_file": str(net.net_file), "vtypes": [str(wd / "routes.rou.xml")],
                 "partner": "aveas-format sim", "title": "SUMO simulation"})
-        res.net = NetInfo(Path("net.net.xml"), net.xodr, net.from_edge, net.to_edge, net.measure_edges,
-                          net.measure_pos)
+            timings["recording"] = time.perf_counter() - t4
+        res.net = replace(net, net_file=Path("net.net.xml"))
         return res
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _section_loops_xml(net: NetInfo, section: tuple[str, float, float]) -> str:
+    """Instant induction loops on every lane of the section's edge at its entry and exit."""
+    edge, lo, hi = section
+    lines = ["<additional>"]
+    for k, (lane, _) in enumerate(net.lanes[edge]):
+        for kind, pos in (("in", lo), ("out", hi)):
+            lines.append(f'    <instantInductionLoop id="{kind}_{k}" lane={quoteattr(lane)} '
+                         f'pos="{pos:.3f}" file="section.xml"/>')
+    lines.append("</additional>")
+    return "\n".join(lines) + "\n"
+
+
+def _read_section(path: Path) -> pa.Table:
+    """The section crossings: per vehicle the first entry and the first exit (a vehicle in the
+    middle of a lane change may be seen on two lanes)."""
+    if not path.exists():
+        raise SimulationError("sumo wrote no section output", path=path)
+    from aveas_format.safeio import iterparse
+
+    t_in: dict[str, float] = {}
+    t_out: dict[str, float] = {}
+    vtype: dict[str, str] = {}
+    for _, el in iterparse(str(path), tag="instantOut"):
+        if el.get("state") == "enter":
+            vid = el.get("vehID")
+            (t_in if el.get("id", "").startswith("in_") else t_out).setdefault(vid, float(el.get("time")))
+            vtype.setdefault(vid, el.get("type"))
+        el.clear()
+    ids = list(vtype)
+    return pa.table({"id": pa.array(ids, pa.string()), "type": pa.array([vtype[i] for i in ids], pa.string()),
+                     "t_in": pa.array([t_in.get(i, np.nan) for i in ids], pa.float64()),
+                     "t_out": pa.array([t_out.get(i, np.nan) for i in ids], pa.float64())})
 
 
 def _read_fcd(path: Path) -> pa.Table:

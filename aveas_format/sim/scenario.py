@@ -145,6 +145,11 @@ class Scenario(_Model):
     step_length: float = Field(0.5, gt=0, le=1.0, description="s; <= 0.5 recommended for W99")
     seed: int = 42
     random_numbers: Literal["common", "sumo"] = "common"
+    speed_sampling: Literal["random", "stratified"] = Field(
+        "random", description="with common random numbers: the standard-normal draws z of a class "
+        "are random (a sample, the default) or stratified (the normal's quantiles at (i + 0.5) / n "
+        "in random order: the desired speeds' sample mean and spread then match mu and sigma "
+        "without sampling error, which the fitter uses for its simulated side)")
     lane_change_duration: float = Field(3.0, ge=0, description="s a lane change takes (SUMO's "
                                         "--lanechange.duration; 0 = instantaneous jumps, which the "
                                         "validator flags as position jumps)")
@@ -160,6 +165,8 @@ class Scenario(_Model):
             raise ValueError(f"class names must be unique: {names}")
         if not self.classes:
             raise ValueError("a scenario needs at least one vehicle class")
+        if self.speed_sampling == "stratified" and self.random_numbers != "common":
+            raise ValueError('speed_sampling = "stratified" needs random_numbers = "common"')
         return self
 
     @classmethod
@@ -222,8 +229,11 @@ class Scenario(_Model):
         return "\n".join(lines) + "\n"
 
     def draws(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Per class: Poisson arrival times in [0, duration) and standard-normal draws z (|z| <= 4),
-        from ``seed`` and the class's position (common random numbers)."""
+        """Per class: Poisson arrival times in [0, duration) and standard-normal draws z (|z| <= 4;
+        with ``speed_sampling = "stratified"`` the quantiles ``ndtri((i + 0.5) / n)`` in random
+        order), from ``seed`` and the class's position (common random numbers)."""
+        from scipy.special import ndtri
+
         out = []
         for k, c in enumerate(self.classes):
             rng = np.random.default_rng([self.seed, k])
@@ -234,7 +244,10 @@ class Scenario(_Model):
             z = rng.standard_normal(len(t))
             z = np.where(np.abs(z) > 4, rng.standard_normal(len(t)).clip(-4, 4), z)
             keep = t < self.duration
-            out.append((t[keep], z[keep]))
+            t, z = t[keep], z[keep]
+            if self.speed_sampling == "stratified":
+                z = ndtri((rng.permutation(len(t)) + 0.5) / max(len(t), 1))
+            out.append((t, z))
         return out
 
 

@@ -115,7 +115,7 @@ def test_fit_config_parameters_and_bounds():
 def test_fit_stored_before_metric_fields_resumes(sumo, tmp_path):
     """A fit directory written before `metric`/`parameters` existed is resumed, not refused."""
     cfg = FitConfig(scenario=small_scenario(duration=60, length=400, inflow=100), restarts=1, maxfev=5,
-                    bounds={"mu_car": (115.0, 150.0), "sigma_car": (8.0, 28.0),
+                    refine=False, bounds={"mu_car": (115.0, 150.0), "sigma_car": (8.0, 28.0),
                             "mu_truck": (80.0, 100.0), "sigma_truck": (2.0, 12.0)})
     od = tmp_path / "fit"
     od.mkdir()

@@ -133,3 +133,64 @@ def test_network_from_a_map_file(sumo, tmp_path):
     assert res.recording.map_source == xodr.read_bytes()
     assert len(res.mean_speeds()["car"]) > 10  # whole edge measured
     assert aveas_format.validate(res.recording).counts["error"] == 0
+
+
+def test_section_crossings_give_the_fcd_mean_speeds(sumo):
+    """Without FCD SUMO writes only the crossings of the measurement section's ends; the mean speed
+    (section length / time between them) is the FCD's mean speed over the section, vehicle by
+    vehicle (the same time mean, to the FCD's 0.5 s sampling of a 1 km section), with lane changes
+    taking time or not."""
+    from aveas_format.sim import prepare_network
+
+    for lcd in (0.0, 3.0):
+        sc = small_scenario(duration=300, lane_change_duration=lcd)
+        net = prepare_network(sc.network)
+        full = simulate(sc, network=net)
+        lean = simulate(sc, network=net, fcd=False)
+        assert lean.fcd is None and lean.section.num_rows > 80
+        assert set(lean.timings) >= {"network", "routes", "sumo", "read"}
+        a, b = full.mean_speeds(), lean.mean_speeds()
+        for c in ("car", "truck"):
+            assert len(a[c]) == len(b[c]) > 5
+            np.testing.assert_allclose(np.sort(a[c]), np.sort(b[c]), atol=0.5)
+            assert abs(a[c].mean() - b[c].mean()) < 0.05
+    with pytest.raises(ValueError, match="needs the FCD"):
+        simulate(sc, fcd=False, recording=True)
+
+
+def test_a_measurement_section_of_several_edges_falls_back_to_the_fcd_of_those_edges(sumo, tmp_path):
+    from aveas_format.opendrive.builder import straight_highway
+    from aveas_format.sim import Network
+
+    xodr = tmp_path / "road.xodr"
+    xodr.write_text(straight_highway(length=600, lanes_right=2, lanes_left=2,
+                                     geo_reference="+proj=tmerc +lat_0=49 +lon_0=8 +ellps=WGS84 +units=m"))
+    sc = small_scenario(duration=60).model_copy(update={"network": Network(
+        map=xodr, from_edge="-1", to_edge="-1", measure_edges=["-1"])})
+    res = simulate(sc, fcd=False)
+    assert res.section is None and res.fcd.num_rows > 0  # no position range: the edges' FCD
+    assert set(res.fcd["edge"].to_pylist()) == {"-1"}
+    assert len(res.mean_speeds()["car"]) > 5
+
+
+def test_stratified_desired_speeds_have_no_sampling_error(sumo):
+    """speed_sampling = "stratified": the standard-normal draws are the normal's quantiles, so the
+    desired speeds' sample mean is mu and their spread sigma (to the discreteness of n quantiles);
+    the arrival times are those of the random draws, and changing mu/sigma keeps the draws."""
+    sc = small_scenario(duration=1800, length=200, inflow=100)
+    strat = sc.model_copy(update={"speed_sampling": "stratified"})
+    for (t_r, z_r), (t_s, z_s) in zip(sc.draws(), strat.draws(), strict=True):
+        np.testing.assert_array_equal(t_r, t_s)
+        assert abs(z_s.mean()) < 1e-9 and abs(z_s.std() - 1) < 0.01
+        assert abs(z_r.mean()) > 1e-6
+    res = simulate(strat, speed_factors=True, fcd=False)
+    for c in ("car", "truck"):
+        mu, sigma = PAPER[c]
+        desired = np.array([f for v, f in res.speed_factors.items() if v.startswith(c)]) * mu
+        assert abs(desired.mean() - mu) < 0.01 and abs(desired.std() - sigma) < 0.01 * sigma
+    other = strat.with_desired_speeds({"car": (120.0, 10.0)})
+    np.testing.assert_array_equal(other.draws()[0][1], strat.draws()[0][1])  # common random numbers
+    from aveas_format.sim import Scenario
+
+    with pytest.raises(ValueError, match="needs random_numbers"):
+        Scenario(random_numbers="sumo", speed_sampling="stratified")

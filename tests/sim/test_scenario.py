@@ -113,8 +113,13 @@ def test_neg_log_likelihood_prefers_the_true_distribution():
 def test_starts_and_simplex_stay_in_bounds():
     cfg = FitConfig(restarts=50)
     b = cfg.bounds_array()
-    st = cfg.starts()
+    rec = {"car": np.array([120.0, 130.0, 140.0]), "truck": np.array([85.0, 95.0])}
+    st = cfg.starts_array(rec)
     assert st.shape == (50, 4) and np.all(st >= b[:, 0]) and np.all(st <= b[:, 1])
+    # the first restart starts from the data: the recorded values' mean and standard deviation
+    np.testing.assert_allclose(st[0], [130.0, 10.0, 90.0, np.sqrt(50.0)])
+    assert FitConfig(restarts=3, starts="uniform").starts_array(rec)[0][0] != 130.0
+    assert FitConfig(start={"mu_car": 150.0}).starts_array(rec)[0][0] == 150.0
     for x0 in st:
         simplex = initial_simplex(x0, b, 0.2)
         assert simplex.shape == (5, 4)
