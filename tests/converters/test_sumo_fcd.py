@@ -13,10 +13,6 @@ import aveas_format
 from aveas_format.converters import convert, load_converters
 from aveas_format.opendrive.builder import straight_highway
 
-from helpers_common import SHARED
-
-SUMO = SHARED / "data" / "sumo"
-
 
 @pytest.fixture(scope="module")
 def westward_map(tmp_path_factory):
@@ -44,8 +40,8 @@ def test_registered():
     assert "sumo-fcd" in load_converters()
 
 
-def test_cartesian_excerpt(westward_map, tmp_path):
-    rec = convert("sumo-fcd", [SUMO / "fcd_cartesian_excerpt.xml"], map_source=westward_map)
+def test_cartesian_excerpt(westward_map, tmp_path, sumo_data):
+    rec = convert("sumo-fcd", [sumo_data / "fcd_cartesian_excerpt.xml"], map_source=westward_map)
     p, s = rec.participants, rec.states
     assert p.column("source_id").to_pylist() == ["0", "1"]
     assert p.column("class").to_pylist() == ["car", "car"]  # t1/t2 undefined -> passenger defaults
@@ -70,27 +66,27 @@ def test_cartesian_excerpt(westward_map, tmp_path):
     assert aveas_format.validate(out).counts["error"] == 0
 
 
-def test_vtypes_and_net_offset(westward_map, tmp_path):
+def test_vtypes_and_net_offset(westward_map, tmp_path, sumo_data):
     rou = tmp_path / "types.rou.xml"
     rou.write_text('<routes>\n  <vType id="t1" vClass="truck" length="12" width="2.5"/>\n</routes>')
-    rec = convert("sumo-fcd", [SUMO / "fcd_cartesian_excerpt.xml"], map_source=westward_map,
+    rec = convert("sumo-fcd", [sumo_data / "fcd_cartesian_excerpt.xml"], map_source=westward_map,
                   options={"vtypes": [str(rou)], "net_offset": [100.0, 0.0]})
     assert rec.participants.column("class").to_pylist() == ["truck", "car"]
     assert rec.participants.column("width").to_pylist() == [2.5, 1.8]
     assert rec.states.column("x").to_pylist()[0] == pytest.approx(1495.25 - 100 + 6.0)
 
 
-def test_net_file_offset(westward_map, tmp_path):
+def test_net_file_offset(westward_map, tmp_path, sumo_data):
     net = tmp_path / "n.net.xml"
     net.write_text('<net>\n <location netOffset="-10.00,2.50" convBoundary="0,0,1,1"/>\n</net>')
-    rec = convert("sumo-fcd", [SUMO / "fcd_cartesian_excerpt.xml"], map_source=westward_map,
+    rec = convert("sumo-fcd", [sumo_data / "fcd_cartesian_excerpt.xml"], map_source=westward_map,
                   options={"net_file": str(net)})
     assert rec.states.column("x").to_pylist()[0] == pytest.approx(1495.25 + 10 + 2.5)
     assert rec.states.column("y").to_pylist()[0] == pytest.approx(401.65 - 2.5)
 
 
-def test_geo_excerpt_is_detected_and_projected(geo_map):
-    rec = convert("sumo-fcd", [SUMO / "fcd_geo_excerpt.xml"], map_source=geo_map)
+def test_geo_excerpt_is_detected_and_projected(geo_map, sumo_data):
+    rec = convert("sumo-fcd", [sumo_data / "fcd_geo_excerpt.xml"], map_source=geo_map)
     s = rec.states
     x, y = s.column("x").to_numpy(), s.column("y").to_numpy()
     assert x[0] == pytest.approx(2.5, abs=0.05) and abs(y[0]) < 0.05
@@ -99,11 +95,11 @@ def test_geo_excerpt_is_detected_and_projected(geo_map):
     assert s.column("lane_id").to_pylist() == [-1] * 11
 
 
-def test_parquet_variant_equals_xml(westward_map, tmp_path):
+def test_parquet_variant_equals_xml(westward_map, tmp_path, sumo_data):
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    rec = convert("sumo-fcd", [SUMO / "fcd_cartesian_excerpt.xml"], map_source=westward_map)
+    rec = convert("sumo-fcd", [sumo_data / "fcd_cartesian_excerpt.xml"], map_source=westward_map)
     n = 11
     t = np.r_[np.arange(8.0), np.arange(5.0, 8.0)]
     table = pa.table({
@@ -132,10 +128,10 @@ def test_malformed_input_is_located(westward_map, tmp_path, text, match):
         convert("sumo-fcd", [bad], map_source=westward_map)
 
 
-def test_cli_convert(westward_map, tmp_path):
+def test_cli_convert(westward_map, tmp_path, sumo_data):
     out = tmp_path / "cli.aveas"
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "sumo-fcd",
-                          str(SUMO / "fcd_cartesian_excerpt.xml"), "--map", str(westward_map),
+                          str(sumo_data / "fcd_cartesian_excerpt.xml"), "--map", str(westward_map),
                           "-o", str(out), "-O", "net_offset=[0,0]"], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert "valid" in res.stderr and out.is_dir()
@@ -143,7 +139,7 @@ def test_cli_convert(westward_map, tmp_path):
                           "x.xml", "-o", str(tmp_path / "y.aveas")], capture_output=True, text=True)
     assert res.returncode == 3 and "no import converter named 'nope'" in res.stderr
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "sumo-fcd",
-                          str(SUMO / "fcd_cartesian_excerpt.xml"), "--map", str(westward_map),
+                          str(sumo_data / "fcd_cartesian_excerpt.xml"), "--map", str(westward_map),
                           "-o", str(tmp_path / "z.aveas"), "-O", "colour=red"], capture_output=True,
                          text=True)
     assert res.returncode == 2 or res.returncode == 3
