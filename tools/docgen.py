@@ -90,7 +90,7 @@ def _command_markdown(name: str, cmd, level: str = "##") -> list[str]:
     lines = [f"{level} `aveas-format {name}`", "", " ".join((cmd.help or "").split()), "",
              "| parameter | description |", "|---|---|"]
     for p in cmd.params:
-        if p.name == "help":
+        if p.name == "help" or getattr(p, "hidden", False):  # (deprecated spellings)
             continue
         if getattr(p, "param_type_name", "") == "argument":
             label = f"`{(p.name or '').upper()}`"

@@ -10,12 +10,13 @@ import typer
 from aveas_format.cli.app import app
 from aveas_format.cli.common import err, handle_errors, out
 from aveas_format.cli.options import (
-    SIMULATION_WORKERS,
+    check_output,
+    check_output_dir,
     overwrite_option,
-    refuse_overwrite,
     scheduler_option,
     validate_option,
     validate_written,
+    workers_option,
 )
 
 sim_app = typer.Typer(help="Simulate traffic with Eclipse SUMO (needs `pip install "
@@ -53,7 +54,7 @@ def run(
     scenario.toml -o sim.aveas`."""
     from aveas_format.sim.runner import simulate
 
-    refuse_overwrite(output, overwrite)
+    check_output(output, overwrite)
     sc = _scenario(config, seed, duration)
     res = simulate(sc, recording=True, workdir=workdir)
     path = res.recording.write(output, overwrite=overwrite)
@@ -82,8 +83,9 @@ def sensitivity_cmd(
                                    "parameter."),
     duration: float = typer.Option(None, "--duration", help="Override the demand period (s) "
                                    "(the paper: 4 h)."),
-    workers: int = SIMULATION_WORKERS,
+    workers: int = workers_option(),
     scheduler: str = scheduler_option(help="Dask scheduler address tcp://..."),
+    overwrite: bool = overwrite_option(help="Replace the files of an existing OUTPUT directory."),
     min_ttc_samples: int = typer.Option(1, "--min-ttc-samples", min=1, help="TTC samples a vehicle "
                                         "needs for its mean TTC to count in the minimum mean TTC."),
 ) -> None:
@@ -93,6 +95,7 @@ def sensitivity_cmd(
     from aveas_format.sim.scenario import W99_RANGES
     from aveas_format.sim.sensitivity import sensitivity
 
+    check_output_dir(output, overwrite)
     sc = _scenario(config, None, duration)
     output.mkdir(parents=True, exist_ok=True)
     rows = sensitivity(sc, params=param or None, n_values=values, fraction=fraction,

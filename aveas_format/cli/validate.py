@@ -13,10 +13,14 @@ import typer
 from aveas_format.cli.app import app
 from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors
 from aveas_format.cli.options import (
+    check_output,
+    check_output_dir,
     check_rules,
     comma_list,
     discover_dataset,
+    format_option,
     ignore_option,
+    overwrite_option,
     print_failure,
     recordings_argument,
     scheduler_option,
@@ -51,10 +55,12 @@ def validate(
     ignore: list[str] = ignore_option(),
     fail_on: FailOn = typer.Option(FailOn.error, "--fail-on", help="Exit 1 when a finding at or "
                                    "above this severity exists."),
-    fmt: Format = typer.Option(Format.text, "--format", help="Report format: text (greppable "
-                               "lines + summary), json, or html (self-contained, with figures)."),
+    fmt: Format = format_option(Format.text, help="Report format: text (greppable lines + "
+                                "summary), json, or html (self-contained, with figures)."),
     output: Path = typer.Option(None, "--output", "-o", help="Write the report to FILE instead of "
                                 "stdout."),
+    overwrite: bool = overwrite_option(help="Replace an existing --output (or the files of "
+                                       "--reports-dir)."),
     config: Path = typer.Option(None, "--config", help="TOML file of rule thresholds (see "
                                 "`--print-config` for every key and its default)."),
     max_sample: int = typer.Option(50, "--max-sample", min=1, max=1000,
@@ -83,6 +89,14 @@ def validate(
         _print_and_exit(config_toml())
     if not recordings:
         raise fail("Missing argument 'RECORDING'.", EXIT_USAGE)
+    if output is not None:
+        check_output(output, overwrite)
+    if reports_dir is not None:
+        check_output_dir(reports_dir, overwrite)
+    if fmt is Format.html:
+        from aveas_format.errors import require
+
+        require("matplotlib", extra="plot", what="--format html")
 
     from aveas_format.errors import FormatError
     from aveas_format.validate import validate as run

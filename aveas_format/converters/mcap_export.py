@@ -73,7 +73,8 @@ def _ts(msg_field, ns: int) -> None:
 
 
 @converter("mcap", direction="export", options=McapExportOptions,
-           description="MCAP with Foxglove SceneUpdate boxes, lane lines and LocationFix")
+           description="MCAP with Foxglove SceneUpdate boxes, lane lines and LocationFix",
+           requires=("mcap", "foxglove_schemas_protobuf", "google.protobuf"), extra="mcap")
 def export_mcap(rec, output: Path, *, options: McapExportOptions) -> list[Path]:
     import io
 

@@ -43,6 +43,7 @@ from lxml import etree
 from aveas_format.converters.common import load_map_bytes, source_block
 from aveas_format.converters.registry import ConverterOptions, ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.numeric import fmt_num
 from aveas_format.safeio import xml_parser
 
 VEHICLE_CATEGORY = {"car": "car", "van": "van", "truck": "truck", "bus": "bus", "trailer": "trailer",
@@ -231,14 +232,24 @@ def recording_to_openscenario(rec, *, logic_file: str = "map.xodr",
     return etree.tostring(root, pretty_print=True, xml_declaration=True, encoding="UTF-8")
 
 
+def _map_name(output: Path, options: OpenScenarioExportOptions) -> str:
+    return options.map_file or f"{output.stem}.xodr"
+
+
+def _export_outputs(output: Path, options: OpenScenarioExportOptions) -> list[Path]:
+    """The export's files: the .xosc and, with ``write_map``, the map next to it."""
+    return [output] + ([output.parent / _map_name(output, options)] if options.write_map else [])
+
+
 @converter("openscenario", direction="export", options=OpenScenarioExportOptions,
+           outputs=_export_outputs,
            description="ASAM OpenSCENARIO XML 1.2/1.3: entities + FollowTrajectoryAction polylines "
                        "(+ the map as .xodr)")
 def export_openscenario(rec, output: Path, *, options: OpenScenarioExportOptions) -> list[Path]:
     from aveas_format.safeio import write_bytes_atomic
 
     output = Path(output)
-    map_name = options.map_file or f"{output.stem}.xodr"
+    map_name = _map_name(output, options)
     data = recording_to_openscenario(rec, logic_file=map_name, options=options)
     written = [write_bytes_atomic(output, data)]
     if options.write_map and rec.map_source is not None:
@@ -403,7 +414,7 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
         raise FormatError("no trajectory (FollowTrajectoryAction polyline) found", path=path)
     if dropped:
         warnings.warn(f"{path.name}: {len(dropped)} trajectory vertices repeat an entity's time "
-                      f"(e.g. entity {dropped[0][0]!r} at {dropped[0][1]!r} s) and were dropped; "
+                      f"(e.g. entity {dropped[0][0]!r} at {fmt_num(dropped[0][1])} s) and were dropped; "
                       "the first vertex of each time is kept", stacklevel=2)
     states = {k: np.asarray(v, np.int64 if k == "participant_id" else np.float64) for k, v in rows.items()}
     if np.isnan(states["heading"]).any():

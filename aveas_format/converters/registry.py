@@ -6,7 +6,15 @@ patterns, a pydantic options model and a one-line description. ``aveas-format co
 finds it here; ``aveas-format convert --list`` prints the table.
 
 Exporters (recording -> foreign format) register with ``direction="export"`` and have the signature
-``(recording, output, *, options) -> list[Path]``.
+``(recording, output, *, options) -> list[Path]``; one that writes companion files next to its
+output (the map of an OpenLABEL or OpenSCENARIO export) declares them with ``outputs=`` so that
+the CLI refuses to replace any of them without ``--overwrite``.
+
+A converter whose source needs an optional stack declares it: ``requires=("mcap", ...)`` (modules)
+and ``extra="ros2"``; calling it without them is a one-line
+:class:`~aveas_format.errors.MissingDependencyError` naming the extra, and ``convert --list`` says
+which extra a converter needs. An unknown name or option is a
+:class:`~aveas_format.errors.UsageError` with the closest known name.
 
 :func:`load_converters` imports the converter modules of this package and of installed partner
 packages (entry-point group ``aveas_format.converters``) through :mod:`aveas_format.plugins`.
@@ -22,7 +30,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, ValidationError
 
 from aveas_format import plugins
-from aveas_format.errors import AveasError, FormatError
+from aveas_format.errors import AveasError, UsageError, did_you_mean, require
 
 
 class ConverterOptions(BaseModel):
@@ -62,17 +70,54 @@ class Converter:
     fn: Callable[..., Any]
     needs_map: bool = True
     version: str = "1"
+    #: modules of an optional dependency the converter needs, and the extra that installs them
+    requires: tuple[str, ...] = ()
+    extra: str | None = None
+    #: an exporter's files for an output and its options (default: the output alone)
+    outputs_fn: Callable[[Path, Any], list[Path]] | None = None
+
+    @property
+    def available(self) -> bool:
+        """Whether the optional dependencies of :attr:`requires` are installed."""
+        import importlib.util
+
+        return all(importlib.util.find_spec(m.split(".")[0]) is not None for m in self.requires)
 
     def parse_options(self, raw: dict[str, Any] | None) -> ConverterOptions:
         try:
             return self.options.model_validate(raw or {})
         except ValidationError as e:
-            parts = [f"{'.'.join(str(p) for p in err['loc'])}: {err['msg']}" for err in e.errors()]
-            raise FormatError(f"converter {self.name}: invalid options: {'; '.join(parts)}") from None
+            fields = list(self.options.model_fields)
+            parts = []
+            for err in e.errors():
+                loc = ".".join(str(p) for p in err["loc"])
+                hint = did_you_mean(loc, fields) if err["type"] == "extra_forbidden" else ""
+                parts.append(f"{loc}: {err['msg']}{hint}")
+            raise UsageError(f"converter {self.name}: invalid options: {'; '.join(parts)} "
+                             f"(options: {', '.join(fields) or 'none'})") from None
+
+    def outputs(self, output: str | Path, options: dict[str, Any] | ConverterOptions | None = None
+                ) -> list[Path]:
+        """The files an export to ``output`` writes (the output and its companion files)."""
+        opts = options if isinstance(options, ConverterOptions) else self.parse_options(options)
+        return self.outputs_fn(Path(output), opts) if self.outputs_fn else [Path(output)]
+
+    def check_map(self, map_source: Any) -> None:
+        """A :class:`~aveas_format.errors.UsageError` when the converter needs a map and has none."""
+        if self.needs_map and map_source is None:
+            raise UsageError(f"converter {self.name} needs a map: pass --map MAP.xodr")
+
+    def require(self) -> None:
+        """A :class:`~aveas_format.errors.MissingDependencyError` naming the extra when an
+        optional dependency of the converter is not installed."""
+        what = f"the {self.name} {'export' if self.direction == 'export' else 'import'}"
+        for module in self.requires:
+            require(module, extra=self.extra or "all", what=what)
 
     def __call__(self, *args: Any, options: dict[str, Any] | ConverterOptions | None = None,
                  **kw: Any) -> Any:
         opts = options if isinstance(options, ConverterOptions) else self.parse_options(options)
+        self.require()
         return self.fn(*args, options=opts, **kw)
 
 
@@ -81,9 +126,12 @@ CONVERTERS: dict[str, Converter] = {}
 
 def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
               method: str | None = None, options: type[ConverterOptions] = ConverterOptions,
-              direction: str = "import", needs_map: bool = True, version: str = "1"
+              direction: str = "import", needs_map: bool = True, version: str = "1",
+              requires: tuple[str, ...] = (), extra: str | None = None,
+              outputs: Callable[[Path, Any], list[Path]] | None = None,
               ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """Register a converter function (decorator)."""
+    """Register a converter function (decorator); ``requires``/``extra``: its optional
+    dependencies, ``outputs``: an exporter's files (see the module docstring)."""
     if direction not in ("import", "export"):
         raise ValueError("direction must be 'import' or 'export'")
     key = name if direction == "import" else f"{name}:export"
@@ -94,7 +142,8 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
                              f"{CONVERTERS[key].fn.__module__} has it")
         CONVERTERS[key] = Converter(name=name, direction=direction, description=description,
                                     patterns=patterns, method=method, options=options, fn=fn,
-                                    needs_map=needs_map, version=version)
+                                    needs_map=needs_map, version=version, requires=requires,
+                                    extra=extra, outputs_fn=outputs)
         return fn
 
     return register
@@ -111,7 +160,8 @@ def get_converter(name: str, direction: str = "import") -> Converter:
     key = name if direction == "import" else f"{name}:export"
     if key not in reg:
         known = sorted(c.name for c in reg.values() if c.direction == direction)
-        raise FormatError(f"no {direction} converter named {name!r}; known: {', '.join(known)}")
+        raise UsageError(f"no {direction} converter named {name!r}{did_you_mean(name, known)}; "
+                         f"known: {', '.join(known)}")
     return reg[key]
 
 
@@ -119,16 +169,16 @@ def convert(name: str, inputs: list[str | Path], *, map_source: str | Path | byt
             options: dict[str, Any] | None = None):
     """Run the importer ``name`` on ``inputs`` and return the Recording."""
     conv = get_converter(name)
+    opts = conv.parse_options(options)  # usage errors first
+    conv.check_map(map_source)
     paths = [Path(p) for p in inputs]
     for p in paths:
         if not p.exists():
             from aveas_format.errors import RecordingIOError
 
             raise RecordingIOError("input not found", path=p)
-    if conv.needs_map and map_source is None:
-        raise FormatError(f"converter {name} needs a map: pass --map MAP.xodr")
     try:
-        return conv(paths, map_source=map_source, options=options)
+        return conv(paths, map_source=map_source, options=opts)
     except AveasError as e:
         if e.path is None and e.where.get("line") is not None and len(paths) == 1:
             # a located error without its file: name the (only) input

@@ -67,7 +67,10 @@ def kde_logpdf(samples: np.ndarray, points: np.ndarray, bandwidth: str | float =
         return np.full(len(points), LOG_FLOOR)
     h = bandwidth_of(samples, bandwidth)
     if backend == "sklearn":
-        from sklearn.neighbors import KernelDensity
+        from aveas_format.errors import require
+
+        KernelDensity = require("sklearn.neighbors", extra="fit", what="the scikit-learn KDE "
+                                "backend").KernelDensity
 
         out = KernelDensity(kernel="gaussian", bandwidth=h).fit(samples[:, None]).score_samples(points[:, None])
     else:

@@ -444,7 +444,7 @@ def test_ind_malformed_input_is_located(tmp_path, site_map, which, line, col, va
 
 def test_ind_needs_a_map(tmp_path):
     files = write_centre(tmp_path / "ind", ind_truth())
-    with pytest.raises(aveas_format.FormatError, match="needs a map"):
+    with pytest.raises(aveas_format.UsageError, match="needs a map"):
         convert("ind", [files[0]])
 
 
@@ -462,7 +462,7 @@ def test_cli_convert_highd_without_map(tmp_path):
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "ind",
                           str(files[0]), "-o", str(tmp_path / "x.aveas")], capture_output=True,
                          text=True)
-    assert res.returncode != 0 and "needs a map" in res.stderr
+    assert res.returncode == 2 and "needs a map" in res.stderr
 
 
 def test_highd_unobserved_outside_the_footprint(tmp_path):
