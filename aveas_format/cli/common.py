@@ -93,8 +93,7 @@ def handle_errors(fn: F) -> F:
             if State.debug:
                 traceback.print_exc()
             raise fail(str(e)) from None
-        except (FileExistsError, PermissionError, IsADirectoryError, FileNotFoundError,
-                NotADirectoryError) as e:
+        except OSError as e:  # (after BrokenPipeError) a file the library did not name itself
             if State.debug:
                 traceback.print_exc()
             raise fail(f"{e.filename or ''}: {e.strerror or e}".lstrip(": ")) from None

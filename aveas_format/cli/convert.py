@@ -11,6 +11,7 @@ from aveas_format.cli.app import app
 from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, print_table
 from aveas_format.cli.options import (
     OutputFormat,
+    ask_unstated,
     check_output,
     converter_options,
     format_option,
@@ -80,8 +81,9 @@ def convert(
         raise fail("--from NAME, INPUT... and --output are required (or --list)", EXIT_USAGE)
     conv = get_converter(source)
     raw = converter_options(options_file, option, conv.options)
-    conv.parse_options(raw)  # usage errors (an unknown option, no map) before any work
+    conv.parse_options(raw)  # usage errors (an unknown option, no map, unstated values) first
     conv.check_map(map_file)
+    ask_unstated(conv, raw)
     if each or group:
         _convert_many(source, [str(i) for i in inputs], map_file, raw, output, group, overwrite,
                       validate_, workers, scheduler)

@@ -310,7 +310,7 @@ def _pos_xyzh(pos, net) -> tuple[float, float, float, float | None]:
 
 @converter("openscenario", description="ASAM OpenSCENARIO XML: FollowTrajectoryAction polylines",
            patterns=("*.xosc",), method="traffic_simulation", options=OpenScenarioImportOptions,
-           needs_map=False)
+           needs_map=False, provides=("partner",))
 def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenarioImportOptions):
     from aveas_format.mapref.build import build_recording
     from aveas_format.opendrive import load_map

@@ -10,6 +10,11 @@ Exporters (recording -> foreign format) register with ``direction="export"`` and
 output (the map of an OpenLABEL or OpenSCENARIO export) declares them with ``outputs=`` so that
 the CLI refuses to replace any of them without ``--overwrite``.
 
+An importer declares which of the recording.json values a person must state (:data:`ASKED`:
+partner, start time, licence) its source can carry, ``provides=("start_time",)``: for the others
+the CLI asks (``-O KEY=VALUE``) instead of writing a stand-in ("unknown", 1970-01-01,
+"unspecified") that the validator would then flag (:meth:`Converter.unstated`).
+
 A converter whose source needs an optional stack declares it: ``requires=("mcap", ...)`` (modules)
 and ``extra="ros2"``; calling it without them is a one-line
 :class:`~aveas_format.errors.MissingDependencyError` naming the extra, and ``convert --list`` says
@@ -59,6 +64,12 @@ class ImportOptions(ConverterOptions):
     """research_only or commercial."""
 
 
+#: recording.json values only a person can state (the import options of the same names)
+ASKED = ("partner", "start_time", "license")
+#: acquisition methods of simulations: their time zero has no calendar date, start_time is not asked
+SIMULATION_METHODS = ("traffic_simulation", "driving_simulator")
+
+
 @dataclass(frozen=True)
 class Converter:
     name: str
@@ -75,6 +86,18 @@ class Converter:
     extra: str | None = None
     #: an exporter's files for an output and its options (default: the output alone)
     outputs_fn: Callable[[Path, Any], list[Path]] | None = None
+    #: which of :data:`ASKED` the source can carry (an importer)
+    provides: tuple[str, ...] = ()
+
+    def unstated(self, options: dict[str, Any] | None) -> list[str]:
+        """The values of :data:`ASKED` that neither the source can carry nor ``options`` give: an
+        importer would write a stand-in for them ("unknown", 1970-01-01, "unspecified") that the
+        validator flags. A simulation's start time is not asked (it has no calendar date)."""
+        if self.direction != "import":
+            return []
+        given = {k for k, v in (options or {}).items() if v not in (None, "")}
+        return [k for k in ASKED if k not in given and k not in self.provides
+                and not (k == "start_time" and self.method in SIMULATION_METHODS)]
 
     @property
     def available(self) -> bool:
@@ -129,9 +152,11 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
               direction: str = "import", needs_map: bool = True, version: str = "1",
               requires: tuple[str, ...] = (), extra: str | None = None,
               outputs: Callable[[Path, Any], list[Path]] | None = None,
+              provides: tuple[str, ...] = (),
               ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Register a converter function (decorator); ``requires``/``extra``: its optional
-    dependencies, ``outputs``: an exporter's files (see the module docstring)."""
+    dependencies, ``outputs``: an exporter's files, ``provides``: the :data:`ASKED` values its
+    source carries (see the module docstring)."""
     if direction not in ("import", "export"):
         raise ValueError("direction must be 'import' or 'export'")
     key = name if direction == "import" else f"{name}:export"
@@ -143,7 +168,7 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
         CONVERTERS[key] = Converter(name=name, direction=direction, description=description,
                                     patterns=patterns, method=method, options=options, fn=fn,
                                     needs_map=needs_map, version=version, requires=requires,
-                                    extra=extra, outputs_fn=outputs)
+                                    extra=extra, outputs_fn=outputs, provides=provides)
         return fn
 
     return register

@@ -26,6 +26,18 @@ def sha256_of(buf: pa.Buffer | bytes | memoryview) -> str:
     return hashlib.sha256(memoryview(buf)).hexdigest()
 
 
+def _looks_like_zip(path: Path) -> bool:
+    """A file meant to be a ZIP archive that :func:`zipfile.is_zipfile` does not take: named
+    ``.zip`` or starting with a ZIP signature (a truncated archive has no central directory)."""
+    if path.name.lower().endswith(".zip"):
+        return True
+    try:
+        with open(path, "rb") as f:
+            return f.read(4) in (b"PK\x03\x04", b"PK\x05\x06", b"PK\x07\x08")
+    except OSError:
+        return False
+
+
 class Container:
     """The files of one recording: ``NAME.aveas/`` or ``NAME.aveas.zip``."""
 
@@ -54,6 +66,10 @@ class Container:
                         and n.count("/") == 1}
                 if len(tops) == 1:
                     self._prefix = tops.pop()
+        elif _looks_like_zip(self.path):
+            raise RecordingIOError("truncated or corrupt ZIP archive: " + (
+                "the file is empty" if self.path.stat().st_size == 0 else "no end-of-central-"
+                "directory record (was the download or copy cut short?)"), path=self.path)
         else:
             raise RecordingIOError("not a recording: neither a directory nor a ZIP archive",
                                    path=self.path)

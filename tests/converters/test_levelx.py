@@ -455,7 +455,8 @@ def test_cli_convert_highd_without_map(tmp_path):
     files = write_highd(tmp_path / "h")
     out = tmp_path / "cli.aveas"
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "highd",
-                          str(files[0]), "-o", str(out), "-O", "pixel_std=2"],
+                          str(files[0]), "-o", str(out), "-O", "pixel_std=2", "-O",
+                          "license=CC-BY-4.0", "-O", "start_time=2017-11-03T08:00:00Z"],
                          capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert "valid" in res.stderr and out.is_dir()

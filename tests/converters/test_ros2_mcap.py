@@ -362,6 +362,7 @@ def test_cli(scene_mcap, road_map, tmp_path):
     out = tmp_path / "cli.aveas"
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "ros2-mcap",
                           str(scene_mcap), "--map", str(road_map), "-o", str(out),
-                          "-O", f"frame_offset={list(OFFSET)}"], capture_output=True, text=True)
+                          "-O", f"frame_offset={list(OFFSET)}", "-O", "partner=test", "-O",
+                          "license=CC-BY-4.0"], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert out.is_dir()

@@ -132,7 +132,8 @@ def test_cli_convert(westward_map, tmp_path, sumo_data):
     out = tmp_path / "cli.aveas"
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "sumo-fcd",
                           str(sumo_data / "fcd_cartesian_excerpt.xml"), "--map", str(westward_map),
-                          "-o", str(out), "-O", "net_offset=[0,0]"], capture_output=True, text=True)
+                          "-o", str(out), "-O", "net_offset=[0,0]", "-O", "partner=test", "-O",
+                          "license=CC-BY-4.0"], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert "valid" in res.stderr and out.is_dir()
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "nope",

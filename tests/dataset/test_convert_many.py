@@ -61,7 +61,8 @@ def test_cli_convert_each(sources, tmp_path):
     out = tmp_path / "many"
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "sumo-fcd",
                           "--each", *map(str, sorted(src.iterdir())), "--map", str(m), "-o",
-                          str(out), "-j", "1"], capture_output=True, text=True)
+                          str(out), "-j", "1", "-O", "partner=test", "-O", "license=CC-BY-4.0"],
+                         capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     summary = json.loads(res.stdout)
     assert summary["completed"] == 3 and summary["failed"] == 0
