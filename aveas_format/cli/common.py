@@ -38,9 +38,11 @@ class _Console(Console):
         raise BrokenPipeError
 
 
-#: machine output (JSON, reports) goes to stdout; messages and errors to stderr
-out = _Console(highlight=False, soft_wrap=True)
-err = _Console(stderr=True, highlight=False, soft_wrap=True)
+#: machine output (JSON, reports) goes to stdout; messages and errors to stderr. Without markup:
+#: messages carry paths and library text (``pip install "aveas-format[plot]"``) that rich would
+#: read as tags; a call that styles passes ``markup=True`` and escapes what it interpolates.
+out = _Console(highlight=False, soft_wrap=True, markup=False)
+err = _Console(stderr=True, highlight=False, soft_wrap=True, markup=False)
 
 EXIT_OK = 0
 EXIT_FINDINGS = 1

@@ -69,8 +69,10 @@ def info(
     if output_format(fmt, as_json) == "json":
         print(json.dumps(s, indent=2))
         return
-    out.print(f"[bold]{s['recording_id']}[/]" + (f" — {s['title']}" if s.get("title") else ""),
-              markup=True)
+    from rich.markup import escape
+
+    out.print(f"[bold]{escape(s['recording_id'])}[/]"
+              + (f" — {escape(s['title'])}" if s.get("title") else ""), markup=True)
     rows = [
         ("path", s["path"]),
         ("format", s["format_version"] + (f" (migrated from {s['migrated_from']})"

@@ -269,8 +269,12 @@ def discover_dataset(specs: list[str], doing: str, workers: int, scheduler: str 
     ``validating 12 recordings with all worker(s)``."""
     from aveas_format.dataset import discover
 
+    if scheduler:  # the [dask] extra: said before any work
+        from aveas_format.errors import require
+
+        require("distributed", extra="dask", what="a Dask scheduler (--scheduler)")
     paths = discover(specs)
-    err.print(f"{doing} {len(paths)} recordings "
+    err.print(f"{doing} {len(paths)} recording{'' if len(paths) == 1 else 's'} "
               + (f"on {scheduler}" if scheduler else f"with {workers or 'all'} worker(s)"))
     return paths
 
@@ -281,7 +285,10 @@ def print_failure(result: Any, *, red: bool = False) -> None:
     if result.ok:
         return
     if red:
-        err.print(f"[red]failed[/red] {result.item}: {result.error}", markup=True, highlight=False)
+        from rich.markup import escape
+
+        err.print(f"[red]failed[/red] {escape(str(result.item))}: {escape(str(result.error))}",
+                  markup=True, highlight=False)
     else:
         err.print(f"failed {result.item}: {result.error}", markup=False, highlight=False)
 

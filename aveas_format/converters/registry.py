@@ -104,7 +104,13 @@ class Converter:
         """Whether the optional dependencies of :attr:`requires` are installed."""
         import importlib.util
 
-        return all(importlib.util.find_spec(m.split(".")[0]) is not None for m in self.requires)
+        def found(module: str) -> bool:
+            try:
+                return importlib.util.find_spec(module) is not None
+            except (ImportError, ValueError):  # a missing parent package
+                return False
+
+        return all(found(m) for m in self.requires)
 
     def parse_options(self, raw: dict[str, Any] | None) -> ConverterOptions:
         try:

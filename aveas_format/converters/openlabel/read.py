@@ -92,7 +92,8 @@ def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImport
     import importlib.util
 
     if importlib.util.find_spec("ijson") is None:  # a dependency; without it: read whole, as before
-        warnings.warn("ijson is not installed: the OpenLABEL file is read whole (pip install ijson)",
+        warnings.warn("ijson is not installed: the OpenLABEL file is read whole (pip install ijson, "
+                      "a dependency of aveas-format)",
                       stacklevel=2)
     else:
         with _no_gc():
