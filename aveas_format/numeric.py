@@ -28,7 +28,7 @@ def fmt_num(v: object, digits: int = 6) -> str:
     if v == 0:
         return "0.0"
     mag = math.floor(math.log10(abs(v)))
-    if not -7 < mag < 16:
+    if not -10 < mag < 16:
         return f"{v:.{digits}g}"
     decimals = min(15, max(2, digits - 1 - mag))
     text = f"{v:.{decimals}f}".rstrip("0")
