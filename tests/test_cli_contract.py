@@ -110,6 +110,8 @@ def test_an_unknown_option_is_a_one_line_usage_error(capsys, path):
     (("map", "check", "MAP", "-f", "jason"), "(did you mean 'json'?)"),
     (("convert", "--list", "--format", "josn"), "(did you mean 'json'?)"),
     (("validate", "REC", "--fromat", "json"), "--format"),
+    (("validate", "REC", "--select", "kinematic.speed"), "(did you mean 'kinematics.speed'?)"),
+    (("derive", "REC", "-o", "OUT", "--only", "kinematic"), "(did you mean 'kinematics'?)"),
     (("frobnicate",), "No such command 'frobnicate'"),
     (("info",), "Missing argument"),
     (("validate", "REC", "-o", "/nonexistent/dir/r.html"), "the directory /nonexistent/dir does not exist"),

@@ -11,6 +11,7 @@ import typer
 
 from aveas_format.cli.app import app
 from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors
+from aveas_format.errors import did_you_mean
 from aveas_format.cli.options import (
     check_output,
     discover_dataset,
@@ -84,13 +85,13 @@ def derive(
     known = derivations()
     for name in only or []:
         if name not in known:
-            raise fail(f"--only {name!r}: unknown derivation; known: {', '.join(known)}",
-                       EXIT_USAGE)
+            raise fail(f"--only {name!r}: unknown derivation{did_you_mean(name, known)}; known: "
+                       f"{', '.join(known)}", EXIT_USAGE)
     params: dict = _parse_params(param or [])
     for name in params:
         if name not in known:
-            raise fail(f"--param {name}.*: unknown derivation; known: {', '.join(known)}",
-                       EXIT_USAGE)
+            raise fail(f"--param {name}.*: unknown derivation{did_you_mean(name, known)}; known: "
+                       f"{', '.join(known)}", EXIT_USAGE)
     ev = params.setdefault("events", {})
     if ttc is not None:
         ev["ttc_s"] = ttc
