@@ -102,16 +102,17 @@ class MissingDependencyError(AveasError, ImportError):
 
 def require(module: str, *, extra: str, what: str | None = None) -> ModuleType:
     """Import the optional dependency ``module`` and return it; without it, a
-    :class:`MissingDependencyError` in one line naming the extra, e.g. ``the MCAP export needs
-    mcap, an optional dependency: pip install "aveas-format[mcap]"``. ``what`` names the feature
-    (default: the extra)."""
+    :class:`MissingDependencyError` in one line naming the extra, e.g. ``mcap, an optional
+    dependency for the mcap export, is not installed: pip install "aveas-format[mcap]"``.
+    ``what`` names the feature (default: the extra)."""
     try:
         return importlib.import_module(module)
     except ImportError as e:
         missing = getattr(e, "name", None) or module
         raise MissingDependencyError(
-            f"{what or 'aveas-format[' + extra + ']'} needs {missing}, an optional dependency: "
-            f'pip install "aveas-format[{extra}]"', module=missing, extra=extra) from None
+            f"{missing}, an optional dependency for {what or 'aveas-format[' + extra + ']'}, is "
+            f'not installed: pip install "aveas-format[{extra}]"', module=missing,
+            extra=extra) from None
 
 
 def did_you_mean(name: str, known: Iterable[str]) -> str:

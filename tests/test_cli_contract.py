@@ -142,8 +142,8 @@ def test_a_missing_optional_dependency_names_the_extra(capsys, env, tmp_path, mo
     monkeypatch.setattr(sys, "meta_path", [BlockImports("mcap"), *sys.meta_path])
     code, out, err = cli(capsys, "export", "--to", "mcap", env["REC"], "-o", tmp_path / "r.mcap")
     assert code == 3
-    assert one_error_line(err).endswith('the mcap export needs mcap, an optional dependency: '
-                                        'pip install "aveas-format[mcap]"')
+    assert one_error_line(err).endswith('mcap, an optional dependency for the mcap export, is not '
+                                        'installed: pip install "aveas-format[mcap]"')
 
 
 # ---------------------------------------------------------------------------------------------
