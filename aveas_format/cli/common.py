@@ -123,8 +123,7 @@ def print_table(rows: Sequence[Sequence[Any]], columns: Sequence[str] | None = N
     columns, every value whole (no ellipses). ``columns``: header (None: a key/value list);
     ``right``: indices of right-aligned columns."""
     cells = [[str(v) for v in row] for row in rows]
-    if is_terminal():
-        from rich.markup import escape
+    if is_terminal():  # (the console reads no markup: cells are shown as they are)
         from rich.table import Table
 
         t = Table(title=title, show_header=columns is not None, show_edge=False,
@@ -133,7 +132,7 @@ def print_table(rows: Sequence[Sequence[Any]], columns: Sequence[str] | None = N
             t.add_column(name, justify="right" if i in right else "left",
                          style="bold" if columns is None and i == 0 else None, overflow="fold")
         for row in cells:
-            t.add_row(*(escape(c) for c in row))
+            t.add_row(*row)
         out.print(t)
         return
     lines = ([list(columns)] if columns else []) + cells
