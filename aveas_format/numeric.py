@@ -95,3 +95,25 @@ def central_differences(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.nda
 
 
 __all__ = ["central_differences", "fmt_num", "same_participant", "wrap_angle"]
+
+
+def instant_lateral_steps(same: np.ndarray, dt: np.ndarray, dx: np.ndarray, dy: np.ndarray,
+                          lane_heading: np.ndarray, lane_width: np.ndarray, lane_changed: np.ndarray,
+                          v_lateral: np.ndarray, max_lateral_speed: float = 3.0) -> np.ndarray:
+    """Steps (sample i -> i+1 of one participant; arrays of length n-1) that are instantaneous lane
+    changes, as traffic simulators write them by default (SUMO without ``--lanechange.duration``):
+    the position moves across the lane by about one lane width (0.5-1.5 of the width at i) into
+    an adjacent lane or road (``lane_changed``), faster than ``max_lateral_speed`` (m/s), while
+    the velocity across the lane (``v_lateral``, the step's mean) explains less than half of it.
+
+    ``lane_heading``: the lane's direction at i (its sign does not matter), ``lane_width`` at i
+    (NaN off the map: never a step)."""
+    nx, ny = -np.sin(lane_heading), np.cos(lane_heading)
+    lat = dx * nx + dy * ny
+    with np.errstate(invalid="ignore", divide="ignore"):
+        across = np.abs(lat)
+        ok = same & (dt > 0) & np.isfinite(across) & np.isfinite(lane_width) & (lane_width > 0)
+        jump = ok & lane_changed & (across >= 0.5 * lane_width) & (across <= 1.5 * lane_width)
+        jump &= across / np.where(dt > 0, dt, np.inf) > max_lateral_speed
+        jump &= np.abs(lat - np.nan_to_num(v_lateral) * dt) > 0.5 * across
+    return jump

@@ -57,7 +57,7 @@ class Kind:
 
 
 KINDS: dict[str, Kind] = {k.name: k for k in (
-    Kind("converters", "aveas_format.converters", ("registry", "common")),
+    Kind("converters", "aveas_format.converters", ("registry", "common", "labels")),
     Kind("rules", "aveas_format.validate.rules"),
     Kind("derivations", "aveas_format.derive", ("registry",)),
     Kind("commands", "aveas_format.cli", ("app", "common", "options")),

@@ -175,6 +175,10 @@ def converters_markdown() -> str:
                 desc = " ".join((f.description or "").split()).replace("|", "\\|")
                 lines.append(f"| `{name}` | {str(ann).replace('|', 'or')} | {default} | {desc} |")
             lines.append("")
+    from aveas_format.converters import labels
+
+    lines += ["## Labels that are not road users", "",
+              inspect.cleandoc(labels.__doc__ or "").split("\n", 1)[1].strip(), ""]
     return "\n".join(lines)
 
 

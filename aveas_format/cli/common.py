@@ -20,6 +20,7 @@ import os
 import re
 import sys
 import traceback
+import warnings
 from collections.abc import Callable, Sequence
 from enum import Enum
 from typing import Any, TypeVar
@@ -75,6 +76,10 @@ def _closed_pipe() -> typer.Exit:
     return typer.Exit(EXIT_OK)
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    err.print(f"warning: {message}", markup=False)
+
+
 def handle_errors(fn: F) -> F:
     """Turn library errors into one line on stderr + exit 3 (2 for a usage error), a closed pipe
     into a silent exit 0; never a traceback unless ``--debug``."""
@@ -82,7 +87,10 @@ def handle_errors(fn: F) -> F:
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
-            return fn(*args, **kwargs)
+            with warnings.catch_warnings():
+                if not State.debug:  # a library warning is one line, without its source line
+                    warnings.showwarning = _show_warning
+                return fn(*args, **kwargs)
         except (typer.Exit, typer.Abort):
             raise
         except BrokenPipeError:

@@ -32,6 +32,10 @@ Collision: the ``case.csv`` step and participants become an ``accident`` event (
 Uncertainty: the stated tolerances are 95 % bounds, std = tol / 1.96 (x, y, vx, vy, ax, ay,
 heading); options give the defaults. Provenance ``natural``, method ``accident_reconstruction``,
 sampling as given. Lights, interior and the trajectory far from the crash are not observable.
+
+Tested on: PCM-style tables written here from an analytic collision (a car at 10 m/s and a
+crossing pedestrian, first contact at 3 s; tests/converters/test_accident.py); no real GIDAS
+case is in ``../shared/data``.
 """
 
 from __future__ import annotations
@@ -46,7 +50,6 @@ import pyarrow as pa
 
 from aveas_format.converters.common import (
     class_of,
-    column,
     factorize,
     footprint_corners,
     read_numeric_table,
@@ -54,6 +57,7 @@ from aveas_format.converters.common import (
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.io.arrow import column_numpy
 from aveas_format.schema.taxonomy import CLASSES
 
 Z95 = 1.959963984540054
@@ -107,7 +111,7 @@ def _check_finite(t: pa.Table, cols, path: Path, positive=()):
     for c in cols:
         if c not in t.column_names:
             continue
-        a = column(t, c)
+        a = column_numpy(t, c)
         bad = ~np.isfinite(a) | ((a <= 0) if c in positive else False)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
@@ -303,19 +307,19 @@ def convert_accident(inputs: list[Path], *, map_source, options: AccidentOptions
     if not d_src:
         raise FormatError("dynamics has no rows", path=dp)
     pid = np.fromiter((index[s] for s in d_src), np.int64, len(d_src))
-    tv = column(dt_, tcol)
+    tv = column_numpy(dt_, tcol)
     time = tv / rate if tcol == "step" else tv
-    x, y = column(dt_, "x"), column(dt_, "y")
-    vx, vy = column(dt_, "vx"), column(dt_, "vy")
+    x, y = column_numpy(dt_, "x"), column_numpy(dt_, "y")
+    vx, vy = column_numpy(dt_, "vx"), column_numpy(dt_, "vy")
     if "yaw" in names:
-        yaw = column(dt_, "yaw")
+        yaw = column_numpy(dt_, "yaw")
         heading = np.radians(yaw) if o.yaw_unit == "deg" else yaw
     else:
         from aveas_format.mapref.build import heading_from_velocity
 
         heading = heading_from_velocity(pid, vx, vy)
     if "ref_offset" in names:
-        off = np.nan_to_num(column(dt_, "ref_offset"))
+        off = np.nan_to_num(column_numpy(dt_, "ref_offset"))
         x, y = x - off * np.cos(heading), y - off * np.sin(heading)
     t_min = float(time.min())
     time = time - t_min if t_min < 0 else time
@@ -332,7 +336,7 @@ def convert_accident(inputs: list[Path], *, map_source, options: AccidentOptions
               "vy_std": np.full(n, vel_std)}
     for c in ("ax", "ay"):
         if c in names:
-            states[c] = column(dt_, c)
+            states[c] = column_numpy(dt_, c)
             states[f"{c}_std"] = np.full(n, acc_std)
 
     # map
@@ -343,7 +347,7 @@ def convert_accident(inputs: list[Path], *, map_source, options: AccidentOptions
            else ["1"] * rt.num_rows)
     lid = rt.column("line_id").cast(pa.string()).to_pylist()
     kinds = [str(k).strip().lower() for k in rt.column("kind").to_pylist()]
-    seq, rx, ry = column(rt, "seq"), column(rt, "x"), column(rt, "y")
+    seq, rx, ry = column_numpy(rt, "seq"), column_numpy(rt, "x"), column_numpy(rt, "y")
     roads: dict[str, dict[str, tuple[str, np.ndarray]]] = {}
     key_codes, keys = factorize([f"{a}\x00{b}" for a, b in zip(rid, lid)])
     order_r = np.lexsort((seq, key_codes))
@@ -379,7 +383,7 @@ def convert_accident(inputs: list[Path], *, map_source, options: AccidentOptions
                   "attributes": [json.dumps({"case_id": str(case.get("case_id", "")),
                                              "source": "case table"})]}
     else:
-        hit = _first_contact(pid, time, x, y, heading, column(pt, "length"), column(pt, "width"))
+        hit = _first_contact(pid, time, x, y, heading, column_numpy(pt, "length"), column_numpy(pt, "width"))
         if hit is None:
             warnings.warn("no collision step given and no footprint overlap found: no accident "
                           "event", stacklevel=2)
@@ -391,13 +395,13 @@ def convert_accident(inputs: list[Path], *, map_source, options: AccidentOptions
                       "attributes": [json.dumps({"method": "first footprint overlap"})]}
 
     m = len(p_src)
-    height = column(pt, "height") if "height" in pt.column_names else np.full(m, np.nan)
+    height = column_numpy(pt, "height", missing=np.nan)
     pmf = np.zeros((m, len(CLASSES)), np.float32)
     pmf[np.arange(m), [CLASSES.index(c) for c in classes]] = 1.0
     dim_std = o.dimension_tol_m / Z95
     participants = {
         "participant_id": np.arange(m, dtype=np.int64), "source_id": p_src, "class": classes,
-        "class_pmf": pmf, "length": column(pt, "length"), "width": column(pt, "width"),
+        "class_pmf": pmf, "length": column_numpy(pt, "length"), "width": column_numpy(pt, "width"),
         "height": pa.array(height, from_pandas=True), "length_std": np.full(m, dim_std),
         "width_std": np.full(m, dim_std), "attributes": attrs,
     }

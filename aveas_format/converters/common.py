@@ -17,10 +17,10 @@ import pyarrow.parquet as pq
 from aveas_format._version import __version__
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.mapref.build import build_recording, load_map_bytes
-from aveas_format.numeric import central_differences, fmt_num
+from aveas_format.numeric import fmt_num
 
 __all__ = [
-    "build_recording", "column", "factorize", "file_sha256", "load_map_bytes", "move_along_heading",
+    "build_recording", "factorize", "file_sha256", "load_map_bytes", "move_along_heading",
     "navigation_deg_to_heading", "read_table", "source_block", "wrap_recording",
 ]
 
@@ -33,10 +33,13 @@ def file_sha256(path: Path, chunk: int = 1 << 22) -> str:
     return h.hexdigest()
 
 
-def source_block(converter: str, inputs: Iterable[Path], options: Any, version: str = "1"
-                 ) -> dict[str, Any]:
-    """The recording.json ``source`` object: converter, versions, input names + SHA-256, options."""
+def source_block(converter: str, inputs: Iterable[Path], options: Any, version: str = "1",
+                 resolved: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The recording.json ``source`` object: converter, versions, input names + SHA-256, options.
+    ``resolved``: what the converter decided where an option left it open (``auto``: the unit
+    it inferred, the reconstruction it applied), recorded over the options' values."""
     opts = options.model_dump(mode="json") if hasattr(options, "model_dump") else dict(options or {})
+    opts.update(resolved or {})
     return {
         "converter": converter,
         "converter_version": f"{version} (aveas-format {__version__})",
@@ -128,7 +131,7 @@ def _numeric(table: pa.Table, numeric: Sequence[str], path: Path, header_lines: 
             num = _try_float(s)
             if num is None:
                 vals = s.to_pylist()
-                bad = next(i for i, v in enumerate(vals) if v not in (None, "") and not _is_float(v))
+                bad = next(i for i, v in enumerate(vals) if v not in (None, "") and not is_float(v))
                 raise FormatError(f"column {c!r}: {vals[bad]!r} is not a number", path=path,
                                   line=bad + 1 + header_lines if header_lines else None,
                                   row=None if header_lines else bad)
@@ -145,17 +148,14 @@ def _try_float(s: pa.ChunkedArray) -> pa.ChunkedArray | None:
         return None
 
 
-def _is_float(v: str) -> bool:
+def is_float(v: str) -> bool:
+    """Does ``float(v)`` accept the string ``v`` (for locating the first value that is not a
+    number)?"""
     try:
         float(v)
         return True
     except ValueError:
         return False
-
-
-def column(table: pa.Table, name: str) -> np.ndarray:
-    """A numeric column as float64 numpy (nulls -> NaN)."""
-    return pc.fill_null(table.column(name).cast(pa.float64()), np.nan).to_numpy()
 
 
 # --- reference points and angles -----------------------------------------------------------------
@@ -187,7 +187,7 @@ def factorize(values: Sequence[Any] | np.ndarray) -> tuple[np.ndarray, np.ndarra
 def wrap_recording(converter: str, inputs: Sequence[Path], options: Any, *, map_bytes: bytes,
                    participants: dict[str, Any], states: dict[str, Any], version: str = "1",
                    partner: str = "unknown", start_time: str = "1970-01-01T00:00:00Z",
-                   **kw: Any):
+                   resolved: dict[str, Any] | None = None, **kw: Any):
     """Finish a conversion: build the recording (lon/lat and road coordinates through the map,
     defaults filled) with the ``source`` block naming the converter, inputs and options.
 
@@ -207,7 +207,8 @@ def wrap_recording(converter: str, inputs: Sequence[Path], options: Any, *, map_
             meta[key] = getattr(o, key)
     meta.update(kw)
     return build_recording(map_source=map_bytes, participants=participants, states=states,
-                           partner=partner, source=source_block(converter, inputs, options, version),
+                           partner=partner,
+                           source=source_block(converter, inputs, options, version, resolved),
                            **meta)
 
 
@@ -270,15 +271,6 @@ def covariance_std_corr(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
 def nullable(a: np.ndarray) -> pa.Array:
     """A float array with NaN as null (for ``_std``/``_corr`` columns: null = unknown)."""
     return pa.array(np.asarray(a, np.float64), from_pandas=True)
-
-
-def velocity_with_std(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray,
-                      x_std: np.ndarray | None = None, y_std: np.ndarray | None = None
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Velocity from positions and its 1-sigma from independent position errors, within each
-    participant: :func:`aveas_format.numeric.central_differences` (0 with std NaN for a single
-    sample). Rows must be sorted by (participant, time)."""
-    return central_differences(pid, t, x, y, x_std, y_std)
 
 
 def footprint_corners(x: np.ndarray, y: np.ndarray, heading: np.ndarray, length: np.ndarray,
@@ -424,33 +416,13 @@ def map_area(map_bytes: bytes, margin: float = 20.0):
     return shapely.box(xmin - margin, ymin - margin, xmax + margin, ymax + margin)
 
 
-CLASS_SYNONYMS: dict[str, str] = {
-    # aveas names map to themselves; common dataset spellings to the 13 classes
-    "person": "pedestrian", "ped": "pedestrian", "walker": "pedestrian", "child": "pedestrian",
-    "bike": "bicycle", "cyclist": "bicycle", "bicyclist": "bicycle",
-    "motorbike": "motorcycle", "motorcyclist": "motorcycle", "moped": "motorcycle",
-    "scooter": "mobility_device", "e_scooter": "mobility_device", "wheelchair": "mobility_device",
-    "stroller": "pushable_pullable", "pram": "pushable_pullable",
-    "passenger_car": "car", "vehicle": "car", "emergency_vehicle": "car", "taxi": "car",
-    "pickup": "van", "lorry": "truck", "heavy_truck": "truck", "semi": "truck", "tractor": "truck",
-    "coach": "bus", "tram": "railvehicle", "train": "railvehicle", "dog": "animal", "deer": "animal",
-    "unknown": "other", "misc": "other", "dontcare": "other",
-}
-
-
 def class_of(name: str, extra: dict[str, str] | None = None) -> str:
     """One of the 13 classes for a class name of a source (case- and separator-insensitive);
-    ``extra`` maps source names first; unknown names become ``other``."""
-    from aveas_format.schema.taxonomy import CLASSES
+    ``extra`` maps source names first; unknown names become ``other``. Whether the label is a road
+    user at all: :func:`aveas_format.converters.labels.label_kind`."""
+    from aveas_format.converters.labels import label_kind
 
-    if extra and str(name) in extra:
-        return extra[str(name)]
-    key = str(name).strip().lower().replace("-", "_").replace(" ", "_")
-    if extra and key in extra:
-        return extra[key]
-    if key in CLASSES:
-        return key
-    return CLASS_SYNONYMS.get(key, "other")
+    return label_kind(name, extra)[0]
 
 
 def group_mean(codes: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
@@ -550,3 +522,127 @@ def sort_states(pid: np.ndarray, t: np.ndarray, path: Path | None = None,
                           **{unit: None if lines is None else int(lines[i])})
     return order
 
+
+
+# --- timestamps of foreign files: unit and epoch inferred, or given -------------------------------
+
+#: ``timestamp_unit`` option values: ``auto`` infers the unit (see :func:`resolve_timestamps`)
+TIMESTAMP_UNITS = ("auto", "s", "ms", "us", "ns")
+_NS_PER = {"s": 1_000_000_000, "ms": 1_000_000, "us": 1_000, "ns": 1}
+_UNIT_WORD = {"s": "seconds", "ms": "milliseconds", "us": "microseconds", "ns": "nanoseconds"}
+#: Unix times (s) counted as absolute: 1990-01-01 .. 2100-01-01
+EPOCH_RANGE_S = (631_152_000, 4_102_444_800)
+
+
+class Timestamps:
+    """Timestamps of a source resolved to seconds since the first: ``seconds`` (float64 array,
+    NaN where a value was missing), ``start_ns`` (Unix nanoseconds of the first, or None when the
+    source counts from its own start), ``unit`` (s/ms/us/ns, or iso8601), ``epoch`` and ``note``
+    (what was decided and why, for the ``source`` block)."""
+
+    def __init__(self, seconds: np.ndarray, start_ns: int | None, unit: str, epoch: bool, note: str):
+        self.seconds, self.start_ns, self.unit, self.epoch, self.note = seconds, start_ns, unit, epoch, note
+
+    @property
+    def start_time(self) -> str | None:
+        return None if self.start_ns is None else utc_iso_from_ns(self.start_ns)
+
+    def resolved(self) -> dict[str, str]:
+        """The choice as option values for the ``source`` block (re-running with them repeats it)."""
+        return {"timestamp_unit": self.unit, "timestamps": self.note}
+
+
+def iso_to_ns(text: str) -> int | None:
+    """Unix nanoseconds of an ISO 8601 date-time (``Z``, an offset or none = UTC; any number of
+    fraction digits), or None when the text is not one."""
+    import re
+    from datetime import datetime, timezone
+
+    m = re.fullmatch(r"\s*(\d{4}-\d{2}-\d{2}[T ]\d{2}:\d{2}(?::\d{2})?)(?:[.,](\d{1,9})\d*)?"
+                     r"(Z|[+-]\d{2}(?::?\d{2})?)?\s*", text)
+    if not m:
+        return None
+    tz = m[3] or "Z"
+    tz = "+00:00" if tz == "Z" else (tz + ":00" if len(tz) == 3 else tz if ":" in tz else tz[:3] + ":" + tz[3:])
+    try:
+        dt = datetime.fromisoformat(m[1].replace(" ", "T") + tz).astimezone(timezone.utc)
+    except ValueError:
+        return None
+    return int(dt.timestamp()) * 1_000_000_000 + int((m[2] or "").ljust(9, "0"))
+
+
+def timestamp_value(v: Any) -> int | float | str | None:
+    """A number (exact int where the text is an integer, so that epoch nanoseconds keep their
+    digits), an ISO text kept as text, None where absent or unreadable."""
+    if v is None or isinstance(v, bool):
+        return None
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        return float(v) if np.isfinite(v) else None
+    if isinstance(v, str):
+        t = v.strip()
+        if t.lstrip("+-").isdigit():
+            return int(t)
+        try:
+            f = float(t)
+            return f if np.isfinite(f) else None
+        except ValueError:
+            return t if iso_to_ns(t) is not None else None
+    return None
+
+
+def resolve_timestamps(values: Sequence[Any], unit: str = "auto", *, what: str = "timestamps"
+                       ) -> Timestamps:
+    """Seconds since the first of timestamps whose unit and epoch a format leaves open (OpenLABEL's
+    ``frame_properties.timestamp``: numbers or numeric strings, or ISO 8601 texts).
+
+    ``unit`` = ``auto`` infers it: values whose magnitude puts them between 1990 and 2100 as
+    seconds, milliseconds, microseconds or nanoseconds since the Unix epoch are read so (the four
+    ranges are 1000x apart, so at most one fits); smaller values count from the source's own
+    start, in the unit their median spacing suggests (< 5: s, < 5e3: ms, < 5e6: us, else ns — a
+    frame period of 0.2 ms .. 5 s). A given ``unit`` fixes the unit; the epoch is still told by
+    the magnitude. ISO texts are absolute. Values are kept exact (integers) until the difference
+    to the first is taken, so nanosecond epochs lose nothing."""
+    if unit not in TIMESTAMP_UNITS:
+        raise FormatError(f"timestamp_unit {unit!r}: expected one of {', '.join(TIMESTAMP_UNITS)}")
+    vals = [timestamp_value(v) for v in values]
+    have = [v for v in vals if v is not None]
+    n = len(vals)
+    if not have:
+        return Timestamps(np.full(n, np.nan), None, unit if unit != "auto" else "s", False,
+                          f"no {what}")
+    if any(isinstance(v, str) for v in have):
+        if not all(isinstance(v, str) for v in have):
+            raise FormatError(f"{what} mix ISO 8601 texts and numbers")
+        ns = [None if v is None else iso_to_ns(v) for v in vals]
+        t0 = min(x for x in ns if x is not None)
+        sec = np.array([np.nan if x is None else (x - t0) / 1e9 for x in ns])
+        return Timestamps(sec, t0, "iso8601", True, f"{what}: ISO 8601 date-times (UTC)")
+    mag = max(abs(float(v)) for v in have)
+    srt = np.unique(np.asarray([float(v) for v in have]))
+    dts = np.diff(srt)
+    spacing = float(np.median(dts)) if len(dts) else None
+    how = "given"
+    epoch = False
+    if unit == "auto":
+        how = "inferred from magnitude %.3g" % mag + (f" and spacing {spacing:.3g}" if spacing else "")
+        for u in ("s", "ms", "us", "ns"):
+            if EPOCH_RANGE_S[0] <= mag * _NS_PER[u] / 1e9 <= EPOCH_RANGE_S[1]:
+                unit, epoch = u, True
+                break
+        else:
+            sp = spacing if spacing else 0.0
+            unit = "s" if sp < 5 else "ms" if sp < 5e3 else "us" if sp < 5e6 else "ns"
+    else:
+        epoch = EPOCH_RANGE_S[0] <= mag * _NS_PER[unit] / 1e9 <= EPOCH_RANGE_S[1]
+    scale = _NS_PER[unit]
+    first = min(have)
+    if all(isinstance(v, int) for v in have):
+        sec = np.array([np.nan if v is None else (v - first) * scale / 1e9 for v in vals])
+        start_ns = first * scale if epoch else None
+    else:
+        sec = np.array([np.nan if v is None else (float(v) - float(first)) * scale / 1e9 for v in vals])
+        start_ns = int(round(float(first) * scale)) if epoch else None
+    ref = "since the Unix epoch" if epoch else "since the start of the recording"
+    return Timestamps(sec, start_ns, unit, epoch, f"{what}: {_UNIT_WORD[unit]} {ref} ({how})")

@@ -30,6 +30,9 @@ where no ``vx``/``vy``. The subject gets role ``subject_role`` (default ``record
 provenance ``subject_provenance`` (default ``staged``: a person driving in an experiment); the
 traffic is ``simulated_agent`` / ``simulated``; the recording is ``mixed`` when the two differ. The
 simulator's state is exact: every ``_std`` is 0. Method ``driving_simulator``.
+
+Tested on: simulator logs (CSV/Parquet) written here from an analytic truth
+(tests/converters/test_driving_simulator.py); no log of a real simulator is in ``../shared/data``.
 """
 
 from __future__ import annotations
@@ -43,7 +46,6 @@ import numpy as np
 import pyarrow as pa
 
 from aveas_format.converters.common import (
-    column,
     factorize,
     load_map_bytes,
     move_along_heading,
@@ -53,6 +55,7 @@ from aveas_format.converters.common import (
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError
+from aveas_format.io.arrow import column_numpy
 from aveas_format.numeric import fmt_num
 from aveas_format.schema.taxonomy import CLASSES, DRIVER_FOCUS
 
@@ -101,7 +104,7 @@ def convert_driving_simulator(inputs: list[Path], *, map_source, options: Drivin
         numeric = [c for c in t.column_names if c not in ("id", "class", "driver_focus")]
         t = read_numeric_table(p, numeric=numeric)
         for c in ("time", "x", "y", "heading"):
-            bad = np.flatnonzero(~np.isfinite(column(t, c)))
+            bad = np.flatnonzero(~np.isfinite(column_numpy(t, c)))
             if len(bad):
                 raise FormatError(f"column {c!r} is empty", path=p, line=int(bad[0]) + 2)
         if not ({"vx", "vy"} <= set(t.column_names) or "speed" in t.column_names):
@@ -115,7 +118,7 @@ def convert_driving_simulator(inputs: list[Path], *, map_source, options: Drivin
     def num(name: str, default: float = np.nan) -> np.ndarray:
         if name not in names:
             return np.full(len(lines), default)
-        return np.concatenate([column(t, name) for _, t in parts])
+        return np.concatenate([column_numpy(t, name) for _, t in parts])
 
     def text(name: str) -> np.ndarray | None:
         if name not in names:

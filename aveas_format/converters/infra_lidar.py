@@ -8,8 +8,12 @@ Inputs (mixed freely; the kind is recognised per file):
   coordinate system; the 9-value Euler form ``[x, y, z, rx, ry, rz, l, w, h]`` is read too). Both
   the ASAM-conformant form (``cuboid`` a list, the object's ``type`` in the top-level ``objects``)
   and the TUM deviations (a single ``cuboid`` object, ``type`` inside ``object_data``) are
-  accepted. The object uid is the track id. ``frame_properties.timestamp`` (s since the epoch)
-  gives the time, else the frame number / ``rate_hz``. ``num_points`` and ``score`` attributes
+  accepted. The object uid is the track id. ``frame_properties.timestamp`` gives the time (its
+  unit inferred as in the ``openlabel`` importer: seconds, ms, us or ns since the epoch, or since
+  the start; ``timestamp_unit`` fixes it; recorded in the ``source`` block), else the frame
+  number / ``rate_hz``. Tracks whose ``type`` is no road user (see "Labels that are not road
+  users") are skipped with a count unless ``keep_non_road_users``; ignore types (DontCare) and
+  boxes with sentinel sizes (<= 0, > 400 m) always, with a note. ``num_points`` and ``score`` attributes
   (``attributes.num`` of the cuboid or of object_data) feed the uncertainty and the class PMF.
 - A plain **tracks table** (CSV/Parquet) of an in-house tracker: ``time`` (s) or ``frame``,
   ``track_id`` (or ``id``), ``class`` (or ``type``), ``x, y, z, yaw, length, width, height`` (or
@@ -23,8 +27,13 @@ Inputs (mixed freely; the kind is recognised per file):
 Frames: a cuboid's coordinate system is its ``coordinate_system``, else option
 ``coordinate_system``, else the one sensor coordinate system with a ``pose_wrt_parent``. The
 sensor-to-base transform is the sensor pose file if given, else the chain of ``pose_wrt_parent``
-(OpenLABEL: the pose of a coordinate system in its parent, ``X_parent = P X_child``) up to the
-root; ``frame_offset`` = (x, y, yaw) places that base frame in the OpenDRIVE map's local frame, whose
+(OpenLABEL: the pose of a coordinate system in its parent, ``X_parent = P X_child``) and of each
+frame's ``frame_properties.transforms`` up to the root. Where a frame's transforms move the
+cuboids' coordinate system, the sensor moves: each frame's boxes go through that frame's
+transform, and the unobserved regions (range, field of view, shadows) follow the sensor frame by
+frame; a chain that ends in a ``geo_*`` root (a sensor on a vehicle in world coordinates, as in
+the ASAM cuboid example) is refused with a message naming ``--from openlabel``; a sensor pose
+file together with moving frames is refused too (it would fix the pose the frames move); ``frame_offset`` = (x, y, yaw) places that base frame in the OpenDRIVE map's local frame, whose
 ground is at base z = 0. Reference point: the cuboid's centre projected to the ground
 (``z = centre - h/2``); heading = yaw of the cuboid's x axis in the map.
 
@@ -45,6 +54,12 @@ Unobserved regions: the map's extent outside the sensor's range (``sensor_range`
 recording; per frame, the ground shadow of every box seen from the sensor (``occlusion``, with
 ``occluder_id``; a box of height h at ground distance d hides the ground to d H / (H - h) for a
 sensor H above the ground), valid from its frame to the next.
+
+Tested on: the TUM Traffic dev-kit's calibration ``../shared/data/tum_traffic_calib/
+s110_lidar_ouster_south.json`` (the real LiDAR-to-base pose) with label files in TUM's layout
+written here from an analytic truth (tests/converters/test_infra_lidar.py: static and moving
+sensor, epoch-microsecond timestamps, DontCare and barriers), and the ASAM spec's
+``asam_spec__openlabel100_example_cuboids.json`` (refused: a moving vehicle in UTM).
 """
 
 from __future__ import annotations
@@ -58,8 +73,8 @@ import numpy as np
 import pyarrow as pa
 
 from aveas_format.converters.common import (
+    TIMESTAMP_UNITS,
     class_of,
-    column,
     coverage_regions,
     unobserved_table,
     covariance_std_corr,
@@ -74,14 +89,18 @@ from aveas_format.converters.common import (
     quaternion_matrix,
     read_numeric_table,
     read_table,
+    resolve_timestamps,
     rotate_covariance_2d,
     sector_polygon,
+    timestamp_value,
     utc_iso_from_ns,
-    velocity_with_std,
     wrap_recording,
 )
+from aveas_format.converters.labels import LabelFilter, implausible_size
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.io.arrow import column_numpy
+from aveas_format.numeric import central_differences
 from aveas_format.safeio import MAX_BULK_JSON_BYTES, load_json
 from aveas_format.schema.taxonomy import CLASSES
 
@@ -123,6 +142,12 @@ class InfraLidarOptions(ImportOptions):
     """Source class name -> one of the 13 classes."""
     z_reference: Literal["center", "bottom"] = "center"
     """Tracks table: z is the box centre or its bottom."""
+    timestamp_unit: Literal[TIMESTAMP_UNITS] = "auto"
+    """Unit of OpenLABEL ``frame_properties.timestamp``: s, ms, us or ns; ``auto`` infers it from
+    the values' magnitude and spacing (recorded in the ``source`` block)."""
+    keep_non_road_users: bool = False
+    """Import tracks whose type is no road user (see docs/converters.md "Labels that are not road
+    users"); ignore-type labels are never imported."""
 
 
 # --- transforms ------------------------------------------------------------------------------------
@@ -192,28 +217,10 @@ def _load_json(path: Path) -> Any:
     return load_json(raw, path=path, max_bytes=MAX_BULK_JSON_BYTES)
 
 
-def _chain(cs: dict[str, Any], name: str, path: Path) -> np.ndarray:
-    out = np.eye(4)
-    cur = name
-    for _ in range(64):
-        node = cs.get(cur)
-        if node is None:
-            raise FormatError(f"coordinate system {cur!r} is not in coordinate_systems "
-                              f"({sorted(cs)})", path=path)
-        if "pose_wrt_parent" in node and node["pose_wrt_parent"]:
-            out = _transform(node["pose_wrt_parent"], f"coordinate_systems.{cur}.pose_wrt_parent",
-                             path) @ out
-        parent = node.get("parent", "")
-        if not parent:
-            return out
-        cur = parent
-    raise FormatError(f"coordinate system {name!r}: parent chain is cyclic", path=path)
-
-
 # --- readers ---------------------------------------------------------------------------------------
 
 _ROWS = ("time", "track", "type", "cx", "cy", "cz", "qx", "qy", "qz", "qw", "l", "w", "h",
-         "points", "score", "cs", "src")
+         "points", "score", "cs", "src", "frame")
 
 
 def _attr(block: dict[str, Any], name: str) -> float | None:
@@ -228,10 +235,17 @@ def _attr(block: dict[str, Any], name: str) -> float | None:
 
 def _read_openlabel(path: Path, data: dict[str, Any], opts: InfraLidarOptions, rows: dict[str, list],
                     systems: dict[str, np.ndarray], src: int) -> None:
+    """The cuboids of one OpenLABEL file into ``rows``; their coordinate systems' transforms to the
+    base frame into ``systems`` (per frame where ``frame_properties.transforms`` move them)."""
+    from aveas_format.converters.openlabel.frames import _Frames
+
     ol = data["openlabel"]
     if not isinstance(ol, dict):
         raise FormatError("'openlabel' is not an object", path=path)
     cs = ol.get("coordinate_systems") or {}
+    if not isinstance(cs, dict):
+        raise FormatError("'openlabel.coordinate_systems' is not an object", path=path)
+    tree = _Frames(cs)
     top = ol.get("objects") or {}
     frames = ol.get("frames") or {}
     if not isinstance(frames, dict):
@@ -242,16 +256,17 @@ def _read_openlabel(path: Path, data: dict[str, Any], opts: InfraLidarOptions, r
                  and v.get("type", "") not in ("scene_cs", "geo_utm", "geo_wgs84", "local_cs")]
         default_cs = posed[0] if len(posed) == 1 else None
     for fkey in sorted(frames, key=lambda k: int(k) if str(k).lstrip("-").isdigit() else 0):
-        frame = frames[fkey]
+        frame = frames[fkey] if isinstance(frames[fkey], dict) else {}
         try:
             fnum = int(fkey)
         except ValueError:
             raise FormatError(f"frame key {fkey!r} is not an integer", path=path) from None
-        ts = (frame.get("frame_properties") or {}).get("timestamp")
-        try:
-            t = float(ts) if ts is not None else fnum / opts.rate_hz
-        except (TypeError, ValueError):
-            raise FormatError(f"frame {fkey}: timestamp {ts!r} is not a number", path=path) from None
+        fp = frame.get("frame_properties") if isinstance(frame.get("frame_properties"), dict) else {}
+        ts = fp.get("timestamp")
+        if ts is not None and timestamp_value(ts) is None:
+            raise FormatError(f"frame {fkey}: timestamp {ts!r} is not a number or an ISO 8601 time",
+                              path=path)
+        edges = tree.frame_edges(fp.get("transforms"))
         for uid, obj in (frame.get("objects") or {}).items():
             od = (obj or {}).get("object_data") or {}
             cub = od.get("cuboid")
@@ -278,17 +293,32 @@ def _read_openlabel(path: Path, data: dict[str, Any], opts: InfraLidarOptions, r
             else:
                 raise FormatError(f"{where} val has {len(val)} values, expected 10 "
                                   "[x,y,z,qx,qy,qz,qw,l,w,h] or 9 [x,y,z,rx,ry,rz,l,w,h]", path=path)
-            if not np.isfinite(val).all():
+            if not np.isfinite(val[:7]).all():
                 raise FormatError(f"{where} val is not finite", path=path)
-            if length <= 0 or width <= 0:
-                raise FormatError(f"{where} size {length} x {width} is not positive", path=path)
             cname = cub.get("coordinate_system") or default_cs
-            key = f"{src}:{cname}"
+            moving = bool(cname) and cname in edges
+            key = f"{src}:{cname}@{fkey}" if moving else f"{src}:{cname}"
             if key not in systems:
                 if opts.sensor_pose is not None:
+                    if moving:
+                        raise FormatError(
+                            f"frame {fkey}: frame_properties.transforms move coordinate system "
+                            f"{cname!r} (a moving sensor), but option sensor_pose fixes its pose: "
+                            "drop sensor_pose to apply the frame's transforms", path=path)
                     systems[key] = read_sensor_pose(opts.sensor_pose)
                 elif cname:
-                    systems[key] = _chain(cs, cname, path)
+                    if cname not in cs and cname not in edges:
+                        raise FormatError(f"coordinate system {cname!r} is not in coordinate_systems "
+                                          f"({sorted(cs)})", path=path)
+                    m, root, via_frame = tree.resolve(cname, edges)
+                    if via_frame and tree.kind.get(root, "").startswith("geo"):
+                        raise FormatError(
+                            f"frame {fkey}: frame_properties.transforms carry coordinate system "
+                            f"{cname!r} into {root!r} ({tree.kind[root]}): the sensor rides on a "
+                            "vehicle in world coordinates, not on a pole; convert with --from "
+                            "openlabel, which applies the transforms and reads the UTM zone",
+                            path=path)
+                    systems[key] = m
                 else:
                     systems[key] = np.eye(4)
             typ = (top.get(uid) or {}).get("type") or od.get("type") or "other"
@@ -298,9 +328,10 @@ def _read_openlabel(path: Path, data: dict[str, Any], opts: InfraLidarOptions, r
             score = _attr(cub, "score")
             if score is None:
                 score = _attr(od, "score")
-            for k, v in zip(_ROWS, (t, str(uid), str(typ), x, y, z, qx, qy, qz, qw, length, width,
-                                    height, np.nan if pts is None else pts,
-                                    np.nan if score is None else score, key, src)):
+            for k, v in zip(_ROWS, (ts if ts is not None else None, str(uid), str(typ), x, y, z, qx,
+                                    qy, qz, qw, length, width, height,
+                                    np.nan if pts is None else pts,
+                                    np.nan if score is None else score, key, src, fnum)):
                 rows[k].append(v)
 
 
@@ -327,11 +358,11 @@ def _read_tracks(path: Path, opts: InfraLidarOptions, rows: dict[str, list],
         pick(c)
     t = read_numeric_table(path, numeric=num)
     n = t.num_rows
-    tv = column(t, tcol)
+    tv = column_numpy(t, tcol)
     time = tv / opts.rate_hz if tcol.startswith("frame") else tv
-    vals = {c: column(t, c) for c in ("x", "y", "yaw")}
-    z = column(t, "z") if "z" in names else np.zeros(n)
-    length, width, height = column(t, lc), column(t, wc), column(t, hc)
+    vals = {c: column_numpy(t, c) for c in ("x", "y", "yaw")}
+    z = column_numpy(t, "z", missing=0.0)
+    length, width, height = column_numpy(t, lc), column_numpy(t, wc), column_numpy(t, hc)
     for c, arr in (("x", vals["x"]), ("y", vals["y"]), ("yaw", vals["yaw"]), (tcol, tv), (lc, length),
                    (wc, width)):
         bad = ~np.isfinite(arr) | ((arr <= 0) if c in (lc, wc) else False)
@@ -356,9 +387,9 @@ def _read_tracks(path: Path, opts: InfraLidarOptions, rows: dict[str, list],
     cols = {"time": time, "track": ids, "type": cls, "cx": vals["x"], "cy": vals["y"], "cz": z,
             "qx": np.zeros(n), "qy": np.zeros(n), "qz": np.sin(half), "qw": np.cos(half),
             "l": length, "w": width, "h": height,
-            "points": column(t, "num_points") if "num_points" in names else np.full(n, np.nan),
-            "score": column(t, "score") if "score" in names else np.full(n, np.nan),
-            "cs": [key] * n, "src": [src] * n}
+            "points": column_numpy(t, "num_points", missing=np.nan),
+            "score": column_numpy(t, "score", missing=np.nan),
+            "cs": [key] * n, "src": [src] * n, "frame": [np.nan] * n}
     for k in _ROWS:
         rows[k].extend(list(cols[k]))
 
@@ -399,10 +430,16 @@ def convert_infra_lidar(inputs: list[Path], *, map_source, options: InfraLidarOp
         _read_tracks(p, o, rows, systems, len(labels) + j)
     if not rows["time"]:
         raise FormatError("no cuboids or track rows found", path=inputs[0])
+    t_abs, resolved, start_ns = _times(rows, labels, o)
+    notes = _keep_road_users(rows, o, t_abs)
+    if not rows["time"]:
+        raise FormatError("no road user among the cuboids: " + "; ".join(notes), path=inputs[0])
+    t_abs = np.asarray(rows["time"], np.float64)
+    for note in notes:
+        warnings.warn(f"infra-lidar: {note}", stacklevel=2)
 
     map_bytes = load_map_bytes(map_source)
     n = len(rows["time"])
-    t_abs = np.asarray(rows["time"], np.float64)
     cs_codes, cs_names = factorize(rows["cs"])
     c = np.c_[rows["cx"], rows["cy"], rows["cz"]].astype(np.float64)
     q = np.c_[rows["qx"], rows["qy"], rows["qz"], rows["qw"]].astype(np.float64)
@@ -447,7 +484,7 @@ def convert_infra_lidar(inputs: list[Path], *, map_source, options: InfraLidarOp
     pid, time = pid[~dup], t_rel[~dup]
     x, y = pos[sel, 0], pos[sel, 1]
     sx, sy, rho = sx[sel], sy[sel], rho[sel]
-    vx, vy, vxs, vys = velocity_with_std(pid, time, x, y, sx, sy)
+    vx, vy, vxs, vys = central_differences(pid, time, x, y, sx, sy)
     mp = len(uniq)
     types = np.asarray(rows["type"], dtype=object)[sel]
     pmf = group_mean(pid, _class_pmf(types, np.asarray(rows["score"], np.float64)[sel], o.class_map), mp)
@@ -473,49 +510,130 @@ def convert_infra_lidar(inputs: list[Path], *, map_source, options: InfraLidarOp
         "attributes": [json.dumps({"source_class": str(types[i])}) for i in first],
     }
 
-    # unobserved regions
+    # unobserved regions: per frame where the sensor moves, else once
     period = 1.0 / o.rate_hz
     frame_times = np.unique(time)
     nxt = np.r_[frame_times[1:], frame_times[-1] + period]
     duration = float(nxt[-1])
-    s0 = mats[0][:3, 3]
-    fov_yaw = matrix_yaw(mats[0][None, :3, :3])[0] + np.radians(o.fov_yaw_deg)
     area = map_area(map_bytes)
-    unob = coverage_regions(o.sensor_id, (float(s0[0]), float(s0[1])), o.range_m, float(fov_yaw),
-                            np.radians(o.fov_deg), area, 0.0, duration)
+    yaw_row = matrix_yaw(m[sel, :3, :3]) + np.radians(o.fov_yaw_deg)
+    sensor = sensor[sel]
+    moving = bool(np.ptp(sensor, axis=0).max() > 1e-3 or np.ptp(np.unwrap(yaw_row)) > 1e-4)
+    fi = np.searchsorted(frame_times, time)
+    at = np.unique(fi, return_index=True)[1] if moving else np.array([0])
     import shapely
 
-    view = shapely.intersection(sector_polygon(float(s0[0]), float(s0[1]), o.range_m, float(fov_yaw),
-                                               np.radians(o.fov_deg)), area)
+    unob: list[dict[str, Any]] = []
+    views = []
+    for k, i in enumerate(at):
+        t_start = float(frame_times[fi[i]]) if moving else 0.0
+        t_end = float(nxt[fi[i]]) if moving else duration
+        sxy = (float(sensor[i, 0]), float(sensor[i, 1]))
+        unob += coverage_regions(o.sensor_id, sxy, o.range_m, float(yaw_row[i]),
+                                 np.radians(o.fov_deg), area, t_start, t_end)
+        views.append(shapely.intersection(sector_polygon(*sxy, o.range_m, float(yaw_row[i]),
+                                                         np.radians(o.fov_deg)), area))
+    view = shapely.union_all(views)
     coverage = shapely.to_wkt(view, rounding_precision=3) if not view.is_empty else None
     if o.occlusion:
-        h_sensor = float(s0[2])
-        shadows = occlusion_shadows((float(s0[0]), float(s0[1]), h_sensor), x, y, heading[sel],
-                                    length[sel], width[sel],
-                                    np.where(np.isfinite(height[sel]), height[sel], 1.5), o.range_m)
+        shadows: list = [None] * len(x)
+        if moving:  # the rows of each frame, seen from the sensor's pose in that frame
+            by_frame = np.argsort(fi, kind="stable")
+            groups = np.split(by_frame, np.flatnonzero(np.diff(fi[by_frame])) + 1)
+        else:
+            groups = [np.arange(len(x))]
+        h_all = np.where(np.isfinite(height[sel]), height[sel], 1.5)
+        for g in groups:
+            s_ = sensor[g[0]]
+            for i, geom in zip(g, occlusion_shadows((float(s_[0]), float(s_[1]), float(s_[2])), x[g],
+                                                    y[g], heading[sel][g], length[sel][g],
+                                                    width[sel][g], h_all[g], o.range_m)):
+                shadows[i] = geom
         keep = np.flatnonzero(np.asarray([g is not None for g in shadows]))
-        ends = nxt[np.searchsorted(frame_times, time[keep])]
+        ends = nxt[fi[keep]]
         for i, te in zip(keep, ends):
             unob.append({"time_start": float(time[i]), "time_end": float(te), "kind": "occlusion",
                          "geometry": shadows[i], "sensor_id": o.sensor_id, "occluder_id": int(pid[i])})
     unobserved = unobserved_table(unob)
-    yaw_s = float(matrix_yaw(mats[0][None, :3, :3])[0])
+    s0 = sensor[0]
+    rot0 = m[sel[0], :3, :3]
+    yaw_s = float(matrix_yaw(rot0[None])[0])
     from scipy.spatial.transform import Rotation
 
-    _, pitch, roll = Rotation.from_matrix(mats[0][:3, :3]).as_euler("ZYX")
-    start = (utc_iso_from_ns(int(round(t0 * 1e9))) if t0 > 1e8 else "1970-01-01T00:00:00Z")
+    _, pitch, roll = Rotation.from_matrix(rot0).as_euler("ZYX")
+    if start_ns is not None:  # exact: the first timestamp's digits, moved to the first kept box
+        start = utc_iso_from_ns(start_ns + int(round((t0 - start_ns / 1e9) * 1e9)))
+    else:
+        start = utc_iso_from_ns(int(round(t0 * 1e9))) if t0 > 1e8 else "1970-01-01T00:00:00Z"
     return wrap_recording(
         "infra-lidar", inputs, options, map_bytes=map_bytes, participants=participants,
         states=states, method="infrastructure_lidar", provenance="natural", start_time=start,
-        unobserved=unobserved, duration_s=duration,
+        unobserved=unobserved, duration_s=duration, resolved=resolved,
         acquisition={
-            "platform": "pole-mounted LiDAR",
+            "platform": "pole-mounted LiDAR" if not moving else "LiDAR on a moving platform",
             "sensors": [{"id": o.sensor_id, "kind": "lidar",
                          "pose": {"x": float(s0[0]), "y": float(s0[1]), "z": float(s0[2]),
                                   "yaw": yaw_s, "pitch": float(pitch), "roll": float(roll),
                                   "frame": "local"},
-                         "description": f"range {o.range_m} m, FOV {o.fov_deg} deg"}],
+                         "description": f"range {o.range_m} m, FOV {o.fov_deg} deg"
+                                        + ("; moving: pose of the first frame, unobserved regions "
+                                           "per frame" if moving else "")}],
             "not_observable": ["light_", "interior"],
         },
         coverage=coverage,
     )
+
+
+def _times(rows: dict[str, list], labels: list, o: InfraLidarOptions
+           ) -> tuple[np.ndarray, dict, int | None]:
+    """Seconds (Unix seconds where absolute) of every row into ``rows["time"]``: OpenLABEL frame
+    timestamps with their unit inferred (or ``timestamp_unit``), else frame numbers at
+    ``rate_hz``; tracks tables' time as given. Returns ``(times, resolved, Unix ns of the first
+    OpenLABEL timestamp or None)``."""
+    n = len(rows["time"])
+    src = np.asarray(rows["src"])
+    is_ol = src < len(labels)
+    t = np.full(n, np.nan)
+    resolved: dict[str, str] = {}
+    start_ns = None
+    if is_ol.any():
+        idx = np.flatnonzero(is_ol)
+        raw = [rows["time"][i] for i in idx]
+        present = np.asarray([v is not None for v in raw])
+        if present.all():
+            ts = resolve_timestamps(raw, o.timestamp_unit, what="frame_properties.timestamp")
+            t[idx] = (ts.start_ns / 1e9 if ts.epoch else 0.0) + ts.seconds
+            resolved, start_ns = ts.resolved(), ts.start_ns
+        elif not present.any():
+            t[idx] = np.asarray(rows["frame"], np.float64)[idx] / o.rate_hz
+            resolved = {"timestamps": f"no frame has a timestamp: frame numbers at rate_hz {o.rate_hz:g}"}
+        else:
+            i = idx[int(np.flatnonzero(~present)[0])]
+            raise FormatError(f"frame {rows['frame'][i]} has no frame_properties.timestamp while other "
+                              "frames have one", path=labels[int(src[i])][0])
+    if (~is_ol).any():
+        t[~is_ol] = np.asarray([rows["time"][i] for i in np.flatnonzero(~is_ol)], np.float64)
+    rows["time"] = t.tolist()
+    return t, resolved, start_ns
+
+
+def _keep_road_users(rows: dict[str, list], o: InfraLidarOptions, t_abs: np.ndarray) -> list[str]:
+    """Drop (in place) the rows of tracks whose type is no road user (``keep_non_road_users``
+    keeps them) or an ignore type, and boxes with a sentinel or impossible size; the notes."""
+    labels = LabelFilter(o.keep_non_road_users, o.class_map)
+    first_type: dict[str, str] = {}
+    for tr, ty in zip(rows["track"], rows["type"]):
+        first_type.setdefault(tr, ty)
+    keep_track = {tr: labels(ty) is not None for tr, ty in first_type.items()}
+    keep = np.asarray([keep_track[tr] for tr in rows["track"]], bool)
+    bad = implausible_size(np.c_[rows["l"], rows["w"], rows["h"]]) & keep
+    notes = [labels.note("tracks")] if labels.note("tracks") else []
+    if bad.any():
+        notes.append(f"dropped {int(bad.sum())} boxes with a sentinel or impossible size (<= 0, "
+                     "not finite or > 400 m)")
+    keep &= ~bad
+    if not keep.all():
+        idx = np.flatnonzero(keep)
+        for k in rows:
+            rows[k] = [rows[k][i] for i in idx]
+    return notes

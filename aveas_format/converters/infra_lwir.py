@@ -3,10 +3,16 @@
 Inputs:
 
 - **Pixel tracks**: MOTChallenge text files (no header, ``frame,id,bb_left,bb_top,bb_width,
-  bb_height,conf,...``; 9 columns are read as MOT17 ground truth ``...,conf,class,visibility``
-  with MOT17's class ids: 1, 2, 7 pedestrian, 3 car, 4 bicycle, 5 motorcycle, 6 other), or a CSV
-  with a header: ``frame`` (or ``time`` in s), ``id``/``track_id``, ``bb_left``, ``bb_top``,
-  ``bb_width``, ``bb_height`` (or ``left, top, width, height``), optional ``conf`` and ``class``.
+  bb_height,conf,...``; 9 columns are read as MOT16/17/20 ground truth ``...,conf,class,visibility``
+  with the documented class ids: 1 pedestrian, 3 car, 4 bicycle, 5 motorbike (motorcycle), 6 non
+  motorized vehicle (pushable_pullable) are road users; 2 person on vehicle (the rider of a
+  labelled vehicle), 7 static person, 8 distractor, 9 occluder, 10 occluder on the ground, 11
+  occluder full and 12 reflection are not, and are skipped with a count in a warning unless
+  ``keep_non_road_users`` (then 2 and 7 are pedestrians, the rest other); 13 crowd (MOT20, a
+  region) is never imported. ``conf`` (MOT's "consider in evaluation" flag) is not a filter: cars
+  carry 0 there), or a CSV with a header: ``frame`` (or ``time`` in s), ``id``/``track_id``,
+  ``bb_left``, ``bb_top``, ``bb_width``, ``bb_height`` (or ``left, top, width, height``),
+  optional ``conf`` and ``class`` (a name; names that are no road user are skipped alike).
 - **Landmarks** (a CSV recognised by its columns ``u, v, x, y``, or option ``landmarks``): pixel
   positions of surveyed ground points and their map coordinates (the OpenDRIVE local frame).
 
@@ -29,6 +35,11 @@ Unobserved regions: the ground footprint of the image (``image_size``, up to the
 ground lies ``range_m`` from the bottom centre's ground point) -> the map's extent outside it is
 ``field_of_view``, beyond ``range_m`` ``sensor_range``. Time = (frame - 1) / ``rate_hz``.
 Provenance ``natural``, method ``infrastructure_lwir``.
+
+Tested on: ``tests/data/third_party/mot17_09_gt_excerpt.txt`` (MOT17-09 ground truth: a
+pedestrian, a reflection, a static person; tests/realdata/test_mot.py) and MOT files written here
+from an analytic camera (tests/converters/test_infra_lwir.py). The landmarks are ours: MOT has no
+ground reference.
 """
 
 from __future__ import annotations
@@ -43,27 +54,26 @@ import pyarrow.csv as pacsv
 
 from aveas_format.converters.common import (
     class_of,
-    column,
     coverage_regions,
     unobserved_table,
     covariance_std_corr,
     factorize,
+    is_float,
     load_map_bytes,
     map_area,
     nullable,
     read_numeric_table,
     reject_non_utf8,
-    velocity_with_std,
     wrap_recording,
 )
+from aveas_format.converters.labels import MOT_CLASS_IDS, LabelFilter
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.io.arrow import column_numpy
+from aveas_format.numeric import central_differences
 from aveas_format.schema.taxonomy import CLASSES
 
 CLS = {c: i for i, c in enumerate(CLASSES)}
-MOT17_CLASSES = {1: "pedestrian", 2: "pedestrian", 3: "car", 4: "bicycle", 5: "motorcycle",
-                 6: "other", 7: "pedestrian", 8: "other", 9: "other", 10: "other", 11: "other",
-                 12: "other"}
 #: default footprint (length, width, height) per class, m
 CLASS_SIZE = {
     "animal": (1.0, 0.5, 0.8), "bicycle": (1.8, 0.6, 1.7), "bus": (12.0, 2.55, 3.2),
@@ -90,7 +100,12 @@ class InfraLwirOptions(ImportOptions):
     default_class: str = "car"
     """Class of tracks without a class."""
     class_map: dict[str, str] = {}
-    """Source class name/id -> one of the 13 classes."""
+    """Source class name (or MOTChallenge class id) -> one of the 13 classes; a mapped label is a
+    road user."""
+    keep_non_road_users: bool = False
+    """Import tracks whose class is no road user (MOTChallenge 2 person on vehicle, 7 static
+    person, 8 distractor, 9-11 occluders, 12 reflection; see docs/converters.md "Labels that are
+    not road users"); 13 crowd (a region) is never imported."""
     ground_point: Literal["footprint_centre", "bottom_centre"] = "footprint_centre"
     """Move the box's bottom centre to the footprint centre, or keep it."""
     range_m: float = 150.0
@@ -203,8 +218,8 @@ def _is_landmarks(path: Path) -> bool:
 
 def _read_landmarks(path: Path):
     t = read_numeric_table(path, required=("u", "v", "x", "y"), numeric=("u", "v", "x", "y"))
-    uv = np.c_[column(t, "u"), column(t, "v")]
-    xy = np.c_[column(t, "x"), column(t, "y")]
+    uv = np.c_[column_numpy(t, "u"), column_numpy(t, "v")]
+    xy = np.c_[column_numpy(t, "x"), column_numpy(t, "y")]
     bad = ~np.isfinite(np.c_[uv, xy]).all(axis=1)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
@@ -240,21 +255,13 @@ def _read_mot(path: Path) -> pa.Table:
         col = raw.column(c)
         if not (pa.types.is_integer(col.type) or pa.types.is_floating(col.type)):
             vals = col.cast(pa.string()).to_pylist()
-            bad = next((i for i, v in enumerate(vals) if v is None or not _num(v)), 0)
+            bad = next((i for i, v in enumerate(vals) if v is None or not is_float(v)), 0)
             raise FormatError(f"field {names.index(c) + 1} ({c}): {vals[bad]!r} is not a number",
                               path=path, line=bad + 1)
         if col.null_count:
             bad = int(np.flatnonzero(col.is_null().to_numpy(zero_copy_only=False))[0])
             raise FormatError(f"field {names.index(c) + 1} ({c}) is empty", path=path, line=bad + 1)
     return raw
-
-
-def _num(v: str) -> bool:
-    try:
-        float(v)
-        return True
-    except ValueError:
-        return False
 
 
 def _read_tracks(path: Path, opts: InfraLwirOptions):
@@ -287,14 +294,14 @@ def _read_tracks(path: Path, opts: InfraLwirOptions):
         t = _read_mot(path)
         tc, idc, lc, tpc, wc, hc = "frame", "id", "bb_left", "bb_top", "bb_width", "bb_height"
         if "class" in t.column_names:
-            cls = [MOT17_CLASSES.get(int(c), "other") if c is not None else opts.default_class
+            cls = [MOT_CLASS_IDS.get(int(c), f"class {int(c)}") if c is not None else opts.default_class
                    for c in t.column("class").to_pylist()]
         else:
             cls = [opts.default_class] * t.num_rows
         frame_based = True
         header = 0
-    tv = column(t, tc)
-    left, top, w, h = column(t, lc), column(t, tpc), column(t, wc), column(t, hc)
+    tv = column_numpy(t, tc)
+    left, top, w, h = column_numpy(t, lc), column_numpy(t, tpc), column_numpy(t, wc), column_numpy(t, hc)
     for c, arr in ((tc, tv), (lc, left), (tpc, top), (wc, w), (hc, h)):
         bad = ~np.isfinite(arr) | ((arr <= 0) if c in (wc, hc) else False)
         if bad.any():
@@ -306,6 +313,18 @@ def _read_tracks(path: Path, opts: InfraLwirOptions):
     return time, ids, cls, left + w / 2.0, top + h, np.arange(len(tv)) + 1 + header
 
 
+def _road_users(ids: list, cls_names: list, o: InfraLwirOptions) -> tuple[np.ndarray, str | None]:
+    """Per row: whether its track is imported (one label per track, its first row's); and the
+    note of what was skipped (MOTChallenge labels distractors, occluders, reflections, static
+    persons and crowds too)."""
+    labels = LabelFilter(o.keep_non_road_users, o.class_map)
+    first: dict[str, str] = {}
+    for i, c in zip(ids, cls_names):
+        first.setdefault(i, c)
+    keep_track = {i: labels(c) is not None for i, c in first.items()}
+    return np.fromiter((keep_track[i] for i in ids), bool, len(ids)), labels.note("tracks")
+
+
 # --- the converter ---------------------------------------------------------------------------------
 
 @converter("infra-lwir", description="Infrastructure LWIR thermal camera: MOT-style pixel tracks + "
@@ -313,6 +332,10 @@ def _read_tracks(path: Path, opts: InfraLwirOptions):
            method="infrastructure_lwir", options=InfraLwirOptions)
 def convert_infra_lwir(inputs: list[Path], *, map_source, options: InfraLwirOptions):
     o = options
+    if o.class_map:  # MOTChallenge class ids as keys: their documented names
+        o = o.model_copy(update={"class_map": {
+            MOT_CLASS_IDS.get(int(k), k) if str(k).strip().isdigit() else k: v
+            for k, v in o.class_map.items()}})
     if o.default_class not in CLASSES:
         raise FormatError(f"default_class {o.default_class!r} is not one of {list(CLASSES)}")
     lm_path = o.landmarks
@@ -349,6 +372,18 @@ def convert_infra_lwir(inputs: list[Path], *, map_source, options: InfraLwirOpti
                           "horizon of the ground homography", path=track_paths[int(files[i])],
                           line=int(lines[i]))
 
+    keep, note = _road_users(ids, cls_names, o)
+    if note:
+        import warnings
+
+        warnings.warn(f"infra-lwir: {note}", stacklevel=2)
+    if not keep.all():
+        if not keep.any():
+            raise FormatError(f"no road user among the tracks ({note})", path=track_paths[0])
+        idx = np.flatnonzero(keep)
+        time, u, v, lines, files = time[idx], u[idx], v[idx], lines[idx], files[idx]
+        ids = [ids[i] for i in idx]
+        cls_names = [cls_names[i] for i in idx]
     pid, uniq = factorize(ids)
     order = np.lexsort((time, pid))
     pid, time, u, v, lines, files = (pid[order], time[order], u[order], v[order], lines[order],
@@ -365,14 +400,14 @@ def convert_infra_lwir(inputs: list[Path], *, map_source, options: InfraLwirOpti
            + np.einsum("nij,jk,nlk->nil", jh, cov_h, jh))
     m = len(uniq)
     first = np.unique(pid, return_index=True)[1]
-    p_cls = [class_of(c, o.class_map) if c not in CLASSES else c for c in cls_arr[first]]
+    p_cls = [class_of(c, o.class_map) for c in cls_arr[first]]
     size = np.asarray([CLASS_SIZE[c] for c in p_cls])
     sx, sy, _ = covariance_std_corr(cov)
 
     def kinematics(x, y):
         from aveas_format.mapref.build import heading_from_velocity
 
-        vx, vy, vxs, vys = velocity_with_std(pid, time, x, y, sx, sy)
+        vx, vy, vxs, vys = central_differences(pid, time, x, y, sx, sy)
         hd = heading_from_velocity(pid, vx, vy)
         return vx, vy, vxs, vys, hd
 

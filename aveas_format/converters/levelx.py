@@ -66,6 +66,11 @@ Accelerations are copied (``ax``, ``ay``). Method ``aerial``, provenance ``natur
 ``observed``; an aerial camera sees no lights and no interior (``acquisition.not_observable``).
 The recordingMeta row is kept in ``extras.levelx``; its date fields (month, weekday, hour) give no
 absolute time, so ``start_time`` is the option's (default 1970-01-01).
+
+Tested on: fixtures written here in the datasets' exact CSV layouts (tracks, tracksMeta,
+recordingMeta) from an analytic truth, with maps built from their lane markings (highD) or
+written here (tests/converters/test_levelx.py); no recording of the levelX datasets is in
+``../shared/data``.
 """
 
 from __future__ import annotations
@@ -81,7 +86,7 @@ import pyarrow.compute as pc
 
 from aveas_format.converters.common import (
     class_pmf,
-    column,
+    is_float,
     load_map_bytes,
     outside_coverage,
     projected_to_local,
@@ -92,6 +97,7 @@ from aveas_format.converters.common import (
 )
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.io.arrow import column_numpy
 
 HIGHD_GSD = 0.10106  # m per video pixel (the highD tools' scale factor)
 DEFAULT_GSD = 0.10
@@ -211,7 +217,7 @@ def _positive(values: np.ndarray, name: str, path: Path, header_lines: int = 1) 
 
 def _finite(table: pa.Table, names: tuple[str, ...], path: Path) -> None:
     for c in names:
-        v = column(table, c)
+        v = column_numpy(table, c)
         bad = np.flatnonzero(~np.isfinite(v))
         if len(bad):
             raise FormatError(f"column {c!r} is empty or not finite", path=path, line=int(bad[0]) + 2)
@@ -351,11 +357,11 @@ def convert_highd(inputs: list[Path], *, map_source=None, options: HighDOptions)
     meta = read_numeric_table(meta_p, required=_HIGHD_META,
                       numeric=("id", "width", "height", "drivingDirection"))
     _finite(meta, ("id", "width", "height", "drivingDirection"), meta_p)
-    m_id = column(meta, "id")
-    m_len, m_wid = column(meta, "width"), column(meta, "height")
+    m_id = column_numpy(meta, "id")
+    m_len, m_wid = column_numpy(meta, "width"), column_numpy(meta, "height")
     _positive(m_len, "width", meta_p)
     _positive(m_wid, "height", meta_p)
-    m_dir = column(meta, "drivingDirection")
+    m_dir = column_numpy(meta, "drivingDirection")
     bad = np.flatnonzero((m_dir != 1) & (m_dir != 2))
     if len(bad):
         raise FormatError(f"column 'drivingDirection': {m_dir[bad[0]]:g} is neither 1 nor 2",
@@ -370,10 +376,10 @@ def convert_highd(inputs: list[Path], *, map_source=None, options: HighDOptions)
     _finite(tr, _HIGHD_TRACKS, tracks_p)
     if tr.num_rows == 0:
         raise FormatError("no track rows", path=tracks_p)
-    frame = column(tr, "frame")
-    tid = column(tr, "id")
+    frame = column_numpy(tr, "frame")
+    tid = column_numpy(tr, "id")
     mi = _track_index(tid, m_id, tracks_p)
-    bw, bh = column(tr, "width"), column(tr, "height")
+    bw, bh = column_numpy(tr, "width"), column_numpy(tr, "height")
     _positive(bw, "width", tracks_p)
     _positive(bh, "height", tracks_p)
 
@@ -386,12 +392,12 @@ def convert_highd(inputs: list[Path], *, map_source=None, options: HighDOptions)
     lines = np.arange(tr.num_rows) + 2
     order = sort_states(pid, t, tracks_p, lines)
 
-    x = column(tr, "x") + bw / 2.0
-    y = -(column(tr, "y") + bh / 2.0)
-    vx = column(tr, "xVelocity")
-    vy = -column(tr, "yVelocity")
-    ax = column(tr, "xAcceleration") if "xAcceleration" in tr.column_names else None
-    ay = -column(tr, "yAcceleration") if "yAcceleration" in tr.column_names else None
+    x = column_numpy(tr, "x") + bw / 2.0
+    y = -(column_numpy(tr, "y") + bh / 2.0)
+    vx = column_numpy(tr, "xVelocity")
+    vy = -column_numpy(tr, "yVelocity")
+    ax = column_numpy(tr, "xAcceleration") if "xAcceleration" in tr.column_names else None
+    ay = -column_numpy(tr, "yAcceleration") if "yAcceleration" in tr.column_names else None
     speed = np.hypot(vx, vy)
     dir_heading = np.where(m_dir[mi] == 1, math.pi, 0.0)
     moving = speed >= options.heading_min_speed
@@ -414,7 +420,7 @@ def convert_highd(inputs: list[Path], *, map_source=None, options: HighDOptions)
 
     events = None
     if "laneId" in tr.column_names:
-        lane = column(tr, "laneId")[order]
+        lane = column_numpy(tr, "laneId")[order]
         ps = states["participant_id"]
         change = np.r_[False, (ps[1:] == ps[:-1]) & (lane[1:] != lane[:-1])]
         events = _events(ps, states["time"], change, "highD laneId")
@@ -526,8 +532,8 @@ def _convert_centre(name: str, inputs: list[Path], map_source, options: LevelXCe
 
     meta = read_numeric_table(meta_p, required=_CENTRE_META, numeric=("trackId", "width", "length"))
     _finite(meta, ("trackId",), meta_p)
-    m_id = column(meta, "trackId")
-    m_wid, m_len = np.nan_to_num(column(meta, "width")), np.nan_to_num(column(meta, "length"))
+    m_id = column_numpy(meta, "trackId")
+    m_wid, m_len = np.nan_to_num(column_numpy(meta, "width")), np.nan_to_num(column_numpy(meta, "length"))
     m_cls_raw = np.asarray(meta.column("class").cast(pa.string()).to_pylist(), dtype=object)
     m_cls = np.array([LEVELX_CLASSES.get(str(c).strip().lower(), "other") for c in m_cls_raw],
                      dtype=object)
@@ -544,21 +550,21 @@ def _convert_centre(name: str, inputs: list[Path], map_source, options: LevelXCe
             tracks_p)
     if tr.num_rows == 0:
         raise FormatError("no track rows", path=tracks_p)
-    tid = column(tr, "trackId")
+    tid = column_numpy(tr, "trackId")
     mi = _track_index(tid, m_id, tracks_p)
-    frame = column(tr, "frame")
+    frame = column_numpy(tr, "frame")
     uniq_ids, pid = np.unique(tid, return_inverse=True)
     pid = pid.astype(np.int64)
     p_meta = mi[np.unique(pid, return_index=True)[1]]
     t = (frame - min(0.0, float(frame.min()))) / rate
     order = sort_states(pid, t, tracks_p, np.arange(tr.num_rows) + 2)
 
-    xc, yc = column(tr, "xCenter"), column(tr, "yCenter")
-    heading = np.radians(column(tr, "heading"))
-    vx, vy = column(tr, "xVelocity"), column(tr, "yVelocity")
+    xc, yc = column_numpy(tr, "xCenter"), column_numpy(tr, "yCenter")
+    heading = np.radians(column_numpy(tr, "heading"))
+    vx, vy = column_numpy(tr, "xVelocity"), column_numpy(tr, "yVelocity")
     has_acc = "xAcceleration" in tr.column_names and "yAcceleration" in tr.column_names
-    ax = np.nan_to_num(column(tr, "xAcceleration")) if has_acc else None
-    ay = np.nan_to_num(column(tr, "yAcceleration")) if has_acc else None
+    ax = np.nan_to_num(column_numpy(tr, "xAcceleration")) if has_acc else None
+    ay = np.nan_to_num(column_numpy(tr, "yAcceleration")) if has_acc else None
 
     map_bytes = load_map_bytes(map_source)
     header = load_map(map_bytes).header
@@ -604,7 +610,7 @@ def _convert_centre(name: str, inputs: list[Path], map_source, options: LevelXCe
     if "laneletId" in tr.column_names:
         _lanelets(tr, pid, tracks_p, attrs)
     if "laneChange" in tr.column_names:
-        lc = np.nan_to_num(column(tr, "laneChange"))[order]
+        lc = np.nan_to_num(column_numpy(tr, "laneChange"))[order]
         events = _events(states["participant_id"], states["time"], lc > 0.5, f"{dataset} laneChange")
 
     m = len(uniq_ids)
@@ -646,7 +652,7 @@ def _lanelets(tr: pa.Table, pid: np.ndarray, path: Path, attrs: list[dict[str, A
         ids = pc.cast(flat, pa.float64()).to_numpy()
     except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
         vals = flat.to_pylist()
-        bad = next(i for i, v in enumerate(vals) if not _isnum(v))
+        bad = next(i for i, v in enumerate(vals) if not is_float(v))
         raise FormatError(f"column 'laneletId': {vals[bad]!r} is not a ';'-separated list of ids",
                           path=path, line=int(rows[bad]) + 2) from None
     ok = np.isfinite(ids) & (ids >= 0)
@@ -654,14 +660,6 @@ def _lanelets(tr: pa.Table, pid: np.ndarray, path: Path, attrs: list[dict[str, A
     split = np.searchsorted(pairs[:, 0], np.arange(len(attrs) + 1))
     for p in range(len(attrs)):
         attrs[p]["lanelets"] = pairs[split[p]:split[p + 1], 1].tolist()
-
-
-def _isnum(v: str) -> bool:
-    try:
-        float(v)
-        return True
-    except ValueError:
-        return False
 
 
 @converter("ind", description="levelX inD / rounD / uniD drone recordings (tracks, tracksMeta, "

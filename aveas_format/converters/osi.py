@@ -54,6 +54,7 @@ from aveas_format.converters.common import (
 )
 from aveas_format.converters.registry import ConverterOptions, ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.io.arrow import column_numpy
 from aveas_format.safeio import check_mcap
 
 VEHICLE_CLASS = {
@@ -367,7 +368,6 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
     import os
 
     import betterosi as b
-    import pyarrow.compute as pc
 
     from aveas_format.safeio import write_bytes_atomic
 
@@ -377,23 +377,18 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
     st = rec.states
     n = st.num_rows
 
-    def col(name: str, default: float = math.nan) -> np.ndarray:
-        if name in st.column_names:
-            return pc.fill_null(st[name].cast("float64"), default).to_numpy(zero_copy_only=False)
-        return np.full(n, default)
-
     pid = st["participant_id"].to_numpy()
-    t = st["time"].to_numpy(zero_copy_only=False).astype(np.float64)
-    x, y, heading = col("x"), col("y"), col("heading", 0.0)
-    vx, vy, ax, ay = col("vx", 0.0), col("vy", 0.0), col("ax"), col("ay")
+    t = column_numpy(st, "time")
+    # a null or absent value: NaN, or 0 for the heading and velocity
+    x, y, ax, ay = (column_numpy(st, c, missing=math.nan) for c in ("x", "y", "ax", "ay"))
+    heading, vx, vy = (column_numpy(st, c, null=0.0, missing=0.0) for c in ("heading", "vx", "vy"))
     kin = rec.derived.get("kinematics")
     if (kin is not None and np.isnan(ax).all() and kin.num_rows == n
             and np.array_equal(kin["participant_id"].to_numpy(), pid)
             and np.array_equal(kin["time"].to_numpy(zero_copy_only=False), t)):  # row-aligned
-        ax = pc.fill_null(kin["ax"], math.nan).to_numpy(zero_copy_only=False)
-        ay = pc.fill_null(kin["ay"], math.nan).to_numpy(zero_copy_only=False)
-    lights = [col(c) for c in ("light_brake_p", "light_indicator_left_p", "light_indicator_right_p",
-                               "light_hazard_p")]
+        ax, ay = column_numpy(kin, "ax"), column_numpy(kin, "ay")
+    lights = [column_numpy(st, c, missing=math.nan) for c in
+              ("light_brake_p", "light_indicator_left_p", "light_indicator_right_p", "light_hazard_p")]
     has_lights = any(np.isfinite(v).any() for v in lights)
     parts = rec.participants.to_pylist()
     info = {p["participant_id"]: p for p in parts}

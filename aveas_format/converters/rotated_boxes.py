@@ -14,7 +14,12 @@ Track table, one row per box and frame (pixel coordinates of the image, u to the
 - Class: ``score_<class>`` columns (any of the 13 format classes, or labels named in ``class_map``)
   -> per-row PMF (normalised), or ``class`` with an optional ``score`` (the label's probability, the
   rest spread over the other classes). DOTA labels ``small-vehicle`` -> car and ``large-vehicle``
-  -> truck are known. A participant's ``class_pmf`` is the mean of its rows' PMFs.
+  -> truck are known; DOTA's other categories (plane, ship, storage-tank, baseball-diamond,
+  tennis-court, basketball-court, ground-track-field, harbor, bridge, helicopter, roundabout,
+  soccer-ball-field, swimming-pool, container-crane, airport, helipad) are no road users: a track
+  whose ``class`` is one is skipped with a count in a warning, unless ``keep_non_road_users``
+  (then class other; ``score_<category>`` columns of them count as other). An unknown label is an
+  error naming the line. A participant's ``class_pmf`` is the mean of its rows' PMFs.
 - Optional per-row pixel noise ``cx_std``, ``cy_std`` (px) and ``cxcy_corr``; else ``pixel_std``.
 
 Georeference conventions: a world file's C, F are the map coordinates of the **centre** of the
@@ -41,6 +46,10 @@ regression. Method ``aerial``, provenance ``natural``, role ``observed``; lights
 not observable. ``coverage`` is the image footprint when ``image_size`` is given; the map's area
 outside it is then an ``outside_coverage`` region of ``unobserved`` for the whole recording
 (occlusions are not in the data and not claimed).
+
+Tested on: fixtures made from an analytic truth (world files, GDAL ``.aux.xml``, DOTA-style corner
+columns and categories; tests/converters/test_rotated_boxes.py). No real detector output or DOTA
+label file is in ``../shared/data`` (the DOTA dev-kit's example labels carry no licence).
 """
 
 from __future__ import annotations
@@ -48,6 +57,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import warnings
 from pathlib import Path
 from typing import Any, Literal
 
@@ -55,7 +65,6 @@ import numpy as np
 import pyarrow as pa
 
 from aveas_format.converters.common import (
-    column,
     factorize,
     load_map_bytes,
     outside_coverage,
@@ -64,8 +73,10 @@ from aveas_format.converters.common import (
     sort_states,
     wrap_recording,
 )
+from aveas_format.converters.labels import NOT_ROAD_USER, LabelFilter, label_kind
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.io.arrow import column_numpy
 from aveas_format.safeio import xml_parser
 from aveas_format.schema.taxonomy import CLASSES
 
@@ -99,6 +110,10 @@ class RotatedBoxOptions(ImportOptions):
     """Speed (m/s) above which the direction of motion picks the heading among the box's two."""
     class_map: dict[str, str] = {}
     """Source class labels -> format classes (adds to the DOTA defaults)."""
+    keep_non_road_users: bool = False
+    """Import tracks whose ``class`` is no road user (DOTA's plane, ship, storage-tank, harbor,
+    ...; see docs/converters.md "Labels that are not road users") as class other; by default
+    they are skipped with a count in a warning."""
     image_size: tuple[int, int] | None = None
     """Image width and height (px): the footprint becomes the recording's coverage."""
     platform: str | None = None
@@ -223,10 +238,10 @@ def _boxes(t: pa.Table, options: RotatedBoxOptions, A: np.ndarray, c: np.ndarray
     names = set(t.column_names)
     shift = 0.5 if options.pixel_origin == "center" else 0.0
     if set(_CENTRE) <= names:
-        u = column(t, "cx") + shift
-        v = column(t, "cy") + shift
-        w, h = column(t, "w"), column(t, "h")
-        ang = column(t, "angle")
+        u = column_numpy(t, "cx") + shift
+        v = column_numpy(t, "cy") + shift
+        w, h = column_numpy(t, "w"), column_numpy(t, "h")
+        ang = column_numpy(t, "angle")
         if options.angle_unit == "deg":
             ang = np.radians(ang)
         du, dv = np.cos(ang), np.sin(ang)           # along w
@@ -241,8 +256,8 @@ def _boxes(t: pa.Table, options: RotatedBoxOptions, A: np.ndarray, c: np.ndarray
         length = np.where(along_w, len_w, len_h)
         width = np.where(along_w, len_h, len_w)
     elif set(_CORNERS) <= names:
-        px = np.stack([column(t, f"x{i}") + shift for i in range(1, 5)])
-        py = np.stack([column(t, f"y{i}") + shift for i in range(1, 5)])
+        px = np.stack([column_numpy(t, f"x{i}") + shift for i in range(1, 5)])
+        py = np.stack([column_numpy(t, f"y{i}") + shift for i in range(1, 5)])
         wx = A[0, 0] * px + A[0, 1] * py + c[0]
         wy = A[1, 0] * px + A[1, 1] * py + c[1]
         X, Y = wx.mean(axis=0), wy.mean(axis=0)
@@ -262,6 +277,29 @@ def _boxes(t: pa.Table, options: RotatedBoxOptions, A: np.ndarray, c: np.ndarray
     return X, Y, axis, length, width
 
 
+def _road_users(t: pa.Table, options: RotatedBoxOptions, path: Path) -> pa.Table:
+    """The rows of tracks whose ``class`` (its first row's) is a road user; DOTA's other
+    categories (plane, ship, storage-tank, ...) are skipped with a warning unless
+    ``keep_non_road_users`` (then they are class other)."""
+    if "class" not in t.column_names or "track_id" not in t.column_names:
+        return t
+    labels = LabelFilter(options.keep_non_road_users,
+                         {**DEFAULT_CLASS_MAP, **{k.lower(): v for k, v in options.class_map.items()}})
+    tid = t.column("track_id").cast(pa.string()).to_pylist()
+    cls = t.column("class").cast(pa.string()).fill_null("").to_pylist()
+    first: dict[str, str] = {}
+    for i, c in zip(tid, cls):
+        first.setdefault(i, c)
+    keep_track = {i: labels(c) is not None for i, c in first.items()}
+    keep = np.fromiter((keep_track[i] for i in tid), bool, len(tid))
+    note = labels.note("tracks")
+    if note:
+        warnings.warn(f"rotated-boxes {path.name}: {note}", stacklevel=3)
+    if not keep.any():
+        raise FormatError(f"no road user among the tracks ({note})", path=path)
+    return t if keep.all() else t.filter(pa.array(keep))
+
+
 def _row_pmf(t: pa.Table, options: RotatedBoxOptions, path: Path) -> np.ndarray:
     cmap = {**DEFAULT_CLASS_MAP, **{k.lower(): v for k, v in options.class_map.items()},
             **{c: c for c in CLASSES}}
@@ -275,10 +313,12 @@ def _row_pmf(t: pa.Table, options: RotatedBoxOptions, path: Path) -> np.ndarray:
         pm = np.zeros((n, k))
         for col in score_cols:
             label = col[len("score_"):].lower()
+            if label not in cmap and label_kind(label)[1] == NOT_ROAD_USER:
+                cmap[label] = label_kind(label)[0]  # its probability mass: class other
             if label not in cmap:
                 raise FormatError(f"column {col!r}: class {label!r} unknown; map it with the "
                                   "class_map option", path=path)
-            s = np.nan_to_num(column(t, col))
+            s = np.nan_to_num(column_numpy(t, col))
             if (s < 0).any():
                 i = int(np.flatnonzero(s < 0)[0])
                 raise FormatError(f"column {col!r}: negative score", path=path, line=i + 2)
@@ -290,12 +330,15 @@ def _row_pmf(t: pa.Table, options: RotatedBoxOptions, path: Path) -> np.ndarray:
         idx = np.empty(len(uniq), np.int64)
         for j, lab in enumerate(uniq):
             key = str(lab).strip().lower()
+            kind_cls, kind = label_kind(key)
+            if key not in cmap and kind == NOT_ROAD_USER:  # kept (keep_non_road_users)
+                cmap[key] = kind_cls
             if key not in cmap:
                 line = int(np.flatnonzero(labels == j)[0]) + 2
                 raise FormatError(f"column 'class': {lab!r} is not a known class; map it with the "
                                   "class_map option", path=path, line=line)
             idx[j] = CLASSES.index(cmap[key])
-        score = np.clip(np.nan_to_num(column(t, "score"), nan=1.0), 0, 1) if "score" in \
+        score = np.clip(np.nan_to_num(column_numpy(t, "score"), nan=1.0), 0, 1) if "score" in \
             t.column_names else np.ones(n)
         pm = np.repeat(((1.0 - score) / (k - 1))[:, None], k, axis=1)
         pm[np.arange(n), idx[labels]] = score
@@ -371,18 +414,19 @@ def convert_rotated_boxes(inputs: list[Path], *, map_source, options: RotatedBox
     probe = read_numeric_table(path)
     numeric = numeric + tuple(c_ for c_ in probe.column_names if c_.startswith("score_"))
     if "track_id" not in probe.column_names:
-        raise FormatError(f"required column(s) ['track_id'] missing; found {probe.column_names}",
+        raise FormatError(f"required column_numpy(s) ['track_id'] missing; found {probe.column_names}",
                           path=path)
     tab = read_numeric_table(path, numeric=[c_ for c_ in numeric if c_ != "track_id"])
     if tab.num_rows == 0:
         raise FormatError("no rows", path=path)
+    tab = _road_users(tab, options, path)
     if "time" in tab.column_names:
-        t = column(tab, "time")
+        t = column_numpy(tab, "time")
     elif "frame" in tab.column_names:
         if not options.frame_rate:
             raise FormatError("the table has 'frame' but no 'time': pass the frame_rate option",
                               path=path)
-        t = column(tab, "frame") / options.frame_rate
+        t = column_numpy(tab, "frame") / options.frame_rate
     else:
         raise FormatError("the table needs a 'time' (s) or 'frame' column", path=path)
     bad = np.flatnonzero(~np.isfinite(t))
@@ -400,11 +444,9 @@ def convert_rotated_boxes(inputs: list[Path], *, map_source, options: RotatedBox
     X, Y, axis_w, length, width = _boxes(tab, options, A, c, path)
     pmf_rows = _row_pmf(tab, options, path)
     n = tab.num_rows
-    su = column(tab, "cx_std") if "cx_std" in tab.column_names else np.full(n, options.pixel_std)
-    sv = column(tab, "cy_std") if "cy_std" in tab.column_names else np.full(n, options.pixel_std)
-    ruv = np.nan_to_num(column(tab, "cxcy_corr")) if "cxcy_corr" in tab.column_names else np.zeros(n)
-    su = np.where(np.isfinite(su), su, options.pixel_std)
-    sv = np.where(np.isfinite(sv), sv, options.pixel_std)
+    su, sv = (column_numpy(tab, c, nonfinite=options.pixel_std, missing=options.pixel_std)
+              for c in ("cx_std", "cy_std"))
+    ruv = np.nan_to_num(column_numpy(tab, "cxcy_corr", missing=0.0))
 
     map_bytes = load_map_bytes(map_source)
     header = load_map(map_bytes).header
@@ -449,7 +491,7 @@ def convert_rotated_boxes(inputs: list[Path], *, map_source, options: RotatedBox
         "vxvy_corr": pa.array(xy_corr.astype(np.float32), mask=nan),
     }
     if "frame" in tab.column_names:
-        states["source_frame"] = column(tab, "frame")[o].astype(np.int64)
+        states["source_frame"] = column_numpy(tab, "frame")[o].astype(np.int64)
 
     m = len(source_ids)
     counts = np.bincount(pid, minlength=m)

@@ -4,10 +4,13 @@
 >>> derive(rec)                       # all derivations, in dependency order   # doctest: +SKIP
 >>> derive(rec, only="kinematics", jerk_density=2.0)                          # doctest: +SKIP
 
-Each derivation lives in its own module, declares the spec of the table it writes there and
-registers itself in :mod:`.registry`; the modules are found by :mod:`aveas_format.plugins` (no list
-to edit; partner packages add theirs through entry points, docs/extending.md). The definitions,
-conventions and uncertainty methods are documented in ``docs/derive.md``.
+Each derivation lives in its own module (``encroachments``, ``events``, ``traffic``) or subpackage
+(``interactions``, ``kinematics``: the ``__init__`` registers, private ``_*`` modules hold the
+helpers), declares the spec of the table it writes there and registers itself in :mod:`.registry`;
+the modules are found by :mod:`aveas_format.plugins` (no list to edit; partner packages add theirs
+through entry points, docs/extending.md). :mod:`._samples` holds what several derivations share
+(the states rows as arrays, road coordinates, track segments). The definitions, conventions and
+uncertainty methods are documented in ``docs/derive.md``.
 """
 
 from __future__ import annotations

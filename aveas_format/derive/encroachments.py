@@ -32,6 +32,7 @@ import pyarrow as pa
 import shapely
 from pydantic import Field
 
+from aveas_format.derive._samples import Samples, ragged
 from aveas_format.derive.registry import Derivation, Params, register
 from aveas_format.errors import FormatError
 from aveas_format.schema.columns import MUST, col, gaussian
@@ -161,9 +162,7 @@ def swept_path(x, y, L, W):
 
 def compute(rec, p: EncroachmentsParams) -> pa.Table:
     """The ``derived/encroachments`` table of ``rec``."""
-    from aveas_format.derive.interactions import _Samples, InteractionsParams
-
-    S = _Samples(rec, InteractionsParams())
+    S = Samples(rec)
     starts = np.r_[0, np.flatnonzero(np.diff(S.pid)) + 1]
     ends = np.r_[starts[1:], S.n]
     pids = S.pid[starts]
@@ -194,14 +193,6 @@ def compute(rec, p: EncroachmentsParams) -> pa.Table:
         "pet_std": pa.array(pstd, pa.float64(), mask=~np.isfinite(pstd)),
         "geometry": pa.array(list(out["geom"]), pa.binary()),
     })
-
-
-def _ragged(lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(segment, position)`` of every element of segments of the given lengths, concatenated."""
-    lengths = np.asarray(lengths, np.int64)
-    seg = np.repeat(np.arange(len(lengths)), lengths)
-    first = np.cumsum(lengths) - lengths
-    return seg, np.arange(int(lengths.sum())) - first[seg]
 
 
 def _segment_first_extreme(values: np.ndarray, seg_start: np.ndarray, largest: bool
@@ -263,7 +254,7 @@ def _swept_areas(S, tracks: list[slice], p: EncroachmentsParams
     ang = np.empty((2, len(parts)))
     for r, tr in enumerate((ta, tb)):
         for lo, hi in _chunks(lens[tr], 2_000_000):
-            seg, pos = _ragged(lens[tr[lo:hi]])
+            seg, pos = ragged(lens[tr[lo:hi]])
             k = starts[tr[lo:hi]][seg] + pos
             c = cen[lo:hi][seg]
             d = np.hypot(S.x[k] - c[:, 0], S.y[k] - c[:, 1])
@@ -341,7 +332,7 @@ def _area_pairs(S, starts: np.ndarray, ends: np.ndarray, areas: np.ndarray, area
     win_lo = np.full(len(member), -1, np.int64)
     win_hi = np.full(len(member), -1, np.int64)
     for lo, hi in _chunks(lens, 4_000_000):
-        seg, pos = _ragged(lens[lo:hi])
+        seg, pos = ragged(lens[lo:hi])
         e = lo + seg
         k = starts[member[e]] + pos
         reach = 0.5 * np.hypot(L[e], W[e])
@@ -378,7 +369,7 @@ def _area_pairs(S, starts: np.ndarray, ends: np.ndarray, areas: np.ndarray, area
     # --- pairs of visits in one area, in entry order -----------------------------------------
     grp_end = np.searchsorted(area_of, area_of, side="right")
     cnt = grp_end - np.arange(len(area_of)) - 1
-    ia, off = _ragged(cnt)
+    ia, off = ragged(cnt)
     ib = ia + 1 + off
     fa = t_in[ia] <= t_in[ib]
     first = np.where(fa, ia, ib)
@@ -410,7 +401,7 @@ def _occupancy_rows(S, lo: np.ndarray, n: np.ndarray, area: np.ndarray, L: np.nd
     """First entry, last exit and the sample indices of the entry and exit frames of windows of
     samples (``lo``, ``n``) in convex areas (padded vertices ``P``), all at once: the columnar
     form of :func:`occupancy` (NaN entry where a window never occupies its area)."""
-    seg, pos = _ragged(n)
+    seg, pos = ragged(n)
     k = lo[seg] + pos
     a = area[seg]
     zero = np.zeros(len(k))

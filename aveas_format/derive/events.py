@@ -26,7 +26,9 @@ import pyarrow as pa
 import pyarrow.compute as pc
 from pydantic import Field
 
+from aveas_format.derive._samples import ragged, segments, string_values
 from aveas_format.derive.registry import Derivation, Params, register
+from aveas_format.io.arrow import column_numpy
 
 VERSION = "1.0.0"
 DEFAULT_THRESHOLD_S = 1.5
@@ -66,33 +68,18 @@ def _confidence(threshold: float, value: float, std: float | None, below: bool =
 
 def _episodes(key: np.ndarray, t: np.ndarray, gap: float) -> np.ndarray:
     """Episode id per row (rows sorted by key, time): a new episode at a new key or time gap."""
-    if len(t) == 0:
-        return np.zeros(0, np.int64)
-    new = np.r_[True, (key[1:] != key[:-1]) | (np.diff(t) > gap)]
-    return np.cumsum(new) - 1
-
-
-def _num(t: pa.Table, c: str) -> np.ndarray:
-    from aveas_format.io.arrow import column_numpy
-
-    return column_numpy(t, c) if c in t.column_names else np.full(t.num_rows, np.nan)
+    return ragged(segments(key, t, gap)[1])[0]
 
 
 def _ttc_events(rec, ttc_thr: float, p: EventsParams) -> list[dict]:
     it = rec.derived.get("interactions")
     if it is None or it.num_rows == 0:
         return []
-    rel = it.column("relation")
-    rel = rel.cast(pa.string()) if pa.types.is_dictionary(rel.type) else rel
-    rel = np.asarray(rel.to_numpy(zero_copy_only=False), dtype=object)
+    rel = string_values(it, "relation")
     pid = it.column("participant_id").to_numpy()
     oid = it.column("other_id").to_numpy()
-    t = _num(it, "time")
-    ttc = _num(it, "ttc")
-    std = _num(it, "ttc_std")
-    kind = it.column("ttc_kind")
-    kind = kind.cast(pa.string()) if pa.types.is_dictionary(kind.type) else kind
-    kind = np.asarray(kind.to_numpy(zero_copy_only=False), dtype=object)
+    t, ttc, std = (column_numpy(it, c, missing=np.nan) for c in ("time", "ttc", "ttc_std"))
+    kind = string_values(it, "ttc_kind")
     use = ((rel == "leader") | ((rel == "conflicting") & (pid < oid))
            | (np.isin(rel, ["left_neighbour", "right_neighbour"]) & (pid < oid)))
     m = use & np.isfinite(ttc) & (ttc <= ttc_thr)
@@ -126,9 +113,8 @@ def _pet_events(rec, pet_thr: float) -> list[dict]:
     en = rec.derived.get("encroachments")
     if en is None or en.num_rows == 0:
         return []
-    pet = _num(en, "pet")
-    std = _num(en, "pet_std")
-    t0, t1 = _num(en, "time_first_exit"), _num(en, "time_second_enter")
+    pet, std, t0, t1 = (column_numpy(en, c, missing=np.nan) for c in
+                        ("pet", "pet_std", "time_first_exit", "time_second_enter"))
     first = en.column("first_id").to_numpy()
     second = en.column("second_id").to_numpy()
     cid = en.column("conflict_id").to_numpy()
@@ -152,9 +138,7 @@ def _braking_events(rec, p: EventsParams) -> list[dict]:
     if k is None or k.num_rows == 0:
         return []
     pid = k.column("participant_id").to_numpy()
-    t = _num(k, "time")
-    a = _num(k, "a_lon")
-    sd = _num(k, "a_lon_std")
+    t, a, sd = (column_numpy(k, c, missing=np.nan) for c in ("time", "a_lon", "a_lon_std"))
     m = np.isfinite(a) & (a <= p.hard_braking_mps2)
     if not m.any():
         return []
@@ -232,7 +216,7 @@ def criticality_summary(rec) -> dict:
     out["thresholds"] = th.model_dump(exclude_none=True) if th is not None else {}
     it = rec.derived.get("interactions")
     if it is not None and it.num_rows:
-        ttc = _num(it, "ttc")
+        ttc = column_numpy(it, "ttc", missing=np.nan)
         if np.isfinite(ttc).any():
             k = int(np.nanargmin(np.where(np.isfinite(ttc), ttc, np.nan)))
             row = it.slice(k, 1).to_pylist()[0]
@@ -242,7 +226,7 @@ def criticality_summary(rec) -> dict:
                                 "relation": str(row["relation"]), "kind": row.get("ttc_kind")}
     en = rec.derived.get("encroachments")
     if en is not None and en.num_rows:
-        pet = _num(en, "pet")
+        pet = column_numpy(en, "pet", missing=np.nan)
         if np.isfinite(pet).any():
             k = int(np.nanargmin(np.where(np.isfinite(pet), pet, np.nan)))
             row = en.slice(k, 1).to_pylist()[0]

@@ -24,7 +24,9 @@ import numpy as np
 import pyarrow as pa
 from pydantic import Field
 
+from aveas_format.derive._samples import ragged, road_columns, searchsorted_segments
 from aveas_format.derive.registry import Derivation, Params, register
+from aveas_format.io.arrow import column_numpy
 from aveas_format.schema.columns import MUST, col, gaussian, interval_cols
 from aveas_format.schema.tables import derived_table
 
@@ -67,11 +69,9 @@ def edie_cells(pid, t, s, lane_key, sigma_s, ds: float, dT: float, max_gap: floa
         c0 = np.floor(np.minimum(a0, a1) / step).astype(np.int64)
         c1 = np.floor(np.maximum(a0, a1) / step).astype(np.int64)
         cnt = c1 - c0
-        tot = int(cnt.sum())
-        if tot:
-            seg = np.repeat(np.arange(len(a0)), cnt)
-            j = np.arange(tot) - np.repeat(np.cumsum(cnt) - cnt, cnt) + 1
-            bound = (c0[seg] + j) * step
+        if int(cnt.sum()):
+            seg, j = ragged(cnt)  # the j-th boundary after the start (from 0)
+            bound = (c0[seg] + j + 1) * step
             with np.errstate(divide="ignore", invalid="ignore"):
                 lm = (bound - a0[seg]) / (a1[seg] - a0[seg])
             ok = np.isfinite(lm) & (lm > 0) & (lm < 1)
@@ -116,19 +116,12 @@ def edie_cells(pid, t, s, lane_key, sigma_s, ds: float, dT: float, max_gap: floa
 
 def compute(rec, p: TrafficParams) -> pa.Table:
     """The ``derived/traffic`` table of ``rec``."""
-    from aveas_format.derive.interactions import _num
-
     s = rec.states
     pid = s.column("participant_id").to_numpy()
-    t = _num(s, "time")
-    road = s.column("road_id")
-    road = road.cast(pa.string()) if pa.types.is_dictionary(road.type) else road
-    road_np = np.asarray(road.to_numpy(zero_copy_only=False), dtype=object)
-    lane = _num(s, "lane_id")
-    rs = _num(s, "road_s")
-    sx, sy = _num(s, "x_std", 0.0), _num(s, "y_std", 0.0)
+    t = column_numpy(s, "time", missing=np.nan)
+    road_np, lane, rs, on = road_columns(s)
+    sx, sy = (column_numpy(s, c, nonfinite=0.0, missing=0.0) for c in ("x_std", "y_std"))
     sigma = np.sqrt(0.5 * (sx ** 2 + sy ** 2))
-    on = np.array([r is not None for r in road_np], dtype=bool) & np.isfinite(lane) & np.isfinite(rs)
     roads = sorted({r for r in road_np[on]})
     rmap = {r: i for i, r in enumerate(roads)}
     lane_i = np.where(on, np.nan_to_num(lane).astype(np.int64), 0)
@@ -186,17 +179,10 @@ def local_density(rec, radius_m: float = 50.0) -> pa.Table:
     ``±radius_m``, and that count per km (``count / (2 radius) * 1000``).
 
     Returns a table ``participant_id, time, local_count, local_density`` (veh/km; null off-map)."""
-    from aveas_format.derive.interactions import _num, _searchsorted_segments
-
     s = rec.states
     pid = s.column("participant_id").to_numpy()
-    t = _num(s, "time")
-    road = s.column("road_id")
-    road = road.cast(pa.string()) if pa.types.is_dictionary(road.type) else road
-    road_np = np.asarray(road.to_numpy(zero_copy_only=False), dtype=object)
-    lane = _num(s, "lane_id")
-    rs = _num(s, "road_s")
-    on = np.array([r is not None for r in road_np], dtype=bool) & np.isfinite(lane) & np.isfinite(rs)
+    t = column_numpy(s, "time", missing=np.nan)
+    road_np, lane, rs, on = road_columns(s)
     idx = np.flatnonzero(on)
     count = np.full(len(t), -1, np.int64)
     if len(idx):
@@ -208,8 +194,8 @@ def local_density(rec, radius_m: float = 50.0) -> pa.Table:
         g_sorted, s_sorted = grp[o], rs[idx][o]
         lo = np.searchsorted(g_sorted, grp, "left")
         hi = np.searchsorted(g_sorted, grp, "right")
-        a = _searchsorted_segments(s_sorted, lo, hi, rs[idx] - radius_m - 1e-9)
-        b = _searchsorted_segments(s_sorted, lo, hi, rs[idx] + radius_m + 1e-9)
+        a = searchsorted_segments(s_sorted, lo, hi, rs[idx] - radius_m - 1e-9)
+        b = searchsorted_segments(s_sorted, lo, hi, rs[idx] + radius_m + 1e-9)
         count[idx] = (b - a) - 1
     dens = np.where(count >= 0, count / (2 * radius_m) * 1000.0, np.nan)
     return pa.table({"participant_id": pa.array(pid, pa.int64()), "time": pa.array(t),

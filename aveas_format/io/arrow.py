@@ -6,11 +6,13 @@
   lists of floats -> PMF structs...), keeps undeclared columns after the declared ones, and names the
   column when a cast is impossible.
 - :func:`pmf_matrix` / :func:`pmf_array` convert PMF struct columns to and from (n, k) numpy arrays.
+- :func:`column_numpy` reads a numeric column as numpy (nulls as NaN, an absent column as asked).
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
+from typing import Literal
 
 import numpy as np
 import pyarrow as pa
@@ -178,11 +180,34 @@ def pmf_array(matrix: np.ndarray, set_name: str, mask: np.ndarray | None = None)
     )
 
 
-def column_numpy(table: pa.Table, name: str, dtype: type = np.float64) -> np.ndarray:
-    """A numeric column as numpy with nulls as NaN (float) — zero-copy where possible."""
+def column_numpy(table: pa.Table | None, name: str, dtype: type = np.float64, *,
+                 null: float = np.nan, nonfinite: float | None = None,
+                 missing: float | Literal["raise"] | None = "raise") -> np.ndarray | None:
+    """A numeric column as a numpy array (float64 by default) with nulls as NaN: the one helper
+    that the converters, derivations, validator and figures read numeric columns with.
+
+    Zero-copy (a read-only view) for a floating column without nulls in one chunk; otherwise a
+    copy (integers and booleans converted by numpy, nulls filled by Arrow).
+
+    - ``null``: the value of a null entry (NaN unless given);
+    - ``nonfinite``: if given, nulls, NaN and ±inf all read as this value (a default for what is
+      undefined, e.g. 0 for an unknown standard deviation);
+    - ``missing``: what an absent column (or ``table`` None) gives: ``"raise"`` (KeyError, as
+      :meth:`pyarrow.Table.column`), None, or a number (an array of it, one per row).
+    """
+    if table is None or name not in table.column_names:
+        if missing is None:
+            return None
+        if isinstance(missing, str):
+            if table is None:
+                raise KeyError(f"no table to read column {name!r} from")
+            table.column(name)  # raises the KeyError naming the column
+        return np.full(table.num_rows, missing, dtype=dtype)
     arr = table.column(name)
     if arr.null_count == 0 and arr.num_chunks == 1 and pa.types.is_floating(arr.type):
-        return arr.chunk(0).to_numpy().astype(dtype, copy=False)
-    return arr.to_numpy().astype(dtype, copy=False) if arr.null_count == 0 else (
-        pc.fill_null(arr.cast(pa.float64()), np.nan).to_numpy().astype(dtype, copy=False)
-    )
+        out = arr.chunk(0).to_numpy().astype(dtype, copy=False)
+    elif arr.null_count == 0:
+        out = arr.to_numpy().astype(dtype, copy=False)
+    else:
+        out = pc.fill_null(arr.cast(pa.float64()), null).to_numpy().astype(dtype, copy=False)
+    return out if nonfinite is None else np.where(np.isfinite(out), out, nonfinite)

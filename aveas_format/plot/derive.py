@@ -19,17 +19,13 @@ import numpy as np
 import pyarrow as pa
 from matplotlib.figure import Figure
 
+from aveas_format.io.arrow import column_numpy
+
 #: colour and legend label per ``ttc_kind``, in drawing order
 TTC_KINDS: dict[str, tuple[str, str]] = {
     "box_2d": ("tab:orange", "2D boxes (neighbour)"),
     "lane_1d": ("tab:blue", "1D lane (leader)"),
 }
-
-
-def _column(t: pa.Table, name: str, fill: float = np.nan) -> np.ndarray:
-    """A numeric column as float64 with nulls as ``fill``."""
-    a = t.column(name).cast(pa.float64()).fill_null(fill)
-    return np.asarray(a.to_numpy(zero_copy_only=False))
 
 
 def _ids(t: pa.Table, name: str) -> np.ndarray:
@@ -50,8 +46,8 @@ def ttc_figure(interactions: pa.Table, participant_id: int, other_id: int, *,
         _ids(interactions, "other_id") == other_id)
     pair &= interactions.column("ttc").is_valid().to_numpy(zero_copy_only=False)
     kind = np.asarray(interactions.column("ttc_kind").to_pylist(), dtype=object)
-    time, ttc = _column(interactions, "time"), _column(interactions, "ttc")
-    std = _column(interactions, "ttc_std", fill=0.0)
+    time, ttc = column_numpy(interactions, "time"), column_numpy(interactions, "ttc")
+    std = column_numpy(interactions, "ttc_std", null=0.0)
     for k, (colour, label) in TTC_KINDS.items():
         m = pair & (kind == k)
         if not m.any():
@@ -81,10 +77,10 @@ def acceleration_figure(kinematics: pa.Table, participant_id: int, *,
     fig = Figure(figsize=(7, 4.6))
     axes = fig.subplots(2, 1, sharex=True)
     m = _ids(kinematics, "participant_id") == participant_id
-    t = _column(kinematics, "time")[m]
+    t = column_numpy(kinematics, "time")[m]
     for a, col in ((axes[0], "ax"), (axes[1], "ay")):
-        v = _column(kinematics, col)[m]
-        s = _column(kinematics, f"{col}_std")[m]
+        v = column_numpy(kinematics, col)[m]
+        s = column_numpy(kinematics, f"{col}_std")[m]
         a.fill_between(t, v - s, v + s, color="tab:blue", alpha=0.25, lw=0, label="±1 std")
         a.plot(t, v, color="tab:blue", lw=1, label=f"derived {col}")
         if truth is not None:

@@ -98,6 +98,12 @@ class KinematicsConfig(_Section):
                                      "opposite to motion) is accepted below it")
     jump_tolerance_m: float = Field(1.0, ge=0, description="m; position step vs integrated velocity")
     jump_z: float = Field(5.0, ge=0, description="sigma multiplier for position jumps")
+    max_lateral_speed: float = Field(3.0, gt=0, description="m/s; a step of about one lane width "
+                                     "into the adjacent lane faster than this, unexplained by the "
+                                     "velocity, is an instantaneous lane change")
+    exact_rel_tolerance: float = Field(1e-4, ge=0, description="relative tolerance of the speed, "
+                                       "acceleration, jerk and yaw-rate limits for exact values "
+                                       "(std 0: simulated), e.g. 40.0003 m/s passes a 40 m/s limit")
 
 
 class UncertaintyConfig(_Section):

@@ -18,7 +18,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from aveas_format.io.arrow import arrow_type, types_compatible
+from aveas_format.io.arrow import arrow_type, column_numpy, types_compatible
 from aveas_format.schema.tables import TABLES
 from aveas_format.schema.taxonomy import VEHICLE_CLASSES
 
@@ -38,15 +38,10 @@ def num(table: pa.Table | None, name: str, spec: str | None = None) -> np.ndarra
         return None
     if spec is not None and not _compatible(table, spec, name):
         return None
-    a = table.column(name)
-    if not (pa.types.is_integer(a.type) or pa.types.is_floating(a.type)
-            or pa.types.is_boolean(a.type)):
+    t = table.column(name).type
+    if not (pa.types.is_integer(t) or pa.types.is_floating(t) or pa.types.is_boolean(t)):
         return None
-    if pa.types.is_boolean(a.type):
-        a = a.cast(pa.float64())
-    if a.null_count:
-        a = pc.fill_null(a.cast(pa.float64()), np.nan)
-    return np.asarray(a.to_numpy(zero_copy_only=False), dtype=np.float64)
+    return column_numpy(table, name)
 
 
 def ints(table: pa.Table | None, name: str) -> np.ndarray | None:

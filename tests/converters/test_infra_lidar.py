@@ -10,6 +10,7 @@ import json
 import math
 
 import numpy as np
+import pyarrow.compute as pc
 import pytest
 import shapely
 from scipy.spatial.transform import Rotation
@@ -242,19 +243,56 @@ def test_tracks_table_with_frame_offset(site_map, tmp_path):
 
 
 @pytest.mark.realdata
-def test_asam_spec_cuboid_example(tmp_path):
-    """The ASAM spec's cuboid example (141 frames, cuboid lists, types in objects) reads as is."""
+def test_asam_spec_cuboid_example_is_a_moving_sensor(tmp_path):
+    """The ASAM spec's cuboid example puts its cuboids in vehicle-iso8855, which per-frame
+    transforms carry into UTM: a sensor on a moving vehicle. infra-lidar used to read the boxes
+    as if the vehicle stood still; it now refuses and names the converter that applies them."""
     asam_cuboids = shared("data", "openlabel", "asam_spec__openlabel100_example_cuboids.json")
-    data = json.loads(asam_cuboids.read_text())["openlabel"]
-    n_cuboids = len({(uid, f["frame_properties"]["timestamp"]) for f in data["frames"].values()
-                     for uid in f.get("objects", {})})  # 5 frames repeat their predecessor's stamp
     m = tmp_path / "m.xodr"
     m.write_text(straight_highway(length=400.0, lanes_right=3, lanes_left=3, x0=-200.0, geo_reference=GEO))
-    with pytest.warns(UserWarning, match="repeat a track's timestamp"):
-        rec = convert("infra-lidar", [asam_cuboids], map_source=m, options={"occlusion": False})
-    assert rec.states.num_rows == n_cuboids
-    assert set(rec.participants.column("class").to_pylist()) <= {"car", "other", "pedestrian", "truck", "bicycle"}
-    assert aveas_format.validate(rec.write(tmp_path / "asam.aveas")).counts["error"] == 0
+    with pytest.raises(aveas_format.FormatError,
+                       match=r"frame_properties.transforms carry coordinate system 'vehicle-iso8855' "
+                             r"into 'utm-30t' \(geo_utm\).*--from openlabel"):
+        convert("infra-lidar", [asam_cuboids], map_source=m, options={"occlusion": False})
+
+
+@pytest.mark.realdata
+def test_frame_transforms_move_the_sensor(site_map, tmp_path):
+    """A LiDAR whose pose in the base frame changes per frame (frame_properties.transforms, as a
+    sensor on a slowly moving platform writes them): the boxes are placed through each frame's
+    transform, and the field of view follows the sensor frame by frame."""
+    files = []
+    for k in range(NF):
+        doc = tum_frame(k)
+        shift = np.eye(4)
+        shift[0, 3] = 2.0 * k  # the platform moves 2 m per frame along x
+        # the cuboids were written for the static pose m; the frame's transform is shift @ m, so
+        # express them in the moved sensor frame: c' = (shift m)^-1 m c
+        moved = shift @ mount()
+        inv = np.linalg.inv(moved) @ mount()
+        for obj in doc["openlabel"]["frames"][str(k)]["objects"].values():
+            v = obj["object_data"]["cuboid"]["val"]
+            c = inv @ np.array([*v[:3], 1.0])
+            r = inv[:3, :3] @ Rotation.from_quat(v[3:7]).as_matrix()
+            obj["object_data"]["cuboid"]["val"] = [*c[:3].tolist(), *Rotation.from_matrix(r).as_quat().tolist(),
+                                                   *v[7:]]
+        doc["openlabel"]["frames"][str(k)]["frame_properties"]["transforms"] = {
+            "lidar_to_base": {"src": "s110_lidar_ouster_south", "dst": "s110_base",
+                              "transform_src_to_dst": {"matrix4x4": moved.ravel().tolist()}}}
+        p = tmp_path / f"{k:06d}.json"
+        p.write_text(json.dumps(doc))
+        files.append(p)
+    rec = convert("infra-lidar", files, map_source=site_map)
+    s = rec.states
+    for i in range(len(TRUTH)):
+        one = s.filter(pc.equal(s.column("participant_id"), i))
+        t = one.column("time").to_numpy()
+        x_true = np.array([truth_at(i, tt)[0] for tt in t])
+        assert np.allclose(one.column("x").to_numpy(), x_true, atol=1e-6)
+    assert "moving" in rec.meta.acquisition.platform
+    fov = rec.unobserved.filter(pc.equal(rec.unobserved.column("kind"), "sensor_range"))
+    assert fov.num_rows == NF  # one range limit per frame, following the sensor
+    assert rec.meta.source.options["timestamp_unit"] == "s"
 
 
 @pytest.mark.realdata
@@ -286,3 +324,30 @@ def test_malformed_inputs_are_located(site_map, tmp_path):
     csv.write_text("time,id,class,x,y,z,yaw,l,w,h\n0,1,car,1,2,0,0,4,2,1.5\n")
     with pytest.raises(aveas_format.FormatError, match=r"pose.json: no 4x4 transform found"):
         convert("infra-lidar", [csv, pose], map_source=site_map)
+
+
+def test_timestamp_units_and_non_road_users(site_map, tmp_path):
+    """Epoch microseconds as strings (inferred, recorded in the source block); a DontCare track
+    and a barrier are skipped with a note; keep_non_road_users keeps the barrier."""
+    files = []
+    for k in range(NF):
+        doc = tum_frame(k)
+        fr = doc["openlabel"]["frames"][str(k)]
+        fr["frame_properties"]["timestamp"] = str(int(round((T0 + k / RATE) * 1e6)))
+        cub = dict(next(iter(fr["objects"].values()))["object_data"]["cuboid"])
+        fr["objects"]["dc"] = {"object_data": {"type": "DontCare", "cuboid": {
+            **cub, "val": cub["val"][:7] + [-1000.0, -1000.0, -1000.0]}}}
+        fr["objects"]["b"] = {"object_data": {"type": "barrier", "cuboid": {
+            **cub, "val": cub["val"][:7] + [2.0, 0.3, 1.0]}}}
+        p = tmp_path / f"{k:06d}.json"
+        p.write_text(json.dumps(doc))
+        files.append(p)
+    with pytest.warns(UserWarning, match=r"skipped 2 tracks: 1 barrier \(no road user\); 1 DontCare"):
+        rec = convert("infra-lidar", files, map_source=site_map)
+    assert rec.participants.num_rows == len(TRUTH)
+    assert np.allclose(np.unique(rec.states.column("time").to_numpy()), np.arange(NF) / RATE)
+    assert rec.meta.start_time.startswith("2022-03-07T15:35:10.044372")
+    assert rec.meta.source.options["timestamp_unit"] == "us"
+    with pytest.warns(UserWarning, match=r"skipped 1 tracks: 1 DontCare"):
+        rec = convert("infra-lidar", files, map_source=site_map, options={"keep_non_road_users": True})
+    assert rec.participants.num_rows == len(TRUTH) + 1

@@ -187,3 +187,28 @@ def test_malformed_inputs_are_located(mot, landmarks, road_map, tmp_path):
     lm.write_text("u,v,x,y\n1,2,3,4\n5,x6,7,8\n")
     with pytest.raises(aveas_format.FormatError, match=r"lm.csv: line 3: column 'v': 'x6' is not a number"):
         convert("infra-lwir", [mot, lm], map_source=road_map)
+
+
+@pytest.mark.parametrize("mot_class, kept_as", [(7, "pedestrian"), (8, "other"), (12, "other"),
+                                                 (2, "pedestrian"), (9, "other")])
+def test_mot_classes_that_are_no_road_users(landmarks, road_map, tmp_path, mot_class, kept_as):
+    """MOTChallenge ground truth labels static persons, distractors, occluders, reflections and
+    riders too: skipped with a count by default, kept with keep_non_road_users; a crowd (13) never."""
+    def relabel(ln, tid, cls):
+        f = ln.split(",")
+        return ",".join([f[0], tid, *f[2:7], str(cls), f[8]])
+
+    lines = [relabel(ln, "2", mot_class) if ln.split(",")[1] == "2" else ln for ln in mot_lines(nine=True)]
+    lines += [relabel(ln, "9", 13) for ln in mot_lines(nine=True) if ln.split(",")[1] == "1"]
+    p = tmp_path / "gt.txt"
+    p.write_text("\n".join(lines) + "\n")
+    from aveas_format.converters.labels import MOT_CLASS_IDS
+
+    name = MOT_CLASS_IDS[mot_class]
+    with pytest.warns(UserWarning, match=rf"skipped 2 tracks: 1 {name} \(no road user\); 1 crowd"):
+        rec = convert("infra-lwir", [p, landmarks], map_source=road_map)
+    assert rec.participants.column("class").to_pylist() == ["car"]
+    with pytest.warns(UserWarning, match=r"skipped 1 tracks: 1 crowd"):
+        rec = convert("infra-lwir", [p, landmarks], map_source=road_map,
+                      options={"keep_non_road_users": True})
+    assert rec.participants.column("class").to_pylist() == ["car", kept_as]

@@ -366,3 +366,25 @@ def test_cli(scene_mcap, road_map, tmp_path):
                           "license=CC-BY-4.0"], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert out.is_dir()
+
+
+def test_barriers_and_signs_are_no_road_users(road_map, tmp_path):
+    """derived_object_msgs classification 10 (BARRIER) is no road user: the track is skipped with
+    a count, or kept with keep_non_road_users."""
+    msgs = []
+    for i in range(N):
+        t = i / RATE
+        t_ns = T0 + int(round(t * 1e9))
+        msgs.append(("/localization/kinematic_state", "nav_msgs/msg/Odometry", odometry(t_ns, t), t_ns))
+        d = derived(t_ns + 50_000_000, i)
+        barrier = dict(d["objects"][0], id=9, classification=10)
+        barrier["pose"] = {"pose": pose(30.0 - 20.0 * t, -5.0, 0.5, 0.0), "covariance": cov6(np.diag([0.09, 0.01]))}
+        d["objects"].append(barrier)
+        msgs.append(("/radar/objects", "derived_object_msgs/msg/ObjectWithCovarianceArray", d, t_ns))
+    path = write_mcap(tmp_path / "barrier.mcap", msgs)
+    with pytest.warns(UserWarning, match=r"skipped 1 tracks: 1 barrier \(no road user\)"):
+        rec = convert("ros2-mcap", [path], map_source=road_map, options=_opts())
+    assert rec.participants.column("source_id").to_pylist() == ["ego", "7"]
+    rec = convert("ros2-mcap", [path], map_source=road_map, options=_opts(keep_non_road_users=True))
+    assert rec.participants.column("source_id").to_pylist() == ["ego", "7", "9"]
+    assert rec.participants.column("class").to_pylist()[2] == "other"

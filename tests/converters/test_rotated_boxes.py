@@ -295,7 +295,7 @@ def test_read_world_file_pixel_centre(tmp_path):
     ("no_crs", r"o.tfw: the georeference has no CRS"),
     ("no_georef", r"tracks.csv: no georeference"),
     ("bad_cx", r"tracks.csv: line 4: column 'cx': 'abc' is not a number"),
-    ("bad_class", r"tracks.csv: line 3: column 'class': 'plane' is not a known class"),
+    ("bad_class", r"tracks.csv: line 3: column 'class': 'spaceship' is not a known class"),
     ("no_rate", r"tracks.csv: the table has 'frame' but no 'time'"),
     ("no_box", r"tracks.csv: the table needs box columns"),
     ("dup", r"tracks.csv: line 4: participant sampled twice"),
@@ -321,7 +321,7 @@ def test_malformed_input_is_located(tmp_path, site_map, case, match):
     elif case == "bad_cx":
         lines[3] = lines[3].replace("102", "abc")
     elif case == "bad_class":
-        lines[2] = lines[2].replace("car", "plane")
+        lines[2] = lines[2].replace("car", "spaceship")
     elif case == "no_rate":
         opts.pop("frame_rate")
     elif case == "no_box":
@@ -359,3 +359,24 @@ def test_unobserved_outside_the_image(tmp_path, site_map):
     assert shapely.intersection(region, shapely.from_wkt(rec.meta.coverage)).area < 1e-3
     bare = convert("rotated-boxes", inputs, map_source=site_map, options={"frame_rate": RATE})
     assert bare.unobserved is None or bare.unobserved.num_rows == 0
+
+
+def test_dota_categories_that_are_no_road_users(tmp_path, site_map):
+    """DOTA labels 15-18 categories; only small-vehicle and large-vehicle are road users. A plane
+    and a storage tank (in DOTA's corner form) are skipped with a count, or kept as class other."""
+    rows = ["frame,track_id,x1,y1,x2,y2,x3,y3,x4,y4,class,difficult"]
+    for k in range(10):
+        u = 100 + 2 * k
+        rows.append(f"{k},car1,{u},100,{u + 36},100,{u + 36},114,{u},114,small-vehicle,0")
+        rows.append(f"{k},p7,400,400,480,400,480,470,400,470,plane,0")
+        rows.append(f"{k},t9,600,600,630,600,630,630,600,630,storage-tank,1")
+    tracks = tmp_path / "tracks.csv"
+    tracks.write_text("\n".join(rows) + "\n")
+    wf = write_world_file(tmp_path / "o.tfw")
+    opts = {"frame_rate": 20.0, "crs": SITE_CRS}
+    with pytest.warns(UserWarning, match=r"skipped 2 tracks: 1 plane, 1 storage-tank \(no road user\)"):
+        rec = convert("rotated-boxes", [tracks, wf], map_source=site_map, options=opts)
+    assert rec.participants.column("class").to_pylist() == ["car"]
+    rec = convert("rotated-boxes", [tracks, wf], map_source=site_map,
+                  options={**opts, "keep_non_road_users": True})
+    assert sorted(rec.participants.column("class").to_pylist()) == ["car", "other", "other"]

@@ -13,26 +13,23 @@ import aveas_format
 from aveas_format.converters import convert, load_converters
 from aveas_format.opendrive.builder import straight_highway
 
+from helpers_common import realdata_fixture, shared
+from helpers_realdata import sumo_excerpt_map
+
 
 @pytest.fixture(scope="module")
 def westward_map(tmp_path_factory):
     """A one-lane road under the excerpts' vehicle: it drives west along y = 401.65."""
     p = tmp_path_factory.mktemp("maps") / "west.xodr"
-    p.write_text(straight_highway(length=2000.0, lanes_right=1, x0=1600.0, y0=401.65 - 1.75,
-                                  hdg=math.pi, geo_reference="+proj=tmerc +lat_0=48.8 +lon_0=11.1 "
-                                  "+k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"))
+    p.write_text(sumo_excerpt_map("cartesian"))
     return p
 
 
 @pytest.fixture(scope="module")
 def geo_map(tmp_path_factory):
-    """A wide lane for the geo excerpt (its road drifts 2 m north over 70 m in this frame), in a
-    local frame centred on its first sample."""
+    """A wide lane for the geo excerpt, in a local frame centred on its first sample."""
     p = tmp_path_factory.mktemp("maps") / "geo.xodr"
-    p.write_text(straight_highway(length=1000.0, lanes_right=1, lane_width=6.0, x0=500.0, y0=-3.0,
-                                  hdg=math.pi,
-                                  geo_reference="+proj=tmerc +lat_0=48.836229 +lon_0=11.090774 +k=1 "
-                                  "+x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"))
+    p.write_text(sumo_excerpt_map("geo"))
     return p
 
 
@@ -145,3 +142,70 @@ def test_cli_convert(westward_map, tmp_path, sumo_data):
                          text=True)
     assert res.returncode == 2
     assert "invalid options: colour: Extra inputs are not permitted" in res.stderr
+
+
+@realdata_fixture(scope="module")
+def road():
+    """netconvert's map of ../shared/data/real/sumo: 3 lanes of 3.2 m along +x."""
+    return shared("data", "real", "sumo", "road.xodr")
+
+
+def _fcd(rows):
+    steps = {}
+    for t, vid, x, y, angle, speed, lat in rows:
+        attrs = f'x="{x:.2f}" y="{y:.2f}" angle="{angle:.2f}" type="car" speed="{speed:.2f}"'
+        if lat is not None:
+            attrs += f' speedLat="{lat:.2f}"'
+        steps.setdefault(t, []).append(f'<vehicle id="{vid}" {attrs}/>')
+    body = "".join(f'<timestep time="{t:.2f}">{"".join(v)}</timestep>' for t, v in sorted(steps.items()))
+    return f'<?xml version="1.0"?><fcd-export>{body}</fcd-export>'
+
+
+def test_lane_change_instant_and_reconstructed(road, tmp_path):
+    """One car jumps a lane width (3.2 m) in one 0.5-s step (SUMO's default): validate reports one
+    instant_lane_change; with lane_change_duration=3 the positions move across smoothly, the
+    velocity carries the lateral speed, the heading turns with it, and nothing is reported."""
+    rows = []
+    for k in range(40):
+        t = 0.5 * k
+        rows.append((t, "a", 10.0 + 15.0 * t, -8.0 if t < 10.0 else -4.8, 90.0, 15.0, None))
+    p = tmp_path / "fcd.xml"
+    p.write_text(_fcd(rows))
+    rec = convert("sumo-fcd", [p], map_source=road)
+    rep = aveas_format.validate(rec, select=["kinematics"])
+    assert rep.codes() == {"kinematics.instant_lane_change"}
+    assert "jumps up to 3.2 m across the lane in 0.5 s" in rep.findings()[0].message
+    rec = convert("sumo-fcd", [p], map_source=road, options={"lane_change_duration": 3.0})
+    assert aveas_format.validate(rec, select=["kinematics"]).codes() == set()
+    s = rec.states
+    t, y, vy, h = (s.column(c).to_numpy() for c in ("time", "y", "vy", "heading"))
+    assert np.all(np.diff(y) >= -1e-9) and y[0] == pytest.approx(-8.0) and y[-1] == pytest.approx(-4.8)
+    mid = (y[t == 9.5][0] + y[t == 10.0][0]) / 2  # the jump's time lies between: half-way there
+    assert abs(mid - (-6.4)) < 0.05
+    u = np.clip((t - (9.75 - 1.5)) / 3.0, 0, 1)  # the quintic over 3 s centred on the jump
+    assert np.allclose(vy, 3.2 * 30 * u ** 2 * (1 - u) ** 2 / 3.0, atol=1e-6)  # peak 2.0 m/s
+    assert np.allclose(s.column("vx").to_numpy(), 15.0)  # the speed stays along the lane
+    assert h.max() == pytest.approx(np.arctan2(vy.max(), 15.0), rel=0.02)
+    assert rec.meta.source.options["lane_changes_reconstructed"] == 1
+    assert '"reconstructed_lane_changes": 1' in rec.participants.column("attributes")[0].as_py()
+
+
+def test_speed_lat_is_the_lateral_speed(road, tmp_path):
+    """SUMO's speed is along the lane, speedLat across it: the velocity is their sum, whatever
+    the FCD angle (which includes the lateral motion)."""
+    rows = []
+    y = -8.0
+    for k in range(20):
+        t = 0.5 * k
+        lat = 1.0 if 2.0 <= t < 5.0 else 0.0
+        ang = 90.0 - np.degrees(np.arctan2(lat, 20.0))
+        rows.append((t, "b", 10.0 + 20.0 * t, y, ang, 20.0, lat))
+        y += 0.5 * lat
+    p = tmp_path / "fcd.xml"
+    p.write_text(_fcd(rows))
+    rec = convert("sumo-fcd", [p], map_source=road)
+    s = rec.states
+    assert np.allclose(s.column("vx").to_numpy(), 20.0)  # not 20 cos(theta)
+    lat = np.array([r[6] for r in rows])
+    assert np.allclose(s.column("vy").to_numpy(), lat)
+    assert rec.meta.source.options["lateral_speed"].startswith("speedLat")

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import aveas_format.derive.kinematics as kin
+import aveas_format.derive.kinematics._jerk_density as jd
+import aveas_format.derive.kinematics._smoother as smoother
 from aveas_format.derive.kinematics import KinematicsParams, estimate
 
 
@@ -50,17 +51,17 @@ def test_auto_recovers_the_density():
     """Per window the ML density is within a factor 2 of the truth (windows of 1,024 samples)."""
     d = _white_jerk(0.2, n=1024, tracks=12)
     captured = {}
-    orig = kin._ml_jerk_density
+    orig = smoother.ml_jerk_density
 
     def spy(*a, **k):
         captured["q"] = orig(*a, **k)
         return captured["q"]
 
-    kin._ml_jerk_density = spy
+    smoother.ml_jerk_density = spy
     try:
         _run(d)
     finally:
-        kin._ml_jerk_density = orig
+        smoother.ml_jerk_density = orig
     q = captured["q"]
     assert q.shape == (12, 2)
     assert np.all(np.abs(np.log(q / 0.2)) < np.log(2.0))
@@ -94,7 +95,7 @@ def test_fast_pass_equals_full_recursion(monkeypatch):
     d = {"pid": pid, "t": t, "x": x, "y": y}
     kw = dict(batch_rows=7, window_steps=100, overlap_steps=20)
     fast = _run(d, **kw)
-    monkeypatch.setattr(kin, "_regular_rows",
+    monkeypatch.setattr(jd, "_regular_rows",
                         lambda dt, r, first, valid: (np.zeros(first.shape[1], bool), 0.0, 0.0))
     full = _run(d, **kw)
     for c in fast:
@@ -109,10 +110,10 @@ def test_mixed_regular_and_irregular_rows(monkeypatch):
     stay on the fast pass; each track's result equals the one computed alone."""
     calls = {"fast": 0, "full": 0}
     for name, key in (("_ca_window_loglik_regular", "fast"), ("_ca_window_loglik", "full")):
-        def counted(*a, _f=getattr(kin, name), _k=key, **k):
+        def counted(*a, _f=getattr(jd, name), _k=key, **k):
             calls[_k] += 1
             return _f(*a, **k)
-        monkeypatch.setattr(kin, name, counted)
+        monkeypatch.setattr(jd, name, counted)
     rng = np.random.default_rng(2)
     parts = []
     for i in range(6):
@@ -136,15 +137,15 @@ def test_mixed_regular_and_irregular_rows(monkeypatch):
 
 
 def test_parabola_vertex_and_refined_grid():
-    g = kin._refined_grid(np.array([1e-2, 1.0, 1e2]), 2)
+    g = jd._refined_grid(np.array([1e-2, 1.0, 1e2]), 2)
     assert np.allclose(np.log10(g), np.arange(-2, 2.01, 0.5))
     x = np.log(np.array([0.1, 1.0, 10.0]))
     for x0 in (-0.7, 0.0, 1.2):
         y = -(x - x0) ** 2
-        assert kin._parabola_vertex(*x, *y) == pytest.approx(x0)
+        assert jd._parabola_vertex(*x, *y) == pytest.approx(x0)
     # a missing neighbour or a flat top keeps the best point
-    assert kin._parabola_vertex(*x, -np.inf, 0.0, -1.0) == x[1]
-    assert kin._parabola_vertex(*x, 0.0, 0.0, 0.0) == x[1]
+    assert jd._parabola_vertex(*x, -np.inf, 0.0, -1.0) == x[1]
+    assert jd._parabola_vertex(*x, 0.0, 0.0, 0.0) == x[1]
 
 
 def test_coupled_filter_uses_auto_density():
@@ -205,11 +206,11 @@ def test_window_loglik_matches_a_naive_filter(regular):
     order = np.argsort(lens - 1, kind="stable")  # windows sorted by their last step
     ends = (lens[order] - 1, order, np.arange(W))  # (last step, row, result row)
     if regular:
-        table = kin._gain_table(int(L), 0.04, 0.01, tuple(qs.tolist()), 50.0, 10.0)
-        got = kin._ca_window_loglik_regular(z, first, lens[order] - 1, ends, table, 0.04,
-                                            np.arange(3), np.arange(3))
+        table = jd._gain_table(int(L), 0.04, 0.01, tuple(qs.tolist()), 50.0, 10.0)
+        got = jd._ca_window_loglik_regular(z, first, lens[order] - 1, ends, table, 0.04,
+                                           np.arange(3), np.arange(3))
     else:
-        got = kin._ca_window_loglik(z, r, dt[:, None, :], first, ends, W, qs, 50.0, 10.0)
+        got = jd._ca_window_loglik(z, r, dt[:, None, :], first, ends, W, qs, 50.0, 10.0)
     got = got[np.argsort(order)]  # back to the tracks' order
     for w, (zz, rr, t) in enumerate(tracks):
         for i, q in enumerate(qs):

@@ -16,7 +16,7 @@ import shapely
 from aveas_format.derive import derive
 from aveas_format.derive.encroachments import (EncroachmentsParams, occupancy, swept_path,
                                                track_directions)
-from aveas_format.derive.interactions import InteractionsParams, _Samples
+from aveas_format.derive._samples import Samples
 
 from helpers_derive import recording, road_map, vectors
 
@@ -35,7 +35,7 @@ def _bench():
 
 def _reference(rec, p: EncroachmentsParams) -> pa.Table:
     """``derived/encroachments`` as the loop over pairs and areas computed it."""
-    S = _Samples(rec, InteractionsParams())
+    S = Samples(rec)
     starts = np.r_[0, np.flatnonzero(np.diff(S.pid)) + 1]
     ends = np.r_[starts[1:], S.n]
     pids = S.pid[starts]

@@ -164,6 +164,11 @@ def c_position_jump(sc):
     return vf.build(sc)
 
 
+def c_instant_lane_change(sc):
+    sc["tracks"][0]["y"][75:] -= 3.5  # the car is in the next lane one step later, no lateral speed
+    return vf.build(sc)
+
+
 # --- uncertainty ---------------------------------------------------------------------------------
 
 
@@ -451,6 +456,7 @@ CASES = [
     (c_yaw_rate, "kinematics.yaw_rate", (0, 0)),
     (c_heading_vs_motion, "kinematics.heading_vs_motion", (0, 0)),
     (c_position_jump, "kinematics.position_jump", (75, 0)),
+    (c_instant_lane_change, "kinematics.instant_lane_change", (75, 0)),
     (c_std_missing, "uncertainty.std_missing", (0, 0)),
     (c_class_pmf_missing, "uncertainty.class_pmf_missing", (2, 2)),
     (c_std_implausibly_large, "uncertainty.std_implausibly_large", (160, 1)),

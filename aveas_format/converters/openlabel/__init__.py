@@ -39,16 +39,63 @@ including those written by ``aveas-openlabel`` itself (``to_dict(exclude_none=Tr
 quirks: ``used_road_link`` as the road-id name, enum values written as
 ``"Road__ClassificationValue.STRAIGHT"``, and the lateral automated-control flag serialised under
 the longitudinal name (the second ``interior/automated_control/longitudinal`` of a frame is read
-as lateral). It also reads generic ASAM OpenLABEL with cuboids (9 values with Euler angles or 10
-with a quaternion) in any coordinate system, chained through ``coordinate_systems``
-``pose_wrt_parent`` and per-frame ``frame_properties.transforms`` to the root frame; a root of
-type ``geo_utm`` named like ``utm-30t`` is read as that UTM zone (or pass ``world_crs``), any other
-root is taken as the map frame. Per-frame timestamps in Unix seconds set ``start_time``.
+as lateral). It also reads generic ASAM OpenLABEL as dataset converters write it (VCD's KITTI
+converter, the ASAM examples, TUM Traffic):
+
+- **Cuboids** of 9 values (x, y, z, rx, ry, rz, sx, sy, sz; Euler angles ZYX) or 10 (a
+  quaternion), in any coordinate system. A cuboid's axes are read through its rotation and its
+  coordinate system's transform to the root: the axis nearest the root's vertical carries the
+  height, the cuboid's x axis (or its y axis where x is the vertical) the length and the heading,
+  the remaining one the width; the ground point lies half the box's vertical extent below its
+  centre. So camera-frame cuboids (KITTI's ``CAM_LEFT``: x right, y down, z forward, sizes along
+  those axes) come out with the right width, height and ground height.
+- **Coordinate systems**: the chain to the root through ``pose_wrt_parent`` and each frame's
+  ``frame_properties.transforms`` (either direction; a frame's transform beats the static pose),
+  found by a search over both, to the reachable root of the highest rank (a ``geo_utm``/
+  ``geo_wgs84`` or ``scene_cs`` system, else the root of the cuboid's own tree). A root of type
+  ``geo_utm`` named like ``utm-30t`` is read as that UTM zone (or pass ``world_crs``); any other
+  root is taken as the map frame. A coordinate system missing from ``coordinate_systems`` is
+  taken as the root, with a warning.
+- **An object with a static cuboid** in ``object_data`` whose coordinate system a frame's
+  transforms move (KITTI's ``Egocar`` in ``vehicle-iso8855``, moved by the odometry) gets one box
+  per such frame (within its ``frame_intervals``): the recording vehicle's trajectory.
+- **Timestamps**: ``frame_properties.timestamp`` as numbers, numeric strings (integers kept
+  exact: epoch nanoseconds lose nothing) or ISO 8601 texts. Their unit is inferred
+  (``timestamp_unit=auto``): values that fall between 1990 and 2100 as seconds, milliseconds,
+  microseconds or nanoseconds since the Unix epoch are read so (at most one unit fits), smaller
+  ones count from the start in the unit their median spacing suggests (< 5: s, < 5000: ms, ...).
+  ``-O timestamp_unit=s|ms|us|ns`` fixes the unit. A cuboid attribute ``timestamp`` (the ASAM
+  example's per-box measurement time) beats the frame's where every box has one and they are
+  absolute. Without a timestamp on every frame: frame numbers at ``rate_hz``. What was decided
+  is recorded in the ``source`` block (options ``timestamp_unit`` and ``timestamps``).
+- **Objects that are no participant**: an object whose type is an ignore type (KITTI's
+  ``DontCare``, ``ignore``, ``noise``, a crowd) is skipped with a note, and so is one whose type
+  is no road user (nuScenes' barriers and traffic cones, Waymo's signs, ...: the table in
+  "Labels that are not road users" below) unless ``keep_non_road_users``. Boxes with a sentinel
+  or impossible size (<= 0 as KITTI's -1000, not finite, > 400 m) are dropped with a note, and
+  an object left without boxes with them: no sentinel size reaches a participant. Object types
+  map to classes through the same table (``Car``, ``Cyclist``, ``vehicle.bus.rigid``,
+  ``vehicle/car``, ...).
+- **TUM Traffic's deviations**: a single ``cuboid`` object instead of a list, and ``type`` inside
+  ``object_data`` (no top-level ``objects``).
+
+Not supported: 2D boxes (``bbox``, ``rbbox``), polygons, polylines, point clouds and semantic
+masks (image-space labels, no ground position: a file with only those is a clear error); static
+cuboids without frames (no time); several files of one frame each (TUM Traffic's layout: use
+``infra-lidar``, which takes many files); ``frame_intervals`` without frames; streams,
+intrinsics and ontologies (read past); relations other than the profile's events.
 
 The map comes from ``--map``, else from ``metadata.opendrive`` when that file lies next to the
 input. Positions are the box centres at ground level; velocities without a ``velocity`` attribute
 are computed from the positions; road coordinates are taken from the file where it has them, else
 computed through the map.
+
+Tested on: ``../shared/data/real/vcd/openlabel100_kitti_tracking_0003.json`` (VCD's KITTI
+converter), ``tests/data/third_party/vcd__openlabel100_kitti_tracking_0016_excerpt.json``
+(pedestrians and a cyclist), the ASAM examples ``asam_spec__openlabel100_example_cuboids.json``
+and ``..._test_bbox_simple.json``, VCD's ``vcd__openlabel100_test_{cuboids,poses,transforms}.json``
+and the AVEAS profile's ``aveas__minimum_openlabel_example.json`` (``../shared/data/openlabel/``;
+tests/realdata/test_openlabel.py), plus this library's own exports.
 
 Modules (``aveas_format.converters.openlabel``): ``profile`` the profile's mapping shared by both
 directions (classes, events, lights, conditions, timestamps, the extension's table encoding);

@@ -83,13 +83,27 @@ def _pose(tf: dict[str, Any] | list | None) -> np.ndarray | None:
     return m
 
 
+#: coordinate-system types that are a world frame (preferred as the root of a chain)
+_WORLD_TYPES = ("geo_utm", "geo_wgs84", "scene_cs")
+
+
 class _Frames:
-    """Chains coordinate systems to the root (static poses + per-frame transforms)."""
+    """The coordinate systems of a file: static poses (``pose_wrt_parent``, ``X_parent = P X``)
+    and, per frame, ``frame_properties.transforms`` (``transform_src_to_dst``). :meth:`resolve`
+    finds the transform of a coordinate system into the root: a breadth-first search over both
+    (a frame's transforms first, either direction), to the reachable root of the highest rank (a
+    geo or scene coordinate system, else the root of its own tree)."""
 
     def __init__(self, cs: dict[str, Any] | None) -> None:
-        self.cs = cs or {}
+        self.cs = cs if isinstance(cs, dict) else {}
         self.parent = {k: (v or {}).get("parent") or None for k, v in self.cs.items()}
         self.static = {k: _pose((v or {}).get("pose_wrt_parent")) for k, v in self.cs.items()}
+        self.kind = {k: str((v or {}).get("type") or "") for k, v in self.cs.items()}
+        self.children: dict[str, list[str]] = defaultdict(list)
+        for k, p in self.parent.items():
+            if p:
+                self.children[p].append(k)
+        self.unknown: set[str] = set()
 
     def root_of(self, name: str | None) -> str | None:
         seen = set()
@@ -98,28 +112,64 @@ class _Frames:
             name = self.parent[name]
         return name
 
-    def to_root(self, name: str | None, transforms: dict[str, Any] | None) -> np.ndarray:
-        m = np.eye(4)
+    @staticmethod
+    def frame_edges(transforms: Any) -> dict[str, list[tuple[str, np.ndarray]]]:
+        """The transforms of a frame as edges ``src -> [(dst, 4x4 X_dst = T X_src)]``, both ways."""
+        edges: dict[str, list[tuple[str, np.ndarray]]] = defaultdict(list)
+        for tf in (transforms or {}).values() if isinstance(transforms, dict) else ():
+            if not (isinstance(tf, dict) and tf.get("src") and tf.get("dst")):
+                continue
+            m = _pose(tf.get("transform_src_to_dst"))
+            if m is None:
+                continue
+            src, dst = str(tf["src"]), str(tf["dst"])
+            edges[src].append((dst, m))
+            try:
+                edges[dst].append((src, np.linalg.inv(m)))
+            except np.linalg.LinAlgError:
+                pass
+        return edges
+
+    def resolve(self, name: str | None, edges: dict[str, list] | None = None
+                ) -> tuple[np.ndarray, str | None, bool]:
+        """``(4x4 name -> root, root, whether a frame transform is on the path)``. A name that is
+        not among ``coordinate_systems`` and has no frame transform is taken as the root."""
         if not name:
-            return m
-        tfs = {}
-        for tf in (transforms or {}).values():
-            if isinstance(tf, dict) and tf.get("src") and tf.get("dst"):
-                tfs[(tf["src"], tf["dst"])] = _pose(tf.get("transform_src_to_dst"))
-        seen = set()
-        while name in self.parent and self.parent[name] and name not in seen:
-            seen.add(name)
-            par = self.parent[name]
-            step = tfs.get((name, par))
-            if step is None and (par, name) in tfs and tfs[(par, name)] is not None:
-                step = np.linalg.inv(tfs[(par, name)])
-            if step is None:
-                step = self.static.get(name)
-            if step is None:
-                step = np.eye(4)
-            m = step @ m
-            name = par
-        return m
+            return np.eye(4), None, False
+        edges = edges or {}
+        if name not in self.cs and name not in edges:
+            self.unknown.add(name)
+            return np.eye(4), name, False
+        best: dict[str, tuple[np.ndarray, bool]] = {name: (np.eye(4), False)}
+        queue = [name]
+        while queue:
+            n = queue.pop(0)
+            m, used = best[n]
+            steps = [(d, t, True) for d, t in edges.get(n, ())]
+            p = self.parent.get(n)
+            if p:
+                steps.append((p, self.static.get(n) if self.static.get(n) is not None else np.eye(4), False))
+            for c in self.children.get(n, ()):
+                st = self.static.get(c)
+                steps.append((c, np.linalg.inv(st) if st is not None else np.eye(4), False))
+            for d, t, frame in steps:
+                if d not in best:
+                    best[d] = (t @ m, used or frame)
+                    queue.append(d)
+        own_root = self.root_of(name)
+        roots = [n for n in best if not self.parent.get(n)]
+
+        def rank(r: str) -> tuple:
+            kind = self.kind.get(r, "")
+            return (kind.startswith("geo"), kind == "scene_cs", r == own_root,
+                    -list(best).index(r))
+
+        root = max(roots, key=rank) if roots else own_root
+        m, used = best.get(root, (np.eye(4), False))
+        return m, root, used
+
+    def to_root(self, name: str | None, transforms: dict[str, Any] | None) -> np.ndarray:
+        return self.resolve(name, self.frame_edges(transforms))[0]
 
 
 def _utm_crs(name: str, cs_type: str | None) -> str | None:
@@ -138,9 +188,9 @@ def _utm_crs(name: str, cs_type: str | None) -> str | None:
 
 #: boxes per chunk of the column buffers (Python lists -> numpy arrays)
 _CHUNK = 4096
-_FLOAT_COLS = ("cub_ts", "px", "py", "pz", "yaw", "vu", "vv", "yr", "au", "av", "x_std", "y_std",
-               "z_std", "heading_std", "vu_std", "vv_std", "yr_std", "au_std", "av_std", "road_s",
-               "road_t", "lane_position", *LIGHTS)
+_FLOAT_COLS = ("cub_ts", "px", "py", "pz", "yaw", "dl", "dw", "dh", "vu", "vv", "yr", "au", "av",
+               "x_std", "y_std", "z_std", "heading_std", "vu_std", "vv_std", "yr_std", "au_std",
+               "av_std", "road_s", "road_t", "lane_position", *LIGHTS)
 _OBJ_COLS = ("csroot", "road_id", "lane_id")
 
 
@@ -218,6 +268,12 @@ class _FrameRows:
         self.sizes: list[tuple[int, str, list]] = []
         self.interior: list[tuple[int, str, dict]] = []
         self._need_size: dict[str, bool] = {}
+        #: object type given inside a frame's object_data (TUM Traffic), by object
+        self.frame_types: dict[str, str] = {}
+        #: objects whose static cuboid (object_data of ``objects``) lies in a coordinate system
+        #: that a frame's transforms move (KITTI's ego car in vehicle-iso8855): one box per frame
+        self.static_cuboids = _static_cuboids(objects)
+        self.moving_static: set[str] = set()
 
     def _needs_size(self, u: str) -> bool:
         need = self._need_size.get(u)
@@ -251,79 +307,114 @@ class _FrameRows:
 
     def add(self, k: Any, fr: Any) -> None:
         j = len(self.keys)
-        fr = fr or {}
+        fr = fr if isinstance(fr, dict) else {}
         ts = _frame_timestamp(fr)
         self.keys.append(k)
         self.stamps.append(ts)
         ui = self.uid_index
         fobjs = fr.get("objects") or {}
+        if not isinstance(fobjs, dict):
+            raise FormatError(f"frame {k}: 'objects' is not an object", path=self.path)
         self.frame_uids.append(np.fromiter((ui.setdefault(u, len(ui)) for u in fobjs), np.int64))
-        cs, path, b = self.cs, self.path, self.buf
-        transforms = (fr.get("frame_properties") or {}).get("transforms")
+        fp = fr.get("frame_properties")
+        edges = self.cs.frame_edges(fp.get("transforms") if isinstance(fp, dict) else None)
+        cache: dict = {}
+        boxed = set()
         for u, oif in fobjs.items():
-            od = (oif or {}).get("object_data") or {}
+            od = (oif or {}).get("object_data") or {} if isinstance(oif, dict) else {}
+            if not isinstance(od, dict):
+                continue
+            if isinstance(od.get("type"), str) and u not in self.frame_types:
+                self.frame_types[u] = od["type"]
             cubs = od.get("cuboid") or []
             if isinstance(cubs, dict):
                 cubs = [cubs]
-            cub = next((c for c in cubs if c.get("name") == "bounding_box"), cubs[0] if cubs else None)
-            if cub is None or cub.get("val") is None:
+            cub = next((c for c in cubs if isinstance(c, dict) and c.get("name") == "bounding_box"),
+                       cubs[0] if cubs else None)
+            if not isinstance(cub, dict) or cub.get("val") is None:
                 continue
-            pw, yaw, dims, csname = _box_in_root(cub, cs, transforms, k, u, path)
-            attrs = _attrs(od)
-            b["uidx"].append(ui[u])
-            b["occ"].append(j)
-            cub_ts = _first(_attrs(cub.get("attributes")), "timestamp")
-            b["cub_ts"].append(float(cub_ts) if isinstance(cub_ts, (int, float)) else np.nan)
-            b["px"].append(pw[0])
-            b["py"].append(pw[1])
-            b["pz"].append(pw[2] - dims[2] / 2.0)
-            b["yaw"].append(yaw)
-            b["csroot"].append(cs.root_of(csname))
-            if self._needs_size(u):
-                self.sizes.append((j, u, dims))
-            vel = _first(attrs, "velocity")
-            acc = _first(attrs, "acceleration")
-            b["vu"].append(vel[0] if vel else np.nan)
-            b["vv"].append(vel[1] if vel else np.nan)
-            b["yr"].append(vel[5] if vel and len(vel) > 5 else np.nan)
-            b["hv"].append(vel is not None)
-            b["au"].append(acc[0] if acc else np.nan)
-            b["av"].append(acc[1] if acc else np.nan)
-            bsd = _first(attrs, "bounding_box/ustddev")
-            b["x_std"].append(bsd[0] if bsd else np.nan)
-            b["y_std"].append(bsd[1] if bsd else np.nan)
-            b["z_std"].append(bsd[2] if bsd else np.nan)
-            b["heading_std"].append(bsd[5] if bsd else np.nan)
-            vsd = _first(attrs, "velocity/ustddev")
-            b["vu_std"].append(vsd[0] if vsd else np.nan)
-            b["vv_std"].append(vsd[1] if vsd else np.nan)
-            b["yr_std"].append(vsd[5] if vsd and len(vsd) > 5 else np.nan)
-            asd = _first(attrs, "acceleration/ustddev")
-            b["au_std"].append(asd[0] if asd else np.nan)
-            b["av_std"].append(asd[1] if asd else np.nan)
-            road = _first(attrs, "used_road_link", _first(attrs, "open_drive/road_id"))
-            lrc = _first(attrs, "open_drive/local_road_coordinates")
-            lane = _first(attrs, "open_drive/lane_id")
-            b["hr"].append(road is not None and lrc is not None)
-            b["road_id"].append(str(road) if road is not None and lrc is not None else None)
-            b["road_s"].append(lrc[0] if road is not None and lrc else np.nan)
-            b["road_t"].append(lrc[1] if road is not None and lrc else np.nan)
-            try:
-                b["lane_id"].append(int(str(_enum_value(lane))) if lane is not None and road is not None else None)
-            except ValueError:
-                b["lane_id"].append(None)
-            b["lane_position"].append(_first(attrs, "open_drive/lane_position", np.nan))
-            for c, name in LIGHTS.items():
-                bl = _first(attrs, name)
-                b[c].append(np.nan if bl is None else float(bool(bl)))
-            irow = _interior_row(attrs)
-            if irow:
-                self.interior.append((j, u, irow))
-            any(n.startswith("impact/") for n in attrs)  # (as before: attribute names are text)
-            e = cub.get(EXT)
-            self.ext_buf.append(e if isinstance(e, dict) else None)
-            if len(b["occ"]) >= _CHUNK:
-                self._flush()
+            self._add_box(j, k, u, cub, od, edges, cache)
+            boxed.add(u)
+        if edges:
+            for u, cub, intervals in self.static_cuboids:
+                if u in boxed or not _in_intervals(k, intervals):
+                    continue
+                m, _, moving = self._resolve(cub.get("coordinate_system"), edges, cache)
+                if moving:
+                    ui.setdefault(u, len(ui))
+                    self.frame_uids[-1] = np.append(self.frame_uids[-1], ui[u])
+                    self.moving_static.add(u)
+                    self._add_box(j, k, u, cub, {}, edges, cache)
+
+    def _resolve(self, csname: Any, edges: dict, cache: dict) -> tuple[np.ndarray, str | None, bool]:
+        key = str(csname) if csname else ""
+        if key not in cache:
+            cache[key] = self.cs.resolve(key or None, edges)
+        return cache[key]
+
+    def _add_box(self, j: int, k: Any, u: str, cub: dict[str, Any], od: dict[str, Any], edges: dict,
+                 cache: dict) -> None:
+        """One box: the cuboid in the root frame and the profile's attributes of the object."""
+        b, ui = self.buf, self.uid_index
+        pw, yaw, dims, ground, root = _box_in_root(
+            cub, lambda name: self._resolve(name, edges, cache), k, u, self.path)
+        attrs = _attrs(od)
+        b["uidx"].append(ui[u])
+        b["occ"].append(j)
+        cub_ts = _first(_attrs(cub.get("attributes")), "timestamp")
+        b["cub_ts"].append(float(cub_ts) if isinstance(cub_ts, (int, float)) else np.nan)
+        b["px"].append(pw[0])
+        b["py"].append(pw[1])
+        b["pz"].append(ground)
+        b["yaw"].append(yaw)
+        b["dl"].append(dims[0])
+        b["dw"].append(dims[1])
+        b["dh"].append(dims[2])
+        b["csroot"].append(root)
+        if self._needs_size(u):
+            self.sizes.append((j, u, dims))
+        vel = _first(attrs, "velocity")
+        acc = _first(attrs, "acceleration")
+        b["vu"].append(vel[0] if vel else np.nan)
+        b["vv"].append(vel[1] if vel else np.nan)
+        b["yr"].append(vel[5] if vel and len(vel) > 5 else np.nan)
+        b["hv"].append(vel is not None)
+        b["au"].append(acc[0] if acc else np.nan)
+        b["av"].append(acc[1] if acc else np.nan)
+        bsd = _first(attrs, "bounding_box/ustddev")
+        b["x_std"].append(bsd[0] if bsd else np.nan)
+        b["y_std"].append(bsd[1] if bsd else np.nan)
+        b["z_std"].append(bsd[2] if bsd else np.nan)
+        b["heading_std"].append(bsd[5] if bsd else np.nan)
+        vsd = _first(attrs, "velocity/ustddev")
+        b["vu_std"].append(vsd[0] if vsd else np.nan)
+        b["vv_std"].append(vsd[1] if vsd else np.nan)
+        b["yr_std"].append(vsd[5] if vsd and len(vsd) > 5 else np.nan)
+        asd = _first(attrs, "acceleration/ustddev")
+        b["au_std"].append(asd[0] if asd else np.nan)
+        b["av_std"].append(asd[1] if asd else np.nan)
+        road = _first(attrs, "used_road_link", _first(attrs, "open_drive/road_id"))
+        lrc = _first(attrs, "open_drive/local_road_coordinates")
+        lane = _first(attrs, "open_drive/lane_id")
+        b["hr"].append(road is not None and lrc is not None)
+        b["road_id"].append(str(road) if road is not None and lrc is not None else None)
+        b["road_s"].append(lrc[0] if road is not None and lrc else np.nan)
+        b["road_t"].append(lrc[1] if road is not None and lrc else np.nan)
+        try:
+            b["lane_id"].append(int(str(_enum_value(lane))) if lane is not None and road is not None else None)
+        except ValueError:
+            b["lane_id"].append(None)
+        b["lane_position"].append(_first(attrs, "open_drive/lane_position", np.nan))
+        for c, name in LIGHTS.items():
+            bl = _first(attrs, name)
+            b[c].append(np.nan if bl is None else float(bool(bl)))
+        irow = _interior_row(attrs)
+        if irow:
+            self.interior.append((j, u, irow))
+        e = cub.get(EXT)
+        self.ext_buf.append(e if isinstance(e, dict) else None)
+        if len(b["occ"]) >= _CHUNK:
+            self._flush()
 
     def finish(self) -> _FrameData:
         self._flush()
@@ -376,6 +467,8 @@ class _FrameRows:
                           if rank_of[j] >= 0)
             for r, i in keep:
                 _, u, irow = self.interior[i]
+                if u not in pid_of:  # an object not imported (no road user)
+                    continue
                 out["participant_id"].append(pid_of[u])
                 out["time"].append(time_of[fkeys[r]])
                 for c in ("automation_longitudinal_p", "automation_lateral_p", "steering_angle",
@@ -385,49 +478,86 @@ class _FrameRows:
 
         return _FrameData(fkeys=fkeys, stamps={k: self.stamps[last[k]] for k in fkeys},
                           seen_in_frames=list(seen), uid_names=names, rows=rows, ext=ext,
-                          sizes=sizes, interior=interior, has_vel=has_vel, has_road=has_road)
+                          sizes=sizes, interior=interior, has_vel=has_vel, has_road=has_road,
+                          frame_types=self.frame_types, moving_static=sorted(self.moving_static),
+                          unknown_cs=sorted(self.cs.unknown))
 
 
 def _frame_timestamp(fr: dict[str, Any]) -> Any:
-    """``frame_properties.timestamp``: a number, a numeric string or an ISO 8601 time (-> Unix
-    seconds); None where absent or unreadable."""
-    ts = (fr.get("frame_properties") or {}).get("timestamp")
-    if isinstance(ts, str):
-        try:
-            ts = float(ts)
-        except ValueError:
-            try:
-                from aveas_format.schema.metadata import timestamp_ns
+    """``frame_properties.timestamp`` as written: a number (an integer text as an exact int), an
+    ISO 8601 text; None where absent or unreadable. Its unit is resolved over all frames."""
+    from aveas_format.converters.common import timestamp_value
 
-                ts = timestamp_ns(_to_utc(ts)) / 1e9
-            except (ValueError, FormatError):
-                ts = None
-    return ts
+    fp = fr.get("frame_properties")
+    return timestamp_value(fp.get("timestamp")) if isinstance(fp, dict) else None
 
 
-def _box_in_root(cub: dict[str, Any], cs: _Frames, transforms: dict[str, Any] | None, k: Any, u: str,
-                 path: Path | None) -> tuple[Any, float, list[float], str | None]:
-    """The cuboid of object ``u`` in frame ``k``: its centre and yaw in the root coordinate system,
-    its size and its coordinate system, ``(centre, yaw, (length, width, height), coordinate_system)``."""
-    v = [float(a) for a in cub["val"]]
+def _box_in_root(cub: dict[str, Any], resolve, k: Any, u: str, path: Path | None
+                 ) -> tuple[Any, float, tuple[float, float, float], float, str | None]:
+    """The cuboid of object ``u`` in frame ``k`` in the root coordinate system:
+    ``(centre, yaw, (length, width, height), ground z, root)``.
+
+    ``resolve(coordinate_system)`` gives ``(4x4 -> root, root, moving)``. The cuboid's axes are
+    read through its rotation and its coordinate system's transform: the axis nearest the root's
+    vertical carries the height, the first other axis (the cuboid's x, unless x is the vertical)
+    the length and the heading, the remaining one the width; the ground point lies half the box's
+    vertical extent below its centre. So a camera-frame cuboid (KITTI's ``CAM_LEFT``: x right,
+    y down, z forward; sizes along those axes) comes out with its height from y."""
+    try:
+        v = [float(a) for a in cub["val"]]
+    except (TypeError, ValueError):
+        raise FormatError(f"frame {k} object {u}: cuboid val holds non-numbers: "
+                          f"{str(cub.get('val'))[:80]}", path=path) from None
     csname = cub.get("coordinate_system")
     if len(v) == 9 and v[3] == 0.0 and v[4] == 0.0 and not csname:
         # the common case (the AVEAS profile): a level box in the root frame
-        pw, yaw, dims = v[:3], v[5], v[6:9]
-    elif len(v) == 10:
+        return v[:3], v[5], (v[6], v[7], v[8]), v[2] - v[8] / 2.0, None
+    if len(v) == 10:
         R = _quat_matrix(v[3], v[4], v[5], v[6])
-        dims = v[7:10]
+        size = v[7:10]
     elif len(v) == 9:
         R = _euler_matrix(v[3], v[4], v[5])
-        dims = v[6:9]
+        size = v[6:9]
     else:
-        raise FormatError(f"frame {k} object {u}: cuboid with {len(v)} values", path=path)
-    if len(v) == 10 or not (v[3] == 0.0 and v[4] == 0.0 and not csname):
-        M = cs.to_root(csname, transforms)
-        Rw = M[:3, :3] @ R
-        pw = M[:3, :3] @ np.asarray(v[:3]) + M[:3, 3]
-        yaw = math.atan2(Rw[1, 0], Rw[0, 0])
-    return pw, yaw, dims, csname
+        raise FormatError(f"frame {k} object {u}: cuboid with {len(v)} values (expected 9: x, y, z, "
+                          "rx, ry, rz, sx, sy, sz or 10: x, y, z, qx, qy, qz, qw, sx, sy, sz)",
+                          path=path)
+    M, root, _ = resolve(csname)
+    Rw = M[:3, :3] @ R
+    pw = M[:3, :3] @ np.asarray(v[:3]) + M[:3, 3]
+    up = np.abs(Rw[2, :])
+    kv = int(np.argmax(up))
+    kl, kw = (i for i in range(3) if i != kv)
+    yaw = math.atan2(Rw[1, kl], Rw[0, kl])
+    ground = float(pw[2] - 0.5 * float(up @ np.abs(np.asarray(size))))
+    return pw, yaw, (size[kl], size[kw], size[kv]), ground, root
+
+
+def _static_cuboids(objects: Any) -> list[tuple[str, dict[str, Any], list | None]]:
+    """``(object, cuboid, frame intervals or None)`` of the objects with a cuboid in their static
+    ``object_data`` in a named coordinate system."""
+    out = []
+    for u, obj in (objects.items() if isinstance(objects, dict) else ()):
+        od = obj.get("object_data") if isinstance(obj, dict) else None
+        cubs = od.get("cuboid") if isinstance(od, dict) else None
+        cubs = [cubs] if isinstance(cubs, dict) else (cubs or [])
+        cub = next((c for c in cubs if isinstance(c, dict) and c.get("val") is not None
+                    and c.get("coordinate_system")), None)
+        if cub is not None:
+            fis = obj.get("frame_intervals")
+            out.append((str(u), cub, fis if isinstance(fis, list) and fis else None))
+    return out
+
+
+def _in_intervals(k: Any, intervals: list | None) -> bool:
+    if intervals is None:
+        return True
+    try:
+        f = int(k)
+    except (TypeError, ValueError):
+        return True
+    return any(isinstance(fi, dict) and int(fi.get("frame_start", f)) <= f <= int(fi.get("frame_end", f))
+               for fi in intervals)
 
 
 def _interior_row(attrs: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:

@@ -18,17 +18,18 @@ import warnings
 from collections import defaultdict
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import pyarrow as pa
 
-from aveas_format.converters.common import load_map_bytes, source_block
+from aveas_format.converters.common import (TIMESTAMP_UNITS, Timestamps, load_map_bytes, resolve_timestamps,
+                                            source_block)
+from aveas_format.converters.labels import LabelFilter, implausible_size, label_kind
 from aveas_format.converters.openlabel.frames import (_MISSING, _FrameData, _Frames, _FrameRows, _rep_list,
                                                       _rep_take, _utm_crs)
 from aveas_format.converters.openlabel.profile import (
     EXT,
-    GENERIC_TYPES,
     LIGHTS,
     PROFILE_TO_METHOD,
     TYPE_TO_CLASS,
@@ -64,6 +65,14 @@ class OpenLabelImportOptions(ImportOptions):
     provenance: str | None = None
     """natural / staged / simulated (default: from the file; ``staged`` where the scenario
     context says so, else natural)."""
+    timestamp_unit: Literal[TIMESTAMP_UNITS] = "auto"
+    """Unit of ``frame_properties.timestamp``: s, ms, us or ns; ``auto`` infers it from the values'
+    magnitude (since the Unix epoch when they fall between 1990 and 2100) and spacing (since the
+    start otherwise); the choice is recorded in the ``source`` block."""
+    keep_non_road_users: bool = False
+    """Import objects whose type is no road user (barriers, signs, static persons...; see
+    docs/converters.md "Labels that are not road users"), as class other; ignore-type objects
+    (KITTI's DontCare) are never imported."""
 
 
 def _find_map(path: Path, ol: dict[str, Any], map_source, options) -> bytes:
@@ -152,9 +161,11 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     for k, fr in (frames() if frames is not None else (ol.get("frames") or {}).items()):
         acc.add(k, fr)
     fd = acc.finish()
-    fnum, time_of, start_time = _frame_times(fd.fkeys, fd.stamps, ext, md, options)
+    fnum, time_of, start_time, resolved = _frame_times(fd.fkeys, fd.stamps, ext, md, options)
     uids = list(objects)
     uids += fd.seen_in_frames
+    if ext is None:  # a foreign file: objects that are no road users, sentinel sizes
+        uids = _drop_non_participants(fd, objects, uids, options, path)
     obj_ext, pid_of = _participant_ids(objects, uids)
 
     # per object and frame: one state per box
@@ -163,7 +174,7 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     n = len(rows["time"])
     if n == 0 and uids:
         raise _no_boxes_error(objects, path)
-    start_time = _box_timestamps(rows, ext, options, start_time)
+    start_time = _box_timestamps(rows, ext, options, start_time, resolved)
     state_ext = _drop_repeats(rows, fd.ext)
     n = len(rows["time"])
     x, y, heading = _to_local(rows, ol, local, options.world_crs)
@@ -176,7 +187,7 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     fd.rows = fd.ext = None
     states = _state_arrays(states, ext)
 
-    participants, ego_seen = _participants(uids, objects, pid_of, obj_ext, fd.sizes, ext)
+    participants, ego_seen = _participants(uids, objects, pid_of, obj_ext, fd.sizes, ext, fd.frame_types)
     if n == 0:
         states = {c: pa.array([], pa.int64() if c == "participant_id" else pa.float64())
                   for c in ("participant_id", "time", "x", "y", "heading", "vx", "vy")}
@@ -188,7 +199,8 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
         **meta_args, start_time=start_time,
         recording_id=options.recording_id or rmeta.get("recording_id"),
         reference=not use_file,
-        source=source_block("openlabel", [path] if path is not None else [], options),
+        source=source_block("openlabel", [path] if path is not None else [], options,
+                            resolved=resolved),
         **kw)
     if ext is not None:
         _restore_derived(rec, ext)
@@ -219,30 +231,93 @@ def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], path: Path | None) -> s
 
 
 def _frame_times(fkeys: list, stamps: dict[Any, Any], ext: dict[str, Any] | None, md: dict[str, Any],
-                 options: OpenLabelImportOptions) -> tuple[dict, dict, str]:
-    """``(frame number by key, time by key, start_time)``: the frames' timestamps (seconds since
-    ``acquisition_date`` in our own files, else relative to the first; Unix seconds set the start
-    time), else frame numbers at ``rate_hz``."""
+                 options: OpenLabelImportOptions) -> tuple[dict, dict, str, dict[str, str]]:
+    """``(frame number by key, time by key, start_time, resolved)``: in our own files the frames'
+    timestamps are seconds since ``acquisition_date``; in foreign files their unit and epoch are
+    inferred (:func:`~aveas_format.converters.common.resolve_timestamps`; ``timestamp_unit``
+    fixes the unit); without a timestamp on every frame, frame numbers at ``rate_hz``.
+    ``resolved`` records the choice for the ``source`` block."""
     fnum = {k: (int(k) if str(k).lstrip("-").isdigit() else i) for i, k in enumerate(fkeys)}
     start_time = None
+    resolved: dict[str, str] = {}
     if ext and ext.get("start_time"):
         start_time = ext["start_time"]
-        time_of = {k: float(stamps[k]) if stamps[k] is not None else 0.0 for k in fkeys}
+        time_of = {k: float(stamps[k]) if isinstance(stamps[k], (int, float)) else 0.0 for k in fkeys}
     else:
-        have = [v for v in stamps.values() if v is not None]
-        if fkeys and len(have) == len(fkeys):
-            t0 = min(have)
-            time_of = {k: float(stamps[k] - t0) for k in fkeys}
-            if t0 > 1e8:  # Unix seconds
-                dt = datetime.fromtimestamp(t0, tz=timezone.utc)
-                start_time = dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+        ts = resolve_timestamps([stamps[k] for k in fkeys], options.timestamp_unit,
+                                what="frame_properties.timestamp") if fkeys else None
+        if ts is not None and np.isfinite(ts.seconds).all():
+            time_of = dict(zip(fkeys, ts.seconds.tolist()))
+            start_time = ts.start_time
+            resolved = ts.resolved()
         else:
             f0 = min(fnum.values()) if fnum else 0
             time_of = {k: (fnum[k] - f0) / options.rate_hz for k in fkeys}
+            missing = "no frame has" if ts is None or np.isnan(ts.seconds).all() else "not every frame has"
+            resolved = {"timestamps": f"{missing} a timestamp: frame numbers at rate_hz "
+                                      f"{options.rate_hz:g}"}
         if start_time is None and md.get("acquisition_date"):
-            start_time = _to_utc(str(md["acquisition_date"]))
+            try:
+                start_time = _to_utc(str(md["acquisition_date"]))
+            except FormatError:
+                warnings.warn(f"metadata.acquisition_date {md['acquisition_date']!r} is not an ISO "
+                              "8601 time: ignored", stacklevel=3)
     start_time = options.start_time or start_time or "1970-01-01T00:00:00Z"
-    return fnum, time_of, start_time
+    return fnum, time_of, start_time, resolved
+
+
+def _drop_non_participants(fd: _FrameData, objects: dict[str, Any], uids: list[str],
+                           options: OpenLabelImportOptions, path: Path | None) -> list[str]:
+    """The objects to import: not those whose type is no road user (unless
+    ``keep_non_road_users``) or an ignore type (KITTI's DontCare), nor boxes with a sentinel or
+    impossible size (a -1000, a 0): each is dropped from the frames' rows, with one warning
+    saying how many and why. An object left without boxes is dropped when it had any."""
+    labels = LabelFilter(options.keep_non_road_users)
+    keep_uid: dict[str, bool] = {}
+    for u in uids:
+        obj = objects.get(u) if isinstance(objects.get(u), dict) else {}
+        od = obj.get("object_data") if isinstance(obj.get("object_data"), dict) else {}
+        otype = obj.get("type") or (od.get("type") if isinstance(od.get("type"), str) else None) \
+            or fd.frame_types.get(u) or "other"
+        keep_uid[u] = labels(otype) is not None
+    rows = fd.rows
+    n = len(rows["uidx"])
+    notes = []
+    if n:
+        by_index = np.asarray([keep_uid.get(u, True) for u in fd.uid_names], bool)
+        keep = by_index[rows["uidx"]]
+        bad = implausible_size(np.c_[rows["dl"], rows["dw"], rows["dh"]])
+        dropped = keep & bad
+        if dropped.any():
+            who = sorted({fd.uid_names[i] for i in np.unique(rows["uidx"][dropped])})
+            notes.append(f"dropped {int(dropped.sum())} boxes with a sentinel or impossible size "
+                         f"(<= 0, not finite or > 400 m) of object(s) {', '.join(who[:5])}"
+                         + (" ..." if len(who) > 5 else ""))
+        keep &= ~bad
+        if not keep.all():
+            had = set(np.unique(rows["uidx"]).tolist())
+            left = set(np.unique(rows["uidx"][keep]).tolist())
+            for i in had - left:
+                keep_uid[fd.uid_names[i]] = False
+            idx = np.flatnonzero(keep)
+            for c in list(rows):
+                rows[c] = rows[c][idx]
+            fd.ext = {c: _rep_take(r, idx) for c, r in fd.ext.items()}
+    for u in list(fd.sizes):
+        if not keep_uid.get(u, True):
+            del fd.sizes[u]
+        else:
+            arr = np.asarray(fd.sizes[u], float).reshape(-1, 3)
+            fd.sizes[u] = arr[~implausible_size(arr)].tolist()
+    note = labels.note("objects")
+    if note:
+        notes.insert(0, note)
+    if fd.unknown_cs:
+        notes.append("coordinate system(s) " + ", ".join(map(repr, fd.unknown_cs))
+                     + " are not in coordinate_systems: taken as the root frame")
+    for nt in notes:
+        warnings.warn(f"OpenLABEL {path.name if path else ''}: {nt}", stacklevel=3)
+    return [u for u in uids if keep_uid.get(u, True)]
 
 
 def _participant_ids(objects: dict[str, Any], uids: list[str]) -> tuple[dict, dict[str, int]]:
@@ -281,22 +356,30 @@ def _no_boxes_error(objects: dict[str, Any], path: Path | None) -> FormatError:
     static = sum(1 for o in objects.values()
                  if isinstance(o, dict) and isinstance(o.get("object_data"), dict)
                  and "cuboid" in o["object_data"])
+    flat = sum(1 for o in objects.values()
+               if isinstance(o, dict) and isinstance(o.get("object_data"), dict)
+               and o["object_data"].get("bbox") and not o["object_data"].get("cuboid"))
     hint = (f" ({static} object(s) carry a static cuboid in object_data, which has no time: "
-            "a trajectory needs frames)" if static else "")
+            "a trajectory needs frames)" if static else
+            f" ({flat} objects carry 2D boxes (bbox) only: image coordinates, no position on the "
+            "ground)" if flat else "")
     return FormatError(f"no frame has a cuboid for any object{hint}", path=path)
 
 
 def _box_timestamps(rows: dict[str, np.ndarray], ext: dict[str, Any] | None,
-                    options: OpenLabelImportOptions, start_time: str) -> str:
-    """Per-box measurement timestamps (cuboid attribute "timestamp", Unix seconds) beat the
-    frame's: the ASAM example repeats frame timestamps while its boxes' differ. Sets
-    ``rows["time"]``; returns the start time."""
+                    options: OpenLabelImportOptions, start_time: str, resolved: dict[str, str]) -> str:
+    """Per-box measurement timestamps (cuboid attribute "timestamp", absolute) beat the frame's:
+    the ASAM example repeats frame timestamps while its boxes' differ. Sets ``rows["time"]``
+    (and ``resolved``); returns the start time."""
     cts = np.asarray(rows["cub_ts"], float)
-    if ext is None and len(rows["time"]) and np.isfinite(cts).all() and cts.min() > 1e8:
-        t0 = float(cts.min())
-        rows["time"] = cts - t0
-        if not options.start_time:
-            start_time = datetime.fromtimestamp(t0, tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    if ext is None and len(rows["time"]) and np.isfinite(cts).all():
+        ts = resolve_timestamps(cts.tolist(), options.timestamp_unit,
+                                what="cuboid attribute timestamp")
+        if ts.epoch:
+            rows["time"] = ts.seconds
+            resolved.update(ts.resolved())
+            if not options.start_time:
+                start_time = ts.start_time
     return start_time
 
 
@@ -451,9 +534,10 @@ def _state_arrays(states: dict[str, Any], ext: dict[str, Any] | None) -> dict[st
 # ================================================================================================
 
 def _participants(uids: list[str], objects: dict[str, Any], pid_of: dict[str, int], obj_ext: dict,
-                  sizes: dict[str, list], ext: dict[str, Any] | None) -> tuple[dict[str, Any], bool]:
+                  sizes: dict[str, list], ext: dict[str, Any] | None, frame_types: dict[str, str]
+                  ) -> tuple[dict[str, Any], bool]:
     """``(participants columns, whether an object is the recording vehicle)``."""
-    part, ego_seen = _profile_participants(uids, objects, pid_of, sizes)
+    part, ego_seen = _profile_participants(uids, objects, pid_of, sizes, frame_types)
     if all(v is None for v in part["class_pmf"]):
         del part["class_pmf"]
     else:
@@ -486,22 +570,23 @@ def _participants(uids: list[str], objects: dict[str, Any], pid_of: dict[str, in
 
 
 def _profile_participants(uids: list[str], objects: dict[str, Any], pid_of: dict[str, int],
-                          sizes: dict[str, list]) -> tuple[dict[str, list], bool]:
-    """The participants' columns from the objects' types and static attributes (the size, else the
-    median of the object's boxes)."""
+                          sizes: dict[str, list], frame_types: dict[str, str]
+                          ) -> tuple[dict[str, list], bool]:
+    """The participants' columns from the objects' types (in ``objects``, or inside a frame's
+    object_data as TUM Traffic writes them) and static attributes (the size, else the median of
+    the object's boxes; a static size with a sentinel value is ignored)."""
     part: dict[str, list] = defaultdict(list)
     ego_seen = False
     for u in uids:
         obj = objects.get(u) or {}
         attrs = _attrs(obj.get("object_data"))
-        otype = str(obj.get("type") or "other")
-        cls = TYPE_TO_CLASS.get(otype)
-        if cls is None:
-            key = otype.lower().split("/")[-1].replace(" ", "_").replace("-", "_")
-            cls = GENERIC_TYPES.get(key, "other")
+        od = obj.get("object_data") if isinstance(obj.get("object_data"), dict) else {}
+        otype = str(obj.get("type") or (od.get("type") if isinstance(od.get("type"), str) else None)
+                    or frame_types.get(u) or "other")
+        cls = TYPE_TO_CLASS.get(otype) or label_kind(otype)[0]
         is_ego = otype.lower() in ("egocar", "ego", "ego_vehicle") or bool(_first(attrs, "is_recorder", False))
         ego_seen |= is_ego
-        size = _first(attrs, "dimensions/size")
+        size = _static_size(_first(attrs, "dimensions/size"))
         if size is None:
             arr = np.asarray(sizes.get(u) or [[1.0, 1.0, 1.0]], float)
             size = np.median(arr, axis=0).tolist()
@@ -521,6 +606,18 @@ def _profile_participants(uids: list[str], objects: dict[str, Any], pid_of: dict
         part["attached_to"].append(pid_of.get(str(att)) if att is not None else None)
         part["role"].append("recording_vehicle" if is_ego else "observed")
     return part, ego_seen
+
+
+def _static_size(size: Any) -> list | None:
+    """An object's static ``dimensions/size`` (length, width[, height]), or None where absent or
+    a sentinel (a -1000, a 0, not numbers)."""
+    if not isinstance(size, (list, tuple)) or len(size) < 2:
+        return None
+    try:
+        arr = np.asarray([[float(v) for v in size[:3]] + [np.nan] * (3 - len(size[:3]))])
+    except (TypeError, ValueError):
+        return None
+    return None if implausible_size(arr)[0] else list(size)
 
 
 def _apply_participants_extension(part: dict[str, Any], p_ext_rows: list) -> None:

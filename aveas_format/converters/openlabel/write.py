@@ -46,6 +46,7 @@ from aveas_format.converters.openlabel.profile import (
     table_to_json,
 )
 from aveas_format.converters.registry import ConverterOptions, converter
+from aveas_format.io.arrow import column_numpy
 
 # ================================================================================================
 # helpers
@@ -57,14 +58,6 @@ def _f(v: Any) -> float:
 
 def _finite(v: Any) -> bool:
     return v is not None and not (isinstance(v, float) and math.isnan(v))
-
-
-def _col(table: pa.Table, name: str, dtype=np.float64) -> np.ndarray | None:
-    if table is None or name not in table.column_names:
-        return None
-    from aveas_format.io.arrow import column_numpy
-
-    return column_numpy(table, name, dtype)
 
 
 def _pylist(table: pa.Table, name: str) -> list | None:
@@ -174,31 +167,31 @@ class _Columns:
         self.part_ids = part_ids = p.column("participant_id").to_numpy()
         self.classes = _pylist(p, "class")
         self.cls_of = dict(zip(part_ids.tolist(), self.classes))
-        self.length = dict(zip(part_ids.tolist(), _col(p, "length").tolist()))
-        self.width = dict(zip(part_ids.tolist(), _col(p, "width").tolist()))
-        hcol = _col(p, "height")
-        hcol = hcol if hcol is not None else np.full(len(part_ids), np.nan)
+        self.length = dict(zip(part_ids.tolist(), column_numpy(p, "length", missing=None).tolist()))
+        self.width = dict(zip(part_ids.tolist(), column_numpy(p, "width", missing=None).tolist()))
+        hcol = column_numpy(p, "height", missing=np.nan)
         self.height = dict(zip(part_ids.tolist(), hcol.tolist()))
-        self.x = _col(s, "x")
-        self.y = _col(s, "y")
-        self.h = h = _col(s, "heading")
-        self.z = _col(s, "z")
-        self.vx, self.vy = vx, vy = _col(s, "vx"), _col(s, "vy")
+        self.x = column_numpy(s, "x", missing=None)
+        self.y = column_numpy(s, "y", missing=None)
+        self.h = h = column_numpy(s, "heading", missing=None)
+        self.z = column_numpy(s, "z", missing=None)
+        self.vx, self.vy = vx, vy = tuple(column_numpy(s, c, missing=None) for c in ("vx", "vy"))
         self.vu, self.vv = _rot_body(vx, vy, h)
-        self.ax, self.ay = ax, ay = _col(s, "ax"), _col(s, "ay")
+        self.ax, self.ay = ax, ay = tuple(column_numpy(s, c, missing=None) for c in ("ax", "ay"))
         self.ax_w, self.ay_w = _world_acceleration(rec, pid, t, vx, vy, ax, ay)
         self.au, self.av = _rot_body(np.nan_to_num(self.ax_w), np.nan_to_num(self.ay_w), h)
-        self.yaw_rate = _col(s, "yaw_rate")
-        self.stds = {c: _col(s, c) for c in ("x_std", "y_std", "z_std", "heading_std", "vx_std", "vy_std",
-                                             "ax_std", "ay_std", "yaw_rate_std")}
-        self.vxvy = _col(s, "vxvy_corr")
-        self.axay = _col(s, "axay_corr")
+        self.yaw_rate = column_numpy(s, "yaw_rate", missing=None)
+        self.stds = {c: column_numpy(s, c, missing=None) for c in
+                     ("x_std", "y_std", "z_std", "heading_std", "vx_std", "vy_std", "ax_std",
+                      "ay_std", "yaw_rate_std")}
+        self.vxvy = column_numpy(s, "vxvy_corr", missing=None)
+        self.axay = column_numpy(s, "axay_corr", missing=None)
         self.road_id = road_id = _pylist(s, "road_id") or [None] * n
-        self.lane_id = _col(s, "lane_id")
-        self.road_s = road_s = _col(s, "road_s")
-        self.road_t = _col(s, "road_t")
-        self.lane_offset = _col(s, "lane_offset")
-        self.lights = {c: _col(s, c) for c in LIGHTS if c in s.column_names}
+        self.lane_id = column_numpy(s, "lane_id", missing=None)
+        self.road_s = road_s = column_numpy(s, "road_s", missing=None)
+        self.road_t = column_numpy(s, "road_t", missing=None)
+        self.lane_offset = column_numpy(s, "lane_offset", missing=None)
+        self.lights = {c: column_numpy(s, c, missing=None) for c in LIGHTS if c in s.column_names}
         #: rows on a road (road id and s known)
         self.on = np.array([r is not None for r in road_id], dtype=bool) & np.isfinite(
             road_s if road_s is not None else np.full(n, np.nan))
@@ -211,7 +204,7 @@ def _world_acceleration(rec, pid: np.ndarray, t: np.ndarray, vx: np.ndarray, vy:
         kin = rec.derived.get("kinematics") if rec.derived else None
         a_est = None
         if kin is not None and kin.num_rows == len(t):
-            a_est = (_col(kin, "ax"), _col(kin, "ay"))
+            a_est = tuple(column_numpy(kin, c, missing=None) for c in ("ax", "ay"))
         if a_est is None:
             from aveas_format.mapref.build import velocity_from_positions
 
@@ -346,7 +339,7 @@ def _exact_values(s: pa.Table, cols: _Columns) -> dict[str, list]:
         hv = np.where(np.isfinite(hv), hv, 0.0)
         back["z"] = (np.where(np.isfinite(z), z, 0.0) + hv / 2) - hv / 2
     for c, b in back.items():
-        orig = _col(s, c)
+        orig = column_numpy(s, c, missing=None)
         off = np.isfinite(orig) & (b != orig)
         if off.any():
             exact[c] = np.where(off, orig, np.nan).tolist()

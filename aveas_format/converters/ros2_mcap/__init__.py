@@ -25,8 +25,12 @@ Objects (the observed participants), from every topic of these types (or ``objec
 Class mapping: Autoware CAR/TRUCK/BUS/TRAILER/MOTORCYCLE/BICYCLE/PEDESTRIAN/ANIMAL -> the class of
 that name, UNKNOWN/HAZARD/OVER_DRIVABLE/UNDER_DRIVABLE -> other; derived_object_msgs PEDESTRIAN ->
 pedestrian, BIKE -> bicycle, CAR -> car, TRUCK -> truck, MOTORCYCLE -> motorcycle, the rest ->
-other. A participant's ``class_pmf`` is the mean of its per-message PMFs; length/width/height the
-mean of its dimensions, ``*_std`` their spread.
+other. Labels that are no road user — Autoware HAZARD/OVER_DRIVABLE/UNDER_DRIVABLE,
+derived_object_msgs BARRIER/SIGN, vision_msgs class ids such as ``traffic_cone`` or ``barrier``
+(the table in "Labels that are not road users") — make a track whose classification is mostly
+theirs be skipped with a count in a warning, unless ``keep_non_road_users`` (then class other).
+A participant's ``class_pmf`` is the mean of its per-message PMFs; length/width/height the mean of
+its dimensions, ``*_std`` their spread.
 
 Ego (the recording vehicle, a participant with role ``recording_vehicle``): ``nav_msgs/msg/
 Odometry`` (pose with covariance of ``child_frame_id`` in ``header.frame_id``, twist in the child
@@ -52,6 +56,11 @@ Time: ``header.stamp`` (not the log time; a zero stamp falls back to the log tim
 warning); time zero = the earliest stamp, which also gives ``start_time``. Decoding is per
 message; everything after it is vectorised per frame. Duplicate (participant, stamp) samples keep
 the first. Provenance ``natural``, role ``observed`` for objects.
+
+Tested on: MCAP files written here with ``mcap_ros2.writer`` and the real message definitions of
+``../shared/data/ros2_msgdefs/`` (Autoware TrackedObjects, derived_object_msgs, vision_msgs
+Detection3DArray, Odometry, NavSatFix, /tf; tests/converters/test_ros2_mcap.py); no bag recorded
+by a vehicle is in ``../shared/data``.
 
 Modules (what lives where, from the bottom up):
 

@@ -19,7 +19,6 @@ from aveas_format.converters.common import (
     load_map_bytes,
     nullable,
     utc_iso_from_ns,
-    velocity_with_std,
     wrap_recording,
 )
 from aveas_format.converters.registry import converter
@@ -29,6 +28,7 @@ from aveas_format.converters.ros2_mcap.options import CLS, NCLS, Ros2McapOptions
 from aveas_format.converters.ros2_mcap.read import _read
 from aveas_format.converters.ros2_mcap.tree import _Tree
 from aveas_format.errors import FormatError
+from aveas_format.numeric import central_differences
 from aveas_format.schema.taxonomy import CLASSES
 
 #: the uncertainty columns of states, null where unknown
@@ -136,7 +136,7 @@ def _ego_from_navsatfix(ego_fix: dict[str, list], fix: str, tree: _Tree, o: Ros2
     ts = (t - t[0]) / 1e9
     sx = np.sqrt(np.clip(fc[:, 0, 0], 0, None))
     sy = np.sqrt(np.clip(fc[:, 1, 1], 0, None))
-    vx, vy, vxs, vys = velocity_with_std(pid0, ts, mx, my, sx, sy)
+    vx, vy, vxs, vys = central_differences(pid0, ts, mx, my, sx, sy)
     from aveas_format.mapref.build import heading_from_velocity
 
     heading = heading_from_velocity(pid0, vx, vy)
@@ -228,11 +228,32 @@ def _objects_in_map(objs: _Objects, obj_topics: list[str], tree: _Tree, ego: dic
     rows = {"t_ns": t_ns, "key": np.asarray(keys, dtype=object), "x": x, "y": y, "z": z,
             "heading": heading, "cov": cov, "vel": vel, "vcov": vcov,
             "dims": np.asarray(objs.dims, np.float64), "pmf": np.asarray(objs.pmf),
+            "nru": np.asarray(objs.nru, np.float64), "nru_label": np.asarray(objs.nru_label, dtype=object),
             "orient": np.asarray(objs.orient), "valid": valid}
     rows = {k: v[valid] for k, v in rows.items()}
     if not len(rows["t_ns"]) and ego is None:
         raise FormatError("no object sample has a transform to the map frame", path=first)
     return rows
+
+
+def _road_users(r: dict[str, np.ndarray], codes: np.ndarray, uniq: np.ndarray, o: Ros2McapOptions):
+    """Drop the tracks whose classification is mostly a label that is no road user (unless
+    ``keep_non_road_users``), with a warning counting them by label; ``(rows, codes, uniq)``."""
+    if o.keep_non_road_users or not len(codes) or not (r["nru"] > 0.5).any():
+        return r, codes, uniq
+    skip = group_mean(codes, r["nru"], len(uniq)) > 0.5
+    if not skip.any():
+        return r, codes, uniq
+    from collections import Counter
+
+    first = np.unique(codes, return_index=True)[1]
+    names = Counter(str(r["nru_label"][i]) or "no road user" for i in first[skip])
+    warnings.warn(f"skipped {int(skip.sum())} tracks: " + ", ".join(f"{c} {n}" for n, c in sorted(names.items()))
+                  + " (no road user); option keep_non_road_users=true imports them", stacklevel=4)
+    keep = ~skip[codes]
+    r = {k: v[keep] for k, v in r.items()}
+    codes, uniq = factorize(r["key"])
+    return r, codes, uniq
 
 
 def _add_ego_motion(v: np.ndarray, vc: np.ndarray, t_ns: np.ndarray, x: np.ndarray, y: np.ndarray,
@@ -303,12 +324,13 @@ def _object_states(rows: dict[str, np.ndarray], t0: int, n_ego: int, o: Ros2Mcap
                       f"{int(r['t_ns'][k])} ns)", stacklevel=3)
     r = {k: v[~dup] for k, v in r.items()}
     codes = codes[~dup]
+    r, codes, uniq = _road_users(r, codes, uniq, o)
     m = len(uniq)
     ts = (r["t_ns"] - t0) / 1e9
     # velocities where the source has none: from positions
     psx = np.sqrt(np.clip(r["cov"][:, 0, 0], 0, None))
     psy = np.sqrt(np.clip(r["cov"][:, 1, 1], 0, None))
-    fvx, fvy, fvxs, fvys = velocity_with_std(codes, ts, r["x"], r["y"], psx, psy)
+    fvx, fvy, fvxs, fvys = central_differences(codes, ts, r["x"], r["y"], psx, psy)
     nov = np.isnan(r["vel"]).any(axis=1)
     r["vel"][nov] = np.c_[fvx, fvy][nov]
     r["vcov"][nov] = 0.0

@@ -7,11 +7,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from aveas_format.converters.common import class_of
+from aveas_format.converters.labels import ROAD_USER, label_kind
 from aveas_format.converters.ros2_mcap.options import (
     AUTOWARE_LABELS,
+    AUTOWARE_NOT_ROAD_USERS,
     CLS,
     DERIVED_LABELS,
+    DERIVED_NOT_ROAD_USERS,
     NCLS,
     T_DERIVED,
     T_DET3D,
@@ -38,6 +40,8 @@ class _Objects:
     twist_kind: list[int] = field(default_factory=list)  # 0 body, 1 header frame, 2 none
     dims: list[tuple] = field(default_factory=list)
     pmf: list[np.ndarray] = field(default_factory=list)
+    nru: list[float] = field(default_factory=list)     # probability of a label that is no road user
+    nru_label: list[str] = field(default_factory=list)  # that label's name (or "")
     orient: list[int] = field(default_factory=list)      # Autoware orientation_availability
     where: list[tuple[int, int]] = field(default_factory=list)  # (message index, object index)
 
@@ -75,10 +79,16 @@ def _read_tracked(msg, objs: _Objects, t_ns: int, ti: int, mi: int, opts: Ros2Mc
             continue
         k = o.kinematics
         pmf = np.zeros(NCLS)
+        nru, nru_label = 0.0, ""
         for c in o.classification:
             pmf[CLS[AUTOWARE_LABELS.get(int(c.label), "other")]] += max(float(c.probability), 0.0)
+            if int(c.label) in AUTOWARE_NOT_ROAD_USERS:
+                nru += max(float(c.probability), 0.0)
+                nru_label = AUTOWARE_NOT_ROAD_USERS[int(c.label)]
         if pmf.sum() <= 0:
             pmf[CLS["other"]] = 1.0
+        objs.nru.append(nru / pmf.sum())
+        objs.nru_label.append(nru_label)
         sh = o.shape
         d = sh.dimensions
         if sh.type == 1:  # cylinder: x = diameter
@@ -120,6 +130,9 @@ def _read_derived(msg, objs: _Objects, t_ns: int, ti: int, mi: int, opts: Ros2Mc
             dims = (np.nan, np.nan, np.nan)
         label = DERIVED_LABELS.get(int(o.classification), "other")
         cert = int(o.classification_certainty)
+        nru_label = DERIVED_NOT_ROAD_USERS.get(int(o.classification), "")
+        objs.nru.append(1.0 if nru_label else 0.0)
+        objs.nru_label.append(nru_label)
         objs.t_ns.append(t_ns)
         objs.topic.append(ti)
         objs.frame.append(frame)
@@ -140,13 +153,20 @@ def _read_det3d(msg, objs: _Objects, t_ns: int, ti: int, mi: int, opts: Ros2Mcap
         frame = d.header.frame_id or msg.header.frame_id
         pmf = np.zeros(NCLS)
         best, best_score = None, -np.inf
+        nru, nru_label = 0.0, ""
         for h in d.results:
             s = float(h.hypothesis.score)
-            pmf[CLS[class_of(h.hypothesis.class_id, opts.class_map)]] += max(s, 0.0)
+            cls, kind = label_kind(h.hypothesis.class_id, opts.class_map)
+            pmf[CLS[cls]] += max(s, 0.0)
+            if kind != ROAD_USER:
+                nru += max(s, 0.0)
+                nru_label = str(h.hypothesis.class_id)
             if s > best_score:
                 best, best_score = h, s
         if pmf.sum() <= 0:
             pmf[CLS["other"]] = 1.0
+        objs.nru.append(nru / pmf.sum())
+        objs.nru_label.append(nru_label)
         objs.t_ns.append(t_ns)
         objs.topic.append(ti)
         objs.frame.append(frame)

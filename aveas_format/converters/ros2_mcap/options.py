@@ -12,6 +12,10 @@ NCLS = len(CLASSES)
 AUTOWARE_LABELS = {0: "other", 1: "car", 2: "truck", 3: "bus", 4: "trailer", 5: "motorcycle",
                    6: "bicycle", 7: "pedestrian", 8: "animal", 9: "other", 10: "other", 11: "other"}
 DERIVED_LABELS = {4: "pedestrian", 5: "bicycle", 6: "car", 7: "truck", 8: "motorcycle"}
+#: labels that are no road user (docs/converters.md "Labels that are not road users"): Autoware
+#: HAZARD, OVER_DRIVABLE, UNDER_DRIVABLE; derived_object_msgs BARRIER, SIGN
+AUTOWARE_NOT_ROAD_USERS = {9: "hazard", 10: "over_drivable", 11: "under_drivable"}
+DERIVED_NOT_ROAD_USERS = {10: "barrier", 11: "sign"}
 
 T_TRACKED = "autoware_perception_msgs/msg/TrackedObjects"
 T_DERIVED = "derived_object_msgs/msg/ObjectWithCovarianceArray"
@@ -60,6 +64,11 @@ class Ros2McapOptions(ImportOptions):
     """Twists given in the header frame are relative to the moving ego (derived_object_msgs)."""
     class_map: dict[str, str] = {}
     """vision_msgs class_id -> class (one of the 13), for ids that are not class names."""
+    keep_non_road_users: bool = False
+    """Import objects whose classification is no road user (Autoware HAZARD/OVER_DRIVABLE/
+    UNDER_DRIVABLE, derived_object_msgs BARRIER/SIGN, vision_msgs ids such as traffic_cone) as
+    class other; by default a track whose classification is mostly such is skipped, with a count
+    in a warning."""
     min_existence_probability: float = 0.0
     """Drop Autoware objects below this existence probability."""
     object_sensor_kind: str = "lidar"

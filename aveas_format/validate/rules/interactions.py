@@ -254,7 +254,9 @@ def _duplicates(ctx: Context, p) -> np.ndarray:
     return dup
 
 
-def _per_pair(S, p, mask: np.ndarray, value: np.ndarray):
+def _pair_hits(S, p, mask: np.ndarray, value: np.ndarray, field: str) -> Hits:
+    """One finding per pair of the ``mask`` rows: at its first sample (by frame), with the number
+    of frames and the largest ``value`` (as ``field``), in file-row order."""
     a, b, key = p["a"][mask], p["b"][mask], p["key"][mask]
     val = value[mask]
     order = np.lexsort((S["frame"][a], key))
@@ -264,7 +266,12 @@ def _per_pair(S, p, mask: np.ndarray, value: np.ndarray):
     peak = np.maximum.reduceat(val, first) if len(val) else val
     i, j = a[first], b[first]
     o = np.argsort(S["row"][i], kind="stable")
-    return i[o], j[o], counts[o], peak[o]
+    i, j, counts, peak = i[o], j[o], counts[o], peak[o]
+    return Hits(total=len(i), arrays={"row": S["row"][i], "participant_id": S["pid"][i],
+                                     "other_id": S["pid"][j], "time": S["t"][i],
+                                     "x": np.round(S["x"][i], 2), "y": np.round(S["y"][i], 2),
+                                     field: np.round(peak, 3), "n_frames": counts},
+               const={"file": "states.parquet", "table": "states", "column": "x,y"})
 
 
 @rule("interactions.overlap", "warning", "Footprints of two participants overlap",
@@ -284,12 +291,7 @@ def overlap(ctx: Context) -> Iterator[Hits]:
     mask = p["overlap"] & ~np.isin(p["key"], _duplicates(ctx, p))
     if not mask.any():
         return
-    i, j, counts, peak = _per_pair(S, p, mask, p["depth"])
-    yield Hits(total=len(i), arrays={"row": S["row"][i], "participant_id": S["pid"][i],
-                                     "other_id": S["pid"][j], "time": S["t"][i],
-                                     "x": np.round(S["x"][i], 2), "y": np.round(S["y"][i], 2),
-                                     "value": np.round(peak, 3), "n_frames": counts},
-               const={"file": "states.parquet", "table": "states", "column": "x,y"})
+    yield _pair_hits(S, p, mask, p["depth"], "value")
 
 
 @rule("interactions.duplicate_track", "warning", "One object tracked twice",
@@ -309,9 +311,4 @@ def duplicate_track(ctx: Context) -> Iterator[Hits]:
         return
     S = ctx.collected["interactions.samples"]
     mask = p["close"] & np.isin(p["key"], dups)
-    i, j, counts, peak = _per_pair(S, p, mask, p["dist"])
-    yield Hits(total=len(i), arrays={"row": S["row"][i], "participant_id": S["pid"][i],
-                                     "other_id": S["pid"][j], "time": S["t"][i],
-                                     "x": np.round(S["x"][i], 2), "y": np.round(S["y"][i], 2),
-                                     "distance": np.round(peak, 3), "n_frames": counts},
-               const={"file": "states.parquet", "table": "states", "column": "x,y"})
+    yield _pair_hits(S, p, mask, p["dist"], "distance")

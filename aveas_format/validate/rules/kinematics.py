@@ -36,9 +36,10 @@ def _std(sv: StatesView, name: str) -> np.ndarray:
     return np.zeros(sv.n) if v is None else np.nan_to_num(v, nan=0.0)
 
 
-def per_participant(sv: StatesView, mask: np.ndarray, value: np.ndarray, **const) -> Hits | None:
+def per_participant(sv: StatesView, mask: np.ndarray, value: np.ndarray, digits: int | None = 3,
+                    **const) -> Hits | None:
     """One finding per participant with ``mask`` set: its first such sample, the peak ``value``
-    and the number of samples (``n_samples``)."""
+    (rounded to ``digits``; None: unrounded) and the number of samples (``n_samples``)."""
     if not mask.any():
         return None
     idx = np.flatnonzero(mask)
@@ -48,7 +49,7 @@ def per_participant(sv: StatesView, mask: np.ndarray, value: np.ndarray, **const
     peak = np.maximum.reduceat(np.abs(value[idx]), first)
     i = idx[first]
     return Hits(total=len(i), arrays={"row": sv.row[i], "participant_id": sv.pid[i], "time": sv.t[i],
-                                      "value": np.round(peak, 3), "n_samples": counts,
+                                      "value": peak if digits is None else np.round(peak, digits), "n_samples": counts,
                                       "class_": sv.cls[i]},
                 const={**_F, **const})
 
@@ -88,8 +89,8 @@ def speed(ctx: Context) -> Iterator[Hits]:
     sig = np.zeros(sv.n)
     sig[i] = np.sqrt(sx[i] ** 2 + sx[j] ** 2 + sy[i] ** 2 + sy[j] ** 2) / dt
     lim = _limit(ctx, sv, "speed_max")
-    bad = v - ctx.config.kinematics.z * sig > lim
-    h = _with_limit(per_participant(sv, bad, v, column="x,y"), sv, lim)
+    bad = _exceeds(ctx, v, sig, lim)
+    h = _with_limit(per_participant(sv, bad, v, None, column="x,y"), sv, lim)
     if h is not None:
         yield h
 
@@ -114,11 +115,36 @@ def _accel(ctx: Context, sv: StatesView):
 
 
 def _with_limit(h: Hits | None, sv: StatesView, lim: np.ndarray) -> Hits | None:
+    """The limit of each finding's sample, and the value with enough digits to show the excess
+    (40.0003 m/s above a 40.0 m/s limit, not "40.0 above 40.0")."""
     if h is not None:
         pos = np.empty(sv.n, np.int64)
         pos[sv.row] = np.arange(sv.n)
         h.arrays["limit"] = lim[pos[h.arrays["row"]]]
+        h.arrays["value"] = distinct_digits(h.arrays["value"], h.arrays["limit"])
     return h
+
+
+def distinct_digits(value: np.ndarray, limit: np.ndarray, least: int = 3, most: int = 9) -> np.ndarray:
+    """``value`` rounded to ``least`` decimals, or to as many more (up to ``most``) as it takes to
+    differ from ``limit`` rounded alike."""
+    v, lim = np.asarray(value, np.float64), np.asarray(limit, np.float64)
+    out = np.round(v, least)
+    for d in range(least + 1, most + 1):
+        same = np.round(v, d - 1) == np.round(lim, d - 1)
+        if not same.any():
+            break
+        out = np.where(same, np.round(v, d), out)
+    return out
+
+
+def _exceeds(ctx: Context, value: np.ndarray, sig: np.ndarray, lim: np.ndarray) -> np.ndarray:
+    """``value`` exceeds ``lim`` by more than z sigma; exact values (sigma 0: simulated) by more
+    than ``exact_rel_tolerance`` of the limit (their last digit is the simulator's rounding)."""
+    k = ctx.config.kinematics
+    tol = np.where(np.nan_to_num(sig) == 0, k.exact_rel_tolerance * np.abs(lim), 0.0)
+    with np.errstate(invalid="ignore"):
+        return value - k.z * sig - lim > tol
 
 
 @rule("kinematics.acceleration", "error", "Acceleration impossible for the class",
@@ -137,10 +163,10 @@ def acceleration(ctx: Context) -> Iterator[Hits]:
     ax, ay, sig = a
     mag = np.hypot(ax, ay)
     lim = _limit(ctx, sv, "accel_max")
-    bad = mag - ctx.config.kinematics.z * sig > lim
+    bad = _exceeds(ctx, mag, sig, lim)
     if bad.any():  # collisions are allowed to decelerate violently
         bad &= ~in_accident(ctx, sv.pid, sv.pid, sv.t)
-    h = _with_limit(per_participant(sv, bad, mag, column="vx,vy"), sv, lim)
+    h = _with_limit(per_participant(sv, bad, mag, None, column="vx,vy"), sv, lim)
     if h is not None:
         yield h
 
@@ -166,8 +192,8 @@ def jerk(ctx: Context) -> Iterator[Hits]:
     s = np.full(sv.n, np.nan)
     s[i] = np.sqrt(sig[i] ** 2 + sig[j] ** 2) / dt
     lim = _limit(ctx, sv, "jerk_max")
-    bad = jk - ctx.config.kinematics.z * s > lim
-    h = _with_limit(per_participant(sv, bad, jk, column="vx,vy"), sv, lim)
+    bad = _exceeds(ctx, jk, s, lim)
+    h = _with_limit(per_participant(sv, bad, jk, None, column="vx,vy"), sv, lim)
     if h is not None:
         yield h
 
@@ -185,7 +211,6 @@ def yaw_rate(ctx: Context) -> Iterator[Hits]:
         return
     h, vx, vy = sv.col("heading"), sv.col("vx"), sv.col("vy")
     lim = _limit(ctx, sv, "yaw_rate_max")
-    z = ctx.config.kinematics.z
     if h is not None and vx is not None and vy is not None:
         i, j, dt = _window(ctx, sv)
         sp = np.hypot(vx, vy)
@@ -196,14 +221,15 @@ def yaw_rate(ctx: Context) -> Iterator[Hits]:
         hs = _std(sv, "heading_std")
         s = np.zeros(sv.n)
         s[i] = np.sqrt(hs[i] ** 2 + hs[j] ** 2) / dt
-        hh = _with_limit(per_participant(sv, w - z * s > lim, w, column="heading",
+        hh = _with_limit(per_participant(sv, _exceeds(ctx, w, s, lim), w, None, column="heading",
                                          source="from heading"), sv, lim)
         if hh is not None:
             yield hh
     yr = sv.col("yaw_rate")
     if yr is not None:
         s = _std(sv, "yaw_rate_std")
-        hh = _with_limit(per_participant(sv, np.abs(yr) - z * s > lim, yr, column="yaw_rate",
+        hh = _with_limit(per_participant(sv, _exceeds(ctx, np.abs(yr), s, lim), yr, None,
+                                         column="yaw_rate",
                                          source="column yaw_rate"), sv, lim)
         if hh is not None:
             yield hh
@@ -241,29 +267,97 @@ def heading_vs_motion(ctx: Context) -> Iterator[Hits]:
         yield hh
 
 
+def _steps(sv: StatesView):
+    """Consecutive samples of a participant, ``(i, j, dt)`` with dt > 0."""
+    i = np.flatnonzero(sv.same)
+    j = i + 1
+    dt = sv.t[j] - sv.t[i]
+    ok = dt > 0
+    return i[ok], j[ok], dt[ok]
+
+
+def instant_lane_change_steps(ctx: Context) -> np.ndarray | None:
+    """Per sample j: the step from j-1 is an instantaneous lane change (cached;
+    :func:`aveas_format.numeric.instant_lateral_steps` on the stored road coordinates through the
+    map); None without road coordinates or map."""
+    key = "kinematics.instant_lane_change"
+    if key in ctx.cache:
+        return ctx.cache[key]
+    from aveas_format.numeric import instant_lateral_steps
+    from aveas_format.validate.rules.map import road_eval
+
+    sv = ctx.states_view
+    out = None
+    e = road_eval(ctx) if sv is not None and sv.n > 1 else None
+    x, y, vx, vy = (sv.col(c) for c in ("x", "y", "vx", "vy")) if sv is not None else (None,) * 4
+    if e is not None and x is not None and y is not None:
+        hdg = np.where(e["known"], e["hdg"], np.nan)
+        width = np.abs(e["outer"] - e["inner"])
+        nx, ny = -np.sin(hdg), np.cos(hdg)
+        vlat = (np.nan_to_num(vx) * nx + np.nan_to_num(vy) * ny) if vx is not None and vy is not None \
+            else np.zeros(sv.n)
+        changed = (e["codes"][1:] != e["codes"][:-1]) | (e["lane"][1:] != e["lane"][:-1])
+        jumps = instant_lateral_steps(sv.same, np.diff(sv.t), np.diff(x), np.diff(y), hdg[:-1],
+                                      width[:-1], changed, 0.5 * (vlat[1:] + vlat[:-1]),
+                                      ctx.config.kinematics.max_lateral_speed)
+        out = np.r_[False, jumps]
+        ctx.cache[key + ".across"] = np.r_[0.0, np.abs(np.diff(x) * nx[:-1] + np.diff(y) * ny[:-1])]
+    ctx.cache[key] = out
+    return out
+
+
+@rule("kinematics.instant_lane_change", "error", "Instantaneous lane change (a simulator artefact)",
+      "states.parquet: row {row}: participant {participant_id} ({class_}) changes lane "
+      "instantaneously {n_samples} time(s), first at {time} s: it jumps up to {value} m across the "
+      "lane in {dt} s with no lateral velocity. A simulator moved it without a lateral manoeuvre "
+      "(SUMO's default); remedies: simulate with --lanechange.duration (e.g. 3) or the sublane "
+      "model (--lateral-resolution 0.8), or convert with -O lane_change_duration=3 (sumo-fcd) to "
+      "reconstruct a smooth manoeuvre",
+      enforces="FORMAT.md 5: x, y are the participant's real positions and vx, vy its velocity: a "
+               "vehicle crosses into the adjacent lane by moving across it, not in one time step",
+      scope="rows")
+def instant_lane_change(ctx: Context) -> Iterator[Hits]:
+    """A vehicle jumps about one lane width (0.5-1.5 widths) into the adjacent lane in one step,
+    faster than ``max_lateral_speed``, while its velocity explains less than half of the jump: an
+    instantaneous lane change, which simulators write by default. One finding per participant
+    (the first jump, the largest, their number); these steps are not reported again by
+    ``kinematics.position_jump``."""
+    sv = ctx.states_view
+    jumps = instant_lane_change_steps(ctx) if sv is not None else None
+    if jumps is None or not jumps.any():
+        return
+    h = per_participant(sv, jumps, ctx.cache["kinematics.instant_lane_change.across"], column="x,y")
+    if h is not None:
+        pos = np.empty(sv.n, np.int64)
+        pos[sv.row] = np.arange(sv.n)
+        k = pos[h.arrays["row"]]
+        h.arrays["dt"] = np.round(sv.t[k] - sv.t[k - 1], 6)
+        yield h
+
+
 @rule("kinematics.position_jump", "error", "Position jump inconsistent with the velocity",
       "states.parquet: row {row}: participant {participant_id} moves {step} m in {dt} s, but its "
-      "velocity integrates to {expected} m (off by {value} m, tolerance {tolerance} m)",
+      "velocity integrates to {expected} m: off by {value} m ({along} m along its motion, {across} m "
+      "across; tolerance {tolerance} m)",
       enforces="FORMAT.md 5: vx, vy are the velocity of the reference point x, y in the local frame", scope="rows")
 def position_jump(ctx: Context) -> Iterator[Hits]:
     """Between two consecutive samples of a participant, the displacement differs from the
     velocity integrated over the step (trapezoid rule) by more than ``jump_tolerance_m`` + ``jump_z``
     sigma (from the x/y and vx/vy ``_std`` columns) + half the class's acceleration limit times
     dt² — a teleport of the track (ID switch, bad frame), or velocities inconsistent with positions
-    (wrong unit or frame)."""
+    (wrong unit or frame). The message splits the offset along and across the integrated motion
+    (a lateral offset of a lane width is a lane change without lateral motion); steps that
+    ``kinematics.instant_lane_change`` reports are left to it."""
     sv = ctx.states_view
     if sv is None or sv.n < 2:
         return
     x, y, vx, vy = sv.col("x"), sv.col("y"), sv.col("vx"), sv.col("vy")
     if x is None or y is None or vx is None or vy is None:
         return
-    i = np.flatnonzero(sv.same)
-    j = i + 1
-    dt = sv.t[j] - sv.t[i]
-    ok = dt > 0
-    i, j, dt = i[ok], j[ok], dt[ok]
-    ex = x[j] - x[i] - 0.5 * (vx[i] + vx[j]) * dt
-    ey = y[j] - y[i] - 0.5 * (vy[i] + vy[j]) * dt
+    i, j, dt = _steps(sv)
+    mx, my = 0.5 * (vx[i] + vx[j]) * dt, 0.5 * (vy[i] + vy[j]) * dt
+    ex = x[j] - x[i] - mx
+    ey = y[j] - y[i] - my
     err = np.hypot(ex, ey)
     sx, sy, svx, svy = (_std(sv, c) for c in ("x_std", "y_std", "vx_std", "vy_std"))
     sig = np.sqrt(sx[i] ** 2 + sx[j] ** 2 + sy[i] ** 2 + sy[j] ** 2
@@ -273,12 +367,24 @@ def position_jump(ctx: Context) -> Iterator[Hits]:
     tol = k.jump_tolerance_m + k.jump_z * sig + 0.5 * amax * dt ** 2
     bad = err > tol
     if bad.any():
+        lane = instant_lane_change_steps(ctx)
+        if lane is not None:
+            bad &= ~lane[j]
+    if bad.any():
         b = np.flatnonzero(bad)
         ii, jj = i[b], j[b]
         step = np.hypot(x[jj] - x[ii], y[jj] - y[ii])
-        expected = np.hypot(0.5 * (vx[ii] + vx[jj]) * dt[b], 0.5 * (vy[ii] + vy[jj]) * dt[b])
+        expected = np.hypot(mx[b], my[b])
+        # the offset along the integrated motion (else along the heading, else the step) and across
+        h = sv.col("heading")
+        ang = np.arctan2(my[b], mx[b])
+        if h is not None:
+            ang = np.where(expected > 1e-6, ang, np.nan_to_num(h[ii]))
+        along = ex[b] * np.cos(ang) + ey[b] * np.sin(ang)
+        across = -ex[b] * np.sin(ang) + ey[b] * np.cos(ang)
         yield Hits(total=len(b), arrays={
             "row": sv.row[jj], "participant_id": sv.pid[jj], "time": sv.t[jj], "x": x[jj],
             "y": y[jj], "step": np.round(step, 3), "dt": np.round(dt[b], 6),
             "expected": np.round(expected, 3), "value": np.round(err[b], 3),
+            "along": np.round(along, 3) + 0.0, "across": np.round(np.abs(across), 3),
             "tolerance": np.round(tol[b], 3)}, const={**_F, "column": "x,y"})

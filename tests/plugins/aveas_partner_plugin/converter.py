@@ -7,8 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from aveas_format.converters.common import column, read_numeric_table, sort_states, wrap_recording
+from aveas_format.converters.common import read_numeric_table, sort_states, wrap_recording
 from aveas_format.converters.registry import ImportOptions, converter
+from aveas_format.io.arrow import column_numpy
 from aveas_format.mapref.build import load_map_bytes
 
 
@@ -26,7 +27,7 @@ class PartnerCsvOptions(ImportOptions):
 def convert_partner_csv(inputs: list[Path], *, map_source, options: PartnerCsvOptions):
     t = read_numeric_table(inputs[0], required=("id", "time", "x", "y"),
                            numeric=("id", "time", "x", "y"))
-    ids, time = column(t, "id").astype(np.int64), column(t, "time")
+    ids, time = column_numpy(t, "id").astype(np.int64), column_numpy(t, "time")
     order = sort_states(ids, time, inputs[0], np.arange(len(ids)) + 2)  # CSV line of each row
     ids, time = ids[order], time[order]
     uniq, pid = np.unique(ids, return_inverse=True)
@@ -35,7 +36,7 @@ def convert_partner_csv(inputs: list[Path], *, map_source, options: PartnerCsvOp
                     "source_id": [str(i) for i in uniq], "class": ["car"] * n,
                     "length": np.full(n, options.length), "width": np.full(n, options.width)}
     states = {"participant_id": pid.astype(np.int64), "time": time,
-              "x": column(t, "x")[order], "y": column(t, "y")[order]}
+              "x": column_numpy(t, "x")[order], "y": column_numpy(t, "y")[order]}
     return wrap_recording("partner-csv", inputs, options, map_bytes=load_map_bytes(map_source),
                           participants=participants, states=states, partner="partner",
                           method="aerial")

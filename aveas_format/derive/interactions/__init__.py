@@ -1,0 +1,199 @@
+"""``derived/interactions``: lane leaders/followers, neighbours and conflicting pairs with TTC,
+gap, THW, DHW and closing speed, each per time step.
+
+Lane relations come from the road coordinates (``road_id``, ``lane_id``, ``road_s``). Lanes are
+chained along the direction of travel across lane sections and roads wherever the map's links give
+a unique continuation (:func:`lane_graph`); each sample gets a *chain* and a travel coordinate
+``u`` along it, and one sort by ``(time, chain, u)`` gives every leader within a chain. The
+frontmost sample of a chain at a time step looks on beyond the chain's end along its *route*
+(diverges, junction entries, merges): where the chain has several continuations, the one the
+participant itself occupies later in the recording (by lane, else by road); where its later
+samples show none (the recording ends first, or it leaves the lane sideways), all of them,
+nearest vehicle first; up to ``route_range`` beyond the chain's end. Followers mirror leaders, so a vehicle just past a merge
+has one follower per approaching lane. Left and right neighbours are the lead (front level with or
+ahead of the participant's front) and the lag (front behind it) in the adjacent lanes, found along
+the adjacent lane's chain within ``neighbour_range``.
+
+Conventions (docs/derive.md):
+
+- ``gap``: net bumper-to-bumper clearance along the lane, ``u_leader - u_follower - (L_l + L_f)/2``
+  (centre reference points, lengths from ``participants``); negative where the footprints overlap
+  longitudinally (side by side for neighbours).
+- ``thw``: net time headway ``gap / v_follower`` (null where the follower does not move forward);
+  ``dhw``: gross distance headway front-to-front, ``gap + L_leader``. In a ``leader`` row the
+  headways are the participant's own, in a ``follower`` row those of the follower behind it.
+- ``dhw`` of a neighbour row: the signed front-to-front distance along the lanes, the
+  neighbour's front minus the participant's (>= 0: lead, < 0: lag).
+- ``closing_speed``: ``v_follower - v_leader`` along the lane for lane pairs, the range rate
+  ``-d|Δp|/dt`` for neighbours and conflicting pairs (positive = approaching).
+- ``ttc`` (``lane_1d``): ``gap / closing_speed`` when closing, with ``ttc_std`` by the delta method
+  from the position, velocity and length uncertainties; null when not closing. Extra columns
+  ``ttc_ca``/``ttc_ca_std``: the constant-acceleration variant (vehicles do not reverse), with
+  accelerations from ``derived/kinematics``.
+- ``ttc`` (``box_2d``): first contact time of the two oriented rectangles under constant velocity
+  (exact, separating axes on the relative motion), for pairs found within ``search_radius`` on a
+  vectorised spatial grid per time step that are not lane leader/follower; ``ttc_std`` from Monte
+  Carlo samples of positions, velocities, headings and sizes. ``conflicting`` rows are those pairs
+  with a finite 2D TTC up to ``horizon`` that are not neighbours.
+
+Modules (``aveas_format.derive.interactions``): this one holds the parameters, :func:`compute`,
+the table and the registration; private modules hold the rest: ``_pairs`` the lane relations
+(leaders and followers along chains and routes, neighbours); ``_lanes`` the lane chains of the map
+and each sample's place on them; ``_ttc`` the 1D TTC (constant velocity and acceleration), THW and
+DHW with their std; ``_boxes`` the 2D TTC of oriented boxes, the candidate-pair grid and the
+conflicting rows; ``_velocities`` the choice of velocities and the projections on a direction. The
+states rows as arrays come from :mod:`aveas_format.derive._samples`.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+import pyarrow as pa
+from pydantic import Field
+
+from aveas_format.derive._samples import Samples
+from aveas_format.derive.interactions._boxes import box_conflicts, candidate_pairs, ttc_boxes
+from aveas_format.derive.interactions._lanes import LaneGraph, lane_chains, lane_graph
+from aveas_format.derive.interactions._pairs import lane_rows
+from aveas_format.derive.interactions._ttc import ttc_constant_acceleration, ttc_constant_velocity
+from aveas_format.derive.interactions._velocities import smoothed_velocities
+from aveas_format.derive.registry import Derivation, Params, register
+from aveas_format.schema.columns import MAY, MUST, col, enum_col, gaussian, pid_col, time_col
+from aveas_format.schema.enums import Relation, TtcKind
+from aveas_format.schema.tables import derived_table
+
+
+class InteractionsParams(Params):
+    """Parameters of ``interactions``."""
+
+    neighbour_range: float = Field(100.0, gt=0, description="largest distance (m) along the "
+                                   "lanes between the fronts of a participant and its left/right "
+                                   "lead or lag")
+    search_radius: float = Field(120.0, gt=0, description="centre distance (m) within which "
+                                 "pairs are candidates for a 2D conflict (those that cannot "
+                                 "touch within `horizon` at their relative speed are dropped)")
+    horizon: float = Field(10.0, gt=0, description="largest 2D TTC (s) reported for conflicting "
+                           "pairs")
+    samples: int = Field(32, ge=0, description="Monte Carlo samples for the 2D ttc_std (0: none)")
+    seed: int = Field(0, description="random seed of the Monte Carlo samples")
+    time_resolution: float = Field(1e-6, gt=0, description="times closer than this (s) are one "
+                                   "time step")
+    box_2d: bool = Field(True, description="compute 2D TTC for non-lane pairs")
+    max_heading_deviation: float = Field(1.0, gt=0, description="samples whose heading deviates "
+                                         "more than this (rad) from their lane's direction of "
+                                         "travel take part in 2D conflicts only")
+    route_range: float = Field(250.0, gt=0, description="how far (m) beyond the end of its lane "
+                               "chain a leader is searched along the participant's route (across "
+                               "diverges, merges and junctions)")
+    velocities: Literal["auto", "states", "smoothed"] = Field(
+        "auto", description="velocity along the direction of motion: the states' (measured) or "
+        "derived/kinematics' smoothed speed; auto: the one with the smaller std per sample")
+
+
+def compute(rec, p: InteractionsParams) -> pa.Table:
+    """The ``derived/interactions`` table of ``rec``."""
+    S = Samples(rec, p.time_resolution)
+    if p.velocities != "states":
+        smoothed_velocities(S, p.velocities)
+    lane = lane_rows(rec, S, p)
+    parts = []
+    if lane:
+        parts.append(lane)
+    if p.box_2d:
+        conflicting = box_conflicts(S, lane, p)  # also gives the neighbour rows their 2D TTC
+        if conflicting:
+            parts.append(conflicting)
+    if not parts:
+        return _table(S, {k: np.zeros(0, t) for k, t in
+                          (("i", np.int64), ("j", np.int64), ("rel", object), ("gap", float),
+                           ("gap_var", float), ("closing", float), ("ttc", float),
+                           ("ttc_std", float), ("thw", float), ("dhw", float), ("ttc_ca", float),
+                           ("ttc_ca_std", float), ("kind", object))})
+    allr = {k: np.concatenate([q[k] for q in parts]) for k in parts[0]}
+    return _table(S, allr)
+
+
+def _f(v: np.ndarray) -> pa.Array:
+    """float64 array with nulls for NaN and +inf (null = undefined / no collision course)."""
+    v = np.asarray(v, float)
+    return pa.array(v, pa.float64(), mask=~np.isfinite(v))
+
+
+def _table(S: Samples, r: dict[str, np.ndarray]) -> pa.Table:
+    i, j = r["i"].astype(np.int64), r["j"].astype(np.int64)
+    ttc = r["ttc"]
+    kind = np.where(np.isfinite(ttc), r["kind"], None)
+    t = pa.table({
+        "participant_id": pa.array(S.pid[i], pa.int64()),
+        "time": pa.array(S.t[i], pa.float64()),
+        "other_id": pa.array(S.pid[j], pa.int64()),
+        "relation": pa.array(r["rel"].astype(object), pa.string()),
+        "ttc": _f(ttc),
+        "ttc_std": _f(np.where(np.isfinite(ttc), r["ttc_std"], np.nan)),
+        "ttc_kind": pa.array(list(kind), pa.string()),
+        "gap": _f(r["gap"]),
+        "gap_std": _f(np.sqrt(r["gap_var"])),
+        "thw": _f(r["thw"]),
+        "dhw": _f(r["dhw"]),
+        "closing_speed": _f(r["closing"]),
+        "ttc_ca": _f(r["ttc_ca"]),
+        "ttc_ca_std": _f(np.where(np.isfinite(r["ttc_ca"]), r["ttc_ca_std"], np.nan)),
+    })
+    if t.num_rows:
+        import pyarrow.compute as pc
+
+        order = pc.sort_indices(t, sort_keys=[("participant_id", "ascending"),
+                                              ("time", "ascending"), ("other_id", "ascending"),
+                                              ("relation", "ascending")])
+        t = t.take(order)
+    return t
+
+
+TABLE = derived_table(
+    "interactions",
+    doc="Pairwise relations per time step: leaders, followers, neighbours and conflicting "
+    "participants with time to collision and headways.",
+    key=("participant_id", "time", "other_id", "relation"),
+    sort=("participant_id", "time", "other_id"),
+    columns=(
+        pid_col(),
+        time_col(),
+        col("other_id", "int64", MUST, "the other participant", minimum=0, nullable=False),
+        enum_col("relation", Relation.values(), MUST, "relation of `other_id` to `participant_id`",
+                 nullable=False),
+        *gaussian("ttc", "s", MAY, "time to collision (null = no collision course)", minimum=0.0),
+        enum_col("ttc_kind", TtcKind.values(), MAY, "how `ttc` was computed"),
+        *gaussian("ttc_ca", "s", MAY, "time to collision with constant accelerations (vehicles stop "
+                  "rather than reverse; null = no collision)", minimum=0.0),
+        *gaussian("gap", "m", MAY, "net bumper-to-bumper gap"),
+        col("thw", "float64", MAY, "time headway: net gap / speed of the follower (null = infinite)",
+            "s", minimum=0.0),
+        col("dhw", "float64", MAY, "distance headway: gross front-to-front spacing (gap + leader "
+            "length); in left/right_neighbour rows the signed front-to-front distance along the "
+            "lane (>= 0: the neighbour leads, < 0: it lags)", "m"),
+        col("closing_speed", "float64", MAY, "rate at which the gap closes (positive = closing)",
+            "m/s"),
+    ),
+)
+
+INTERACTIONS = register(Derivation(
+    name="interactions",
+    spec=TABLE,
+    version="1.1.0",
+    params=InteractionsParams,
+    fn=compute,
+    needs={"states": ("participant_id", "time", "x", "y", "heading", "vx", "vy"),
+           "participants": ("participant_id", "length", "width")},
+    optional=("derived/kinematics",),
+    after=("kinematics",),
+    doc="lane leaders/followers and neighbours with gap, THW, DHW, closing speed and 1D TTC "
+        "(constant velocity and constant acceleration); 2D TTC of oriented boxes for conflicting "
+        "pairs",
+    method=lambda p: "lane_1d+box_2d" if p.box_2d else "lane_1d",
+))
+
+__all__ = ["INTERACTIONS", "TABLE", "InteractionsParams", "LaneGraph", "candidate_pairs", "compute",
+           "lane_chains", "lane_graph", "ttc_boxes", "ttc_constant_acceleration",
+           "ttc_constant_velocity"]
