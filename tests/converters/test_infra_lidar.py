@@ -326,6 +326,7 @@ def test_malformed_inputs_are_located(site_map, tmp_path):
         convert("infra-lidar", [csv, pose], map_source=site_map)
 
 
+@pytest.mark.realdata
 def test_timestamp_units_and_non_road_users(site_map, tmp_path):
     """Epoch microseconds as strings (inferred, recorded in the source block); a DontCare track
     and a barrier are skipped with a note; keep_non_road_users keeps the barrier."""

@@ -368,6 +368,7 @@ def test_cli(scene_mcap, road_map, tmp_path):
     assert out.is_dir()
 
 
+@pytest.mark.realdata
 def test_barriers_and_signs_are_no_road_users(road_map, tmp_path):
     """derived_object_msgs classification 10 (BARRIER) is no road user: the track is skipped with
     a count, or kept with keep_non_road_users."""
