@@ -112,6 +112,8 @@ def test_an_unknown_option_is_a_one_line_usage_error(capsys, path):
     (("validate", "REC", "--fromat", "json"), "--format"),
     (("validate", "REC", "--select", "kinematic.speed"), "(did you mean 'kinematics.speed'?)"),
     (("derive", "REC", "-o", "OUT", "--only", "kinematic"), "(did you mean 'kinematics'?)"),
+    (("sim", "run", "-o", "OUT"), "does not state the licence; pass -O license=LICENCE"),
+    (("sim", "run", "-o", "OUT", "-O", "licence=CC0-1.0"), "(did you mean 'license'?)"),
     (("frobnicate",), "No such command 'frobnicate'"),
     (("info",), "Missing argument"),
     (("validate", "REC", "-o", "/nonexistent/dir/r.html"), "the directory /nonexistent/dir does not exist"),
@@ -159,7 +161,7 @@ OUTPUT_RUNS: dict[tuple[str, ...], tuple[tuple[str, ...], str]] = {
     ("map", "plot"): (("map", "plot", "MAP", "-o", "OUT"), "out.png"),
     ("map", "project"): (("map", "project", "MAP", "-p", "PTS", "-o", "OUT"), "out.csv"),
     ("plot",): (("plot", "REC", "-o", "OUT"), "dir/"),
-    ("sim", "run"): (("sim", "run", "-o", "OUT"), "out.aveas"),
+    ("sim", "run"): (("sim", "run", "-o", "OUT", "-O", "license=CC0-1.0"), "out.aveas"),
     ("sim", "sensitivity"): (("sim", "sensitivity", "-o", "OUT"), "dir/"),
     ("validate",): (("validate", "REC", "-o", "OUT"), "report.txt"),
 }

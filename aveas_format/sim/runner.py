@@ -246,9 +246,12 @@ def fcd_mean_speeds(fcd: pa.Table, edges: list[str] | None, pos: tuple[float, fl
 
 
 def simulate(scenario: Scenario, *, recording: bool = False, speed_factors: bool = False,
-             workdir: str | Path | None = None, timeout: float | None = 600) -> SimResult:
+             workdir: str | Path | None = None, timeout: float | None = 600,
+             recording_options: dict | None = None) -> SimResult:
     """Run ``scenario``; see the module docstring. ``workdir`` keeps the files (default: a
-    temporary directory, removed afterwards)."""
+    temporary directory, removed afterwards). ``recording_options``: options of the ``sumo-fcd``
+    import that makes the recording (its metadata: ``license``, ``partner``, ``title``, ...;
+    without a ``license`` the recording carries the stand-in the validator flags)."""
     sumo = find_sumo("sumo")
     tmp = None
     if workdir is None:
@@ -288,8 +291,8 @@ def simulate(scenario: Scenario, *, recording: bool = False, speed_factors: bool
             from aveas_format.converters import convert
 
             res.recording = convert("sumo-fcd", [wd / fcd_name], map_source=net.xodr, options={
-                "net_file": str(net.net_file), "vtypes": [str(wd / "routes.rou.xml")],
-                "partner": "aveas-format sim", "title": "SUMO simulation"})
+                "partner": "aveas-format sim", "title": "SUMO simulation", **(recording_options or {}),
+                "net_file": str(net.net_file), "vtypes": [str(wd / "routes.rou.xml")]})
         res.net = NetInfo(Path("net.net.xml"), net.xodr, net.from_edge, net.to_edge, net.measure_edges,
                           net.measure_pos)
         return res
