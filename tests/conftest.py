@@ -6,6 +6,9 @@ and their count in pytest's closing line (``... 212 ran on real data in 180s``; 
 
 from __future__ import annotations
 
+import os
+import sys
+
 import pytest
 
 import helpers_common
@@ -21,6 +24,43 @@ def pytest_collection_modifyitems(items):
 @pytest.hookimpl(tryfirst=True)
 def pytest_runtest_setup(item):
     helpers_common.CURRENT_TEST[0] = item
+
+
+# A test that reads ../shared without the marker, past shared() (a path built from SHARED, a
+# helper's constant): Python's own file opens and directory listings under ../shared are audited
+# while a test runs, and an unmarked test that made one fails (files read by C libraries such as
+# pyarrow or libxml2 are not seen; the plain-clone run catches those).
+_SHARED_PREFIX = str(SHARED.resolve()) + os.sep
+_UNMARKED: dict[str, str] = {}
+
+
+def _audit(event: str, args: tuple) -> None:
+    if event not in ("open", "os.listdir", "os.scandir") or not args:
+        return
+    item = helpers_common.CURRENT_TEST[0]
+    if item is None or item.nodeid in _UNMARKED or isinstance(args[0], int) or args[0] is None:
+        return
+    try:
+        path = os.path.abspath(os.fsdecode(args[0]))
+    except (TypeError, ValueError):
+        return
+    if path.startswith(_SHARED_PREFIX) and item.get_closest_marker("realdata") is None:
+        _UNMARKED[item.nodeid] = path
+
+
+sys.addaudithook(_audit)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    report = (yield).get_result()
+    if call.when == "teardown":
+        helpers_common.CURRENT_TEST[0] = None
+    path = _UNMARKED.pop(item.nodeid, None) if call.when == "call" else None
+    if path and report.passed:
+        report.outcome = "failed"
+        report.longrepr = (f"{item.nodeid} reads {path} but is not marked realdata: add "
+                           "@pytest.mark.realdata or take the data from a realdata_fixture")
 
 
 def pytest_terminal_summary(terminalreporter):

@@ -89,3 +89,41 @@ def test_shared_refuses_a_test_not_marked_realdata():
 @pytest.mark.realdata
 def test_shared_gives_the_path_to_a_marked_test():
     assert shared("data").is_dir()  # skips without ../shared
+
+
+PROBE = '''
+import pytest
+
+from helpers_common import SHARED, shared
+
+
+def test_unmarked_reads_past_shared():
+    try:  # a path built from SHARED, not shared(): found by the audit of the test's file opens
+        (SHARED / "data" / "SOURCES.md").read_text()
+    except OSError:
+        pass
+
+
+def test_unmarked_lists_past_shared():
+    list((SHARED / "data").glob("*"))
+
+
+@pytest.mark.realdata
+def test_marked_reads():
+    shared("data").is_dir()
+'''
+
+
+def test_a_test_reading_shared_unmarked_fails(tmp_path):
+    """A test that reads ../shared past :func:`shared` (a path built from ``SHARED``) without the
+    marker fails too (tests/conftest.py audits file opens and listings under ../shared), with or
+    without ../shared present; a marked one passes or skips."""
+    (tmp_path / "test_probe.py").write_text(PROBE)
+    res = _pytest(ROOT, "-c", str(ROOT / "pyproject.toml"), "--rootdir", str(ROOT), "-p", "conftest",
+                  str(tmp_path / "test_probe.py"), "-rfs")
+    out = res.stdout + res.stderr
+    assert res.returncode == 1, out[-3000:]
+    failed = set(re.findall(r"FAILED \S*::(test_\w+)", out))
+    assert failed == {"test_unmarked_reads_past_shared", "test_unmarked_lists_past_shared"}, out[-3000:]
+    assert f"reads {SHARED.resolve()}" in out and "is not marked realdata" in out
+    assert "1 ran on real data" in out or "1 real-data skipped" in out, out[-3000:]
