@@ -91,6 +91,12 @@ class UsageError(AveasError, ValueError):
     missing argument (a map the converter needs). The CLI exits 2 with it."""
 
 
+class MissingCrsError(FormatError, UsageError):
+    """The map has no ``<geoReference>`` and no ``crs`` was given: the recording's frame is
+    undefined (FORMAT.md: ``crs`` alone defines it then). The converter registry turns it into a
+    message showing the command that works. A missing argument: the CLI exits 2 with it."""
+
+
 class MissingDependencyError(AveasError, ImportError):
     """An optional dependency is not installed; the message names the extra that installs it."""
 

@@ -11,7 +11,6 @@ generated deserialisers, which are faster).
 
 from __future__ import annotations
 
-import math
 import shutil
 import tempfile
 import time

@@ -1,6 +1,6 @@
 """Export/import throughput of the interoperability converters on the sample highway scene
-(60 vehicles, 30 s at 25 Hz): OpenLABEL export + import (lossless round trip), OpenSCENARIO and
-MCAP export."""
+(60 vehicles, 30 s at 25 Hz): OpenLABEL export + import (lossless round trip), OpenSCENARIO export
++ import (the storyboard replay), MCAP and OSI export."""
 
 from __future__ import annotations
 
@@ -34,6 +34,12 @@ def main(n_vehicles: int = 60, duration_s: float = 30.0) -> list[dict]:
         rows.append({"benchmark": "import_openlabel", "states": back.states.num_rows,
                      "seconds": round(dt, 3), "rows_per_s": round(n / dt),
                      "note": "with the aveas_format extension (lossless)"})
+        t0 = time.perf_counter()
+        back = convert("openscenario", [tmp / "rec.xosc"])
+        dt = time.perf_counter() - t0
+        rows.append({"benchmark": "import_openscenario", "states": back.states.num_rows,
+                     "seconds": round(dt, 3), "rows_per_s": round(back.states.num_rows / dt),
+                     "note": "storyboard replay of the 10 Hz export (issue 18)"})
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return rows

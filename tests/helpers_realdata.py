@@ -30,6 +30,18 @@ def real_files(*patterns: str) -> list:
     return realdata_params(paths, ids=lambda p: str(p.relative_to(DATA)))
 
 
+#: a transverse Mercator for maps without a geoReference (the files' site is unknown: a CRS must
+#: be given, FORMAT.md; where on Earth does not matter for these checks)
+SOME_CRS = "+proj=tmerc +lat_0=57.7 +lon_0=11.97 +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
+
+
+def crs_for(map_path) -> str | None:
+    """``SOME_CRS`` where the map has no ``<geoReference>``, else None (the map's counts)."""
+    from aveas_format.opendrive import load_map
+
+    return None if load_map(map_path).header.geo_reference else SOME_CRS
+
+
 # --- the pieces every source kind's real-file test shares -----------------------------------------
 
 #: small excerpts of third-party files committed with the tests (licences: tests/data/third_party/)
@@ -50,22 +62,29 @@ def error_codes(rec) -> set[str]:
 
 
 def round_trips(rec, tmp_path: Path, formats=("openlabel", "openscenario", "osi")) -> dict:
-    """``rec`` exported to each format and imported again: ``{format: recording}``. OSI carries no
-    map: the map goes next to the trace and is passed on import."""
+    """``rec`` exported to each format (OpenSCENARIO at every sample) and imported again:
+    ``{format: recording}``, each with the map its export wrote next to it (the recording's ``crs``
+    travels in that map where the map has no geoReference)."""
+    import warnings
+
     from aveas_format.converters import convert, get_converter
 
     out = {}
-    for fmt, name in (("openlabel", "rt.json"), ("openscenario", "rt.xosc"), ("osi", "rt.osi")):
+    for fmt, name, opts in (("openlabel", "rt.json", {}), ("openscenario", "rt.xosc", {"max_rate_hz": None}),
+                            ("osi", "rt.osi", {})):
         if fmt not in formats:
             continue
         d = tmp_path / fmt
-        d.mkdir()
-        get_converter(fmt, "export")(rec, d / name)
+        d.mkdir(parents=True, exist_ok=True)
+        paths = get_converter(fmt, "export")(rec, d / name, options=opts)
+        if rec.map_source is not None:
+            assert (d / "rt.xodr") in paths, paths  # the map travels with every export
         kw = {}
-        if fmt == "osi":
-            (d / "map.xodr").write_bytes(rec.map_source)
-            kw["map_source"] = d / "map.xodr"
-        out[fmt] = convert(fmt, [d / name], **kw)
+        if fmt != "openscenario" and (d / "rt.xodr").exists():
+            kw["map_source"] = d / "rt.xodr"
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            out[fmt] = convert(fmt, [d / name], **kw)
     return out
 
 
@@ -140,3 +159,24 @@ def sumo_excerpt_map(name: str) -> str:
     return straight_highway(length=1000.0, lanes_right=1, lane_width=6.0, x0=500.0, y0=-3.0, hdg=math.pi,
                             geo_reference="+proj=tmerc +lat_0=48.836229 +lon_0=11.090774 +k=1 +x_0=0 "
                             "+y_0=0 +ellps=WGS84 +units=m +no_defs")
+
+
+def assert_same_motion(rec, back, *, tol_m: float = 1e-3) -> None:
+    """The re-imported recording has the same participants (ids and classes), and each one the
+    positions of its source at its own times (to ``tol_m``; times shifted where an export starts
+    its clock at the first sample)."""
+    import numpy as np
+    import pyarrow.compute as pc
+
+    assert back.participants.column("participant_id").to_pylist() == \
+        rec.participants.column("participant_id").to_pylist()
+    assert back.participants.column("class").to_pylist() == rec.participants.column("class").to_pylist()
+    shift = float(pc.min(rec.states["time"]).as_py()) - float(pc.min(back.states["time"]).as_py())
+    for q in rec.participants.column("participant_id").to_pylist():
+        a = rec.states.filter(pc.equal(rec.states["participant_id"], q))
+        b = back.states.filter(pc.equal(back.states["participant_id"], q))
+        assert b.num_rows, q
+        tb = b["time"].to_numpy() + shift
+        for c in ("x", "y"):
+            ref = np.interp(tb, a["time"].to_numpy(), a[c].to_numpy())
+            assert np.max(np.abs(b[c].to_numpy() - ref)) < tol_m, (q, c)

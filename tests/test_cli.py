@@ -141,3 +141,36 @@ def test_info_gives_the_coverage_in_lonlat(written):
     assert b == pytest.approx([lon0, lat0, lon1, lat1], abs=1e-6)
     text = cli("info", written, check_rc=0).stdout
     assert f"lon {b[0]:.6f} .. {b[2]:.6f}, lat {b[1]:.6f} .. {b[3]:.6f}" in text
+
+
+_FAR_XOSC = """<?xml version="1.0"?><OpenSCENARIO><FileHeader revMajor="1" revMinor="2" date="x"
+description="far" author="me"/><ParameterDeclarations/><CatalogLocations/><RoadNetwork/>
+<Entities><ScenarioObject name="A"><Vehicle name="car" vehicleCategory="car"><BoundingBox>
+<Center x="0" y="0" z="0.7"/><Dimensions width="1.8" length="4.5" height="1.4"/></BoundingBox>
+</Vehicle></ScenarioObject></Entities><Storyboard><Init><Actions><Private entityRef="A">
+<PrivateAction><RoutingAction><FollowTrajectoryAction><Trajectory name="t" closed="false"><Shape>
+<Polyline>{vertices}</Polyline></Shape></Trajectory><TimeReference><Timing
+domainAbsoluteRelative="absolute" scale="1" offset="0"/></TimeReference><TrajectoryFollowingMode
+followingMode="position"/></FollowTrajectoryAction></RoutingAction></PrivateAction></Private>
+</Actions></Init><StopTrigger/></Storyboard></OpenSCENARIO>"""
+
+
+def test_convert_onto_the_wrong_map_says_so(tmp_path):
+    """Issue 18, point 7: positions on no road of the map are an error at the end of a conversion
+    (exit 1 with --validate; a warning line with --no-validate), and the summary gives the share
+    of states on the map. Here x and y are swapped: the message says that this fits."""
+    from helpers_common import STRAIGHT_MAP
+
+    vertices = "".join(f'<Vertex time="{t / 10}"><Position><WorldPosition x="-5.25" y="{20 + t}" '
+                       f'h="1.5708"/></Position></Vertex>' for t in range(60))
+    src = tmp_path / "far.xosc"
+    src.write_text(_FAR_XOSC.format(vertices=vertices))
+    args = ["convert", "--from", "openscenario", str(src), "--map", str(STRAIGHT_MAP), "-o",
+            str(tmp_path / "far.aveas"), "-O", "license=CC0-1.0"]
+    r = cli(*args)
+    assert r.returncode == 1, r.stderr
+    assert "0.0% on the map" in r.stderr
+    assert "map.mostly_off_road" in r.stdout and "with x and y swapped, 100%" in r.stdout
+    r = cli(*args, "--overwrite", "--no-validate")
+    assert r.returncode == 0, r.stderr
+    assert "warning: states.parquet: 60 of 60 vehicle states (100.0 %) are on no road" in r.stderr

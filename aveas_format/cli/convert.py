@@ -14,6 +14,7 @@ from aveas_format.cli.options import (
     ask_unstated,
     check_output,
     converter_options,
+    crs_option,
     format_option,
     option_pairs_option,
     options_file_option,
@@ -55,6 +56,7 @@ def convert(
     map_file: Path = typer.Option(None, "--map", "-m", help="The OpenDRIVE map the data refers to."),
     output: Path = typer.Option(None, "--output", "-o", help="Output recording (NAME.aveas or "
                                 "NAME.aveas.zip)."),
+    crs: str = crs_option(),
     option: list[str] = option_pairs_option("Converter"),
     options_file: Path = options_file_option("Converter"),
     overwrite: bool = overwrite_option(),
@@ -81,6 +83,8 @@ def convert(
         raise fail("--from NAME, INPUT... and --output are required (or --list)", EXIT_USAGE)
     conv = get_converter(source)
     raw = converter_options(options_file, option, conv.options)
+    if crs:
+        raw["crs"] = crs
     conv.parse_options(raw)  # usage errors (an unknown option, no map, unstated values) first
     conv.check_map(map_file)
     ask_unstated(conv, raw)
@@ -93,10 +97,23 @@ def convert(
 
     rec = run(source, inputs, map_source=map_file, options=raw)
     path = rec.write(output, overwrite=overwrite)
-    err.print(f"wrote {path}: {rec.participants.num_rows} participants, "
-              f"{rec.states.num_rows:,} states")
+    n = rec.states.num_rows
+    on_map = (n - rec.states.column("road_id").null_count) / n if n else 0.0
+    err.print(f"wrote {path}: {rec.participants.num_rows} participants, {n:,} states, "
+              f"{on_map:.1%} on the map")
     if validate_:
-        validate_written(path)
+        validate_written(path)  # map.mostly_off_road among the rules
+    else:
+        _off_map_note(path)
+
+
+def _off_map_note(path: Path) -> None:
+    """Without --validate, still say when the recording is mostly off its map (wrong map, CRS,
+    offset, axes or unit): the one finding a conversion must not keep quiet about."""
+    import aveas_format
+
+    for f in aveas_format.validate(path, select=["map.mostly_off_road"]).findings():
+        err.print(f"warning: {f.message}", markup=False, highlight=False)
 
 
 def _convert_many(source: str, inputs: list[str], map_file: Path | None, raw: dict, output: Path,

@@ -11,6 +11,7 @@ spelling out ``typer.Option(...)`` again, and calls the helper that goes with th
 - **Format**: :func:`format_option` (``--format text|json``, for every command that prints
   something a machine may read; a wrong value gets the closest allowed one) and
   :func:`legacy_json_option` + :func:`output_format`, the hidden, deprecated ``--json``.
+- **The CRS of an import** (``convert``): :func:`crs_option` (``--crs``).
 - **Options of a converter or exporter** (``convert``, ``export``): :func:`option_pairs_option`
   (``--option/-O KEY=VALUE``) and :func:`options_file_option` (``--options FILE.json``), read by
   :func:`converter_options`; :func:`parse_option_pairs` also reads ``fit``'s metric options.
@@ -132,8 +133,18 @@ def options_file_option(kind: str) -> Any:
     return typer.Option(None, "--options", help=f"{kind} options as a JSON file.")
 
 
+def crs_option() -> Any:
+    """``--crs CRS`` of the importers: the recording's CRS where the map has no
+    ``<geoReference>`` (the common import option ``crs``)."""
+    return typer.Option(None, "--crs", help="The recording's CRS (PROJ string, EPSG:code or WKT) "
+                        "where the map has no <geoReference>, e.g. '+proj=tmerc +lat_0=48.1 "
+                        "+lon_0=11.5 +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m' (a transverse "
+                        "Mercator at the site).")
+
+
 def parse_option_pairs(pairs: list[str], model: type) -> dict[str, Any]:
-    """``["net_file=a.net.xml", "vtypes=a.rou.xml,b.rou.xml", "geo=true"]`` -> dict.
+    """``["net_file=a.net.xml", "vtypes=a.rou.xml,b.rou.xml", "geo=true", "parameter.Speed=60"]``
+    -> dict (``KEY.NAME=VALUE`` sets the entry ``NAME`` of the dict option ``KEY``).
 
     Values are read as JSON where they parse (numbers, booleans, lists), else as strings; a
     comma-separated string becomes a list for list-typed options.
@@ -149,6 +160,10 @@ def parse_option_pairs(pairs: list[str], model: type) -> dict[str, Any]:
             value: Any = json.loads(raw)
         except json.JSONDecodeError:
             value = raw
+        if "." in key:  # KEY.NAME=VALUE: one entry of a dict option (parameter.Speed=60)
+            head, name = key.split(".", 1)
+            out_.setdefault(head, {})[name] = raw if isinstance(value, (dict, list)) else value
+            continue
         ann = fields[key].annotation if key in fields else None
         if typing.get_origin(ann) in (list, tuple) and isinstance(value, str):
             value = [v for v in value.split(",") if v]

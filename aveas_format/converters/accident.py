@@ -56,7 +56,7 @@ from aveas_format.converters.common import (
     wrap_recording,
 )
 from aveas_format.converters.registry import ImportOptions, converter
-from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.errors import FormatError
 from aveas_format.io.arrow import column_numpy
 from aveas_format.schema.taxonomy import CLASSES
 

@@ -206,6 +206,9 @@ def wrap_recording(converter: str, inputs: Sequence[Path], options: Any, *, map_
         if getattr(o, key, None):
             meta[key] = getattr(o, key)
     meta.update(kw)
+    if getattr(o, "crs", None) and getattr(o, "crs_is_recording_crs", True) and not meta.get("crs"):
+        meta["crs"] = o.crs
+        meta["check_map_crs"] = True  # the user's CRS must agree with the map's geoReference
     return build_recording(map_source=map_bytes, participants=participants, states=states,
                            partner=partner,
                            source=source_block(converter, inputs, options, version, resolved),
@@ -523,6 +526,41 @@ def sort_states(pid: np.ndarray, t: np.ndarray, path: Path | None = None,
     return order
 
 
+# --- exports: what a re-import needs ---------------------------------------------------------------
+
+def companion_map_path(output: Path, options: Any) -> Path | None:
+    """Where an exporter writes the map next to its ``output``: the option ``map_file`` or the
+    output's name with ``.xodr``; None where the exporter has no map or ``write_map`` is off. The
+    one rule of every exporter that writes a map (the ``export`` command refuses to replace it
+    without ``--overwrite``)."""
+    if not getattr(options, "write_map", False):
+        return None
+    output = Path(output)
+    return output.parent / (getattr(options, "map_file", None) or f"{output.stem}.xodr")
+
+
+def companion_map(rec) -> bytes | None:
+    """The map to write next to an export: the recording's map, with the recording's ``crs`` as its
+    ``<geoReference>`` where the map has none, so that the export's re-import finds the frame
+    (FORMAT.md: without a geoReference, ``crs`` alone defines it; the OpenSCENARIO and OSI re-imports
+    read it from this map). The rest of the map's bytes are unchanged."""
+    import re
+
+    data = rec.map_source
+    if data is None:
+        return None
+    crs = rec.meta.crs
+    if not crs or rec.map.header.geo_reference:
+        return data
+    head = re.search(rb"<header\b[^>]*?(/?)>", data)
+    if head is None:
+        return data
+    geo = b"<geoReference><![CDATA[" + crs.replace("]]>", "").encode() + b"]]></geoReference>"
+    if head.group(1):  # <header .../>
+        new = head.group(0)[:-2].rstrip() + b">" + geo + b"</header>"
+    else:
+        new = head.group(0) + geo
+    return data[:head.start()] + new + data[head.end():]
 
 # --- timestamps of foreign files: unit and epoch inferred, or given -------------------------------
 

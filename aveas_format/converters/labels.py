@@ -35,7 +35,6 @@ values (KITTI's -1000) whatever the label says.
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterable
 
 import numpy as np
 

@@ -31,6 +31,14 @@ OpenDRIVE map). Where the GroundTruth carries a ``proj_string`` that differs fro
 geoReference, positions go from the OSI frame (through ``proj_frame_offset``) to the projected CRS
 and then into the map's frame. Provenance ``simulated``, role ``simulated_agent``, every ``_std`` 0;
 method ``traffic_simulation`` (option ``method`` for driving-simulator traces).
+
+Where the map has no ``<geoReference>``, the trace's ``proj_string`` (with its
+``proj_frame_offset``, a translation) is the recording's CRS, or ``--crs`` gives it; the OSI export
+writes ``proj_string`` and the map next to the trace, so that its re-import needs nothing else.
+
+Tested on: omega-prime's esmini-written traces ``alks_cut-in.osi`` and ``acc-test.osi`` on
+``straight_500m.xodr`` (``../shared/data/real/omega-prime``; also with the map's geoReference
+removed), and this toolkit's own OSI exports of every real OpenSCENARIO file.
 """
 
 from __future__ import annotations
@@ -46,6 +54,8 @@ import numpy as np
 from pydantic import Field
 
 from aveas_format.converters.common import (
+    companion_map,
+    companion_map_path,
     load_map_bytes,
     projected_to_local,
     rotate,
@@ -195,6 +205,10 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     vx, vy, ax, ay = arr("vx"), arr("vy"), arr("ax"), arr("ay")
     map_bytes = load_map_bytes(map_source)
     header = load_map(map_bytes).header
+    kw: dict[str, Any] = {}
+    if proj is not None and not header.geo_reference and not options.crs:
+        # the map has no geoReference: the trace's proj_string (with its frame offset) is the frame
+        kw["crs"] = _offset_crs(proj[0], proj[1])
     if proj is not None and header.geo_reference and not crs_equal(proj[0], header.geo_reference):
         px, py = LocalFrame(proj[0], proj[1], warn=False).to_projected(x, y)
         x, y, rot = projected_to_local(px, py, proj[0], header.geo_reference, header.offset)
@@ -233,7 +247,6 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
         "attributes": [json.dumps({"osi_type": d["osi_type"], "osi_lanes": sorted(d["lanes"])})
                        for d in info],
     }
-    kw: dict[str, Any] = {}
     zt = _zero_time(inputs[0])
     if zt and not options.start_time:
         kw["start_time"] = _shift_iso(zt, t0)
@@ -244,6 +257,19 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
                      "sensors": [{"id": "osi", "kind": "simulator"}]},
         **kw,
     )
+
+
+def _offset_crs(proj: str, offset: tuple[float, float, float, float]) -> str:
+    """The CRS of the OSI frame: the trace's ``proj_string`` with its ``proj_frame_offset``
+    (a translation; a rotated frame is refused) folded into the false easting/northing."""
+    if not offset[0] and not offset[1] and not offset[3]:
+        return proj
+    if offset[3]:
+        raise FormatError("the trace's proj_frame_offset rotates the frame (yaw "
+                          f"{offset[3]!r}) and the map has no <geoReference>: pass --crs")
+    from aveas_format.converters.levelx import shifted_crs
+
+    return shifted_crs(proj, offset[0], offset[1])
 
 
 def _shift_iso(iso: str, seconds: float) -> str:
@@ -339,6 +365,11 @@ class OsiExportOptions(ConverterOptions):
     role system_under_test or recording_vehicle, else none)."""
     every: int = Field(1, ge=1)
     """Write every n-th time step (1 = all)."""
+    map_file: str | None = None
+    """File name of the map written next to the trace (default: the trace's name with .xodr)."""
+    write_map: bool = True
+    """Write the map next to the trace (with the recording's crs as its geoReference where the map
+    has none), so that the trace re-imports: ``convert --from osi TRACE --map MAP``."""
 
 
 def _light_state(b, brake: float, left: float, right: float, hazard: float):
@@ -363,8 +394,9 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
     type and vehicle classification from the class; brake and indicator lights where the states
     carry their probabilities, on at >= 0.5), ``proj_string`` = the recording's CRS, and the host
     vehicle. Timestamps are the recording's ``time`` (s); an MCAP trace carries ``zero_time`` =
-    ``start_time``. The map is referenced, not embedded: write it next to the trace with
-    ``aveas-format map`` if the consumer needs it. ``.osi`` or ``.mcap`` by the output's suffix."""
+    ``start_time``. The map is written next to the trace (``write_map``, ``map_file``; OSI
+    references it, does not embed it), with the recording's ``crs`` as its ``<geoReference>`` where
+    the map has none. ``.osi`` or ``.mcap`` by the output's suffix."""
     import os
 
     import betterosi as b
@@ -438,9 +470,12 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
             if host is not None:
                 gt.host_vehicle_id = b.Identifier(value=int(host))
             msgs.append(gt)
+    companion = companion_map_path(output, options)
+    extra = ([write_bytes_atomic(companion, companion_map(rec))]
+             if companion is not None and rec.map_source is not None else [])
     if suffix == ".osi":
         data = b"".join(struct.pack("<I", len(m)) + m for m in (g.to_binary() for g in msgs))
-        return [write_bytes_atomic(output, data)]
+        return [write_bytes_atomic(output, data), *extra]
     tmp = output.with_name(f".{output.stem}.tmp-{os.getpid()}.mcap")
     try:
         with warnings.catch_warnings():
@@ -455,4 +490,4 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
         os.replace(tmp, output)
     finally:
         tmp.unlink(missing_ok=True)
-    return [output]
+    return [output, *extra]

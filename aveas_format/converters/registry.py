@@ -6,9 +6,11 @@ patterns, a pydantic options model and a one-line description. ``aveas-format co
 finds it here; ``aveas-format convert --list`` prints the table.
 
 Exporters (recording -> foreign format) register with ``direction="export"`` and have the signature
-``(recording, output, *, options) -> list[Path]``; one that writes companion files next to its
-output (the map of an OpenLABEL or OpenSCENARIO export) declares them with ``outputs=`` so that
-the CLI refuses to replace any of them without ``--overwrite``.
+``(recording, output, *, options) -> list[Path]``. Its companion files count as outputs: the CLI
+refuses to replace any of them without ``--overwrite`` (:meth:`Converter.outputs`). The map next
+to the output (options ``write_map``/``map_file``, ``converters.common.companion_map_path``) is
+counted by default; an exporter that writes other files next to its output declares them with
+``outputs=``.
 
 An importer declares which of the recording.json values a person must state (:data:`ASKED`:
 partner, start time, licence) its source can carry, ``provides=("start_time",)``: for the others
@@ -30,12 +32,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
 from aveas_format import plugins
-from aveas_format.errors import AveasError, UsageError, did_you_mean, require
+from aveas_format.errors import AveasError, MissingCrsError, UsageError, did_you_mean, require
 
 
 class ConverterOptions(BaseModel):
@@ -62,6 +64,13 @@ class ImportOptions(ConverterOptions):
     """Owner of the data (default: the partner)."""
     right_of_use: str = "research_only"
     """research_only or commercial."""
+    #: False where a converter's own ``crs`` option means its source's CRS (rotated boxes: the
+    #: world file's), which it projects into the map's frame itself
+    crs_is_recording_crs: ClassVar[bool] = True
+    crs: str | None = None
+    """The recording's CRS (PROJ, EPSG or WKT) where the map has no ``<geoReference>`` (it alone
+    then defines the frame, FORMAT.md); CLI ``--crs``, API ``convert(..., crs=)``. Must agree with
+    the map's geoReference where there is one."""
 
 
 #: recording.json values only a person can state (the import options of the same names)
@@ -129,7 +138,12 @@ class Converter:
                 ) -> list[Path]:
         """The files an export to ``output`` writes (the output and its companion files)."""
         opts = options if isinstance(options, ConverterOptions) else self.parse_options(options)
-        return self.outputs_fn(Path(output), opts) if self.outputs_fn else [Path(output)]
+        if self.outputs_fn:
+            return self.outputs_fn(Path(output), opts)
+        from aveas_format.converters.common import companion_map_path
+
+        companion = companion_map_path(Path(output), opts)
+        return [Path(output)] + ([companion] if companion is not None else [])
 
     def check_map(self, map_source: Any) -> None:
         """A :class:`~aveas_format.errors.UsageError` when the converter needs a map and has none."""
@@ -197,9 +211,14 @@ def get_converter(name: str, direction: str = "import") -> Converter:
 
 
 def convert(name: str, inputs: list[str | Path], *, map_source: str | Path | bytes | None = None,
-            options: dict[str, Any] | None = None):
-    """Run the importer ``name`` on ``inputs`` and return the Recording."""
+            options: dict[str, Any] | None = None, crs: str | None = None):
+    """Run the importer ``name`` on ``inputs`` and return the Recording.
+
+    ``crs`` is the recording's CRS where the map has no ``<geoReference>`` (the common import
+    option ``crs``; it wins over ``options["crs"]``)."""
     conv = get_converter(name)
+    if crs is not None:
+        options = {**(options or {}), "crs": crs}
     opts = conv.parse_options(options)  # usage errors first
     conv.check_map(map_source)
     paths = [Path(p) for p in inputs]
@@ -210,8 +229,25 @@ def convert(name: str, inputs: list[str | Path], *, map_source: str | Path | byt
             raise RecordingIOError("input not found", path=p)
     try:
         return conv(paths, map_source=map_source, options=opts)
+    except MissingCrsError as e:
+        from aveas_format.mapref.build import EXAMPLE_CRS
+
+        cmd = (f"aveas-format convert --from {name} {' '.join(_quote(p) for p in paths)}"
+               + (f" --map {_quote(map_source)}" if isinstance(map_source, (str, Path)) else "")
+               + "".join(f" -O {_quote(f'{k}={v}')}" for k in ASKED
+                         if (v := (options if isinstance(options, dict) else {}).get(k)) not in (None, ""))
+               + f" --crs '{EXAMPLE_CRS}' -o OUT.aveas")
+        raise MissingCrsError("the map has no <geoReference>, so the recording's CRS must be given "
+                              f"(API: crs=): {cmd} (a transverse Mercator at the site: put its "
+                              "latitude and longitude in +lat_0/+lon_0)", path=e.path) from None
     except AveasError as e:
         if e.path is None and e.where.get("line") is not None and len(paths) == 1:
             # a located error without its file: name the (only) input
             raise type(e)(e.message, path=paths[0], **e.where) from None
         raise
+
+
+def _quote(p: Any) -> str:
+    import shlex
+
+    return shlex.quote(str(p))

@@ -59,7 +59,7 @@ import math
 import re
 import warnings
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 import pyarrow as pa
@@ -92,8 +92,10 @@ _CENTRE = ("cx", "cy", "w", "h", "angle")
 class RotatedBoxOptions(ImportOptions):
     frame_rate: float | None = None
     """Frames per second, where the table has ``frame`` instead of ``time``."""
+    crs_is_recording_crs: ClassVar[bool] = False
     crs: str | None = None
-    """CRS (EPSG/PROJ/WKT) of the georeference, where no .prj / .aux.xml gives it."""
+    """CRS (EPSG/PROJ/WKT) of the georeference, where no .prj / .aux.xml gives it (``--crs``);
+    projected into the map's frame where the map has a geoReference, else the recording's CRS."""
     geotransform: tuple[float, float, float, float, float, float] | None = None
     """GDAL geotransform (GT0..GT5, upper-left pixel corner) instead of a world file."""
     pixel_origin: Literal["corner", "center"] = "corner"

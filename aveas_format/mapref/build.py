@@ -19,7 +19,7 @@ import numpy as np
 import pyarrow as pa
 from pydantic import ValidationError
 
-from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.errors import FormatError, MissingCrsError, RecordingIOError
 from aveas_format.io.arrow import conform
 from aveas_format.io.container import sha256_of
 from aveas_format.io.recording import Recording
@@ -69,6 +69,31 @@ def load_map_bytes(source: str | bytes | Path) -> bytes:
         raise RecordingIOError("map file not found", path=path) from None
     except OSError as e:
         raise RecordingIOError(f"cannot read map: {e.strerror or e}", path=path) from None
+
+
+#: an example CRS for maps without ``<geoReference>``: a transverse Mercator at the site
+EXAMPLE_CRS = "+proj=tmerc +lat_0=48.1 +lon_0=11.5 +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m"
+
+
+def check_crs(crs: str | None, geo_reference: str | None) -> str:
+    """The recording's CRS: the map's ``geo_reference``, else ``crs`` (FORMAT.md: where the map has
+    no geoReference, ``crs`` alone defines the frame). A ``crs`` that differs from the map's
+    geoReference is an error (the map fixes the frame); neither raises
+    :class:`~aveas_format.errors.MissingCrsError`."""
+    from aveas_format.mapref.crs import crs_equal, parse_crs
+
+    if crs and geo_reference:
+        if not crs_equal(crs, geo_reference):
+            raise FormatError(f"crs {crs!r} differs from the map's <geoReference> "
+                              f"{geo_reference!r}: the map fixes the frame; leave crs out")
+        return geo_reference
+    if crs:
+        parse_crs(crs)  # a FormatError naming an unreadable CRS
+        return crs
+    if geo_reference:
+        return geo_reference
+    raise MissingCrsError("the map has no <geoReference>: give the recording's CRS with --crs "
+                          f"(API: crs=), e.g. a transverse Mercator at the site, '{EXAMPLE_CRS}'")
 
 
 def velocity_from_positions(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray
@@ -122,6 +147,7 @@ def build_recording(
     rights: Mapping[str, Any] | None = None,
     license: str | None = None,
     reference: bool = True,
+    check_map_crs: bool = False,
     **meta: Any,
 ) -> Recording:
     """A valid in-memory recording from plain arrays (see module doc).
@@ -132,7 +158,11 @@ def build_recording(
     validator flags (a simulation's time zero excepted). Extra keyword arguments are
     recording.json fields (``title``, ``acquisition`` overrides as a dict, ``coverage``,
     ``conditions``, ``thresholds``, ``extras``...). ``reference=False`` keeps road coordinates as
-    given (or null) instead of computing them from the map.
+    given (or null) instead of computing them from the map. ``crs`` defaults to the map's
+    geoReference (one of them is needed: :class:`~aveas_format.errors.MissingCrsError`);
+    ``check_map_crs=True`` (a CRS a user gave, the importers' ``crs`` option) refuses a ``crs``
+    that differs from the map's geoReference. Without it a differing ``crs`` is taken as given
+    (``validate`` reports it: geo.crs_mismatch).
     """
     map_bytes = load_map_bytes(map_source)
     net = load_map(map_bytes)
@@ -140,9 +170,8 @@ def build_recording(
     if provenance is None:
         provenance = "simulated" if method in _SIMULATED_METHODS else "natural"
     rec_prov = RecordingProvenance(provenance)
-    crs = crs or net.header.geo_reference
-    if not crs:
-        raise FormatError("the map has no <geoReference>: pass crs= (e.g. a transverse Mercator at the site)")
+    if check_map_crs or not crs:
+        crs = check_crs(crs, net.header.geo_reference)
 
     p = _table(participants, "participants")
     s = _table(states, "states")

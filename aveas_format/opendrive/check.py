@@ -10,7 +10,13 @@ geometry.gap           warning   consecutive geometries: the end of one is > 1 m
 geometry.heading_jump  warning   consecutive geometries: heading differs by > 1 mrad
 geometry.s_mismatch    warning   a geometry's s differs from the previous s + length by > 1 mm
 road.length_mismatch   warning   the plan view's length differs from the road's length by > 1 mm
-lane.negative_width    error     a lane's width is negative somewhere in its section
+lane.negative_width    error     a lane's width is negative somewhere in its section, by more than
+                                 ``WIDTH_TOL`` (1 cm)
+lane.width_noise       warning   ... by less than ``WIDTH_TOL``: numerical noise of the tool that wrote
+                                 the map (e.g. -2.6 mm at a section start in a RoadRunner export)
+lane.border_sign       warning   a ``<border>`` record puts a lane's outer border on the other side of
+                                 the reference line (a right lane with positive t, a left lane with
+                                 negative t); read as the standard says (signed t)
 lane.fold              warning   a lane lies farther out than the curve radius (world -> road folds)
 link.missing_road      error     a road, junction connection or lane link names a road not in the map
 link.missing_junction  error     a road link names a junction not in the map
@@ -36,6 +42,8 @@ if TYPE_CHECKING:  # pragma: no cover
 
 GAP_TOL = 1e-3
 HEADING_TOL = 1e-3
+#: m: a negative lane width smaller than this is numerical noise (a warning), larger an error
+WIDTH_TOL = 1e-2
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,18 +139,28 @@ def _lanes(net: RoadNetwork, step: float = 2.0) -> list[Finding]:
                 if ids[k] == 0:
                     continue
                 w = float(width[:, k].min())
-                if w < -1e-9:
-                    lane = sec.lane(int(ids[k]))
-                    out.append(
-                        Finding(
-                            "lane.negative_width",
-                            f"road {road.id}: lane {ids[k]} of the section at s={sec.s:.6g} has width {w:.4g} m",
-                            "error",
-                            road.id,
-                            lane.line if lane else sec.line,
-                            w,
-                        )
-                    )
+                lane = sec.lane(int(ids[k]))
+                line = lane.line if lane else sec.line
+                if lane is not None and not len(lane.widths) and len(lane.borders):
+                    across = sign * outers[:, k] < -1e-9  # outer border beyond the reference line
+                    if across.any():
+                        out.append(Finding(
+                            "lane.border_sign",
+                            f"road {road.id}: lane {ids[k]} of the section at s={sec.s:.6g}: its <border> "
+                            f"is at t={float(outers[np.argmax(across), k]):.4g} m, on the other side of the "
+                            "reference line; read as signed t (ASAM OpenDRIVE 1.8 11.6.2), not as a distance",
+                            "warning", road.id, line, float(outers[np.argmax(across), k])))
+                if w < -WIDTH_TOL:
+                    out.append(Finding(
+                        "lane.negative_width",
+                        f"road {road.id}: lane {ids[k]} of the section at s={sec.s:.6g} has width {w:.4g} m",
+                        "error", road.id, line, w))
+                elif w < -1e-9:
+                    out.append(Finding(
+                        "lane.width_noise",
+                        f"road {road.id}: lane {ids[k]} of the section at s={sec.s:.6g} has width {w:.4g} m "
+                        f"(within the {WIDTH_TOL * 1000:g} mm tolerance for numerical noise)",
+                        "warning", road.id, line, w))
         x, y, h, kap, _, _ = net.plan.at(np.full(len(s), ri), s)
         tl, tr = lanes.extent(b)
         fold = ((kap > 0) & (tl * kap >= 1)) | ((kap < 0) & (tr * kap >= 1))

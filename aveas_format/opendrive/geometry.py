@@ -16,8 +16,11 @@ and evaluates each geometry type on its own subset at once:
 - ``paramPoly3``: ``pRange="arcLength"``: p in [0, length]; the curve's true arc length ``A(p)`` is
   computed and the point at ``s`` is the one at arc length ``s * A(length) / length`` (p read as
   true arc length rescaled to the geometry's length, as esmini does; reading p literally as s
-  shifts points by cm on real maps). ``pRange="normalized"``: p = ds / length, as the standard
-  defines it.
+  shifts points by cm on real maps). ``pRange="normalized"``: p in [0, 1], read the same way:
+  the point at ``s`` is the one at true arc length ``s * A(1) / length``. Both are what esmini
+  (``ParamPoly3::calcS2PMap``) and libOpenDRIVE (its arc-length table) compute; reading normalized
+  p linearly as ``ds / length`` (the letter of the standard) differs from them by up to 0.13 m on
+  a real RoadRunner-style map (docs/opendrive.md gives the agreement measured).
 
 ``evaluate`` also returns ``kappa`` (d heading / d s) and ``speed`` (|d position / d s|, 1 for all
 types but paramPoly3, where it is close to 1), which the Newton projection needs.
@@ -34,8 +37,9 @@ from .model import Poly3Record, Road
 
 KIND_CODES = {"line": 0, "arc": 1, "spiral": 2, "poly3": 3, "paramPoly3": 4}
 LINE, ARC, SPIRAL, POLY3, PPOLY3 = range(5)
-# poly modes
-MODE_TRUE_ARC, MODE_RESCALED_ARC, MODE_NORMALIZED = 0, 1, 2
+# poly modes: poly3 (p is the true arc length), paramPoly3 (p rescaled by arc length; its range
+# [0, p_max] is [0, length] for pRange arcLength and [0, 1] for normalized)
+MODE_TRUE_ARC, MODE_RESCALED_ARC = 0, 1
 
 _GL16_X, _GL16_W = np.polynomial.legendre.leggauss(16)
 _GL8_X, _GL8_W = np.polynomial.legendre.leggauss(8)
@@ -136,6 +140,7 @@ class PlanView:
         # polynomial coefficients (aU, bU, cU, dU, aV, bV, cV, dV) for poly3 / paramPoly3
         self.pc = np.zeros((n, 8))
         self.pmode = np.zeros(n, dtype=np.int8)
+        normalized: list[int] = []
         for i, (_, g) in enumerate(geoms):
             p = g.params
             if g.kind == "arc":
@@ -147,7 +152,12 @@ class PlanView:
                 self.pmode[i] = MODE_TRUE_ARC
             elif g.kind == "paramPoly3":
                 self.pc[i] = [p[k] for k in ("aU", "bU", "cU", "dU", "aV", "bV", "cV", "dV")]
-                self.pmode[i] = MODE_RESCALED_ARC if p["p_range"] == "arcLength" else MODE_NORMALIZED
+                self.pmode[i] = MODE_RESCALED_ARC
+                if p["p_range"] != "arcLength":
+                    normalized.append(i)
+        # the range of the polynomial parameter p: [0, length], or [0, 1] for pRange normalized
+        self.p_max = self.length.copy()
+        self.p_max[normalized] = 1.0
         self.index = SegmentedIndex.build(
             [np.array([g.s for g in road.geometries], dtype=np.float64) for road in roads], road_offset
         )
@@ -191,15 +201,15 @@ class PlanView:
         self.f_S0[sp] = S0
 
     def _prepare_polys(self) -> None:
-        """Arc-length tables for poly3 and paramPoly3 arcLength: A(p) at 64 panels over [0, L]."""
+        """Arc-length tables for poly3 and paramPoly3: A(p) at 64 panels over [0, p_max]."""
         n = len(self.kind)
         self.ptab = np.zeros((n, _N_PANELS + 1))
-        self.p_total = np.ones(n)  # A(L): true arc length over p in [0, L]
+        self.p_total = np.ones(n)  # A(p_max): true arc length over p in [0, p_max]
         self.p_h = np.ones(n)
-        pi = np.flatnonzero(((self.kind == POLY3) | (self.kind == PPOLY3)) & (self.pmode != MODE_NORMALIZED))
+        pi = np.flatnonzero((self.kind == POLY3) | (self.kind == PPOLY3))
         if len(pi) == 0:
             return
-        L = np.maximum(self.length[pi], 1e-12)
+        L = np.maximum(self.p_max[pi], 1e-12)
         h = L / _N_PANELS
         self.p_h[pi] = h
         # integrate |r'(p)| over each panel with 8-node Gauss-Legendre
@@ -238,45 +248,28 @@ class PlanView:
 
     def p_of_ds(self, g: np.ndarray, ds: np.ndarray) -> np.ndarray:
         """The polynomial parameter p at local offset ds (see the module doc for the modes)."""
-        mode = self.pmode[g]
         L = np.maximum(self.length[g], 1e-12)
-        p = np.empty_like(ds)
-        norm = mode == MODE_NORMALIZED
-        p[norm] = ds[norm] / L[norm]
-        inv = ~norm
-        if inv.any():
-            gi, d = g[inv], ds[inv]
-            target = np.where(self.pmode[gi] == MODE_RESCALED_ARC, d * self.p_total[gi] / L[inv], d)
-            # initial guess: linear in the table
-            q = target * L[inv] / self.p_total[gi]
-            for _ in range(8):
-                f = self.arc_of_p(gi, q) - target
-                q = q - f / np.maximum(self._pspeed(gi, q), 1e-12)
-                if np.all(np.abs(f) < 1e-12):
-                    break
-            p[inv] = q
-        return p
+        target = np.where(self.pmode[g] == MODE_RESCALED_ARC, ds * self.p_total[g] / L, ds)
+        # initial guess: linear in the table
+        q = target * self.p_max[g] / self.p_total[g]
+        for _ in range(8):
+            f = self.arc_of_p(g, q) - target
+            q = q - f / np.maximum(self._pspeed(g, q), 1e-12)
+            if np.all(np.abs(f) < 1e-12):
+                break
+        return q
 
     def ds_of_p(self, g: np.ndarray, p: np.ndarray) -> np.ndarray:
         """Inverse of :meth:`p_of_ds`."""
-        mode = self.pmode[g]
         L = np.maximum(self.length[g], 1e-12)
-        out = np.empty_like(p)
-        norm = mode == MODE_NORMALIZED
-        out[norm] = p[norm] * L[norm]
-        inv = ~norm
-        if inv.any():
-            gi = g[inv]
-            arc = self.arc_of_p(gi, p[inv])
-            out[inv] = np.where(self.pmode[gi] == MODE_RESCALED_ARC, arc * L[inv] / self.p_total[gi], arc)
-        return out
+        arc = self.arc_of_p(g, p)
+        return np.where(self.pmode[g] == MODE_RESCALED_ARC, arc * L / self.p_total[g], arc)
 
     def ds_per_p(self, g: np.ndarray, p: np.ndarray) -> np.ndarray:
         """d(ds)/dp."""
-        mode = self.pmode[g]
         L = np.maximum(self.length[g], 1e-12)
         sp = self._pspeed(g, p)
-        return np.where(mode == MODE_NORMALIZED, L, np.where(mode == MODE_RESCALED_ARC, sp * L / self.p_total[g], sp))
+        return np.where(self.pmode[g] == MODE_RESCALED_ARC, sp * L / self.p_total[g], sp)
 
     def eval_p(self, g: np.ndarray, p: np.ndarray):
         """x, y, heading, d heading/dp, |dr/dp| of a poly geometry at parameter p."""

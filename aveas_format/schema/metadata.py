@@ -29,7 +29,6 @@ from aveas_format.schema.enums import (
     SensorKind,
 )
 from aveas_format.schema.taxonomy import LIGHTING, PMF_TOLERANCE, ROAD_SURFACE, WEATHER
-from aveas_format.schema.versions import FORMAT_VERSION
 
 _SEMVER = r"^(0|[1-9]\d*)\.(0|[1-9]\d*)\.(0|[1-9]\d*)$"
 _SHA256 = r"^[0-9a-f]{64}$"

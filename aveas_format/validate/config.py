@@ -133,6 +133,13 @@ class MapConfig(_Section):
                                    "the lane direction is driving against it")
     min_wrong_way_s: float = Field(0.5, ge=0, description="s; shorter wrong-way episodes are "
                                    "ignored")
+    off_road_share: float = Field(0.5, ge=0, le=1, description="a recording whose states are on "
+                                  "no road of the map for more than this share is an error "
+                                  "(map.mostly_off_road: wrong map, CRS, offset, axes or unit)")
+    off_road_min_states: int = Field(10, ge=1, description="... checked from this many states on")
+    off_road_walk_m: float = Field(30.0, ge=0, description="in a recording without vehicles, a "
+                                   "state counts as off the map only this far from every lane "
+                                   "(pedestrians walk beside the roads)")
 
 
 class InteractionsConfig(_Section):

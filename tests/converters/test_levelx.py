@@ -399,7 +399,8 @@ def test_ind_map_in_the_tracks_frame(tmp_path):
     veh = ind_truth()
     files = write_centre(tmp_path / "ind", veh)
     local = tmp_path / "local.xodr"
-    local.write_text(straight_highway(length=300.0, lanes_right=2, lanes_left=2, x0=-50.0, y0=-60.0))
+    # under the tracks (x 20..75 m, y -48..-40 m): off the map would be map.mostly_off_road
+    local.write_text(straight_highway(length=300.0, lanes_right=2, lanes_left=2, x0=-50.0, y0=-44.0))
     rec = convert("ind", files, map_source=local)
     tracks = np.genfromtxt(files[0], delimiter=",", names=True)
     s = rec.states

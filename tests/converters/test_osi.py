@@ -202,8 +202,10 @@ def test_export_round_trip(tmp_path, suffix):
     rec = _lit_recording()
     (tmp_path / "map.xodr").write_bytes(rec.map_source)
     out = tmp_path / f"trace{suffix}"
-    assert get_converter("osi", "export")(rec, out) == [out]
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["map.xodr", out.name])  # no temp left
+    # the map is written next to the trace (issue 18): what the re-import needs
+    assert get_converter("osi", "export")(rec, out) == [out, tmp_path / "trace.xodr"]
+    assert (tmp_path / "trace.xodr").read_bytes() == rec.map_source  # it has a geoReference
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["map.xodr", out.name, "trace.xodr"])  # no temp left
     back = convert("osi", [out], map_source=tmp_path / "map.xodr")
     a, c = rec.states, back.states
     assert c.num_rows == a.num_rows

@@ -11,7 +11,6 @@ import pytest
 
 import aveas_format
 from aveas_format.converters import convert, load_converters
-from aveas_format.opendrive.builder import straight_highway
 
 from helpers_common import realdata_fixture, shared
 from helpers_realdata import sumo_excerpt_map

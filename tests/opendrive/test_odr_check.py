@@ -89,3 +89,39 @@ def test_georeference(geo, code):
     header = f"<header><geoReference><![CDATA[{geo}]]></geoReference></header>" if geo else "<header/>"
     net = _map(_road(), header=header)
     assert _flat(net.check()) == [(code, None, 2)]
+
+
+def test_lane_width_noise_is_a_warning_below_the_tolerance():
+    """Issue 18, point 8: a few mm of negative width at a section start (a real RoadRunner export
+    has -2.6 mm) is numerical noise: a warning below WIDTH_TOL (1 cm), an error beyond."""
+    from aveas_format.opendrive.check import WIDTH_TOL
+
+    def lanes(a):
+        return (f'<lane id="-1" type="driving"><width sOffset="0" a="{a}" b="0.5" c="0" d="0"/></lane>'
+                '<lane id="-2" type="driving"><width sOffset="0" a="3.5"/></lane>')
+
+    noisy = [f for f in _map(_road(lanes=lanes(-0.0026))).check() if f.code != "georef.missing"]
+    assert [(f.code, f.severity) for f in noisy] == [("lane.width_noise", "warning")]
+    assert "-0.0026 m (within the 10 mm tolerance" in noisy[0].message
+    bad = [f for f in _map(_road(lanes=lanes(-2 * WIDTH_TOL))).check() if f.code != "georef.missing"]
+    assert [(f.code, f.severity) for f in bad] == [("lane.negative_width", "error")]
+
+
+def test_border_records_are_signed_t_in_check_and_projection():
+    """<border> is the outer border's signed t (ASAM OpenDRIVE 1.8 11.6.2): a right lane's border at
+    a positive t lies left of the reference line. map check says so (border_sign, and the negative
+    width that follows) and the projection reads it the same way: the lane's borders are t = 0 and
+    t = +2, a negative width on the right side, so no point lies in it (neither at t = -1 nor at
+    t = +1): the map is defective, as map check says, rather than silently reinterpreted."""
+    import numpy as np
+
+    net = _map(_road(lanes='<lane id="-1" type="driving"><border sOffset="0" a="2.0"/></lane>'))
+    codes = [(f.code, f.severity) for f in net.check() if f.code != "georef.missing"]
+    assert codes == [("lane.border_sign", "warning"), ("lane.negative_width", "error")]
+    inner, outer = net.lane_borders("1", np.array([50.0]), np.array([-1]))
+    assert (inner[0], outer[0]) == (0.0, 2.0)
+    lane, _ = net.lane_at("1", np.array([50.0, 50.0]), np.array([-1.0, 1.0]))
+    assert lane.tolist() == [0, 0]
+    # the usual reading: a right lane's border at a negative t, no finding
+    ok = _map(_road(lanes='<lane id="-1" type="driving"><border sOffset="0" a="-2.0"/></lane>'))
+    assert [f.code for f in ok.check()] == ["georef.missing"]

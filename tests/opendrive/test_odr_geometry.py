@@ -108,16 +108,30 @@ def test_parampoly3_arclength_is_rescaled_true_arc_length(geom_net):
     assert p[-1] == pytest.approx(g.length, abs=1e-9)  # the end of the geometry is p = length
 
 
-def test_parampoly3_normalized_is_linear_in_p(geom_net):
+def test_parampoly3_normalized_is_rescaled_true_arc_length(geom_net):
+    """pRange normalized: p in [0, 1], the point at s is the one at true arc length
+    s * A(1) / length, as esmini (calcS2PMap) and libOpenDRIVE read it (issue 18, point 6);
+    checked against an independent adaptive quadrature (scipy quad) + root finding (brentq)."""
+    from scipy.optimize import brentq
+
     g = geom_net.roads["ppoly_normalized"].geometries[0]
     P = {k: g.params[k] for k in ("aU", "bU", "cU", "dU", "aV", "bV", "cV", "dV")}
+    du = lambda p: P["bU"] + 2 * P["cU"] * p + 3 * P["dU"] * p * p  # noqa: E731
+    dv = lambda p: P["bV"] + 2 * P["cV"] * p + 3 * P["dV"] * p * p  # noqa: E731
+    total = _arc_length(du, dv, 1.0)
     s = np.linspace(0, g.length, 7)
-    p = s / g.length
+    p = np.array([0.0 if si == 0 else brentq(lambda q: _arc_length(du, dv, q) - si * total / g.length,
+                                             0.0, 1.0, xtol=1e-14) for si in s])
     U = P["aU"] + P["bU"] * p + P["cU"] * p**2 + P["dU"] * p**3
     V = P["aV"] + P["bV"] * p + P["cV"] * p**2 + P["dV"] * p**3
     x, y, h, _ = geom_net.reference_line("ppoly_normalized", s)
     np.testing.assert_allclose(x, g.x + U * np.cos(g.hdg) - V * np.sin(g.hdg), atol=1e-9)
     np.testing.assert_allclose(y, g.y + U * np.sin(g.hdg) + V * np.cos(g.hdg), atol=1e-9)
+    np.testing.assert_allclose(h, g.hdg + np.arctan2(dv(p), du(p)), atol=1e-12)
+    # and the linear reading (p = s / length) is measurably different on this fixture
+    lin = s / g.length
+    Ul = P["aU"] + P["bU"] * lin + P["cU"] * lin**2 + P["dU"] * lin**3
+    assert np.max(np.abs(Ul - U)) > 1e-3
 
 
 @pytest.mark.parametrize("road_id", ["arc", "spiral", "spiral_tiny", "poly3", "ppoly_arclength", "ppoly_normalized"])

@@ -79,7 +79,11 @@ def test_converts_validates_and_round_trips(path, tmp_path):
             convert("openlabel", [path], map_source=STRAIGHT_MAP)
         return
     rec, notes = _convert(path, tmp_path)
-    assert error_codes(rec) == DEFECTS.get(path.name, set()), path.name
+    codes = error_codes(rec)
+    if _map_for(path, tmp_path) == STRAIGHT_MAP:
+        # a stand-in map (the files come without their site's): being off it says nothing
+        codes.discard("map.mostly_off_road")
+    assert codes == DEFECTS.get(path.name, set()), path.name
     assert rec.meta.source.options["timestamps"]  # the time base is recorded
     doc = json.loads(path.read_text())["openlabel"]
     objects = doc.get("objects") or {}
@@ -141,7 +145,8 @@ def test_kitti_0003_label_glitch_is_the_one_error(path, tmp_path):
     neighbours, so the velocity from positions halves for a frame (an annotation slip)."""
     rec, _ = _convert(path, tmp_path)
     rep = aveas_format.validate(rec)
-    (f,) = [f for f in rep.findings() if f.severity.value == "error"]
+    # (off the stand-in map, as every KITTI file: not the file's error)
+    (f,) = [f for f in rep.findings() if f.severity.value == "error" and f.code != "map.mostly_off_road"]
     car0 = rec.participants.filter(pc.equal(rec.participants.column("source_id"), "Car0"))
     assert f.code == "kinematics.acceleration"
     assert f.location.participant_id == car0.column("participant_id")[0].as_py()

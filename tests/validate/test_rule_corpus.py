@@ -540,7 +540,7 @@ def test_derived_stale_asks_the_derivation_package(clean, monkeypatch):
 
 
 def test_every_rule_has_a_failing_case():
-    covered = {c[1] for c in CASES} | {"metadata.derived_stale"}
+    covered = {c[1] for c in CASES} | {"metadata.derived_stale", "map.mostly_off_road"}
     semantic = {c for c in load_rules() if not c.startswith(("structure.", "zzz."))}
     assert semantic == covered
 
@@ -559,3 +559,38 @@ def test_overlap_is_exempt_for_accidents_and_attached_participants():
     c_overlap(sc)
     sc["participants"]["attached_to"] = pa.array([None, None, None, None, 0], pa.int64())
     assert aveas_format.validate(vf.build(sc), select=["interactions"]).codes() == set()
+
+
+# --- map.mostly_off_road: with map.off_drivable_lane by nature (each vehicle is off the map too) ---
+
+def _moved(sc, transform):
+    """The scene's states moved by ``transform(x, y) -> (x, y)`` (road coordinates recomputed)."""
+    for tr in sc["tracks"]:
+        tr["x"], tr["y"] = transform(np.asarray(tr["x"]), np.asarray(tr["y"]))
+    return vf.build(sc)
+
+
+@pytest.mark.parametrize("transform,cause", [
+    (lambda x, y: (y, x), "with x and y swapped, 100% would be on a road"),
+    (lambda x, y: (x * 100.0, y * 100.0), "read as centimetres, 100% would be on a road"),
+    (lambda x, y: (x + 5000.0, y + 3000.0), "the offset): none puts the positions on the map"),
+])
+def test_mostly_off_road_names_the_likely_cause(scene, transform, cause):
+    """A recording whose vehicles are on no road (issue 18, point 7) is an error naming the likely
+    causes, and the cheap ones are tried: swapped axes and units put the points back on the map."""
+    rec = _moved(scene, transform)
+    report = aveas_format.validate(rec, select=["map"])  # (geo and kinematics notice it too)
+    assert report.codes() == {"map.mostly_off_road", "map.off_drivable_lane"}, report.codes()
+    f = report.findings()[[r.code for r in report.results].index("map.mostly_off_road")]
+    assert f.severity.value == "error" and cause in f.message, f.message
+    # the threshold is configurable
+    assert "map.mostly_off_road" not in aveas_format.validate(
+        rec, config={"map": {"off_road_share": 1.0}}).codes()
+
+
+def test_mostly_off_road_counts_vehicles(scene):
+    """Half the vehicles off the map is below the default threshold (more than half)."""
+    n = len(scene["tracks"])
+    for tr in scene["tracks"][: n // 2]:
+        tr["y"] = np.asarray(tr["y"]) + 3000.0
+    assert "map.mostly_off_road" not in aveas_format.validate(vf.build(scene)).codes()

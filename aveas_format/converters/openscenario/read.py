@@ -1,0 +1,263 @@
+"""The OpenSCENARIO import: a scenario file -> the recording of the motion it prescribes.
+
+Parameters and catalogs are resolved first (:mod:`.params`), then the storyboard is replayed
+(:mod:`.replay`) on the map (``--map`` or the ``RoadNetwork/LogicFile``, relative to the file).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from lxml import etree
+from pydantic import Field
+
+from aveas_format.converters.common import load_map_bytes, wrap_recording
+from aveas_format.converters.registry import ImportOptions, converter
+from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.numeric import fmt_num
+from aveas_format.safeio import xml_parser
+
+CATEGORY_TO_CLASS = {"car": "car", "van": "van", "truck": "truck", "bus": "bus", "trailer": "trailer",
+                     "semitrailer": "trailer", "motorbike": "motorcycle", "bicycle": "bicycle",
+                     "train": "railvehicle", "tram": "railvehicle", "pedestrian": "pedestrian",
+                     "animal": "animal", "wheelchair": "mobility_device"}
+_KINDS = ("Vehicle", "Pedestrian", "MiscObject")
+
+
+class OpenScenarioImportOptions(ImportOptions):
+    provenance: str = "simulated"
+    """natural / staged / simulated: what the trajectories are (default simulated)."""
+    method: str = "traffic_simulation"
+    """Acquisition method of the recording."""
+    parameter: dict[str, str | float | int | bool] = Field(default_factory=dict)
+    """Values of the scenario's global parameters (``-O parameter.NAME=VALUE``, repeatable),
+    instead of their declared defaults."""
+    rate_hz: float = Field(20.0, gt=0, le=1000)
+    """Steps per second of the replay (samples of default motion and of untimed trajectories;
+    timed polyline vertices are kept as they are)."""
+    max_duration: float = Field(600.0, gt=0)
+    """End of the replay (s) where no stop trigger ends it earlier."""
+
+
+def _read(path: Path):
+    try:
+        root = etree.parse(str(path), xml_parser()).getroot()
+    except OSError as e:
+        raise RecordingIOError(f"cannot read: {e}", path=path) from None
+    except etree.XMLSyntaxError as e:
+        raise FormatError(f"malformed XML: {e.msg}", path=path, line=e.lineno) from None
+    if root.tag != "OpenSCENARIO":
+        raise FormatError(f"not OpenSCENARIO: root element <{root.tag}>", path=path)
+    return root
+
+
+def _map_of(root, path: Path, map_source):
+    if map_source is not None:
+        return map_source
+    lf = root.find("RoadNetwork/LogicFile")
+    if lf is None or not lf.get("filepath"):
+        raise FormatError("no map: pass --map MAP.xodr (the file has no RoadNetwork/LogicFile)",
+                          path=path)
+    cand = path.parent / lf.get("filepath")
+    if not cand.is_file():
+        raise FormatError(f"no map: pass --map MAP.xodr (LogicFile {lf.get('filepath')!r} is not "
+                          f"at {cand})", path=path)
+    return cand
+
+
+def _inline_catalog_maneuvers(root, catalogs, path: Path) -> None:
+    """``ManeuverGroup/CatalogReference`` (maneuver catalogs) replaced by the resolved
+    ``Maneuver``; one that cannot be resolved is an error naming the line (its events would be
+    lost otherwise)."""
+    for mg in list(root.iter("ManeuverGroup")):
+        for ref in mg.findall("CatalogReference"):
+            try:
+                entry = catalogs.resolve(ref)
+            except FormatError as e:
+                raise FormatError(e.message, path=path, **e.where) from None
+            if entry.tag != "Maneuver":
+                raise FormatError(f"catalog entry {ref.get('entryName')!r} is a <{entry.tag}>, not "
+                                  "a Maneuver", path=path, line=ref.sourceline)
+            mg.replace(ref, entry)
+
+
+def _entity(so, catalogs) -> tuple[Any, str | None]:
+    """The Vehicle / Pedestrian / MiscObject element of a ScenarioObject, or (None, why not)."""
+    el = next((c for c in so if c.tag in _KINDS), None)
+    if el is not None:
+        return el, None
+    ref = so.find("CatalogReference")
+    if ref is not None:
+        try:
+            el = catalogs.resolve(ref)
+        except FormatError as e:
+            return None, f"{e.message} (XML line {ref.sourceline})"
+        if el.tag not in _KINDS:
+            return None, f"catalog entry {ref.get('entryName')!r} is a <{el.tag}>, not an entity"
+        return el, None
+    kinds = [c.tag for c in so if isinstance(c.tag, str) and c.tag != "ObjectController"]
+    return None, f"<{kinds[0] if kinds else 'nothing'}> is not a Vehicle, Pedestrian or MiscObject"
+
+
+@converter("openscenario", description="ASAM OpenSCENARIO XML 1.0-1.3: the storyboard's motion "
+           "replayed (trajectories, speeds, teleports; parameters, catalogs)",
+           patterns=("*.xosc",), method="traffic_simulation", options=OpenScenarioImportOptions,
+           needs_map=False, provides=("partner",))
+def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenarioImportOptions):
+    """The motion an OpenSCENARIO file prescribes, replayed kinematically (module
+    :mod:`aveas_format.converters.openscenario.replay` says what is carried out and what is not).
+
+    Entities: ``Vehicle``, ``Pedestrian``, ``MiscObject`` inline or by ``CatalogReference``
+    (``CatalogLocations`` directories relative to the file; parameter assignments applied); the
+    ``BoundingBox`` gives length, width, height and the offset of its centre from the entity's
+    reference point (positions are moved to the footprint centre). Class from the category (or the
+    ``aveas:class`` property of this toolkit's own export). An entity that cannot be converted is
+    one warning line naming it and why; an error only when none can.
+    """
+    from aveas_format.converters.openscenario.params import Catalogs, declare, resolve_tree
+    from aveas_format.converters.openscenario.replay import Replay
+    from aveas_format.mapref.crs import LocalFrame
+    from aveas_format.opendrive import load_map
+
+    if len(inputs) != 1:
+        raise FormatError(f"openscenario: expected one input file, got {len(inputs)}")
+    path = Path(inputs[0])
+    root = _read(path)
+    declared = {d.get("name") for d in root.iterfind("ParameterDeclarations/ParameterDeclaration")}
+    unknown = sorted(set(options.parameter) - declared)
+    if unknown:
+        raise FormatError(f"parameter {unknown[0]!r} (option parameter.{unknown[0]}) is not declared "
+                          f"by the scenario; declared: {', '.join(sorted(x for x in declared if x))}",
+                          path=path)
+    try:
+        scope = declare(root.find("ParameterDeclarations"), {}, options.parameter)
+        resolve_tree(root, {}, options.parameter)
+        catalogs = Catalogs(root, path.parent, scope)
+    except FormatError as e:
+        raise FormatError(e.message, path=e.path or path, **e.where) from None
+    _inline_catalog_maneuvers(root, catalogs, path)
+    map_bytes = load_map_bytes(_map_of(root, path, map_source))
+    net = load_map(map_bytes)
+    crs = net.header.geo_reference or options.crs
+    frame = LocalFrame(crs, net.header.offset, warn=False) if crs else None
+
+    problems: dict[str, str] = {}
+    info: dict[str, dict[str, Any]] = {}
+    for so in root.iterfind("Entities/ScenarioObject"):
+        name = so.get("name")
+        el, why = _entity(so, catalogs)
+        if el is None:
+            problems[name] = why or "unknown entity kind"
+            continue
+        props = {pr.get("name"): pr.get("value") for pr in el.iterfind("Properties/Property")}
+        cat = el.get("vehicleCategory") or el.get("pedestrianCategory") or (
+            "pedestrian" if el.tag == "Pedestrian" else None)
+        dims, centre = el.find("BoundingBox/Dimensions"), el.find("BoundingBox/Center")
+        if dims is None:
+            problems[name] = f"no BoundingBox (XML line {el.sourceline})"
+            continue
+        f = {k: float(dims.get(k, "nan")) for k in ("length", "width", "height")}
+        c = {k: float(centre.get(k, "0")) if centre is not None else 0.0 for k in ("x", "y")}
+        info[name] = {"class": props.get("aveas:class") or CATEGORY_TO_CLASS.get(cat or "", "other"),
+                      **f, "cx": c["x"], "cy": c["y"],
+                      "participant_id": props.get("aveas:participant_id"),
+                      "source_id": props.get("aveas:source_id") or name,
+                      "role": props.get("aveas:role")}
+    replay = Replay(root, net, {n: d["length"] for n, d in info.items()}, rate_hz=options.rate_hz,
+                    max_duration=options.max_duration, frame=frame, params=scope)
+    replay.catalogs = catalogs
+    ents = replay.run()
+
+    rows: dict[str, list] = {k: [] for k in ("participant_id", "time", "x", "y", "z", "heading")}
+    part: dict[str, list] = {k: [] for k in ("participant_id", "source_id", "class", "length",
+                                             "width", "height", "role")}
+    dropped: list[tuple[str, float]] = []
+    used_ids = {int(d["participant_id"]) for d in info.values()
+                if d["participant_id"] and str(d["participant_id"]).isdigit()}
+    next_id = 0
+    for name, d in info.items():
+        e = ents[name]
+        if e.error:
+            problems[name] = e.error
+            continue
+        if not e.rows:
+            problems[name] = "no position (no TeleportAction or trajectory places it)"
+            continue
+        q = d["participant_id"]
+        if q and str(q).isdigit():
+            pid = int(q)
+        else:
+            while next_id in used_ids:
+                next_id += 1
+            pid = next_id
+            used_ids.add(pid)
+        first: dict[float, tuple] = {}
+        for r in e.rows:
+            key = round(r[0], 9)
+            if key in first:
+                if any(abs(a - b) > 1e-9 for a, b in zip(r[1:4], first[key][1:4])):
+                    dropped.append((name, r[0]))
+                continue
+            first[key] = r
+        for tt, x, y, z, h in sorted(first.values()):
+            hh = h if np.isfinite(h) else 0.0
+            # the entity's reference point -> the footprint centre (the bounding box centre)
+            rows["participant_id"].append(pid)
+            rows["time"].append(tt)
+            rows["x"].append(x + d["cx"] * math.cos(hh) - d["cy"] * math.sin(hh))
+            rows["y"].append(y + d["cx"] * math.sin(hh) + d["cy"] * math.cos(hh))
+            rows["z"].append(z)
+            rows["heading"].append(h)
+        part["participant_id"].append(pid)
+        for k in ("source_id", "class", "length", "width", "height"):
+            part[k].append(d[k])
+        part["role"].append(d["role"] if d["role"] and d["role"] not in ("None", "observed")
+                            else "simulated_agent")
+    for name, why in problems.items():
+        warnings.warn(f"{path.name}: entity {name!r} not converted: {why}", stacklevel=2)
+    if not rows["time"]:
+        raise FormatError("no participants: no entity could be converted"
+                          + (": " + "; ".join(f"{n!r}: {w}" for n, w in problems.items())
+                             if problems else " (the file has no ScenarioObject)"), path=path)
+    for name, n in replay.clipped.items():
+        warnings.warn(f"{path.name}: {n} trajectory vertices of entity {name!r} lie after the end "
+                      f"of the scenario (its StopTrigger, at {replay.t:g} s) and were dropped",
+                      stacklevel=2)
+    if dropped:
+        warnings.warn(f"{path.name}: {len(dropped)} trajectory vertices repeat an entity's time "
+                      f"(e.g. entity {dropped[0][0]!r} at {fmt_num(dropped[0][1])} s) and were dropped; "
+                      "the first vertex of each time is kept", stacklevel=2)
+    notes = {}
+    if replay.ignored_actions:
+        notes["actions_not_replayed"] = dict(sorted(replay.ignored_actions.items()))
+    if replay.ignored_conditions:
+        notes["conditions_not_evaluated"] = sorted(replay.ignored_conditions)
+    if notes:
+        warnings.warn(f"{path.name}: replayed kinematically; "
+                      + "; ".join(f"{k.replace('_', ' ')}: {', '.join(v)}" for k, v in notes.items()),
+                      stacklevel=2)
+    states = {k: np.asarray(v, np.int64 if k == "participant_id" else np.float64)
+              for k, v in rows.items()}
+    if np.isnan(states["heading"]).any():
+        del states["heading"]  # from the direction of motion
+    order = np.lexsort((states["time"], states["participant_id"]))
+    states = {k: v[order] for k, v in states.items()}
+    participants = {k: np.asarray(v, dtype=object if k in ("source_id", "class", "role") else
+                                  np.int64 if k == "participant_id" else np.float64)
+                    for k, v in part.items()}
+    hdr = root.find("FileHeader")
+    title = options.title or (hdr.get("description") if hdr is not None else None)
+    partner = (hdr.get("author") if hdr is not None else None) or "unknown"
+    return wrap_recording(
+        "openscenario", [path], options, map_bytes=map_bytes, participants=participants,
+        states=states, method=options.method, provenance=options.provenance, partner=partner,
+        acquisition={"platform": f"OpenSCENARIO {path.name}",
+                     "sensors": [{"id": "scenario", "kind": "simulator"}]},
+        extras={"openscenario": {"replay_rate_hz": options.rate_hz,
+                                 "duration_s": replay.t, "catalog_files": [f.name for f in catalogs.files],
+                                 "not_converted": problems, **notes}},
+        **({"title": title} if title else {}))
