@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -76,7 +77,10 @@ def env(tmp_path_factory):
     rec = small_recording().write(d / "rec.aveas")
     (d / "points.csv").write_text("x,y\n10,-1.75\n20,-5.25\n")
     (d / "fcd.xml").write_text(FCD)
-    return {"REC": rec, "MAP": STRAIGHT_MAP, "PTS": d / "points.csv", "FCD": d / "fcd.xml"}
+    bare = re.sub(r"<geoReference>.*?</geoReference>", "", STRAIGHT_MAP.read_text(), flags=re.S)
+    (d / "bare.xodr").write_text(bare)  # a map without geoReference: the CRS must be given
+    return {"REC": rec, "MAP": STRAIGHT_MAP, "PTS": d / "points.csv", "FCD": d / "fcd.xml",
+            "BARE": d / "bare.xodr"}
 
 
 def fill(args, env, **extra) -> list[str]:
@@ -114,6 +118,8 @@ def test_an_unknown_option_is_a_one_line_usage_error(capsys, path):
     (("derive", "REC", "-o", "OUT", "--only", "kinematic"), "(did you mean 'kinematics'?)"),
     (("sim", "run", "-o", "OUT"), "does not state the licence; pass -O license=LICENCE"),
     (("sim", "run", "-o", "OUT", "-O", "licence=CC0-1.0"), "(did you mean 'license'?)"),
+    (("convert", "--from", "sumo-fcd", "FCD", "--map", "BARE", "-o", "OUT", "-O", "partner=x", "-O",
+      "license=y"), "the map has no <geoReference>, so the recording's CRS must be given"),
     (("frobnicate",), "No such command 'frobnicate'"),
     (("info",), "Missing argument"),
     (("validate", "REC", "-o", "/nonexistent/dir/r.html"), "the directory /nonexistent/dir does not exist"),

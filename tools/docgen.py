@@ -72,8 +72,9 @@ def cli_markdown() -> str:
         "",
         "- **Exit codes**: 0 success, 1 findings (`validate`: errors, or warnings too with "
         "`--fail-on warning`; `map check`), 2 usage error (an unknown command, option or value, a "
-        "missing argument, an unknown converter or `-O` key, an output that exists without "
-        "`--overwrite`), 3 unreadable input or tool failure (a missing optional dependency "
+        "missing argument — a map, a value only a person can state (`-O license=...`), `--crs` "
+        "where the map has no geoReference —, an unknown converter or `-O` key, an output that "
+        "exists without `--overwrite`), 3 unreadable input or tool failure (a missing optional dependency "
         "included: the message names the extra, `pip install \"aveas-format[ros2]\"`).",
         "- **Errors** are one line on stderr, `aveas-format: error: ...`; a wrong option value "
         "names the closest allowed one (`did you mean 'html'?`). `--debug` shows the traceback.",
