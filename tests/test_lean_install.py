@@ -66,7 +66,7 @@ def test_the_core_works_and_each_extra_is_named(tmp_path):
         "plot": ["plot", str(rec), "-o", str(tmp_path / "figs")],
         "map_plot": ["map", "plot", str(STRAIGHT_MAP), "-o", str(tmp_path / "m.png")],
         "mcap": ["export", "--to", "mcap", str(rec), "-o", str(tmp_path / "r.mcap")],
-        "osi": ["export", "--to", "osi", str(rec), "-o", str(tmp_path / "r.osi")],
+        "osi": ["export", "--to", "osi", str(rec), "-o", str(tmp_path / "t.osi")],  # + t.xodr
         "ros2": ["convert", "--from", "ros2-mcap", str(tmp_path / "fcd.xml"), "--map",
                  str(STRAIGHT_MAP), "-o", str(tmp_path / "v.aveas"), "-O", "partner=t", "-O",
                  "license=CC0-1.0"],

@@ -92,6 +92,8 @@ def test_shared_gives_the_path_to_a_marked_test():
 
 
 PROBE = '''
+import os
+
 import pytest
 
 from helpers_common import SHARED, shared
@@ -105,7 +107,10 @@ def test_unmarked_reads_past_shared():
 
 
 def test_unmarked_lists_past_shared():
-    list((SHARED / "data").glob("*"))
+    try:
+        os.listdir(SHARED / "data")
+    except OSError:
+        pass
 
 
 @pytest.mark.realdata
