@@ -1,13 +1,108 @@
-"""Export/import throughput of the interoperability converters on the sample highway scene
-(60 vehicles, 30 s at 25 Hz): OpenLABEL export + import (lossless round trip), OpenSCENARIO export
-+ import (the storyboard replay), MCAP and OSI export."""
+"""Export/import throughput of the interoperability converters (issues 8, 22), each path as
+states/s and MB beside a baseline measured in the same run.
+
+The sample highway scene (60 vehicles, 30 s at 25 Hz, 23 k states): OpenLABEL export (streamed
+from columns) against ``json.dumps`` of the same document and a pyarrow Parquet write of the same
+states; OpenLABEL import (lossless) against ``json.loads`` of the same file and a Parquet read;
+OpenSCENARIO export + import, MCAP and OSI export. With ``--states N`` (e.g. 2000000) the scene is
+tiled in time to N states (participant ids and times shifted, as bench_validate_memory does) and
+the OpenLABEL export and import each run in a fresh process, with its peak memory (VmHWM) — the
+recording is generated here, never stored in the repository.
+
+    python benchmarks/bench_interop.py                 # the 23 k sample (make bench)
+    python benchmarks/bench_interop.py --states 2000000
+"""
 
 from __future__ import annotations
 
+import json
 import shutil
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_validate_memory import HWM_MB_SRC, tiled  # noqa: E402
+
+_CHILD = """
+import json, sys, time
+from pathlib import Path
+""" + HWM_MB_SRC + """
+import aveas_format
+from aveas_format.converters import convert, get_converter
+
+what, rec_dir, out = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3])
+if what == "export":
+    rec = aveas_format.open(rec_dir)
+    _ = rec.states, rec.participants, rec.map
+    base = hwm_mb()
+    t0 = time.perf_counter()
+    get_converter("openlabel", "export")(rec, out)
+else:
+    base = hwm_mb()
+    t0 = time.perf_counter()
+    rec = convert("openlabel", [out])
+dt = time.perf_counter() - t0
+print(json.dumps({"seconds": dt, "peak_mb": hwm_mb(), "before_mb": base, "states": rec.states.num_rows}))
+"""
+
+
+def _child(what: str, rec_dir: Path, out: Path) -> dict:
+    r = subprocess.run([sys.executable, "-c", _CHILD, what, str(rec_dir), str(out)],
+                       capture_output=True, text=True)
+    if r.returncode:
+        raise RuntimeError(r.stderr[-2000:])
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def _row(name: str, n: int, dt: float, note: str, base_s: float | None = None, base_note: str = "") -> dict:
+    r = {"benchmark": name, "states": n, "seconds": round(dt, 3), "rows_per_s": round(n / dt), "note": note}
+    if base_s is not None:
+        r["baseline_s"] = round(base_s, 3)
+        r["speedup_vs_baseline"] = round(base_s / dt, 2)
+        r["note"] = f"{note}; baseline: {base_note}"
+    return r
+
+
+def _timed(fn) -> float:
+    t0 = time.perf_counter()
+    fn()
+    return time.perf_counter() - t0
+
+
+def _openlabel_rows(rec, tmp: Path) -> list[dict]:
+    """OpenLABEL export and import of ``rec`` in this process, with their same-run baselines."""
+    import pyarrow.parquet as pq
+
+    from aveas_format.converters import convert, get_converter
+    from aveas_format.converters.openlabel import recording_to_openlabel
+    from aveas_format.converters.openlabel.write import openlabel_chunks
+    from aveas_format.safeio import write_parquet_atomic
+
+    n = rec.states.num_rows
+    out = tmp / "rec.json"
+    dt = _timed(lambda: get_converter("openlabel", "export")(rec, out))
+    mb = out.stat().st_size / 1e6
+    enc = _timed(lambda: sum(map(len, openlabel_chunks(rec, opendrive="rec.xodr"))))
+    doc = recording_to_openlabel(rec, opendrive="rec.xodr")
+    b_dumps = _timed(lambda: json.dumps(doc, allow_nan=False, separators=(",", ":")).encode())
+    del doc
+    b_pq = _timed(lambda: write_parquet_atomic(rec.states, tmp / "states.parquet"))
+    rows = [_row("encode_openlabel", n, enc, "the document's bytes from the recording, no file", b_dumps,
+                 "json.dumps of the same document (built outside the timing)"),
+            _row("export_openlabel", n, dt, f"{mb:.1f} MB ({mb * 1e3 / n:.2f} kB/state), streamed to the "
+                 "file (atomic, fsync) + the map", b_pq,
+                 f"pyarrow Parquet write of the states, atomic ({(tmp / 'states.parquet').stat().st_size / 1e6:.1f}"
+                 " MB)")]
+    dt = _timed(lambda: convert("openlabel", [out]))
+    b_loads = _timed(lambda: json.loads(out.read_bytes()))
+    b_pqr = _timed(lambda: pq.read_table(tmp / "states.parquet"))
+    rows += [_row("import_openlabel", n, dt, "lossless (aveas_format extension), streamed", b_loads,
+                  "json.loads of the same file (no recording built)"),
+             _row("import_openlabel", n, dt, "(the same run)", b_pqr, "pyarrow Parquet read of the states")]
+    return rows
 
 
 def main(n_vehicles: int = 60, duration_s: float = 30.0) -> list[dict]:
@@ -18,33 +113,51 @@ def main(n_vehicles: int = 60, duration_s: float = 30.0) -> list[dict]:
     _ = rec.map  # parse once, outside the timings
     n = rec.states.num_rows
     tmp = Path(tempfile.mkdtemp(prefix="aveas-bench-interop-"))
-    rows: list[dict] = []
     try:
-        for name, file in (("openlabel", "rec.json"), ("openscenario", "rec.xosc"), ("mcap", "rec.mcap"),
-                           ("osi", "rec.osi")):
-            t0 = time.perf_counter()
-            get_converter(name, "export")(rec, tmp / file)
-            dt = time.perf_counter() - t0
-            size = (tmp / file).stat().st_size
-            rows.append({"benchmark": f"export_{name}", "states": n, "seconds": round(dt, 3),
-                         "rows_per_s": round(n / dt), "note": f"{size / 1e6:.1f} MB"})
-        t0 = time.perf_counter()
-        back = convert("openlabel", [tmp / "rec.json"])
-        dt = time.perf_counter() - t0
-        rows.append({"benchmark": "import_openlabel", "states": back.states.num_rows,
-                     "seconds": round(dt, 3), "rows_per_s": round(n / dt),
-                     "note": "with the aveas_format extension (lossless)"})
+        rows = _openlabel_rows(rec, tmp)
+        for name, file in (("openscenario", "rec.xosc"), ("mcap", "rec.mcap"), ("osi", "rec.osi")):
+            dt = _timed(lambda: get_converter(name, "export")(rec, tmp / file))
+            rows.append(_row(f"export_{name}", n, dt, f"{(tmp / file).stat().st_size / 1e6:.1f} MB"))
         t0 = time.perf_counter()
         back = convert("openscenario", [tmp / "rec.xosc"])
-        dt = time.perf_counter() - t0
-        rows.append({"benchmark": "import_openscenario", "states": back.states.num_rows,
-                     "seconds": round(dt, 3), "rows_per_s": round(back.states.num_rows / dt),
-                     "note": "storyboard replay of the 10 Hz export (issue 18)"})
+        rows.append(_row("import_openscenario", back.states.num_rows, time.perf_counter() - t0,
+                         "storyboard replay of the 10 Hz export (issue 18)"))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return rows
 
 
+def large(target_states: int) -> list[dict]:
+    """The OpenLABEL export and import of a recording of ``target_states`` states, each in a fresh
+    process (peak memory = its VmHWM; the export's includes the recording it reads)."""
+    from aveas_format.sample import highway_scene
+
+    tmp = Path(tempfile.mkdtemp(prefix="aveas-bench-interop-large-"))
+    try:
+        base = highway_scene(n_vehicles=600, duration_s=300.0, seed=3)
+        copies = max(1, -(-target_states // base.states.num_rows))
+        rec = tiled(base, copies)
+        rec.write(tmp / "rec")
+        n = rec.states.num_rows
+        del rec, base
+        out = tmp / "rec.json"
+        e = _child("export", tmp / "rec", out)
+        mb = out.stat().st_size / 1e6
+        i = _child("import", tmp / "rec", out)
+        return [
+            _row("export_openlabel_large", n, e["seconds"], f"{mb:.0f} MB; fresh process: peak "
+                 f"{e['peak_mb']:.0f} MB with the recording loaded ({e['before_mb']:.0f} MB before the export)"),
+            _row("import_openlabel_large", i["states"], i["seconds"],
+                 f"fresh process: peak {i['peak_mb']:.0f} MB ({i['before_mb']:.0f} MB after imports)"),
+        ]
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 if __name__ == "__main__":
-    for r in main():
+    if len(sys.argv) > 2 and sys.argv[1] == "--states":
+        result = large(int(sys.argv[2]))
+    else:
+        result = main()
+    for r in result:
         print(r)

@@ -17,11 +17,8 @@ import tempfile
 import time
 from pathlib import Path
 
-_CHILD = """
-import json, sys, time
-import aveas_format
-
-
+#: source of ``hwm_mb()`` for the fresh processes of the memory benchmarks (also bench_interop)
+HWM_MB_SRC = """
 def hwm_mb():
     # VmHWM belongs to this process's own address space; ru_maxrss would also count the parent's
     # memory at fork (Linux keeps it across exec)
@@ -29,7 +26,12 @@ def hwm_mb():
         if line.startswith("VmHWM:"):
             return int(line.split()[1]) / 1024
     return float("nan")
+"""
 
+_CHILD = """
+import json, sys, time
+import aveas_format
+""" + HWM_MB_SRC + """
 cfg = json.loads(sys.argv[2])
 t0 = time.perf_counter()
 r = aveas_format.validate(sys.argv[1], config=cfg)

@@ -12,8 +12,8 @@ import textwrap
 
 from helpers_common import STRAIGHT_MAP
 
-#: the top-level packages of every extra ([plot], [mcap], [ros2], [osi], [dask], [sim], [fit])
-EXTRAS = ("matplotlib", "mcap", "mcap_ros2", "rosbags", "foxglove_schemas_protobuf", "google",
+#: the top-level packages of every extra ([fast], [plot], [mcap], [ros2], [osi], [dask], [sim], [fit])
+EXTRAS = ("orjson", "matplotlib", "mcap", "mcap_ros2", "rosbags", "foxglove_schemas_protobuf", "google",
           "betterosi", "dask", "distributed", "sklearn", "sumo", "sumolib", "traci")
 
 SCRIPT = textwrap.dedent('''

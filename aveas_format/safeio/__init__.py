@@ -13,6 +13,7 @@ Imports nothing of the package but :mod:`aveas_format.errors` (tests/test_layers
 from aveas_format.safeio.atomic import (
     save_figure_atomic,
     write_bytes_atomic,
+    write_chunks_atomic,
     write_parquet_atomic,
     write_text_atomic,
 )
@@ -42,6 +43,6 @@ __all__ = [
     "MAX_BULK_JSON_BYTES", "MAX_JSON_BYTES", "MAX_JSON_DEPTH", "MAX_MCAP_CHUNK_BYTES", "MAX_MCAP_RATIO",
     "MAX_MCAP_UNCOMPRESSED_FLOOR", "MAX_ZIP_MEMBER_BYTES", "MAX_ZIP_RATIO", "CountingReader",
     "check_json_size", "check_mcap", "check_zip_member", "iterparse", "load_json",
-    "save_figure_atomic", "scan_json_member", "stream_json_error", "write_bytes_atomic",
+    "save_figure_atomic", "scan_json_member", "stream_json_error", "write_bytes_atomic", "write_chunks_atomic",
     "write_parquet_atomic", "write_text_atomic", "xml_parser",
 ]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 
 from aveas_format.errors import RecordingIOError
@@ -17,8 +18,15 @@ def _umask() -> int:
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` through a temporary sibling and a rename (mode as for a new file
-    under the current umask, not mkstemp's 0600). A directory that is missing or not writable is
-    a :class:`~aveas_format.errors.RecordingIOError` naming ``path`` and the directory (not the
+    under the current umask, not mkstemp's 0600)."""
+    return write_chunks_atomic(path, (data,))
+
+
+def write_chunks_atomic(path: str | Path, chunks: Iterable[bytes]) -> Path:
+    """Write the byte chunks one after the other to ``path`` through a temporary sibling and a
+    rename (a streamed export never holds the whole file); nothing is left behind when the
+    iterator raises. A directory that is missing or not writable is a
+    :class:`~aveas_format.errors.RecordingIOError` naming ``path`` and the directory (not the
     temporary file)."""
     path = Path(path)
     parent = path.parent if str(path.parent) else Path(".")
@@ -35,7 +43,8 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
     try:
         os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as f:
-            f.write(data)
+            for data in chunks:
+                f.write(data)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)

@@ -192,6 +192,11 @@ _FLOAT_COLS = ("cub_ts", "px", "py", "pz", "yaw", "dl", "dw", "dh", "vu", "vv", 
                "x_std", "y_std", "z_std", "heading_std", "vu_std", "vv_std", "yr_std", "au_std",
                "av_std", "road_s", "road_t", "lane_position", *LIGHTS)
 _OBJ_COLS = ("csroot", "road_id", "lane_id")
+#: the values of one box, in the order :meth:`_FrameRows._add_box` puts them in its row tuple
+_ROW_COLS = ("uidx", "occ", "hv", "hr", "cub_ts", "px", "py", "pz", "yaw", "dl", "dw", "dh", "vu", "vv",
+             "yr", "au", "av", "x_std", "y_std", "z_std", "heading_std", "vu_std", "vv_std", "yr_std",
+             "au_std", "av_std", "road_s", "road_t", "lane_position", *LIGHTS, *_OBJ_COLS)
+assert sorted(_ROW_COLS) == sorted((*_FLOAT_COLS, *_OBJ_COLS, "uidx", "occ", "hv", "hr"))
 
 
 def _as_obj(lst: list) -> np.ndarray:
@@ -260,8 +265,7 @@ class _FrameRows:
         self.stamps: list = []
         self.frame_uids: list[np.ndarray] = []
         self.uid_index: dict[str, int] = {}
-        self.buf: dict[str, list] = {c: [] for c in (*_FLOAT_COLS, *_OBJ_COLS, "uidx", "occ",
-                                                     "hv", "hr")}
+        self.buf: list[tuple] = []  # one tuple of _ROW_COLS per box
         self.ext_buf: list = []
         self.chunks: list[dict[str, np.ndarray]] = []
         self.ext_chunks: list[tuple[int, dict[str, tuple]]] = []
@@ -287,9 +291,9 @@ class _FrameRows:
         return need
 
     def _flush(self) -> None:
-        b = self.buf
-        if not b["occ"]:
+        if not self.buf:
             return
+        b = dict(zip(_ROW_COLS, zip(*self.buf)))
         ch = {c: _as_float(b[c]) for c in _FLOAT_COLS}
         ch.update({c: _as_obj(b[c]) for c in _OBJ_COLS})
         ch["uidx"] = np.asarray(b["uidx"], np.int64)
@@ -301,8 +305,7 @@ class _FrameRows:
         keys = dict.fromkeys(c for e in es if e for c in e)
         self.ext_chunks.append((len(es), {c: _ext_rep([e.get(c, _MISSING) if e else _MISSING
                                                        for e in es]) for c in keys}))
-        for v in b.values():
-            v.clear()
+        self.buf = []
         self.ext_buf = []
 
     def add(self, k: Any, fr: Any) -> None:
@@ -355,65 +358,47 @@ class _FrameRows:
     def _add_box(self, j: int, k: Any, u: str, cub: dict[str, Any], od: dict[str, Any], edges: dict,
                  cache: dict) -> None:
         """One box: the cuboid in the root frame and the profile's attributes of the object."""
-        b, ui = self.buf, self.uid_index
         pw, yaw, dims, ground, root = _box_in_root(
             cub, lambda name: self._resolve(name, edges, cache), k, u, self.path)
         attrs = _attrs(od)
-        b["uidx"].append(ui[u])
-        b["occ"].append(j)
-        cub_ts = _first(_attrs(cub.get("attributes")), "timestamp")
-        b["cub_ts"].append(float(cub_ts) if isinstance(cub_ts, (int, float)) else np.nan)
-        b["px"].append(pw[0])
-        b["py"].append(pw[1])
-        b["pz"].append(ground)
-        b["yaw"].append(yaw)
-        b["dl"].append(dims[0])
-        b["dw"].append(dims[1])
-        b["dh"].append(dims[2])
-        b["csroot"].append(root)
+        cub_attrs = cub.get("attributes")
+        cub_ts = _first(_attrs(cub_attrs), "timestamp") if cub_attrs else None
         if self._needs_size(u):
             self.sizes.append((j, u, dims))
+        nan = np.nan
         vel = _first(attrs, "velocity")
         acc = _first(attrs, "acceleration")
-        b["vu"].append(vel[0] if vel else np.nan)
-        b["vv"].append(vel[1] if vel else np.nan)
-        b["yr"].append(vel[5] if vel and len(vel) > 5 else np.nan)
-        b["hv"].append(vel is not None)
-        b["au"].append(acc[0] if acc else np.nan)
-        b["av"].append(acc[1] if acc else np.nan)
         bsd = _first(attrs, "bounding_box/ustddev")
-        b["x_std"].append(bsd[0] if bsd else np.nan)
-        b["y_std"].append(bsd[1] if bsd else np.nan)
-        b["z_std"].append(bsd[2] if bsd else np.nan)
-        b["heading_std"].append(bsd[5] if bsd else np.nan)
         vsd = _first(attrs, "velocity/ustddev")
-        b["vu_std"].append(vsd[0] if vsd else np.nan)
-        b["vv_std"].append(vsd[1] if vsd else np.nan)
-        b["yr_std"].append(vsd[5] if vsd and len(vsd) > 5 else np.nan)
         asd = _first(attrs, "acceleration/ustddev")
-        b["au_std"].append(asd[0] if asd else np.nan)
-        b["av_std"].append(asd[1] if asd else np.nan)
         road = _first(attrs, "used_road_link", _first(attrs, "open_drive/road_id"))
         lrc = _first(attrs, "open_drive/local_road_coordinates")
         lane = _first(attrs, "open_drive/lane_id")
-        b["hr"].append(road is not None and lrc is not None)
-        b["road_id"].append(str(road) if road is not None and lrc is not None else None)
-        b["road_s"].append(lrc[0] if road is not None and lrc else np.nan)
-        b["road_t"].append(lrc[1] if road is not None and lrc else np.nan)
         try:
-            b["lane_id"].append(int(str(_enum_value(lane))) if lane is not None and road is not None else None)
+            lane_id = int(str(_enum_value(lane))) if lane is not None and road is not None else None
         except ValueError:
-            b["lane_id"].append(None)
-        b["lane_position"].append(_first(attrs, "open_drive/lane_position", np.nan))
-        for c, name in LIGHTS.items():
-            bl = _first(attrs, name)
-            b[c].append(np.nan if bl is None else float(bool(bl)))
+            lane_id = None
+        on = road is not None and lrc is not None
+        self.buf.append((
+            self.uid_index[u], j, vel is not None, on,
+            float(cub_ts) if isinstance(cub_ts, (int, float)) else nan,
+            pw[0], pw[1], ground, yaw, dims[0], dims[1], dims[2],
+            vel[0] if vel else nan, vel[1] if vel else nan, vel[5] if vel and len(vel) > 5 else nan,
+            acc[0] if acc else nan, acc[1] if acc else nan,
+            bsd[0] if bsd else nan, bsd[1] if bsd else nan, bsd[2] if bsd else nan, bsd[5] if bsd else nan,
+            vsd[0] if vsd else nan, vsd[1] if vsd else nan, vsd[5] if vsd and len(vsd) > 5 else nan,
+            asd[0] if asd else nan, asd[1] if asd else nan,
+            lrc[0] if road is not None and lrc else nan, lrc[1] if road is not None and lrc else nan,
+            _first(attrs, "open_drive/lane_position", nan),
+            *[nan if (bl := _first(attrs, name)) is None else float(bool(bl)) for name in LIGHTS.values()],
+            root, str(road) if on else None, lane_id,
+        ))
         irow = _interior_row(attrs)
         if irow:
             self.interior.append((j, u, irow))
         e = cub.get(EXT)
         self.ext_buf.append(e if isinstance(e, dict) else None)
-        if len(b["occ"]) >= _CHUNK:
+        if len(self.buf) >= _CHUNK:
             self._flush()
 
     def finish(self) -> _FrameData:

@@ -19,7 +19,6 @@ import base64
 import json
 import math
 import re
-from collections import defaultdict
 from datetime import datetime, timezone
 from typing import Any
 
@@ -268,15 +267,24 @@ def _body_std(sx: np.ndarray, sy: np.ndarray, corr: np.ndarray | None, h: np.nda
 # ================================================================================================
 
 def _attrs(od: dict[str, Any] | None) -> dict[str, list[dict[str, Any]]]:
-    """name -> list of items (all types), in file order."""
-    out: dict[str, list] = defaultdict(list)
+    """name -> list of items (all types), in file order (on the import's hot path: one call per box)."""
+    out: dict[str, list] = {}
+    if not od:
+        return out
     for kind in ("boolean", "num", "text", "vec"):
-        items = (od or {}).get(kind) or []
+        items = od.get(kind)
+        if not items:
+            continue
         if isinstance(items, dict):
             items = [items]
         for it in items:
             if isinstance(it, dict) and "name" in it:
-                out[it["name"]].append(it)
+                name = it["name"]
+                same = out.get(name)
+                if same is None:
+                    out[name] = [it]
+                else:
+                    same.append(it)
     return out
 
 

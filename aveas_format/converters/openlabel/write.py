@@ -18,6 +18,7 @@ import math
 from collections import defaultdict
 from datetime import datetime, timezone
 from pathlib import Path
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -25,7 +26,6 @@ import pyarrow as pa
 
 from aveas_format.converters.openlabel.profile import (
     _DEFAULT_THRESHOLDS,
-    _LONGITUDINAL,
     _NO_RECORDER,
     _PROFILE_PART_COLS,
     _PROFILE_STATE_COLS,
@@ -45,6 +45,7 @@ from aveas_format.converters.openlabel.profile import (
     _rot_world,
     table_to_json,
 )
+from aveas_format.converters.openlabel.encode import CHUNK_ROWS, dumps, frame_chunks, orjson
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.io.arrow import column_numpy
 
@@ -101,31 +102,40 @@ class OpenLabelExportOptions(ConverterOptions):
 
 def recording_to_openlabel(rec, *, opendrive: str = "map.xodr", extension: bool = True,
                            road_attributes: bool = True) -> dict[str, Any]:
-    """The OpenLABEL document (a dict with the root key ``openlabel``) of a recording."""
-    with _no_gc():
-        return _recording_to_openlabel(rec, opendrive, extension, road_attributes)
+    """The OpenLABEL document (a dict with the root key ``openlabel``) of a recording (the parsed
+    bytes of :func:`openlabel_chunks`: one writer for the file and the dict)."""
+    data = b"".join(openlabel_chunks(rec, opendrive=opendrive, extension=extension,
+                                     road_attributes=road_attributes))
+    return orjson.loads(data) if orjson is not None else json.loads(data)
 
 
-def _recording_to_openlabel(rec, opendrive: str, extension: bool, road_attributes: bool) -> dict[str, Any]:
-    """The steps of :func:`recording_to_openlabel` (the keys of the document in this order)."""
+def openlabel_chunks(rec, *, opendrive: str = "map.xodr", extension: bool = True,
+                     road_attributes: bool = True, chunk_rows: int = CHUNK_ROWS) -> Iterator[bytes]:
+    """The compact JSON of the OpenLABEL document of a recording, streamed: the keys of the
+    document in this order (metadata, frames, frame_intervals, objects, contexts, events), the
+    frames a chunk of about ``chunk_rows`` state rows at a time (never the whole text in memory)."""
     meta = rec.meta
     thr = meta.thresholds.model_dump() if meta.thresholds else {}
     thr_out = {k: (thr.get(k) or v) for k, v in _DEFAULT_THRESHOLDS.items()}
     metadata = _profile_metadata(meta, opendrive, thr_out)
-    doc: dict[str, Any] = {"metadata": metadata}
-    cols = _Columns(rec)
-    doc["frames"] = _frames(rec, cols, thr_out, extension, road_attributes)
-    times = cols.times
-    doc["frame_intervals"] = [{"frame_start": 0, "frame_end": int(len(times) - 1)}] if len(times) else []
-    speed = np.hypot(cols.vx, cols.vy)
-    doc["objects"] = _objects(rec.participants, cols, speed, extension)
-    doc["contexts"] = _contexts(rec, times, speed)
-    events = _events(rec.events, times)
-    if events:
-        doc["events"] = events
     if extension:
         metadata[EXT] = _extension(rec, thr)
-    return {"openlabel": doc}
+    cols = _Columns(rec)
+    yield b'{"openlabel":{"metadata":' + dumps(metadata) + b',"frames":{'
+    del metadata
+    with _no_gc():
+        yield from frame_chunks(_frame_inputs(rec, cols, thr_out, extension, road_attributes),
+                                chunk_rows=chunk_rows)
+    times = cols.times
+    tail: dict[str, Any] = {}
+    tail["frame_intervals"] = [{"frame_start": 0, "frame_end": int(len(times) - 1)}] if len(times) else []
+    speed = np.hypot(cols.vx, cols.vy)
+    tail["objects"] = _objects(rec.participants, cols, speed, extension)
+    tail["contexts"] = _contexts(rec, times, speed)
+    events = _events(rec.events, times)
+    if events:
+        tail["events"] = events
+    yield b"}," + dumps(tail)[1:] + b"}"
 
 
 def _profile_metadata(meta, opendrive: str, thr_out: dict[str, float]) -> dict[str, Any]:
@@ -322,7 +332,7 @@ def _impact(derived: dict[str, pa.Table] | None, times: np.ndarray, thr_out: dic
     return impact
 
 
-def _exact_values(s: pa.Table, cols: _Columns) -> dict[str, list]:
+def _exact_values(s: pa.Table, cols: _Columns) -> dict[str, np.ndarray]:
     """Values the importer rebuilds with rounding (vehicle -> world frame, box centre -> ground):
     the exact value (NaN elsewhere) of each column where the rebuilt one would differ in any bit,
     so that an unchanged round trip hashes the same (and derived tables stay fresh)."""
@@ -342,14 +352,15 @@ def _exact_values(s: pa.Table, cols: _Columns) -> dict[str, list]:
         orig = column_numpy(s, c, missing=None)
         off = np.isfinite(orig) & (b != orig)
         if off.any():
-            exact[c] = np.where(off, orig, np.nan).tolist()
+            exact[c] = np.where(off, orig, np.nan)
     return exact
 
 
 def _uncertainty(p: pa.Table, cols: _Columns) -> tuple:
-    """The ``/ustddev`` vectors, as lists of Python floats per row (``box_std``, ``vel_std``,
-    ``acc_std``; velocity and acceleration only in rows where ``vel_ok``/``acc_ok``) and per
-    participant (``size_std``): ``(box_std, size_std, vel_std, vel_ok, acc_std, acc_ok)``."""
+    """The ``/ustddev`` vectors, as lists of their components (arrays over the states, 0.0 where
+    constant: ``box_std``, ``vel_std``, ``acc_std``; velocity and acceleration only in rows where
+    ``vel_ok``/``acc_ok``) and per participant (``size_std``):
+    ``(box_std, size_std, vel_std, vel_ok, acc_std, acc_ok)``."""
     n, stds, h = cols.n, cols.stds, cols.h
 
     def _z(a):
@@ -357,9 +368,7 @@ def _uncertainty(p: pa.Table, cols: _Columns) -> tuple:
 
     box_std = vel_std = acc_std = None
     if any(stds[c] is not None for c in ("x_std", "y_std", "heading_std")):
-        zero = np.zeros(n)
-        box_std = np.column_stack([_z(stds["x_std"]), _z(stds["y_std"]), _z(stds["z_std"]), zero, zero,
-                                   _z(stds["heading_std"])]).tolist()
+        box_std = [_z(stds["x_std"]), _z(stds["y_std"]), _z(stds["z_std"]), 0.0, 0.0, _z(stds["heading_std"])]
     size_std = {}
     for j, q in enumerate(cols.part_ids.tolist()):
         size_std[q] = [float(v) if v is not None else 0.0 for v in (
@@ -369,13 +378,11 @@ def _uncertainty(p: pa.Table, cols: _Columns) -> tuple:
     if stds["vx_std"] is not None and stds["vy_std"] is not None:
         vel_ok = np.isfinite(stds["vx_std"]) & np.isfinite(stds["vy_std"])
         su, sv = _body_std(_z(stds["vx_std"]), _z(stds["vy_std"]), cols.vxvy, h)
-        zero = np.zeros(n)
-        vel_std = np.column_stack([su, sv, zero, zero, zero, _z(stds["yaw_rate_std"])]).tolist()
+        vel_std = [su, sv, 0.0, 0.0, 0.0, _z(stds["yaw_rate_std"])]
     if stds["ax_std"] is not None and stds["ay_std"] is not None:
         acc_ok = np.isfinite(stds["ax_std"]) & np.isfinite(stds["ay_std"])
         su, sv = _body_std(_z(stds["ax_std"]), _z(stds["ay_std"]), cols.axay, h)
-        zero = np.zeros(n)
-        acc_std = np.column_stack([su, sv, zero, zero, zero, zero]).tolist()
+        acc_std = [su, sv, 0.0, 0.0, 0.0, 0.0]
     return box_std, size_std, vel_std, vel_ok, acc_std, acc_ok
 
 
@@ -383,115 +390,50 @@ def _uncertainty(p: pa.Table, cols: _Columns) -> tuple:
 # frames: one object per state row
 # ================================================================================================
 
-def _frames(rec, cols: _Columns, thr_out: dict[str, float], extension: bool, road_attributes: bool
-            ) -> dict[str, dict[str, Any]]:
-    """``frames``: per distinct time its timestamp and, per state row, the object's data."""
-    s, n = rec.states, cols.n
-    facts = _row_road_facts(rec, cols) if road_attributes and cols.on.any() else None
-    interior_rows = _interior_rows(rec.interior)
-    impact = _impact(rec.derived, cols.times, thr_out)
-    # extension columns of states, and the nullable columns the profile writes a placeholder for
-    ext_cols = [c for c in s.column_names if c not in _PROFILE_STATE_COLS]
-    ext_vals = {c: _pylist(s, c) for c in ext_cols}
-    nullable = [c for c in ("z", "z_std", "x_std", "y_std", "heading_std", "ax", "ay", "yaw_rate")
-                if c in s.column_names]
-    null_ofl = {c: s.column(c).is_null().to_numpy(zero_copy_only=False).tolist() for c in nullable}
-    exact = _exact_values(s, cols) if extension and n else {}
-    box_std, size_std, vel_std, vel_ok, acc_std, acc_ok = _uncertainty(rec.participants, cols)
-    # per-row values as Python lists (the loop below is the hot path)
-    cls_of, height, length, width, road_id = cols.cls_of, cols.height, cols.length, cols.width, cols.road_id
-    xl, yl, hl = cols.x.tolist(), cols.y.tolist(), cols.h.tolist()
-    onl = cols.on.tolist()
-    lane_idl = cols.lane_id.tolist() if cols.lane_id is not None else None
-    road_sl = cols.road_s.tolist() if cols.road_s is not None else None
-    road_tl = cols.road_t.tolist() if cols.road_t is not None else None
-    lightl = {c: a.tolist() for c, a in cols.lights.items()}
-    zl = cols.z.tolist() if cols.z is not None else None
-    vul, vvl, aul, avl = cols.vu.tolist(), cols.vv.tolist(), cols.au.tolist(), cols.av.tolist()
-    yrl = cols.yaw_rate.tolist() if cols.yaw_rate is not None else None
-    pidl, tl, fl = cols.pid.tolist(), cols.t.tolist(), cols.frame_of_row.tolist()
+def _frame_inputs(rec, cols: _Columns, thr_out: dict[str, float], extension: bool, road_attributes: bool
+                  ) -> dict[str, Any]:
+    """The per-row inputs of the frames as columns (numpy arrays over all state rows; dicts by
+    (participant, time) for the sparse interior and ``impact`` data), for
+    :func:`aveas_format.converters.openlabel.encode.frame_chunks`."""
+    s, p, n = rec.states, rec.participants, cols.n
+    pid = cols.pid
+    # per-row participant statics (sizes, class) through the participants' index
+    pos = {q: j for j, q in enumerate(cols.part_ids.tolist())}
+    prow = np.fromiter((pos[q] for q in pid.tolist()), dtype=np.int64, count=n)
 
-    frames: dict[str, dict[str, Any]] = {}
-    for k, tv in enumerate(cols.times):
-        frames[str(k)] = {"frame_properties": {"timestamp": float(tv)}, "objects": {}}
-    for i in range(n):
-        q = pidl[i]
-        cls = cls_of[q]
-        hh = height[q]
-        zc = (0.0 if zl is None or not _finite(zl[i]) else zl[i]) + (0.0 if not _finite(hh) else hh / 2)
-        cuboid: dict[str, Any] = {"name": "bounding_box", "val": [
-            xl[i], yl[i], zc, 0.0, 0.0, hl[i], length[q], width[q], hh if _finite(hh) else 0.0]}
-        yr = yrl[i] if yrl is not None and _finite(yrl[i]) else 0.0
-        vec: list[dict[str, Any]] = [
-            {"name": "velocity", "val": [vul[i], vvl[i], 0.0, 0.0, 0.0, yr]},
-            {"name": "acceleration", "val": [aul[i], avl[i], 0.0, 0.0, 0.0, 0.0]},
-        ]
-        num: list[dict[str, Any]] = []
-        text: list[dict[str, Any]] = []
-        boolean: list[dict[str, Any]] = []
-        if box_std is not None:
-            vec.append({"name": "bounding_box/ustddev", "val": box_std[i] + size_std[q]})
-        if vel_std is not None and vel_ok[i]:
-            vec.append({"name": "velocity/ustddev", "val": vel_std[i]})
-        if acc_std is not None and acc_ok[i]:
-            vec.append({"name": "acceleration/ustddev", "val": acc_std[i]})
-        if onl[i]:
-            text.append({"name": "used_road_link", "val": str(road_id[i])})
-            if lane_idl is not None and _finite(lane_idl[i]):
-                text.append({"name": "open_drive/lane_id", "val": str(int(lane_idl[i]))})
-            vec.append({"name": "open_drive/local_road_coordinates",
-                        "val": [road_sl[i], road_tl[i]]})
-            if facts is not None:
-                lp = facts["lane_position"][i]
-                if _finite(lp):
-                    num.append({"name": "open_drive/lane_position", "val": _f(lp)})
-                if cls in _ROAD_CLASSES:
-                    text.append({"name": "road/classification", "val": str(facts["classification"][i])})
-                    for side in ("left", "right"):
-                        num.append({"name": f"road/number_lanes/{side}/legal",
-                                    "val": int(facts[f"{side}_legal"][i])})
-                        num.append({"name": f"road/number_lanes/{side}/physical",
-                                    "val": int(facts[f"{side}_phys"][i])})
-        for c, name in LIGHTS.items():
-            a = lightl.get(c)
-            if a is not None and _finite(a[i]):
-                boolean.append({"name": name, "val": bool(a[i] >= 0.5)})
-        irow = interior_rows.get((q, tl[i])) if interior_rows else None
-        if irow:
-            for c, name in (("automation_longitudinal_p", _LONGITUDINAL),
-                            # the profile's lateral flag carries the longitudinal name (quirk)
-                            ("automation_lateral_p", _LONGITUDINAL)):
-                if irow.get(c) is not None:
-                    boolean.append({"name": name, "val": bool(irow[c] >= 0.5)})
-            for c, name in (("steering_angle", "interior/steering_angle"),
-                            ("steering_angle_std", "interior/steering_angle/ustddev"),
-                            ("brake_pedal", "interior/brake_pedal"),
-                            ("accelerator_pedal", "interior/accelerator_pedal"),
-                            ("gear", "interior/gear")):
-                if irow.get(c) is not None:
-                    num.append({"name": name, "val": irow[c] if c == "gear" else float(irow[c])})
-        imp = impact.get((q, tl[i])) if impact else None
-        if imp:
-            for key in ("gttc", "pret", "thw"):
-                if imp.get(f"{key}/values"):
-                    vec.append({"name": f"impact/{key}/object_ids", "val": imp[f"{key}/object_ids"]})
-                    vec.append({"name": f"impact/{key}/values", "val": imp[f"{key}/values"]})
-        if extension:
-            ext = {c: ext_vals[c][i] for c in ext_cols if ext_vals[c][i] is not None}
-            for c in nullable:
-                if null_ofl[c][i]:
-                    ext[c] = None
-            for c, vals in exact.items():
-                if not math.isnan(vals[i]):
-                    ext[c] = vals[i]
-            if ext:
-                cuboid[EXT] = _clean(ext)
-        od: dict[str, Any] = {"cuboid": [cuboid], "vec": vec}
-        od["boolean"] = boolean
-        od["num"] = num
-        od["text"] = text
-        frames[str(fl[i])]["objects"][str(q)] = {"object_data": od}
-    return frames
+    def _by_row(d: dict) -> np.ndarray:
+        return np.asarray([d[q] for q in cols.part_ids.tolist()], dtype=np.float64)[prow]
+
+    length, width, height = _by_row(cols.length), _by_row(cols.width), _by_row(cols.height)
+    hh = np.where(np.isfinite(height), height, 0.0)
+    z = np.zeros(n) if cols.z is None else np.where(np.isfinite(cols.z), cols.z, 0.0)
+    yr = 0.0 if cols.yaw_rate is None else np.where(np.isfinite(cols.yaw_rate), cols.yaw_rate, 0.0)
+    box_std, size_std, vel_std, vel_ok, acc_std, acc_ok = _uncertainty(p, cols)
+    if box_std is not None:
+        sz = np.asarray([size_std[q] for q in cols.part_ids.tolist()], dtype=np.float64)
+        box_std = [*box_std, *(sz[:, k][prow] for k in range(3))]
+    road_class = np.asarray([c in _ROAD_CLASSES for c in cols.classes], dtype=bool)[prow]
+    ext = None
+    if extension:
+        nullable = [c for c in ("z", "z_std", "x_std", "y_std", "heading_std", "ax", "ay", "yaw_rate")
+                    if c in s.column_names]
+        ext = {"columns": {c: s.column(c) for c in s.column_names if c not in _PROFILE_STATE_COLS},
+               "nullable": {c: s.column(c).is_null().to_numpy(zero_copy_only=False) for c in nullable},
+               "exact": _exact_values(s, cols) if n else {}}
+    return {
+        "pid": pid, "t": cols.t, "times": cols.times, "frame_of_row": cols.frame_of_row, "on": cols.on,
+        # vectors as lists of their components (stacked per chunk: no n x 9 matrices)
+        "box": [cols.x, cols.y, z + hh / 2, 0.0, 0.0, cols.h, length, width, hh],
+        "vel": [cols.vu, cols.vv, 0.0, 0.0, 0.0, yr],
+        "acc": [cols.au, cols.av, 0.0, 0.0, 0.0, 0.0],
+        "box_std": box_std, "vel_std": vel_std, "vel_ok": vel_ok, "acc_std": acc_std, "acc_ok": acc_ok,
+        "road_id": cols.road_id, "lane_id": cols.lane_id, "road_s": cols.road_s,
+        "road_t": cols.road_t if cols.road_t is not None else np.full(n, np.nan),
+        "facts": _row_road_facts(rec, cols) if road_attributes and cols.on.any() else None,
+        "road_class": road_class, "lights": cols.lights,
+        "interior": _interior_rows(rec.interior), "impact": _impact(rec.derived, cols.times, thr_out),
+        "ext": ext,
+    }
 
 
 # ================================================================================================
@@ -673,15 +615,16 @@ def _outputs(output: Path, options: OpenLabelExportOptions) -> list[Path]:
 @converter("openlabel", direction="export", options=OpenLabelExportOptions, outputs=_outputs,
            description="ASAM OpenLABEL 1.0 JSON, AVEAS profile (+ the map as .xodr next to it)")
 def export_openlabel(rec, output: Path, *, options: OpenLabelExportOptions) -> list[Path]:
-    from aveas_format.safeio import write_bytes_atomic
+    from aveas_format.safeio import write_bytes_atomic, write_chunks_atomic
 
     output = Path(output)
     map_name = _map_name(output, options)
-    doc = recording_to_openlabel(rec, opendrive=map_name, extension=options.extension,
-                                 road_attributes=options.road_attributes)
-    data = json.dumps(doc, indent=options.indent, allow_nan=False, separators=None if options.indent
-                      else (",", ":")).encode()
-    written = [write_bytes_atomic(output, data)]
+    chunks = openlabel_chunks(rec, opendrive=map_name, extension=options.extension,
+                              road_attributes=options.road_attributes)
+    if options.indent:  # human-readable: the document whole (compact files are streamed)
+        doc = json.loads(b"".join(chunks))
+        chunks = iter([json.dumps(doc, indent=options.indent, allow_nan=False).encode()])
+    written = [write_chunks_atomic(output, chunks)]
     if options.write_map and rec.map_source is not None:
         written.append(write_bytes_atomic(output.parent / map_name, rec.map_source))
     return written
