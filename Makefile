@@ -1,22 +1,33 @@
 # aveas-format — every target sets up what it needs (a .venv with the package) on a fresh machine.
+# `make demo` installs the package with what the demo needs (the [demo] extra: MCAP and OSI
+# exports, figures); `make test` and the other targets install every extra and the test tools.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+DEMO_STAMP := $(VENV)/.installed-demo
 
 .PHONY: demo test test-all bench docs fuzz clean
 
-$(STAMP): pyproject.toml
+$(VENV)/.pip: 
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[test]"
+	touch $@
+
+$(DEMO_STAMP): pyproject.toml | $(VENV)/.pip
+	$(PY) -m pip install --quiet -e ".[demo]"
+	touch $@
+
+$(STAMP): pyproject.toml | $(VENV)/.pip
+	$(PY) -m pip install --quiet -e ".[all,test]"
 	# The official OpenDRIVE XSDs ship in asam-qc-opendrive, whose pins (numpy<2, lxml<6) clash
 	# with ours; the tests only read its schema files, so it is installed without dependencies.
 	$(PY) -m pip install --quiet --no-deps "asam-qc-opendrive==1.0.0"
-	touch $(STAMP)
+	touch $@ $(DEMO_STAMP)
 
-demo: $(STAMP)
-	$(VENV)/bin/aveas-format demo --output demo-output
+# writes demo-output/ (replacing the previous demo), ends with the HTML report and the figures
+demo: $(DEMO_STAMP)
+	$(VENV)/bin/aveas-format demo --output demo-output --overwrite
 
 test: $(STAMP)
 	$(PY) -m pytest -q -m "not slow"

@@ -22,8 +22,10 @@ from aveas_format.errors import (
     FormatError,
     FormatVersionError,
     MapError,
+    MissingDependencyError,
     RecordingExistsError,
     RecordingIOError,
+    UsageError,
 )
 
 _LAZY = {
@@ -48,7 +50,7 @@ def __getattr__(name: str) -> Any:
 
 
 __all__ = [
-    "AveasError", "ChecksumError", "FormatError", "FormatVersionError", "MapError", "ReadPlan",
-    "Recording", "RecordingExistsError", "RecordingIOError", "__version__", "build_recording", "open",
-    "validate",
+    "AveasError", "ChecksumError", "FormatError", "FormatVersionError", "MapError",
+    "MissingDependencyError", "ReadPlan", "Recording", "RecordingExistsError", "RecordingIOError",
+    "UsageError", "__version__", "build_recording", "open", "validate",
 ]

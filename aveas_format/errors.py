@@ -10,11 +10,15 @@ built-in exceptions so that callers can catch either (STYLE.md 11, as rasterio d
 - :class:`MapError` (also :class:`ValueError`): an OpenDRIVE map cannot be read; carries the XML line.
 - :class:`PluginError` (also :class:`ImportError`): a plugin (an entry point of a partner package)
   cannot be loaded or registers a name that exists (:mod:`aveas_format.plugins`).
+- :class:`UsageError` (also :class:`ValueError`): the call itself is wrong (an unknown converter,
+  exporter, option or value; a missing map), not the data; the CLI exits 2 with it.
 - :class:`MissingDependencyError` (also :class:`ImportError`): an optional dependency is not
   installed; the message names the extra that brings it (:func:`require`).
 
-:func:`require` imports an optional dependency or raises :class:`MissingDependencyError` naming
-the extra (``pip install "aveas-format[geo]"``), the one guard of every optional import.
+Two helpers go with them: :func:`require` imports an optional dependency or raises
+:class:`MissingDependencyError` naming the extra (``pip install "aveas-format[ros2]"``), the one
+guard of every optional import; :func:`did_you_mean` adds the closest known name to a message
+about an unknown one.
 
 Each error carries the ``path`` it is about (and, where known, ``line``/``row``/``column``) as
 attributes, and its message names them: the CLI prints ``str(error)`` as its one line on stderr.
@@ -24,7 +28,9 @@ This module imports nothing outside the standard library: every layer may use it
 
 from __future__ import annotations
 
+import difflib
 import importlib
+from collections.abc import Iterable
 from pathlib import PurePath
 from types import ModuleType
 
@@ -55,12 +61,6 @@ class FormatError(AveasError, ValueError):
     """The content of a recording violates the format (wrong type, bad JSON, bad metadata...)."""
 
 
-class MissingCrsError(FormatError):
-    """The map has no ``<geoReference>`` and no ``crs`` was given: the recording's frame is
-    undefined (FORMAT.md: ``crs`` alone defines it then). The converter registry turns it into a
-    message showing the command that works."""
-
-
 class FormatVersionError(FormatError):
     """The recording's ``format_version`` is unknown, newer than this library, or malformed."""
 
@@ -86,6 +86,17 @@ class PluginError(AveasError, ImportError):
         self.path = None  # ImportError.__init__ resets it; a plugin error is about no file
 
 
+class UsageError(AveasError, ValueError):
+    """The call is wrong, not the data: an unknown converter, exporter, option or value, or a
+    missing argument (a map the converter needs). The CLI exits 2 with it."""
+
+
+class MissingCrsError(FormatError, UsageError):
+    """The map has no ``<geoReference>`` and no ``crs`` was given: the recording's frame is
+    undefined (FORMAT.md: ``crs`` alone defines it then). The converter registry turns it into a
+    message showing the command that works. A missing argument: the CLI exits 2 with it."""
+
+
 class MissingDependencyError(AveasError, ImportError):
     """An optional dependency is not installed; the message names the extra that installs it."""
 
@@ -97,8 +108,8 @@ class MissingDependencyError(AveasError, ImportError):
 
 def require(module: str, *, extra: str, what: str | None = None) -> ModuleType:
     """Import the optional dependency ``module`` and return it; without it, a
-    :class:`MissingDependencyError` in one line naming the extra, e.g. ``geopandas, an optional
-    dependency for to_geopandas, is not installed: pip install "aveas-format[geo]"``.
+    :class:`MissingDependencyError` in one line naming the extra, e.g. ``mcap, an optional
+    dependency for the mcap export, is not installed: pip install "aveas-format[mcap]"``.
     ``what`` names the feature (default: the extra)."""
     try:
         return importlib.import_module(module)
@@ -108,6 +119,12 @@ def require(module: str, *, extra: str, what: str | None = None) -> ModuleType:
             f"{missing}, an optional dependency for {what or 'aveas-format[' + extra + ']'}, is "
             f'not installed: pip install "aveas-format[{extra}]"', module=missing,
             extra=extra) from None
+
+
+def did_you_mean(name: str, known: Iterable[str]) -> str:
+    """``" (did you mean 'sumo-fcd'?)"`` for the closest of ``known`` to ``name``, else ``""``."""
+    close = difflib.get_close_matches(str(name), [str(k) for k in known], n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 __all__ = [
@@ -120,5 +137,7 @@ __all__ = [
     "PluginError",
     "RecordingExistsError",
     "RecordingIOError",
+    "UsageError",
+    "did_you_mean",
     "require",
 ]

@@ -1,12 +1,38 @@
 """Array helpers every layer shares (numpy only; foundation layer, below ``schema``).
 
 One home for the small numerical conventions of the package, so that they cannot drift apart:
-angle wrapping and the per-participant segmentation of ``(participant_id, time)``-sorted rows.
+angle wrapping, the per-participant segmentation of ``(participant_id, time)``-sorted rows, and
+how a number is written in a message for people (:func:`fmt_num`).
 """
 
 from __future__ import annotations
 
+import math
+from numbers import Real
+
 import numpy as np
+
+
+def fmt_num(v: object, digits: int = 6) -> str:
+    """A number as people read it in a message: floats to ``digits`` significant digits but at
+    least two decimals kept where they exist, no float noise, no exponent in everyday ranges
+    (``6.6000000000000005`` -> ``6.6``, ``25.080000000000002`` -> ``25.08``, ``691234.5678`` ->
+    ``691234.57``, ``1.0`` -> ``1.0``); integers, ``nan``/``inf`` and non-numbers as ``str``."""
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, bool) or not isinstance(v, Real) or isinstance(v, int):
+        return str(v)
+    v = float(v)
+    if not math.isfinite(v):
+        return str(v)
+    if v == 0:
+        return "0.0"
+    mag = math.floor(math.log10(abs(v)))
+    if not -10 < mag < 16:
+        return f"{v:.{digits}g}"
+    decimals = min(15, max(2, digits - 1 - mag))
+    text = f"{v:.{decimals}f}".rstrip("0")
+    return text + "0" if text.endswith(".") else text
 
 
 def wrap_angle(a: np.ndarray | float) -> np.ndarray:
@@ -68,7 +94,7 @@ def central_differences(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.nda
     return vx, vy, vx_std, vy_std
 
 
-__all__ = ["central_differences", "same_participant", "wrap_angle"]
+__all__ = ["central_differences", "fmt_num", "same_participant", "wrap_angle"]
 
 
 def instant_lateral_steps(same: np.ndarray, dt: np.ndarray, dx: np.ndarray, dy: np.ndarray,

@@ -119,12 +119,10 @@ def _run_isolated(fn: Callable[[Any], Any], items: list[Any], i: int) -> TaskRes
 
 
 def _run_dask(fn: Callable[[Any], Any], items: list[Any], scheduler: str) -> Iterator[TaskResult]:
-    try:
-        from distributed import Client, as_completed
-    except ImportError:
-        from aveas_format.errors import AveasError
+    from aveas_format.errors import require
 
-        raise AveasError("--scheduler needs Dask: pip install \"aveas-format[dask]\"") from None
+    require("distributed", extra="dask", what="a Dask scheduler (--scheduler)")
+    from distributed import Client, as_completed
     with Client(scheduler) as client:
         futures = client.map(_call, [fn] * len(items), items, pure=False)
         index = {f.key: i for i, f in enumerate(futures)}

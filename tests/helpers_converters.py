@@ -10,10 +10,6 @@ import json
 import numpy as np
 import pyarrow as pa
 
-from helpers_common import SHARED
-
-OPENLABEL_DATA = SHARED / "data" / "openlabel"
-
 
 def _norm(v):
     if isinstance(v, dict):

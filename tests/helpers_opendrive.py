@@ -11,11 +11,11 @@ from lxml import etree
 
 from aveas_format.opendrive import RoadNetwork, load_map
 
-from helpers_common import SHARED
+from helpers_common import SHARED, shared
 
 DATA = Path(__file__).resolve().parent / "opendrive" / "data"
-SHARED_XODR = SHARED / "data" / "xodr"
-REAL_MAPS = sorted(p.name for p in SHARED_XODR.glob("*.xodr")) if SHARED_XODR.is_dir() else []
+#: names of the real maps in ../shared/data/xodr (none without ../shared)
+REAL_MAPS = sorted(p.name for p in (SHARED / "data" / "xodr").glob("*.xodr"))
 #: maps whose consecutive geometries meet to <= 1e-6 m in the file itself
 CONTINUOUS_MAPS = {
     "esmini__e6mini.xodr",
@@ -26,19 +26,19 @@ CONTINUOUS_MAPS = {
 }
 
 
-@lru_cache(maxsize=None)
 def real_map(name: str) -> RoadNetwork:
-    return load_map(SHARED_XODR / name)
+    """A real map of ../shared/data/xodr, for a realdata test (skips without ../shared)."""
+    return _load(shared("data", "xodr", name))
+
+
+@lru_cache(maxsize=None)
+def _load(path: Path) -> RoadNetwork:
+    return load_map(path)
 
 
 @lru_cache(maxsize=None)
 def fixture_map(name: str) -> RoadNetwork:
     return load_map(DATA / name)
-
-
-def require_real_maps() -> None:
-    if not REAL_MAPS:
-        pytest.skip(f"the real OpenDRIVE maps are not there ({SHARED_XODR} is missing)")
 
 
 def xsd_16():

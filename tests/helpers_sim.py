@@ -29,6 +29,7 @@ def cli_simulated_recording(folder, toml: str):
     cfg = folder / "s.toml"
     cfg.write_text(toml)
     with pytest.raises(SystemExit) as e:
-        main(["sim", "run", "-c", str(cfg), "-o", str(folder / "rec.aveas"), "--no-validate"])
+        main(["sim", "run", "-c", str(cfg), "-o", str(folder / "rec.aveas"), "-O", "license=CC0-1.0",
+              "--no-validate"])
     assert e.value.code == 0
     return cfg, folder / "rec.aveas"

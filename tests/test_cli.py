@@ -99,15 +99,48 @@ def test_validate_exit_codes_and_json_equals_api(written):
 
 
 def test_demo(tmp_path):
-    res = cli("demo", "--output", tmp_path / "demo", "--vehicles", "12", "--duration", "6",
-              check_rc=0)
+    """The demo writes the vehicles asked for (40 in 5 s: more than a 1 km road sees, so the road
+    is lengthened, and it says so), ends with its HTML report and figures, prints the next
+    commands, and refuses to replace its output without --overwrite."""
+    demo = tmp_path / "demo"
+    res = cli("demo", "--output", demo, "--vehicles", "40", "--duration", "5", check_rc=0)
     assert "VALID" in res.stdout and "equal to the directory form: True" in res.stderr
-    rec = aveas_format.open(tmp_path / "demo" / "highway.aveas.zip")
-    assert rec.participants.num_rows == 12
+    rec = aveas_format.open(demo / "highway.aveas.zip")
+    assert rec.participants.num_rows == 40
+    assert "so that all 40 vehicles drive on it" in res.stderr
     assert rec.unobserved.num_rows == 2
     s = rec.states
     assert {"x_std", "y_std", "heading_std", "vx_std", "vy_std", "interpolated"} <= set(s.column_names)
     assert s.column("road_id").null_count == 0
+    html = (demo / "report.html").read_text()
+    assert html.startswith("<!DOCTYPE html") or "<html" in html[:500]
+    assert "data:image/png;base64," in html
+    figures = sorted(p.name for p in (demo / "figures").glob("*.png"))
+    assert "map.png" in figures and len(figures) >= 4
+    assert all((demo / "figures" / f).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for f in figures)
+    nxt = res.stdout[res.stdout.index(f"Look at {demo / 'report.html'}"):].splitlines()
+    commands = [line.split("#")[0].strip() for line in nxt[1:] if line.startswith("  aveas-format ")]
+    assert len(commands) == 3 and commands[0].startswith(f"aveas-format derive {demo / 'highway.aveas'}")
+    for command in commands:  # they run as printed
+        cli(*command.split()[1:], check_rc=0)
+    again = cli("demo", "--output", demo, "--vehicles", "3", "--duration", "2")
+    assert again.returncode == 2 and "pass --overwrite" in again.stderr
+    assert aveas_format.open(demo / "highway.aveas").participants.num_rows == 40
+
+
+def test_info_gives_the_coverage_in_lonlat(written):
+    """The coverage polygon (local frame) also as lon/lat bounds through the recording's CRS."""
+    import pyproj
+
+    res = cli("info", written, "--format", "json", check_rc=0)
+    b = json.loads(res.stdout)["coverage_lonlat_bounds"]
+    crs = aveas_format.open(written).meta.crs
+    to_wgs84 = pyproj.Transformer.from_crs(pyproj.CRS(crs), "EPSG:4326", always_xy=True)
+    lon0, lat0 = to_wgs84.transform(0.0, -12.0)       # the coverage's corners (small_recording)
+    lon1, lat1 = to_wgs84.transform(1000.0, 2.0)
+    assert b == pytest.approx([lon0, lat0, lon1, lat1], abs=1e-6)
+    text = cli("info", written, check_rc=0).stdout
+    assert f"lon {b[0]:.6f} .. {b[2]:.6f}, lat {b[1]:.6f} .. {b[3]:.6f}" in text
 
 
 _FAR_XOSC = """<?xml version="1.0"?><OpenSCENARIO><FileHeader revMajor="1" revMinor="2" date="x"
@@ -133,7 +166,7 @@ def test_convert_onto_the_wrong_map_says_so(tmp_path):
     src = tmp_path / "far.xosc"
     src.write_text(_FAR_XOSC.format(vertices=vertices))
     args = ["convert", "--from", "openscenario", str(src), "--map", str(STRAIGHT_MAP), "-o",
-            str(tmp_path / "far.aveas")]
+            str(tmp_path / "far.aveas"), "-O", "license=CC0-1.0"]
     r = cli(*args)
     assert r.returncode == 1, r.stderr
     assert "0.0% on the map" in r.stderr

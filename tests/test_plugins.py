@@ -227,7 +227,8 @@ def test_cli_finds_the_partner_plugin(tmp_path, highway):
     assert res.returncode == 0 and "partner-csv" in res.stdout, res.stderr
     out = tmp_path / "one.aveas"
     res = cli(site, "convert", "--from", "partner-csv", partner_csv(tmp_path / "one.csv", 1),
-              "--map", highway, "-o", out)
+              "--map", highway, "-o", out, "-O", "partner=test", "-O", "license=CC-BY-4.0",
+              "-O", "start_time=2024-05-13T08:15:00Z")
     assert res.returncode == 0, res.stderr
     res = cli(site, "validate", out, "--format", "json", "--select", "partner")
     report = json.loads(res.stdout)

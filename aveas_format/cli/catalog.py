@@ -10,6 +10,7 @@ import typer
 from aveas_format.cli.app import app
 from aveas_format.cli.common import err, handle_errors
 from aveas_format.cli.options import (
+    check_output,
     check_rules,
     comma_list,
     dataset_argument,
@@ -17,7 +18,6 @@ from aveas_format.cli.options import (
     ignore_option,
     overwrite_option,
     print_failure,
-    refuse_overwrite,
     scheduler_option,
     select_option,
     validate_option,
@@ -46,7 +46,7 @@ def catalog(
     from aveas_format.dataset import catalog as build
     from aveas_format.dataset import write_catalog
 
-    refuse_overwrite(output, overwrite)
+    check_output(output, overwrite)
     only, skip = comma_list(select), comma_list(ignore)
     if validate:
         check_rules(only, skip)

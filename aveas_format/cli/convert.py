@@ -2,26 +2,50 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
+
 import typer
-from rich.table import Table
 
 from aveas_format.cli.app import app
-from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, out
+from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, print_table
 from aveas_format.cli.options import (
+    OutputFormat,
+    ask_unstated,
+    check_output,
     converter_options,
     crs_option,
+    format_option,
     option_pairs_option,
     options_file_option,
     overwrite_option,
     print_failure,
-    refuse_overwrite,
     run_summary,
     scheduler_option,
     validate_option,
     validate_written,
     workers_option,
 )
+
+
+def list_converters(direction: str | None, fmt: OutputFormat) -> None:
+    """``convert --list`` / ``export --list``: the converters of a direction (None: both), as a
+    table (plain text when not a terminal) or as JSON (``--format json``)."""
+    from aveas_format.converters.registry import load_converters
+
+    convs = sorted((c for c in load_converters().values() if direction in (None, c.direction)),
+                   key=lambda c: (c.direction, c.name))
+    rows = [{"name": c.name, "direction": c.direction, "method": c.method,
+             "inputs": list(c.patterns), "description": c.description, "extra": c.extra,
+             "available": c.available} for c in convs]
+    if fmt is OutputFormat.json:
+        print(json.dumps(rows, indent=2))
+        return
+    cols = ("name", "direction", "method", "inputs", "needs", "description")
+    print_table([(r["name"], r["direction"], r["method"] or "", " ".join(r["inputs"]),
+                  (f"[{r['extra']}]" + ("" if r["available"] else " (not installed)"))
+                  if r["extra"] else "", r["description"]) for r in rows],
+                cols if direction is None else [c for c in cols if c != "direction"])
 
 
 @app.command()
@@ -37,28 +61,23 @@ def convert(
     options_file: Path = options_file_option("Converter"),
     overwrite: bool = overwrite_option(),
     list_: bool = typer.Option(False, "--list", help="List the converters and exit."),
+    fmt: OutputFormat = format_option(help="With --list: text (a table) or json."),
     each: bool = typer.Option(False, "--each", help="Many recordings: each INPUT (a file, or a "
                               "directory of files) becomes OUTPUT/NAME.aveas; OUTPUT is a directory."),
     group: str = typer.Option(None, "--group", help="With --each: group input files into "
                               "recordings by the first capture group of this regular expression on "
                               "their names, e.g. '^(\\d+)_' for levelX."),
-    workers: int = workers_option(scope="With --each",
-                                  help="local worker processes (0 = one per core)."),
+    workers: int = workers_option(scope="With --each"),
     scheduler: str = scheduler_option(scope="With --each",
                                       help="address of a Dask scheduler (tcp://HOST:PORT)."),
     validate_: bool = validate_option(),
 ) -> None:
     """Convert source data into a recording: `aveas-format convert --from sumo-fcd fcd.xml --map
     net.xodr -o run.aveas`."""
-    from aveas_format.converters.registry import get_converter, load_converters
+    from aveas_format.converters.registry import get_converter
 
     if list_:
-        t = Table(show_edge=False)
-        for col in ("name", "direction", "method", "inputs", "description"):
-            t.add_column(col)
-        for c in sorted(load_converters().values(), key=lambda c: (c.direction, c.name)):
-            t.add_row(c.name, c.direction, c.method or "", " ".join(c.patterns), c.description)
-        out.print(t)
+        list_converters(None, fmt)
         return
     if not source or not inputs or not output:
         raise fail("--from NAME, INPUT... and --output are required (or --list)", EXIT_USAGE)
@@ -66,11 +85,14 @@ def convert(
     raw = converter_options(options_file, option, conv.options)
     if crs:
         raw["crs"] = crs
+    conv.parse_options(raw)  # usage errors (an unknown option, no map, unstated values) first
+    conv.check_map(map_file)
+    ask_unstated(conv, raw)
     if each or group:
         _convert_many(source, [str(i) for i in inputs], map_file, raw, output, group, overwrite,
                       validate_, workers, scheduler)
         return
-    refuse_overwrite(output, overwrite)
+    check_output(output, overwrite)
     from aveas_format.converters.registry import convert as run
 
     rec = run(source, inputs, map_source=map_file, options=raw)
@@ -99,8 +121,6 @@ def _convert_many(source: str, inputs: list[str], map_file: Path | None, raw: di
                   scheduler: str | None) -> None:
     """One recording per input (or per --group), in parallel; a failing source is reported and
     the others complete. Exit 3 when any failed, 1 when any result has validation errors."""
-    import json
-
     from aveas_format.dataset import convert_dataset
 
     if output.exists() and not output.is_dir():

@@ -1,4 +1,5 @@
-"""``aveas-format demo``: write, read back, validate and summarise a sample recording."""
+"""``aveas-format demo``: write, read back, validate and summarise a sample recording, then write
+its HTML validation report and figures and say what to try next."""
 
 from __future__ import annotations
 
@@ -9,37 +10,71 @@ import typer
 
 from aveas_format.cli.app import app
 from aveas_format.cli.common import err, handle_errors, out
+from aveas_format.cli.options import check_output_dir, overwrite_option
+
+#: the sample road grows (x1.5 at least per try) until every vehicle drives on it, up to this
+MAX_ROAD_M = 50_000.0
+
+
+def sample_scene(vehicles: int, duration: float):
+    """The sample highway scene with every one of ``vehicles`` on the road: the traffic starts
+    upstream at safe headways, so a short road in a short time sees only the first ones; the
+    road is lengthened until all are seen (or :data:`MAX_ROAD_M`). Returns ``(rec, road length)``."""
+    from aveas_format.sample import highway_scene
+
+    length = 1000.0
+    while True:
+        rec = highway_scene(n_vehicles=vehicles, duration_s=duration, length_m=length)
+        seen = rec.participants.num_rows
+        if seen >= vehicles or length >= MAX_ROAD_M:
+            return rec, length
+        length = min(MAX_ROAD_M, round(length * max(1.5, 1.1 * vehicles / max(seen, 1)), -2))
 
 
 @app.command()
 @handle_errors
 def demo(
     output: Path = typer.Option(Path("demo-output"), "--output", "-o",
-                                help="Directory for the sample recording (replaced if it exists)."),
-    vehicles: int = typer.Option(60, "--vehicles", min=1, max=100_000, help="Number of vehicles."),
+                                help="Directory for the sample recording, its exports, report and "
+                                "figures."),
+    vehicles: int = typer.Option(60, "--vehicles", min=1, max=100_000, help="Number of vehicles "
+                                 "(the road is lengthened until all of them drive on it)."),
     duration: float = typer.Option(30.0, "--duration", min=1.0, help="Seconds to simulate."),
+    overwrite: bool = overwrite_option(help="Replace the files of an existing OUTPUT directory."),
 ) -> None:
     """Generate a sample aerial highway recording (map, uncertainty, occlusions, metadata), write it
-    as a directory and as a ZIP, export it as OpenLABEL, OpenSCENARIO, MCAP (Foxglove) and an ASAM OSI
-    trace, read it
-    back, validate it and print its summary."""
+    as a directory and as a ZIP, export it as OpenLABEL, OpenSCENARIO, MCAP (Foxglove) and an ASAM
+    OSI trace, read it back, validate it, print its summary and write the HTML validation report
+    and the figures next to it."""
     import aveas_format
-    from aveas_format.sample import highway_scene
+    from aveas_format.converters import get_converter
+    from aveas_format.errors import MissingDependencyError
     from aveas_format.validate.render import render_text
 
+    check_output_dir(output, overwrite)
     output.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    rec = highway_scene(n_vehicles=vehicles, duration_s=duration)
-    err.print(f"generated {rec.states.num_rows:,} states of {rec.participants.num_rows} vehicles "
-              f"in {time.perf_counter() - t0:.2f} s")
+    rec, length = sample_scene(vehicles, duration)
+    n = rec.participants.num_rows
+    err.print(f"generated {rec.states.num_rows:,} states of {n} vehicles in "
+              f"{time.perf_counter() - t0:.2f} s")
+    if n < vehicles:
+        err.print(f"note: {vehicles - n} of {vehicles} vehicles do not reach the {length / 1000:g} km "
+                  f"road within {duration:g} s (the traffic starts upstream at safe headways); "
+                  "a longer --duration lets them in")
+    elif length > 1000.0:
+        err.print(f"note: the road is {length / 1000:g} km long so that all {vehicles} vehicles "
+                  f"drive on it within {duration:g} s")
     d = rec.write(output / "highway.aveas", overwrite=True)
     z = rec.write(output / "highway.aveas.zip", overwrite=True)
     err.print(f"wrote {d} and {z}")
-    from aveas_format.converters import get_converter
-
     for name, fn in (("openlabel", "highway.openlabel.json"), ("openscenario", "highway.xosc"),
                      ("mcap", "highway.mcap"), ("osi", "highway.osi")):
-        written = get_converter(name, "export")(rec, output / fn)
+        try:
+            written = get_converter(name, "export")(rec, output / fn)
+        except MissingDependencyError as e:
+            err.print(f"skipped the {name} export: {e}")
+            continue
         err.print(f"exported {name}: {', '.join(str(p) for p in written)}")
     back = aveas_format.open(z)
     same = back.states.equals(aveas_format.open(d).states)
@@ -48,7 +83,35 @@ def demo(
     report = aveas_format.validate(d)
     out.print(render_text(report), end="")
     from aveas_format.cli.info import info as info_cmd
+    from aveas_format.cli.options import OutputFormat
 
-    info_cmd(d, as_json=False)
+    info_cmd(d, fmt=OutputFormat.text, as_json=False)
+    look = _report_and_figures(d, report, output)
+    print()
+    print("Look at " + (" and ".join(str(p) for p in look) if look else f"{d}") + ". Next:")
+    print(f"  aveas-format derive {d} -o {output / 'derived.aveas'}   # TTC, headways, PET "
+          "with uncertainty")
+    print(f"  aveas-format info {output / 'derived.aveas'}   # the criticality of the scene")
+    print("  aveas-format convert --list   # converters for your own data")
     if report.exit_code("error") != 0 or not same:
         raise typer.Exit(1)
+
+
+def _report_and_figures(path: Path, report, output: Path) -> list[Path]:
+    """The HTML validation report and the figures of the recording at ``path``, next to it; what
+    was written (nothing, with a note, without the [plot] extra)."""
+    from aveas_format.errors import MissingDependencyError
+
+    try:
+        from aveas_format.plot import render_html, save_figures
+        from aveas_format.plot.recording import open_for_figures
+    except MissingDependencyError as e:
+        err.print(f"skipped the HTML report and the figures: {e}")
+        return []
+    from aveas_format.safeio import write_text_atomic
+
+    rec = open_for_figures(path, report)
+    html = write_text_atomic(output / "report.html", render_html(report, rec))
+    figs = save_figures(rec, output / "figures", report.findings())
+    err.print(f"wrote {html} and {len(figs)} figures in {output / 'figures'}")
+    return [html, output / "figures"]

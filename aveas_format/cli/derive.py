@@ -11,12 +11,13 @@ import typer
 
 from aveas_format.cli.app import app
 from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors
+from aveas_format.errors import did_you_mean
 from aveas_format.cli.options import (
+    check_output,
     discover_dataset,
     overwrite_option,
     print_failure,
     recordings_argument,
-    refuse_overwrite,
     run_summary,
     scheduler_option,
     single_recording,
@@ -52,7 +53,7 @@ def derive(
     output: Path | None = typer.Option(None, "--output", "-o", help="Write the result here."),
     in_place: bool = typer.Option(False, "--in-place", help="Replace the input recording "
                                   "(atomically)."),
-    overwrite: bool = overwrite_option(help="Replace OUTPUT if it exists."),
+    overwrite: bool = overwrite_option(help="Replace OUTPUT (and the --report file) if it exists."),
     ttc: float | None = typer.Option(None, "--ttc", help="TTC threshold (s) for near-miss "
                                      "events (default: recording.json thresholds.ttc_s, else 1.5)."),
     pet: float | None = typer.Option(None, "--pet", help="PET threshold (s) for near-miss "
@@ -81,17 +82,19 @@ def derive(
     if output is not None and in_place:
         raise fail("give either --output or --in-place, not both", EXIT_USAGE)
     if recording is not None and output is not None:
-        refuse_overwrite(output, overwrite)
+        check_output(output, overwrite)
+    if report is not None:
+        check_output(report, overwrite)
     known = derivations()
     for name in only or []:
         if name not in known:
-            raise fail(f"--only {name!r}: unknown derivation; known: {', '.join(known)}",
-                       EXIT_USAGE)
+            raise fail(f"--only {name!r}: unknown derivation{did_you_mean(name, known)}; known: "
+                       f"{', '.join(known)}", EXIT_USAGE)
     params: dict = _parse_params(param or [])
     for name in params:
         if name not in known:
-            raise fail(f"--param {name}.*: unknown derivation; known: {', '.join(known)}",
-                       EXIT_USAGE)
+            raise fail(f"--param {name}.*: unknown derivation{did_you_mean(name, known)}; known: "
+                       f"{', '.join(known)}", EXIT_USAGE)
     ev = params.setdefault("events", {})
     if ttc is not None:
         ev["ttc_s"] = ttc

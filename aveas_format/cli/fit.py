@@ -9,7 +9,7 @@ import typer
 
 from aveas_format.cli.app import app
 from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, out
-from aveas_format.cli.options import SIMULATION_WORKERS, parse_option_pairs, scheduler_option
+from aveas_format.cli.options import parse_option_pairs, scheduler_option, workers_option
 
 fit_app = typer.Typer(help="Fit behaviour-model parameters to recordings (maximum likelihood "
                       "with SUMO; docs/fitting.md).", no_args_is_help=True)
@@ -135,7 +135,7 @@ def desired_speed(
     output: Path = _OUTPUT,
     config: Path = _CONFIG,
     restarts: int = _RESTARTS,
-    workers: int = SIMULATION_WORKERS,
+    workers: int = workers_option(),
     scheduler: str = _SCHEDULER,
     maxfev: int = _MAXFEV,
     seed: int = _SEED,
@@ -168,7 +168,7 @@ def car_following(
                                "time_headway, min_ttc, a_lon_std or mean_speed."),
     config: Path = _CONFIG,
     restarts: int = _RESTARTS,
-    workers: int = SIMULATION_WORKERS,
+    workers: int = workers_option(),
     scheduler: str = _SCHEDULER,
     maxfev: int = _MAXFEV,
     seed: int = _SEED,
@@ -219,7 +219,7 @@ def study(
     restarts: int = typer.Option(1, "--restarts", "-r", min=1, help="Restarts per fit."),
     maxfev: int = typer.Option(100, "--maxfev", help="Evaluations per restart at most."),
     method: str = _METHOD,
-    workers: int = SIMULATION_WORKERS,
+    workers: int = workers_option(),
     scheduler: str = _SCHEDULER,
 ) -> None:
     """Parameter recovery as a statistic: simulate a recording at the paper's estimates with seed

@@ -4,33 +4,75 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import typer
-from rich.table import Table
 
 from aveas_format.cli.app import app
-from aveas_format.cli.common import handle_errors, out
+from aveas_format.cli.common import handle_errors, out, print_table
+from aveas_format.cli.options import OutputFormat, format_option, legacy_json_option, output_format
+
+
+def coverage_lonlat(rec: Any, wkt: str | None) -> list[float] | None:
+    """``[lon_min, lat_min, lon_max, lat_max]`` (degrees) of the coverage polygon, through the
+    recording's CRS and map offset (edges densified to 10 m); None without a coverage or a
+    readable CRS."""
+    if not wkt or not rec.meta.crs:
+        return None
+    import numpy as np
+    import shapely
+
+    from aveas_format.errors import AveasError
+    from aveas_format.mapref.crs import LocalFrame
+
+    try:
+        xy = shapely.get_coordinates(shapely.segmentize(shapely.from_wkt(wkt), 10.0))
+        lon, lat = LocalFrame.of(rec, warn=False).to_wgs84(xy[:, 0], xy[:, 1])
+    except (AveasError, shapely.errors.ShapelyError, ValueError):
+        return None
+    if not len(lon) or not (np.isfinite(lon).all() and np.isfinite(lat).all()):
+        return None
+    return [round(float(v), 7) for v in (lon.min(), lat.min(), lon.max(), lat.max())]
+
+
+def _coverage_text(s: dict[str, Any]) -> str:
+    if not s["coverage"]:
+        return "not given"
+    import shapely
+
+    try:
+        area = f"{shapely.from_wkt(s['coverage']).area:,.0f} m²"
+    except shapely.errors.ShapelyError:
+        area = s["coverage"]
+    b = s.get("coverage_lonlat_bounds")
+    return area + (f", lon {b[0]:.6f} .. {b[2]:.6f}, lat {b[1]:.6f} .. {b[3]:.6f}" if b else "")
 
 
 @app.command()
 @handle_errors
 def info(
     recording: Path = typer.Argument(..., help="A recording: NAME.aveas directory or NAME.aveas.zip."),
-    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+    fmt: OutputFormat = format_option(),
+    as_json: bool = legacy_json_option(),
 ) -> None:
-    """Summarise a recording: participants per class, duration, rate, columns present, coverage."""
+    """Summarise a recording: participants per class, duration, rate, columns present, coverage
+    (also in lon/lat where the CRS is known)."""
     import aveas_format
 
     rec = aveas_format.open(recording)
     s = rec.summary()
+    s["coverage_lonlat_bounds"] = coverage_lonlat(rec, s["coverage"])
     if rec.derived or (rec.events is not None and rec.events.num_rows):
         from aveas_format.derive import criticality_summary
 
         s["criticality"] = criticality_summary(rec)
-    if as_json:
+    if output_format(fmt, as_json) == "json":
         print(json.dumps(s, indent=2))
         return
-    out.print(f"[bold]{s['recording_id']}[/]" + (f" — {s['title']}" if s.get("title") else ""))
+    from rich.markup import escape
+
+    out.print(f"[bold]{escape(s['recording_id'])}[/]"
+              + (f" — {escape(s['title'])}" if s.get("title") else ""), markup=True)
     rows = [
         ("path", s["path"]),
         ("format", s["format_version"] + (f" (migrated from {s['migrated_from']})"
@@ -47,23 +89,16 @@ def info(
          or "none"),
         ("on map", f"{100 * s['on_map_share']:.1f} % of states" if s.get("on_map_share") is not None
          else "-"),
-        ("coverage", s["coverage"] or "not given"),
+        ("coverage", _coverage_text(s)),
     ]
-    t = Table(show_header=False, show_edge=False, pad_edge=False, box=None)
-    t.add_column(style="bold")
-    t.add_column()
-    for k, v in rows:
-        t.add_row(k, str(v))
-    out.print(t)
+    print_table(rows)
     cov = s.get("column_coverage") or {}
     if cov:
-        ct = Table(title="states columns (share of non-null values)", show_edge=False)
-        ct.add_column("column")
-        ct.add_column("non-null", justify="right")
-        for c, v in cov.items():
-            ct.add_row(c, f"{100 * v:.1f} %")
-        out.print(ct)
+        print()
+        print_table([(c, f"{100 * v:.1f} %") for c, v in cov.items()], ("states column", "non-null"),
+                    right=(1,))
     if "criticality" in s:
+        print()
         _print_criticality(rec, s["criticality"])
 
 
@@ -90,15 +125,10 @@ def _print_criticality(rec, crit: dict) -> None:
     per = sorted((r for r in rows if str(r["scope"]) == "participant" and r["min_ttc"] is not None),
                  key=lambda r: r["min_ttc"])[:3]
     cols = ([whole] if whole else []) + per
-    t = Table(title=f"criticality (TTC threshold {th.get('ttc_s', 1.5):g} s; ± 1 std; the "
-              "participants with the smallest TTC)", show_edge=False, title_justify="left")
-    t.add_column("measure")
-    for r in cols:
-        t.add_column("recording" if r["participant_id"] is None
-                     else f"participant {r['participant_id']}", justify="right")
+    table: list[list[str]] = []
 
     def line(label, fn):
-        t.add_row(label, *(fn(r) for r in cols))
+        table.append([label, *(fn(r) for r in cols)])
 
     line("min TTC (s)", lambda r: _pm(r["min_ttc"], r["min_ttc_std"]))
     line("  at (s), with", lambda r: "-" if r["min_ttc_time"] is None else
@@ -113,4 +143,7 @@ def _print_criticality(rec, crit: dict) -> None:
     line("near misses", lambda r: str(r["near_misses"]))
     line("hard braking", lambda r: str(r["hard_braking"]))
     line("worst events", lambda r: ", ".join(map(str, (r["worst_events"] or [])[:3])) or "-")
-    out.print(t)
+    header = ["measure"] + ["recording" if r["participant_id"] is None else f"participant {r['participant_id']}"
+                            for r in cols]
+    print_table(table, header, title=f"criticality (TTC threshold {th.get('ttc_s', 1.5):g} s; ± 1 std; "
+                "the participants with the smallest TTC)", right=tuple(range(1, len(header))))

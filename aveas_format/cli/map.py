@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import enum
 import json
 import sys
 from collections import Counter
@@ -12,11 +11,16 @@ from typing import Any
 
 import numpy as np
 import typer
-from rich.markup import escape
-from rich.table import Table
-
 from aveas_format.cli.app import app
-from aveas_format.cli.common import EXIT_FINDINGS, EXIT_USAGE, err, fail, handle_errors, out
+from aveas_format.cli.common import EXIT_FINDINGS, EXIT_USAGE, err, fail, handle_errors, print_table
+from aveas_format.cli.options import (
+    OutputFormat,
+    check_output,
+    format_option,
+    legacy_json_option,
+    output_format,
+    overwrite_option,
+)
 
 map_app = typer.Typer(
     help="OpenDRIVE maps: `info` (summary), `project` (x, y -> road, lane, s, t), `plot` (PNG of "
@@ -105,12 +109,14 @@ def map_summary(net) -> dict[str, Any]:
 @handle_errors
 def info(
     map_file: Path = typer.Argument(None, metavar="MAP", help=_MAP_HELP),
-    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+    fmt: OutputFormat = format_option(),
+    as_json: bool = legacy_json_option(),
 ) -> None:
     """Summarise a map: roads, junctions, lanes by type, length, geometry types, CRS and how the
     `<geoReference>` was read."""
+    fmt_ = output_format(fmt, as_json)
     s = map_summary(_load(map_file))
-    if as_json:
+    if fmt_ == "json":
         print(json.dumps(s, indent=2))
         return
     c = s["crs"]
@@ -139,12 +145,7 @@ def info(
         ("crs", crs_txt),
         ("offset", "x {:.3f}, y {:.3f}, z {:.3f}, hdg {:.6f}".format(*c["offset"]) if c["offset"] else "none"),
     ]
-    t = Table(show_header=False, show_edge=False, pad_edge=False, box=None)
-    t.add_column(style="bold")
-    t.add_column()
-    for k, v in rows:
-        t.add_row(k, escape(str(v)))
-    out.print(t)
+    print_table(rows)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -251,6 +252,7 @@ def project(
                                 "[, heading] in the map's local frame (other columns are kept)."),
     output: Path = typer.Option(None, "--output", "-o", help="Output .csv or .parquet (default: CSV "
                                 "on stdout)."),
+    overwrite: bool = overwrite_option(),
     drivable_only: bool = typer.Option(False, "--drivable-only", help="Ignore non-drivable lanes "
                                        "(sidewalks, shoulders, ...)."),
     track: bool = typer.Option(False, "--track", help="Choose among overlapping roads by continuity "
@@ -269,6 +271,8 @@ def project(
                    ".parquet", EXIT_USAGE)
     if map_file is None:
         raise fail("Missing argument 'MAP'.", EXIT_USAGE)
+    if output is not None:
+        check_output(output, overwrite)
     table = read_points(points)
     net = _load(map_file)
     x = table.column("x").to_numpy(zero_copy_only=False).astype(np.float64)
@@ -315,6 +319,7 @@ def plot(
                                               "the roads inside junctions."),
     dpi: int = typer.Option(150, "--dpi", min=20, max=1200, help="Resolution of a PNG."),
     step: float = typer.Option(1.0, "--step", min=0.05, help="Sampling of lane borders [m]."),
+    overwrite: bool = overwrite_option(),
 ) -> None:
     """Draw the map: lanes filled by type, reference lines, road ids, junction outlines."""
     if output is None:
@@ -322,10 +327,10 @@ def plot(
     if output.suffix.lower() not in (".png", ".svg", ".pdf"):
         raise fail(f"{output}: unknown image format {output.suffix or '(no suffix)'!r}; use .png, .svg or "
                    ".pdf", EXIT_USAGE)
-    if output.parent and not output.parent.exists():
-        raise fail(f"{output.parent}: no such directory", EXIT_USAGE)
+    check_output(output, overwrite)
+    from aveas_format.plot.map import save_map  # (needs [plot]: says so before reading the map)
+
     net = _load(map_file)
-    from aveas_format.plot.map import save_map
 
     save_map(net, output, dpi=dpi, labels=labels, junction_road_labels=junction_road_labels, step=step)
     err.print(f"wrote {output}")
@@ -333,16 +338,11 @@ def plot(
 
 # ----------------------------------------------------------------------------------------------
 # check
-class CheckFormat(str, enum.Enum):
-    text = "text"
-    json = "json"
-
-
 @map_app.command("check")
 @handle_errors
 def check(
     map_file: Path = typer.Argument(None, metavar="MAP", help=_MAP_HELP),
-    fmt: CheckFormat = typer.Option(CheckFormat.text, "--format", "-f", help="Report format."),
+    fmt: OutputFormat = format_option(OutputFormat.text, "-f", help="Report format: text or json."),
 ) -> None:
     """Self-consistency of a map: geometry continuity gaps, lane widths >= 0, broken links,
     unparseable geoReference. Exit 1 when there are errors."""
@@ -350,7 +350,7 @@ def check(
     findings = net.check()
     counts = Counter(f.severity for f in findings)
     summary = {k: counts.get(k, 0) for k in ("error", "warning", "info")}
-    if fmt is CheckFormat.json:
+    if fmt is OutputFormat.json:
         print(json.dumps({
             "map": net.path,
             "valid": summary["error"] == 0,

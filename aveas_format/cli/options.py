@@ -3,10 +3,14 @@
 Like ``rasterio.rio.options``: a command module takes its shared options from here instead of
 spelling out ``typer.Option(...)`` again, and calls the helper that goes with the option.
 
-- **Output**: :func:`overwrite_option` (``--overwrite``) and :func:`refuse_overwrite`, the check
-  before writing (never overwrite without ``--overwrite``).
-- **Format**: :func:`format_option` (``--format text|json``, :class:`OutputFormat`) for a command
-  that prints something a machine may read.
+- **Output**: :func:`overwrite_option` (``--overwrite``) and the checks before writing, made
+  before any work: :func:`check_output` (a file: never replaced without ``--overwrite``, and its
+  directory must exist; :func:`refuse_overwrite` is its old name) and :func:`check_output_dir` (a
+  directory of outputs: not an existing, non-empty one without ``--overwrite``). Companion files
+  (the map of an OpenLABEL export) are outputs too: check each.
+- **Format**: :func:`format_option` (``--format text|json``, for every command that prints
+  something a machine may read; a wrong value gets the closest allowed one) and
+  :func:`legacy_json_option` + :func:`output_format`, the hidden, deprecated ``--json``.
 - **The CRS of an import** (``convert``): :func:`crs_option` (``--crs``).
 - **Options of a converter or exporter** (``convert``, ``export``): :func:`option_pairs_option`
   (``--option/-O KEY=VALUE``) and :func:`options_file_option` (``--options FILE.json``), read by
@@ -20,20 +24,20 @@ spelling out ``typer.Option(...)`` again, and calls the helper that goes with th
   :func:`single_recording` (one recording, or a dataset); :func:`discover_dataset` (find the
   recordings, announce the run); :func:`print_failure` (each failed recording, as it fails);
   :func:`run_summary` (the JSON printed at the end).
-- **Parallel runs**: :func:`workers_option` (``--workers``) and :func:`scheduler_option`
-  (``--scheduler``, a Dask cluster); :data:`SIMULATION_WORKERS` of the SUMO runs (``sim
-  sensitivity``, ``fit``).
+- **Parallel runs**: :func:`workers_option` (``--workers/-j N``: local worker processes, 0 = one
+  per core, the default, 1 = in this process; the same name, meaning and default in every
+  command) and :func:`scheduler_option` (``--scheduler``, a Dask cluster).
 
-The factories take the command's own flag names and help texts where these differ today (``-j``
-or ``-w``, default 0 or 1): the options keep the names they had; harmonising them is a later
-change, made here. Error handling and exit codes stay in :mod:`aveas_format.cli.common`.
+To add a shared option: a factory here (``typer.Option(...)`` with its one help text) and the
+helper that reads it; a command module then only names it. Error handling, exit codes and plain
+output stay in :mod:`aveas_format.cli.common`.
 """
 
 from __future__ import annotations
 
 import json
 import typing
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from enum import Enum
 from pathlib import Path
 from typing import Any
@@ -55,10 +59,34 @@ def overwrite_option(help: str = "Replace an existing output.") -> Any:
     return typer.Option(False, "--overwrite", help=help)
 
 
-def refuse_overwrite(path: Path, overwrite: bool) -> None:
-    """A usage error (exit 2) when ``path`` exists and ``--overwrite`` was not given."""
-    if path.exists() and not overwrite:
-        raise fail(f"{path}: exists; pass --overwrite to replace it", EXIT_USAGE)
+def check_output(path: Path | Iterable[Path], overwrite: bool) -> None:
+    """Before any work, for each output file (the output and its companion files): a usage error
+    (exit 2) when it exists and ``--overwrite`` was not given, or when its directory does not
+    exist (said as such, not as a temporary file's name)."""
+    for p in [path] if isinstance(path, Path) else list(path):
+        p = Path(p)
+        if p.exists() and not overwrite:
+            raise fail(f"{p}: exists; pass --overwrite to replace it", EXIT_USAGE)
+        parent = p.parent if str(p.parent) else Path(".")
+        if not parent.is_dir():
+            raise fail(f"{p}: cannot write: the directory {parent} does not exist"
+                       if not parent.exists() else f"{p}: cannot write: {parent} is not a directory",
+                       EXIT_USAGE)
+
+
+#: the former name of :func:`check_output` (one output file)
+refuse_overwrite = check_output
+
+
+def check_output_dir(path: Path, overwrite: bool) -> None:
+    """Before any work, for an output directory (created, parents too): a usage error (exit 2)
+    when it is a file, or an existing non-empty directory and ``--overwrite`` was not given (its
+    files would be replaced)."""
+    if path.exists() and not path.is_dir():
+        raise fail(f"{path}: exists and is not a directory", EXIT_USAGE)
+    if path.is_dir() and any(path.iterdir()) and not overwrite:
+        raise fail(f"{path}: exists and is not empty; pass --overwrite to replace the files in it",
+                   EXIT_USAGE)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -75,6 +103,20 @@ def format_option(default: Enum = OutputFormat.text, *flags: str,
     """``--format FORMAT`` (the command's Enum of formats, :class:`OutputFormat` by default; extra
     ``flags`` such as ``-f`` where a command had them)."""
     return typer.Option(default, "--format", *flags, help=help)
+
+
+def legacy_json_option() -> Any:
+    """``--json``, the deprecated spelling of ``--format json`` (hidden; still works)."""
+    return typer.Option(False, "--json", hidden=True, help="Deprecated: use --format json.")
+
+
+def output_format(fmt: Enum, legacy_json: bool) -> str:
+    """The format asked for: ``--format``, or ``json`` for the deprecated ``--json`` (with a
+    note on stderr)."""
+    if legacy_json:
+        err.print("aveas-format: note: --json is deprecated; use --format json")
+        return "json"
+    return str(fmt.value)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -127,6 +169,25 @@ def parse_option_pairs(pairs: list[str], model: type) -> dict[str, Any]:
             value = [v for v in value.split(",") if v]
         out_[key] = value
     return out_
+
+
+#: each value an importer asks for (``converter.unstated``): what it is, how to state it
+_ASK_HOW = {"partner": ("the partner", "partner=INSTITUTION"),
+            "start_time": ("the start time", "start_time=2024-05-13T08:15:00Z (UTC of time 0)"),
+            "license": ("the licence", "license=LICENCE (an SPDX id, e.g. CC-BY-4.0)")}
+
+
+def ask_unstated(conv: Any, raw: dict[str, Any]) -> None:
+    """A usage error (exit 2), before any work, when the converter's source cannot state a value
+    only a person knows (the partner, the start time, the licence) and the options do not give
+    it: the converter would otherwise write a stand-in the validator flags."""
+    missing = conv.unstated(raw)
+    if missing:
+        what = [_ASK_HOW[k][0] for k in missing]
+        what_text = ", ".join(what[:-1]) + " and " + what[-1] if len(what) > 1 else what[0]
+        raise fail(f"converter {conv.name}: its source does not state {what_text}; pass "
+                   + " ".join(f"-O {_ASK_HOW[k][1]}" for k in missing)
+                   + " (or put them in --options FILE.json)", EXIT_USAGE)
 
 
 def converter_options(options_file: Path | None, pairs: list[str] | None, model: type) -> dict[str, Any]:
@@ -223,8 +284,12 @@ def discover_dataset(specs: list[str], doing: str, workers: int, scheduler: str 
     ``validating 12 recordings with all worker(s)``."""
     from aveas_format.dataset import discover
 
+    if scheduler:  # the [dask] extra: said before any work
+        from aveas_format.errors import require
+
+        require("distributed", extra="dask", what="a Dask scheduler (--scheduler)")
     paths = discover(specs)
-    err.print(f"{doing} {len(paths)} recordings "
+    err.print(f"{doing} {len(paths)} recording{'' if len(paths) == 1 else 's'} "
               + (f"on {scheduler}" if scheduler else f"with {workers or 'all'} worker(s)"))
     return paths
 
@@ -235,7 +300,10 @@ def print_failure(result: Any, *, red: bool = False) -> None:
     if result.ok:
         return
     if red:
-        err.print(f"[red]failed[/red] {result.item}: {result.error}", markup=True, highlight=False)
+        from rich.markup import escape
+
+        err.print(f"[red]failed[/red] {escape(str(result.item))}: {escape(str(result.error))}",
+                  markup=True, highlight=False)
     else:
         err.print(f"failed {result.item}: {result.error}", markup=False, highlight=False)
 
@@ -251,11 +319,14 @@ def run_summary(d: dict[str, Any], fields: Sequence[str], *, exit_code: bool = F
 
 # ----------------------------------------------------------------------------------------------
 # parallel runs
-def workers_option(short: str = "-j", *, default: int = 0, minimum: int | None = 0, scope: str = "",
-                   help: str = "local worker processes (0 = one per core, 1 = in this process).") -> Any:
-    """``--workers N`` with the command's short flag: local processes of a parallel run (0 = one
-    per core); ``scope`` prefixes the help (``Dataset``: only when the arguments are a dataset)."""
-    return typer.Option(default, "--workers", short, min=minimum, help=_scoped(scope, help))
+WORKERS_HELP = "local worker processes (0 = one per core, 1 = in this process)."
+
+
+def workers_option(*, scope: str = "") -> Any:
+    """``--workers/-j N``: local processes of a parallel run, the same in every command (0 = one
+    per core, the default; 1 = in this process); ``scope`` prefixes the help (``Dataset``: only
+    when the arguments are a dataset)."""
+    return typer.Option(0, "--workers", "-j", min=0, help=_scoped(scope, WORKERS_HELP))
 
 
 def scheduler_option(*, scope: str = "", help: str = "address of a Dask scheduler "
@@ -263,7 +334,3 @@ def scheduler_option(*, scope: str = "", help: str = "address of a Dask schedule
     """``--scheduler ADDRESS``: run on a Dask cluster instead of local processes."""
     return typer.Option(None, "--scheduler", help=_scoped(scope, help))
 
-
-#: ``--workers/-w`` of the commands that run SUMO simulations (``sim sensitivity``, ``fit``)
-SIMULATION_WORKERS = workers_option("-w", default=1, minimum=None,
-                                    help="Local processes (0 = one per core).")

@@ -8,6 +8,7 @@ import typer
 
 from aveas_format.cli.app import app
 from aveas_format.cli.common import err, handle_errors
+from aveas_format.cli.options import check_output_dir, overwrite_option
 
 
 @app.command()
@@ -18,11 +19,14 @@ def plot(
                                 "files (created)."),
     findings: bool = typer.Option(True, "--findings/--no-findings", help="Validate first and mark "
                                   "the located findings on the map."),
+    overwrite: bool = overwrite_option(help="Replace the files of an existing OUTPUT directory."),
 ) -> None:
     """Write the report figures as PNG: map.png (lanes, trajectories, findings), speed.png and
     acceleration.png (histograms per class), sample_rate.png (sample rate over time)."""
     import aveas_format
-    from aveas_format.plot import save_figures
+    from aveas_format.plot import save_figures  # (needs [plot]: says so before any work)
+
+    check_output_dir(output, overwrite)
     from aveas_format.plot.recording import open_for_figures
 
     report = aveas_format.validate(recording) if findings else None

@@ -10,12 +10,17 @@ import typer
 from aveas_format.cli.app import app
 from aveas_format.cli.common import err, handle_errors, out
 from aveas_format.cli.options import (
-    SIMULATION_WORKERS,
+    ask_unstated,
+    check_output,
+    check_output_dir,
+    converter_options,
+    option_pairs_option,
+    options_file_option,
     overwrite_option,
-    refuse_overwrite,
     scheduler_option,
     validate_option,
     validate_written,
+    workers_option,
 )
 
 sim_app = typer.Typer(help="Simulate traffic with Eclipse SUMO (needs `pip install "
@@ -46,16 +51,25 @@ def run(
     duration: float = typer.Option(None, "--duration", help="Override the demand period (s)."),
     workdir: Path = typer.Option(None, "--workdir", help="Keep SUMO's files here (default: a "
                                  "temporary directory)."),
+    option: list[str] = option_pairs_option("Recording (sumo-fcd import)"),
+    options_file: Path = options_file_option("Recording (sumo-fcd import)"),
     overwrite: bool = overwrite_option(),
     validate_: bool = validate_option(help="Validate the result."),
 ) -> None:
     """Run a scenario with SUMO and write the result as a recording: `aveas-format sim run --config
-    scenario.toml -o sim.aveas`."""
+    scenario.toml -o sim.aveas -O license=CC-BY-4.0`. The licence of the result is yours to state
+    (`-O license=...`, asked for before SUMO runs); the partner is "aveas-format sim" unless
+    `-O partner=...` names another."""
+    from aveas_format.converters.registry import get_converter
     from aveas_format.sim.runner import simulate
 
-    refuse_overwrite(output, overwrite)
+    conv = get_converter("sumo-fcd")
+    raw = {"partner": "aveas-format sim", **converter_options(options_file, option, conv.options)}
+    conv.parse_options(raw)  # usage errors (an unknown option, the licence unstated) first
+    ask_unstated(conv, raw)
+    check_output(output, overwrite)
     sc = _scenario(config, seed, duration)
-    res = simulate(sc, recording=True, workdir=workdir)
+    res = simulate(sc, recording=True, workdir=workdir, recording_options=raw)
     path = res.recording.write(output, overwrite=overwrite)
     ms = res.mean_speeds()
     err.print(f"wrote {path}: {res.recording.participants.num_rows} vehicles, "
@@ -82,8 +96,9 @@ def sensitivity_cmd(
                                    "parameter."),
     duration: float = typer.Option(None, "--duration", help="Override the demand period (s) "
                                    "(the paper: 4 h)."),
-    workers: int = SIMULATION_WORKERS,
+    workers: int = workers_option(),
     scheduler: str = scheduler_option(help="Dask scheduler address tcp://..."),
+    overwrite: bool = overwrite_option(help="Replace the files of an existing OUTPUT directory."),
     min_ttc_samples: int = typer.Option(1, "--min-ttc-samples", min=1, help="TTC samples a vehicle "
                                         "needs for its mean TTC to count in the minimum mean TTC."),
 ) -> None:
@@ -93,6 +108,7 @@ def sensitivity_cmd(
     from aveas_format.sim.scenario import W99_RANGES
     from aveas_format.sim.sensitivity import sensitivity
 
+    check_output_dir(output, overwrite)
     sc = _scenario(config, None, duration)
     output.mkdir(parents=True, exist_ok=True)
     rows = sensitivity(sc, params=param or None, n_values=values, fraction=fraction,

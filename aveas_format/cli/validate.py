@@ -13,12 +13,14 @@ import typer
 from aveas_format.cli.app import app
 from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors
 from aveas_format.cli.options import (
+    check_output,
+    check_output_dir,
     check_rules,
-    overwrite_option,
-    refuse_overwrite,
     comma_list,
     discover_dataset,
+    format_option,
     ignore_option,
+    overwrite_option,
     print_failure,
     recordings_argument,
     scheduler_option,
@@ -53,8 +55,8 @@ def validate(
     ignore: list[str] = ignore_option(),
     fail_on: FailOn = typer.Option(FailOn.error, "--fail-on", help="Exit 1 when a finding at or "
                                    "above this severity exists."),
-    fmt: Format = typer.Option(Format.text, "--format", help="Report format: text (greppable "
-                               "lines + summary), json, or html (self-contained, with figures)."),
+    fmt: Format = format_option(Format.text, help="Report format: text (greppable lines + "
+                                "summary), json, or html (self-contained, with figures)."),
     output_: str = typer.Option(None, "--output", "-o", metavar="PATH",
                                 help="Write the report to FILE instead of "
                                 "stdout; to a DIRECTORY (an existing one, or a path ending in /): "
@@ -91,6 +93,12 @@ def validate(
         _print_and_exit(config_toml())
     if not recordings:
         raise fail("Missing argument 'RECORDING'.", EXIT_USAGE)
+    out_dir = _output_dir(output_)
+    output = Path(output_) if output_ and out_dir is None else None
+    if output is not None:  # before any work: never replaced without --overwrite
+        check_output(output, overwrite)
+    if reports_dir is not None:
+        check_output_dir(reports_dir, overwrite)
 
     from aveas_format.errors import FormatError
     from aveas_format.validate import validate as run
@@ -102,21 +110,17 @@ def validate(
         raise fail(str(e), EXIT_USAGE) from None
     only, skip = comma_list(select), comma_list(ignore)
     recording = single_recording(recordings)
-    out_dir = _output_dir(output_)
-    output = Path(output_) if output_ and out_dir is None else None
     if recording is None:
         if out_dir is not None and reports_dir is None:  # -o DIR/ of a dataset: its reports dir
             reports_dir, output = out_dir, None
-            for name in ("dataset-report.json", "dataset-report.html"):
-                refuse_overwrite(out_dir / name, overwrite)
-        if output is not None:
-            refuse_overwrite(output, overwrite)
+            if out_dir.is_dir():
+                check_output([out_dir / "dataset-report.json", out_dir / "dataset-report.html"], overwrite)
         _validate_dataset(recordings, only, skip, cfg, max_sample, fail_on.value, fmt, output,
                           workers, scheduler, reports_dir, top)
     targets = ([out_dir / "report.json", out_dir / "report.html"] if out_dir is not None else
                [output] if output is not None else [])
-    for target in targets:
-        refuse_overwrite(target, overwrite)
+    if out_dir is None or out_dir.is_dir():
+        check_output(targets, overwrite)
     try:
         report = run(recording, select=only, ignore=skip, config=cfg, max_sample=max_sample)
     except ValueError as e:

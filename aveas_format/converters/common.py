@@ -17,6 +17,7 @@ import pyarrow.parquet as pq
 from aveas_format._version import __version__
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.mapref.build import build_recording, load_map_bytes
+from aveas_format.numeric import fmt_num
 
 __all__ = [
     "build_recording", "factorize", "file_sha256", "load_map_bytes", "move_along_heading",
@@ -520,7 +521,7 @@ def sort_states(pid: np.ndarray, t: np.ndarray, path: Path | None = None,
     if len(dup):
         i = order[dup[0] + 1]
         who = "participant" if ids is None else f"participant {str(ids[int(pid[i])])!r}"
-        raise FormatError(f"{who} sampled twice at time {round(float(t[i]), 9)!r}", path=path,
+        raise FormatError(f"{who} sampled twice at time {fmt_num(t[i])}", path=path,
                           **{unit: None if lines is None else int(lines[i])})
     return order
 

@@ -56,6 +56,7 @@ from aveas_format.converters.common import (
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError
 from aveas_format.io.arrow import column_numpy
+from aveas_format.numeric import fmt_num
 from aveas_format.schema.taxonomy import CLASSES, DRIVER_FOCUS
 
 DEFAULT_SIZE = {"car": (4.5, 1.8, 1.5), "van": (5.5, 2.0, 2.2), "truck": (12.0, 2.5, 3.5),
@@ -152,7 +153,7 @@ def convert_driving_simulator(inputs: list[Path], *, map_source, options: Drivin
     dup = np.flatnonzero((ps[1:] == ps[:-1]) & (ts[1:] == ts[:-1]))
     if len(dup):
         i = order[dup[0] + 1]
-        raise FormatError(f"object {str(ids[i])!r} logged twice at time {float(t[i])!r}",
+        raise FormatError(f"object {str(ids[i])!r} logged twice at time {fmt_num(t[i])}",
                           path=parts[files[i]][0], line=int(lines[i]))
     sort_states(pid, t)
 

@@ -407,7 +407,7 @@ def _class_pmf(types: np.ndarray, score: np.ndarray, class_map: dict[str, str]) 
 
 @converter("infra-lidar", description="Infrastructure LiDAR: OpenLABEL cuboids (TUM Traffic/A9 style) "
            "or a tracks table + sensor pose", patterns=("*.json", "*.csv", "*.parquet"),
-           method="infrastructure_lidar", options=InfraLidarOptions)
+           method="infrastructure_lidar", options=InfraLidarOptions, provides=("start_time",))
 def convert_infra_lidar(inputs: list[Path], *, map_source, options: InfraLidarOptions):
     o = options
     rows: dict[str, list] = {k: [] for k in _ROWS}

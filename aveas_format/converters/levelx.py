@@ -340,7 +340,7 @@ _HIGHD_META = ("id", "width", "height", "class", "drivingDirection")
 @converter("highd", description="levelX highD drone recordings (tracks, tracksMeta, recordingMeta "
            "CSV); builds the map from the lane markings",
            patterns=("*_tracks.csv", "*_tracksMeta.csv", "*_recordingMeta.csv"), method="aerial",
-           options=HighDOptions, needs_map=False)
+           options=HighDOptions, needs_map=False, provides=("partner",))
 def convert_highd(inputs: list[Path], *, map_source=None, options: HighDOptions):
     tracks_p, meta_p, rec_p = find_recording_files(inputs)
     rec = _meta_row(rec_p, ("frameRate", "upperLaneMarkings", "lowerLaneMarkings"),
@@ -665,7 +665,7 @@ def _lanelets(tr: pa.Table, pid: np.ndarray, path: Path, attrs: list[dict[str, A
 @converter("ind", description="levelX inD / rounD / uniD drone recordings (tracks, tracksMeta, "
            "recordingMeta CSV) on an OpenDRIVE map of the site",
            patterns=("*_tracks.csv", "*_tracksMeta.csv", "*_recordingMeta.csv"), method="aerial",
-           options=InDOptions)
+           options=InDOptions, provides=("partner",))
 def convert_ind(inputs: list[Path], *, map_source, options: InDOptions):
     dataset = options.dataset or "inD"
     road_type = "urban"
@@ -675,6 +675,6 @@ def convert_ind(inputs: list[Path], *, map_source, options: InDOptions):
 @converter("exid", description="levelX exiD drone recordings (tracks with lanelet lists, "
            "tracksMeta, recordingMeta CSV) on an OpenDRIVE map of the site",
            patterns=("*_tracks.csv", "*_tracksMeta.csv", "*_recordingMeta.csv"), method="aerial",
-           options=ExiDOptions)
+           options=ExiDOptions, provides=("partner",))
 def convert_exid(inputs: list[Path], *, map_source, options: ExiDOptions):
     return _convert_centre("exid", inputs, map_source, options, "exiD", "motorway")

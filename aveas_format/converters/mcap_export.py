@@ -73,23 +73,19 @@ def _ts(msg_field, ns: int) -> None:
 
 
 @converter("mcap", direction="export", options=McapExportOptions,
-           description="MCAP with Foxglove SceneUpdate boxes, lane lines and LocationFix")
+           description="MCAP with Foxglove SceneUpdate boxes, lane lines and LocationFix",
+           requires=("mcap", "foxglove_schemas_protobuf", "google.protobuf"), extra="mcap")
 def export_mcap(rec, output: Path, *, options: McapExportOptions) -> list[Path]:
     import io
 
     import shapely
 
-    try:
-        from foxglove_schemas_protobuf.Color_pb2 import Color
-        from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
-        from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
-        from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
-        from mcap.writer import CompressionType, Writer
-    except ImportError as e:
-        from aveas_format.errors import FormatError
-
-        raise FormatError(f"the MCAP export needs the packages mcap and foxglove-schemas-protobuf "
-                          f"({e.name} is missing): pip install mcap foxglove-schemas-protobuf") from None
+    # the [mcap] extra: checked by the registry (requires=) before this runs
+    from foxglove_schemas_protobuf.Color_pb2 import Color
+    from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
+    from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
+    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+    from mcap.writer import CompressionType, Writer
 
     from aveas_format._version import __version__
     from aveas_format.safeio import write_bytes_atomic

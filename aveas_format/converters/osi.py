@@ -148,7 +148,7 @@ def _zero_time(path: Path) -> str | None:
 
 @converter("osi", description="ASAM OSI trace (.osi length-prefixed binary or MCAP): GroundTruth "
            "moving objects", patterns=("*.osi", "*.mcap"), method="traffic_simulation",
-           options=OsiOptions)
+           options=OsiOptions, requires=("betterosi",), extra="osi")
 def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     from aveas_format.mapref.crs import LocalFrame, crs_equal
     from aveas_format.opendrive import load_map
@@ -385,7 +385,8 @@ def _light_state(b, brake: float, left: float, right: float, hazard: float):
 
 
 @converter("osi", direction="export", options=OsiExportOptions,
-           description="ASAM OSI GroundTruth trace (.osi length-prefixed binary, or .mcap)")
+           description="ASAM OSI GroundTruth trace (.osi length-prefixed binary, or .mcap)",
+           requires=("betterosi",), extra="osi")
 def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
     """One ``osi3.GroundTruth`` per distinct ``time``: every participant present then as a moving
     object (id = participant_id; base position = footprint centre with z = half the height, yaw =

@@ -6,7 +6,22 @@ patterns, a pydantic options model and a one-line description. ``aveas-format co
 finds it here; ``aveas-format convert --list`` prints the table.
 
 Exporters (recording -> foreign format) register with ``direction="export"`` and have the signature
-``(recording, output, *, options) -> list[Path]``.
+``(recording, output, *, options) -> list[Path]``. Its companion files count as outputs: the CLI
+refuses to replace any of them without ``--overwrite`` (:meth:`Converter.outputs`). The map next
+to the output (options ``write_map``/``map_file``, ``converters.common.companion_map_path``) is
+counted by default; an exporter that writes other files next to its output declares them with
+``outputs=``.
+
+An importer declares which of the recording.json values a person must state (:data:`ASKED`:
+partner, start time, licence) its source can carry, ``provides=("start_time",)``: for the others
+the CLI asks (``-O KEY=VALUE``) instead of writing a stand-in ("unknown", 1970-01-01,
+"unspecified") that the validator would then flag (:meth:`Converter.unstated`).
+
+A converter whose source needs an optional stack declares it: ``requires=("mcap", ...)`` (modules)
+and ``extra="ros2"``; calling it without them is a one-line
+:class:`~aveas_format.errors.MissingDependencyError` naming the extra, and ``convert --list`` says
+which extra a converter needs. An unknown name or option is a
+:class:`~aveas_format.errors.UsageError` with the closest known name.
 
 :func:`load_converters` imports the converter modules of this package and of installed partner
 packages (entry-point group ``aveas_format.converters``) through :mod:`aveas_format.plugins`.
@@ -22,7 +37,7 @@ from typing import Any, ClassVar
 from pydantic import BaseModel, ConfigDict, ValidationError
 
 from aveas_format import plugins
-from aveas_format.errors import AveasError, FormatError, MissingCrsError
+from aveas_format.errors import AveasError, MissingCrsError, UsageError, did_you_mean, require
 
 
 class ConverterOptions(BaseModel):
@@ -58,6 +73,12 @@ class ImportOptions(ConverterOptions):
     the map's geoReference where there is one."""
 
 
+#: recording.json values only a person can state (the import options of the same names)
+ASKED = ("partner", "start_time", "license")
+#: acquisition methods of simulations: their time zero has no calendar date, start_time is not asked
+SIMULATION_METHODS = ("traffic_simulation", "driving_simulator")
+
+
 @dataclass(frozen=True)
 class Converter:
     name: str
@@ -69,17 +90,77 @@ class Converter:
     fn: Callable[..., Any]
     needs_map: bool = True
     version: str = "1"
+    #: modules of an optional dependency the converter needs, and the extra that installs them
+    requires: tuple[str, ...] = ()
+    extra: str | None = None
+    #: an exporter's files for an output and its options (default: the output alone)
+    outputs_fn: Callable[[Path, Any], list[Path]] | None = None
+    #: which of :data:`ASKED` the source can carry (an importer)
+    provides: tuple[str, ...] = ()
+
+    def unstated(self, options: dict[str, Any] | None) -> list[str]:
+        """The values of :data:`ASKED` that neither the source can carry nor ``options`` give: an
+        importer would write a stand-in for them ("unknown", 1970-01-01, "unspecified") that the
+        validator flags. A simulation's start time is not asked (it has no calendar date)."""
+        if self.direction != "import":
+            return []
+        given = {k for k, v in (options or {}).items() if v not in (None, "")}
+        return [k for k in ASKED if k not in given and k not in self.provides
+                and not (k == "start_time" and self.method in SIMULATION_METHODS)]
+
+    @property
+    def available(self) -> bool:
+        """Whether the optional dependencies of :attr:`requires` are installed."""
+        import importlib.util
+
+        def found(module: str) -> bool:
+            try:
+                return importlib.util.find_spec(module) is not None
+            except (ImportError, ValueError):  # a missing parent package
+                return False
+
+        return all(found(m) for m in self.requires)
 
     def parse_options(self, raw: dict[str, Any] | None) -> ConverterOptions:
         try:
             return self.options.model_validate(raw or {})
         except ValidationError as e:
-            parts = [f"{'.'.join(str(p) for p in err['loc'])}: {err['msg']}" for err in e.errors()]
-            raise FormatError(f"converter {self.name}: invalid options: {'; '.join(parts)}") from None
+            fields = list(self.options.model_fields)
+            parts = []
+            for err in e.errors():
+                loc = ".".join(str(p) for p in err["loc"])
+                hint = did_you_mean(loc, fields) if err["type"] == "extra_forbidden" else ""
+                parts.append(f"{loc}: {err['msg']}{hint}")
+            raise UsageError(f"converter {self.name}: invalid options: {'; '.join(parts)} "
+                             f"(options: {', '.join(fields) or 'none'})") from None
+
+    def outputs(self, output: str | Path, options: dict[str, Any] | ConverterOptions | None = None
+                ) -> list[Path]:
+        """The files an export to ``output`` writes (the output and its companion files)."""
+        opts = options if isinstance(options, ConverterOptions) else self.parse_options(options)
+        if self.outputs_fn:
+            return self.outputs_fn(Path(output), opts)
+        from aveas_format.converters.common import companion_map_path
+
+        companion = companion_map_path(Path(output), opts)
+        return [Path(output)] + ([companion] if companion is not None else [])
+
+    def check_map(self, map_source: Any) -> None:
+        """A :class:`~aveas_format.errors.UsageError` when the converter needs a map and has none."""
+        if self.needs_map and map_source is None:
+            raise UsageError(f"converter {self.name} needs a map: pass --map MAP.xodr")
+
+    def require(self) -> None:
+        """A :class:`~aveas_format.errors.MissingDependencyError` naming the extra when an
+        optional dependency of the converter is not installed."""
+        what = f"the {self.name} {'export' if self.direction == 'export' else 'import'}"
+        for module in self.requires:
+            require(module, extra=self.extra or "all", what=what)
 
     def __call__(self, *args: Any, options: dict[str, Any] | ConverterOptions | None = None,
                  **kw: Any) -> Any:
         opts = options if isinstance(options, ConverterOptions) else self.parse_options(options)
+        self.require()
         return self.fn(*args, options=opts, **kw)
 
 
@@ -88,9 +169,14 @@ CONVERTERS: dict[str, Converter] = {}
 
 def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
               method: str | None = None, options: type[ConverterOptions] = ConverterOptions,
-              direction: str = "import", needs_map: bool = True, version: str = "1"
+              direction: str = "import", needs_map: bool = True, version: str = "1",
+              requires: tuple[str, ...] = (), extra: str | None = None,
+              outputs: Callable[[Path, Any], list[Path]] | None = None,
+              provides: tuple[str, ...] = (),
               ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """Register a converter function (decorator)."""
+    """Register a converter function (decorator); ``requires``/``extra``: its optional
+    dependencies, ``outputs``: an exporter's files, ``provides``: the :data:`ASKED` values its
+    source carries (see the module docstring)."""
     if direction not in ("import", "export"):
         raise ValueError("direction must be 'import' or 'export'")
     key = name if direction == "import" else f"{name}:export"
@@ -101,7 +187,8 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
                              f"{CONVERTERS[key].fn.__module__} has it")
         CONVERTERS[key] = Converter(name=name, direction=direction, description=description,
                                     patterns=patterns, method=method, options=options, fn=fn,
-                                    needs_map=needs_map, version=version)
+                                    needs_map=needs_map, version=version, requires=requires,
+                                    extra=extra, outputs_fn=outputs, provides=provides)
         return fn
 
     return register
@@ -118,7 +205,8 @@ def get_converter(name: str, direction: str = "import") -> Converter:
     key = name if direction == "import" else f"{name}:export"
     if key not in reg:
         known = sorted(c.name for c in reg.values() if c.direction == direction)
-        raise FormatError(f"no {direction} converter named {name!r}; known: {', '.join(known)}")
+        raise UsageError(f"no {direction} converter named {name!r}{did_you_mean(name, known)}; "
+                         f"known: {', '.join(known)}")
     return reg[key]
 
 
@@ -131,21 +219,23 @@ def convert(name: str, inputs: list[str | Path], *, map_source: str | Path | byt
     conv = get_converter(name)
     if crs is not None:
         options = {**(options or {}), "crs": crs}
+    opts = conv.parse_options(options)  # usage errors first
+    conv.check_map(map_source)
     paths = [Path(p) for p in inputs]
     for p in paths:
         if not p.exists():
             from aveas_format.errors import RecordingIOError
 
             raise RecordingIOError("input not found", path=p)
-    if conv.needs_map and map_source is None:
-        raise FormatError(f"converter {name} needs a map: pass --map MAP.xodr")
     try:
-        return conv(paths, map_source=map_source, options=options)
+        return conv(paths, map_source=map_source, options=opts)
     except MissingCrsError as e:
         from aveas_format.mapref.build import EXAMPLE_CRS
 
         cmd = (f"aveas-format convert --from {name} {' '.join(_quote(p) for p in paths)}"
                + (f" --map {_quote(map_source)}" if isinstance(map_source, (str, Path)) else "")
+               + "".join(f" -O {_quote(f'{k}={v}')}" for k in ASKED
+                         if (v := (options if isinstance(options, dict) else {}).get(k)) not in (None, ""))
                + f" --crs '{EXAMPLE_CRS}' -o OUT.aveas")
         raise MissingCrsError("the map has no <geoReference>, so the recording's CRS must be given "
                               f"(API: crs=): {cmd} (a transverse Mercator at the site: put its "

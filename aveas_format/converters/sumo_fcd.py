@@ -67,6 +67,7 @@ from aveas_format.converters.common import (
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.io.arrow import column_numpy
+from aveas_format.numeric import fmt_num
 from aveas_format.safeio import iterparse, xml_parser
 
 # SUMO's vType defaults per vClass: (length, width, height) in m
@@ -244,7 +245,7 @@ def _check_unique(pid: np.ndarray, t: np.ndarray, source_ids, lines: list, files
     dup = np.flatnonzero((ps[1:] == ps[:-1]) & (ts[1:] == ts[:-1]))
     if len(dup):
         i = int(max(order[dup[0]], order[dup[0] + 1]))
-        raise FormatError(f"{str(source_ids[int(pid[i])])!r} sampled twice at time {float(t[i])!r}",
+        raise FormatError(f"{str(source_ids[int(pid[i])])!r} sampled twice at time {fmt_num(t[i])}",
                           path=inputs[files[i]], line=lines[i])
 
 

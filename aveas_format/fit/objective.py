@@ -75,7 +75,10 @@ def kde_logpdf(samples: np.ndarray, points: np.ndarray, bandwidth: str | float =
         if sd > h:
             samples = m + (samples - m) * np.sqrt(1.0 - (h / sd) ** 2)
     if backend == "sklearn":
-        from sklearn.neighbors import KernelDensity
+        from aveas_format.errors import require
+
+        KernelDensity = require("sklearn.neighbors", extra="fit", what="the scikit-learn KDE "
+                                "backend").KernelDensity
 
         out = KernelDensity(kernel="gaussian", bandwidth=h).fit(samples[:, None]).score_samples(points[:, None])
     else:

@@ -26,6 +26,24 @@ def sha256_of(buf: pa.Buffer | bytes | memoryview) -> str:
     return hashlib.sha256(memoryview(buf)).hexdigest()
 
 
+def _not_a_zip(path: Path) -> str:
+    """Why a file that :func:`zipfile.is_zipfile` does not take is not a recording: a ZIP archive
+    cut short (it starts with a ZIP signature but has no central directory), an empty or foreign
+    file named ``.zip``, or neither."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError as e:
+        return f"cannot read: {e.strerror or e}"
+    if head in (b"PK\x03\x04", b"PK\x05\x06", b"PK\x07\x08"):
+        return ("truncated or corrupt ZIP archive: no end-of-central-directory record (was the "
+                "download or copy cut short?)")
+    if path.name.lower().endswith(".zip"):
+        return ("truncated or corrupt ZIP archive: the file is empty" if not head else
+                "not a recording: named .zip but not a ZIP archive (no ZIP signature)")
+    return "not a recording: neither a directory nor a ZIP archive"
+
+
 class Container:
     """The files of one recording: ``NAME.aveas/`` or ``NAME.aveas.zip``."""
 
@@ -55,8 +73,7 @@ class Container:
                 if len(tops) == 1:
                     self._prefix = tops.pop()
         else:
-            raise RecordingIOError("not a recording: neither a directory nor a ZIP archive",
-                                   path=self.path)
+            raise RecordingIOError(_not_a_zip(self.path), path=self.path)
 
     # -- listing -----------------------------------------------------------------------------
     def names(self) -> list[str]:

@@ -145,13 +145,17 @@ def build_recording(
     duration_s: float | None = None,
     recording_id: str | None = None,
     rights: Mapping[str, Any] | None = None,
+    license: str | None = None,
     reference: bool = True,
     check_map_crs: bool = False,
     **meta: Any,
 ) -> Recording:
     """A valid in-memory recording from plain arrays (see module doc).
 
-    ``map_source`` is the OpenDRIVE text/bytes or a path to a .xodr file. Extra keyword arguments are
+    ``map_source`` is the OpenDRIVE text/bytes or a path to a .xodr file. ``partner``,
+    ``start_time`` and ``license`` (or the whole ``rights``) are what only a person can state:
+    without them the recording carries stand-ins ("unknown", 1970-01-01, "unspecified") that the
+    validator flags (a simulation's time zero excepted). Extra keyword arguments are
     recording.json fields (``title``, ``acquisition`` overrides as a dict, ``coverage``,
     ``conditions``, ``thresholds``, ``extras``...). ``reference=False`` keeps road coordinates as
     given (or null) instead of computing them from the map. ``crs`` defaults to the map's
@@ -203,8 +207,8 @@ def build_recording(
         "crs": crs,
         "map": {"file": "map.xodr", "sha256": sha256_of(map_bytes),
                 "opendrive_version": opendrive_version(map_bytes)},
-        "rights": dict(rights or {"right_of_use": "research_only", "license": "unspecified",
-                                  "owner": partner}),
+        "rights": dict(rights or {"right_of_use": "research_only",
+                                  "license": license or "unspecified", "owner": partner}),
     }
     md.update(meta)
     try:

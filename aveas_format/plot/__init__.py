@@ -28,6 +28,11 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from aveas_format.errors import require
+
+# matplotlib is the [plot] extra: without it, one line naming the extra (not a ModuleNotFoundError)
+require("matplotlib", extra="plot", what="figures and the HTML report")
+
 _MODULES: dict[str, tuple[str, ...]] = {
     "derive": ("acceleration_figure", "ttc_figure"),
     "fit": ("plot_histogram", "plot_parameters"),

@@ -7,6 +7,8 @@ import tempfile
 from collections.abc import Iterable
 from pathlib import Path
 
+from aveas_format.errors import RecordingIOError
+
 
 def _umask() -> int:
     mask = os.umask(0)
@@ -23,9 +25,21 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
 def write_chunks_atomic(path: str | Path, chunks: Iterable[bytes]) -> Path:
     """Write the byte chunks one after the other to ``path`` through a temporary sibling and a
     rename (a streamed export never holds the whole file); nothing is left behind when the
-    iterator raises."""
+    iterator raises. A directory that is missing or not writable is a
+    :class:`~aveas_format.errors.RecordingIOError` naming ``path`` and the directory (not the
+    temporary file)."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent or ".")
+    parent = path.parent if str(path.parent) else Path(".")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=parent)
+    except FileNotFoundError:
+        raise RecordingIOError(f"cannot write: the directory {parent} does not exist",
+                               path=path) from None
+    except NotADirectoryError:
+        raise RecordingIOError(f"cannot write: {parent} is not a directory", path=path) from None
+    except PermissionError:
+        raise RecordingIOError(f"cannot write: permission denied in the directory {parent}",
+                               path=path) from None
     try:
         os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as f:

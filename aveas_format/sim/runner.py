@@ -311,9 +311,11 @@ def fcd_mean_speeds(fcd: pa.Table, edges: list[str] | None, pos: tuple[float, fl
 
 def simulate(scenario: Scenario, *, recording: bool = False, speed_factors: bool = False,
              fcd: bool = True, network: NetInfo | None = None, workdir: str | Path | None = None,
-             timeout: float | None = 600) -> SimResult:
+             timeout: float | None = 600, recording_options: dict | None = None) -> SimResult:
     """Run ``scenario``; see the module docstring. ``workdir`` keeps the files (default: a
-    temporary directory, removed afterwards).
+    temporary directory, removed afterwards). ``recording_options``: options of the ``sumo-fcd``
+    import that makes the recording (its metadata: ``license``, ``partner``, ``title``, ...;
+    without a ``license`` the recording carries the stand-in the validator flags).
 
     ``fcd=False`` has SUMO write only what the per-vehicle mean speeds need: the crossings of two
     instant induction loops per lane at the ends of the measurement section when it is a position
@@ -379,8 +381,8 @@ def simulate(scenario: Scenario, *, recording: bool = False, speed_factors: bool
             from aveas_format.converters import convert
 
             res.recording = convert("sumo-fcd", [wd / fcd_name], map_source=net.xodr, options={
-                "net_file": str(net.net_file), "vtypes": [str(wd / "routes.rou.xml")],
-                "partner": "aveas-format sim", "title": "SUMO simulation"})
+                "partner": "aveas-format sim", "title": "SUMO simulation", **(recording_options or {}),
+                "net_file": str(net.net_file), "vtypes": [str(wd / "routes.rou.xml")]})
             timings["recording"] = time.perf_counter() - t4
         res.net = replace(net, net_file=Path("net.net.xml"))
         return res

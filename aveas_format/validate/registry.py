@@ -172,6 +172,9 @@ def select_rules(select: list[str] | None = None, ignore: list[str] | None = Non
 
     for p in (select or []) + (ignore or []):
         if p not in reg and p not in families:
-            raise ValueError(f"unknown rule or family {p!r}; families: {', '.join(sorted(families))}")
+            from aveas_format.errors import did_you_mean
+
+            raise ValueError(f"unknown rule or family {p!r}{did_you_mean(p, [*families, *reg])}; "
+                             f"families: {', '.join(sorted(families))}")
     chosen = [reg[c] for c in sorted(reg) if not select or match(reg[c], select)]
     return [r for r in chosen if not ignore or not match(r, ignore)]

@@ -14,6 +14,8 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from aveas_format.numeric import fmt_num
+
 
 class Severity(str, Enum):
     """error = a MUST of the format, warning = a SHOULD, info = no quality impact."""
@@ -63,7 +65,7 @@ class Location(BaseModel):
         for name in ("table", "row", "participant_id", "time", "column", "road_id", "lane_id", "xpath"):
             v = getattr(self, name)
             if v is not None:
-                parts.append(f"{name}={v:g}" if isinstance(v, float) else f"{name}={v}")
+                parts.append(f"{name}={fmt_num(v)}")
         if self.x is not None and self.y is not None:
             parts.append(f"x,y={self.x:.2f},{self.y:.2f}")
         return " ".join(parts)

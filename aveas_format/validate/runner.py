@@ -12,6 +12,7 @@ import numpy as np
 
 from aveas_format._version import __version__
 from aveas_format.io.recording import Recording
+from aveas_format.numeric import fmt_num
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import COLLECTORS, Hit, Hits, Rule, select_rules
 from aveas_format.validate.report import Finding, Location, Report, RuleResult, ToolFailure
@@ -45,8 +46,9 @@ def _finding(r: Rule, fields: dict[str, Any]) -> Finding:
         if k in loc and isinstance(loc[k], (int, float)):
             loc[k] = float(loc[k])
     ctx = {k: v for k, v in fields.items() if k not in _LOCATION_FIELDS}
-    try:
-        message = r.message.format_map(_SafeDict(fields))
+    try:  # numbers in the message rounded for people; the typed fields keep every digit
+        message = r.message.format_map(_SafeDict({k: fmt_num(v) if isinstance(v, float) else v
+                                                  for k, v in fields.items()}))
     except (ValueError, TypeError, IndexError, KeyError):
         message = r.message
     return Finding(code=r.code, severity=r.severity, message=message,

@@ -8,7 +8,14 @@ from pathlib import Path
 
 import pytest
 
+from helpers_common import realdata_fixture, shared
 from helpers_converters import rich_recording
+
+
+@realdata_fixture
+def openlabel_data() -> Path:
+    """The OpenLABEL files of ../shared/data/openlabel (ASAM, VCD and AVEAS examples)."""
+    return shared("data", "openlabel")
 
 
 @pytest.fixture(scope="session")

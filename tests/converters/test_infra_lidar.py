@@ -5,6 +5,7 @@ truth in the base frame."""
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 
@@ -18,13 +19,9 @@ import aveas_format
 from aveas_format.converters import convert, load_converters
 from aveas_format.opendrive.builder import straight_highway
 
-from helpers_common import SHARED
+from helpers_common import realdata_fixture, shared
 
-CALIB = SHARED / "data" / "tum_traffic_calib" / "s110_lidar_ouster_south.json"
-ASAM_CUBOIDS = SHARED / "data" / "openlabel" / "asam_spec__openlabel100_example_cuboids.json"
 GEO = "+proj=tmerc +lat_0=48.24 +lon_0=11.64 +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
-M = np.asarray(json.loads(CALIB.read_text())["transformation_matrix_s110_lidar_ouster_south_to_s110_base"])
-M_INV = np.linalg.inv(M)
 T0 = 1646667310.044372
 NF = 20
 RATE = 10.0
@@ -37,9 +34,27 @@ TRUTH = [
 ]
 
 
+def calib():
+    """The real s110 LiDAR calibration file (../shared; for a realdata test)."""
+    return shared("data", "tum_traffic_calib", "s110_lidar_ouster_south.json")
+
+
+def mount() -> np.ndarray:
+    """The LiDAR -> base transformation of :func:`calib` (4x4)."""
+    return _mount(calib())
+
+
+@functools.lru_cache(maxsize=None)
+def _mount(path) -> np.ndarray:
+    m = np.asarray(json.loads(path.read_text())["transformation_matrix_s110_lidar_ouster_south_to_s110_base"])
+    m.setflags(write=False)
+    return m
+
+
 def lidar_cuboid(x, y, heading, l, w, h):
-    c = M_INV @ np.array([x, y, h / 2, 1.0])
-    r = M_INV[:3, :3] @ Rotation.from_euler("z", heading).as_matrix()
+    m_inv = np.linalg.inv(mount())
+    c = m_inv @ np.array([x, y, h / 2, 1.0])
+    r = m_inv[:3, :3] @ Rotation.from_euler("z", heading).as_matrix()
     q = Rotation.from_matrix(r).as_quat()
     return [*c[:3].tolist(), *q.tolist(), l, w, h]
 
@@ -57,7 +72,7 @@ def tum_frame(k, with_pose=True):
     cs = {"s110_base": {"type": "scene_cs", "parent": "", "children": ["s110_lidar_ouster_south"]},
           "s110_lidar_ouster_south": {"type": "sensor_cs", "parent": "s110_base", "children": []}}
     if with_pose:
-        cs["s110_lidar_ouster_south"]["pose_wrt_parent"] = {"matrix4x4": M.ravel().tolist()}
+        cs["s110_lidar_ouster_south"]["pose_wrt_parent"] = {"matrix4x4": mount().ravel().tolist()}
     return {"openlabel": {
         "metadata": {"schema_version": "1.0.0"}, "coordinate_systems": cs,
         "frames": {str(k): {"frame_properties": {
@@ -73,7 +88,7 @@ def site_map(tmp_path_factory):
     return p
 
 
-@pytest.fixture(scope="module")
+@realdata_fixture(scope="module")
 def tum_files(tmp_path_factory):
     d = tmp_path_factory.mktemp("tum")
     out = []
@@ -93,6 +108,7 @@ def test_registered():
     assert "infra-lidar" in load_converters()
 
 
+@pytest.mark.realdata
 def test_tum_layout(tum_files, site_map, tmp_path):
     rec = convert("infra-lidar", tum_files, map_source=site_map, options={"fov_deg": 160.0,
                                                                           "fov_yaw_deg": -70.0})
@@ -117,11 +133,12 @@ def test_tum_layout(tum_files, site_map, tmp_path):
     assert s.column("vx").to_numpy()[pid == 1] == pytest.approx(-15.0)
     assert s.column("lane_id").to_numpy()[car].tolist() == [-1] * NF
     sensor = rec.meta.acquisition.sensors[0].pose
-    assert (sensor.x, sensor.y, sensor.z) == pytest.approx(tuple(M[:3, 3]))
+    assert (sensor.x, sensor.y, sensor.z) == pytest.approx(tuple(mount()[:3, 3]))
     report = aveas_format.validate(rec.write(tmp_path / "tum.aveas"))
     assert report.counts["error"] == 0, report
 
 
+@pytest.mark.realdata
 def test_uncertainty_model(tum_files, site_map):
     """sigma along the line of sight (0.05 + 0.002 r) f, across it (0.05 + 0.0015 r) f with
     f = sqrt(50 / 20) for the truck's 20 points, rotated by the bearing."""
@@ -129,7 +146,7 @@ def test_uncertainty_model(tum_files, site_map):
     s = rec.states
     row = int(np.flatnonzero(s.column("participant_id").to_numpy() == 1)[3])
     x, y = s.column("x")[row].as_py(), s.column("y")[row].as_py()
-    dx, dy = x - M[0, 3], y - M[1, 3]
+    dx, dy = x - mount()[0, 3], y - mount()[1, 3]
     r, b = math.hypot(dx, dy), math.atan2(dy, dx)
     f = math.sqrt(50 / 20)
     sr, st = (0.05 + 0.002 * r) * f, (0.05 + 0.0015 * r) * f
@@ -144,6 +161,7 @@ def test_uncertainty_model(tum_files, site_map):
     assert np.all(s.column("vx_std").to_numpy()[car] > 0)
 
 
+@pytest.mark.realdata
 def test_unobserved_regions(tum_files, site_map):
     rec = convert("infra-lidar", tum_files, map_source=site_map,
                   options={"range_m": 80.0, "fov_deg": 180.0, "fov_yaw_deg": -77.6})
@@ -155,7 +173,7 @@ def test_unobserved_regions(tum_files, site_map):
     assert set(u.column("occluder_id").to_numpy(zero_copy_only=False)[occ]) <= {0, 1, 2}
     geoms = shapely.from_wkb(u.column("geometry").to_pylist())
     assert shapely.is_valid(geoms).all()
-    sx, sy, sh = M[:3, 3]
+    sx, sy, sh = mount()[:3, 3]
     # the car at t = 0: ground behind it (seen from the sensor) is hidden, ground in front is not
     row = next(i for i in occ if u.column("occluder_id")[i].as_py() == 0 and u.column("time_start")[i].as_py() == 0)
     cx, cy = -40.0, -1.75
@@ -169,6 +187,7 @@ def test_unobserved_regions(tum_files, site_map):
     assert rec.meta.coverage.startswith("POLYGON")
 
 
+@pytest.mark.realdata
 def test_asam_form_and_sensor_pose_file(site_map, tmp_path):
     """One file per sequence, ASAM-conformant (cuboid lists, type in the top-level objects,
     coordinate_system in the cuboid), the cuboids' system has no pose: the real TUM calibration
@@ -188,7 +207,7 @@ def test_asam_form_and_sensor_pose_file(site_map, tmp_path):
                          "objects": objects, "frames": frames}}
     seq = tmp_path / "sequence.json"
     seq.write_text(json.dumps(doc))
-    rec = convert("infra-lidar", [seq, CALIB], map_source=site_map)
+    rec = convert("infra-lidar", [seq, calib()], map_source=site_map)
     s = rec.states
     pid = s.column("participant_id").to_numpy()
     t = s.column("time").to_numpy()
@@ -196,9 +215,10 @@ def test_asam_form_and_sensor_pose_file(site_map, tmp_path):
     assert s.column("x").to_numpy()[pid == 1] == pytest.approx(tx, abs=1e-6)
     assert s.column("y").to_numpy()[pid == 1] == pytest.approx(ty, abs=1e-6)
     assert rec.participants.column("class").to_pylist() == ["car", "truck", "pedestrian"]
-    assert [i.file for i in rec.meta.source.inputs] == ["sequence.json", CALIB.name]
+    assert [i.file for i in rec.meta.source.inputs] == ["sequence.json", calib().name]
 
 
+@pytest.mark.realdata
 def test_tracks_table_with_frame_offset(site_map, tmp_path):
     """A tracker's CSV in the sensor frame + the calibration; frame_offset shifts the base frame."""
     lines = ["frame,track_id,class,x,y,z,yaw,length,width,height,num_points"]
@@ -210,7 +230,7 @@ def test_tracks_table_with_frame_offset(site_map, tmp_path):
     csv = tmp_path / "tracks.csv"
     csv.write_text("\n".join(lines) + "\n")
     rec = convert("infra-lidar", [csv], map_source=site_map,
-                  options={"sensor_pose": str(CALIB), "frame_offset": [10.0, 0.0, 0.0], "rate_hz": 10})
+                  options={"sensor_pose": str(calib()), "frame_offset": [10.0, 0.0, 0.0], "rate_hz": 10})
     s = rec.states
     pid = s.column("participant_id").to_numpy()
     t = s.column("time").to_numpy()
@@ -222,18 +242,21 @@ def test_tracks_table_with_frame_offset(site_map, tmp_path):
     assert aveas_format.validate(rec.write(tmp_path / "t.aveas")).counts["error"] == 0
 
 
+@pytest.mark.realdata
 def test_asam_spec_cuboid_example_is_a_moving_sensor(tmp_path):
     """The ASAM spec's cuboid example puts its cuboids in vehicle-iso8855, which per-frame
     transforms carry into UTM: a sensor on a moving vehicle. infra-lidar used to read the boxes
     as if the vehicle stood still; it now refuses and names the converter that applies them."""
+    asam_cuboids = shared("data", "openlabel", "asam_spec__openlabel100_example_cuboids.json")
     m = tmp_path / "m.xodr"
     m.write_text(straight_highway(length=400.0, lanes_right=3, lanes_left=3, x0=-200.0, geo_reference=GEO))
     with pytest.raises(aveas_format.FormatError,
                        match=r"frame_properties.transforms carry coordinate system 'vehicle-iso8855' "
                              r"into 'utm-30t' \(geo_utm\).*--from openlabel"):
-        convert("infra-lidar", [ASAM_CUBOIDS], map_source=m, options={"occlusion": False})
+        convert("infra-lidar", [asam_cuboids], map_source=m, options={"occlusion": False})
 
 
+@pytest.mark.realdata
 def test_frame_transforms_move_the_sensor(site_map, tmp_path):
     """A LiDAR whose pose in the base frame changes per frame (frame_properties.transforms, as a
     sensor on a slowly moving platform writes them): the boxes are placed through each frame's
@@ -243,10 +266,10 @@ def test_frame_transforms_move_the_sensor(site_map, tmp_path):
         doc = tum_frame(k)
         shift = np.eye(4)
         shift[0, 3] = 2.0 * k  # the platform moves 2 m per frame along x
-        # the cuboids were written for the static pose M; the frame's transform is shift @ M, so
-        # express them in the moved sensor frame: c' = (shift M)^-1 M c
-        moved = shift @ M
-        inv = np.linalg.inv(moved) @ M
+        # the cuboids were written for the static pose m; the frame's transform is shift @ m, so
+        # express them in the moved sensor frame: c' = (shift m)^-1 m c
+        moved = shift @ mount()
+        inv = np.linalg.inv(moved) @ mount()
         for obj in doc["openlabel"]["frames"][str(k)]["objects"].values():
             v = obj["object_data"]["cuboid"]["val"]
             c = inv @ np.array([*v[:3], 1.0])
@@ -272,6 +295,7 @@ def test_frame_transforms_move_the_sensor(site_map, tmp_path):
     assert rec.meta.source.options["timestamp_unit"] == "s"
 
 
+@pytest.mark.realdata
 def test_malformed_inputs_are_located(site_map, tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text('{"openlabel": {\n  "frames": {\n    "0": {,}\n}}}')
@@ -288,13 +312,13 @@ def test_malformed_inputs_are_located(site_map, tmp_path):
     csv = tmp_path / "t.csv"
     csv.write_text("time,id,class,x,y,z,yaw,l,w,h\n0,1,car,1,2,0,0,4,2,1.5\n0.1,1,car,abc,2,0,0,4,2,1.5\n")
     with pytest.raises(aveas_format.FormatError, match=r"t.csv: line 3: column 'x': 'abc' is not a number"):
-        convert("infra-lidar", [csv, CALIB], map_source=site_map)
+        convert("infra-lidar", [csv, calib()], map_source=site_map)
     with pytest.raises(aveas_format.FormatError, match=r"t.csv: a tracks table needs a sensor pose"):
         csv.write_text("time,id,class,x,y,z,yaw,l,w,h\n0,1,car,1,2,0,0,4,2,1.5\n")
         convert("infra-lidar", [csv], map_source=site_map)
     csv.write_text("time,id,class,x,y,z,yaw,l,w,h\n0,1,car,1,2,0,0,4,2,1.5\n0.1,1,car,1,2,0,0,-4,2,1.5\n")
     with pytest.raises(aveas_format.FormatError, match=r"t.csv: line 3: column 'l': value must be positive"):
-        convert("infra-lidar", [csv, CALIB], map_source=site_map)
+        convert("infra-lidar", [csv, calib()], map_source=site_map)
     pose = tmp_path / "pose.json"
     pose.write_text('{"projection": [[1, 2, 3, 4]]}')
     csv.write_text("time,id,class,x,y,z,yaw,l,w,h\n0,1,car,1,2,0,0,4,2,1.5\n")
@@ -302,6 +326,7 @@ def test_malformed_inputs_are_located(site_map, tmp_path):
         convert("infra-lidar", [csv, pose], map_source=site_map)
 
 
+@pytest.mark.realdata
 def test_timestamp_units_and_non_road_users(site_map, tmp_path):
     """Epoch microseconds as strings (inferred, recorded in the source block); a DontCare track
     and a barrier are skipped with a note; keep_non_road_users keeps the barrier."""

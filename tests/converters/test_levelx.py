@@ -445,7 +445,7 @@ def test_ind_malformed_input_is_located(tmp_path, site_map, which, line, col, va
 
 def test_ind_needs_a_map(tmp_path):
     files = write_centre(tmp_path / "ind", ind_truth())
-    with pytest.raises(aveas_format.FormatError, match="needs a map"):
+    with pytest.raises(aveas_format.UsageError, match="needs a map"):
         convert("ind", [files[0]])
 
 
@@ -456,14 +456,15 @@ def test_cli_convert_highd_without_map(tmp_path):
     files = write_highd(tmp_path / "h")
     out = tmp_path / "cli.aveas"
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "highd",
-                          str(files[0]), "-o", str(out), "-O", "pixel_std=2"],
+                          str(files[0]), "-o", str(out), "-O", "pixel_std=2", "-O",
+                          "license=CC-BY-4.0", "-O", "start_time=2017-11-03T08:00:00Z"],
                          capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert "valid" in res.stderr and out.is_dir()
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "ind",
                           str(files[0]), "-o", str(tmp_path / "x.aveas")], capture_output=True,
                          text=True)
-    assert res.returncode != 0 and "needs a map" in res.stderr
+    assert res.returncode == 2 and "needs a map" in res.stderr
 
 
 def test_highd_unobserved_outside_the_footprint(tmp_path):

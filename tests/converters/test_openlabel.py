@@ -19,7 +19,7 @@ from aveas_format.converters import convert, get_converter
 from aveas_format.converters.openlabel import openlabel_to_recording, recording_to_openlabel
 from aveas_format.opendrive.builder import straight_highway
 
-from helpers_converters import OPENLABEL_DATA, assert_recordings_equal, assert_tables_equal
+from helpers_converters import assert_recordings_equal, assert_tables_equal
 
 STRAIGHT = aveas_format.__path__[0] + "/../tests/data/straight.xodr"
 SITE = "+proj=tmerc +lat_0=48.9 +lon_0=8.35 +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
@@ -221,10 +221,10 @@ def test_aveas_openlabel_generated_file(tmp_path, openlabel_schema):
     assert doc["openlabel"]["metadata"]["acquisition_method"] == "in-vehicle"
 
 
-def test_minimum_example_with_map(tmp_path):
+def test_minimum_example_with_map(tmp_path, openlabel_data):
     from aveas_openlabel import AveasOpenLabel
 
-    rec = convert("openlabel", [OPENLABEL_DATA / "aveas__minimum_openlabel_example.json"],
+    rec = convert("openlabel", [openlabel_data / "aveas__minimum_openlabel_example.json"],
                   map_source=STRAIGHT)
     assert rec.participants.num_rows == 0 and rec.states.num_rows == 0
     assert rec.meta.acquisition.partner == "understand.ai"
@@ -234,24 +234,24 @@ def test_minimum_example_with_map(tmp_path):
     AveasOpenLabel.from_dict(json.loads(out.read_text()))
 
 
-def test_static_cuboids_without_frames_are_a_clear_error():
+def test_static_cuboids_without_frames_are_a_clear_error(openlabel_data):
     """VCD's test file labels two cars with cuboids in object_data and no frames: no time, so no
     trajectory; the error says why."""
     with pytest.raises(aveas_format.FormatError, match=r"2 object\(s\) carry a static cuboid"):
-        convert("openlabel", [OPENLABEL_DATA / "vcd__openlabel100_test_cuboids.json"],
+        convert("openlabel", [openlabel_data / "vcd__openlabel100_test_cuboids.json"],
                 map_source=STRAIGHT)
 
 
-def test_minimum_example_without_map_is_a_clear_error():
+def test_minimum_example_without_map_is_a_clear_error(openlabel_data):
     with pytest.raises(aveas_format.FormatError, match="no map: pass --map"):
-        convert("openlabel", [OPENLABEL_DATA / "aveas__minimum_openlabel_example.json"])
+        convert("openlabel", [openlabel_data / "aveas__minimum_openlabel_example.json"])
 
 
-def test_generic_asam_cuboids_with_utm_transforms(tmp_path):
+def test_generic_asam_cuboids_with_utm_transforms(tmp_path, openlabel_data):
     """ASAM spec example 7.13.1: cuboids in vehicle-iso8855, per-frame odometry to UTM 30T."""
     import pyproj
 
-    src = OPENLABEL_DATA / "asam_spec__openlabel100_example_cuboids.json"
+    src = openlabel_data / "asam_spec__openlabel100_example_cuboids.json"
     doc = json.loads(src.read_text())["openlabel"]
     f0 = doc["frames"]["538"]["frame_properties"]["transforms"]["vehicle-iso8855_to_utm-30t"]
     q = f0["transform_src_to_dst"]["quaternion"]
@@ -304,11 +304,11 @@ def test_cli_export_and_convert(rich, tmp_path):
     assert_recordings_equal(rich, aveas_format.open(back))
 
 
-def test_poses_and_utm_names():
+def test_poses_and_utm_names(openlabel_data):
     """The VCD pose example gives one camera as a matrix and its twin as Euler angles."""
     from aveas_format.converters.openlabel.frames import _pose, _utm_crs
 
-    cs = json.loads((OPENLABEL_DATA / "vcd__openlabel100_test_poses.json").read_text())
+    cs = json.loads((openlabel_data / "vcd__openlabel100_test_poses.json").read_text())
     cs = cs["openlabel"]["coordinate_systems"]
     a, b = _pose(cs["CAM_1"]["pose_wrt_parent"]), _pose(cs["CAM_2"]["pose_wrt_parent"])
     assert np.allclose(a, b)

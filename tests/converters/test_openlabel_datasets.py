@@ -141,7 +141,7 @@ def test_timestamp_unit_option_overrides(tmp_path):
     assert np.allclose(np.unique(rec.states.column("time").to_numpy()), 1e-4 * np.arange(20))
     assert rec.meta.source.options["timestamp_unit"] == "us"
     assert "given" in rec.meta.source.options["timestamps"]
-    with pytest.raises(aveas_format.FormatError, match="timestamp_unit"):
+    with pytest.raises(aveas_format.UsageError, match="timestamp_unit"):
         convert("openlabel", [src], map_source=STRAIGHT_MAP, options={"timestamp_unit": "minutes"})
 
 

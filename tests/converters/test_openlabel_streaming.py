@@ -18,7 +18,6 @@ from aveas_format.converters import convert, get_converter
 from aveas_format.converters.openlabel import openlabel_to_recording
 from aveas_format.sample import highway_scene
 
-from helpers_converters import OPENLABEL_DATA
 
 STRAIGHT = aveas_format.__path__[0] + "/../tests/data/straight.xodr"
 
@@ -92,11 +91,11 @@ def test_shuffled_frame_order_gives_the_same_recording(scene_file, tmp_path):
     assert a.states.equals(b.states) and a.participants.equals(b.participants)
 
 
-def test_generic_files_streamed_equal_dict_path(tmp_path):
+def test_generic_files_streamed_equal_dict_path(tmp_path, openlabel_data):
     for name in ("asam_spec__openlabel100_example_cuboids.json",
                  "asam_spec__openlabel100_test_bbox_simple.json",
                  "vcd__openlabel100_test_cuboids.json", "aveas__minimum_openlabel_example.json"):
-        src = OPENLABEL_DATA / name
+        src = openlabel_data / name
         try:
             expected = _dict_path(src, STRAIGHT)
         except aveas_format.AveasError as e:

@@ -106,5 +106,6 @@ def test_cli(rich, tmp_path):
     assert res.returncode == 0, res.stderr
     back = tmp_path / "back.aveas"
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "openscenario",
-                          str(out), "-o", str(back)], capture_output=True, text=True)
+                          str(out), "-o", str(back), "-O", "license=CC-BY-4.0"],
+                         capture_output=True, text=True)
     assert res.returncode == 0, res.stderr + res.stdout

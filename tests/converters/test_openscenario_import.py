@@ -140,7 +140,7 @@ def test_cli_parameter_override(tmp_path):
              params='<ParameterDeclaration name="V" parameterType="double" value="10"/>')
     out = tmp_path / "o.aveas"
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "openscenario",
-                          str(p), "-O", "parameter.V=25", "-o", str(out), "--no-validate"],
+                          str(p), "-O", "parameter.V=25", "-O", "license=CC0-1.0", "-o", str(out), "--no-validate"],
                          capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert aveas_format.open(out).meta.duration_s == pytest.approx(4.0)

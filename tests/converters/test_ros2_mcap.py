@@ -16,12 +16,11 @@ import aveas_format
 from aveas_format.converters import convert, load_converters
 from aveas_format.opendrive.builder import straight_highway
 
-from helpers_common import SHARED
+from helpers_common import realdata_fixture, shared
 
 pytest.importorskip("mcap_ros2")
 from mcap_ros2.writer import Writer  # noqa: E402
 
-MSGDEFS = SHARED / "data" / "ros2_msgdefs"
 SEP = "=" * 80
 # tf2_msgs/msg/TFMessage is not among the shared definitions: its full text, from the same
 # geometry_msgs/std_msgs sources
@@ -60,11 +59,16 @@ def write_mcap(path, messages, msgdefs=None):
         for topic, ty, msg, log in messages:
             if ty not in schemas:
                 text = TF_MSGDEF if ty == "tf2_msgs/msg/TFMessage" else (
-                    (msgdefs or {}).get(ty) or (MSGDEFS / TYPES[ty]).read_text())
+                    (msgdefs or {}).get(ty) or msgdef(TYPES[ty]))
                 schemas[ty] = w.register_msgdef(ty, text)
             w.write_message(topic, schemas[ty], msg, log_time=log, publish_time=log)
         w.finish()
     return path
+
+
+def msgdef(name: str) -> str:
+    """A real ROS 2 message definition of ../shared/data/ros2_msgdefs (for a realdata test)."""
+    return shared("data", "ros2_msgdefs", name).read_text()
 
 
 def header(t_ns, frame):
@@ -156,7 +160,7 @@ def to_local(x, y):
     return OFFSET[0] + c * x - s * y, OFFSET[1] + s * x + c * y
 
 
-@pytest.fixture(scope="module")
+@realdata_fixture(scope="module")
 def scene_mcap(tmp_path_factory):
     rng = np.random.default_rng(1)
     msgs = []
@@ -273,6 +277,7 @@ def test_relative_velocity(scene_mcap, road_map):
     assert np.allclose(s.column("vx").to_numpy()[b], 41 * math.cos(YAW0))
 
 
+@pytest.mark.realdata
 def test_navsatfix_ego_and_tf_static(road_map, tmp_path):
     """No odometry: the ego from NavSatFix (heading from motion); vision_msgs detections in a lidar
     frame 1 m ahead of base_link (/tf_static); velocity from positions."""
@@ -346,7 +351,7 @@ def test_malformed_inputs_are_located(scene_mcap, road_map, tmp_path):
     with pytest.raises(aveas_format.FormatError, match=r"cut.mcap: "):
         convert("ros2-mcap", [cut], map_source=road_map)
     # a schema that does not match the message type name (message cannot be read as the type)
-    wrong = {"autoware_perception_msgs/msg/TrackedObjects": (MSGDEFS / "nav_msgs__Odometry.msg").read_text()}
+    wrong = {"autoware_perception_msgs/msg/TrackedObjects": msgdef("nav_msgs__Odometry.msg")}
     bad2 = write_mcap(tmp_path / "wrong.mcap", [("/objects", "autoware_perception_msgs/msg/TrackedObjects",
                                                  odometry(T0, 0.0), T0)], msgdefs=wrong)
     with pytest.raises(aveas_format.FormatError, match=r"wrong.mcap: topic /objects message 0: malformed"):
@@ -357,11 +362,13 @@ def test_cli(scene_mcap, road_map, tmp_path):
     out = tmp_path / "cli.aveas"
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "ros2-mcap",
                           str(scene_mcap), "--map", str(road_map), "-o", str(out),
-                          "-O", f"frame_offset={list(OFFSET)}"], capture_output=True, text=True)
+                          "-O", f"frame_offset={list(OFFSET)}", "-O", "partner=test", "-O",
+                          "license=CC-BY-4.0"], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert out.is_dir()
 
 
+@pytest.mark.realdata
 def test_barriers_and_signs_are_no_road_users(road_map, tmp_path):
     """derived_object_msgs classification 10 (BARRIER) is no road user: the track is skipped with
     a count, or kept with keep_non_road_users."""

@@ -12,10 +12,8 @@ import pytest
 import aveas_format
 from aveas_format.converters import convert, load_converters
 
-from helpers_common import SHARED
+from helpers_common import realdata_fixture, shared
 from helpers_realdata import sumo_excerpt_map
-
-SUMO = SHARED / "data" / "sumo"
 
 
 @pytest.fixture(scope="module")
@@ -38,8 +36,8 @@ def test_registered():
     assert "sumo-fcd" in load_converters()
 
 
-def test_cartesian_excerpt(westward_map, tmp_path):
-    rec = convert("sumo-fcd", [SUMO / "fcd_cartesian_excerpt.xml"], map_source=westward_map)
+def test_cartesian_excerpt(westward_map, tmp_path, sumo_data):
+    rec = convert("sumo-fcd", [sumo_data / "fcd_cartesian_excerpt.xml"], map_source=westward_map)
     p, s = rec.participants, rec.states
     assert p.column("source_id").to_pylist() == ["0", "1"]
     assert p.column("class").to_pylist() == ["car", "car"]  # t1/t2 undefined -> passenger defaults
@@ -64,27 +62,27 @@ def test_cartesian_excerpt(westward_map, tmp_path):
     assert aveas_format.validate(out).counts["error"] == 0
 
 
-def test_vtypes_and_net_offset(westward_map, tmp_path):
+def test_vtypes_and_net_offset(westward_map, tmp_path, sumo_data):
     rou = tmp_path / "types.rou.xml"
     rou.write_text('<routes>\n  <vType id="t1" vClass="truck" length="12" width="2.5"/>\n</routes>')
-    rec = convert("sumo-fcd", [SUMO / "fcd_cartesian_excerpt.xml"], map_source=westward_map,
+    rec = convert("sumo-fcd", [sumo_data / "fcd_cartesian_excerpt.xml"], map_source=westward_map,
                   options={"vtypes": [str(rou)], "net_offset": [100.0, 0.0]})
     assert rec.participants.column("class").to_pylist() == ["truck", "car"]
     assert rec.participants.column("width").to_pylist() == [2.5, 1.8]
     assert rec.states.column("x").to_pylist()[0] == pytest.approx(1495.25 - 100 + 6.0)
 
 
-def test_net_file_offset(westward_map, tmp_path):
+def test_net_file_offset(westward_map, tmp_path, sumo_data):
     net = tmp_path / "n.net.xml"
     net.write_text('<net>\n <location netOffset="-10.00,2.50" convBoundary="0,0,1,1"/>\n</net>')
-    rec = convert("sumo-fcd", [SUMO / "fcd_cartesian_excerpt.xml"], map_source=westward_map,
+    rec = convert("sumo-fcd", [sumo_data / "fcd_cartesian_excerpt.xml"], map_source=westward_map,
                   options={"net_file": str(net)})
     assert rec.states.column("x").to_pylist()[0] == pytest.approx(1495.25 + 10 + 2.5)
     assert rec.states.column("y").to_pylist()[0] == pytest.approx(401.65 - 2.5)
 
 
-def test_geo_excerpt_is_detected_and_projected(geo_map):
-    rec = convert("sumo-fcd", [SUMO / "fcd_geo_excerpt.xml"], map_source=geo_map)
+def test_geo_excerpt_is_detected_and_projected(geo_map, sumo_data):
+    rec = convert("sumo-fcd", [sumo_data / "fcd_geo_excerpt.xml"], map_source=geo_map)
     s = rec.states
     x, y = s.column("x").to_numpy(), s.column("y").to_numpy()
     assert x[0] == pytest.approx(2.5, abs=0.05) and abs(y[0]) < 0.05
@@ -93,11 +91,11 @@ def test_geo_excerpt_is_detected_and_projected(geo_map):
     assert s.column("lane_id").to_pylist() == [-1] * 11
 
 
-def test_parquet_variant_equals_xml(westward_map, tmp_path):
+def test_parquet_variant_equals_xml(westward_map, tmp_path, sumo_data):
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    rec = convert("sumo-fcd", [SUMO / "fcd_cartesian_excerpt.xml"], map_source=westward_map)
+    rec = convert("sumo-fcd", [sumo_data / "fcd_cartesian_excerpt.xml"], map_source=westward_map)
     n = 11
     t = np.r_[np.arange(8.0), np.arange(5.0, 8.0)]
     table = pa.table({
@@ -126,25 +124,29 @@ def test_malformed_input_is_located(westward_map, tmp_path, text, match):
         convert("sumo-fcd", [bad], map_source=westward_map)
 
 
-def test_cli_convert(westward_map, tmp_path):
+def test_cli_convert(westward_map, tmp_path, sumo_data):
     out = tmp_path / "cli.aveas"
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "sumo-fcd",
-                          str(SUMO / "fcd_cartesian_excerpt.xml"), "--map", str(westward_map),
-                          "-o", str(out), "-O", "net_offset=[0,0]"], capture_output=True, text=True)
+                          str(sumo_data / "fcd_cartesian_excerpt.xml"), "--map", str(westward_map),
+                          "-o", str(out), "-O", "net_offset=[0,0]", "-O", "partner=test", "-O",
+                          "license=CC-BY-4.0"], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert "valid" in res.stderr and out.is_dir()
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "nope",
                           "x.xml", "-o", str(tmp_path / "y.aveas")], capture_output=True, text=True)
-    assert res.returncode == 3 and "no import converter named 'nope'" in res.stderr
+    assert res.returncode == 2 and "no import converter named 'nope'" in res.stderr
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "sumo-fcd",
-                          str(SUMO / "fcd_cartesian_excerpt.xml"), "--map", str(westward_map),
+                          str(sumo_data / "fcd_cartesian_excerpt.xml"), "--map", str(westward_map),
                           "-o", str(tmp_path / "z.aveas"), "-O", "colour=red"], capture_output=True,
                          text=True)
-    assert res.returncode == 2 or res.returncode == 3
+    assert res.returncode == 2
     assert "invalid options: colour: Extra inputs are not permitted" in res.stderr
 
 
-ROAD = SHARED / "data" / "real" / "sumo" / "road.xodr"  # netconvert's map: 3 lanes of 3.2 m along +x
+@realdata_fixture(scope="module")
+def road():
+    """netconvert's map of ../shared/data/real/sumo: 3 lanes of 3.2 m along +x."""
+    return shared("data", "real", "sumo", "road.xodr")
 
 
 def _fcd(rows):
@@ -158,7 +160,7 @@ def _fcd(rows):
     return f'<?xml version="1.0"?><fcd-export>{body}</fcd-export>'
 
 
-def test_lane_change_instant_and_reconstructed(tmp_path):
+def test_lane_change_instant_and_reconstructed(road, tmp_path):
     """One car jumps a lane width (3.2 m) in one 0.5-s step (SUMO's default): validate reports one
     instant_lane_change; with lane_change_duration=3 the positions move across smoothly, the
     velocity carries the lateral speed, the heading turns with it, and nothing is reported."""
@@ -168,11 +170,11 @@ def test_lane_change_instant_and_reconstructed(tmp_path):
         rows.append((t, "a", 10.0 + 15.0 * t, -8.0 if t < 10.0 else -4.8, 90.0, 15.0, None))
     p = tmp_path / "fcd.xml"
     p.write_text(_fcd(rows))
-    rec = convert("sumo-fcd", [p], map_source=ROAD)
+    rec = convert("sumo-fcd", [p], map_source=road)
     rep = aveas_format.validate(rec, select=["kinematics"])
     assert rep.codes == {"kinematics.instant_lane_change"}
     assert "jumps up to 3.2 m across the lane in 0.5 s" in rep.findings()[0].message
-    rec = convert("sumo-fcd", [p], map_source=ROAD, options={"lane_change_duration": 3.0})
+    rec = convert("sumo-fcd", [p], map_source=road, options={"lane_change_duration": 3.0})
     assert aveas_format.validate(rec, select=["kinematics"]).codes == set()
     s = rec.states
     t, y, vy, h = (s.column(c).to_numpy() for c in ("time", "y", "vy", "heading"))
@@ -187,7 +189,7 @@ def test_lane_change_instant_and_reconstructed(tmp_path):
     assert '"reconstructed_lane_changes": 1' in rec.participants.column("attributes")[0].as_py()
 
 
-def test_speed_lat_is_the_lateral_speed(tmp_path):
+def test_speed_lat_is_the_lateral_speed(road, tmp_path):
     """SUMO's speed is along the lane, speedLat across it: the velocity is their sum, whatever
     the FCD angle (which includes the lateral motion)."""
     rows = []
@@ -200,7 +202,7 @@ def test_speed_lat_is_the_lateral_speed(tmp_path):
         y += 0.5 * lat
     p = tmp_path / "fcd.xml"
     p.write_text(_fcd(rows))
-    rec = convert("sumo-fcd", [p], map_source=ROAD)
+    rec = convert("sumo-fcd", [p], map_source=road)
     s = rec.states
     assert np.allclose(s.column("vx").to_numpy(), 20.0)  # not 20 cos(theta)
     lat = np.array([r[6] for r in rows])

@@ -15,17 +15,14 @@ from aveas_format.dataset import conversion_groups, convert_dataset
 from aveas_format.errors import AveasError
 from aveas_format.opendrive.builder import straight_highway
 
-from helpers_common import SHARED
-
-FCD = SHARED / "data" / "sumo" / "fcd_cartesian_excerpt.xml"
-
 
 @pytest.fixture
-def sources(tmp_path):
+def sources(tmp_path, sumo_data):
+    """Three copies of a real SUMO FCD excerpt (../shared) and a broken one."""
     src = tmp_path / "src"
     src.mkdir()
     for name in ("run1", "run2", "run3"):
-        shutil.copy(FCD, src / f"{name}.xml")
+        shutil.copy(sumo_data / "fcd_cartesian_excerpt.xml", src / f"{name}.xml")
     (src / "broken.xml").write_text("<fcd-export><timestep time='0'><vehicle id='a'")
     m = tmp_path / "west.xodr"
     m.write_text(straight_highway(length=2000.0, lanes_right=1, x0=1600.0, y0=401.65 - 1.75,
@@ -64,7 +61,8 @@ def test_cli_convert_each(sources, tmp_path):
     out = tmp_path / "many"
     res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "sumo-fcd",
                           "--each", *map(str, sorted(src.iterdir())), "--map", str(m), "-o",
-                          str(out), "-j", "1"], capture_output=True, text=True)
+                          str(out), "-j", "1", "-O", "partner=test", "-O", "license=CC-BY-4.0"],
+                         capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     summary = json.loads(res.stdout)
     assert summary["completed"] == 3 and summary["failed"] == 0

@@ -18,7 +18,7 @@ from aveas_format.derive.encroachments import (EncroachmentsParams, occupancy, s
                                                track_directions)
 from aveas_format.derive._samples import Samples
 
-from helpers_derive import VECTORS, recording, road_map, vectors
+from helpers_derive import recording, road_map, vectors
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -165,7 +165,7 @@ def test_junction_explicit_area_identical(junction):
     assert got.num_rows > 20
 
 
-@pytest.mark.skipif(not VECTORS.is_file(), reason="shared vectors.json not found")
+@pytest.mark.realdata
 @pytest.mark.parametrize("rotate", [0.0, 0.7])
 def test_vectors_pet_identical(rotate):
     v = vectors()["pet_crossing_lane_ca"]

@@ -10,9 +10,8 @@ import shapely
 from aveas_format.derive import derive
 from aveas_format.derive.interactions import ttc_boxes
 
-from helpers_derive import VECTORS, recording, road_map, row, value, vectors
+from helpers_derive import recording, road_map, row, value, vectors
 
-pytestmark = pytest.mark.skipif(not VECTORS.is_file(), reason="shared vectors.json not found")
 LANE_Y = -1.75  # centre of lane -1 of the test map
 
 
@@ -33,6 +32,7 @@ def _at0(rec, relation="leader", pid=0):
     return r[0]
 
 
+@pytest.mark.realdata
 @pytest.mark.parametrize("rotate", [0.0, np.pi / 6, np.pi / 4])
 def test_ttc1d_cv(rotate):
     v = vectors()["ttc1d_cv"]
@@ -52,6 +52,7 @@ def test_ttc1d_cv(rotate):
         assert _at0(rec, "follower", pid=1)["ttc"] == r["ttc"]
 
 
+@pytest.mark.realdata
 def test_ttc1d_ca_leader_braking():
     v = vectors()["ttc1d_ca_leader_braking"]
     i = v["inputs"]
@@ -64,6 +65,7 @@ def test_ttc1d_ca_leader_braking():
     assert r["ttc_ca_std"] > 0
 
 
+@pytest.mark.realdata
 def test_headway_thw_dhw():
     v = vectors()["headway_thw_dhw"]
     i, e = v["inputs"], v["expected"]
@@ -86,6 +88,7 @@ def _box(a):
     return (a["x"], a["y"], a["heading_rad"], a["length"], a["width"], a["vx"], a["vy"])
 
 
+@pytest.mark.realdata
 @pytest.mark.parametrize("case", ["ttc2d_rear_end_aligned", "ttc2d_perpendicular_collision"])
 def test_ttc2d(case):
     v = vectors()[case]
@@ -117,6 +120,7 @@ def _area(v, rotate=0.0, shift=(0.0, 500.0)):
     return shapely.affinity.translate(box, *shift).wkt
 
 
+@pytest.mark.realdata
 @pytest.mark.parametrize("rotate", [0.0, 0.7])
 def test_pet_crossing_explicit_area(rotate):
     v = vectors()["pet_crossing_lane_ca"]
@@ -137,6 +141,7 @@ def test_pet_crossing_explicit_area(rotate):
                    relation="conflicting")
 
 
+@pytest.mark.realdata
 def test_pet_crossing_swept_paths():
     """Without an explicit area the conflict area is the overlap of the swept footprints: a 2 m
     square (B's width x A's width): A's rear leaves x = 1 at t = 1.9 s, B's front reaches y = -1 at
@@ -163,6 +168,7 @@ def test_pet_undefined_when_both_inside():
     assert r["pet"] is None and r["time_second_enter"] <= r["time_first_exit"]
 
 
+@pytest.mark.realdata
 def test_edie_lane_segment():
     v = vectors()["edie_lane_segment"]
     e = v["expected"]
@@ -185,6 +191,7 @@ def test_edie_lane_segment():
     assert r["count"] == 3
 
 
+@pytest.mark.realdata
 @pytest.mark.parametrize("method", ["ca_kalman_rts", "savitzky_golay"])
 def test_accel_kinematics(method):
     v = vectors()["accel_kinematics"]

@@ -33,6 +33,20 @@ def test_not_a_recording(tmp_path):
         aveas_format.open(f)
 
 
+
+@pytest.mark.parametrize("cut,name,match", [
+    (0.5, "r.aveas.zip", "truncated or corrupt ZIP archive: no end-of-central-directory record"),
+    (0.5, "r.bin", "truncated or corrupt ZIP archive: no end-of-central-directory record"),
+    (0.0, "r.aveas.zip", "truncated or corrupt ZIP archive: the file is empty"),
+    (None, "r.aveas.zip", "named .zip but not a ZIP archive"),
+])
+def test_a_truncated_zip_says_so(tmp_path, rec, cut, name, match):
+    """A download cut short is a truncated ZIP, not "neither a directory nor a ZIP archive"."""
+    data = rec.write(tmp_path / "whole.aveas.zip").read_bytes()
+    (tmp_path / name).write_bytes(b"not a zip at all" if cut is None else data[:int(len(data) * cut)])
+    with pytest.raises(RecordingIOError, match=match):
+        aveas_format.open(tmp_path / name)
+
 @pytest.mark.parametrize("name", ["states.parquet", "participants.parquet", "map.xodr",
                                   "recording.json"])
 def test_missing_file(written, name):
@@ -154,3 +168,17 @@ def test_unlisted_extra_table_is_read(written, rec):
     shutil.copy(written / "states.parquet", written / "interior.parquet")
     with pytest.raises(FormatError, match="interior.parquet.*'aveas' names table 'states'"):
         aveas_format.open(written)
+
+
+def test_a_write_into_a_missing_directory_says_so(tmp_path, rec):
+    """Atomic writes name the target and its missing directory, not their temporary file."""
+    from aveas_format.safeio import write_text_atomic
+
+    target = tmp_path / "no" / "such" / "report.html"
+    with pytest.raises(RecordingIOError) as e:
+        write_text_atomic(target, "x")
+    assert str(e.value) == f"{target}: cannot write: the directory {target.parent} does not exist"
+    assert ".tmp" not in str(e.value)
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(RecordingIOError, match="is not a directory"):
+        write_text_atomic(tmp_path / "file" / "r.html", "x")

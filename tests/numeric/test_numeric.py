@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from aveas_format.numeric import central_differences, wrap_angle
+from aveas_format.numeric import central_differences, fmt_num, wrap_angle
 
 
 @given(st.lists(st.floats(-1e4, 1e4), min_size=1, max_size=50))
@@ -90,3 +91,13 @@ def test_repeated_times_and_single_samples():
     vx, _, std, _ = central_differences(pid, t, x, x, np.full(4, 0.1), None)
     assert vx.tolist() == [0.0, 2.0, 2.0, 0.0]
     assert np.isnan(std[0]) and np.isnan(std[3])
+
+
+@pytest.mark.parametrize("value,text", [
+    (6.6000000000000005, "6.6"), (25.080000000000002, "25.08"), (0.1 + 0.2, "0.3"), (1.0, "1.0"),
+    (691234.5678, "691234.57"), (1646667310.044372, "1646667310.04"), (5e-07, "0.0000005"),
+    (-0.000123456, "-0.000123456"), (0.0, "0.0"), (3.123456789e20, "3.12346e+20"), (7, "7"),
+    (np.float32(0.1), "0.1"), (np.int64(3), "3"), (float("nan"), "nan"), ("x", "x"), (True, "True"),
+])
+def test_numbers_in_messages_are_rounded_for_people(value, text):
+    assert fmt_num(value) == text

@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import pytest
-from helpers_opendrive import REAL_MAPS, fixture_map, real_map, require_real_maps
+from helpers_common import realdata_params
+from helpers_opendrive import REAL_MAPS, fixture_map, real_map
 
 from aveas_format.opendrive import RoadNetwork
 
 
-@pytest.fixture(params=REAL_MAPS or ["<none>"])
+@pytest.fixture(params=realdata_params(REAL_MAPS))
 def real_net(request) -> RoadNetwork:
-    require_real_maps()
+    """Each real map of ../shared/data/xodr."""
     return real_map(request.param)
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers_opendrive import CONTINUOUS_MAPS, fixture_map, real_map, require_real_maps
+from helpers_opendrive import CONTINUOUS_MAPS, fixture_map, real_map
 from scipy.integrate import quad
 
 from aveas_format.opendrive import load_map
@@ -213,8 +213,8 @@ def test_continuity_of_real_maps(real_net):
         assert (gap <= 1e-6).mean() > 0.6
 
 
+@pytest.mark.realdata
 def test_spirals_of_a_real_map_against_quadrature():
-    require_real_maps()
     net = real_map("qc-opendrive__Ex_Entry_Exit.xodr")
     pv = net.plan
     for gi in np.flatnonzero(pv.kind == 2)[:6]:

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import pytest
 import shapely
-from helpers_opendrive import real_map, require_real_maps
+from helpers_opendrive import real_map
 
 from aveas_format.opendrive import load_map
 from aveas_format.opendrive.builder import straight_highway
@@ -31,8 +32,8 @@ def test_polygons_contain_their_lane_points(geom_net):
         assert poly.buffer(1e-3).contains(shapely.Point(x[i], y[i]))
 
 
+@pytest.mark.realdata
 def test_real_map_polygons_drivable_only():
-    require_real_maps()
     net = real_map("opendrive-test-files__Town04.xodr")
     all_polys = net.lane_polygons(step=2.0)
     drivable = net.lane_polygons(step=2.0, drivable_only=True)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from helpers_opendrive import fixture_map, real_map, require_real_maps
+from helpers_opendrive import fixture_map, real_map
 
 from aveas_format.opendrive import load_map
 from aveas_format.opendrive.builder import curved_highway, straight_highway
@@ -61,8 +61,8 @@ def test_round_trip_every_fixture_road(geom_net):
     assert (proj.n_candidates >= 1).all()
 
 
+@pytest.mark.realdata
 def test_junction_overlaps_are_reported_as_candidates():
-    require_real_maps()
     net = real_map("opendrive-test-files__Town04.xodr")
     smp, proj, found, _ = _round_trip(net, 5_000, seed=11)
     multi = np.flatnonzero(proj.n_candidates > 1)
@@ -157,8 +157,8 @@ def _junction_trajectory(net):
     pytest.skip("no suitable junction path found")
 
 
+@pytest.mark.realdata
 def test_track_chooses_by_continuity():
-    require_real_maps()
     net = real_map("opendrive-test-files__Town04.xodr")
     x, y, truth, plain = _junction_trajectory(net)
     t = np.arange(len(x)) * 0.1
@@ -211,8 +211,8 @@ def test_gap_between_geometries_is_bridged():
     assert proj.s[0] == pytest.approx(100.0) and proj.t[0] == pytest.approx(-1.0)
 
 
+@pytest.mark.realdata
 def test_threads_and_batches_agree():
-    require_real_maps()
     net = real_map("opendrive-test-files__Town03.xodr")
     smp = net.sample_lane_points(3000, seed=5)
     x, y, _, _ = net.road_to_world(smp["road_id"], smp["s"], smp["t"])

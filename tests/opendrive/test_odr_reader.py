@@ -4,14 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers_opendrive import (
-    DATA,
-    REAL_MAPS,
-    SHARED_XODR,
-    fixture_map,
-    real_map,
-    require_real_maps,
-)
+from helpers_opendrive import DATA, fixture_map, real_map
 
 from aveas_format.errors import MapError, RecordingIOError
 from aveas_format.opendrive import load_map
@@ -164,10 +157,8 @@ def test_wrong_root():
         ("qc-opendrive__Ex_Entry_Exit.xodr", None, None, "1.8"),
     ],
 )
+@pytest.mark.realdata
 def test_real_map_counts(name, n_roads, n_junctions, version):
-    require_real_maps()
-    if name not in REAL_MAPS:
-        pytest.skip(f"{name} is not in {SHARED_XODR}")
     net = real_map(name)
     assert net.header.version == version
     if n_roads is not None:
@@ -183,8 +174,8 @@ def test_every_real_map_loads(real_net):
     assert xmax > xmin and ymax > ymin
 
 
+@pytest.mark.realdata
 def test_real_map_features():
-    require_real_maps()
     e6 = real_map("esmini__e6mini.xodr")
     assert "+proj=utm" in e6.header.geo_reference
     assert any(

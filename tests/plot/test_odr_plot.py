@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.figure import Figure
-from helpers_opendrive import REAL_MAPS, fixture_map, real_map
+from helpers_opendrive import fixture_map, real_map
 
 from aveas_format.opendrive import load_map
 from aveas_format.opendrive.builder import curved_highway
@@ -43,7 +43,7 @@ def test_save_map_is_headless_and_leaves_the_backend_alone(tmp_path):
     assert matplotlib.get_backend() == backend
 
 
-@pytest.mark.skipif("esmini__fabriksgatan.xodr" not in REAL_MAPS, reason="real maps not available")
+@pytest.mark.realdata
 def test_junctions_are_outlined_and_labelled():
     net = real_map("esmini__fabriksgatan.xodr")
     ax = plot_map(net)

@@ -11,13 +11,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pytest
-
-from helpers_realdata import ABSENT, DATA
+from helpers_common import realdata_fixture, shared
 
 
-@pytest.fixture
+@realdata_fixture
 def shared_data() -> Path:
-    if not DATA.is_dir():
-        pytest.skip(ABSENT)
-    return DATA
+    """``../shared/data`` (skips without it)."""
+    return shared("data")

@@ -27,6 +27,9 @@ MAP_OF = {"alks_cut-in.osi": "straight_500m.xodr", "acc-test.osi": "straight_500
           "pedestrian.osi": "fabriksgatan.xodr"}
 
 
+#: what only a person can state, which convert asks for (the sources here do not carry it)
+STATED = ("-O", "partner=test", "-O", "license=CC0-1.0")
+
 def _map(path):
     name = MAP_OF.get(path.name)
     found = [p for p in DATA.rglob(name or "-")] if name else []
@@ -88,7 +91,7 @@ def test_alks_cut_in_on_the_wrong_map_is_an_error(shared_data, tmp_path):
     along x) converted "valid" before; now the conversion ends in map.mostly_off_road."""
     trace = REAL / "omega-prime" / "alks_cut-in.osi"
     r = _cli("convert", "--from", "osi", trace, "--map", REAL / "omega-prime" / "e6mini.xodr",
-             "-o", tmp_path / "w.aveas")
+             "-o", tmp_path / "w.aveas", *STATED)
     assert r.returncode == 1 and "0.0% on the map" in r.stderr
     assert "map.mostly_off_road" in r.stdout and "are on no road of the map" in r.stdout
 
@@ -101,14 +104,14 @@ def test_alks_cut_in_on_a_map_without_georeference(shared_data, tmp_path):
     e6 = REAL / "omega-prime" / "straight_500m.xodr"
     bare = _without_georeference(e6, tmp_path / "straight_500m.xodr")
     out = tmp_path / "a.aveas"
-    r = _cli("convert", "--from", "osi", trace, "--map", bare, "--crs", SOME_CRS, "-o", out)
+    r = _cli("convert", "--from", "osi", trace, "--map", bare, "--crs", SOME_CRS, "-o", out, *STATED)
     assert r.returncode == 0, r.stderr + r.stdout
     rec = aveas_format.open(out)
     assert rec.meta.crs == SOME_CRS and rec.map.header.geo_reference is None
-    r = _cli("convert", "--from", "osi", trace, "--map", bare, "-o", tmp_path / "b.aveas")
+    r = _cli("convert", "--from", "osi", trace, "--map", bare, "-o", tmp_path / "b.aveas", *STATED)
     assert r.returncode == 0, r.stderr + r.stdout  # the trace's proj_string is the frame
     # the map has a geoReference: --crs must agree
-    r = _cli("convert", "--from", "osi", trace, "--map", e6, "--crs", SOME_CRS, "-o", tmp_path / "c")
+    r = _cli("convert", "--from", "osi", trace, "--map", e6, "--crs", SOME_CRS, "-o", tmp_path / "c", *STATED)
     assert r.returncode != 0 and "differs from the map's <geoReference>" in r.stderr
     # OSI export of the recording on the bare map: the map travels with the trace, with the crs
     # as its geoReference, and the trace re-imports with nothing else
@@ -132,7 +135,7 @@ def test_missing_crs_error_shows_a_command_that_works(shared_data, tmp_path):
     the error shows the command with --crs, and that command (with the site's coordinates)
     converts."""
     src = REAL / "esmini" / "resources" / "xosc" / "pedestrian_traj_synch.xosc"
-    r = _cli("convert", "--from", "openscenario", src, "-o", tmp_path / "p.aveas")
+    r = _cli("convert", "--from", "openscenario", src, "-o", tmp_path / "p.aveas", *STATED)
     assert r.returncode != 0
     msg = r.stderr.strip().splitlines()[-1]
     assert "the map has no <geoReference>" in msg, msg

@@ -97,7 +97,7 @@ def test_converts_validates_round_trips(path, tmp_path):
         assert_same_trajectories(rec, back, f"{path.name} via {fmt}")
 
 
-def test_velocity_as_sumo_defines_it_against_ssm(sumo, tmp_path):
+def test_velocity_as_sumo_defines_it_against_ssm(sumo, shared_data, tmp_path):
     """SUMO on the run's inputs with 3-s lane changes (lateral motion, speedLat in the FCD) and the
     SSM device as the oracle: the converter's velocity is the speed along the lane plus speedLat
     across it, so the lane-1D TTC of following pairs agrees with SSM's during lane changes as well

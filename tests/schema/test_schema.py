@@ -17,7 +17,7 @@ from aveas_format.schema.enums import Requirement
 from aveas_format.schema.metadata import WeatherPmf, timestamp_ns
 from aveas_format.schema.pmf import argmax, normalise, one_hot, pmf_problems
 
-from helpers_common import CONFORMANCE, minimal_meta
+from helpers_common import minimal_meta
 
 AVEAS_OPENLABEL_ORDER = ["animal", "bicycle", "bus", "car", "pedestrian", "mobility_device",
                          "motorcycle", "other", "pushable_pullable", "railvehicle", "trailer",
@@ -95,10 +95,10 @@ def test_pmf_helpers():
         one_hot(["spaceship"], "class")
 
 
-def test_json_schema_validates_conformance_metadata():
+def test_json_schema_validates_conformance_metadata(conformance_path):
     schema = recording_json_schema()
     jsonschema.Draft202012Validator.check_schema(schema)
-    data = json.loads((CONFORMANCE / "recording.json").read_text())
+    data = json.loads((conformance_path / "recording.json").read_text())
     jsonschema.validate(data, schema)
     bad = dict(data, provenance="made_up")
     with pytest.raises(jsonschema.ValidationError):

@@ -24,6 +24,8 @@ from aveas_format.converters import convert
 from aveas_format.errors import AveasError
 from aveas_format.opendrive.builder import straight_highway
 
+from helpers_common import REALDATA
+
 sys.path.insert(0, str(Path(__file__).parents[1] / "converters"))
 
 N = 10                     # samples of a truth track
@@ -244,7 +246,7 @@ def src_infra_lidar(d, case):
     p.write_text("\n".join(lines) + "\n")
     m = _map(d, length=300.0, lanes_right=2, lanes_left=2, x0=-100.0, y0=0.0, geo_reference=il.GEO)
     return (lambda: convert("infra-lidar", [p], map_source=m,
-                            options={"sensor_pose": str(il.CALIB), "rate_hz": il.RATE})), \
+                            options={"sensor_pose": str(il.calib()), "rate_hz": il.RATE})), \
         samples(veh, "t"), ["tracks.csv"]
 
 
@@ -457,10 +459,15 @@ KNOWN: dict[tuple[str, str], str] = {}
 KNOWN_DERIVE: dict[tuple[str, str], str] = {}
 
 
+#: sources whose generators use real data of ../shared (a LiDAR calibration, ROS 2 message definitions)
+REALDATA_SOURCES = {"infra-lidar", "infra-lidar(tum)", "ros2-mcap"}
+
+
 def _params(known: dict) -> list:
     return [pytest.param(name, case, id=f"{name}-{case}",
-                         marks=[pytest.mark.xfail(reason=known[name, case], strict=False)]
-                         if (name, case) in known else [])
+                         marks=([pytest.mark.xfail(reason=known[name, case], strict=False)]
+                                if (name, case) in known else [])
+                         + ([REALDATA] if name in REALDATA_SOURCES else []))
             for name in sorted(SOURCES) for case in CASES]
 
 

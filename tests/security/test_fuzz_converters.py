@@ -17,7 +17,7 @@ from aveas_format.converters import convert
 from aveas_format.errors import AveasError
 from aveas_format.opendrive.builder import straight_highway
 
-from helpers_common import SHARED
+from helpers_common import realdata_fixture, shared
 from helpers_fuzz import OPS, mutate
 
 N = int(os.environ.get("AVEAS_FUZZ_EXAMPLES", "25"))
@@ -43,20 +43,27 @@ def west_map(tmp_path_factory):
 
 @SETTINGS
 @given(ops=OPS)
-def test_sumo_fcd(tmp_path_factory, west_map, ops):
+def test_sumo_fcd(tmp_path_factory, west_map, sumo_data, ops):
     src = tmp_path_factory.mktemp("s") / "fcd.xml"
-    src.write_bytes(mutate((SHARED / "data" / "sumo" / "fcd_cartesian_excerpt.xml").read_bytes(), ops))
+    src.write_bytes(mutate((sumo_data / "fcd_cartesian_excerpt.xml").read_bytes(), ops))
     _clean("sumo-fcd", [src], map_source=west_map)
+
+
+@realdata_fixture(scope="module")
+def openlabel_example():
+    """The AVEAS minimum OpenLABEL example and the esmini map it refers to (../shared)."""
+    return (shared("data", "openlabel", "aveas__minimum_openlabel_example.json").read_bytes(),
+            shared("data", "xodr", "esmini__e6mini.xodr"))
 
 
 @SETTINGS
 @given(ops=OPS)
-def test_openlabel(tmp_path_factory, ops):
+def test_openlabel(tmp_path_factory, openlabel_example, ops):
+    data, xodr = openlabel_example
     d = tmp_path_factory.mktemp("o")
     src = d / "labels.json"
-    src.write_bytes(mutate((SHARED / "data" / "openlabel" / "aveas__minimum_openlabel_example.json")
-                           .read_bytes(), ops))
-    shutil.copy(SHARED / "data" / "xodr" / "esmini__e6mini.xodr", d / "map.xodr")
+    src.write_bytes(mutate(data, ops))
+    shutil.copy(xodr, d / "map.xodr")
     _clean("openlabel", [src], map_source=d / "map.xodr")
 
 
@@ -192,7 +199,7 @@ def test_rotated_boxes(tmp_path_factory, rotated_src, ops, which):
     _clean("rotated-boxes", files, map_source=m, options={"frame_rate": rate, "image_size": [3000, 1500]})
 
 
-@pytest.fixture(scope="module")
+@realdata_fixture(scope="module")
 def ros2_src(tmp_path_factory):
     pytest.importorskip("mcap_ros2")
     import test_ros2_mcap as r
@@ -221,7 +228,7 @@ def test_ros2_mcap(tmp_path_factory, ros2_src, ops):
     _clean("ros2-mcap", files, map_source=m, options=opts)
 
 
-@pytest.fixture(scope="module")
+@realdata_fixture(scope="module")
 def lidar_src(tmp_path_factory):
     import test_infra_lidar as il
 

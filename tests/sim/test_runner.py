@@ -85,9 +85,14 @@ def test_cli_sim_run_and_sensitivity(sumo, tmp_path):
     cfg = tmp_path / "s.toml"
     cfg.write_text('duration = 60\nseed = 2\n[network]\nlength = 500\ninflow = 100\n')
     with pytest.raises(SystemExit) as e:
-        main(["sim", "run", "--config", str(cfg), "-o", str(tmp_path / "sim.aveas")])
+        main(["sim", "run", "--config", str(cfg), "-o", str(tmp_path / "sim.aveas"), "-O",
+              "license=CC0-1.0"])
     assert e.value.code == 0
-    assert aveas_format.open(tmp_path / "sim.aveas").participants.num_rows > 10
+    sim = aveas_format.open(tmp_path / "sim.aveas")
+    assert sim.participants.num_rows > 10
+    assert (sim.meta.rights.license, sim.meta.acquisition.partner) == ("CC0-1.0", "aveas-format sim")
+    stand_ins = {"metadata.rights_unclear", "metadata.partner_placeholder", "metadata.start_time_implausible"}
+    assert not aveas_format.validate(sim).codes() & stand_ins
     with pytest.raises(SystemExit) as e:
         main(["sim", "sensitivity", "--config", str(cfg), "-o", str(tmp_path / "sens"), "-p", "cc1",
               "-n", "2", "--min-ttc-samples", "2"])

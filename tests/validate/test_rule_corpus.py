@@ -8,6 +8,7 @@ no finding at all (the passing fixture of every rule).
 
 from __future__ import annotations
 
+import re
 import sys
 import types
 
@@ -512,6 +513,8 @@ def test_each_broken_recording_is_caught_by_exactly_its_rule(scene, case, code, 
     first = report.results[0].sample[0]
     if where is not None:
         assert (first.location.row, first.location.participant_id) == where, first.message
+    for f in report.findings():  # numbers in messages are rounded for people (no float noise)
+        assert not re.search(r"\d\.\d{9,}|\de[-+]\d", f.message + f.location.text()), f.message
     sev = report.results[0].severity.value
     assert report.exit_code() == (1 if sev == "error" else 0)
     assert report.exit_code("warning") == (0 if sev == "info" else 1)

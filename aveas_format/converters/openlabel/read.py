@@ -91,7 +91,8 @@ def _find_map(path: Path, ol: dict[str, Any], map_source, options) -> bytes:
 
 
 @converter("openlabel", description="ASAM OpenLABEL 1.0 JSON (AVEAS profile and generic cuboids)",
-           patterns=("*.json",), method=None, options=OpenLabelImportOptions, needs_map=False)
+           patterns=("*.json",), method=None, options=OpenLabelImportOptions, needs_map=False,
+           provides=("partner", "start_time", "license"))
 def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImportOptions):
     if len(inputs) != 1:
         raise FormatError(f"openlabel: expected one input file, got {len(inputs)}")
@@ -99,7 +100,8 @@ def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImport
     import importlib.util
 
     if importlib.util.find_spec("ijson") is None:  # a dependency; without it: read whole, as before
-        warnings.warn("ijson is not installed: the OpenLABEL file is read whole (pip install ijson)",
+        warnings.warn("ijson is not installed: the OpenLABEL file is read whole (pip install ijson, "
+                      "a dependency of aveas-format)",
                       stacklevel=2)
     else:
         with _no_gc():

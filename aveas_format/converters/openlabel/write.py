@@ -602,14 +602,23 @@ def _extension(rec, thr: dict[str, Any]) -> dict[str, Any]:
     })
 
 
-@converter("openlabel", direction="export", options=OpenLabelExportOptions,
+def _map_name(output: Path, options: OpenLabelExportOptions) -> str:
+    stem = output.name[:-5] if output.name.endswith(".json") else output.stem
+    return options.map_file or f"{stem}.xodr"
+
+
+def _outputs(output: Path, options: OpenLabelExportOptions) -> list[Path]:
+    """The export's files: the JSON and, with ``write_map``, the map next to it."""
+    return [output] + ([output.parent / _map_name(output, options)] if options.write_map else [])
+
+
+@converter("openlabel", direction="export", options=OpenLabelExportOptions, outputs=_outputs,
            description="ASAM OpenLABEL 1.0 JSON, AVEAS profile (+ the map as .xodr next to it)")
 def export_openlabel(rec, output: Path, *, options: OpenLabelExportOptions) -> list[Path]:
     from aveas_format.safeio import write_bytes_atomic, write_chunks_atomic
 
     output = Path(output)
-    stem = output.name[:-5] if output.name.endswith(".json") else output.stem
-    map_name = options.map_file or f"{stem}.xodr"
+    map_name = _map_name(output, options)
     chunks = openlabel_chunks(rec, opendrive=map_name, extension=options.extension,
                               road_attributes=options.road_attributes)
     if options.indent:  # human-readable: the document whole (compact files are streamed)

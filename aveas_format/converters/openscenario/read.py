@@ -18,6 +18,7 @@ from pydantic import Field
 from aveas_format.converters.common import load_map_bytes, wrap_recording
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.numeric import fmt_num
 from aveas_format.safeio import xml_parser
 
 CATEGORY_TO_CLASS = {"car": "car", "van": "van", "truck": "truck", "bus": "bus", "trailer": "trailer",
@@ -105,7 +106,7 @@ def _entity(so, catalogs) -> tuple[Any, str | None]:
 @converter("openscenario", description="ASAM OpenSCENARIO XML 1.0-1.3: the storyboard's motion "
            "replayed (trajectories, speeds, teleports; parameters, catalogs)",
            patterns=("*.xosc",), method="traffic_simulation", options=OpenScenarioImportOptions,
-           needs_map=False)
+           needs_map=False, provides=("partner",))
 def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenarioImportOptions):
     """The motion an OpenSCENARIO file prescribes, replayed kinematically (module
     :mod:`aveas_format.converters.openscenario.replay` says what is carried out and what is not).
@@ -228,7 +229,7 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
                       stacklevel=2)
     if dropped:
         warnings.warn(f"{path.name}: {len(dropped)} trajectory vertices repeat an entity's time "
-                      f"(e.g. entity {dropped[0][0]!r} at {dropped[0][1]!r} s) and were dropped; "
+                      f"(e.g. entity {dropped[0][0]!r} at {fmt_num(dropped[0][1])} s) and were dropped; "
                       "the first vertex of each time is kept", stacklevel=2)
     notes = {}
     if replay.ignored_actions:

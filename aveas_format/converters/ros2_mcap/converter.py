@@ -37,7 +37,8 @@ _STD_COLUMNS = ("x_std", "y_std", "xy_corr", "heading_std", "vx_std", "vy_std", 
 
 @converter("ros2-mcap", description="ROS 2 MCAP of a road vehicle: Autoware/derived_object_msgs/"
            "vision_msgs objects + Odometry/NavSatFix ego + /tf",
-           patterns=("*.mcap",), method="road_vehicle", options=Ros2McapOptions)
+           patterns=("*.mcap",), method="road_vehicle", options=Ros2McapOptions,
+           requires=("mcap", "mcap_ros2"), extra="ros2", provides=("start_time",))
 def convert_ros2_mcap(inputs: list[Path], *, map_source, options: Ros2McapOptions):
     o = options
     if o.ego_class not in CLASSES:

@@ -153,12 +153,14 @@ def partner_placeholder(ctx: Context) -> Iterator[Hit]:
       enforces=quality("real_values"))
 def start_time_implausible(ctx: Context) -> Iterator[Hit]:
     """``start_time`` lies before ``[metadata] earliest_start`` (1990; 1970-01-01 is an epoch
-    default, not a date) or more than a day in the future."""
+    default, not a date) or more than a day in the future. A simulation (provenance
+    ``simulated``) has no calendar date: its time zero may be the epoch, only the future is
+    flagged."""
     if ctx.meta is None:
         return
     ns = ctx.meta.start_time_ns
     earliest = ctx.config.metadata.earliest_start
-    if ns < timestamp_ns(earliest):
+    if ns < timestamp_ns(earliest) and ctx.meta.provenance.value != "simulated":
         yield Hit(file="recording.json", column="start_time", value=ctx.meta.start_time,
                   why=f"before {earliest}")
     elif ns > (_time.time() + 86400) * 1e9:

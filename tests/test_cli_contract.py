@@ -1,0 +1,357 @@
+"""The CLI contract of docs/cli.md, walked over every command of the typer app (a new command is
+in these tests without a line here, or fails until it gets one): a usage error exits 2 with one
+line on stderr, a wrong option value names the closest allowed one, outputs (companion files
+included) are never replaced without ``--overwrite``, a closed pipe is a silent exit 0,
+``--format json`` parses, output off a terminal is plain.
+
+Most runs are in-process (:func:`aveas_format.cli.common.run` is what the ``aveas-format`` script
+runs, with pytest's captured, non-terminal stdout); the pipe tests run the real script.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import typer.main
+
+from aveas_format.cli.app import app
+from aveas_format.cli.common import run
+
+from helpers_common import STRAIGHT_MAP
+
+
+def leaf_commands(group=None, prefix: tuple[str, ...] = ()) -> dict[tuple[str, ...], object]:
+    """Every command of the app (groups resolved to their subcommands), by its path."""
+    group = group or typer.main.get_command(app)
+    found = {}
+    for name, cmd in group.commands.items():
+        if getattr(cmd, "commands", None):
+            found.update(leaf_commands(cmd, (*prefix, name)))
+        else:
+            found[(*prefix, name)] = cmd
+    return found
+
+
+COMMANDS = leaf_commands()
+IDS = [" ".join(p) for p in COMMANDS]
+
+
+def options_of(path: tuple[str, ...]) -> set[str]:
+    return {o for p in COMMANDS[path].params for o in getattr(p, "opts", ())}
+
+
+def cli(capsys, *args) -> tuple[int, str, str]:
+    code = run(app, [str(a) for a in args])
+    res = capsys.readouterr()
+    return code, res.out, res.err
+
+
+def one_error_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("aveas-format: error: "), err
+    assert "Traceback" not in err and "╭" not in err
+    return lines[0]
+
+
+FCD = """<fcd-export>
+<timestep time="0.00"><vehicle id="a" x="10.0" y="-1.75" angle="90.0" type="car" speed="20.0"/></timestep>
+<timestep time="0.10"><vehicle id="a" x="12.0" y="-1.75" angle="90.0" type="car" speed="20.0"/></timestep>
+<timestep time="0.20"><vehicle id="a" x="14.0" y="-1.75" angle="90.0" type="car" speed="20.0"/></timestep>
+</fcd-export>
+"""
+
+
+@pytest.fixture(scope="module")
+def env(tmp_path_factory):
+    """Inputs of every command: a recording, the straight test map, points, an FCD file."""
+    from helpers_common import small_recording
+
+    d = tmp_path_factory.mktemp("contract")
+    rec = small_recording().write(d / "rec.aveas")
+    (d / "points.csv").write_text("x,y\n10,-1.75\n20,-5.25\n")
+    (d / "fcd.xml").write_text(FCD)
+    bare = re.sub(r"<geoReference>.*?</geoReference>", "", STRAIGHT_MAP.read_text(), flags=re.S)
+    (d / "bare.xodr").write_text(bare)  # a map without geoReference: the CRS must be given
+    return {"REC": rec, "MAP": STRAIGHT_MAP, "PTS": d / "points.csv", "FCD": d / "fcd.xml",
+            "BARE": d / "bare.xodr"}
+
+
+def fill(args, env, **extra) -> list[str]:
+    values = {**env, **extra}
+    return [str(values.get(a, a)) for a in args]
+
+
+# ---------------------------------------------------------------------------------------------
+# usage errors: exit 2, one line on stderr
+@pytest.mark.parametrize("path", COMMANDS, ids=IDS)
+def test_an_unknown_option_is_a_one_line_usage_error(capsys, path):
+    code, out, err = cli(capsys, *path, "--no-such-option")
+    assert code == 2
+    assert "No such option: --no-such-option" in one_error_line(err)
+    assert f"see 'aveas-format {' '.join(path)} --help'" in err
+
+
+@pytest.mark.parametrize("args,needle", [
+    (("convert", "--from", "sumofcd", "FCD", "-o", "OUT"), "(did you mean 'sumo-fcd'?)"),
+    (("convert", "--from", "sumo-fcd", "FCD", "-o", "OUT", "-O", "partner=x", "-O", "license=y"),
+     "needs a map: pass --map"),
+    (("convert", "--from", "sumo-fcd", "FCD", "--map", "MAP", "-o", "OUT", "-O", "net_ofset=1"),
+     "net_ofset: Extra inputs are not permitted (did you mean 'net_offset'?)"),
+    (("convert", "--from", "sumo-fcd", "FCD", "--map", "MAP", "-o", "OUT"),
+     "its source does not state the partner and the licence; pass -O partner=INSTITUTION"),
+    (("export", "--to", "openlabl", "REC", "-o", "OUT"), "(did you mean 'openlabel'?)"),
+    (("export", "--to", "openlabel", "REC", "-o", "OUT", "-O", "indnet=2"), "(did you mean 'indent'?)"),
+    (("validate", "REC", "--format", "htm"), "(did you mean 'html'?)"),
+    (("validate", "REC", "--fail-on", "warnings"), "(did you mean 'warning'?)"),
+    (("info", "REC", "--format", "jsn"), "(did you mean 'json'?)"),
+    (("map", "check", "MAP", "-f", "jason"), "(did you mean 'json'?)"),
+    (("convert", "--list", "--format", "josn"), "(did you mean 'json'?)"),
+    (("validate", "REC", "--fromat", "json"), "--format"),
+    (("validate", "REC", "--select", "kinematic.speed"), "(did you mean 'kinematics.speed'?)"),
+    (("derive", "REC", "-o", "OUT", "--only", "kinematic"), "(did you mean 'kinematics'?)"),
+    (("sim", "run", "-o", "OUT"), "does not state the licence; pass -O license=LICENCE"),
+    (("sim", "run", "-o", "OUT", "-O", "licence=CC0-1.0"), "(did you mean 'license'?)"),
+    (("convert", "--from", "sumo-fcd", "FCD", "--map", "BARE", "-o", "OUT", "-O", "partner=x", "-O",
+      "license=y"), "the map has no <geoReference>, so the recording's CRS must be given"),
+    (("frobnicate",), "No such command 'frobnicate'"),
+    (("info",), "Missing argument"),
+    (("validate", "REC", "-o", "/nonexistent/dir/r.html"), "the directory /nonexistent/dir does not exist"),
+])
+def test_usage_errors_exit_2_in_one_line(capsys, env, tmp_path, args, needle):
+    code, out, err = cli(capsys, *fill(args, env, OUT=tmp_path / "out.aveas"))
+    assert code == 2, err
+    assert needle in one_error_line(err)
+    assert not (tmp_path / "out.aveas").exists()
+
+
+class BlockImports:
+    """A meta path finder that makes the given top-level packages not installed."""
+
+    def __init__(self, *names: str) -> None:
+        self.names = names
+
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in self.names:
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+        return None
+
+
+def test_a_missing_optional_dependency_names_the_extra(capsys, env, tmp_path, monkeypatch):
+    """Each guarded import says which extra to install, in one line (exit 3)."""
+    for name in [m for m in sys.modules if m == "mcap" or m.startswith("mcap.")]:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setattr(sys, "meta_path", [BlockImports("mcap"), *sys.meta_path])
+    code, out, err = cli(capsys, "export", "--to", "mcap", env["REC"], "-o", tmp_path / "r.mcap")
+    assert code == 3
+    assert one_error_line(err).endswith('mcap, an optional dependency for the mcap export, is not '
+                                        'installed: pip install "aveas-format[mcap]"')
+
+
+# ---------------------------------------------------------------------------------------------
+# outputs: never replaced without --overwrite
+#: how to make each command write its output OUT (an existing file or a non-empty directory)
+OUTPUT_RUNS: dict[tuple[str, ...], tuple[tuple[str, ...], str]] = {
+    ("catalog",): (("catalog", "REC", "-o", "OUT"), "out.parquet"),
+    ("convert",): (("convert", "--from", "sumo-fcd", "FCD", "--map", "MAP", "-o", "OUT", "-O",
+                    "partner=test", "-O", "license=CC-BY-4.0"), "out.aveas"),
+    ("demo",): (("demo", "-o", "OUT", "--vehicles", "3", "--duration", "2"), "dir/"),
+    ("derive",): (("derive", "REC", "-o", "OUT"), "out.aveas"),
+    ("export",): (("export", "--to", "openlabel", "REC", "-o", "OUT"), "out.json"),
+    ("map", "plot"): (("map", "plot", "MAP", "-o", "OUT"), "out.png"),
+    ("map", "project"): (("map", "project", "MAP", "-p", "PTS", "-o", "OUT"), "out.csv"),
+    ("plot",): (("plot", "REC", "-o", "OUT"), "dir/"),
+    ("sim", "run"): (("sim", "run", "-o", "OUT", "-O", "license=CC0-1.0"), "out.aveas"),
+    ("sim", "sensitivity"): (("sim", "sensitivity", "-o", "OUT"), "dir/"),
+    ("validate",): (("validate", "REC", "-o", "OUT"), "report.txt"),
+}
+#: commands whose --output is not replaced but resumed, by design (docs/fitting.md)
+RESUMED = {("fit", "car-following"), ("fit", "desired-speed")}
+
+
+def test_every_command_with_an_output_is_covered():
+    with_output = {p for p in COMMANDS if "--output" in options_of(p)}
+    assert with_output == set(OUTPUT_RUNS) | RESUMED
+
+
+@pytest.mark.parametrize("path", sorted(OUTPUT_RUNS), ids=[" ".join(p) for p in sorted(OUTPUT_RUNS)])
+def test_outputs_are_not_replaced_without_overwrite(capsys, env, tmp_path, path):
+    args, kind = OUTPUT_RUNS[path]
+    if kind.endswith("/"):
+        out = tmp_path / "out"
+        out.mkdir()
+        (out / "mine.txt").write_text("keep me")
+        guarded = out / "mine.txt"
+    else:
+        out = guarded = tmp_path / kind
+        guarded.write_text("keep me")
+    code, _, err = cli(capsys, *fill(args, env, OUT=out))
+    assert code == 2, err
+    line = one_error_line(err)
+    assert "--overwrite" in line and str(out) in line
+    assert guarded.read_text() == "keep me"
+    assert "--overwrite" in options_of(path)
+
+
+def test_companion_files_are_outputs_too(capsys, env, tmp_path):
+    """``export --to openlabel -o k.json`` writes k.xodr next to it: an existing k.xodr is not
+    replaced either; with --overwrite both are written."""
+    (tmp_path / "k.xodr").write_text("my map")
+    code, _, err = cli(capsys, "export", "--to", "openlabel", env["REC"], "-o", tmp_path / "k.json")
+    assert code == 2 and f"{tmp_path / 'k.xodr'}: exists; pass --overwrite" in one_error_line(err)
+    assert not (tmp_path / "k.json").exists() and (tmp_path / "k.xodr").read_text() == "my map"
+    code, _, err = cli(capsys, "export", "--to", "openlabel", env["REC"], "-o", tmp_path / "k.json",
+                       "--overwrite")
+    assert code == 0, err
+    assert (tmp_path / "k.xodr").read_bytes() == STRAIGHT_MAP.read_bytes()
+
+
+# ---------------------------------------------------------------------------------------------
+# --format json
+#: how to run each command that has --format json
+JSON_RUNS: dict[tuple[str, ...], tuple[str, ...]] = {
+    ("convert",): ("convert", "--list"),
+    ("export",): ("export", "--list"),
+    ("info",): ("info", "REC"),
+    ("map", "check"): ("map", "check", "MAP"),
+    ("map", "info"): ("map", "info", "MAP"),
+    ("validate",): ("validate", "REC"),
+}
+
+
+def _has_json_format(path) -> bool:
+    from aveas_format.cli.common import _choices
+
+    return any("--format" in getattr(p, "opts", ()) and "json" in _choices(p)
+               for p in COMMANDS[path].params)
+
+
+def test_every_json_format_is_covered():
+    assert {p for p in COMMANDS if _has_json_format(p)} == set(JSON_RUNS)
+
+
+@pytest.mark.parametrize("path", sorted(JSON_RUNS), ids=[" ".join(p) for p in sorted(JSON_RUNS)])
+def test_format_json_parses(capsys, env, path):
+    code, out, err = cli(capsys, *fill(JSON_RUNS[path], env), "--format", "json")
+    assert code == 0, err
+    assert json.loads(out)
+
+
+def test_the_old_json_flag_still_works_with_a_note(capsys, env):
+    code, out, err = cli(capsys, "info", env["REC"], "--json")
+    assert code == 0 and json.loads(out)["recording_id"] == "test-1"
+    assert "--json is deprecated; use --format json" in err
+
+
+def test_listings_in_json_name_every_converter(capsys):
+    code, out, _ = cli(capsys, "convert", "--list", "--format", "json")
+    rows = json.loads(out)
+    assert {"sumo-fcd", "ros2-mcap", "openlabel"} <= {r["name"] for r in rows}
+    ros2 = next(r for r in rows if r["name"] == "ros2-mcap")
+    assert ros2["extra"] == "ros2" and isinstance(ros2["available"], bool)
+
+
+# ---------------------------------------------------------------------------------------------
+# plain output when not a terminal
+def test_listings_off_a_terminal_are_plain(capsys):
+    code, out, _ = cli(capsys, "convert", "--list")
+    assert code == 0
+    assert not set(out) & set("┃│━─╇…")  # no rich boxes, nothing cut
+    assert "driving-simulator" in out and "infra-lidar" in out and "rotated-boxes" in out
+
+
+@pytest.mark.parametrize("path", COMMANDS, ids=IDS)
+def test_help_off_a_terminal_is_plain_and_whole(capsys, path):
+    code, out, _ = cli(capsys, *path, "--help")
+    assert code == 0
+    assert not set(out) & set("╭│╰…")
+    for opt in options_of(path):
+        if opt.startswith("--") and not any(p.hidden for p in COMMANDS[path].params
+                                            if opt in getattr(p, "opts", ())):
+            assert opt in out, f"{opt} missing or cut in the help of {' '.join(path)}"
+
+
+# ---------------------------------------------------------------------------------------------
+# a closed pipe
+class _ClosedPipeBytes(io.RawIOBase):
+    def writable(self):
+        return True
+
+    def write(self, b):
+        raise BrokenPipeError(32, "Broken pipe")
+
+
+class _ClosedPipe(io.TextIOBase):
+    """stdout whose reader has gone (``| head``): every write raises EPIPE, text or bytes."""
+
+    buffer = _ClosedPipeBytes()
+
+    def write(self, s):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    def flush(self):
+        pass
+
+    def isatty(self):
+        return False
+
+
+PIPED: list[tuple[str, ...]] = [
+    ("info", "REC"), ("info", "REC", "--format", "json"), ("validate", "REC"),
+    ("validate", "REC", "--format", "json"), ("schema",), ("schema", "--tables"), ("convert", "--list"),
+    ("export", "--list", "--format", "json"), ("map", "info", "MAP"), ("map", "check", "MAP"),
+    ("map", "project", "MAP", "-p", "PTS"), ("--help",), *[(*p, "--help") for p in COMMANDS],
+]
+
+
+@pytest.mark.parametrize("args", PIPED, ids=[" ".join(a) for a in PIPED])
+def test_a_closed_pipe_is_a_silent_exit_0(capsys, env, monkeypatch, args):
+    monkeypatch.setattr(sys, "stdout", _ClosedPipe())
+    code = run(app, fill(args, env))
+    assert code == 0
+    assert capsys.readouterr().err == ""
+
+
+def _script(*args) -> list[str]:
+    return [sys.executable, "-m", "aveas_format", *map(str, args)]
+
+
+@pytest.mark.parametrize("args", [("info", "REC", "--format", "json"), ("schema", "--tables"),
+                                  ("convert", "--list")])
+def test_a_real_pipe_into_head_is_silent(env, args):
+    """``aveas-format ... | head -1`` (the real script, a real pipe), and the same with the
+    reader gone before the first write: exit 0, nothing on stderr."""
+    cmd = _script(*fill(args, env))
+    writer = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    head = subprocess.run(["head", "-1"], stdin=writer.stdout, capture_output=True, timeout=120)
+    writer.stdout.close()
+    err = writer.stderr.read().decode()
+    assert writer.wait(timeout=120) == 0 and err == "", err
+    assert head.stdout.strip()
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        res = subprocess.run(cmd, stdout=w, stderr=subprocess.PIPE, timeout=120)
+    finally:
+        os.close(w)
+    assert res.returncode == 0 and res.stderr == b"", res.stderr
+
+
+# ---------------------------------------------------------------------------------------------
+# one meaning of --workers
+def test_workers_mean_and_default_the_same_everywhere():
+    seen = {}
+    for path, cmd in COMMANDS.items():
+        for p in cmd.params:
+            if "--workers" in getattr(p, "opts", ()):
+                seen[path] = (tuple(sorted(p.opts)), p.default,
+                              (p.help or "").split(": ")[-1].lower())
+    assert len(seen) >= 6, seen
+    assert len(set(seen.values())) == 1, seen
+    assert next(iter(seen.values()))[:2] == (("--workers", "-j"), 0)
