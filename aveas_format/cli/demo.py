@@ -99,19 +99,19 @@ def demo(
 
 def _report_and_figures(path: Path, report, output: Path) -> list[Path]:
     """The HTML validation report and the figures of the recording at ``path``, next to it; what
-    was written (nothing, with a note, without the [plot] extra)."""
+    was written (without the [plot] extra the report has no figures and no figures are drawn,
+    with a note)."""
     from aveas_format.errors import MissingDependencyError
-
-    try:
-        from aveas_format.plot import render_html, save_figures
-        from aveas_format.plot.recording import open_for_figures
-    except MissingDependencyError as e:
-        err.print(f"skipped the HTML report and the figures: {e}")
-        return []
+    from aveas_format.plot import render_html, save_figures
+    from aveas_format.plot.recording import open_for_figures
     from aveas_format.safeio import write_text_atomic
 
     rec = open_for_figures(path, report)
     html = write_text_atomic(output / "report.html", render_html(report, rec))
-    figs = save_figures(rec, output / "figures", report.findings())
+    try:
+        figs = save_figures(rec, output / "figures", report.findings())
+    except MissingDependencyError as e:
+        err.print(f"wrote {html}; skipped the figures: {e}")
+        return [html]
     err.print(f"wrote {html} and {len(figs)} figures in {output / 'figures'}")
     return [html, output / "figures"]

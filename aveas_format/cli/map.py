@@ -328,7 +328,10 @@ def plot(
         raise fail(f"{output}: unknown image format {output.suffix or '(no suffix)'!r}; use .png, .svg or "
                    ".pdf", EXIT_USAGE)
     check_output(output, overwrite)
-    from aveas_format.plot.map import save_map  # (needs [plot]: says so before reading the map)
+    from aveas_format.errors import require
+    from aveas_format.plot.map import save_map
+
+    require("matplotlib", extra="plot", what="figures")  # says so before reading the map
 
     net = _load(map_file)
 

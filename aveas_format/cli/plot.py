@@ -24,7 +24,10 @@ def plot(
     """Write the report figures as PNG: map.png (lanes, trajectories, findings), speed.png and
     acceleration.png (histograms per class), sample_rate.png (sample rate over time)."""
     import aveas_format
-    from aveas_format.plot import save_figures  # (needs [plot]: says so before any work)
+    from aveas_format.errors import require
+    from aveas_format.plot import save_figures
+
+    require("matplotlib", extra="plot", what="figures")  # says so before any work
 
     check_output_dir(output, overwrite)
     from aveas_format.plot.recording import open_for_figures

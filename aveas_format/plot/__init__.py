@@ -19,6 +19,11 @@ none imports ``fit``, ``sim`` or ``dataset`` (they sit above and call in). Figur
   parameters per restart).
 - :mod:`~aveas_format.plot.sensitivity`: the W99 sensitivity study's figure.
 
+matplotlib is the ``[plot]`` extra: a module that draws at import (``derive``, ``fit``,
+``sensitivity``) or a function that draws (``plot_map``, the recording figures) says so in one line
+naming the extra (:func:`aveas_format.errors.require`); the HTML report renders without it, minus
+the figures, and says which extra draws them.
+
 The names below are re-exported lazily (on first use), so importing one module, e.g.
 ``aveas_format.plot.map``, does not load the others (the HTML report loads the validator).
 """
@@ -28,10 +33,6 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
-from aveas_format.errors import require
-
-# matplotlib is the [plot] extra: without it, one line naming the extra (not a ModuleNotFoundError)
-require("matplotlib", extra="plot", what="figures and the HTML report")
 
 _MODULES: dict[str, tuple[str, ...]] = {
     "derive": ("acceleration_figure", "ttc_figure"),

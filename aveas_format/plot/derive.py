@@ -18,7 +18,10 @@ from collections.abc import Mapping
 
 import numpy as np
 import pyarrow as pa
-from matplotlib.figure import Figure
+from aveas_format.errors import require
+
+require("matplotlib", extra="plot", what="figures")
+from matplotlib.figure import Figure  # noqa: E402  (after the one-line message of the [plot] extra)
 
 from aveas_format.io.arrow import column_numpy
 

@@ -11,7 +11,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-from matplotlib.figure import Figure
+from aveas_format.errors import require
+
+require("matplotlib", extra="plot", what="figures")
+from matplotlib.figure import Figure  # noqa: E402  (after the one-line message of the [plot] extra)
 
 from aveas_format.safeio import save_figure_atomic
 

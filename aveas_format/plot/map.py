@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from aveas_format.errors import require
 from aveas_format.safeio import save_figure_atomic
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -100,6 +101,8 @@ def plot_map(
     with their ids. ``step``: sampling of lane borders and reference lines in metres.
     """
     import shapely
+
+    require("matplotlib", extra="plot", what="figures")
     from matplotlib.collections import LineCollection, PolyCollection
     from matplotlib.patches import Patch
 
