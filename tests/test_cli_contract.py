@@ -16,7 +16,6 @@ import os
 import re
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 import typer.main
@@ -75,12 +74,17 @@ def env(tmp_path_factory):
 
     d = tmp_path_factory.mktemp("contract")
     rec = small_recording().write(d / "rec.aveas")
+    from aveas_format.derive import derive
+
+    derived = small_recording()
+    derive(derived)  # `find` ranks the derived criticality summaries
+    derived = derived.write(d / "derived.aveas")
     (d / "points.csv").write_text("x,y\n10,-1.75\n20,-5.25\n")
     (d / "fcd.xml").write_text(FCD)
     bare = re.sub(r"<geoReference>.*?</geoReference>", "", STRAIGHT_MAP.read_text(), flags=re.S)
     (d / "bare.xodr").write_text(bare)  # a map without geoReference: the CRS must be given
     return {"REC": rec, "MAP": STRAIGHT_MAP, "PTS": d / "points.csv", "FCD": d / "fcd.xml",
-            "BARE": d / "bare.xodr"}
+            "BARE": d / "bare.xodr", "DERIVED": derived}
 
 
 def fill(args, env, **extra) -> list[str]:
@@ -172,7 +176,7 @@ OUTPUT_RUNS: dict[tuple[str, ...], tuple[tuple[str, ...], str]] = {
     ("validate",): (("validate", "REC", "-o", "OUT"), "report.txt"),
 }
 #: commands whose --output is not replaced but resumed, by design (docs/fitting.md)
-RESUMED = {("fit", "car-following"), ("fit", "desired-speed")}
+RESUMED = {("fit", "car-following"), ("fit", "desired-speed"), ("fit", "study")}
 
 
 def test_every_command_with_an_output_is_covered():
@@ -218,6 +222,7 @@ def test_companion_files_are_outputs_too(capsys, env, tmp_path):
 JSON_RUNS: dict[tuple[str, ...], tuple[str, ...]] = {
     ("convert",): ("convert", "--list"),
     ("export",): ("export", "--list"),
+    ("find",): ("find", "DERIVED"),
     ("info",): ("info", "REC"),
     ("map", "check"): ("map", "check", "MAP"),
     ("map", "info"): ("map", "info", "MAP"),
