@@ -405,16 +405,16 @@ def _on_map_share(net, x: np.ndarray, y: np.ndarray) -> float:
 
 
 def _far_from_lanes(net, xy: np.ndarray, dist_m: float) -> np.ndarray:
-    """Which of the points ``xy`` are farther than ``dist_m`` from every lane of ``net`` (one bulk
-    nearest-neighbour query over the lane polygons)."""
+    """Which of the points ``xy`` are farther than ``dist_m`` from every road surface of ``net``
+    (one bulk nearest-neighbour query on the map's own spatial index, the one ``world_to_road``
+    uses: road chunks with their lanes' extent)."""
     import shapely
 
-    polys = [p for *_, p in net.lane_polygons(step=2.0)]
-    if not polys:
+    index = net.spatial_index
+    if not len(index.polygons):
         return np.ones(len(xy), dtype=bool)
-    tree = shapely.STRtree(polys)
-    (i, _), d = tree.query_nearest(shapely.points(xy[:, 0], xy[:, 1]), return_distance=True,
-                                   all_matches=False)
+    (i, _), d = index.tree.query_nearest(shapely.points(xy[:, 0], xy[:, 1]), return_distance=True,
+                                         all_matches=False)
     far = np.ones(len(xy), dtype=bool)
     far[i] = d > dist_m
     return far
