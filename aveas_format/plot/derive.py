@@ -18,12 +18,9 @@ from collections.abc import Mapping
 
 import numpy as np
 import pyarrow as pa
-from aveas_format.errors import require
-
-require("matplotlib", extra="plot", what="figures")
-from matplotlib.figure import Figure  # noqa: E402  (after the one-line message of the [plot] extra)
 
 from aveas_format.io.arrow import column_numpy
+from aveas_format.plot._mpl import Figure
 
 #: colour and legend label per ``ttc_kind``, in drawing order
 TTC_KINDS: dict[str, tuple[str, str]] = {

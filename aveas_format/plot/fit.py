@@ -11,11 +11,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-from aveas_format.errors import require
 
-require("matplotlib", extra="plot", what="figures")
-from matplotlib.figure import Figure  # noqa: E402  (after the one-line message of the [plot] extra)
-
+from aveas_format.plot._mpl import Figure
 from aveas_format.safeio import save_figure_atomic
 
 #: (histogram colour, density colour) per class

@@ -11,11 +11,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from pathlib import Path
 
-from aveas_format.errors import require
 
-require("matplotlib", extra="plot", what="figures")
-from matplotlib.figure import Figure  # noqa: E402  (after the one-line message of the [plot] extra)
-
+from aveas_format.plot._mpl import Figure
 from aveas_format.safeio import save_figure_atomic
 
 
