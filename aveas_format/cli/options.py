@@ -5,7 +5,7 @@ spelling out ``typer.Option(...)`` again, and calls the helper that goes with th
 
 - **Output**: :func:`overwrite_option` (``--overwrite``) and the checks before writing, made
   before any work: :func:`check_output` (a file: never replaced without ``--overwrite``, and its
-  directory must exist; :func:`refuse_overwrite` is its old name) and :func:`check_output_dir` (a
+  directory must exist) and :func:`check_output_dir` (a
   directory of outputs: not an existing, non-empty one without ``--overwrite``). Companion files
   (the map of an OpenLABEL export) are outputs too: check each.
 - **Format**: :func:`format_option` (``--format text|json``, for every command that prints
@@ -72,10 +72,6 @@ def check_output(path: Path | Iterable[Path], overwrite: bool) -> None:
             raise fail(f"{p}: cannot write: the directory {parent} does not exist"
                        if not parent.exists() else f"{p}: cannot write: {parent} is not a directory",
                        EXIT_USAGE)
-
-
-#: the former name of :func:`check_output` (one output file)
-refuse_overwrite = check_output
 
 
 def check_output_dir(path: Path, overwrite: bool) -> None:
