@@ -20,6 +20,11 @@ Two helpers go with them: :func:`require` imports an optional dependency or rais
 guard of every optional import; :func:`did_you_mean` adds the closest known name to a message
 about an unknown one.
 
+Findings about a source file that an import survives (a dropped box, a PMF not summing to 1) are
+not errors: a converter reports each with :func:`report_source` — a warning by default, a located
+:class:`SourceFinding` when the caller listens (:func:`collect_source_findings`, as
+``aveas-format validate FILE`` does, which turns them into the ``source.*`` rules' findings).
+
 Each error carries the ``path`` it is about (and, where known, ``line``/``row``/``column``) as
 attributes, and its message names them: the CLI prints ``str(error)`` as its one line on stderr.
 
@@ -30,9 +35,14 @@ from __future__ import annotations
 
 import difflib
 import importlib
-from collections.abc import Iterable
+import warnings
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
+from dataclasses import dataclass, field
 from pathlib import PurePath
 from types import ModuleType
+from typing import Any
 
 
 class AveasError(Exception):
@@ -141,3 +151,52 @@ __all__ = [
     "did_you_mean",
     "require",
 ]
+
+
+# --- findings about a source file, reported while it is imported ---------------------------------
+
+@dataclass(frozen=True)
+class SourceFinding:
+    """Something wrong with a foreign file that the import survived (a box with an impossible size
+    dropped, a PMF not summing to 1, an unknown object type...), located in the source's own terms.
+
+    ``code`` is the code of the validate rule that reports it (``source.*``, see
+    ``validate/rules/source.py``); ``location`` holds the source's own coordinates of the problem:
+    ``file``, ``line`` (1-based, XML/JSON text), ``frame`` (OpenLABEL frame key), ``uid`` (OpenLABEL
+    object uid), ``json_path``, ``message_index`` / ``object_id`` (OSI), ``entity`` (OpenSCENARIO),
+    ``participant_id`` / ``time`` (the format's). ``count`` says how many instances the one finding
+    stands for (a vectorised check reports the first location and the count)."""
+
+    code: str
+    message: str
+    location: dict[str, Any] = field(default_factory=dict)
+    count: int = 1
+
+
+_SOURCE_COLLECTOR: ContextVar[list[SourceFinding] | None] = ContextVar("aveas_source_findings",
+                                                                       default=None)
+
+
+def report_source(code: str, message: str, *, count: int = 1, stacklevel: int = 2,
+                  **location: Any) -> None:
+    """Report a finding about the file being imported: collected when a caller listens
+    (:func:`collect_source_findings`, as ``aveas-format validate FILE`` does), otherwise a
+    ``UserWarning`` with the message (what an import on its own has always shown)."""
+    sink = _SOURCE_COLLECTOR.get()
+    if sink is not None:
+        sink.append(SourceFinding(code, message, {k: v for k, v in location.items() if v is not None},
+                                  count))
+    else:
+        warnings.warn(message, stacklevel=stacklevel + 1)
+
+
+@contextmanager
+def collect_source_findings() -> Iterator[list[SourceFinding]]:
+    """``with collect_source_findings() as found: convert(...)`` — the import's findings land in
+    ``found`` instead of being warned."""
+    sink: list[SourceFinding] = []
+    token = _SOURCE_COLLECTOR.set(sink)
+    try:
+        yield sink
+    finally:
+        _SOURCE_COLLECTOR.reset(token)
