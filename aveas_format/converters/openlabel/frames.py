@@ -17,16 +17,16 @@ from __future__ import annotations
 import math
 import re
 from collections import defaultdict
+from itertools import compress, repeat
+from operator import is_not, methodcaller
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from aveas_format.converters.openlabel.profile import (EXT, LIGHTS, _LONGITUDINAL, _attrs, _enum_value, _first)
+from aveas_format.converters.openlabel.columns import _MISSING, as_obj, block_columns, box_parts, ext_chunk
+from aveas_format.converters.openlabel.profile import LIGHTS, _LONGITUDINAL, _attrs, _first
 from aveas_format.errors import FormatError
-
-#: an extension value the box does not carry (``None`` is a value: null)
-_MISSING = object()
 
 
 # -- geometry of generic files -------------------------------------------------------------------
@@ -185,47 +185,12 @@ def _utm_crs(name: str, cs_type: str | None) -> str | None:
 # -- the frames: one at a time into column chunks ------------------------------------------------
 
 
-#: boxes per chunk of the column buffers (Python lists -> numpy arrays)
+#: boxes per block converted to columns at once (:func:`.columns.block_columns`)
 _CHUNK = 4096
 _FLOAT_COLS = ("cub_ts", "px", "py", "pz", "yaw", "dl", "dw", "dh", "vu", "vv", "yr", "au", "av",
                "x_std", "y_std", "z_std", "heading_std", "vu_std", "vv_std", "yr_std", "au_std",
                "av_std", "road_s", "road_t", "lane_position", *LIGHTS)
 _OBJ_COLS = ("csroot", "road_id", "lane_id")
-#: the values of one box, in the order :meth:`_FrameRows._add_box` puts them in its row tuple
-_ROW_COLS = ("uidx", "occ", "hv", "hr", "cub_ts", "px", "py", "pz", "yaw", "dl", "dw", "dh", "vu", "vv",
-             "yr", "au", "av", "x_std", "y_std", "z_std", "heading_std", "vu_std", "vv_std", "yr_std",
-             "au_std", "av_std", "road_s", "road_t", "lane_position", *LIGHTS, *_OBJ_COLS)
-assert sorted(_ROW_COLS) == sorted((*_FLOAT_COLS, *_OBJ_COLS, "uidx", "occ", "hv", "hr"))
-
-
-def _as_obj(lst: list) -> np.ndarray:
-    a = np.empty(len(lst), object)
-    for i, v in enumerate(lst):
-        a[i] = v
-    return a
-
-
-def _as_float(lst: list) -> np.ndarray:
-    """float64 where every value converts (as ``np.asarray(values, float)`` would), else the values
-    as an object array (converted, or refused with the same error, where the column is used)."""
-    try:
-        a = np.asarray(lst, float)
-        if a.ndim == 1:
-            return a
-    except (TypeError, ValueError, OverflowError):
-        pass
-    return _as_obj(lst)
-
-
-def _ext_rep(vals: list) -> tuple:
-    """One extension column (values or ``_MISSING``): ``("f", values, present, null)`` where all
-    present values are floats or null, else ``("o", object array)``."""
-    n = len(vals)
-    if all(v is _MISSING or v is None or type(v) is float for v in vals):
-        return ("f", np.fromiter((v if type(v) is float else np.nan for v in vals), float, n),
-                np.fromiter((v is not _MISSING for v in vals), bool, n),
-                np.fromiter((v is None for v in vals), bool, n))
-    return ("o", _as_obj(vals))
 
 
 def _rep_list(rep: tuple) -> list:
@@ -242,7 +207,7 @@ def _rep_take(rep: tuple, idx: np.ndarray) -> tuple:
 def _rep_concat(reps: list[tuple]) -> tuple:
     if all(r[0] == "f" for r in reps):
         return ("f", *(np.concatenate([r[i] for r in reps]) for i in (1, 2, 3)))
-    return ("o", np.concatenate([r[1] if r[0] == "o" else _as_obj(_rep_list(r)) for r in reps]))
+    return ("o", np.concatenate([r[1] if r[0] == "o" else as_obj(_rep_list(r)) for r in reps]))
 
 
 class _FrameData:
@@ -264,11 +229,15 @@ class _FrameRows:
         self.stamps: list = []
         self.frame_uids: list[np.ndarray] = []
         self.uid_index: dict[str, int] = {}
-        self.buf: list[tuple] = []  # one tuple of _ROW_COLS per box
-        self.ext_buf: list = []
+        # the boxes of the frames not yet converted: per box its frame, object, object_data, cuboid
+        self.p_j: list[int] = []
+        self.p_u: list[str] = []
+        self.p_od: list[dict] = []
+        self.p_cub: list[dict] = []
+        self.p_edges: dict[int, tuple[dict, dict]] = {}  # frame -> (its transforms, resolve cache)
         self.chunks: list[dict[str, np.ndarray]] = []
         self.ext_chunks: list[tuple[int, dict[str, tuple]]] = []
-        self.sizes: list[tuple[int, str, list]] = []
+        self.sizes: list[tuple[int, str, tuple]] = []
         self.interior: list[tuple[int, str, dict]] = []
         self._need_size: dict[str, bool] = {}
         #: object type given inside a frame's object_data (TUM Traffic), by object
@@ -289,25 +258,8 @@ class _FrameRows:
             self._need_size[u] = need
         return need
 
-    def _flush(self) -> None:
-        if not self.buf:
-            return
-        b = dict(zip(_ROW_COLS, zip(*self.buf)))
-        ch = {c: _as_float(b[c]) for c in _FLOAT_COLS}
-        ch.update({c: _as_obj(b[c]) for c in _OBJ_COLS})
-        ch["uidx"] = np.asarray(b["uidx"], np.int64)
-        ch["occ"] = np.asarray(b["occ"], np.int64)
-        ch["hv"] = np.asarray(b["hv"], bool)
-        ch["hr"] = np.asarray(b["hr"], bool)
-        self.chunks.append(ch)
-        es = self.ext_buf
-        keys = dict.fromkeys(c for e in es if e for c in e)
-        self.ext_chunks.append((len(es), {c: _ext_rep([e.get(c, _MISSING) if e else _MISSING
-                                                       for e in es]) for c in keys}))
-        self.buf = []
-        self.ext_buf = []
-
     def add(self, k: Any, fr: Any) -> None:
+        """One frame: its key, timestamp and objects; its boxes wait for :meth:`_flush`."""
         j = len(self.keys)
         fr = fr if isinstance(fr, dict) else {}
         ts = _frame_timestamp(fr)
@@ -320,85 +272,73 @@ class _FrameRows:
         self.frame_uids.append(np.fromiter((ui.setdefault(u, len(ui)) for u in fobjs), np.int64))
         fp = fr.get("frame_properties")
         edges = self.cs.frame_edges(fp.get("transforms") if isinstance(fp, dict) else None)
-        cache: dict = {}
-        boxed = set()
-        for u, oif in fobjs.items():
-            od = (oif or {}).get("object_data") or {} if isinstance(oif, dict) else {}
-            if not isinstance(od, dict):
-                continue
-            if isinstance(od.get("type"), str) and u not in self.frame_types:
-                self.frame_types[u] = od["type"]
-            cubs = od.get("cuboid") or []
-            if isinstance(cubs, dict):
-                cubs = [cubs]
-            cub = next((c for c in cubs if isinstance(c, dict) and c.get("name") == "bounding_box"),
-                       cubs[0] if cubs else None)
-            if not isinstance(cub, dict) or cub.get("val") is None:
-                continue
-            self._add_box(j, k, u, cub, od, edges, cache)
-            boxed.add(u)
+        parts = list(map(box_parts, fobjs.values()))
+        if not parts:
+            return
+        ods, cubs = zip(*parts)
+        types = list(map(methodcaller("get", "type"), ods))
+        if any(isinstance(t, str) for t in types):
+            for u, t in zip(fobjs, types):
+                if isinstance(t, str) and u not in self.frame_types:
+                    self.frame_types[u] = t
+        has = list(map(is_not, cubs, repeat(None)))
+        uids = list(compress(fobjs, has))
+        ods, cubs = list(compress(ods, has)), list(compress(cubs, has))
+        self.p_edges[j] = (edges, {})
         if edges:
+            boxed = set(uids)
             for u, cub, intervals in self.static_cuboids:
                 if u in boxed or not _in_intervals(k, intervals):
                     continue
-                m, _, moving = self._resolve(cub.get("coordinate_system"), edges, cache)
+                _, _, moving = self._resolve(cub.get("coordinate_system"), j)
                 if moving:
                     ui.setdefault(u, len(ui))
                     self.frame_uids[-1] = np.append(self.frame_uids[-1], ui[u])
                     self.moving_static.add(u)
-                    self._add_box(j, k, u, cub, {}, edges, cache)
+                    uids.append(u)
+                    ods.append({})
+                    cubs.append(cub)
+        self.p_j.extend(repeat(j, len(uids)))
+        self.p_u.extend(uids)
+        self.p_od.extend(ods)
+        self.p_cub.extend(cubs)
+        if len(self.p_j) >= _CHUNK:
+            self._flush()
 
-    def _resolve(self, csname: Any, edges: dict, cache: dict) -> tuple[np.ndarray, str | None, bool]:
+    def _resolve(self, csname: Any, j: int) -> tuple[np.ndarray, str | None, bool]:
+        edges, cache = self.p_edges[j]
         key = str(csname) if csname else ""
         if key not in cache:
             cache[key] = self.cs.resolve(key or None, edges)
         return cache[key]
 
-    def _add_box(self, j: int, k: Any, u: str, cub: dict[str, Any], od: dict[str, Any], edges: dict,
-                 cache: dict) -> None:
-        """One box: the cuboid in the root frame and the profile's attributes of the object."""
-        pw, yaw, dims, ground, root = _box_in_root(
-            cub, lambda name: self._resolve(name, edges, cache), k, u, self.path)
-        attrs = _attrs(od)
-        cub_attrs = cub.get("attributes")
-        cub_ts = _first(_attrs(cub_attrs), "timestamp") if cub_attrs else None
-        if self._needs_size(u):
-            self.sizes.append((j, u, dims))
-        nan = np.nan
-        vel = _first(attrs, "velocity")
-        acc = _first(attrs, "acceleration")
-        bsd = _first(attrs, "bounding_box/ustddev")
-        vsd = _first(attrs, "velocity/ustddev")
-        asd = _first(attrs, "acceleration/ustddev")
-        road = _first(attrs, "used_road_link", _first(attrs, "open_drive/road_id"))
-        lrc = _first(attrs, "open_drive/local_road_coordinates")
-        lane = _first(attrs, "open_drive/lane_id")
-        try:
-            lane_id = int(str(_enum_value(lane))) if lane is not None and road is not None else None
-        except ValueError:
-            lane_id = None
-        on = road is not None and lrc is not None
-        self.buf.append((
-            self.uid_index[u], j, vel is not None, on,
-            float(cub_ts) if isinstance(cub_ts, (int, float)) else nan,
-            pw[0], pw[1], ground, yaw, dims[0], dims[1], dims[2],
-            vel[0] if vel else nan, vel[1] if vel else nan, vel[5] if vel and len(vel) > 5 else nan,
-            acc[0] if acc else nan, acc[1] if acc else nan,
-            bsd[0] if bsd else nan, bsd[1] if bsd else nan, bsd[2] if bsd else nan, bsd[5] if bsd else nan,
-            vsd[0] if vsd else nan, vsd[1] if vsd else nan, vsd[5] if vsd and len(vsd) > 5 else nan,
-            asd[0] if asd else nan, asd[1] if asd else nan,
-            lrc[0] if road is not None and lrc else nan, lrc[1] if road is not None and lrc else nan,
-            _first(attrs, "open_drive/lane_position", nan),
-            *[nan if (bl := _first(attrs, name)) is None else float(bool(bl)) for name in LIGHTS.values()],
-            root, str(road) if on else None, lane_id,
-        ))
-        irow = _interior_row(attrs)
-        if irow:
-            self.interior.append((j, u, irow))
-        e = cub.get(EXT)
-        self.ext_buf.append(e if isinstance(e, dict) else None)
-        if len(self.buf) >= _CHUNK:
-            self._flush()
+    def _flush(self) -> None:
+        """The waiting boxes into one chunk of columns (:func:`.columns.block_columns`)."""
+        if not self.p_j:
+            return
+        js, us, ods, cubs = self.p_j, self.p_u, self.p_od, self.p_cub
+        keys = self.keys
+
+        def place(i: int) -> tuple:
+            j = js[i]
+            return _box_in_root(cubs[i], lambda name: self._resolve(name, j), keys[j], us[i], self.path)
+
+        ch, sizes, ext, at = block_columns(ods, cubs, place)
+        ui = self.uid_index
+        ch["uidx"] = np.fromiter(map(ui.__getitem__, us), np.int64, len(us))
+        ch["occ"] = np.asarray(js, np.int64)
+        self.chunks.append(ch)
+        self.ext_chunks.append((len(us), ext_chunk(ext)))
+        need = {u: self._needs_size(u) for u in dict.fromkeys(us)}
+        if any(need.values()):
+            self.sizes.extend((j, u, d) for j, u, d in zip(js, us, sizes) if need[u])
+        inames = [c for nm, c in at.code_of.items() if nm.startswith("interior/")]
+        if inames:
+            for i in np.unique(at.box[np.isin(at.codes, inames)]).tolist():
+                irow = _interior_row(_attrs(ods[i]))
+                if irow:
+                    self.interior.append((js[i], us[i], irow))
+        self.p_j, self.p_u, self.p_od, self.p_cub, self.p_edges = [], [], [], [], {}
 
     def finish(self) -> _FrameData:
         self._flush()
