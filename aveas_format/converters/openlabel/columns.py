@@ -56,6 +56,27 @@ def box_parts(oif: Any) -> tuple[dict, dict | None]:
     return od, cub
 
 
+def split_boxes(oifs: list) -> tuple[list[dict], list[dict | None]]:
+    """:func:`box_parts` of many objects: in bulk where every one is laid out as the profile's
+    (``object_data`` with a ``cuboid`` list whose first item is the ``bounding_box`` with a
+    ``val``), else one at a time."""
+    if oifs:
+        try:
+            ods = list(map(itemgetter("object_data"), oifs))
+            if set(map(type, ods)) == {dict}:
+                cubl = list(map(itemgetter("cuboid"), ods))
+                if set(map(type, cubl)) == {list}:
+                    cubs = list(map(itemgetter(0), cubl))
+                    if (set(map(type, cubs)) == {dict}
+                            and set(map(itemgetter("name"), cubs)) == {"bounding_box"}
+                            and None not in list(map(itemgetter("val"), cubs))):
+                        return ods, cubs
+        except (KeyError, TypeError, IndexError):
+            pass
+    parts = list(map(box_parts, oifs))
+    return [p[0] for p in parts], [p[1] for p in parts]
+
+
 def as_obj(lst: list) -> np.ndarray:
     """A 1-D object array of the values (lists stay elements)."""
     a = np.empty(len(lst), object)
@@ -166,11 +187,13 @@ class _Attributes:
             return has, cols
         notnone = np.fromiter(map(is_not, vals, repeat(None)), bool, len(vals))
         has[boxes[notnone]] = True
-        try:
-            a = np.asarray(vals, float)
-            ok = a.ndim == 2
-        except (TypeError, ValueError, OverflowError):
-            ok = False
+        lens = set(map(len, vals)) if notnone.all() else set()
+        ok = len(lens) == 1
+        if ok:
+            try:
+                a = np.fromiter(chain.from_iterable(vals), float).reshape(len(vals), -1)
+            except (TypeError, ValueError, OverflowError):
+                ok = False
         if ok:
             for c, e in zip(cols, elems):
                 if a.shape[1] > e:

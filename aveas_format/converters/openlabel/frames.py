@@ -18,13 +18,14 @@ import math
 import re
 from collections import defaultdict
 from itertools import compress, repeat
-from operator import is_not, methodcaller
+from operator import is_not
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from aveas_format.converters.openlabel.columns import _MISSING, as_obj, block_columns, box_parts, ext_chunk
+from aveas_format.converters.openlabel.columns import (_MISSING, as_obj, block_columns, box_parts, ext_chunk,
+                                                       split_boxes)
 from aveas_format.converters.openlabel.profile import LIGHTS, _LONGITUDINAL, _attrs, _first
 from aveas_format.errors import FormatError
 
@@ -229,11 +230,10 @@ class _FrameRows:
         self.stamps: list = []
         self.frame_uids: list[np.ndarray] = []
         self.uid_index: dict[str, int] = {}
-        # the boxes of the frames not yet converted: per box its frame, object, object_data, cuboid
+        # the boxes of the frames not yet converted: per object in a frame its frame, uid, value
         self.p_j: list[int] = []
         self.p_u: list[str] = []
-        self.p_od: list[dict] = []
-        self.p_cub: list[dict] = []
+        self.p_oif: list[Any] = []
         self.p_edges: dict[int, tuple[dict, dict]] = {}  # frame -> (its transforms, resolve cache)
         self.chunks: list[dict[str, np.ndarray]] = []
         self.ext_chunks: list[tuple[int, dict[str, tuple]]] = []
@@ -269,39 +269,29 @@ class _FrameRows:
         fobjs = fr.get("objects") or {}
         if not isinstance(fobjs, dict):
             raise FormatError(f"frame {k}: 'objects' is not an object", path=self.path)
-        self.frame_uids.append(np.fromiter((ui.setdefault(u, len(ui)) for u in fobjs), np.int64))
+        if not fobjs.keys() <= ui.keys():
+            for u in fobjs:
+                ui.setdefault(u, len(ui))
+        self.frame_uids.append(np.fromiter(map(ui.__getitem__, fobjs), np.int64, len(fobjs)))
         fp = fr.get("frame_properties")
         edges = self.cs.frame_edges(fp.get("transforms") if isinstance(fp, dict) else None)
-        parts = list(map(box_parts, fobjs.values()))
-        if not parts:
-            return
-        ods, cubs = zip(*parts)
-        types = list(map(methodcaller("get", "type"), ods))
-        if any(isinstance(t, str) for t in types):
-            for u, t in zip(fobjs, types):
-                if isinstance(t, str) and u not in self.frame_types:
-                    self.frame_types[u] = t
-        has = list(map(is_not, cubs, repeat(None)))
-        uids = list(compress(fobjs, has))
-        ods, cubs = list(compress(ods, has)), list(compress(cubs, has))
         self.p_edges[j] = (edges, {})
-        if edges:
-            boxed = set(uids)
+        self.p_j.extend(repeat(j, len(fobjs)))
+        self.p_u.extend(fobjs)
+        self.p_oif.extend(fobjs.values())
+        if edges and self.static_cuboids:
+            boxed = {u for u, oif in fobjs.items() if box_parts(oif)[1] is not None}
             for u, cub, intervals in self.static_cuboids:
                 if u in boxed or not _in_intervals(k, intervals):
                     continue
                 _, _, moving = self._resolve(cub.get("coordinate_system"), j)
-                if moving:
+                if moving:  # the static cuboid, placed by this frame's transforms
                     ui.setdefault(u, len(ui))
                     self.frame_uids[-1] = np.append(self.frame_uids[-1], ui[u])
                     self.moving_static.add(u)
-                    uids.append(u)
-                    ods.append({})
-                    cubs.append(cub)
-        self.p_j.extend(repeat(j, len(uids)))
-        self.p_u.extend(uids)
-        self.p_od.extend(ods)
-        self.p_cub.extend(cubs)
+                    self.p_j.append(j)
+                    self.p_u.append(u)
+                    self.p_oif.append({"object_data": {"cuboid": [cub]}})
         if len(self.p_j) >= _CHUNK:
             self._flush()
 
@@ -315,8 +305,24 @@ class _FrameRows:
     def _flush(self) -> None:
         """The waiting boxes into one chunk of columns (:func:`.columns.block_columns`)."""
         if not self.p_j:
+            self.p_edges = {}
             return
-        js, us, ods, cubs = self.p_j, self.p_u, self.p_od, self.p_cub
+        ods, cubs = split_boxes(self.p_oif)
+        types = list(map(dict.get, ods, repeat("type")))
+        if any(isinstance(t, str) for t in types):  # a type inside a frame's object_data (TUM)
+            for u, t in zip(self.p_u, types):
+                if isinstance(t, str) and u not in self.frame_types:
+                    self.frame_types[u] = t
+        has = list(map(is_not, cubs, repeat(None)))
+        if all(has):
+            js, us = self.p_j, self.p_u
+        else:
+            js, us = list(compress(self.p_j, has)), list(compress(self.p_u, has))
+            ods, cubs = list(compress(ods, has)), list(compress(cubs, has))
+        self.p_j, self.p_u, self.p_oif = [], [], []
+        if not js:
+            self.p_edges = {}
+            return
         keys = self.keys
 
         def place(i: int) -> tuple:
@@ -338,7 +344,7 @@ class _FrameRows:
                 irow = _interior_row(_attrs(ods[i]))
                 if irow:
                     self.interior.append((js[i], us[i], irow))
-        self.p_j, self.p_u, self.p_od, self.p_cub, self.p_edges = [], [], [], [], {}
+        self.p_edges = {}
 
     def finish(self) -> _FrameData:
         self._flush()
