@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import re
 from collections import defaultdict
-from itertools import compress, repeat
+from itertools import chain, compress, repeat
 from operator import is_not
 from pathlib import Path
 from typing import Any
@@ -26,7 +26,8 @@ import numpy as np
 
 from aveas_format.converters.openlabel.columns import (_MISSING, as_obj, block_columns, box_parts, ext_chunk,
                                                        split_boxes)
-from aveas_format.converters.openlabel.profile import LIGHTS, _LONGITUDINAL, _attrs, _first
+from aveas_format.converters.openlabel.profile import (LIGHTS, _LONGITUDINAL, MANDATORY_FRAME_ATTRIBUTES, _attrs,
+                                                       _first)
 from aveas_format.errors import FormatError
 
 
@@ -246,6 +247,11 @@ class _FrameRows:
         #: that a frame's transforms move (KITTI's ego car in vehicle-iso8855): one box per frame
         self.static_cuboids = _static_cuboids(objects)
         self.moving_static: set[str] = set()
+        #: check the profile's mandatory attributes of each box (files that claim the profile)
+        self.profile = False
+        #: what the frames' checks found: (code, attribute or coordinate system) ->
+        #: [first frame key, first object uid, count]
+        self.found: dict[tuple[str, str], list] = {}
 
     def _needs_size(self, u: str) -> bool:
         need = self._need_size.get(u)
@@ -295,12 +301,49 @@ class _FrameRows:
         if len(self.p_j) >= _CHUNK:
             self._flush()
 
-    def _resolve(self, csname: Any, j: int) -> tuple[np.ndarray, str | None, bool]:
+    def _resolve(self, csname: Any, j: int, uid: str | None = None) -> tuple[np.ndarray, str | None, bool]:
         edges, cache = self.p_edges[j]
         key = str(csname) if csname else ""
         if key not in cache:
             cache[key] = self.cs.resolve(key or None, edges)
+            if key in self.cs.unknown:
+                self._found("source.openlabel.unknown_coordinate_system", key, self.keys[j], uid, 1)
         return cache[key]
+
+    def _found(self, code: str, what: str, frame: Any, uid: str | None, count: int) -> None:
+        f = self.found.get((code, what))
+        if f is None:
+            self.found[(code, what)] = [frame, uid, count]
+        else:
+            f[2] += count
+
+    def _check_block(self, at: Any, js: list[int], us: list[str]) -> None:
+        """The checks of the source in bulk: PMF attributes (``*/uncertainties``) that do not sum
+        to 1, and (files that claim the profile) boxes without a mandatory attribute."""
+        from aveas_format.schema.pmf import pmf_problems
+
+        for name in at.code_of:
+            if not name.endswith("/uncertainties"):
+                continue
+            boxes, vals = at.first(name)
+            try:
+                lens = set(map(len, vals))
+                m = np.fromiter(chain.from_iterable(vals), float).reshape(len(vals), -1) \
+                    if len(lens) == 1 else None
+            except (TypeError, ValueError):
+                m = None
+            bad = pmf_problems(m) if m is not None else np.fromiter(map(_pmf_bad, vals), bool, len(vals))
+            if bad.any():
+                i = int(boxes[np.argmax(bad)])
+                self._found("source.openlabel.pmf_sum", name, self.keys[js[i]], us[i], int(bad.sum()))
+        if self.profile:
+            for name in MANDATORY_FRAME_ATTRIBUTES:
+                has = np.zeros(at.n, bool)
+                has[at.first(name)[0]] = True
+                if not has.all():
+                    i = int(np.argmin(has))
+                    self._found("source.openlabel.missing_attribute", name, self.keys[js[i]], us[i],
+                                int((~has).sum()))
 
     def _flush(self) -> None:
         """The waiting boxes into one chunk of columns (:func:`.columns.block_columns`)."""
@@ -326,13 +369,14 @@ class _FrameRows:
         keys = self.keys
 
         def place(i: int) -> tuple:
-            j = js[i]
-            return _box_in_root(cubs[i], lambda name: self._resolve(name, j), keys[j], us[i], self.path)
+            j, u = js[i], us[i]
+            return _box_in_root(cubs[i], lambda name: self._resolve(name, j, u), keys[j], u, self.path)
 
         ch, sizes, ext, at = block_columns(ods, cubs, place)
         ui = self.uid_index
         ch["uidx"] = np.fromiter(map(ui.__getitem__, us), np.int64, len(us))
         ch["occ"] = np.asarray(js, np.int64)
+        self._check_block(at, js, us)
         self.chunks.append(ch)
         self.ext_chunks.append((len(us), ext_chunk(ext)))
         need = {u: self._needs_size(u) for u in dict.fromkeys(us)}
@@ -410,7 +454,18 @@ class _FrameRows:
                           seen_in_frames=list(seen), uid_names=names, rows=rows, ext=ext,
                           sizes=sizes, interior=interior, has_vel=has_vel, has_road=has_road,
                           frame_types=self.frame_types, moving_static=sorted(self.moving_static),
-                          unknown_cs=sorted(self.cs.unknown))
+                          unknown_cs=sorted(self.cs.unknown), found=self.found)
+
+
+def _pmf_bad(v: Any) -> bool:
+    """Whether one PMF value is no vector of numbers summing to 1 (within the schema's tolerance)."""
+    from aveas_format.schema.pmf import pmf_problems
+
+    try:
+        m = np.asarray([v], float)
+    except (TypeError, ValueError):
+        return True
+    return m.ndim != 2 or bool(pmf_problems(m)[0])
 
 
 def _frame_timestamp(fr: dict[str, Any]) -> Any:

@@ -59,6 +59,12 @@ _NO_RECORDER = {"animal", "pushable_pullable", "trailer"}
 #: classes whose frames carry the mandatory road attributes in the profile
 _ROAD_CLASSES = {"bicycle", "bus", "car", "mobility_device", "motorcycle", "other", "railvehicle",
                  "trailer", "truck", "van"}
+#: the attributes every object in a frame carries in the profile (its ``velocity`` and
+#: ``acceleration`` are mandatory); a file that claims the profile (its metadata or object types)
+#: and lacks one is reported (``source.openlabel.missing_attribute``)
+MANDATORY_FRAME_ATTRIBUTES = ("velocity", "acceleration")
+#: the attributes every object carries in the profile
+MANDATORY_OBJECT_ATTRIBUTES = ("dimensions/size",)
 #: format event kinds <-> AVEAS event types
 EVENT_TO_TYPE = {"lane_change": "lane change", "parking": "parking", "turning": "turning",
                  "overtaking": "overtaking", "following": "following"}

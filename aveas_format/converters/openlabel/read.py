@@ -30,6 +30,7 @@ from aveas_format.converters.openlabel.frames import (_MISSING, _FrameData, _Fra
 from aveas_format.converters.openlabel.profile import (
     EXT,
     LIGHTS,
+    MANDATORY_OBJECT_ATTRIBUTES,
     PROFILE_TO_METHOD,
     TYPE_TO_CLASS,
     TYPE_TO_EVENT,
@@ -45,7 +46,7 @@ from aveas_format.converters.openlabel.profile import (
 )
 from aveas_format.converters.openlabel.stream import _check_stream, _load_doc, _NotStrictJSON, _stream_doc
 from aveas_format.converters.registry import ImportOptions, converter
-from aveas_format.errors import FormatError
+from aveas_format.errors import FormatError, report_source
 from aveas_format.schema.taxonomy import CLASSES
 
 
@@ -157,10 +158,12 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     # frames (streamed one at a time, or from the dict) into per-box columns, and time
     objects = ol.get("objects") or {}
     acc = _FrameRows(objects, _Frames(ol.get("coordinate_systems")), path)
+    acc.profile = _claims_profile(md, objects)
     for k, fr in (frames() if frames is not None else (ol.get("frames") or {}).items()):
         acc.add(k, fr)
     fd = acc.finish()
-    fnum, time_of, start_time, resolved = _frame_times(fd.fkeys, fd.stamps, ext, md, options)
+    _report_frame_findings(fd, path)
+    fnum, time_of, start_time, resolved = _frame_times(fd.fkeys, fd.stamps, ext, md, options, path)
     uids = list(objects)
     uids += fd.seen_in_frames
     if ext is None:  # a foreign file: objects that are no road users, sentinel sizes
@@ -174,7 +177,7 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     if n == 0 and uids:
         raise _no_boxes_error(objects, path)
     start_time = _box_timestamps(rows, ext, options, start_time, resolved)
-    state_ext = _drop_repeats(rows, fd.ext)
+    state_ext = _drop_repeats(rows, fd, path)
     n = len(rows["time"])
     x, y, heading = _to_local(rows, ol, local, options.world_crs)
     states = _state_columns(rows, x, y, heading, fd.has_vel)
@@ -187,6 +190,7 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     states = _state_arrays(states, ext)
 
     participants, ego_seen = _participants(uids, objects, pid_of, obj_ext, fd.sizes, ext, fd.frame_types)
+    _check_objects(uids, objects, fd.frame_types, _claims_profile(md, objects), path)
     if n == 0:
         states = {c: pa.array([], pa.int64() if c == "participant_id" else pa.float64())
                   for c in ("participant_id", "time", "x", "y", "heading", "vx", "vy")}
@@ -202,7 +206,7 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
                             resolved=resolved),
         **kw)
     if ext is not None:
-        _restore_derived(rec, ext)
+        _restore_derived(rec, ext, path)
     return rec
 
 
@@ -222,7 +226,9 @@ def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], path: Path | None) -> s
                 parse_crs(ps)
                 crs = ps
             except FormatError:
-                warnings.warn(f"projection_string {ps!r} is not a usable CRS", stacklevel=3)
+                report_source("source.openlabel.bad_metadata", f"projection_string {ps!r} is not a usable CRS",
+                              stacklevel=3, file=str(path) if path is not None else None,
+                              json_path="$.openlabel.metadata.projection_string")
     if not crs:
         raise FormatError("neither the map (<geoReference>) nor metadata.projection_string gives "
                           "a usable CRS", path=path)
@@ -230,7 +236,8 @@ def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], path: Path | None) -> s
 
 
 def _frame_times(fkeys: list, stamps: dict[Any, Any], ext: dict[str, Any] | None, md: dict[str, Any],
-                 options: OpenLabelImportOptions) -> tuple[dict, dict, str, dict[str, str]]:
+                 options: OpenLabelImportOptions, path: Path | None = None
+                 ) -> tuple[dict, dict, str, dict[str, str]]:
     """``(frame number by key, time by key, start_time, resolved)``: in our own files the frames'
     timestamps are seconds since ``acquisition_date``; in foreign files their unit and epoch are
     inferred (:func:`~aveas_format.converters.common.resolve_timestamps`; ``timestamp_unit``
@@ -259,8 +266,11 @@ def _frame_times(fkeys: list, stamps: dict[Any, Any], ext: dict[str, Any] | None
             try:
                 start_time = _to_utc(str(md["acquisition_date"]))
             except FormatError:
-                warnings.warn(f"metadata.acquisition_date {md['acquisition_date']!r} is not an ISO "
-                              "8601 time: ignored", stacklevel=3)
+                report_source("source.openlabel.bad_metadata",
+                              f"metadata.acquisition_date {md['acquisition_date']!r} is not an ISO "
+                              "8601 time: ignored", stacklevel=3,
+                              file=str(path) if path is not None else None,
+                              json_path="$.openlabel.metadata.acquisition_date")
     start_time = options.start_time or start_time or "1970-01-01T00:00:00Z"
     return fnum, time_of, start_time, resolved
 
@@ -273,15 +283,24 @@ def _drop_non_participants(fd: _FrameData, objects: dict[str, Any], uids: list[s
     saying how many and why. An object left without boxes is dropped when it had any."""
     labels = LabelFilter(options.keep_non_road_users)
     keep_uid: dict[str, bool] = {}
+    first_skipped = None
     for u in uids:
         obj = objects.get(u) if isinstance(objects.get(u), dict) else {}
         od = obj.get("object_data") if isinstance(obj.get("object_data"), dict) else {}
         otype = obj.get("type") or (od.get("type") if isinstance(od.get("type"), str) else None) \
             or fd.frame_types.get(u) or "other"
         keep_uid[u] = labels(otype) is not None
+        if first_skipped is None and not keep_uid[u]:
+            first_skipped = u
     rows = fd.rows
     n = len(rows["uidx"])
-    notes = []
+    where = f"OpenLABEL {path.name if path else ''}: "
+    file = str(path) if path is not None else None
+    note = labels.note("objects")
+    if note:
+        report_source("source.openlabel.skipped_object", where + note, count=sum(labels.skipped.values()),
+                      stacklevel=3, file=file, uid=first_skipped,
+                      json_path=_jpath("objects", first_skipped, "type"))
     if n:
         by_index = np.asarray([keep_uid.get(u, True) for u in fd.uid_names], bool)
         keep = by_index[rows["uidx"]]
@@ -289,9 +308,14 @@ def _drop_non_participants(fd: _FrameData, objects: dict[str, Any], uids: list[s
         dropped = keep & bad
         if dropped.any():
             who = sorted({fd.uid_names[i] for i in np.unique(rows["uidx"][dropped])})
-            notes.append(f"dropped {int(dropped.sum())} boxes with a sentinel or impossible size "
-                         f"(<= 0, not finite or > 400 m) of object(s) {', '.join(who[:5])}"
-                         + (" ..." if len(who) > 5 else ""))
+            first = int(np.argmax(dropped))
+            frame, uid = fd.fkeys[int(rows["rank"][first])], fd.uid_names[int(rows["uidx"][first])]
+            report_source("source.openlabel.bad_size",
+                          where + f"dropped {int(dropped.sum())} boxes with a sentinel or impossible size "
+                          f"(<= 0, not finite or > 400 m) of object(s) {', '.join(who[:5])}"
+                          + (" ..." if len(who) > 5 else ""), count=int(dropped.sum()), stacklevel=3,
+                          file=file, frame=frame, uid=uid,
+                          json_path=_jpath("frames", frame, "objects", uid, "object_data", "cuboid"))
         keep &= ~bad
         if not keep.all():
             had = set(np.unique(rows["uidx"]).tolist())
@@ -308,15 +332,52 @@ def _drop_non_participants(fd: _FrameData, objects: dict[str, Any], uids: list[s
         else:
             arr = np.asarray(fd.sizes[u], float).reshape(-1, 3)
             fd.sizes[u] = arr[~implausible_size(arr)].tolist()
-    note = labels.note("objects")
-    if note:
-        notes.insert(0, note)
-    if fd.unknown_cs:
-        notes.append("coordinate system(s) " + ", ".join(map(repr, fd.unknown_cs))
-                     + " are not in coordinate_systems: taken as the root frame")
-    for nt in notes:
-        warnings.warn(f"OpenLABEL {path.name if path else ''}: {nt}", stacklevel=3)
     return [u for u in uids if keep_uid.get(u, True)]
+
+
+def _jpath(*keys: Any) -> str | None:
+    """A JSONPath into the document: ``$.openlabel.frames['12'].objects['3']...``; None where a key
+    is unknown."""
+    if any(k is None for k in keys):
+        return None
+    out = "$.openlabel"
+    for k in keys:
+        out += f".{k}" if isinstance(k, str) and k.isidentifier() else f"[{str(k)!r}]"
+    return out
+
+
+def _claims_profile(md: dict[str, Any], objects: Any) -> bool:
+    """Whether a file claims the AVEAS profile: its metadata has the profile's
+    ``acquisition_method``, or an object has one of the profile's types (``vehicle/car``...)."""
+    if isinstance(md, dict) and md.get("acquisition_method") is not None:
+        return True
+    return isinstance(objects, dict) and any(
+        isinstance(o, dict) and o.get("type") in TYPE_TO_CLASS for o in objects.values())
+
+
+def _report_frame_findings(fd: _FrameData, path: Path | None) -> None:
+    """What the frames' checks found (:meth:`_FrameRows._check_block`, the coordinate systems):
+    one finding per kind and attribute, at its first box, with the count."""
+    name = path.name if path else ""
+    file = str(path) if path is not None else None
+    unknown = [what for (code, what) in fd.found if code == "source.openlabel.unknown_coordinate_system"]
+    for (code, what), (frame, uid, count) in fd.found.items():
+        if code == "source.openlabel.unknown_coordinate_system":
+            if what != unknown[0]:
+                continue  # one finding for all (as the one warning always said)
+            msg = ("coordinate system(s) " + ", ".join(map(repr, sorted(unknown)))
+                   + " are not in coordinate_systems: taken as the root frame")
+            count = len(unknown)
+            jp = _jpath("frames", frame, "objects", uid, "object_data", "cuboid") if uid else None
+        elif code == "source.openlabel.pmf_sum":
+            msg = f"{count} value(s) of {what!r} do not sum to 1 (first: frame {frame}, object {uid})"
+            jp = _jpath("frames", frame, "objects", uid, "object_data", "vec")
+        else:
+            msg = (f"{count} object(s) in frames lack the profile's mandatory attribute {what!r} "
+                   f"(first: frame {frame}, object {uid})")
+            jp = _jpath("frames", frame, "objects", uid, "object_data")
+        report_source(code, f"OpenLABEL {name}: {msg}", count=count, stacklevel=4, file=file,
+                      frame=frame, uid=uid, json_path=jp)
 
 
 def _participant_ids(objects: dict[str, Any], uids: list[str]) -> tuple[dict, dict[str, int]]:
@@ -344,7 +405,7 @@ def _box_rows(fd: _FrameData, pid_of: dict[str, int], time_of: dict) -> dict[str
     """The per-box columns of the frames, with ``participant_id`` and ``time`` in place of the
     object and frame indices."""
     rows = fd.rows
-    uidx, rank = rows.pop("uidx"), rows.pop("rank")
+    uidx, rank = rows["uidx"], rows["rank"]  # (kept: where the findings are)
     rows["participant_id"] = np.asarray([pid_of.get(u, 0) for u in fd.uid_names])[uidx] \
         if fd.uid_names else np.asarray([])
     rows["time"] = np.asarray([time_of[k] for k in fd.fkeys], float)[rank] if fd.fkeys else np.asarray([])
@@ -382,17 +443,25 @@ def _box_timestamps(rows: dict[str, np.ndarray], ext: dict[str, Any] | None,
     return start_time
 
 
-def _drop_repeats(rows: dict[str, np.ndarray], state_ext: dict[str, tuple]) -> dict[str, tuple]:
+def _drop_repeats(rows: dict[str, np.ndarray], fd: _FrameData, path: Path | None) -> dict[str, tuple]:
     """One state per participant and time: later duplicates are dropped (from ``rows``, in place,
-    and from the extension columns, returned), with a warning."""
+    and from the extension columns ``fd.ext``, returned), reported at the first one dropped."""
+    state_ext = fd.ext
     n = len(rows["time"])
     if n:
         key = np.rec.fromarrays([np.asarray(rows["participant_id"]), np.asarray(rows["time"], float)])
         _, first_idx = np.unique(key, return_index=True)
         if len(first_idx) < n:
             keep = np.sort(first_idx)
-            warnings.warn(f"OpenLABEL: {n - len(keep)} boxes repeat a (participant, time) and were "
-                          "dropped", stacklevel=3)
+            dup = np.ones(n, bool)
+            dup[keep] = False
+            i = int(np.argmax(dup))
+            frame, uid = fd.fkeys[int(rows["rank"][i])], fd.uid_names[int(rows["uidx"][i])]
+            report_source("source.openlabel.duplicate_state",
+                          f"OpenLABEL: {n - len(keep)} boxes repeat a (participant, time) and were "
+                          f"dropped (first: frame {frame}, object {uid})", count=n - len(keep),
+                          stacklevel=3, file=str(path) if path is not None else None, frame=frame,
+                          uid=uid, json_path=_jpath("frames", frame, "objects", uid))
             for c in list(rows):
                 rows[c] = rows[c][keep]
             state_ext = {c: _rep_take(r, keep) for c, r in state_ext.items()}
@@ -607,6 +676,54 @@ def _profile_participants(uids: list[str], objects: dict[str, Any], pid_of: dict
     return part, ego_seen
 
 
+def _check_objects(uids: list[str], objects: dict[str, Any], frame_types: dict[str, str],
+                   profile: bool, path: Path | None) -> None:
+    """The objects' findings: a type that is not one of the profile's (in a file that claims the
+    profile; in any file a type no table knows, read as ``other``), a ``classification/
+    uncertainties`` PMF not summing to 1, a mandatory attribute missing (files that claim the
+    profile). One finding per kind (and type or attribute) at its first object, with the count."""
+
+    file = str(path) if path is not None else None
+    where = f"OpenLABEL {path.name if path else ''}: "
+    types: dict[str, list] = {}
+    missing: dict[str, list] = {}
+    pmfs: list[tuple[str, Any]] = []
+    for u in uids:
+        obj = objects.get(u) if isinstance(objects.get(u), dict) else {}
+        od = obj.get("object_data") if isinstance(obj.get("object_data"), dict) else {}
+        otype = str(obj.get("type") or (od.get("type") if isinstance(od.get("type"), str) else None)
+                    or frame_types.get(u) or "other")
+        if otype not in TYPE_TO_CLASS and (profile or label_kind(otype) == ("other", "road_user")
+                                           and otype.lower() != "other"):
+            types.setdefault(otype, [u, 0])[1] += 1
+        attrs = _attrs(od)
+        pmf = _first(attrs, "classification/uncertainties")
+        if pmf is not None:
+            pmfs.append((u, pmf))
+        if profile and u in objects:
+            for name in MANDATORY_OBJECT_ATTRIBUTES:
+                if _first(attrs, name) is None:
+                    missing.setdefault(name, [u, 0])[1] += 1
+    for otype, (u, count) in types.items():
+        cls = TYPE_TO_CLASS.get(otype) or label_kind(otype)[0]
+        report_source("source.openlabel.unknown_type", where + f"object type {otype!r} is not one of the "
+                      f"AVEAS profile's types: read as class {cls} ({count} object(s), first {u})",
+                      count=count, stacklevel=3, file=file, uid=u, json_path=_jpath("objects", u, "type"))
+    for name, (u, count) in missing.items():
+        report_source("source.openlabel.missing_attribute", where + f"{count} object(s) lack the "
+                      f"profile's mandatory attribute {name!r} (first {u})", count=count, stacklevel=3,
+                      file=file, uid=u, json_path=_jpath("objects", u, "object_data"))
+    if pmfs:
+        from aveas_format.converters.openlabel.frames import _pmf_bad
+
+        bad = [u for u, v in pmfs if _pmf_bad(v)]
+        if bad:
+            report_source("source.openlabel.pmf_sum", where + f"{len(bad)} object(s)' "
+                          f"'classification/uncertainties' do not sum to 1 (first {bad[0]})",
+                          count=len(bad), stacklevel=3, file=file, uid=bad[0],
+                          json_path=_jpath("objects", bad[0], "object_data", "vec"))
+
+
 def _static_size(size: Any) -> list | None:
     """An object's static ``dimensions/size`` (length, width[, height]), or None where absent or
     a sentinel (a -1000, a 0, not numbers)."""
@@ -717,7 +834,7 @@ def _recording_metadata(options: OpenLabelImportOptions, md: dict[str, Any], rme
     return meta_args, kw
 
 
-def _restore_derived(rec, ext: dict[str, Any]) -> None:
+def _restore_derived(rec, ext: dict[str, Any], path: Path | None = None) -> None:
     """The derived tables and recording.json ``derived`` entries of this library's own export."""
     from aveas_format.schema.metadata import DerivedEntry
     from aveas_format.schema.tables import TABLES
@@ -725,7 +842,10 @@ def _restore_derived(rec, ext: dict[str, Any]) -> None:
     for name, obj in sorted((ext.get("derived") or {}).items()):
         spec = TABLES.get(f"derived/{name}")
         if spec is None or not isinstance(obj, dict):
-            warnings.warn(f"OpenLABEL extension: unknown derived table {name!r} skipped", stacklevel=3)
+            report_source("source.openlabel.extension_skipped",
+                          f"OpenLABEL extension: unknown derived table {name!r} skipped", stacklevel=3,
+                          file=str(path) if path is not None else None,
+                          json_path=f"$.openlabel.metadata.{EXT}.derived[{name!r}]")
             continue
         table = table_from_json(obj, spec.name)
         if table is not None:
@@ -733,11 +853,14 @@ def _restore_derived(rec, ext: dict[str, Any]) -> None:
             rec.derived[name] = table.select([c for c in obj.get("columns") or {}
                                               if c in table.column_names])
     entries = []
-    for e in ext.get("derived_entries") or []:
+    for i, e in enumerate(ext.get("derived_entries") or []):
         try:
             entries.append(DerivedEntry.model_validate(e))
         except Exception as err:  # noqa: BLE001 — a damaged entry: the table is then reported stale
-            warnings.warn(f"OpenLABEL extension: derived entry skipped ({err})", stacklevel=3)
+            report_source("source.openlabel.extension_skipped",
+                          f"OpenLABEL extension: derived entry skipped ({err})", stacklevel=3,
+                          file=str(path) if path is not None else None,
+                          json_path=f"$.openlabel.metadata.{EXT}.derived_entries[{i}]")
     if entries:
         rec.meta.derived = entries
 
