@@ -139,3 +139,37 @@ def test_skipped_extension_entries_are_located(tmp_path):
     n = len(ext["derived_entries"]) - 1
     assert paths == [f"$.openlabel.metadata.aveas_format.derived['no_such_table']",
                      f"$.openlabel.metadata.aveas_format.derived_entries[{n}]"]
+
+
+# --- the compact forms (.json.gz, .json.zst) ------------------------------------------------------
+
+@pytest.mark.parametrize("suffix", [".json.gz", ".json.zst"])
+def test_compact_forms_round_trip_as_the_plain_file(tmp_path, suffix):
+    import gzip
+
+    if suffix == ".json.zst":
+        zstandard = pytest.importorskip("zstandard", reason="the [zstd] extra")
+    rec = highway_scene(n_vehicles=3, duration_s=2.0)
+    plain, small = tmp_path / "rec.json", tmp_path / f"small{suffix}"
+    get_converter("openlabel", "export")(rec, plain)
+    get_converter("openlabel", "export")(rec, small)
+    assert (tmp_path / "small.xodr").is_file()  # the map's name without the compression suffix
+    raw = small.read_bytes()
+    text = gzip.decompress(raw) if suffix == ".json.gz" else \
+        zstandard.ZstdDecompressor().stream_reader(raw).read()
+    assert json.loads(text)["openlabel"]["frames"] == json.loads(plain.read_bytes())["openlabel"]["frames"]
+    assert len(raw) < plain.stat().st_size / 4
+    a, b = convert("openlabel", [plain]), convert("openlabel", [small])
+    assert a.states.equals(b.states) and a.participants.equals(b.participants)
+
+
+def test_a_broken_compressed_file_is_a_clear_error(tmp_path):
+    import aveas_format
+
+    rec = highway_scene(n_vehicles=2, duration_s=1.0)
+    p = tmp_path / "rec.json.gz"
+    get_converter("openlabel", "export")(rec, p)
+    p.write_bytes(p.read_bytes()[: p.stat().st_size // 2])  # truncated
+    with pytest.raises(aveas_format.FormatError) as ei:
+        convert("openlabel", [p])
+    assert str(p) in str(ei.value)

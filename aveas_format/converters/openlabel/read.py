@@ -92,8 +92,8 @@ def _find_map(path: Path, ol: dict[str, Any], map_source, options) -> bytes:
 
 
 @converter("openlabel", description="ASAM OpenLABEL 1.0 JSON (AVEAS profile and generic cuboids)",
-           patterns=("*.json",), method=None, options=OpenLabelImportOptions, needs_map=False,
-           provides=("partner", "start_time", "license"))
+           patterns=("*.json", "*.json.gz", "*.json.zst"), method=None, options=OpenLabelImportOptions,
+           needs_map=False, provides=("partner", "start_time", "license"))
 def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImportOptions):
     if len(inputs) != 1:
         raise FormatError(f"openlabel: expected one input file, got {len(inputs)}")

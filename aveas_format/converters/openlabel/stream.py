@@ -24,9 +24,88 @@ from aveas_format.safeio import (MAX_BULK_JSON_BYTES, MAX_JSON_DEPTH, CountingRe
                                  load_json, scan_json_member, stream_json_error)
 
 
+#: the compact forms: name suffix -> (module, what to install)
+COMPRESSED = {".gz": "gzip", ".zst": "zstandard"}
+
+
+def compression(path: Path) -> str | None:
+    """``"gzip"`` / ``"zstandard"`` for a ``.json.gz`` / ``.json.zst`` file (by its name), else None."""
+    return COMPRESSED.get(Path(path).suffix.lower())
+
+
+class _Decompressed:
+    """A file read through its decompressor, seekable as the readers here need it: forward by
+    reading on, backward by starting over (each pass over the frames reads the file once)."""
+
+    def __init__(self, path: Path, kind: str) -> None:
+        self.path, self.kind = path, kind
+        self.raw = self.f = None
+        self._open()
+
+    def _open(self) -> None:
+        self.close()
+        self.raw = open(self.path, "rb")  # noqa: SIM115 - closed in close()
+        if self.kind == "gzip":
+            import gzip
+
+            self.f = gzip.GzipFile(fileobj=self.raw, mode="rb")
+        else:
+            try:
+                import zstandard
+            except ImportError:
+                from aveas_format.errors import MissingDependencyError
+
+                raise MissingDependencyError("reading .zst needs zstandard: pip install "
+                                             "'aveas-format[zstd]'") from None
+            self.f = zstandard.ZstdDecompressor().stream_reader(self.raw, read_across_frames=True)
+        self.pos = 0
+
+    def read(self, n: int = -1) -> bytes:
+        try:
+            data = self.f.read(n) if n is not None and n >= 0 else self.f.read()
+        except (OSError, EOFError, ValueError) as e:  # gzip.BadGzipFile, zstd.ZstdError, truncated
+            raise FormatError(f"cannot decompress ({self.kind}): {e}", path=self.path) from None
+        self.pos += len(data)
+        return data
+
+    def seek(self, pos: int, whence: int = 0) -> int:
+        if whence != 0:
+            raise ValueError("only absolute seeks")
+        if pos < self.pos:
+            self._open()
+        while self.pos < pos:
+            if not self.read(min(1 << 20, pos - self.pos)):
+                break
+        return self.pos
+
+    def tell(self) -> int:
+        return self.pos
+
+    def close(self) -> None:
+        for f in (self.f, self.raw):
+            if f is not None:
+                f.close()
+
+    def __enter__(self) -> _Decompressed:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _open(path: Path):
+    """The file for reading: decompressed where its name says it is compressed."""
+    kind = compression(path)
+    return _Decompressed(Path(path), kind) if kind else open(path, "rb")  # noqa: SIM115
+
+
 def _load_doc(path: Path) -> dict[str, Any]:
     try:
-        raw = path.read_bytes()
+        if compression(path):
+            with _open(path) as f:  # (at most one byte over the limit: load_json refuses it)
+                raw = f.read(MAX_BULK_JSON_BYTES + 1)
+        else:
+            raw = path.read_bytes()
     except OSError as e:
         raise RecordingIOError(f"cannot read: {e.strerror or e}", path=path) from None
     doc = load_json(raw, path=path, max_bytes=MAX_BULK_JSON_BYTES)
@@ -52,7 +131,7 @@ def _check_stream(path: Path) -> None:
     """Parse the whole file without building anything: the file's JSON error, if it has one."""
     import ijson
 
-    with open(path, "rb") as f:
+    with _open(path) as f:
         r = CountingReader(f)
         try:
             for _ in ijson.basic_parse(r, use_float=True):
@@ -75,7 +154,7 @@ def _stream_doc(path: Path):
 
     check_json_size(path, max_bytes=MAX_BULK_JSON_BYTES)
     try:
-        f = open(path, "rb")  # noqa: SIM115 - closed below
+        f = _open(path)
     except OSError as e:
         raise RecordingIOError(f"cannot read: {e.strerror or e}", path=path) from None
     with f:
@@ -89,7 +168,7 @@ def _stream_doc(path: Path):
         return _load_doc(path), None
     if depth > MAX_JSON_DEPTH:
         raise FormatError(f"JSON nested deeper than {MAX_JSON_DEPTH} levels", path=path)
-    with open(path, "rb") as f:
+    with _open(path) as f:
         r = CountingReader(f, (span[0], span[1], b"{}") if span else None)
         try:
             doc = dict(ijson.kvitems(r, "", use_float=True))
@@ -107,7 +186,7 @@ def _stream_doc(path: Path):
             start = yield from _fast_frames(path, span)
             if start is None:
                 return
-        with open(path, "rb") as fr:
+        with _open(path) as fr:
             rd = CountingReader(fr, start=start, stop=span[1])
             if start != span[0]:  # the rest of the frames after what the fast path took
                 rd = _Prefixed(b"{", rd)
@@ -130,7 +209,7 @@ def _fast_frames(path: Path, span: tuple[int, int]):
     parsed with orjson; a generator returning None when it took all frames, else the file offset
     (at a frame boundary) from which the caller goes on with ijson — at the first block it cannot
     cut or parse (another layout, NaN, numbers orjson refuses: the exact error comes from ijson)."""
-    with open(path, "rb") as f:
+    with _open(path) as f:
         f.seek(span[0])
         if f.read(1) != b"{":
             return span[0]

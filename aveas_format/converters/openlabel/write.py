@@ -46,6 +46,7 @@ from aveas_format.converters.openlabel.profile import (
     table_to_json,
 )
 from aveas_format.converters.openlabel.encode import CHUNK_ROWS, dumps, frame_chunks, orjson
+from aveas_format.converters.openlabel.stream import compression
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.io.arrow import column_numpy
 
@@ -603,7 +604,10 @@ def _extension(rec, thr: dict[str, Any]) -> dict[str, Any]:
 
 
 def _map_name(output: Path, options: OpenLabelExportOptions) -> str:
-    stem = output.name[:-5] if output.name.endswith(".json") else output.stem
+    name = output.name
+    if compression(output):
+        name = name[:-len(output.suffix)]
+    stem = name[:-5] if name.endswith(".json") else Path(name).stem
     return options.map_file or f"{stem}.xodr"
 
 
@@ -612,8 +616,36 @@ def _outputs(output: Path, options: OpenLabelExportOptions) -> list[Path]:
     return [output] + ([output.parent / _map_name(output, options)] if options.write_map else [])
 
 
+#: compression levels of the compact forms: fast, most of the size gain (docs/performance.md)
+GZIP_LEVEL, ZSTD_LEVEL = 3, 1
+
+
+def compressed(chunks, kind: str):
+    """The chunks compressed as a stream: one gzip member / one zstd frame (``kind`` as
+    :func:`~.stream.compression` says)."""
+    if kind == "gzip":
+        import zlib
+
+        c = zlib.compressobj(GZIP_LEVEL, zlib.DEFLATED, 31)  # 31: the gzip container
+    else:
+        try:
+            import zstandard
+        except ImportError:
+            from aveas_format.errors import MissingDependencyError
+
+            raise MissingDependencyError("writing .zst needs zstandard: pip install "
+                                         "'aveas-format[zstd]'") from None
+        c = zstandard.ZstdCompressor(level=ZSTD_LEVEL).compressobj()
+    for data in chunks:
+        out = c.compress(data)
+        if out:
+            yield out
+    yield c.flush()
+
+
 @converter("openlabel", direction="export", options=OpenLabelExportOptions, outputs=_outputs,
-           description="ASAM OpenLABEL 1.0 JSON, AVEAS profile (+ the map as .xodr next to it)")
+           description="ASAM OpenLABEL 1.0 JSON, AVEAS profile (+ the map as .xodr next to it); "
+                       "OUT.json.gz / OUT.json.zst: compressed")
 def export_openlabel(rec, output: Path, *, options: OpenLabelExportOptions) -> list[Path]:
     from aveas_format.safeio import write_bytes_atomic, write_chunks_atomic
 
@@ -624,6 +656,9 @@ def export_openlabel(rec, output: Path, *, options: OpenLabelExportOptions) -> l
     if options.indent:  # human-readable: the document whole (compact files are streamed)
         doc = json.loads(b"".join(chunks))
         chunks = iter([json.dumps(doc, indent=options.indent, allow_nan=False).encode()])
+    kind = compression(output)
+    if kind:
+        chunks = compressed(chunks, kind)
     written = [write_chunks_atomic(output, chunks)]
     if options.write_map and rec.map_source is not None:
         written.append(write_bytes_atomic(output.parent / map_name, rec.map_source))
