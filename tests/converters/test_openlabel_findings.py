@@ -173,3 +173,16 @@ def test_a_broken_compressed_file_is_a_clear_error(tmp_path):
     with pytest.raises(aveas_format.FormatError) as ei:
         convert("openlabel", [p])
     assert str(p) in str(ei.value)
+
+
+def test_a_decompression_bomb_stops_at_the_size_limit(tmp_path, monkeypatch):
+    import aveas_format
+    from aveas_format.converters.openlabel import stream
+
+    rec = highway_scene(n_vehicles=2, duration_s=1.0)
+    p = tmp_path / "rec.json.gz"
+    get_converter("openlabel", "export")(rec, p)
+    monkeypatch.setattr(stream, "MAX_BULK_JSON_BYTES", 2 * p.stat().st_size)  # < the plain size
+    with pytest.raises(aveas_format.FormatError, match="once decompressed exceeds the limit") as ei:
+        convert("openlabel", [p])
+    assert str(p) in str(ei.value)

@@ -66,6 +66,9 @@ class _Decompressed:
         except (OSError, EOFError, ValueError) as e:  # gzip.BadGzipFile, zstd.ZstdError, truncated
             raise FormatError(f"cannot decompress ({self.kind}): {e}", path=self.path) from None
         self.pos += len(data)
+        if self.pos > MAX_BULK_JSON_BYTES:  # (a decompression bomb: the plain file's limit)
+            raise FormatError(f"JSON of more than {MAX_BULK_JSON_BYTES:,} bytes once decompressed "
+                              "exceeds the limit", path=self.path)
         return data
 
     def seek(self, pos: int, whence: int = 0) -> int:
