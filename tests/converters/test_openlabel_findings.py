@@ -186,3 +186,19 @@ def test_a_decompression_bomb_stops_at_the_size_limit(tmp_path, monkeypatch):
     with pytest.raises(aveas_format.FormatError, match="once decompressed exceeds the limit") as ei:
         convert("openlabel", [p])
     assert str(p) in str(ei.value)
+
+
+def test_odd_attribute_values_are_no_internal_error(tmp_path):
+    # a velocity that is a number, a dict and a ragged list; an item without a name; a name that
+    # is no text: the import goes on (NaN where no vector), as box by box it would
+    doc = _profile_doc()
+    objs = doc["openlabel"]["frames"]["3"]["objects"]
+    objs["1"]["object_data"]["vec"][0]["val"] = 5
+    objs["2"]["object_data"]["vec"] = [{"name": "velocity", "val": {"x": 1}}, {"val": [1]},
+                                       {"name": 7, "val": [1]}]
+    doc["openlabel"]["frames"]["0"]["objects"]["1"]["object_data"]["vec"][0]["val"] = [9.0, 0.5]
+    p = tmp_path / "odd.json"
+    p.write_text(json.dumps(doc))
+    with collect_source_findings():
+        rec = convert("openlabel", [p], map_source=STRAIGHT_MAP)
+    assert rec.states.num_rows == 5

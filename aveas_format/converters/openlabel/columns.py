@@ -177,8 +177,8 @@ class _Attributes:
 
     def vector(self, name: str, elems: tuple[int, ...]) -> tuple[np.ndarray, list[np.ndarray]]:
         """``(whether a box's first value of name is not None, per element index the value or NaN
-        where the vector is absent, empty or shorter)``; values that do not convert in bulk are
-        taken one by one (and converted where the column is used, as box by box)."""
+        where the vector is absent, empty, shorter or no list)``; values that do not convert in bulk
+        are taken one by one (and converted where the column is used, as box by box)."""
         n = self.n
         has = np.zeros(n, bool)
         cols = [np.full(n, np.nan) for _ in elems]
@@ -187,8 +187,7 @@ class _Attributes:
             return has, cols
         notnone = np.fromiter(map(is_not, vals, repeat(None)), bool, len(vals))
         has[boxes[notnone]] = True
-        lens = set(map(len, vals)) if notnone.all() else set()
-        ok = len(lens) == 1
+        ok = set(map(type, vals)) == {list} and len(set(map(len, vals))) == 1
         if ok:
             try:
                 a = np.fromiter(chain.from_iterable(vals), float).reshape(len(vals), -1)
@@ -201,7 +200,7 @@ class _Attributes:
             return has, cols
         objs = [as_obj([_NAN] * n) for _ in elems]
         for b, v in zip(boxes.tolist(), vals):
-            if v:
+            if v and isinstance(v, (list, tuple)):  # (another value: no vector, NaN)
                 for o, e in zip(objs, elems):
                     if len(v) > e:
                         o[b] = v[e]
