@@ -118,13 +118,19 @@ class _Attributes:
     first item of a name (kinds in the order boolean, num, text, vec; as ``_first(_attrs(od))``)."""
 
     def __init__(self, ods: list[dict]) -> None:
-        n = len(ods)
-        boxes, items = [], []
+        n = self.n = len(ods)
+        per_kind = []
         for kind in _KINDS:
             lists = list(map(methodcaller("get", kind), ods))
             if not any(lists):
                 continue
-            lists = [x if isinstance(x, list) else [x] if isinstance(x, dict) else [] for x in lists]
+            per_kind.append([x if isinstance(x, list) else [x] if isinstance(x, dict) else []
+                             for x in lists])
+        self.layout: dict[str, tuple[list, int, int]] | None = None
+        if self._uniform(per_kind):
+            return
+        boxes, items = [], []
+        for lists in per_kind:
             counts = np.fromiter(map(len, lists), np.int64, n)
             boxes.append(np.repeat(np.arange(n), counts))
             items.append(list(chain.from_iterable(lists)))
@@ -145,26 +151,59 @@ class _Attributes:
         # the items grouped by name (in file order within a name): one sort per block
         self.order = np.argsort(codes, kind="stable")
         self.bounds = np.searchsorted(codes[self.order], np.arange(len(self.code_of) + 1))
-        self.codes, self.flat, self.n = codes, flat, n
+        self.codes, self.flat = codes, flat
 
-    def names(self) -> list[str]:
-        return list(self.code_of)
+    def _uniform(self, per_kind: list[list[list]]) -> bool:
+        """Where every box lists the same attribute names in the same order (a profile export:
+        the common case), each name's values are a stride of the items: no encoding, no sort."""
+        n = self.n
+        layout: dict[str, tuple[list, int, int]] = {}
+        for lists in per_kind:
+            c = len(lists[0])
+            if c == 0 or set(map(len, lists)) != {c}:
+                return False
+            flat = list(chain.from_iterable(lists))
+            try:
+                names = list(map(itemgetter("name"), flat))
+            except (KeyError, TypeError):
+                return False
+            sig = names[:c]
+            if names != sig * n or not all(isinstance(nm, str) for nm in sig):
+                return False
+            for pos, nm in enumerate(sig):
+                layout.setdefault(nm, (flat, pos, c))  # the first kind and position of a name
+        self.layout = layout
+        self.code_of = dict.fromkeys(layout)
+        return True
 
     def first(self, name: str) -> tuple[np.ndarray, list]:
         """``(boxes that have the name, the first such item's value per box)``."""
-        code = self.code_of.get(name)
-        if code is None:
-            return np.zeros(0, np.int64), []
-        sel = self.order[self.bounds[code]:self.bounds[code + 1]]
-        boxes = self.box[sel]
-        if len(boxes) > 1 and not (boxes[1:] > boxes[:-1]).all():  # a name twice in a box
-            boxes, first = np.unique(boxes, return_index=True)
-            sel = sel[first]
-        items = list(map(self.flat.__getitem__, sel.tolist()))
+        if self.layout is not None:
+            if name not in self.layout:
+                return np.zeros(0, np.int64), []
+            flat, pos, c = self.layout[name]
+            items, boxes = flat[pos::c], np.arange(self.n)
+        else:
+            code = self.code_of.get(name)
+            if code is None:
+                return np.zeros(0, np.int64), []
+            sel = self.order[self.bounds[code]:self.bounds[code + 1]]
+            boxes = self.box[sel]
+            if len(boxes) > 1 and not (boxes[1:] > boxes[:-1]).all():  # a name twice in a box
+                boxes, first = np.unique(boxes, return_index=True)
+                sel = sel[first]
+            items = list(map(self.flat.__getitem__, sel.tolist()))
         try:
             return boxes, list(map(itemgetter("val"), items))
         except KeyError:
             return boxes, list(map(dict.get, items, repeat("val")))
+
+    def boxes_with(self, names: list[str]) -> np.ndarray:
+        """The boxes that have an item of any of ``names``, in order."""
+        if self.layout is not None:
+            return np.arange(self.n) if any(nm in self.layout for nm in names) else np.zeros(0, np.int64)
+        codes = [self.code_of[nm] for nm in names if nm in self.code_of]
+        return np.unique(self.box[np.isin(self.codes, codes)]) if codes else np.zeros(0, np.int64)
 
     def scalar(self, name: str, default: Any = None) -> list:
         """Per box the first value of ``name`` (``default`` where a box has none)."""

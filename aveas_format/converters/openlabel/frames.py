@@ -382,9 +382,9 @@ class _FrameRows:
         need = {u: self._needs_size(u) for u in dict.fromkeys(us)}
         if any(need.values()):
             self.sizes.extend((j, u, d) for j, u, d in zip(js, us, sizes) if need[u])
-        inames = [c for nm, c in at.code_of.items() if nm.startswith("interior/")]
+        inames = [nm for nm in at.code_of if nm.startswith("interior/")]
         if inames:
-            for i in np.unique(at.box[np.isin(at.codes, inames)]).tolist():
+            for i in at.boxes_with(inames).tolist():
                 irow = _interior_row(_attrs(ods[i]))
                 if irow:
                     self.interior.append((js[i], us[i], irow))
