@@ -13,7 +13,8 @@ MCAP ``zero_time`` metadata + that offset gives ``start_time`` unless the option
 - every ``moving_object``: ``id`` -> source id; ``base.position`` x, y (z) = the bounding box centre
   in the OSI global frame, which is the footprint centre the format uses; ``base.orientation.yaw``
   (rad, counter-clockwise) -> heading; ``base.velocity``/``base.acceleration`` x, y -> vx, vy, ax,
-  ay; ``base.dimension`` length/width/height (the first message of an object counts);
+  ay; ``base.dimension`` length/width/height (the first message of an object with a positive one
+  counts);
   ``base.orientation_rate.yaw`` -> yaw_rate.
 - class: ``type`` PEDESTRIAN -> pedestrian, ANIMAL -> animal, VEHICLE by
   ``vehicle_classification.type``: (small/compact/luxury) car -> car, delivery van -> van, heavy
@@ -25,6 +26,13 @@ MCAP ``zero_time`` metadata + that offset gives ``start_time`` unless the option
 - ``assigned_lane_id`` (OSI lane ids, not OpenDRIVE lanes) -> the participant's ``osi_lanes``
   attribute; road coordinates are computed through the map.
 - ``host_vehicle_id`` -> that participant gets role ``host_role`` (default ``system_under_test``).
+
+Findings about the trace that the import survives are located (message index, object id) with
+:func:`aveas_format.errors.report_source`, one per object and kind with a count (warnings of
+``convert``, the ``source.osi.*`` rules of ``validate TRACE``): a moving object without id or
+base (the sample is skipped), without a positive ``base.dimension`` (a later message's is used;
+without any the object is not imported), an UNKNOWN or unmapped type (class ``other``), a
+timestamp earlier than the previous message's (the states are sorted).
 
 Frame: the OSI global frame is taken to be the map's local frame (a simulator driving on the same
 OpenDRIVE map). Where the GroundTruth carries a ``proj_string`` that differs from the map's
@@ -63,7 +71,7 @@ from aveas_format.converters.common import (
     wrap_recording,
 )
 from aveas_format.converters.registry import ConverterOptions, ImportOptions, converter
-from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.errors import FormatError, RecordingIOError, report_source
 from aveas_format.io.arrow import column_numpy
 from aveas_format.safeio import check_mcap
 
@@ -160,6 +168,8 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     host_ids: set[int] = set()
     proj: tuple[str, tuple[float, float, float, float]] | None = None
     n_msg = 0
+    last_t = -math.inf
+    found = _Findings()
     for path in inputs:
         try:
             with warnings.catch_warnings():
@@ -176,14 +186,30 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
                             _get(off, "position", "y", default=0.0), 0.0,
                             _get(off, "yaw", default=0.0))
                         proj = (str(gt.proj_string), o)
+                    if t < last_t:
+                        found.add("source.osi.time_not_increasing", None, n_msg,
+                                  f"message {n_msg}: timestamp {t:.9g} s is earlier than the "
+                                  f"previous message's ({last_t:.9g} s); the states are sorted")
+                    last_t = max(last_t, t)
                     for mo in gt.moving_object:
-                        _object(mo, t, n_msg, cols, static)
+                        _object(mo, t, n_msg, cols, static, found)
                     n_msg += 1
         except (FormatError, RecordingIOError):
             raise
         except Exception as e:  # noqa: BLE001 - decoder errors of any kind
             raise FormatError(f"cannot decode OSI message {n_msg}: {type(e).__name__}: {e}",
                               path=path) from None
+    sizeless = [oid for oid, d in static.items() if d["length"] is None]
+    for oid in sizeless:
+        found.add("source.osi.missing_dimension", oid, static[oid]["no_size_msg"],
+                  f"moving object {oid} has no positive base.dimension (length, width) in any of "
+                  f"its messages: not imported", count=static[oid]["no_size_n"])
+    if sizeless:  # objects without a size cannot be participants: their samples go
+        keep = ~np.isin(np.asarray(cols["id"], np.int64), sizeless)
+        cols = {k: [v for v, m in zip(vals, keep) if m] for k, vals in cols.items()}
+        for oid in sizeless:
+            del static[oid]
+    found.report(inputs[0] if len(inputs) == 1 else None)
     if not cols["t"]:
         raise FormatError("no GroundTruth moving objects in the trace", path=inputs[0])
 
@@ -292,10 +318,35 @@ def _get(obj: Any, *path: str, default: float = math.nan) -> float:
     return float(obj)
 
 
-def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dict[str, Any]]) -> None:
-    if getattr(mo, "id", None) is None or getattr(mo, "base", None) is None:
-        raise FormatError(f"moving object without id or base in message {msg}")
-    oid = int(mo.id.value)
+class _Findings:
+    """What the import finds about the trace, one finding per (code, object) with the first
+    message index and a count (:func:`aveas_format.errors.report_source` at the end)."""
+
+    def __init__(self) -> None:
+        self.first: dict[tuple[str, int | None], list[Any]] = {}
+
+    def add(self, code: str, oid: int | None, msg: int, message: str, count: int = 1) -> None:
+        entry = self.first.get((code, oid))
+        if entry is None:
+            self.first[(code, oid)] = [msg, message, count]
+        else:
+            entry[2] += count
+
+    def report(self, path: Path | None) -> None:
+        for (code, oid), (msg, message, count) in self.first.items():
+            report_source(code, message + (f" ({count} times)" if count > 1 else ""),
+                          count=count, stacklevel=3, file=str(path) if path else None,
+                          message_index=msg, object_id=oid)
+
+
+def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dict[str, Any]],
+            found: _Findings) -> None:
+    oid = int(mo.id.value) if getattr(mo, "id", None) is not None else None
+    if oid is None or getattr(mo, "base", None) is None:
+        found.add("source.osi.missing_base", oid, msg,
+                  f"message {msg}: a moving object without {'id' if oid is None else 'base'} "
+                  "was skipped")
+        return
     b = mo.base
     cols["t"].append(t)
     cols["id"].append(oid)
@@ -328,21 +379,34 @@ def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dic
     d = static.get(oid)
     if d is None:
         otype = _enum_name(mo.type)
+        vtype = _enum_name(vc.type) if vc is not None and otype == "VEHICLE" else None
         if otype == "PEDESTRIAN":
             cls = "pedestrian"
         elif otype == "ANIMAL":
             cls = "animal"
         elif otype == "VEHICLE":
-            cls = VEHICLE_CLASS.get(_enum_name(vc.type), "other") if vc is not None else "car"
+            cls = VEHICLE_CLASS.get(vtype, "other") if vc is not None else "car"
         else:
             cls = "other"
+        if otype not in ("PEDESTRIAN", "ANIMAL", "VEHICLE", "OTHER") or (
+                vtype is not None and vtype not in VEHICLE_CLASS and vtype != "OTHER"):
+            found.add("source.osi.unknown_type", oid, msg,
+                      f"moving object {oid}: type {otype}"
+                      + (f", vehicle type {vtype}" if vtype is not None else "")
+                      + " has no class of the format: class other")
+        static[oid] = d = {"class": cls, "length": None, "width": None, "height": None,
+                           "osi_type": otype, "lanes": set(), "no_size_msg": msg, "no_size_n": 0}
+    if d["length"] is None:
         length, width, height = (_get(b, "dimension", k) for k in ("length", "width", "height"))
-        if not (length > 0 and width > 0):
-            raise FormatError(f"moving object {oid} has no positive base.dimension "
-                              f"(length {length}, width {width}) in message {msg}")
-        static[oid] = d = {"class": cls, "length": length, "width": width,
-                           "height": height if height > 0 else None, "osi_type": otype,
-                           "lanes": set()}
+        if length > 0 and width > 0:
+            if d["no_size_n"]:
+                found.add("source.osi.missing_dimension", oid, d["no_size_msg"],
+                          f"moving object {oid} has no positive base.dimension in message "
+                          f"{d['no_size_msg']} and {d['no_size_n'] - 1} later ones; the size of "
+                          f"message {msg} is used", count=d["no_size_n"])
+            d.update(length=length, width=width, height=height if height > 0 else None)
+        else:
+            d["no_size_n"] += 1
     d["lanes"].update(int(li.value) for li in mo.assigned_lane_id)
 
 
