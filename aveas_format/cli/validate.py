@@ -26,11 +26,13 @@ from aveas_format.cli.options import (
     check_output_dir,
     check_rules,
     comma_list,
+    converter_name_option,
     converter_options,
     crs_option,
     discover_dataset,
     format_option,
     ignore_option,
+    map_option,
     option_pairs_option,
     options_file_option,
     overwrite_option,
@@ -94,11 +96,10 @@ def validate(
                                      "recording's JSON report and the dataset report (JSON + "
                                      "HTML) into this directory."),
     top: int = typer.Option(20, "--top", min=1, help="Dataset: worst recordings listed."),
-    source: str = typer.Option(None, "--from", "-f", help="A submitted file (or files): the "
-                               "converter that imports it (see `convert --list`); default: by "
-                               "its extension."),
-    map_file: Path = typer.Option(None, "--map", "-m", help="A submitted file: the OpenDRIVE map "
-                                  "its data refers to (as `convert` takes it)."),
+    source: str = converter_name_option("A submitted file (or files): the converter that "
+                                        "imports it (see `convert --list`); default: by its "
+                                        "extension."),
+    map_file: Path = map_option("A submitted file: the OpenDRIVE map its data refers to."),
     crs: str = crs_option(),
     option: list[str] = option_pairs_option("A submitted file: converter"),
     options_file: Path = options_file_option("A submitted file: converter"),
@@ -315,14 +316,19 @@ def import_submission(inputs: list[Path], source: str | None = None, map_file: P
     import warnings
 
     from aveas_format.converters.registry import convert
-    from aveas_format.errors import SourceFinding, collect_source_findings
+    from aveas_format.errors import MissingCrsError, SourceFinding, collect_source_findings
 
     name = _converter_name(inputs, source)
     with collect_source_findings() as found, warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         warnings.simplefilter("ignore", DeprecationWarning)
         warnings.simplefilter("ignore", PendingDeprecationWarning)
-        rec = convert(name, inputs, map_source=map_file, options=options, crs=crs)
+        try:
+            rec = convert(name, inputs, map_source=map_file, options=options, crs=crs)
+        except MissingCrsError as e:  # its message shows the convert command: show this one
+            raise MissingCrsError(e.message.replace("aveas-format convert ", "aveas-format "
+                                                    "validate ").replace(" -o OUT.aveas", ""),
+                                  path=e.path) from None
     file = str(inputs[0])
     out = [f if "file" in f.location else
            dataclasses.replace(f, location={"file": file, **f.location}) for f in found]

@@ -188,8 +188,8 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
                         proj = (str(gt.proj_string), o)
                     if t < last_t:
                         found.add("source.osi.time_not_increasing", None, n_msg,
-                                  f"message {n_msg}: timestamp {t:.9g} s is earlier than the "
-                                  f"previous message's ({last_t:.9g} s); the states are sorted")
+                                  f"timestamp {t:.9g} s is earlier than the previous "
+                                  f"message's ({last_t:.9g} s); the states are sorted")
                     last_t = max(last_t, t)
                     for mo in gt.moving_object:
                         _object(mo, t, n_msg, cols, static, found)
@@ -344,8 +344,7 @@ def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dic
     oid = int(mo.id.value) if getattr(mo, "id", None) is not None else None
     if oid is None or getattr(mo, "base", None) is None:
         found.add("source.osi.missing_base", oid, msg,
-                  f"message {msg}: a moving object without {'id' if oid is None else 'base'} "
-                  "was skipped")
+                  f"a moving object without {'id' if oid is None else 'base'} was skipped")
         return
     b = mo.base
     cols["t"].append(t)
