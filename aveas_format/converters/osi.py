@@ -61,6 +61,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field
 
+from aveas_format.converters import _protowire as pw
 from aveas_format.converters.common import (
     companion_map,
     companion_map_path,
@@ -447,6 +448,95 @@ def _light_state(b, brake: float, left: float, right: float, hazard: float):
         brake_light_state=getattr(b.MovingObjectVehicleClassificationLightStateBrakeLightState, brk))
 
 
+#: heights (m) where a participant has none
+_DEFAULT_HEIGHT = {"pedestrian": 1.75, "bicycle": 1.7, "truck": 3.5, "bus": 3.2, "trailer": 3.5}
+
+
+def encode_ground_truths(b, participants, order: np.ndarray, bounds: np.ndarray, sec: np.ndarray,
+                         nanos: np.ndarray, host: int | None, proj_string: str, *, pid, x, y,
+                         heading, vx, vy, ax, ay, lights) -> pw.Ragged:
+    """The serialized ``osi3.GroundTruth`` of each time step, from columns (:mod:`._protowire`):
+    the states ``order[bounds[k]:bounds[k+1]]`` are the moving objects of step ``k`` (timestamp
+    ``sec[k]``, ``nanos[k]``). Field for field what the bindings' messages held (the module
+    docstring of :func:`export_osi`); ``lights`` (brake, left, right, hazard probabilities) or
+    None."""
+    p = participants
+    p_ids = p.column("participant_id").to_numpy()
+    by_id = np.argsort(p_ids)
+    row = by_id[np.searchsorted(p_ids, pid[order], sorter=by_id)]
+    classes = p.column("class").cast("string").to_pylist()
+    heights = (p.column("height").to_pylist() if "height" in p.column_names else [None] * len(classes))
+    h_p = np.array([hh or _DEFAULT_HEIGHT.get(c, 1.5) for hh, c in zip(heights, classes)], float)
+    mtype = b.MovingObjectType
+    vtypes = b.MovingObjectVehicleClassificationType
+    kinds = [EXPORT_CLASS.get(c, ("OTHER", None)) for c in classes]
+    otype_p = np.array([int(getattr(mtype, o)) for o, _ in kinds], np.int64)
+    vtype_p = np.array([int(getattr(vtypes, v)) if v else -1 for _, v in kinds], np.int64)
+    L = column_numpy(p, "length")[row]
+    W = column_numpy(p, "width")[row]
+    H = h_p[row]
+    o = order
+
+    def vec(a, bb, c):
+        return pw.concat(pw.f_double(1, a), pw.f_double(2, bb), pw.f_double(3, c))
+
+    zeros = np.zeros(len(o))
+    acc_ok = np.isfinite(ax[o])
+    base = pw.concat(
+        pw.f_message(1, vec(L, W, H)),                                 # dimension
+        pw.f_message(2, vec(x[o], y[o], H / 2)),                       # position
+        pw.f_message(3, pw.f_double(3, heading[o])),                   # orientation.yaw
+        pw.f_message(4, vec(vx[o], vy[o], zeros)),                     # velocity
+        pw.keep(pw.f_message(5, vec(np.where(acc_ok, ax[o], 0.0), np.where(acc_ok, ay[o], 0.0),
+                                    zeros)), acc_ok))                  # acceleration
+    vt = vtype_p[row]
+    is_vehicle = vt >= 0
+    vc = [pw.f_varint(1, np.maximum(vt, 0))]
+    if lights is not None:
+        brake, left, right, hazard = (v[o] for v in lights)
+
+        def on(v):
+            return np.isfinite(v) & (v >= 0.5)
+
+        ind_s = b.MovingObjectVehicleClassificationLightStateIndicatorState
+        brk_s = b.MovingObjectVehicleClassificationLightStateBrakeLightState
+        known = np.isfinite(left) | np.isfinite(right) | np.isfinite(hazard)
+        ind = np.select([on(hazard), on(left), on(right), known],
+                        [int(ind_s.WARNING), int(ind_s.LEFT), int(ind_s.RIGHT), int(ind_s.OFF)],
+                        int(ind_s.UNKNOWN))
+        brk = np.select([on(brake), np.isfinite(brake)], [int(brk_s.NORMAL), int(brk_s.OFF)],
+                        int(brk_s.UNKNOWN))
+        vc.append(pw.f_message(2, pw.concat(pw.f_varint(1, ind), pw.f_varint(7, brk))))
+    mo = pw.concat(
+        pw.f_message(1, pw.f_varint(1, pid[o])),                       # id
+        pw.f_message(2, base),
+        pw.f_varint(3, otype_p[row]),                                  # type
+        pw.keep(pw.f_message(6, pw.concat(*vc)), is_vehicle))          # vehicle_classification
+    m = len(sec)
+    parts = [pw.f_message(2, pw.concat(pw.f_varint(1, sec), pw.f_varint(2, nanos)))]  # timestamp
+    if host is not None:
+        parts.append(pw.Ragged.const(pw.f_message(3, pw.f_varint(1, np.array([host]))).data.tobytes(),
+                                     m))                                # host_vehicle_id
+    parts.append(pw.group(pw.f_message(5, mo), bounds))                # moving_object
+    if proj_string:
+        parts.append(pw.Ragged.const(pw.f_strings(14, [proj_string]).data.tobytes(), m))
+    return pw.concat(*parts)
+
+
+class _Encoded:
+    """A serialized GroundTruth as betterosi's writer takes a message (its type for the MCAP
+    channel's schema, its bytes)."""
+
+    def __init__(self, raw: bytes, proto) -> None:
+        self.raw, self.proto = raw, proto
+
+    def desc(self):
+        return self.proto.desc()
+
+    def to_binary(self) -> bytes:
+        return self.raw
+
+
 @converter("osi", direction="export", options=OsiExportOptions,
            description="ASAM OSI GroundTruth trace (.osi length-prefixed binary, or .mcap)",
            requires=("betterosi",), extra="osi")
@@ -493,52 +583,19 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
                      if p.get("role") in ("system_under_test", "recording_vehicle")), None)
     elif host not in info:
         raise FormatError(f"host_id {host}: no such participant", path=output)
-    default_h = {"pedestrian": 1.75, "bicycle": 1.7, "truck": 3.5, "bus": 3.2, "trailer": 3.5}
-
-    def moving_object(i: int):
-        p = info[int(pid[i])]
-        otype, vtype = EXPORT_CLASS.get(p["class"], ("OTHER", None))
-        h = p.get("height") or default_h.get(p["class"], 1.5)
-        kw: dict[str, Any] = {"type": getattr(b.MovingObjectType, otype)}
-        if vtype is not None:
-            vc = {"type": getattr(b.MovingObjectVehicleClassificationType, vtype)}
-            if has_lights:
-                vc["light_state"] = _light_state(b, *(v[i] for v in lights))
-            kw["vehicle_classification"] = b.MovingObjectVehicleClassification(**vc)
-        acc = b.Vector3d(x=float(ax[i]), y=float(ay[i]), z=0.0) if np.isfinite(ax[i]) else None
-        return b.MovingObject(
-            id=b.Identifier(value=int(pid[i])),
-            base=b.BaseMoving(
-                dimension=b.Dimension3d(length=float(p["length"]), width=float(p["width"]),
-                                        height=float(h)),
-                position=b.Vector3d(x=float(x[i]), y=float(y[i]), z=float(h) / 2),
-                orientation=b.Orientation3d(yaw=float(heading[i])),
-                velocity=b.Vector3d(x=float(vx[i]), y=float(vy[i]), z=0.0),
-                **({"acceleration": acc} if acc is not None else {})),
-            **kw)
-
-    times = np.unique(t)
-    order = np.lexsort((pid, t))
-    bounds = np.searchsorted(t[order], times)
-    ends = np.r_[bounds[1:], n]
-    msgs = []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)
-        for k in range(0, len(times), options.every):
-            sec, nanos = divmod(round(float(times[k]) * 1e9), 10**9)
-            gt = b.GroundTruth(
-                timestamp=b.Timestamp(seconds=sec, nanos=nanos),
-                moving_object=[moving_object(int(i)) for i in order[bounds[k]:ends[k]]],
-                proj_string=rec.meta.crs or "")
-            if host is not None:
-                gt.host_vehicle_id = b.Identifier(value=int(host))
-            msgs.append(gt)
+    times = np.unique(t)[::options.every]
+    sel = np.flatnonzero(np.isin(t, times)) if options.every > 1 else np.arange(n)
+    order = sel[np.lexsort((pid[sel], t[sel]))]
+    bounds = np.r_[np.searchsorted(t[order], times), len(order)]
+    sec, nanos = np.divmod(np.round(times * 1e9).astype(np.int64), 10**9)
+    gts = encode_ground_truths(b, rec.participants, order, bounds, sec, nanos, host,
+                               rec.meta.crs or "", pid=pid, x=x, y=y, heading=heading, vx=vx,
+                               vy=vy, ax=ax, ay=ay, lights=lights if has_lights else None)
     companion = companion_map_path(output, options)
     extra = ([write_bytes_atomic(companion, companion_map(rec))]
              if companion is not None and rec.map_source is not None else [])
     if suffix == ".osi":
-        data = b"".join(struct.pack("<I", len(m)) + m for m in (g.to_binary() for g in msgs))
-        return [write_bytes_atomic(output, data), *extra]
+        return [write_bytes_atomic(output, pw.length_prefixed(gts)), *extra]
     tmp = output.with_name(f".{output.stem}.tmp-{os.getpid()}.mcap")
     try:
         with warnings.catch_warnings():
@@ -546,8 +603,9 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
             with b.Writer(tmp, metadata={"zero_time": rec.meta.start_time,
                                          "description": f"aveas-format export of "
                                                         f"{rec.meta.recording_id}"}) as w:
-                for m in msgs:
-                    w.add(m)
+                proto = b.GroundTruth()
+                for raw, ns in zip(gts.tolist(), (sec * 10**9 + nanos).tolist()):
+                    w.add(_Encoded(raw, proto), log_time=ns)
         with open(tmp, "rb") as f:
             os.fsync(f.fileno())
         os.replace(tmp, output)
