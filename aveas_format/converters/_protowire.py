@@ -94,15 +94,19 @@ def _with_key(field: int, wire: int, body: Ragged) -> Ragged:
     return concat(Ragged.const(key(field, wire), body.n), body)
 
 
-def f_varint(field: int, values: np.ndarray) -> Ragged:
-    """An integer / enum / bool field in every row."""
-    return _with_key(field, VARINT, varints(values))
+def f_varint(field: int, values: np.ndarray, proto3: bool = False) -> Ragged:
+    """An integer / enum / bool field in every row (``proto3``: absent where 0, as proto3
+    writers leave a scalar at its default out)."""
+    r = _with_key(field, VARINT, varints(values))
+    return keep(r, np.asarray(values) != 0) if proto3 else r
 
 
-def f_double(field: int, values: np.ndarray) -> Ragged:
+def f_double(field: int, values: np.ndarray, proto3: bool = False) -> Ragged:
+    """A double field in every row (``proto3``: absent where 0.0)."""
     v = np.ascontiguousarray(np.asarray(values, "<f8"))
     k = np.frombuffer(key(field, I64), np.uint8)
-    return Ragged.fixed(np.hstack([np.tile(k, (len(v), 1)), v.view(np.uint8).reshape(-1, 8)]))
+    r = Ragged.fixed(np.hstack([np.tile(k, (len(v), 1)), v.view(np.uint8).reshape(-1, 8)]))
+    return keep(r, v.view(np.uint64) != 0) if proto3 else r  # -0.0 is written, as protobuf does
 
 
 def f_float(field: int, values: np.ndarray) -> Ragged:
@@ -121,6 +125,16 @@ def f_strings(field: int, values: list[str]) -> Ragged:
     body = Ragged(np.frombuffer(b"".join(raw), np.uint8).copy(),
                   np.fromiter(map(len, raw), np.int64, len(raw)))
     return f_message(field, body)
+
+
+def take(r: Ragged, rows: np.ndarray) -> Ragged:
+    """The given rows (any order, repeats allowed), e.g. a participant's bytes for each state."""
+    rows = np.asarray(rows, np.int64)
+    off = r.offsets()
+    start, lengths = off[rows], r.lengths[rows]
+    sel = np.repeat(start - np.r_[0, np.cumsum(lengths)][:-1], lengths) + \
+        np.arange(int(lengths.sum()))
+    return Ragged(r.data[sel], lengths)
 
 
 def keep(r: Ragged, mask: np.ndarray) -> Ragged:
