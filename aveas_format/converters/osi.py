@@ -162,9 +162,8 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     from aveas_format.mapref.crs import LocalFrame, crs_equal
     from aveas_format.opendrive import load_map
 
-    cols: dict[str, list] = {k: [] for k in (
-        "t", "id", "x", "y", "z", "yaw", "vx", "vy", "ax", "ay", "yaw_rate", "brake", "ind_l",
-        "ind_r", "hazard", "msg")}
+    # one tuple of floats (_FLOAT_COLS) per sample, its object id and message index apart
+    cols: dict[str, list] = {"f": [], "id": [], "msg": []}
     static: dict[int, dict[str, Any]] = {}
     host_ids: set[int] = set()
     proj: tuple[str, tuple[float, float, float, float]] | None = None
@@ -200,18 +199,21 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
         except Exception as e:  # noqa: BLE001 - decoder errors of any kind
             raise FormatError(f"cannot decode OSI message {n_msg}: {type(e).__name__}: {e}",
                               path=path) from None
+    f = np.asarray(cols["f"], np.float64).reshape(-1, len(_FLOAT_COLS))
+    cols = {"id": np.asarray(cols["id"], np.int64), "msg": np.asarray(cols["msg"], np.int64),
+            **{k: f[:, j] for j, k in enumerate(_FLOAT_COLS)}}
     sizeless = [oid for oid, d in static.items() if d["length"] is None]
     for oid in sizeless:
         found.add("source.osi.missing_dimension", oid, static[oid]["no_size_msg"],
                   f"moving object {oid} has no positive base.dimension (length, width) in any of "
                   f"its messages: not imported", count=static[oid]["no_size_n"])
     if sizeless:  # objects without a size cannot be participants: their samples go
-        keep = ~np.isin(np.asarray(cols["id"], np.int64), sizeless)
-        cols = {k: [v for v, m in zip(vals, keep) if m] for k, vals in cols.items()}
+        keep = ~np.isin(cols["id"], sizeless)
+        cols = {k: v[keep] for k, v in cols.items()}
         for oid in sizeless:
             del static[oid]
     found.report(inputs[0] if len(inputs) == 1 else None)
-    if not cols["t"]:
+    if not len(cols["t"]):
         raise FormatError("no GroundTruth moving objects in the trace", path=inputs[0])
 
     t = np.asarray(cols["t"])
@@ -310,6 +312,11 @@ def _shift_iso(iso: str, seconds: float) -> str:
     return dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
+#: the float columns of the samples (one tuple each), in order
+_FLOAT_COLS = ("t", "x", "y", "z", "yaw", "vx", "vy", "ax", "ay", "yaw_rate", "brake", "ind_l",
+               "ind_r", "hazard")
+
+
 def _get(obj: Any, *path: str, default: float = math.nan) -> float:
     """A numeric field of nested OSI messages; ``default`` where a message on the way is unset."""
     for name in path:
@@ -348,21 +355,11 @@ def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dic
                   f"a moving object without {'id' if oid is None else 'base'} was skipped")
         return
     b = mo.base
-    cols["t"].append(t)
-    cols["id"].append(oid)
-    cols["msg"].append(msg)
-    cols["x"].append(_get(b, "position", "x"))
-    cols["y"].append(_get(b, "position", "y"))
-    cols["z"].append(_get(b, "position", "z"))
-    cols["yaw"].append(_get(b, "orientation", "yaw", default=0.0))
-    cols["vx"].append(_get(b, "velocity", "x", default=0.0))
-    cols["vy"].append(_get(b, "velocity", "y", default=0.0))
-    cols["ax"].append(_get(b, "acceleration", "x"))
-    cols["ay"].append(_get(b, "acceleration", "y"))
-    cols["yaw_rate"].append(_get(b, "orientation_rate", "yaw"))
-    brake = ind_l = ind_r = hazard = math.nan
-    vc = getattr(mo, "vehicle_classification", None)
-    ls = getattr(vc, "light_state", None) if vc is not None else None
+    p, o, v, a, r = b.position, b.orientation, b.velocity, b.acceleration, b.orientation_rate
+    nan = math.nan
+    brake = ind_l = ind_r = hazard = nan
+    vc = mo.vehicle_classification
+    ls = vc.light_state if vc is not None else None
     if ls is not None:
         bname = _enum_name(ls.brake_light_state)
         if bname not in ("UNKNOWN", "OTHER"):
@@ -372,10 +369,14 @@ def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dic
             ind_l = 1.0 if iname == "LEFT" else 0.0
             ind_r = 1.0 if iname == "RIGHT" else 0.0
             hazard = 1.0 if iname == "WARNING" else 0.0
-    cols["brake"].append(brake)
-    cols["ind_l"].append(ind_l)
-    cols["ind_r"].append(ind_r)
-    cols["hazard"].append(hazard)
+    cols["f"].append((
+        t, *((p.x, p.y, p.z) if p is not None else (nan, nan, nan)),
+        o.yaw if o is not None else 0.0,
+        *((v.x, v.y) if v is not None else (0.0, 0.0)),
+        *((a.x, a.y) if a is not None else (nan, nan)),
+        r.yaw if r is not None else nan, brake, ind_l, ind_r, hazard))
+    cols["id"].append(oid)
+    cols["msg"].append(msg)
     d = static.get(oid)
     if d is None:
         otype = _enum_name(mo.type)
@@ -407,7 +408,9 @@ def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dic
             d.update(length=length, width=width, height=height if height > 0 else None)
         else:
             d["no_size_n"] += 1
-    d["lanes"].update(int(li.value) for li in mo.assigned_lane_id)
+    lanes = mo.assigned_lane_id
+    if lanes:
+        d["lanes"].update(int(li.value) for li in lanes)
 
 
 # ---- export ------------------------------------------------------------------------------------
