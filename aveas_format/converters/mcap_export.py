@@ -39,6 +39,10 @@ CLASS_COLOURS: dict[str, tuple[float, float, float, float]] = {
 }
 
 
+#: states encoded at once (bounds the memory of the encoding)
+BATCH_STATES = 100_000
+
+
 class McapExportOptions(ConverterOptions):
     lane_step_m: float = 2.0
     """Sampling step of the lane borders (m)."""
@@ -179,10 +183,17 @@ def export_mcap(rec, output: Path, *, options: McapExportOptions) -> list[Path]:
     ids = list(info)
     rows = np.searchsorted(np.asarray(ids), pid[order]) if ids == sorted(ids) else \
         np.asarray([ids.index(int(q)) for q in pid[order]])
-    scenes = _scene_updates(info, rows, np.repeat(step_ns, np.diff(bounds)), life,
-                            x[order], y[order], z[order], h[order], bounds)
-    for ns, data in zip(step_ns.tolist(), scenes.tolist()):
-        w.add_message(ch_scene, ns, data, ns)
+    k0 = 0
+    while k0 < len(steps):  # batches of about BATCH_STATES states: bounded memory
+        k1 = int(np.searchsorted(bounds, bounds[k0] + BATCH_STATES, side="right"))
+        k1 = min(max(k1 - 1, k0 + 1), len(steps))
+        a, z1 = bounds[k0], bounds[k1]
+        o = order[a:z1]
+        scenes = _scene_updates(info, rows[a:z1], np.repeat(step_ns[k0:k1], np.diff(bounds[k0:k1 + 1])),
+                                life, x[o], y[o], z[o], h[o], bounds[k0:k1 + 1] - a)
+        for ns, data in zip(step_ns[k0:k1].tolist(), scenes.tolist()):
+            w.add_message(ch_scene, ns, data, ns)
+        k0 = k1
 
     # ---- geo --------------------------------------------------------------------------------------
     loc = rec.meta.location
@@ -196,10 +207,12 @@ def export_mcap(rec, output: Path, *, options: McapExportOptions) -> list[Path]:
         ids_arr = np.asarray(ids)
         prow = np.searchsorted(ids_arr, pid[o]) if ids == sorted(ids) else \
             np.asarray([ids.index(int(q)) for q in pid[o]])
-        fixes = _location_fixes(info, prow, ns, lat[o], lon[o])
         add, ch = w.add_message, ch_loc
-        for k, data in zip(ns.tolist(), fixes.tolist()):
-            add(ch, k, data, k)
+        for a in range(0, len(o), BATCH_STATES):
+            sl = slice(a, a + BATCH_STATES)
+            fixes = _location_fixes(info, prow[sl], ns[sl], lat[o[sl]], lon[o[sl]])
+            for k, data in zip(ns[sl].tolist(), fixes.tolist()):
+                add(ch, k, data, k)
     w.finish()
     return [write_bytes_atomic(Path(output), buf.getvalue())]
 

@@ -451,6 +451,9 @@ def _light_state(b, brake: float, left: float, right: float, hazard: float):
         brake_light_state=getattr(b.MovingObjectVehicleClassificationLightStateBrakeLightState, brk))
 
 
+#: states encoded at once by the OSI export (bounds its memory: ~1 kB per state while encoding)
+BATCH_STATES = 100_000
+
 #: heights (m) where a participant has none
 _DEFAULT_HEIGHT = {"pedestrian": 1.75, "bicycle": 1.7, "truck": 3.5, "bus": 3.2, "trailer": 3.5}
 
@@ -557,7 +560,7 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
 
     import betterosi as b
 
-    from aveas_format.safeio import write_bytes_atomic
+    from aveas_format.safeio import write_bytes_atomic, write_chunks_atomic
 
     suffix = output.suffix.lower()
     if suffix not in (".osi", ".mcap"):
@@ -591,14 +594,27 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
     order = sel[np.lexsort((pid[sel], t[sel]))]
     bounds = np.r_[np.searchsorted(t[order], times), len(order)]
     sec, nanos = np.divmod(np.round(times * 1e9).astype(np.int64), 10**9)
-    gts = encode_ground_truths(b, rec.participants, order, bounds, sec, nanos, host,
-                               rec.meta.crs or "", pid=pid, x=x, y=y, heading=heading, vx=vx,
-                               vy=vy, ax=ax, ay=ay, lights=lights if has_lights else None)
+
+    def batches():
+        """(GroundTruth bytes, step indices) of batches of about :data:`BATCH_STATES` states:
+        the memory of the encoding stays bounded whatever the length of the recording."""
+        k0 = 0
+        while k0 < len(times):
+            k1 = int(np.searchsorted(bounds, bounds[k0] + BATCH_STATES, side="right"))
+            k1 = min(max(k1 - 1, k0 + 1), len(times))
+            yield encode_ground_truths(
+                b, rec.participants, order[bounds[k0]:bounds[k1]], bounds[k0:k1 + 1] - bounds[k0],
+                sec[k0:k1], nanos[k0:k1], host, rec.meta.crs or "", pid=pid, x=x, y=y,
+                heading=heading, vx=vx, vy=vy, ax=ax, ay=ay,
+                lights=lights if has_lights else None), range(k0, k1)
+            k0 = k1
+
     companion = companion_map_path(output, options)
     extra = ([write_bytes_atomic(companion, companion_map(rec))]
              if companion is not None and rec.map_source is not None else [])
     if suffix == ".osi":
-        return [write_bytes_atomic(output, pw.length_prefixed(gts)), *extra]
+        return [write_chunks_atomic(output, (pw.length_prefixed(g) for g, _ in batches())),
+                *extra]
     tmp = output.with_name(f".{output.stem}.tmp-{os.getpid()}.mcap")
     try:
         with warnings.catch_warnings():
@@ -607,8 +623,9 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
                                          "description": f"aveas-format export of "
                                                         f"{rec.meta.recording_id}"}) as w:
                 proto = b.GroundTruth()
-                for raw, ns in zip(gts.tolist(), (sec * 10**9 + nanos).tolist()):
-                    w.add(_Encoded(raw, proto), log_time=ns)
+                for gts, steps in batches():
+                    for raw, k in zip(gts.tolist(), steps):
+                        w.add(_Encoded(raw, proto), log_time=int(sec[k]) * 10**9 + int(nanos[k]))
         with open(tmp, "rb") as f:
             os.fsync(f.fileno())
         os.replace(tmp, output)

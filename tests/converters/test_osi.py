@@ -317,3 +317,15 @@ def test_export_bytes_are_the_bindings_encoding(tmp_path):
     gt = b.GroundTruth(timestamp=b.Timestamp(seconds=sec, nanos=nanos), moving_object=mos,
                        proj_string=rec.meta.crs, host_vehicle_id=b.Identifier(value=1))
     assert first == gt.to_binary()
+
+
+def test_export_in_batches_writes_the_same_trace(tmp_path, monkeypatch):
+    """The export encodes batches of time steps (bounded memory): any batch size, the same bytes."""
+    from aveas_format.converters import get_converter, osi
+
+    rec = _lit_recording()
+    export = get_converter("osi", "export")
+    export(rec, tmp_path / "whole.osi", options={"write_map": False})
+    monkeypatch.setattr(osi, "BATCH_STATES", 7)
+    export(rec, tmp_path / "batched.osi", options={"write_map": False})
+    assert (tmp_path / "whole.osi").read_bytes() == (tmp_path / "batched.osi").read_bytes()
