@@ -13,6 +13,7 @@ recording is generated here, never stored in the repository.
 
     python benchmarks/bench_interop.py                 # the 23 k sample (make bench)
     python benchmarks/bench_interop.py --states 2000000
+    python benchmarks/bench_interop.py --osi-mcap-states 2000000   # the OSI and MCAP rows alone
 """
 
 from __future__ import annotations
@@ -280,9 +281,57 @@ def large(target_states: int) -> list[dict]:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+_CHILD_PROTO = """
+import json, sys, time, warnings
+from pathlib import Path
+""" + HWM_MB_SRC + """
+import aveas_format
+from aveas_format.converters import get_converter
+
+warnings.simplefilter("ignore")
+name, rec_dir, out = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3])
+rec = aveas_format.open(rec_dir)
+_ = rec.states, rec.participants, rec.map
+base = hwm_mb()
+t0 = time.perf_counter()
+get_converter(name, "export")(rec, out, options={"write_map": False} if name == "osi" else {})
+dt = time.perf_counter() - t0
+print(json.dumps({"seconds": dt, "peak_mb": hwm_mb(), "before_mb": base, "states": rec.states.num_rows}))
+"""
+
+
+def large_osi_mcap(target_states: int) -> list[dict]:
+    """The OSI (.osi, .mcap) and MCAP exports of a recording of ``target_states`` states, each in
+    a fresh process (peak memory = its VmHWM, with the recording loaded)."""
+    from aveas_format.sample import highway_scene
+
+    tmp = Path(tempfile.mkdtemp(prefix="aveas-bench-interop-large-"))
+    try:
+        base = highway_scene(n_vehicles=600, duration_s=300.0, seed=3)
+        rec = tiled(base, max(1, -(-target_states // base.states.num_rows)))
+        rec.write(tmp / "rec")
+        n = rec.states.num_rows
+        del rec, base
+        rows = []
+        for name, file in (("osi", "rec.osi"), ("osi", "rec_osi.mcap"), ("mcap", "rec.mcap")):
+            r = subprocess.run([sys.executable, "-c", _CHILD_PROTO, name, str(tmp / "rec"),
+                                str(tmp / file)], capture_output=True, text=True)
+            if r.returncode:
+                raise RuntimeError(r.stderr[-2000:])
+            e = json.loads(r.stdout.strip().splitlines()[-1])
+            rows.append(_row(f"export_{name}_large ({Path(file).suffix})", n, e["seconds"],
+                             f"{(tmp / file).stat().st_size / 1e6:.0f} MB; fresh process: peak "
+                             f"{e['peak_mb']:.0f} MB ({e['before_mb']:.0f} MB with the recording loaded)"))
+        return rows
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 if __name__ == "__main__":
-    if len(sys.argv) > 2 and sys.argv[1] == "--states":
-        result = large(int(sys.argv[2]))
+    if len(sys.argv) > 2 and sys.argv[1] == "--osi-mcap-states":
+        result = large_osi_mcap(int(sys.argv[2]))
+    elif len(sys.argv) > 2 and sys.argv[1] == "--states":
+        result = large(int(sys.argv[2])) + large_osi_mcap(int(sys.argv[2]))
     else:
         result = main()
     for r in result:
