@@ -6,7 +6,8 @@ achieves in the same run: ``jsonschema`` on the ASAM OpenLABEL 1.0 JSON schema (
 The sample highway scene (60 vehicles, 30 s at 25 Hz, 23 k states) is exported to OpenLABEL (with
 its map next to it), then checked the way a partner's file is: the CLI in this process
 (``validate FILE --format json -o report.json``: import with the source findings collected, every
-rule). The split: the import alone and the rules alone on the imported recording.
+rule). The split: the import alone and the rules alone on the imported recording. And the same
+scene as an ASAM OSI trace, checked the same way (``validate TRACE --map MAP``).
 
     python benchmarks/bench_submission.py
 """
@@ -79,6 +80,12 @@ def main(n_vehicles: int = 60, duration_s: float = 30.0, schema_frames: int = 10
         sample, n_sample = _schema_sample(json.loads(src.read_bytes()), schema_frames)
         dt_schema = _timed(lambda: validator.validate(sample))
         mb = src.stat().st_size / 1e6
+        trace = tmp / "submission.osi"
+        get_converter("osi", "export")(imported, trace)
+        t0 = time.perf_counter()
+        code_osi = run(app, ["validate", str(trace), "--map", str(tmp / "submission.xodr"),
+                             "--format", "json", "-o", str(tmp / "report_osi.json")])
+        dt_osi = time.perf_counter() - t0
         return [
             _row("validate_openlabel_file", n, dt, f"{mb:.1f} MB OpenLABEL, import + "
                  f"{len(checked['rules_run'])} rules, report to a file (exit {code})", dt_schema,
@@ -87,6 +94,8 @@ def main(n_vehicles: int = 60, duration_s: float = 30.0, schema_frames: int = 10
             _row("validate_openlabel_file", n, dt, "(the same run): split below"),
             _row("  import_openlabel", n, dt_import, "the import alone (lossless)"),
             _row("  rules", n, dt_rules, "every rule on the imported recording (in memory)"),
+            _row("validate_osi_file", n, dt_osi, f"{trace.stat().st_size / 1e6:.1f} MB ASAM OSI "
+                 f"trace of the same scene, --map, import + rules (exit {code_osi})"),
         ]
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
