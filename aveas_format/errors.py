@@ -181,13 +181,26 @@ def report_source(code: str, message: str, *, count: int = 1, stacklevel: int = 
                   **location: Any) -> None:
     """Report a finding about the file being imported: collected when a caller listens
     (:func:`collect_source_findings`, as ``aveas-format validate FILE`` does), otherwise a
-    ``UserWarning`` with the message (what an import on its own has always shown)."""
+    ``UserWarning`` with the location and the message (``FILE: line 12, entity 'Ego': ...``, what
+    an import on its own has always shown)."""
     sink = _SOURCE_COLLECTOR.get()
     if sink is not None:
         sink.append(SourceFinding(code, message, {k: v for k, v in location.items() if v is not None},
                                   count))
     else:
-        warnings.warn(message, stacklevel=stacklevel + 1)
+        warnings.warn(_located(message, location), stacklevel=stacklevel + 1)
+
+
+def _located(message: str, location: dict[str, Any]) -> str:
+    """The warning of an uncollected source finding: its location first, as an error's message
+    is (``trace.osi: message index 3, object id 7: ...``)."""
+    where = {k: v for k, v in location.items() if v is not None
+             and not (isinstance(v, str) and repr(v) in message)}  # the message names it
+    file, line = where.pop("file", None), where.pop("line", None)
+    head = f"{file}:{line}" if file and line is not None else file or (
+        f"line {line}" if line is not None else "")
+    loc = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in where.items())
+    return "".join(f"{p}: " for p in (head, loc) if p) + message
 
 
 @contextmanager

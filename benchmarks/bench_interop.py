@@ -4,7 +4,9 @@ states/s and MB beside a baseline measured in the same run.
 The sample highway scene (60 vehicles, 30 s at 25 Hz, 23 k states): OpenLABEL export (streamed
 from columns) against ``json.dumps`` of the same document and a pyarrow Parquet write of the same
 states; OpenLABEL import (lossless) against ``json.loads`` of the same file and a Parquet read;
-OpenSCENARIO export + import, MCAP and OSI export. With ``--states N`` (e.g. 2000000) the scene is
+OpenSCENARIO export + import; OSI export (.osi, .mcap) against the bindings' per-object messages
+and their floor, OSI import against betterosi's decoding alone, MCAP export against mcap's floor of
+one message per state and a Parquet write. With ``--states N`` (e.g. 2000000) the scene is
 tiled in time to N states (participant ids and times shifted, as bench_validate_memory does) and
 the OpenLABEL export and import each run in a fresh process, with its peak memory (VmHWM) — the
 recording is generated here, never stored in the repository. The compact forms (``.json.gz``,
@@ -13,6 +15,7 @@ recording is generated here, never stored in the repository. The compact forms (
 
     python benchmarks/bench_interop.py                 # the 23 k sample (make bench)
     python benchmarks/bench_interop.py --states 2000000
+    python benchmarks/bench_interop.py --osi-mcap-states 2000000   # the OSI and MCAP rows alone
 """
 
 from __future__ import annotations
@@ -162,6 +165,130 @@ def _compact_rows(rec, tmp: Path, n: int, plain_mb: float) -> list[dict]:
     return rows
 
 
+# ---- OSI and MCAP (issue 22): the columnar protobuf encoder against the bindings, same run ------
+
+def _osi_bindings(rec) -> bytes:
+    """The OSI export as it was built before issue 22 (one betterosi message per moving object,
+    serialized per time step): the same-run baseline; the new export writes the same bytes."""
+    import math
+    import struct
+    import warnings
+
+    import betterosi as b
+    import numpy as np
+
+    from aveas_format.converters.osi import _DEFAULT_HEIGHT, EXPORT_CLASS, _light_state
+    from aveas_format.io.arrow import column_numpy
+
+    st = rec.states
+    pid, t = st["participant_id"].to_numpy(), column_numpy(st, "time")
+    x, y, ax, ay = (column_numpy(st, c, missing=math.nan) for c in ("x", "y", "ax", "ay"))
+    heading, vx, vy = (column_numpy(st, c, null=0.0, missing=0.0) for c in ("heading", "vx", "vy"))
+    lights = [column_numpy(st, c, missing=math.nan) for c in
+              ("light_brake_p", "light_indicator_left_p", "light_indicator_right_p", "light_hazard_p")]
+    has_lights = any(np.isfinite(v).any() for v in lights)
+    info = {p["participant_id"]: p for p in rec.participants.to_pylist()}
+    host = next((q for q, p in info.items() if p.get("role") in ("system_under_test", "recording_vehicle")),
+                None)
+
+    def moving_object(i: int):
+        p = info[int(pid[i])]
+        otype, vtype = EXPORT_CLASS.get(p["class"], ("OTHER", None))
+        h = p.get("height") or _DEFAULT_HEIGHT.get(p["class"], 1.5)
+        kw = {"type": getattr(b.MovingObjectType, otype)}
+        if vtype is not None:
+            vc = {"type": getattr(b.MovingObjectVehicleClassificationType, vtype)}
+            if has_lights:
+                vc["light_state"] = _light_state(b, *(v[i] for v in lights))
+            kw["vehicle_classification"] = b.MovingObjectVehicleClassification(**vc)
+        acc = ({"acceleration": b.Vector3d(x=float(ax[i]), y=float(ay[i]), z=0.0)}
+               if np.isfinite(ax[i]) else {})
+        return b.MovingObject(id=b.Identifier(value=int(pid[i])), base=b.BaseMoving(
+            dimension=b.Dimension3d(length=float(p["length"]), width=float(p["width"]), height=float(h)),
+            position=b.Vector3d(x=float(x[i]), y=float(y[i]), z=float(h) / 2),
+            orientation=b.Orientation3d(yaw=float(heading[i])),
+            velocity=b.Vector3d(x=float(vx[i]), y=float(vy[i]), z=0.0), **acc), **kw)
+
+    times = np.unique(t)
+    order = np.lexsort((pid, t))
+    bounds = np.r_[np.searchsorted(t[order], times), len(t)]
+    out = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        for k in range(len(times)):
+            sec, nanos = divmod(round(float(times[k]) * 1e9), 10**9)
+            gt = b.GroundTruth(timestamp=b.Timestamp(seconds=sec, nanos=nanos),
+                               moving_object=[moving_object(int(i)) for i in order[bounds[k]:bounds[k + 1]]],
+                               proj_string=rec.meta.crs or "")
+            if host is not None:
+                gt.host_vehicle_id = b.Identifier(value=int(host))
+            m = gt.to_binary()
+            out.append(struct.pack("<I", len(m)) + m)
+    return b"".join(out)
+
+
+def _osi_mcap_rows(rec, tmp: Path) -> list[dict]:
+    """OSI (.osi, .mcap) export and import, MCAP (Foxglove) export, each beside its same-run
+    baseline, and the floors of the libraries: one near-empty OSI message built and serialized
+    per state with the bindings; one empty MCAP message written per state with ``mcap``."""
+    import warnings
+
+    import betterosi as b
+    import mcap.writer
+
+    from aveas_format.converters import convert, get_converter
+
+    n = rec.states.num_rows
+    rows = []
+    osi = get_converter("osi", "export")
+    mc = get_converter("mcap", "export")
+    osi(rec, tmp / "warm.osi")  # first calls outside the timings (imports, the map's lane polygons)
+    convert("osi", [tmp / "warm.osi"], map_source=tmp / "warm.xodr")
+    mc(rec, tmp / "warm.mcap")
+    dt = _timed(lambda: osi(rec, tmp / "rec.osi"))
+    b_old = _timed(lambda: _osi_bindings(rec))
+    same = _osi_bindings(rec) == (tmp / "rec.osi").read_bytes()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        floor = _timed(lambda: [b.MovingObject(id=b.Identifier(value=i)).to_binary() for i in range(n)])
+    rows.append(_row("export_osi", n, dt, f"{(tmp / 'rec.osi').stat().st_size / 1e6:.1f} MB, bytes "
+                     f"{'identical to' if same else 'DIFFERENT from'} the bindings' (+ the map)", b_old,
+                     "the bindings: one betterosi message per object (the export before issue 22)"))
+    rows.append(_row("export_osi", n, dt, "(the same run)", floor, "floor of the bindings: one "
+                     "MovingObject(id) built + serialized per state"))
+    dt = _timed(lambda: osi(rec, tmp / "rec_osi.mcap"))
+    rows.append(_row("export_osi_mcap", n, dt, f"{(tmp / 'rec_osi.mcap').stat().st_size / 1e6:.1f} MB"))
+    dt = _timed(lambda: convert("osi", [tmp / "rec.osi"], map_source=tmp / "rec.xodr"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        b_read = _timed(lambda: sum(len(g.moving_object) for g in
+                                    b.read(str(tmp / "rec.osi"), return_ground_truth=True)))
+    rows.append(_row("import_osi", n, dt, "the recording, on its map", b_read,
+                     "floor: betterosi decoding the trace alone"))
+    dt = _timed(lambda: mc(rec, tmp / "rec.mcap"))
+    dt_noloc = _timed(lambda: mc(rec, tmp / "rec_noloc.mcap", options={"locations": False}))
+
+    def empty_messages() -> None:
+        import io
+
+        w = mcap.writer.Writer(io.BytesIO())
+        w.start()
+        ch = w.register_channel("/x", "protobuf", w.register_schema("x", "protobuf", b""))
+        for i in range(n):
+            w.add_message(ch, i, b"", i)
+        w.finish()
+
+    b_pq = _timed(lambda: __import__("aveas_format.safeio", fromlist=["x"]).write_parquet_atomic(
+        rec.states, tmp / "mcap_baseline.parquet"))
+    rows.append(_row("export_mcap", n, dt, f"{(tmp / 'rec.mcap').stat().st_size / 1e6:.1f} MB "
+                     "(/scene + one /locations message per state)", _timed(empty_messages),
+                     "floor of mcap: one empty message written per state"))
+    rows.append(_row("export_mcap", n, dt, "(the same run)", b_pq, "pyarrow Parquet write of the states"))
+    rows.append(_row("export_mcap_no_locations", n, dt_noloc,
+                     f"{(tmp / 'rec_noloc.mcap').stat().st_size / 1e6:.1f} MB, /scene only (-O locations=false)"))
+    return rows
+
+
 def main(n_vehicles: int = 60, duration_s: float = 30.0) -> list[dict]:
     from aveas_format.converters import convert, get_converter
     from aveas_format.sample import highway_scene
@@ -172,9 +299,9 @@ def main(n_vehicles: int = 60, duration_s: float = 30.0) -> list[dict]:
     tmp = Path(tempfile.mkdtemp(prefix="aveas-bench-interop-"))
     try:
         rows = _openlabel_rows(rec, tmp)
-        for name, file in (("openscenario", "rec.xosc"), ("mcap", "rec.mcap"), ("osi", "rec.osi")):
-            dt = _timed(lambda: get_converter(name, "export")(rec, tmp / file))
-            rows.append(_row(f"export_{name}", n, dt, f"{(tmp / file).stat().st_size / 1e6:.1f} MB"))
+        rows += _osi_mcap_rows(rec, tmp)
+        dt = _timed(lambda: get_converter("openscenario", "export")(rec, tmp / "rec.xosc"))
+        rows.append(_row("export_openscenario", n, dt, f"{(tmp / 'rec.xosc').stat().st_size / 1e6:.1f} MB"))
         t0 = time.perf_counter()
         back = convert("openscenario", [tmp / "rec.xosc"])
         rows.append(_row("import_openscenario", back.states.num_rows, time.perf_counter() - t0,
@@ -211,9 +338,57 @@ def large(target_states: int) -> list[dict]:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+_CHILD_PROTO = """
+import json, sys, time, warnings
+from pathlib import Path
+""" + HWM_MB_SRC + """
+import aveas_format
+from aveas_format.converters import get_converter
+
+warnings.simplefilter("ignore")
+name, rec_dir, out = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3])
+rec = aveas_format.open(rec_dir)
+_ = rec.states, rec.participants, rec.map
+base = hwm_mb()
+t0 = time.perf_counter()
+get_converter(name, "export")(rec, out, options={"write_map": False} if name == "osi" else {})
+dt = time.perf_counter() - t0
+print(json.dumps({"seconds": dt, "peak_mb": hwm_mb(), "before_mb": base, "states": rec.states.num_rows}))
+"""
+
+
+def large_osi_mcap(target_states: int) -> list[dict]:
+    """The OSI (.osi, .mcap) and MCAP exports of a recording of ``target_states`` states, each in
+    a fresh process (peak memory = its VmHWM, with the recording loaded)."""
+    from aveas_format.sample import highway_scene
+
+    tmp = Path(tempfile.mkdtemp(prefix="aveas-bench-interop-large-"))
+    try:
+        base = highway_scene(n_vehicles=600, duration_s=300.0, seed=3)
+        rec = tiled(base, max(1, -(-target_states // base.states.num_rows)))
+        rec.write(tmp / "rec")
+        n = rec.states.num_rows
+        del rec, base
+        rows = []
+        for name, file in (("osi", "rec.osi"), ("osi", "rec_osi.mcap"), ("mcap", "rec.mcap")):
+            r = subprocess.run([sys.executable, "-c", _CHILD_PROTO, name, str(tmp / "rec"),
+                                str(tmp / file)], capture_output=True, text=True)
+            if r.returncode:
+                raise RuntimeError(r.stderr[-2000:])
+            e = json.loads(r.stdout.strip().splitlines()[-1])
+            rows.append(_row(f"export_{name}_large ({Path(file).suffix})", n, e["seconds"],
+                             f"{(tmp / file).stat().st_size / 1e6:.0f} MB; fresh process: peak "
+                             f"{e['peak_mb']:.0f} MB ({e['before_mb']:.0f} MB with the recording loaded)"))
+        return rows
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 if __name__ == "__main__":
-    if len(sys.argv) > 2 and sys.argv[1] == "--states":
-        result = large(int(sys.argv[2]))
+    if len(sys.argv) > 2 and sys.argv[1] == "--osi-mcap-states":
+        result = large_osi_mcap(int(sys.argv[2]))
+    elif len(sys.argv) > 2 and sys.argv[1] == "--states":
+        result = large(int(sys.argv[2])) + large_osi_mcap(int(sys.argv[2]))
     else:
         result = main()
     for r in result:

@@ -127,6 +127,12 @@ def test_an_unknown_option_is_a_one_line_usage_error(capsys, path):
     (("frobnicate",), "No such command 'frobnicate'"),
     (("info",), "Missing argument"),
     (("validate", "REC", "-o", "/nonexistent/dir/r.html"), "the directory /nonexistent/dir does not exist"),
+    # a submitted file: the converter's usage errors, before any work
+    (("validate", "FCD"), "needs a map: pass --map"),
+    (("validate", "--from", "sumofcd", "FCD"), "(did you mean 'sumo-fcd'?)"),
+    (("validate", "FCD", "--map", "MAP", "-O", "net_ofset=1"), "(did you mean 'net_offset'?)"),
+    (("validate", "FCD", "--map", "MAP", "--select", "source.osx"), "unknown rule or family"),
+    (("validate", "FCD", "--map", "BARE"), "aveas-format validate --from sumo-fcd"),
 ])
 def test_usage_errors_exit_2_in_one_line(capsys, env, tmp_path, args, needle):
     code, out, err = cli(capsys, *fill(args, env, OUT=tmp_path / "out.aveas"))
@@ -248,6 +254,15 @@ def test_format_json_parses(capsys, env, path):
     assert json.loads(out)
 
 
+def test_validate_a_submitted_file_in_json(capsys, env):
+    """``validate FILE`` (a file a converter imports): the report in JSON, named after the file,
+    the import's findings among the rules that ran."""
+    code, out, err = cli(capsys, "validate", env["FCD"], "--map", env["MAP"], "--format", "json")
+    rep = json.loads(out)
+    assert code == 0 and rep["recording"] == str(env["FCD"]), err  # warnings only
+    assert "source.other" in rep["rules_run"] and "kinematics.speed" in rep["rules_run"]
+
+
 def test_the_old_json_flag_still_works_with_a_note(capsys, env):
     code, out, err = cli(capsys, "info", env["REC"], "--json")
     assert code == 0 and json.loads(out)["recording_id"] == "test-1"
@@ -309,6 +324,7 @@ class _ClosedPipe(io.TextIOBase):
 
 PIPED: list[tuple[str, ...]] = [
     ("info", "REC"), ("info", "REC", "--format", "json"), ("validate", "REC"),
+    ("validate", "FCD", "--map", "MAP"),
     ("validate", "REC", "--format", "json"), ("schema",), ("schema", "--tables"), ("convert", "--list"),
     ("export", "--list", "--format", "json"), ("map", "info", "MAP"), ("map", "check", "MAP"),
     ("map", "project", "MAP", "-p", "PTS"), ("--help",), *[(*p, "--help") for p in COMMANDS],

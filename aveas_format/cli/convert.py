@@ -13,9 +13,11 @@ from aveas_format.cli.options import (
     OutputFormat,
     ask_unstated,
     check_output,
+    converter_name_option,
     converter_options,
     crs_option,
     format_option,
+    map_option,
     option_pairs_option,
     options_file_option,
     overwrite_option,
@@ -52,8 +54,8 @@ def list_converters(direction: str | None, fmt: OutputFormat) -> None:
 @handle_errors
 def convert(
     inputs: list[Path] = typer.Argument(None, help="Input files of the source format."),
-    source: str = typer.Option(None, "--from", "-f", help="Converter name (see --list)."),
-    map_file: Path = typer.Option(None, "--map", "-m", help="The OpenDRIVE map the data refers to."),
+    source: str = converter_name_option(),
+    map_file: Path = map_option(),
     output: Path = typer.Option(None, "--output", "-o", help="Output recording (NAME.aveas or "
                                 "NAME.aveas.zip)."),
     crs: str = crs_option(),

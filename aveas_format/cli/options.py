@@ -129,6 +129,16 @@ def options_file_option(kind: str) -> Any:
     return typer.Option(None, "--options", help=f"{kind} options as a JSON file.")
 
 
+def converter_name_option(help: str = "Converter name (see --list).") -> Any:
+    """``--from/-f NAME``: the converter of an import (``convert``, ``validate FILE``)."""
+    return typer.Option(None, "--from", "-f", help=help)
+
+
+def map_option(help: str = "The OpenDRIVE map the data refers to.") -> Any:
+    """``--map/-m MAP.xodr``: the map of an import (``convert``, ``validate FILE``)."""
+    return typer.Option(None, "--map", "-m", help=help)
+
+
 def crs_option() -> Any:
     """``--crs CRS`` of the importers: the recording's CRS where the map has no
     ``<geoReference>`` (the common import option ``crs``)."""

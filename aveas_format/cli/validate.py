@@ -1,4 +1,13 @@
-"""``aveas-format validate REC``: check a recording against the format."""
+"""``aveas-format validate REC``: check a recording against the format; ``validate FILE``: a
+submitted file of any importable format (OpenLABEL, OSI, OpenSCENARIO...), imported on the fly.
+
+A submission is imported in memory by its converter (``--from NAME``, else the one whose file
+patterns match; ``.json`` / ``.mcap``, which several converters read, are told apart by their first
+bytes) with :func:`aveas_format.errors.collect_source_findings` active, and validated as a
+recording: the import's findings about the file become the ``source.*`` rules' findings, located
+in the source's own terms, next to the format's rules. Memory: the imported recording's columns
+(about 0.3 kB per state), as ``convert`` holds them before writing.
+"""
 
 from __future__ import annotations
 
@@ -17,9 +26,15 @@ from aveas_format.cli.options import (
     check_output_dir,
     check_rules,
     comma_list,
+    converter_name_option,
+    converter_options,
+    crs_option,
     discover_dataset,
     format_option,
     ignore_option,
+    map_option,
+    option_pairs_option,
+    options_file_option,
     overwrite_option,
     print_failure,
     recordings_argument,
@@ -81,9 +96,18 @@ def validate(
                                      "recording's JSON report and the dataset report (JSON + "
                                      "HTML) into this directory."),
     top: int = typer.Option(20, "--top", min=1, help="Dataset: worst recordings listed."),
+    source: str = converter_name_option("A submitted file (or files): the converter that "
+                                        "imports it (see `convert --list`); default: by its "
+                                        "extension."),
+    map_file: Path = map_option("A submitted file: the OpenDRIVE map its data refers to."),
+    crs: str = crs_option(),
+    option: list[str] = option_pairs_option("A submitted file: converter"),
+    options_file: Path = options_file_option("A submitted file: converter"),
 ) -> None:
-    """Validate a recording. Exit codes: 0 valid, 1 findings at/above --fail-on, 2 usage error,
-    3 unreadable input or tool failure."""
+    """Validate a recording, or a submitted file of any importable format (`validate
+    submission.json`, `validate --from osi trace.osi --map map.xodr`): imported on the fly, its
+    findings located in the file's own terms (rules source.*). Exit codes: 0 valid, 1 findings
+    at/above --fail-on, 2 usage error, 3 unreadable input or tool failure."""
     from aveas_format.validate.config import ValidationConfig, config_toml
     from aveas_format.validate.report import report_json_schema
 
@@ -109,8 +133,9 @@ def validate(
     except FormatError as e:
         raise fail(str(e), EXIT_USAGE) from None
     only, skip = comma_list(select), comma_list(ignore)
-    recording = single_recording(recordings)
-    if recording is None:
+    submission = _submission(recordings, source)
+    recording = None if submission else single_recording(recordings)
+    if recording is None and not submission:
         if out_dir is not None and reports_dir is None:  # -o DIR/ of a dataset: its reports dir
             reports_dir, output = out_dir, None
             if out_dir.is_dir():
@@ -121,12 +146,21 @@ def validate(
                [output] if output is not None else [])
     if out_dir is None or out_dir.is_dir():
         check_output(targets, overwrite)
-    try:
-        report = run(recording, select=only, ignore=skip, config=cfg, max_sample=max_sample)
-    except ValueError as e:
-        if "unknown rule or family" in str(e):
-            raise fail(str(e), EXIT_USAGE) from None
-        raise
+    figures = recording
+    if submission:
+        check_rules(only, skip)  # a usage error before the import's work
+        rec, found = import_submission(submission, source, map_file, converter_options(
+            options_file, option, _options_model(submission, source)), crs)
+        report = run(rec, select=only, ignore=skip, config=cfg, max_sample=max_sample,
+                     source_findings=found, name=" ".join(str(p) for p in submission))
+        figures = rec
+    else:
+        try:
+            report = run(recording, select=only, ignore=skip, config=cfg, max_sample=max_sample)
+        except ValueError as e:
+            if "unknown rule or family" in str(e):
+                raise fail(str(e), EXIT_USAGE) from None
+            raise
     if out_dir is not None:
         from aveas_format.plot.report_html import render_html
         from aveas_format.safeio import write_text_atomic
@@ -134,7 +168,7 @@ def validate(
         out_dir.mkdir(parents=True, exist_ok=True)
         write_text_atomic(out_dir / "report.json", render_json(report))
         write_text_atomic(out_dir / "report.html", render_html(
-            report, _open_for_figures(recording, report), docs_url=docs_url))
+            report, _open_for_figures(figures, report), docs_url=docs_url))
         err.print(render_text(report).rstrip().rsplit("\n", 1)[-1], markup=False, highlight=False)
         err.print(f"wrote {out_dir / 'report.json'}, {out_dir / 'report.html'}", markup=False,
                   highlight=False)
@@ -144,7 +178,7 @@ def validate(
     elif fmt is Format.html:
         from aveas_format.plot.report_html import render_html
 
-        text = render_html(report, _open_for_figures(recording, report), docs_url=docs_url)
+        text = render_html(report, _open_for_figures(figures, report), docs_url=docs_url)
     else:
         text = render_text(report)
     if output:
@@ -194,12 +228,114 @@ def _validate_dataset(specs: list[str], select: list[str] | None, ignore: list[s
     raise typer.Exit(rep.exit_code())
 
 
-def _open_for_figures(path: Path, report=None):
+def _open_for_figures(path, report=None):
     """The recording for the report's figures (the columns they draw; of a large recording, a
-    subset of its participants), or None when it cannot be read."""
+    subset of its participants), or None when it cannot be read; an imported submission (a
+    Recording in memory) as it is."""
     from aveas_format.plot.recording import open_for_figures
 
+    if not isinstance(path, (str, Path)):
+        return path
     try:
         return open_for_figures(path, report)
     except Exception:  # noqa: BLE001 — a broken recording still gets its report, without figures
         return None
+
+
+# --- a submitted file ---------------------------------------------------------------------------
+
+#: the first bytes that tell converters sharing an extension apart (``.json``: OpenLABEL or an
+#: infrastructure-lidar track list; ``.mcap``: OSI or ROS 2)
+_SNIFF = {"openlabel": (b'"openlabel"',), "osi": (b"osi3.", b"net.asam.osi")}
+_SNIFF_BYTES = 1 << 16
+
+
+def _submission(specs: list[str] | None, source: str | None) -> list[Path]:
+    """The files of a submission when the arguments name one: ``--from`` (then every argument is
+    an input of that converter), or one existing file that is not a recording ZIP."""
+    if not specs:
+        return []
+    if source:
+        return [Path(s) for s in specs]
+    p = Path(specs[0])
+    if len(specs) == 1 and p.is_file() and not p.name.lower().endswith(".zip"):
+        return [p]
+    return []
+
+
+def _candidates(path: Path) -> list[str]:
+    """Import converters whose file patterns match ``path``; where several do, those whose
+    signature (:data:`_SNIFF`) is in the file's first bytes, if that leaves one."""
+    import fnmatch
+
+    from aveas_format.converters.registry import load_converters
+
+    name = path.name.lower()
+    hits = sorted(c.name for c in load_converters().values() if c.direction == "import"
+                  and any(fnmatch.fnmatch(name, pat.lower()) for pat in c.patterns))
+    if len(hits) > 1:
+        try:
+            with open(path, "rb") as f:
+                head = f.read(_SNIFF_BYTES)
+        except OSError:
+            return hits
+        sniffed = [h for h in hits if any(sig in head for sig in _SNIFF.get(h, ()))]
+        if len(sniffed) == 1:
+            return sniffed
+    return hits
+
+
+def _converter_name(inputs: list[Path], source: str | None) -> str:
+    from aveas_format.errors import RecordingIOError, UsageError
+
+    if source:
+        return source
+    hits = _candidates(inputs[0])
+    if len(hits) == 1:
+        return hits[0]
+    if hits:
+        raise UsageError(f"{inputs[0]}: several converters read {inputs[0].suffix or 'it'} "
+                         f"({', '.join(hits)}): pass --from NAME")
+    raise RecordingIOError("not a recording, and no converter reads files like it (pass --from "
+                           "NAME; `aveas-format convert --list` lists them)", path=inputs[0])
+
+
+def _options_model(inputs: list[Path], source: str | None) -> type:
+    from aveas_format.converters.registry import get_converter
+
+    return get_converter(_converter_name(inputs, source)).options
+
+
+def import_submission(inputs: list[Path], source: str | None = None, map_file: Path | None = None,
+                      options: dict | None = None, crs: str | None = None):
+    """Import a submitted file in memory and collect what the import finds about it: ``(recording,
+    [SourceFinding])``. Findings without a file name the (first) input; a warning of a converter
+    that does not report located findings yet becomes a ``source.other`` finding, so that nothing
+    it says is lost. An unimportable file raises the converter's (located) error."""
+    import dataclasses
+    import warnings
+
+    from aveas_format.converters.registry import convert
+    from aveas_format.errors import MissingCrsError, SourceFinding, collect_source_findings
+
+    name = _converter_name(inputs, source)
+    with collect_source_findings() as found, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        warnings.simplefilter("ignore", DeprecationWarning)
+        warnings.simplefilter("ignore", PendingDeprecationWarning)
+        try:
+            rec = convert(name, inputs, map_source=map_file, options=options, crs=crs)
+        except MissingCrsError as e:  # its message shows the convert command: show this one
+            raise MissingCrsError(e.message.replace("aveas-format convert ", "aveas-format "
+                                                    "validate ").replace(" -o OUT.aveas", ""),
+                                  path=e.path) from None
+    file = str(inputs[0])
+    out = [f if "file" in f.location else
+           dataclasses.replace(f, location={"file": file, **f.location}) for f in found]
+    seen: set[str] = set()
+    for w in caught:
+        msg = str(w.message)
+        if msg not in seen:
+            seen.add(msg)
+            out.append(SourceFinding("source.other", msg, {"file": file}))
+    return rec, out

@@ -39,6 +39,10 @@ CLASS_COLOURS: dict[str, tuple[float, float, float, float]] = {
 }
 
 
+#: states encoded at once (bounds the memory of the encoding)
+BATCH_STATES = 100_000
+
+
 class McapExportOptions(ConverterOptions):
     lane_step_m: float = 2.0
     """Sampling step of the lane borders (m)."""
@@ -171,38 +175,25 @@ def export_mcap(rec, output: Path, *, options: McapExportOptions) -> list[Path]:
     times, inv = np.unique(t, return_inverse=True)
     period = float(np.median(np.diff(times))) if len(times) > 1 else 1.0 / rec.meta.nominal_rate_hz
     life = int(round(1.5 * period * max(options.every, 1) * 1e9))
+    steps = np.arange(0, len(times), max(options.every, 1))
     order = np.argsort(inv, kind="stable")
-    bounds = np.searchsorted(inv[order], np.arange(len(times) + 1))
-    for k in range(0, len(times), max(options.every, 1)):
-        ns = t0 + int(round(times[k] * 1e9))
-        up = SceneUpdate()
-        for i in order[bounds[k]:bounds[k + 1]]:
-            q = int(pid[i])
-            cls, ln, wd, hh = info[q]
-            e = up.entities.add()
-            _ts(e.timestamp, ns)
-            _ts(e.lifetime, life)
-            e.frame_id = "map"
-            e.id = f"participant/{q}"
-            cube = e.cubes.add()
-            cube.pose.position.x, cube.pose.position.y = float(x[i]), float(y[i])
-            cube.pose.position.z = float(z[i] + hh / 2)
-            cube.pose.orientation.z = float(np.sin(h[i] / 2))
-            cube.pose.orientation.w = float(np.cos(h[i] / 2))
-            cube.size.x, cube.size.y, cube.size.z = float(ln), float(wd), float(hh)
-            c = CLASS_COLOURS.get(cls, CLASS_COLOURS["other"])
-            cube.color.CopyFrom(Color(r=c[0], g=c[1], b=c[2], a=c[3]))
-            txt = e.texts.add()
-            txt.pose.position.x, txt.pose.position.y = float(x[i]), float(y[i])
-            txt.pose.position.z = float(z[i] + hh + 0.5)
-            txt.pose.orientation.w = 1.0
-            txt.billboard = True
-            txt.font_size = 14.0
-            txt.scale_invariant = True
-            txt.color.CopyFrom(Color(r=1, g=1, b=1, a=1))
-            txt.text = f"{q} {cls}"
-            e.metadata.add(key="class", value=cls)
-        w.add_message(ch_scene, ns, up.SerializeToString(), ns)
+    order = order[np.isin(inv[order], steps)] if options.every > 1 else order
+    bounds = np.r_[np.searchsorted(inv[order], steps), len(order)]
+    step_ns = t0 + np.round(times[steps] * 1e9).astype(np.int64)
+    ids = list(info)
+    rows = np.searchsorted(np.asarray(ids), pid[order]) if ids == sorted(ids) else \
+        np.asarray([ids.index(int(q)) for q in pid[order]])
+    k0 = 0
+    while k0 < len(steps):  # batches of about BATCH_STATES states: bounded memory
+        k1 = int(np.searchsorted(bounds, bounds[k0] + BATCH_STATES, side="right"))
+        k1 = min(max(k1 - 1, k0 + 1), len(steps))
+        a, z1 = bounds[k0], bounds[k1]
+        o = order[a:z1]
+        scenes = _scene_updates(info, rows[a:z1], np.repeat(step_ns[k0:k1], np.diff(bounds[k0:k1 + 1])),
+                                life, x[o], y[o], z[o], h[o], bounds[k0:k1 + 1] - a)
+        for ns, data in zip(step_ns[k0:k1].tolist(), scenes.tolist()):
+            w.add_message(ch_scene, ns, data, ns)
+        k0 = k1
 
     # ---- geo --------------------------------------------------------------------------------------
     loc = rec.meta.location
@@ -211,16 +202,109 @@ def export_mcap(rec, output: Path, *, options: McapExportOptions) -> list[Path]:
     w.add_message(ch_origin, t0, fix.SerializeToString(), t0)
     if ch_loc is not None:
         lon, lat = s.column("lon").to_numpy(), s.column("lat").to_numpy()
-        for i in np.argsort(t, kind="stable"):
-            ns = t0 + int(round(t[i] * 1e9))
-            f = LocationFix(latitude=float(lat[i]), longitude=float(lon[i]), frame_id=str(int(pid[i])),
-                            position_covariance_type=LocationFix.UNKNOWN)
-            _ts(f.timestamp, ns)
-            f.color.CopyFrom(Color(**dict(zip("rgba", CLASS_COLOURS.get(info[int(pid[i])][0],
-                                                                          CLASS_COLOURS["other"])))))
-            w.add_message(ch_loc, ns, f.SerializeToString(), ns)
+        o = np.argsort(t, kind="stable")
+        ns = t0 + np.round(t[o] * 1e9).astype(np.int64)
+        ids_arr = np.asarray(ids)
+        prow = np.searchsorted(ids_arr, pid[o]) if ids == sorted(ids) else \
+            np.asarray([ids.index(int(q)) for q in pid[o]])
+        add, ch = w.add_message, ch_loc
+        for a in range(0, len(o), BATCH_STATES):
+            sl = slice(a, a + BATCH_STATES)
+            fixes = _location_fixes(info, prow[sl], ns[sl], lat[o[sl]], lon[o[sl]])
+            for k, data in zip(ns[sl].tolist(), fixes.tolist()):
+                add(ch, k, data, k)
     w.finish()
     return [write_bytes_atomic(Path(output), buf.getvalue())]
+
+
+# ---- the per-state messages, encoded from columns (converters/_protowire.py) --------------------
+
+def _numbers(message_class) -> dict[str, int]:
+    """Field name -> field number of a protobuf message class (from its descriptor)."""
+    return {f.name: f.number for f in message_class.DESCRIPTOR.fields}
+
+
+def _time(field: int, ns: np.ndarray):
+    """A google.protobuf.Timestamp / Duration field (seconds 1, nanos 2) of nanoseconds."""
+    from aveas_format.converters import _protowire as pw
+
+    sec, nanos = np.divmod(np.asarray(ns, np.int64), 1_000_000_000)
+    return pw.f_message(field, pw.concat(pw.f_varint(1, sec, True), pw.f_varint(2, nanos, True)))
+
+
+def _vec(field: int, *xyz: np.ndarray, names: str = "xyz"):
+    """A foxglove Vector3 / Quaternion / Color field (doubles 1, 2, ... in ``names`` order)."""
+    from aveas_format.converters import _protowire as pw
+
+    return pw.f_message(field, pw.concat(*(pw.f_double(k + 1, v, True) for k, v in enumerate(xyz))))
+
+
+def _colour(field: int, classes: list[str]):
+    c = np.array([CLASS_COLOURS.get(k, CLASS_COLOURS["other"]) for k in classes], float)
+    return _vec(field, *c.T)
+
+
+def _scene_updates(info: dict, rows: np.ndarray, ns: np.ndarray, life: int, x, y, z, h,
+                   bounds: np.ndarray):
+    """The ``foxglove.SceneUpdate`` of each time step: per state an entity with a cube and a
+    label (what :func:`export_mcap`'s docstring says), the states of step ``k`` being
+    ``bounds[k]:bounds[k+1]``; ``rows`` = each state's participant (index into ``info``)."""
+    from foxglove_schemas_protobuf.CubePrimitive_pb2 import CubePrimitive
+    from foxglove_schemas_protobuf.KeyValuePair_pb2 import KeyValuePair
+    from foxglove_schemas_protobuf.Pose_pb2 import Pose
+    from foxglove_schemas_protobuf.SceneEntity_pb2 import SceneEntity
+    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+    from foxglove_schemas_protobuf.TextPrimitive_pb2 import TextPrimitive
+
+    from aveas_format.converters import _protowire as pw
+
+    E, C, T = _numbers(SceneEntity), _numbers(CubePrimitive), _numbers(TextPrimitive)
+    P, K = _numbers(Pose), _numbers(KeyValuePair)
+    ids = list(info)
+    cls = [info[q][0] for q in ids]
+    size = np.array([info[q][1:4] for q in ids], float)
+    n, m = len(rows), len(ids)
+    # per participant, then per state (take)
+    ent_id = pw.take(pw.f_strings(E["id"], [f"participant/{q}" for q in ids]), rows)
+    meta = pw.take(pw.f_message(E["metadata"], pw.concat(pw.f_strings(K["key"], ["class"] * m),
+                                                         pw.f_strings(K["value"], cls))), rows)
+    cube_size = pw.take(_vec(C["size"], *size.T), rows)
+    cube_colour = pw.take(_colour(C["color"], cls), rows)
+    label = pw.take(pw.f_strings(T["text"], [f"{q} {k}" for q, k in zip(ids, cls)]), rows)
+    hh = size[rows, 2]
+    zero = np.zeros(n)
+    cube = pw.concat(
+        pw.f_message(C["pose"], pw.concat(
+            _vec(P["position"], x, y, z + hh / 2),
+            _vec(P["orientation"], zero, zero, np.sin(h / 2), np.cos(h / 2)))),
+        cube_size, cube_colour)
+    text = pw.concat(
+        pw.f_message(T["pose"], pw.concat(_vec(P["position"], x, y, z + hh + 0.5),
+                                          _vec(P["orientation"], zero, zero, zero, zero + 1))),
+        pw.f_varint(T["billboard"], np.ones(n, np.int64)),
+        pw.f_double(T["font_size"], np.full(n, 14.0)),
+        pw.f_varint(T["scale_invariant"], np.ones(n, np.int64)),
+        _vec(T["color"], zero + 1, zero + 1, zero + 1, zero + 1), label)
+    entity = pw.concat(  # in field-number order, as protobuf writes them
+        _time(E["timestamp"], ns), pw.f_strings(E["frame_id"], ["map"] * n), ent_id,
+        _time(E["lifetime"], np.full(n, life)), meta, pw.f_message(E["cubes"], cube),
+        pw.f_message(E["texts"], text))
+    return pw.group(pw.f_message(_numbers(SceneUpdate)["entities"], entity), bounds)
+
+
+def _location_fixes(info: dict, rows: np.ndarray, ns: np.ndarray, lat, lon):
+    """One ``foxglove.LocationFix`` per state: latitude, longitude, the participant id as
+    ``frame_id``, the class colour, the timestamp."""
+    from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
+
+    from aveas_format.converters import _protowire as pw
+
+    F = _numbers(LocationFix)
+    ids = list(info)
+    colour = pw.take(_colour(F["color"], [info[q][0] for q in ids]), rows)
+    frame = pw.take(pw.f_strings(F["frame_id"], [str(int(q)) for q in ids]), rows)
+    return pw.concat(pw.f_double(F["latitude"], lat, True), pw.f_double(F["longitude"], lon, True),
+                     _time(F["timestamp"], ns), frame, colour)
 
 
 __all__ = ["CLASS_COLOURS", "export_mcap"]

@@ -13,7 +13,8 @@ MCAP ``zero_time`` metadata + that offset gives ``start_time`` unless the option
 - every ``moving_object``: ``id`` -> source id; ``base.position`` x, y (z) = the bounding box centre
   in the OSI global frame, which is the footprint centre the format uses; ``base.orientation.yaw``
   (rad, counter-clockwise) -> heading; ``base.velocity``/``base.acceleration`` x, y -> vx, vy, ax,
-  ay; ``base.dimension`` length/width/height (the first message of an object counts);
+  ay; ``base.dimension`` length/width/height (the first message of an object with a positive one
+  counts);
   ``base.orientation_rate.yaw`` -> yaw_rate.
 - class: ``type`` PEDESTRIAN -> pedestrian, ANIMAL -> animal, VEHICLE by
   ``vehicle_classification.type``: (small/compact/luxury) car -> car, delivery van -> van, heavy
@@ -25,6 +26,13 @@ MCAP ``zero_time`` metadata + that offset gives ``start_time`` unless the option
 - ``assigned_lane_id`` (OSI lane ids, not OpenDRIVE lanes) -> the participant's ``osi_lanes``
   attribute; road coordinates are computed through the map.
 - ``host_vehicle_id`` -> that participant gets role ``host_role`` (default ``system_under_test``).
+
+Findings about the trace that the import survives are located (message index, object id) with
+:func:`aveas_format.errors.report_source`, one per object and kind with a count (warnings of
+``convert``, the ``source.osi.*`` rules of ``validate TRACE``): a moving object without id or
+base (the sample is skipped), without a positive ``base.dimension`` (a later message's is used;
+without any the object is not imported), an UNKNOWN or unmapped type (class ``other``), a
+timestamp earlier than the previous message's (the states are sorted).
 
 Frame: the OSI global frame is taken to be the map's local frame (a simulator driving on the same
 OpenDRIVE map). Where the GroundTruth carries a ``proj_string`` that differs from the map's
@@ -53,6 +61,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field
 
+from aveas_format.converters import _protowire as pw
 from aveas_format.converters.common import (
     companion_map,
     companion_map_path,
@@ -63,7 +72,7 @@ from aveas_format.converters.common import (
     wrap_recording,
 )
 from aveas_format.converters.registry import ConverterOptions, ImportOptions, converter
-from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.errors import FormatError, RecordingIOError, report_source
 from aveas_format.io.arrow import column_numpy
 from aveas_format.safeio import check_mcap
 
@@ -153,13 +162,14 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     from aveas_format.mapref.crs import LocalFrame, crs_equal
     from aveas_format.opendrive import load_map
 
-    cols: dict[str, list] = {k: [] for k in (
-        "t", "id", "x", "y", "z", "yaw", "vx", "vy", "ax", "ay", "yaw_rate", "brake", "ind_l",
-        "ind_r", "hazard", "msg")}
+    # one tuple of floats (_FLOAT_COLS) per sample, its object id and message index apart
+    cols: dict[str, list] = {"f": [], "id": [], "msg": []}
     static: dict[int, dict[str, Any]] = {}
     host_ids: set[int] = set()
     proj: tuple[str, tuple[float, float, float, float]] | None = None
     n_msg = 0
+    last_t = -math.inf
+    found = _Findings()
     for path in inputs:
         try:
             with warnings.catch_warnings():
@@ -176,15 +186,34 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
                             _get(off, "position", "y", default=0.0), 0.0,
                             _get(off, "yaw", default=0.0))
                         proj = (str(gt.proj_string), o)
+                    if t < last_t:
+                        found.add("source.osi.time_not_increasing", None, n_msg,
+                                  f"timestamp {t:.9g} s is earlier than the previous "
+                                  f"message's ({last_t:.9g} s); the states are sorted")
+                    last_t = max(last_t, t)
                     for mo in gt.moving_object:
-                        _object(mo, t, n_msg, cols, static)
+                        _object(mo, t, n_msg, cols, static, found)
                     n_msg += 1
         except (FormatError, RecordingIOError):
             raise
         except Exception as e:  # noqa: BLE001 - decoder errors of any kind
             raise FormatError(f"cannot decode OSI message {n_msg}: {type(e).__name__}: {e}",
                               path=path) from None
-    if not cols["t"]:
+    f = np.asarray(cols["f"], np.float64).reshape(-1, len(_FLOAT_COLS))
+    cols = {"id": np.asarray(cols["id"], np.int64), "msg": np.asarray(cols["msg"], np.int64),
+            **{k: f[:, j] for j, k in enumerate(_FLOAT_COLS)}}
+    sizeless = [oid for oid, d in static.items() if d["length"] is None]
+    for oid in sizeless:
+        found.add("source.osi.missing_dimension", oid, static[oid]["no_size_msg"],
+                  f"moving object {oid} has no positive base.dimension (length, width) in any of "
+                  f"its messages: not imported", count=static[oid]["no_size_n"])
+    if sizeless:  # objects without a size cannot be participants: their samples go
+        keep = ~np.isin(cols["id"], sizeless)
+        cols = {k: v[keep] for k, v in cols.items()}
+        for oid in sizeless:
+            del static[oid]
+    found.report(inputs[0] if len(inputs) == 1 else None)
+    if not len(cols["t"]):
         raise FormatError("no GroundTruth moving objects in the trace", path=inputs[0])
 
     t = np.asarray(cols["t"])
@@ -283,6 +312,11 @@ def _shift_iso(iso: str, seconds: float) -> str:
     return dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
+#: the float columns of the samples (one tuple each), in order
+_FLOAT_COLS = ("t", "x", "y", "z", "yaw", "vx", "vy", "ax", "ay", "yaw_rate", "brake", "ind_l",
+               "ind_r", "hazard")
+
+
 def _get(obj: Any, *path: str, default: float = math.nan) -> float:
     """A numeric field of nested OSI messages; ``default`` where a message on the way is unset."""
     for name in path:
@@ -292,26 +326,40 @@ def _get(obj: Any, *path: str, default: float = math.nan) -> float:
     return float(obj)
 
 
-def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dict[str, Any]]) -> None:
-    if getattr(mo, "id", None) is None or getattr(mo, "base", None) is None:
-        raise FormatError(f"moving object without id or base in message {msg}")
-    oid = int(mo.id.value)
+class _Findings:
+    """What the import finds about the trace, one finding per (code, object) with the first
+    message index and a count (:func:`aveas_format.errors.report_source` at the end)."""
+
+    def __init__(self) -> None:
+        self.first: dict[tuple[str, int | None], list[Any]] = {}
+
+    def add(self, code: str, oid: int | None, msg: int, message: str, count: int = 1) -> None:
+        entry = self.first.get((code, oid))
+        if entry is None:
+            self.first[(code, oid)] = [msg, message, count]
+        else:
+            entry[2] += count
+
+    def report(self, path: Path | None) -> None:
+        for (code, oid), (msg, message, count) in self.first.items():
+            report_source(code, message + (f" ({count} times)" if count > 1 else ""),
+                          count=count, stacklevel=3, file=str(path) if path else None,
+                          message_index=msg, object_id=oid)
+
+
+def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dict[str, Any]],
+            found: _Findings) -> None:
+    oid = int(mo.id.value) if getattr(mo, "id", None) is not None else None
+    if oid is None or getattr(mo, "base", None) is None:
+        found.add("source.osi.missing_base", oid, msg,
+                  f"a moving object without {'id' if oid is None else 'base'} was skipped")
+        return
     b = mo.base
-    cols["t"].append(t)
-    cols["id"].append(oid)
-    cols["msg"].append(msg)
-    cols["x"].append(_get(b, "position", "x"))
-    cols["y"].append(_get(b, "position", "y"))
-    cols["z"].append(_get(b, "position", "z"))
-    cols["yaw"].append(_get(b, "orientation", "yaw", default=0.0))
-    cols["vx"].append(_get(b, "velocity", "x", default=0.0))
-    cols["vy"].append(_get(b, "velocity", "y", default=0.0))
-    cols["ax"].append(_get(b, "acceleration", "x"))
-    cols["ay"].append(_get(b, "acceleration", "y"))
-    cols["yaw_rate"].append(_get(b, "orientation_rate", "yaw"))
-    brake = ind_l = ind_r = hazard = math.nan
-    vc = getattr(mo, "vehicle_classification", None)
-    ls = getattr(vc, "light_state", None) if vc is not None else None
+    p, o, v, a, r = b.position, b.orientation, b.velocity, b.acceleration, b.orientation_rate
+    nan = math.nan
+    brake = ind_l = ind_r = hazard = nan
+    vc = mo.vehicle_classification
+    ls = vc.light_state if vc is not None else None
     if ls is not None:
         bname = _enum_name(ls.brake_light_state)
         if bname not in ("UNKNOWN", "OTHER"):
@@ -321,29 +369,48 @@ def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dic
             ind_l = 1.0 if iname == "LEFT" else 0.0
             ind_r = 1.0 if iname == "RIGHT" else 0.0
             hazard = 1.0 if iname == "WARNING" else 0.0
-    cols["brake"].append(brake)
-    cols["ind_l"].append(ind_l)
-    cols["ind_r"].append(ind_r)
-    cols["hazard"].append(hazard)
+    cols["f"].append((
+        t, *((p.x, p.y, p.z) if p is not None else (nan, nan, nan)),
+        o.yaw if o is not None else 0.0,
+        *((v.x, v.y) if v is not None else (0.0, 0.0)),
+        *((a.x, a.y) if a is not None else (nan, nan)),
+        r.yaw if r is not None else nan, brake, ind_l, ind_r, hazard))
+    cols["id"].append(oid)
+    cols["msg"].append(msg)
     d = static.get(oid)
     if d is None:
         otype = _enum_name(mo.type)
+        vtype = _enum_name(vc.type) if vc is not None and otype == "VEHICLE" else None
         if otype == "PEDESTRIAN":
             cls = "pedestrian"
         elif otype == "ANIMAL":
             cls = "animal"
         elif otype == "VEHICLE":
-            cls = VEHICLE_CLASS.get(_enum_name(vc.type), "other") if vc is not None else "car"
+            cls = VEHICLE_CLASS.get(vtype, "other") if vc is not None else "car"
         else:
             cls = "other"
+        if otype not in ("PEDESTRIAN", "ANIMAL", "VEHICLE", "OTHER") or (
+                vtype is not None and vtype not in VEHICLE_CLASS and vtype != "OTHER"):
+            found.add("source.osi.unknown_type", oid, msg,
+                      f"moving object {oid}: type {otype}"
+                      + (f", vehicle type {vtype}" if vtype is not None else "")
+                      + " has no class of the format: class other")
+        static[oid] = d = {"class": cls, "length": None, "width": None, "height": None,
+                           "osi_type": otype, "lanes": set(), "no_size_msg": msg, "no_size_n": 0}
+    if d["length"] is None:
         length, width, height = (_get(b, "dimension", k) for k in ("length", "width", "height"))
-        if not (length > 0 and width > 0):
-            raise FormatError(f"moving object {oid} has no positive base.dimension "
-                              f"(length {length}, width {width}) in message {msg}")
-        static[oid] = d = {"class": cls, "length": length, "width": width,
-                           "height": height if height > 0 else None, "osi_type": otype,
-                           "lanes": set()}
-    d["lanes"].update(int(li.value) for li in mo.assigned_lane_id)
+        if length > 0 and width > 0:
+            if d["no_size_n"]:
+                found.add("source.osi.missing_dimension", oid, d["no_size_msg"],
+                          f"moving object {oid} has no positive base.dimension in message "
+                          f"{d['no_size_msg']} and {d['no_size_n'] - 1} later ones; the size of "
+                          f"message {msg} is used", count=d["no_size_n"])
+            d.update(length=length, width=width, height=height if height > 0 else None)
+        else:
+            d["no_size_n"] += 1
+    lanes = mo.assigned_lane_id
+    if lanes:
+        d["lanes"].update(int(li.value) for li in lanes)
 
 
 # ---- export ------------------------------------------------------------------------------------
@@ -384,6 +451,98 @@ def _light_state(b, brake: float, left: float, right: float, hazard: float):
         brake_light_state=getattr(b.MovingObjectVehicleClassificationLightStateBrakeLightState, brk))
 
 
+#: states encoded at once by the OSI export (bounds its memory: ~1 kB per state while encoding)
+BATCH_STATES = 100_000
+
+#: heights (m) where a participant has none
+_DEFAULT_HEIGHT = {"pedestrian": 1.75, "bicycle": 1.7, "truck": 3.5, "bus": 3.2, "trailer": 3.5}
+
+
+def encode_ground_truths(b, participants, order: np.ndarray, bounds: np.ndarray, sec: np.ndarray,
+                         nanos: np.ndarray, host: int | None, proj_string: str, *, pid, x, y,
+                         heading, vx, vy, ax, ay, lights) -> pw.Ragged:
+    """The serialized ``osi3.GroundTruth`` of each time step, from columns (:mod:`._protowire`):
+    the states ``order[bounds[k]:bounds[k+1]]`` are the moving objects of step ``k`` (timestamp
+    ``sec[k]``, ``nanos[k]``). Field for field what the bindings' messages held (the module
+    docstring of :func:`export_osi`); ``lights`` (brake, left, right, hazard probabilities) or
+    None."""
+    p = participants
+    p_ids = p.column("participant_id").to_numpy()
+    by_id = np.argsort(p_ids)
+    row = by_id[np.searchsorted(p_ids, pid[order], sorter=by_id)]
+    classes = p.column("class").cast("string").to_pylist()
+    heights = (p.column("height").to_pylist() if "height" in p.column_names else [None] * len(classes))
+    h_p = np.array([hh or _DEFAULT_HEIGHT.get(c, 1.5) for hh, c in zip(heights, classes)], float)
+    mtype = b.MovingObjectType
+    vtypes = b.MovingObjectVehicleClassificationType
+    kinds = [EXPORT_CLASS.get(c, ("OTHER", None)) for c in classes]
+    otype_p = np.array([int(getattr(mtype, o)) for o, _ in kinds], np.int64)
+    vtype_p = np.array([int(getattr(vtypes, v)) if v else -1 for _, v in kinds], np.int64)
+    L = column_numpy(p, "length")[row]
+    W = column_numpy(p, "width")[row]
+    H = h_p[row]
+    o = order
+
+    def vec(a, bb, c):
+        return pw.concat(pw.f_double(1, a), pw.f_double(2, bb), pw.f_double(3, c))
+
+    zeros = np.zeros(len(o))
+    acc_ok = np.isfinite(ax[o])
+    base = pw.concat(
+        pw.f_message(1, vec(L, W, H)),                                 # dimension
+        pw.f_message(2, vec(x[o], y[o], H / 2)),                       # position
+        pw.f_message(3, pw.f_double(3, heading[o])),                   # orientation.yaw
+        pw.f_message(4, vec(vx[o], vy[o], zeros)),                     # velocity
+        pw.keep(pw.f_message(5, vec(np.where(acc_ok, ax[o], 0.0), np.where(acc_ok, ay[o], 0.0),
+                                    zeros)), acc_ok))                  # acceleration
+    vt = vtype_p[row]
+    is_vehicle = vt >= 0
+    vc = [pw.f_varint(1, np.maximum(vt, 0))]
+    if lights is not None:
+        brake, left, right, hazard = (v[o] for v in lights)
+
+        def on(v):
+            return np.isfinite(v) & (v >= 0.5)
+
+        ind_s = b.MovingObjectVehicleClassificationLightStateIndicatorState
+        brk_s = b.MovingObjectVehicleClassificationLightStateBrakeLightState
+        known = np.isfinite(left) | np.isfinite(right) | np.isfinite(hazard)
+        ind = np.select([on(hazard), on(left), on(right), known],
+                        [int(ind_s.WARNING), int(ind_s.LEFT), int(ind_s.RIGHT), int(ind_s.OFF)],
+                        int(ind_s.UNKNOWN))
+        brk = np.select([on(brake), np.isfinite(brake)], [int(brk_s.NORMAL), int(brk_s.OFF)],
+                        int(brk_s.UNKNOWN))
+        vc.append(pw.f_message(2, pw.concat(pw.f_varint(1, ind), pw.f_varint(7, brk))))
+    mo = pw.concat(
+        pw.f_message(1, pw.f_varint(1, pid[o])),                       # id
+        pw.f_message(2, base),
+        pw.f_varint(3, otype_p[row]),                                  # type
+        pw.keep(pw.f_message(6, pw.concat(*vc)), is_vehicle))          # vehicle_classification
+    m = len(sec)
+    parts = [pw.f_message(2, pw.concat(pw.f_varint(1, sec), pw.f_varint(2, nanos)))]  # timestamp
+    if host is not None:
+        parts.append(pw.Ragged.const(pw.f_message(3, pw.f_varint(1, np.array([host]))).data.tobytes(),
+                                     m))                                # host_vehicle_id
+    parts.append(pw.group(pw.f_message(5, mo), bounds))                # moving_object
+    if proj_string:
+        parts.append(pw.Ragged.const(pw.f_strings(14, [proj_string]).data.tobytes(), m))
+    return pw.concat(*parts)
+
+
+class _Encoded:
+    """A serialized GroundTruth as betterosi's writer takes a message (its type for the MCAP
+    channel's schema, its bytes)."""
+
+    def __init__(self, raw: bytes, proto) -> None:
+        self.raw, self.proto = raw, proto
+
+    def desc(self):
+        return self.proto.desc()
+
+    def to_binary(self) -> bytes:
+        return self.raw
+
+
 @converter("osi", direction="export", options=OsiExportOptions,
            description="ASAM OSI GroundTruth trace (.osi length-prefixed binary, or .mcap)",
            requires=("betterosi",), extra="osi")
@@ -401,7 +560,7 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
 
     import betterosi as b
 
-    from aveas_format.safeio import write_bytes_atomic
+    from aveas_format.safeio import write_bytes_atomic, write_chunks_atomic
 
     suffix = output.suffix.lower()
     if suffix not in (".osi", ".mcap"):
@@ -430,52 +589,32 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
                      if p.get("role") in ("system_under_test", "recording_vehicle")), None)
     elif host not in info:
         raise FormatError(f"host_id {host}: no such participant", path=output)
-    default_h = {"pedestrian": 1.75, "bicycle": 1.7, "truck": 3.5, "bus": 3.2, "trailer": 3.5}
+    times = np.unique(t)[::options.every]
+    sel = np.flatnonzero(np.isin(t, times)) if options.every > 1 else np.arange(n)
+    order = sel[np.lexsort((pid[sel], t[sel]))]
+    bounds = np.r_[np.searchsorted(t[order], times), len(order)]
+    sec, nanos = np.divmod(np.round(times * 1e9).astype(np.int64), 10**9)
 
-    def moving_object(i: int):
-        p = info[int(pid[i])]
-        otype, vtype = EXPORT_CLASS.get(p["class"], ("OTHER", None))
-        h = p.get("height") or default_h.get(p["class"], 1.5)
-        kw: dict[str, Any] = {"type": getattr(b.MovingObjectType, otype)}
-        if vtype is not None:
-            vc = {"type": getattr(b.MovingObjectVehicleClassificationType, vtype)}
-            if has_lights:
-                vc["light_state"] = _light_state(b, *(v[i] for v in lights))
-            kw["vehicle_classification"] = b.MovingObjectVehicleClassification(**vc)
-        acc = b.Vector3d(x=float(ax[i]), y=float(ay[i]), z=0.0) if np.isfinite(ax[i]) else None
-        return b.MovingObject(
-            id=b.Identifier(value=int(pid[i])),
-            base=b.BaseMoving(
-                dimension=b.Dimension3d(length=float(p["length"]), width=float(p["width"]),
-                                        height=float(h)),
-                position=b.Vector3d(x=float(x[i]), y=float(y[i]), z=float(h) / 2),
-                orientation=b.Orientation3d(yaw=float(heading[i])),
-                velocity=b.Vector3d(x=float(vx[i]), y=float(vy[i]), z=0.0),
-                **({"acceleration": acc} if acc is not None else {})),
-            **kw)
+    def batches():
+        """(GroundTruth bytes, step indices) of batches of about :data:`BATCH_STATES` states:
+        the memory of the encoding stays bounded whatever the length of the recording."""
+        k0 = 0
+        while k0 < len(times):
+            k1 = int(np.searchsorted(bounds, bounds[k0] + BATCH_STATES, side="right"))
+            k1 = min(max(k1 - 1, k0 + 1), len(times))
+            yield encode_ground_truths(
+                b, rec.participants, order[bounds[k0]:bounds[k1]], bounds[k0:k1 + 1] - bounds[k0],
+                sec[k0:k1], nanos[k0:k1], host, rec.meta.crs or "", pid=pid, x=x, y=y,
+                heading=heading, vx=vx, vy=vy, ax=ax, ay=ay,
+                lights=lights if has_lights else None), range(k0, k1)
+            k0 = k1
 
-    times = np.unique(t)
-    order = np.lexsort((pid, t))
-    bounds = np.searchsorted(t[order], times)
-    ends = np.r_[bounds[1:], n]
-    msgs = []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", DeprecationWarning)
-        for k in range(0, len(times), options.every):
-            sec, nanos = divmod(round(float(times[k]) * 1e9), 10**9)
-            gt = b.GroundTruth(
-                timestamp=b.Timestamp(seconds=sec, nanos=nanos),
-                moving_object=[moving_object(int(i)) for i in order[bounds[k]:ends[k]]],
-                proj_string=rec.meta.crs or "")
-            if host is not None:
-                gt.host_vehicle_id = b.Identifier(value=int(host))
-            msgs.append(gt)
     companion = companion_map_path(output, options)
     extra = ([write_bytes_atomic(companion, companion_map(rec))]
              if companion is not None and rec.map_source is not None else [])
     if suffix == ".osi":
-        data = b"".join(struct.pack("<I", len(m)) + m for m in (g.to_binary() for g in msgs))
-        return [write_bytes_atomic(output, data), *extra]
+        return [write_chunks_atomic(output, (pw.length_prefixed(g) for g, _ in batches())),
+                *extra]
     tmp = output.with_name(f".{output.stem}.tmp-{os.getpid()}.mcap")
     try:
         with warnings.catch_warnings():
@@ -483,8 +622,10 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
             with b.Writer(tmp, metadata={"zero_time": rec.meta.start_time,
                                          "description": f"aveas-format export of "
                                                         f"{rec.meta.recording_id}"}) as w:
-                for m in msgs:
-                    w.add(m)
+                proto = b.GroundTruth()
+                for gts, steps in batches():
+                    for raw, k in zip(gts.tolist(), steps):
+                        w.add(_Encoded(raw, proto), log_time=int(sec[k]) * 10**9 + int(nanos[k]))
         with open(tmp, "rb") as f:
             os.fsync(f.fileno())
         os.replace(tmp, output)

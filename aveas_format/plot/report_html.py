@@ -55,7 +55,7 @@ a.doc{font-size:.8rem;margin-left:.4rem} abbr{text-decoration:none;cursor:help}
 """
 
 _LOC = ("file", "table", "row", "participant_id", "time", "column", "x", "y", "road_id", "lane_id",
-        "line")
+        "line", "frame", "uid", "json_path", "message_index", "object_id", "entity")
 
 
 def _e(v: Any) -> str:

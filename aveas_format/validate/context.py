@@ -125,6 +125,9 @@ class Context:
         #: results shared between rules (e.g. the pairs of nearby participants), by key
         self.cache: dict[str, Any] = {}
         self.problems: list[Problem] = []
+        #: findings an import reported about the submitted source file (``validate FILE``): a list
+        #: of :class:`aveas_format.errors.SourceFinding`, read by the ``source.*`` rules
+        self.source_findings: list[Any] = []
         #: merged results of the collectors (set by the runner before the recording rules run)
         self.collected: dict[str, Any] = {}
         #: tables validated in batches (empty for small recordings and in-memory ones)

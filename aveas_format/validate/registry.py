@@ -22,7 +22,8 @@ import numpy as np
 from aveas_format import plugins
 from aveas_format.validate.report import Severity
 
-_CODE = re.compile(r"^[a-z]+\.[a-z][a-z0-9_]*$")
+#: ``family.snake_case``, or ``family.group.snake_case`` (``source.osi.missing_dimension``)
+_CODE = re.compile(r"^[a-z]+\.(?:[a-z][a-z0-9_]*\.)?[a-z][a-z0-9_]*$")
 
 
 @dataclass
@@ -80,6 +81,13 @@ class Rule:
     def family(self) -> str:
         return self.code.split(".", 1)[0]
 
+    @property
+    def groups(self) -> tuple[str, ...]:
+        """What ``--select`` may name to pick the rule besides its code: the family, and for a
+        three-part code its group (``source``, ``source.osi``)."""
+        parts = self.code.split(".")
+        return tuple(".".join(parts[:i]) for i in range(1, len(parts)))
+
 
 REGISTRY: dict[str, Rule] = {}
 
@@ -101,7 +109,8 @@ def rule(code: str, severity: str, title: str, message: str, enforces: str | Non
     ``Context.schema``, ``num_rows``, ``key_table`` or a collector instead).
     """
     if not _CODE.match(code):
-        raise ValueError(f"rule code {code!r} must look like 'family.snake_case'")
+        raise ValueError(f"rule code {code!r} must look like 'family.snake_case' (or "
+                         "'family.group.snake_case')")
     if code in REGISTRY:
         raise ValueError(f"rule code {code!r} registered twice: {REGISTRY[code].fn.__module__} has it")
     if scope not in _SCOPES:
@@ -159,16 +168,17 @@ def load_rules() -> dict[str, Rule]:
 
 
 def select_rules(select: list[str] | None = None, ignore: list[str] | None = None) -> list[Rule]:
-    """Rules matching ``select`` (codes or families; default all) minus ``ignore``, by code (the
+    """Rules matching ``select`` (codes, families or groups such as ``source.osi``; default all)
+    minus ``ignore``, by code (the
     same order whichever rule module happened to be imported first).
 
     Raises ValueError naming an unknown code or family.
     """
     reg = load_rules()
-    families = {r.family for r in reg.values()}
+    families = {g for r in reg.values() for g in r.groups}
 
     def match(r: Rule, pats: list[str]) -> bool:
-        return any(p == r.code or p == r.family for p in pats)
+        return any(p == r.code or p in r.groups for p in pats)
 
     for p in (select or []) + (ignore or []):
         if p not in reg and p not in families:

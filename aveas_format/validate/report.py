@@ -40,6 +40,11 @@ def findings_exit_code(results: Iterable[Any], fail_on: str = "error") -> int:
     return 1 if any(r.count and r.severity.rank >= threshold for r in results) else 0
 
 
+#: location fields shown as ``name=value`` by :meth:`Location.text` (file/line and x,y apart)
+TEXT_FIELDS = ("table", "row", "participant_id", "time", "column", "road_id", "lane_id", "xpath",
+               "frame", "uid", "json_path", "message_index", "object_id", "entity")
+
+
 class Location(BaseModel):
     """Where a finding is. Every field is optional; set those that apply."""
 
@@ -57,12 +62,22 @@ class Location(BaseModel):
     lane_id: int | None = None
     xpath: str | None = None
     line: int | None = Field(None, description="1-based line in a text file (JSON, XML)")
+    # a submitted source file's own coordinates (findings of the import, ``source.*`` rules)
+    frame: str | None = Field(None, description="OpenLABEL frame key")
+    uid: str | None = Field(None, description="OpenLABEL object uid")
+    json_path: str | None = Field(None, description="JSON path in the source file, e.g. "
+                                  "$.openlabel.frames['12'].objects['3']")
+    message_index: int | None = Field(None, description="0-based index of an OSI message")
+    object_id: int | None = Field(None, description="OSI object id")
+    entity: str | None = Field(None, description="OpenSCENARIO entity (ScenarioObject name)")
 
     def text(self) -> str:
         parts = []
         if self.file:
             parts.append(self.file + (f":{self.line}" if self.line is not None else ""))
-        for name in ("table", "row", "participant_id", "time", "column", "road_id", "lane_id", "xpath"):
+        elif self.line is not None:
+            parts.append(f"line={self.line}")
+        for name in TEXT_FIELDS:
             v = getattr(self, name)
             if v is not None:
                 parts.append(f"{name}={fmt_num(v)}")
@@ -79,10 +94,12 @@ class Finding(BaseModel):
     message: str
     location: Location = Field(default_factory=Location)
     context: dict[str, Any] = Field(default_factory=dict)
+    count: int = Field(1, ge=1, description="instances the finding stands for (a source finding "
+                       "about many objects names the first; the rule's count is the sum)")
 
     def get(self, key: str) -> Any:
         """A location field, or ``code``/``severity``/``message``, or a context value."""
-        if key in ("code", "message"):
+        if key in ("code", "message", "count"):
             return getattr(self, key)
         if key == "severity":
             return self.severity.value
@@ -161,7 +178,9 @@ def _field(name: str, doc: str) -> property:
 #: (column, pandas dtype) of :meth:`Report.to_pandas` after code, severity, title, message
 _FRAME_LOCATION = {"file": "string", "table": "string", "row": "Int64", "participant_id": "Int64",
                    "time": "Float64", "column": "string", "x": "Float64", "y": "Float64",
-                   "road_id": "string", "lane_id": "Int64", "xpath": "string", "line": "Int64"}
+                   "road_id": "string", "lane_id": "Int64", "xpath": "string", "line": "Int64",
+                   "frame": "string", "uid": "string", "json_path": "string",
+                   "message_index": "Int64", "object_id": "Int64", "entity": "string"}
 
 
 class Report:
@@ -237,8 +256,9 @@ class Report:
         """The sampled findings as a DataFrame, one row per finding: ``code``, ``severity`` (an
         ordered categorical, so ``df[df.severity >= "warning"]`` works), ``title``, ``message``,
         the typed location (``file``, ``table``, ``row``, ``participant_id``, ``time``,
-        ``column``, ``x``, ``y``, ``road_id``, ``lane_id``, ``xpath``, ``line``; nullable
-        dtypes) and ``context`` (a dict of the other values of the message). Needs pandas
+        ``column``, ``x``, ``y``, ``road_id``, ``lane_id``, ``xpath``, ``line``, and a submitted
+        file's ``frame``, ``uid``, ``json_path``, ``message_index``, ``object_id``, ``entity``;
+        nullable dtypes) and ``context`` (a dict of the other values of the message). Needs pandas
         (``pip install "aveas-format[pandas]"``)."""
         from aveas_format.errors import require
 

@@ -20,6 +20,8 @@ from aveas_format.validate.report import Finding, Location, Report, RuleResult, 
 #: Findings kept per rule (the count is always the true total).
 DEFAULT_MAX_SAMPLE = 50
 _LOCATION_FIELDS = set(Location.model_fields)
+_INT_FIELDS = ("row", "participant_id", "line", "message_index", "object_id", "lane_id")
+_STR_FIELDS = ("frame", "uid", "json_path", "entity")
 
 
 class _SafeDict(dict):
@@ -38,21 +40,23 @@ def _plain(v: Any) -> Any:
 def _finding(r: Rule, fields: dict[str, Any]) -> Finding:
     fields = {k: _plain(v) for k, v in fields.items() if v is not None}
     loc = {k: v for k, v in fields.items() if k in _LOCATION_FIELDS}
-    if "row" in loc:
-        loc["row"] = int(loc["row"])
-    if "participant_id" in loc:
-        loc["participant_id"] = int(loc["participant_id"])
+    for k in _INT_FIELDS:
+        if k in loc:
+            loc[k] = int(loc[k])
+    for k in _STR_FIELDS:
+        if k in loc:
+            loc[k] = str(loc[k])
     for k in ("time", "x", "y"):
         if k in loc and isinstance(loc[k], (int, float)):
             loc[k] = float(loc[k])
-    ctx = {k: v for k, v in fields.items() if k not in _LOCATION_FIELDS}
+    ctx = {k: v for k, v in fields.items() if k not in _LOCATION_FIELDS and k != "count"}
     try:  # numbers in the message rounded for people; the typed fields keep every digit
         message = r.message.format_map(_SafeDict({k: fmt_num(v) if isinstance(v, float) else v
                                                   for k, v in fields.items()}))
     except (ValueError, TypeError, IndexError, KeyError):
         message = r.message
     return Finding(code=r.code, severity=r.severity, message=message,
-                   location=Location(**loc), context=ctx)
+                   location=Location(**loc), context=ctx, count=int(fields.get("count", 1)))
 
 
 def _map_row(fields: dict[str, Any], ctx: Context | None) -> dict[str, Any]:
@@ -75,7 +79,7 @@ def run_rule(r: Rule, ctx: Context, max_sample: int = DEFAULT_MAX_SAMPLE,
     t0 = time.perf_counter()
     for item in r.fn(ctx):
         if isinstance(item, Hit):
-            res.count += 1
+            res.count += int(item.fields.get("count", 1))  # a source finding stands for many
             if len(res.sample) < max_sample:
                 res.sample.append(_finding(r, _map_row(item.fields, ctx)))
         elif isinstance(item, Hits):
@@ -122,8 +126,14 @@ class _Run:
 
 def validate(source: str | Path | Recording, *, select: list[str] | None = None,
              ignore: list[str] | None = None, config: Any = None,
-             max_sample: int = DEFAULT_MAX_SAMPLE) -> Report:
+             max_sample: int = DEFAULT_MAX_SAMPLE, source_findings: list[Any] | None = None,
+             name: str | None = None) -> Report:
     """Validate a recording (a path to a directory/ZIP, or an in-memory Recording).
+
+    ``source_findings``: the :class:`~aveas_format.errors.SourceFinding` list an import collected
+    (:func:`~aveas_format.errors.collect_source_findings`) when the recording was just imported from
+    a submitted file; the ``source.*`` rules report them. ``name``: the report's ``recording``
+    (default: the path, or the recording id of an in-memory one).
 
     Raises RecordingIOError when the path is not a recording at all; every problem inside the
     recording becomes a finding. A rule that raises becomes a tool failure in ``report.failures``.
@@ -135,7 +145,8 @@ def validate(source: str | Path | Recording, *, select: list[str] | None = None,
     rules = select_rules(select, ignore)
     t0 = time.perf_counter()
     ctx = Context(source, config=config)
-    report = Report(recording=ctx.name, tool_version=__version__)
+    ctx.source_findings = list(source_findings or [])
+    report = Report(recording=name or ctx.name, tool_version=__version__)
     run = _Run(report, max_sample)
     row_rules = [r for r in rules if r.scope == "rows"]
     rec_rules = [r for r in rules if r.scope == "recording"]

@@ -81,3 +81,31 @@ def test_cli_export_mcap(rich, tmp_path):
     with open(out, "rb") as f:
         summary = mcap_reader.make_reader(f).get_summary()
     assert "/locations" not in {c.topic for c in summary.channels.values()}
+
+
+def test_mcap_export_in_batches_writes_the_same_messages(rich, tmp_path, monkeypatch):
+    """The boxes and locations are encoded in batches of states (bounded memory): any batch size
+    gives the same messages, and each decodes with the Foxglove bindings."""
+    from foxglove_schemas_protobuf.LocationFix_pb2 import LocationFix
+    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+
+    from aveas_format.converters import mcap_export
+
+    export = get_converter("mcap", "export")
+
+    def messages(path):
+        with open(path, "rb") as f:
+            return [(c.topic, m.log_time, m.data) for _, c, m in
+                    mcap_reader.make_reader(f).iter_messages()]
+
+    export(rich, tmp_path / "whole.mcap")
+    monkeypatch.setattr(mcap_export, "BATCH_STATES", 5)
+    export(rich, tmp_path / "batched.mcap")
+    whole = messages(tmp_path / "whole.mcap")
+    assert whole == messages(tmp_path / "batched.mcap")
+    scene = next(d for topic, _, d in whole if topic == "/scene")
+    e = SceneUpdate.FromString(scene).entities[0]
+    assert e.id.startswith("participant/") and e.frame_id == "map" and len(e.cubes) == 1
+    assert e.metadata[0].key == "class" and e.texts[0].text.endswith(e.metadata[0].value)
+    fix = LocationFix.FromString(next(d for topic, _, d in whole if topic == "/locations"))
+    assert fix.frame_id.isdigit() and -90 <= fix.latitude <= 90 and fix.color.a > 0

@@ -175,10 +175,10 @@ description="c" author="me"/><Catalog name="VehicleCatalog">
                                                                           ("B", "bus", 12.0)]
     # the reference point is 2 m behind the bounding box centre: positions are the centre's
     assert states_of(rec)["x"][0] == pytest.approx(12.0)
-    # C cannot be converted: one warning line naming it and why
+    # C cannot be converted: one warning line naming it, where and why
     assert [w for w in warned if "'C'" in w] == [
-        "s.xosc: entity 'C' not converted: catalog entry 'tram' of catalog 'VehicleCatalog' not "
-        "found in the CatalogLocations (XML line 5)"]
+        f"{p}:5: entity 'C' not converted: catalog entry 'tram' of catalog 'VehicleCatalog' not "
+        "found in the CatalogLocations"]
 
 
 def test_no_entity_convertible_is_an_error(tmp_path):

@@ -104,3 +104,33 @@ def test_exports_and_imports_back(path, shared_data, tmp_path):
         assert_same_motion(rec, back, tol_m=1e-3 if name != "openlabel" else 1e-2)
         assert pc.sum(pc.is_null(back.states["road_id"])).as_py() <= \
             pc.sum(pc.is_null(rec.states["road_id"])).as_py() + 2, name
+
+
+@pytest.mark.parametrize("path", XOSC)
+def test_validate_the_scenario_as_submitted(path, shared_data, capsys):
+    """``aveas-format validate FILE.xosc`` (issue 22) on esmini's files: imported on the fly with
+    the map and CRS the conversion takes; no entity left unconverted (no
+    source.openscenario.entity_not_converted / no_bounding_box), no tool failure."""
+    import json
+
+    from lxml import etree
+
+    from aveas_format.cli.app import app
+    from aveas_format.cli.common import run
+
+    exp = EXPECT.get(path.name, {})
+    map_path = ESMINI_MAPS / exp["map"] if "map" in exp else None
+    lf = etree.parse(str(path)).getroot().find("RoadNetwork/LogicFile")
+    if map_path is None and lf is None:
+        pytest.skip(f"{path.name} names no map and none is known for it")
+    crs = crs_for(map_path or (path.parent / lf.get("filepath")))
+    args = ["validate", str(path), "--format", "json", *(["--map", str(map_path)] if map_path else []),
+            *(["--crs", crs] if crs else [])]
+    code = run(app, args)
+    rep = json.loads(capsys.readouterr().out)
+    errors = [r for r in rep["results"] if r["severity"] == "error"]
+    assert code == (1 if errors else 0) and rep["recording"] == str(path) and not rep["failures"]
+    found = {r["code"] for r in rep["results"]}
+    assert not found & {"source.openscenario.entity_not_converted",
+                        "source.openscenario.no_bounding_box"}
+    assert "source.openscenario.vertex_without_time" in rep["rules_run"]

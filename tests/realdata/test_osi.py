@@ -145,3 +145,19 @@ def test_missing_crs_error_shows_a_command_that_works(shared_data, tmp_path):
     r = _cli(*args)
     assert r.returncode == 0, r.stderr + r.stdout
     assert aveas_format.open(tmp_path / "p.aveas").meta.crs.startswith("+proj=tmerc")
+
+
+@pytest.mark.parametrize("path", TRACES)
+def test_validate_the_trace_as_submitted(path, shared_data, capsys):
+    """``aveas-format validate TRACE --map MAP`` (issue 22): imported on the fly, the format's
+    rules and the source.osi.* rules run, no error; esmini's traces have no OSI finding."""
+    import json
+
+    from aveas_format.cli.app import app
+    from aveas_format.cli.common import run
+
+    code = run(app, ["validate", str(path), "--map", str(_map(path)), "--format", "json"])
+    rep = json.loads(capsys.readouterr().out)
+    assert code == 0 and rep["recording"] == str(path) and not rep["failures"]
+    assert {"source.osi.missing_dimension", "kinematics.speed"} <= set(rep["rules_run"])
+    assert not [r["code"] for r in rep["results"] if r["code"].startswith("source.osi.")]

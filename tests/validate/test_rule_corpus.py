@@ -541,7 +541,9 @@ def test_derived_stale_asks_the_derivation_package(clean, monkeypatch):
 
 def test_every_rule_has_a_failing_case():
     covered = {c[1] for c in CASES} | {"metadata.derived_stale", "map.mostly_off_road"}
-    semantic = {c for c in load_rules() if not c.startswith(("structure.", "zzz."))}
+    # source.* rules report an import's findings, not a recording's: their cases are in
+    # test_validate_submission.py (one per code)
+    semantic = {c for c in load_rules() if not c.startswith(("structure.", "zzz.", "source."))}
     assert semantic == covered
 
 

@@ -7,7 +7,6 @@ Parameters and catalogs are resolved first (:mod:`.params`), then the storyboard
 from __future__ import annotations
 
 import math
-import warnings
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +16,7 @@ from pydantic import Field
 
 from aveas_format.converters.common import load_map_bytes, wrap_recording
 from aveas_format.converters.registry import ImportOptions, converter
-from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.errors import FormatError, RecordingIOError, report_source
 from aveas_format.numeric import fmt_num
 from aveas_format.safeio import xml_parser
 
@@ -85,22 +84,25 @@ def _inline_catalog_maneuvers(root, catalogs, path: Path) -> None:
             mg.replace(ref, entry)
 
 
-def _entity(so, catalogs) -> tuple[Any, str | None]:
-    """The Vehicle / Pedestrian / MiscObject element of a ScenarioObject, or (None, why not)."""
+def _entity(so, catalogs) -> tuple[Any, str | None, int | None]:
+    """The Vehicle / Pedestrian / MiscObject element of a ScenarioObject, or (None, why not, the
+    XML line)."""
     el = next((c for c in so if c.tag in _KINDS), None)
     if el is not None:
-        return el, None
+        return el, None, None
     ref = so.find("CatalogReference")
     if ref is not None:
         try:
             el = catalogs.resolve(ref)
         except FormatError as e:
-            return None, f"{e.message} (XML line {ref.sourceline})"
+            return None, e.message, ref.sourceline
         if el.tag not in _KINDS:
-            return None, f"catalog entry {ref.get('entryName')!r} is a <{el.tag}>, not an entity"
-        return el, None
+            return None, (f"catalog entry {ref.get('entryName')!r} is a <{el.tag}>, not an "
+                          "entity"), ref.sourceline
+        return el, None, None
     kinds = [c.tag for c in so if isinstance(c.tag, str) and c.tag != "ObjectController"]
-    return None, f"<{kinds[0] if kinds else 'nothing'}> is not a Vehicle, Pedestrian or MiscObject"
+    return None, (f"<{kinds[0] if kinds else 'nothing'}> is not a Vehicle, Pedestrian or "
+                  "MiscObject"), so.sourceline
 
 
 @converter("openscenario", description="ASAM OpenSCENARIO XML 1.0-1.3: the storyboard's motion "
@@ -116,7 +118,9 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
     ``BoundingBox`` gives length, width, height and the offset of its centre from the entity's
     reference point (positions are moved to the footprint centre). Class from the category (or the
     ``aveas:class`` property of this toolkit's own export). An entity that cannot be converted is
-    one warning line naming it and why; an error only when none can.
+    one located finding (:func:`~aveas_format.errors.report_source`: entity, XML line; a warning of
+    ``convert``, a ``source.openscenario.*`` rule of ``validate FILE``) naming it and why; an error
+    only when none can.
     """
     from aveas_format.converters.openscenario.params import Catalogs, declare, resolve_tree
     from aveas_format.converters.openscenario.replay import Replay
@@ -146,20 +150,27 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
     frame = LocalFrame(crs, net.header.offset, warn=False) if crs else None
 
     problems: dict[str, str] = {}
+    where: dict[str, tuple[str, int | None]] = {}  # entity -> code, XML line of its problem
     info: dict[str, dict[str, Any]] = {}
     for so in root.iterfind("Entities/ScenarioObject"):
         name = so.get("name")
-        el, why = _entity(so, catalogs)
+        el, why, line = _entity(so, catalogs)
         if el is None:
             problems[name] = why or "unknown entity kind"
+            where[name] = ("source.openscenario.entity_not_converted", line)
             continue
         props = {pr.get("name"): pr.get("value") for pr in el.iterfind("Properties/Property")}
         cat = el.get("vehicleCategory") or el.get("pedestrianCategory") or (
             "pedestrian" if el.tag == "Pedestrian" else None)
         dims, centre = el.find("BoundingBox/Dimensions"), el.find("BoundingBox/Center")
         if dims is None:
-            problems[name] = f"no BoundingBox (XML line {el.sourceline})"
+            problems[name] = f"no BoundingBox/Dimensions in its <{el.tag}>"
+            where[name] = ("source.openscenario.no_bounding_box", el.sourceline)
             continue
+        if cat and cat not in CATEGORY_TO_CLASS and not props.get("aveas:class"):
+            report_source("source.openscenario.unknown_category",
+                          f"entity {name!r}: category {cat!r} has no class of the format: class "
+                          "other", file=str(path), entity=name, line=el.sourceline)
         f = {k: float(dims.get(k, "nan")) for k in ("length", "width", "height")}
         c = {k: float(centre.get(k, "0")) if centre is not None else 0.0 for k in ("x", "y")}
         info[name] = {"class": props.get("aveas:class") or CATEGORY_TO_CLASS.get(cat or "", "other"),
@@ -183,9 +194,11 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
         e = ents[name]
         if e.error:
             problems[name] = e.error
+            where[name] = ("source.openscenario.entity_not_converted", e.error_line)
             continue
         if not e.rows:
             problems[name] = "no position (no TeleportAction or trajectory places it)"
+            where[name] = ("source.openscenario.entity_not_converted", None)
             continue
         q = d["participant_id"]
         if q and str(q).isdigit():
@@ -217,29 +230,42 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
             part[k].append(d[k])
         part["role"].append(d["role"] if d["role"] and d["role"] not in ("None", "observed")
                             else "simulated_agent")
-    for name, why in problems.items():
-        warnings.warn(f"{path.name}: entity {name!r} not converted: {why}", stacklevel=2)
     if not rows["time"]:
         raise FormatError("no participants: no entity could be converted"
-                          + (": " + "; ".join(f"{n!r}: {w}" for n, w in problems.items())
+                          + (": " + "; ".join(f"{n!r}: {w}" + (f" (XML line {where[n][1]})"
+                                                               if where[n][1] else "")
+                                              for n, w in problems.items())
                              if problems else " (the file has no ScenarioObject)"), path=path)
+    for name, why in problems.items():
+        report_source(where[name][0], f"entity {name!r} not converted: {why}", file=str(path),
+                      entity=name, line=where[name][1])
     for name, n in replay.clipped.items():
-        warnings.warn(f"{path.name}: {n} trajectory vertices of entity {name!r} lie after the end "
-                      f"of the scenario (its StopTrigger, at {replay.t:g} s) and were dropped",
-                      stacklevel=2)
-    if dropped:
-        warnings.warn(f"{path.name}: {len(dropped)} trajectory vertices repeat an entity's time "
-                      f"(e.g. entity {dropped[0][0]!r} at {fmt_num(dropped[0][1])} s) and were dropped; "
-                      "the first vertex of each time is kept", stacklevel=2)
+        report_source("source.openscenario.after_end",
+                      f"{n} trajectory vertices of entity {name!r} lie after the end of the "
+                      f"scenario (its StopTrigger, at {replay.t:g} s) and were dropped", count=n,
+                      file=str(path), entity=name)
+    by_entity: dict[str, list[float]] = {}
+    for name, tt in dropped:
+        by_entity.setdefault(name, []).append(tt)
+    for name, times in by_entity.items():
+        report_source("source.openscenario.repeated_time",
+                      f"{len(times)} trajectory vertices of entity {name!r} repeat a time (first at "
+                      f"{fmt_num(times[0])} s) with another position and were dropped; the first "
+                      "vertex of each time is kept", count=len(times), file=str(path),
+                      entity=name, time=times[0])
     notes = {}
     if replay.ignored_actions:
         notes["actions_not_replayed"] = dict(sorted(replay.ignored_actions.items()))
     if replay.ignored_conditions:
         notes["conditions_not_evaluated"] = sorted(replay.ignored_conditions)
-    if notes:
-        warnings.warn(f"{path.name}: replayed kinematically; "
-                      + "; ".join(f"{k.replace('_', ' ')}: {', '.join(v)}" for k, v in notes.items()),
-                      stacklevel=2)
+    for what, counts in (("action", replay.ignored_actions),
+                         ("condition", replay.ignored_conditions)):
+        for kind, n in sorted(counts.items()):
+            report_source("source.openscenario.not_replayed",
+                          f"replayed kinematically: {what}s not "
+                          f"{'replayed' if what == 'action' else 'evaluated (they never hold)'}: "
+                          f"{kind} ({n})",
+                          count=n, file=str(path), line=replay.ignored_lines.get(kind))
     states = {k: np.asarray(v, np.int64 if k == "participant_id" else np.float64)
               for k, v in rows.items()}
     if np.isnan(states["heading"]).any():

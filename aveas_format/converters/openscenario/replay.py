@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from aveas_format.converters.openscenario.shapes import Pose, Resolver, ShapeError, attr, shape_path
-from aveas_format.errors import FormatError
+from aveas_format.errors import FormatError, report_source
 
 #: s the replay goes on after every act has ended and no trajectory runs, waiting for a stop trigger
 GRACE = 10.0
@@ -98,6 +98,7 @@ class Entity:
     rows: list[tuple[float, float, float, float, float]] = field(default_factory=list)
     rest_since: float | None = None
     error: str | None = None
+    error_line: int | None = None  # the XML line of the action that failed
 
 
 class Replay:
@@ -115,6 +116,8 @@ class Replay:
         self.state: dict[Any, tuple[str, float | None, float | None]] = {}  # -> kind, start, end
         self.cond_true: dict[Any, float] = {}
         self.ignored_actions: dict[str, int] = {}
+        #: the XML line of the first action / condition of each kind not replayed
+        self.ignored_lines: dict[str, int] = {}
         self.clipped: dict[str, int] = {}
         self.wakeups: set[float] = set()  # times between steps at which something happens  # entity -> timed vertices after the end of the replay
         self.ignored_conditions: dict[str, int] = {}
@@ -131,9 +134,9 @@ class Replay:
     def _record(self, e: Entity, t: float, p: Pose) -> None:
         e.rows.append((t, p.x, p.y, p.z, np.nan if p.h is None else p.h))
 
-    def _fail(self, e: Entity, why: str) -> None:
+    def _fail(self, e: Entity, why: str, line: int | None = None) -> None:
         if e.error is None:
-            e.error = why
+            e.error, e.error_line = why, line
 
     # -- actions ---------------------------------------------------------------------------------
     def _private(self, e: Entity, pa) -> float:
@@ -165,14 +168,14 @@ class Replay:
             if child.tag == "RoutingAction" and fta is not None:
                 return self._follow(e, fta)
         except (ShapeError, EntityError) as err:
-            self._fail(e, f"{err.message} (XML line {err.where.get('line')})"
-                       if err.where.get("line") else err.message)
+            self._fail(e, err.message, err.where.get("line"))
             return t
         kind = child.tag
         if kind in ("LongitudinalAction", "LateralAction", "RoutingAction", "ControllerAction",
                     "AppearanceAction", "TrailerAction"):
             kind = next((c.tag for c in child if isinstance(c.tag, str)), kind)
         self.ignored_actions[kind] = self.ignored_actions.get(kind, 0) + 1
+        self.ignored_lines.setdefault(kind, child.sourceline)
         return t
 
     def _speed(self, e: Entity, sa) -> float:
@@ -306,6 +309,12 @@ class Replay:
                                   line=traj.sourceline)
             tr = Traj(tt, path.x, path.y, path.z, h, timed=True)
         else:
+            if timing is not None:  # timed, but a vertex has no time: followed at the speed
+                untimed = next((v for v in traj.iter("Vertex") if v.get("time") is None), traj)
+                report_source("source.openscenario.vertex_without_time",
+                              f"entity {e.name!r}: trajectory {traj.get('name')!r} has a "
+                              "TimeReference but a vertex without time: followed at the "
+                              "entity's speed instead", entity=e.name, line=untimed.sourceline)
             v = e.v
             if abs(v) < 1e-9:
                 raise EntityError(
@@ -483,6 +492,7 @@ class Replay:
                 except (TypeError, ValueError):
                     return v == k.get("value") if k.get("rule") == "equalTo" else False
             self.ignored_conditions[k.tag] = self.ignored_conditions.get(k.tag, 0) + 1
+            self.ignored_lines.setdefault(k.tag, k.sourceline)
             return False
         be = c.find("ByEntityCondition")
         if be is None:
@@ -494,6 +504,7 @@ class Replay:
         if k is None or k.tag not in ENTITY_CONDITIONS:
             tag = k.tag if k is not None else "EntityCondition"
             self.ignored_conditions[tag] = self.ignored_conditions.get(tag, 0) + 1
+            self.ignored_lines.setdefault(tag, (k if k is not None else be).sourceline)
             return False
         vals = [self._entity_condition(k, self.ents.get(r)) for r in refs]
         if not vals:
@@ -641,6 +652,7 @@ class Replay:
             else:
                 kind = next((c.tag for c in action if isinstance(c.tag, str)), "Action")
                 self.ignored_actions[kind] = self.ignored_actions.get(kind, 0) + 1
+                self.ignored_lines.setdefault(kind, action.sourceline)
             self.state[action] = ("action", self.t, a_end)
             end = max(end, a_end)
         self.state[ev] = ("event", self.t, end)

@@ -1,0 +1,187 @@
+"""Protocol Buffers wire format from columns: many messages of one layout encoded at once.
+
+The OSI and Foxglove exports write one small message per state (an ``osi3.MovingObject``, a
+``foxglove.SceneEntity``). Building a message object per state in the Python bindings and
+serialising it costs more than everything else of the export (``benchmarks/bench_interop.py``
+measures that floor). Here the bytes are built from the columns with numpy instead, by the
+encoding rules of https://protobuf.dev/programming-guides/encoding/: a field is its key (field
+number << 3 | wire type, a varint) and its value — a varint (integers, enums, bools), 8 or 4
+little-endian bytes (double, float), or a varint length and the bytes (strings, sub-messages).
+
+A column of ``n`` byte strings is a :class:`Ragged` (flat bytes + per-row lengths); fields are
+:class:`Ragged` columns concatenated row by row (:func:`concat`); a repeated sub-message of
+consecutive rows is :func:`group`. Every field is written (proto2 ``optional`` fields set, as the
+bindings write what they are given); where a value is absent for some rows, :func:`keep` drops it
+from those rows. Decoders read the result as they read the bindings' output (the OSI and MCAP
+tests decode it with the bindings).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+VARINT, I64, LEN, I32 = 0, 1, 2, 5
+
+
+@dataclass
+class Ragged:
+    """``n`` byte strings: ``data`` (uint8, all rows' bytes in order) and ``lengths`` (int64)."""
+
+    data: np.ndarray
+    lengths: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return len(self.lengths)
+
+    def offsets(self) -> np.ndarray:
+        return np.r_[0, np.cumsum(self.lengths)]
+
+    def tolist(self) -> list[bytes]:
+        raw = self.data.tobytes()
+        off = self.offsets().tolist()
+        return [raw[a:b] for a, b in zip(off[:-1], off[1:])]
+
+    @classmethod
+    def fixed(cls, matrix: np.ndarray) -> Ragged:
+        """Rows of equal width (an ``n x w`` uint8 matrix)."""
+        m = np.ascontiguousarray(matrix, np.uint8)
+        return cls(m.reshape(-1), np.full(m.shape[0], m.shape[1], np.int64))
+
+    @classmethod
+    def const(cls, value: bytes, n: int) -> Ragged:
+        """The same bytes in every row."""
+        return cls.fixed(np.tile(np.frombuffer(value, np.uint8), (n, 1)))
+
+
+def key(field: int, wire: int) -> bytes:
+    return varint_bytes(field << 3 | wire)
+
+
+def varint_bytes(v: int) -> bytes:
+    out = bytearray()
+    v &= (1 << 64) - 1  # negative int64: two's complement, 10 bytes
+    while True:
+        b = v & 0x7F
+        v >>= 7
+        if v:
+            out.append(b | 0x80)
+        else:
+            out.append(b)
+            return bytes(out)
+
+
+def varints(values: np.ndarray) -> Ragged:
+    """Each value (integers; negative ones as 64-bit two's complement) as a varint."""
+    v = np.asarray(values).astype(np.int64).view(np.uint64)
+    n = len(v)
+    top = int(v.max()) if n else 0
+    if top < 0x80:  # one byte each (keys, enums, short lengths): the common case
+        return Ragged.fixed(v.astype(np.uint8).reshape(-1, 1))
+    width = (top.bit_length() + 6) // 7
+    nbytes = np.ones(n, np.int64)
+    for k in range(1, width):
+        nbytes += (v >> np.uint64(7 * k)) > 0
+    cols = np.arange(width)
+    mat = ((v[:, None] >> (np.uint64(7) * cols.astype(np.uint64))) & np.uint64(0x7F)).astype(np.uint8)
+    mat |= np.where(cols[None, :] < (nbytes[:, None] - 1), 0x80, 0).astype(np.uint8)
+    return Ragged(mat[cols[None, :] < nbytes[:, None]], nbytes)
+
+
+def _with_key(field: int, wire: int, body: Ragged) -> Ragged:
+    return concat(Ragged.const(key(field, wire), body.n), body)
+
+
+def f_varint(field: int, values: np.ndarray, proto3: bool = False) -> Ragged:
+    """An integer / enum / bool field in every row (``proto3``: absent where 0, as proto3
+    writers leave a scalar at its default out)."""
+    r = _with_key(field, VARINT, varints(values))
+    return keep(r, np.asarray(values) != 0) if proto3 else r
+
+
+def f_double(field: int, values: np.ndarray, proto3: bool = False) -> Ragged:
+    """A double field in every row (``proto3``: absent where 0.0)."""
+    v = np.ascontiguousarray(np.asarray(values, "<f8"))
+    k = np.frombuffer(key(field, I64), np.uint8)
+    r = Ragged.fixed(np.hstack([np.tile(k, (len(v), 1)), v.view(np.uint8).reshape(-1, 8)]))
+    return keep(r, v.view(np.uint64) != 0) if proto3 else r  # -0.0 is written, as protobuf does
+
+
+def f_float(field: int, values: np.ndarray) -> Ragged:
+    v = np.ascontiguousarray(np.asarray(values, "<f4"))
+    k = np.frombuffer(key(field, I32), np.uint8)
+    return Ragged.fixed(np.hstack([np.tile(k, (len(v), 1)), v.view(np.uint8).reshape(-1, 4)]))
+
+
+def f_message(field: int, body: Ragged) -> Ragged:
+    """A sub-message (or string / bytes) field: key, length, the bytes."""
+    return concat(Ragged.const(key(field, LEN), body.n), varints(body.lengths), body)
+
+
+def f_strings(field: int, values: list[str]) -> Ragged:
+    raw = [s.encode() for s in values]
+    body = Ragged(np.frombuffer(b"".join(raw), np.uint8).copy(),
+                  np.fromiter(map(len, raw), np.int64, len(raw)))
+    return f_message(field, body)
+
+
+def take(r: Ragged, rows: np.ndarray) -> Ragged:
+    """The given rows (any order, repeats allowed), e.g. a participant's bytes for each state."""
+    rows = np.asarray(rows, np.int64)
+    off = r.offsets()
+    start, lengths = off[rows], r.lengths[rows]
+    sel = np.repeat(start - np.r_[0, np.cumsum(lengths)][:-1], lengths) + \
+        np.arange(int(lengths.sum()))
+    return Ragged(r.data[sel], lengths)
+
+
+def keep(r: Ragged, mask: np.ndarray) -> Ragged:
+    """The rows where ``mask`` is true keep their bytes; the others become empty (the field is
+    absent there)."""
+    mask = np.asarray(mask, bool)
+    per_byte = np.repeat(mask, r.lengths)
+    return Ragged(r.data[per_byte], np.where(mask, r.lengths, 0))
+
+
+def concat(*parts: Ragged) -> Ragged:
+    """Row ``i`` of the result is row ``i`` of every part, in order."""
+    parts = tuple(p for p in parts if p is not None)
+    n = parts[0].n
+    if n == 0:
+        return Ragged(np.zeros(0, np.uint8), np.zeros(0, np.int64))
+    if all((p.lengths == p.lengths[0]).all() for p in parts):  # all fixed width: one hstack
+        return Ragged.fixed(np.hstack([p.data.reshape(n, -1) for p in parts]))
+    lengths = np.sum([p.lengths for p in parts], axis=0)
+    out_off = np.r_[0, np.cumsum(lengths)][:-1]
+    out = np.empty(int(lengths.sum()), np.uint8)
+    before = np.zeros_like(lengths)
+    for p in parts:
+        if len(p.data):
+            starts = out_off + before
+            src_off = np.r_[0, np.cumsum(p.lengths)][:-1]
+            dest = np.repeat(starts - src_off, p.lengths) + np.arange(len(p.data))
+            out[dest] = p.data
+        before = before + p.lengths
+    return Ragged(out, lengths)
+
+
+def group(r: Ragged, bounds: np.ndarray) -> Ragged:
+    """Consecutive rows joined: row ``k`` of the result is rows ``bounds[k]:bounds[k+1]``
+    (``bounds`` has one more entry than the result; rows outside are dropped)."""
+    off = r.offsets()
+    b = np.asarray(bounds, np.int64)
+    start, end = off[b[:-1]], off[b[1:]]
+    if b[0] == 0 and b[-1] == r.n:
+        return Ragged(r.data, end - start)
+    sel = np.repeat(start - np.r_[0, np.cumsum(end - start)][:-1], end - start) + \
+        np.arange(int((end - start).sum()))
+    return Ragged(r.data[sel], end - start)
+
+
+def length_prefixed(r: Ragged) -> bytes:
+    """The rows as one byte string, each prefixed with its length as a 4-byte little-endian
+    integer (the framing of a binary .osi trace)."""
+    head = Ragged.fixed(r.lengths.astype("<u4").view(np.uint8).reshape(-1, 4))
+    return concat(head, r).data.tobytes()
