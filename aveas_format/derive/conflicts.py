@@ -157,6 +157,14 @@ def _delta_std(args, variances):
     return [np.where(np.isfinite(b), np.sqrt(s), np.nan) for b, s in zip(base, var)]
 
 
+def pair_rank(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rank of each row's unordered pair of participant ids among the distinct pairs (the
+    conflict numbering of ``derived/conflicts``)."""
+    lo, hi = np.minimum(a, b).astype(np.int64), np.maximum(a, b).astype(np.int64)
+    keys = np.unique(np.stack([lo, hi], axis=1), axis=0, return_inverse=True)[1]
+    return keys.ravel().astype(np.int64)
+
+
 def _passage(t, arc, target):
     """Time the path position ``arc`` (increasing along a track) reaches ``target``, linearly
     interpolated within the frame (NaN if never)."""
@@ -261,6 +269,10 @@ def compute(rec, p: ConflictsParams) -> pa.Table:
     r = {k: (np.concatenate(v) if v else np.zeros(0)) for k, v in rows.items()}
     i = r["i"].astype(np.int64)
     j = r["j"].astype(np.int64)
+    if len(i):
+        # conflicts numbered in the order of their pairs of participant ids (one crossing per
+        # pair): the same numbers whichever subset of the recording is derived
+        r["cid"] = pair_rank(S.pid[i], S.pid[j])
 
     def f(v):
         v = np.asarray(v, float)
