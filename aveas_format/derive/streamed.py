@@ -44,7 +44,7 @@ DEFAULT_WINDOW_S = 60.0
 #: rows per row group of a window's part files
 PART_ROW_GROUP = 16_384
 #: rows per sorted piece when a derived table is assembled from the windows' parts
-ASSEMBLE_ROWS = 1_000_000
+ASSEMBLE_ROWS = 250_000
 
 
 def _peak_kb() -> int | None:
@@ -334,7 +334,7 @@ def merge_summaries(parts: list[pa.Table]) -> pa.Table:
 def derive_by_windows(path: str | Path, out_dir: str | Path, *,
                       window_s: float = DEFAULT_WINDOW_S, margin_s: float = 5.0,
                       workers: int | None = 2, progress: bool = False,
-                      track_chunk_rows: int = 500_000, **params: Any) -> dict[str, Any]:
+                      track_chunk_rows: int = 200_000, **params: Any) -> dict[str, Any]:
     """Derive the criticality measures of the recording at ``path`` into ``out_dir`` (module
     docstring): kinematics per chunk of whole tracks (about ``track_chunk_rows`` states), then
     interactions, conflicts and the summary per time window; ``params`` (flat: a parameter name
