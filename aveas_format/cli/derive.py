@@ -76,7 +76,9 @@ def derive(
                                 "to FILE (.json or .html)."),
 ) -> None:
     """Compute derived tables and events (FORMAT.md 10) and write the recording: to `--output`,
-    or over the input with `--in-place`. Prints what was derived as JSON."""
+    or over the input with `--in-place`. Prints what was derived as JSON. `--window SECONDS`
+    derives the criticality tables of a recording too large for memory by time windows, the same
+    tables as at once (docs/derive.md "Large recordings")."""
     import aveas_format
     from aveas_format.derive import derive as run_derive
     from aveas_format.derive.registry import derivations
