@@ -385,16 +385,6 @@ def derive_by_windows(path: str | Path, out_dir: str | Path, *,
             "participants": summary.num_rows - 1}
 
 
-def _file_sha256(path: Path, chunk: int = 1 << 20) -> str:
-    import hashlib
-
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(chunk):
-            h.update(block)
-    return h.hexdigest()
-
-
 def _pid_ranges(dataset, rows: int) -> list[tuple[int, int]]:
     """Consecutive participant-id ranges ``(lo, hi)`` (inclusive) of about ``rows`` rows each
     (a participant's rows are never split)."""
@@ -458,7 +448,10 @@ def _assemble(parts: Path, spec, dest: Path, provenance: bytes) -> tuple[int, st
     finally:
         if writer is not None:
             writer.close()
-    return rows, _file_sha256(dest)
+    from aveas_format.io.container import Container
+
+    with Container(dest.parent) as c:
+        return rows, c.sha256(dest.name)
 
 
 def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEFAULT_WINDOW_S,
@@ -477,21 +470,17 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
     from datetime import datetime, timezone
 
     from aveas_format.derive.registry import DERIVED_KEY, derivations
-    from aveas_format.errors import RecordingExistsError, RecordingIOError
-    from aveas_format.io.container import Container
+    from aveas_format.errors import RecordingIOError
+    from aveas_format.io.container import Container, sha256_of
     from aveas_format.io.reader import open_recording
-    from aveas_format.io.writer import _fsync_dir, _replace, parquet_bytes, prepare_table
+    from aveas_format.io.writer import (_fsync_dir, _replace, check_target, parquet_bytes,
+                                        prepare_table)
     from aveas_format.schema.metadata import DerivedEntry, TableEntry
     from aveas_format.schema.tables import TABLES
     from aveas_format.schema.versions import FORMAT_VERSION
 
     src, path = Path(src), Path(path)
-    if path.exists() and not overwrite:
-        raise RecordingExistsError("exists; pass overwrite=True (CLI: --overwrite) to replace it",
-                                   path=path)
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise RecordingIOError("parent directory does not exist", path=parent)
+    parent = check_target(path, overwrite)
     head = open_recording(src, tables=["participants"], verify=False)
     meta = head.meta.model_copy(deep=True)
     reg = derivations()
@@ -529,7 +518,7 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
                 buf = parquet_bytes(t, spec)
                 (tmp / spec.file).parent.mkdir(parents=True, exist_ok=True)
                 (tmp / spec.file).write_bytes(memoryview(buf))
-                rows, sha = t.num_rows, _file_sha256(tmp / spec.file)
+                rows, sha = t.num_rows, sha256_of(buf)
             else:
                 rows, sha = _assemble(work / n, spec, tmp / spec.file, prov)
             meta.tables[d.table] = TableEntry(rows=rows, sha256=sha)

@@ -127,6 +127,18 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
+def check_target(path: Path, overwrite: bool) -> Path:
+    """The directory a recording is to be written into at ``path``; RecordingExistsError where
+    ``path`` exists and not ``overwrite``, RecordingIOError where the directory does not exist."""
+    if path.exists() and not overwrite:
+        raise RecordingExistsError("exists; pass overwrite=True (CLI: --overwrite) to replace it",
+                                   path=path)
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise RecordingIOError("parent directory does not exist", path=parent)
+    return parent
+
+
 def write_recording(rec, path: str | Path, *, overwrite: bool = False, form: str | None = None) -> Path:
     """Write ``rec`` (a Recording) to ``path`` atomically; return the path.
 
@@ -136,12 +148,7 @@ def write_recording(rec, path: str | Path, *, overwrite: bool = False, form: str
     form = form or ("zip" if path.name.endswith(".zip") else "directory")
     if form not in ("directory", "zip"):
         raise ValueError(f"form must be 'directory' or 'zip', got {form!r}")
-    if path.exists() and not overwrite:
-        raise RecordingExistsError("exists; pass overwrite=True (CLI: --overwrite) to replace it",
-                                   path=path)
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise RecordingIOError("parent directory does not exist", path=parent)
+    parent = check_target(path, overwrite)
 
     members: dict[str, pa.Buffer | bytes] = {}
     entries: dict[str, TableEntry] = {}
