@@ -117,3 +117,38 @@ def instant_lateral_steps(same: np.ndarray, dt: np.ndarray, dx: np.ndarray, dy: 
         jump &= across / np.where(dt > 0, dt, np.inf) > max_lateral_speed
         jump &= np.abs(lat - np.nan_to_num(v_lateral) * dt) > 0.5 * across
     return jump
+
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+
+
+def _splitmix64(z: np.ndarray) -> np.ndarray:
+    """SplitMix64's output function (Steele et al. 2014) on uint64 arrays (wrapping)."""
+    z = z + _GOLDEN
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+def keyed_normals(seed: int, keys: tuple[np.ndarray, ...], n: int) -> np.ndarray:
+    """``(n, m)`` standard normal draws for ``m`` elements, each column a function of ``seed``,
+    that element's ``keys`` (integer arrays of length ``m``) and the draw index only: the same
+    element gets the same draws whatever else is in the batch (a counter-based generator:
+    SplitMix64 of the keys and the counter, Box-Muller). For Monte Carlo whose result must not
+    depend on how the rows are split into batches (time windows, subsets)."""
+    keys = tuple(np.asarray(k).astype(np.int64).view(np.uint64) for k in keys)
+    m = len(keys[0]) if keys else 0
+    half = (n + 1) // 2
+    with np.errstate(over="ignore"):
+        h = np.full(m, np.uint64(seed & 0xFFFFFFFFFFFFFFFF), np.uint64)
+        for k in keys:
+            h = _splitmix64(h ^ k)
+        c = (np.arange(1, half + 1, dtype=np.uint64) * _GOLDEN)[:, None]
+        bits = _splitmix64(h[None, :] ^ c)  # (half, m): two 32-bit uniforms each
+    u1 = ((bits >> np.uint64(32)).astype(np.float64) + 1.0) * (1.0 / 4294967296.0)  # (0, 1]
+    u2 = (bits & np.uint64(0xFFFFFFFF)).astype(np.float64) * (2.0 * np.pi / 4294967296.0)
+    r = np.sqrt(-2.0 * np.log(u1))
+    out = np.empty((2 * half, m))
+    np.multiply(r, np.cos(u2), out=out[:half])
+    np.multiply(r, np.sin(u2), out=out[half:])
+    return out[:n]

@@ -65,13 +65,20 @@ def derive(
     param: list[str] = typer.Option(None, "--param", help="A derivation parameter as "
                                     "NAME.PARAM=VALUE (repeatable; VALUE in JSON), e.g. "
                                     "traffic.cell_duration_s=30."),
-    workers: int = workers_option(scope="Dataset"),
+    window: float | None = typer.Option(None, "--window", min=1.0, help="Derive by time "
+                                        "windows of SECONDS with bounded memory (kinematics, "
+                                        "interactions, conflicts, criticality_summary; 60 is a "
+                                        "good choice; docs/derive.md 'Large recordings'). One "
+                                        "recording; --workers processes."),
+    workers: int = workers_option(scope="Dataset or --window"),
     scheduler: str = scheduler_option(scope="Dataset"),
     report: Path = typer.Option(None, "--report", help="Dataset: also write the dataset report "
                                 "to FILE (.json or .html)."),
 ) -> None:
     """Compute derived tables and events (FORMAT.md 10) and write the recording: to `--output`,
-    or over the input with `--in-place`. Prints what was derived as JSON."""
+    or over the input with `--in-place`. Prints what was derived as JSON. `--window SECONDS`
+    derives the criticality tables of a recording too large for memory by time windows, the same
+    tables as at once (docs/derive.md "Large recordings")."""
     import aveas_format
     from aveas_format.derive import derive as run_derive
     from aveas_format.derive.registry import derivations
@@ -104,6 +111,14 @@ def derive(
         ev["hard_braking_mps2"] = hard_braking
     if drac is not None:
         ev["drac_mps2"] = drac
+    if window is not None:
+        if recording is None:
+            raise fail("--window derives one recording (a dataset: derive its recordings one by "
+                       "one)", EXIT_USAGE)
+        _derive_windows(recording, output, in_place, overwrite, list(only) if only else None,
+                        params, window, workers)
+    elif recording is not None:
+        _hint_window(recording)
     if recording is None:
         _derive_dataset(recordings, output, in_place, overwrite, list(only) if only else None,
                         params, workers, scheduler, report)
@@ -117,6 +132,65 @@ def derive(
                "events": rec.events.num_rows if rec.events is not None else 0}
     print(json.dumps(summary, indent=2))
     err.print(f"derived {', '.join(ran)} -> {path}")
+
+
+#: states rows above which deriving at once is likely to need several GB (about 1 kB per state
+#: for all the derived tables and their std): derive prints a hint to use --window
+LARGE_STATES = 3_000_000
+
+
+def _hint_window(recording: str) -> None:
+    from aveas_format.io.reader import open_recording
+
+    try:
+        entry = open_recording(recording, tables=["participants"], verify=False).meta.tables.get(
+            "states")
+    except Exception:  # noqa: BLE001 — only a hint; opening it for real reports the error
+        return
+    if entry is not None and entry.rows > LARGE_STATES:
+        err.print(f"{recording}: {entry.rows:,} states; for bounded memory derive by time "
+                  "windows: --window 60 (docs/derive.md 'Large recordings')")
+
+
+def _derive_windows(recording: str, output: Path | None, in_place: bool, overwrite: bool,
+                    only: list[str] | None, params: dict, window: float, workers: int) -> NoReturn:
+    """``--window``: the criticality tables by time windows
+    (:func:`aveas_format.derive.streamed.write_by_windows`), written to OUTPUT or in place."""
+    from aveas_format.derive.streamed import WINDOW_TABLES, write_by_windows
+
+    outside = [n for n in only or [] if n not in WINDOW_TABLES]
+    if outside:
+        raise fail(f"--window derives {', '.join(WINDOW_TABLES)}; --only {outside[0]} is not "
+                   "derived by windows (derive it without --window)", EXIT_USAGE)
+    ev = params.pop("events", {})
+    flags = {"pet_s": "--pet", "hard_braking_mps2": "--hard-braking", "drac_mps2": "--drac"}
+    unwindowed = [flags.get(k, f"--param events.{k}") for k in ev if k != "ttc_s"]
+    if unwindowed:
+        raise fail(f"{unwindowed[0]}: events are not derived by windows (derive them without "
+                   "--window)", EXIT_USAGE)
+    flat: dict = {}
+    for name, ps in params.items():
+        if name not in WINDOW_TABLES:
+            raise fail(f"--param {name}.*: {name} is not derived by windows ("
+                       f"{', '.join(WINDOW_TABLES)})", EXIT_USAGE)
+        for k, v in ps.items():
+            if flat.get(k, v) != v:
+                raise fail(f"--param {name}.{k}: differs from another derivation's {k}; by "
+                           "windows a parameter has one value for all", EXIT_USAGE)
+            flat[k] = v
+    if "ttc_s" in ev:
+        flat["ttc_s"] = ev["ttc_s"]
+    target = Path(recording) if in_place else output
+    assert target is not None  # --output or --in-place, checked by the caller
+    info = write_by_windows(recording, target, window_s=window, workers=workers or None,
+                            overwrite=in_place or overwrite, progress=True, **flat)
+    summary = {"recording": info["recording"], "derived": info["derived"],
+               "tables": info["tables"], "events": 0, "windows": info["windows"],
+               "window_s": window, "worker_peak_mb": round(info["worker_peak_kb"] / 1024, 1)}
+    print(json.dumps(summary, indent=2))
+    err.print(f"derived {', '.join(info['derived'])} in {info['windows']} windows of {window:g} s "
+              f"-> {info['recording']}")
+    raise typer.Exit(0)
 
 
 def _derive_dataset(specs: list[str], output: Path | None, in_place: bool, overwrite: bool,

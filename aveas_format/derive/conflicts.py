@@ -17,10 +17,13 @@ derived/kinematics, along the motion). Entry and exit times are extrapolated wit
 speed and, only when it is braking (``a < 0``), the current deceleration (a vehicle that stops
 before the point never enters). With A the participant expected to enter first:
 
-- ``ttc`` ``= d_B / v_B`` where A's expected exit is later than B's expected entry (their
-  occupancies would overlap), else null; 0 once B is inside while A is (then ``drac`` is null);
-- ``drac`` ``= 2 (v_B − d_B / t_A,exit) / t_A,exit`` in that case: the constant deceleration
-  that brings B to the entry exactly when A leaves;
+- ``ttc`` ``= d_B / v_B`` where B's expected entry is not later than A's expected exit (their
+  occupancies would overlap), else null; 0 once B is inside while A is;
+- ``drac``: the smaller of the decelerations either participant would need to let the other
+  pass first, ``2 (v_X − d_X / t_Y,exit) / t_Y,exit`` (``v_X² / 2 d_X`` where Y would stop
+  inside the area), null where either needs none (it passes behind anyway) or both are inside,
+  0 once one has left (SUMO's ``computeDRAC`` for crossings: it is positive only where both
+  would have to brake, whether or not TTC is defined);
 - ``ppet`` ``= t_B,entry − t_A,exit`` (predicted post-encroachment time; negative: the
   occupancies overlap).
 
@@ -119,25 +122,47 @@ def entry_time(d, v, a):
     return np.where(d <= 0, 0.0, t)
 
 
+def _brake_for(d, v, t_other_out, t_other_in):
+    """The constant deceleration that brings a participant at distance ``d`` and speed ``v`` to
+    the entry when the other leaves (``2 (v - d / t_out) / t_out``); where the other never leaves
+    but enters, the deceleration to stop before the entry (``v² / 2d``); NaN where it is inside
+    already or the other never arrives."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        leave = 2 * (v - d / t_other_out) / t_other_out
+        stop = np.where(v > 0, 0.5 * v * v / d, 0.0)
+    out = np.where(np.isfinite(t_other_out) & (t_other_out > 0), leave,
+                   np.where(np.isfinite(t_other_in), stop, np.nan))
+    return np.where(d > 0, out, np.nan)
+
+
 def crossing_measures(dA, vA, aA, xA, dB, vB, aB, xB):
     """``(ttc, drac, ppet, first_is_A)`` of two participants approaching a conflict area:
     distances to the entry ``d``, speeds ``v``, accelerations ``a`` and the lengths of the area
     along their paths ``x`` (exit = entry + x); SUMO's definitions (module docstring)."""
     tA_in, tB_in = entry_time(dA, vA, aA), entry_time(dB, vB, aB)
     tA_out, tB_out = entry_time(dA + xA, vA, aA), entry_time(dB + xB, vB, aB)
-    a_first = tA_in <= tB_in
+    # SUMO: A first where it is expected strictly earlier; a tie (both inside, or never) goes to
+    # the one further along
+    a_first = (tA_in < tB_in) | ((tA_in == tB_in) & (dA <= dB))
     t1_out = np.where(a_first, tA_out, tB_out)
     t2_in = np.where(a_first, tB_in, tA_in)
     d2 = np.where(a_first, dB, dA)
     v2 = np.where(a_first, vB, vA)
-    overlap = t1_out > t2_in
+    overlap = t2_in <= t1_out
     with np.errstate(divide="ignore", invalid="ignore"):
-        # the second already inside while the first is: contact now (TTC 0, no DRAC avoids it)
-        ttc = np.where(overlap & (v2 > 0), np.maximum(d2, 0.0) / v2, np.nan)
-        drac = np.where(overlap & np.isfinite(t1_out) & (t1_out > 0) & (d2 > 0),
-                        2 * (v2 - d2 / t1_out) / t1_out, np.nan)
+        # the second already inside while the first is: contact now (TTC 0)
+        ttc = np.where(overlap & (d2 <= 0), 0.0,
+                       np.where(overlap & (v2 > 0), np.maximum(d2, 0.0) / v2, np.nan))
         ppet = np.where(np.isfinite(t2_in) & np.isfinite(t1_out), t2_in - t1_out, np.nan)
-    return ttc, np.where(drac >= 0, drac, np.nan), ppet, a_first
+    # DRAC: the smaller of the decelerations either would need to let the other pass first; none
+    # where either needs none (it passes behind anyway), where both are inside (contact), and 0
+    # once one has left
+    da = _brake_for(dA, vA, tB_out, tB_in)
+    db = _brake_for(dB, vB, tA_out, tA_in)
+    drac = np.fmin(da, db)
+    drac = np.where(drac > 0, drac, np.nan)
+    drac = np.where((dA + xA <= 0) | (dB + xB <= 0), 0.0, drac)
+    return ttc, drac, ppet, a_first
 
 
 def _delta_std(args, variances):
@@ -155,6 +180,14 @@ def _delta_std(args, variances):
                 d = (hi[m] - lo[m]) / (2 * h)
             var[m] += np.where(np.isfinite(d), d * d * np.nan_to_num(v), 0.0)
     return [np.where(np.isfinite(b), np.sqrt(s), np.nan) for b, s in zip(base, var)]
+
+
+def pair_rank(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rank of each row's unordered pair of participant ids among the distinct pairs (the
+    conflict numbering of ``derived/conflicts``)."""
+    lo, hi = np.minimum(a, b).astype(np.int64), np.maximum(a, b).astype(np.int64)
+    keys = np.unique(np.stack([lo, hi], axis=1), axis=0, return_inverse=True)[1]
+    return keys.ravel().astype(np.int64)
 
 
 def _passage(t, arc, target):
@@ -261,6 +294,10 @@ def compute(rec, p: ConflictsParams) -> pa.Table:
     r = {k: (np.concatenate(v) if v else np.zeros(0)) for k, v in rows.items()}
     i = r["i"].astype(np.int64)
     j = r["j"].astype(np.int64)
+    if len(i):
+        # conflicts numbered in the order of their pairs of participant ids (one crossing per
+        # pair): the same numbers whichever subset of the recording is derived
+        r["cid"] = pair_rank(S.pid[i], S.pid[j])
 
     def f(v):
         v = np.asarray(v, float)
@@ -303,8 +340,9 @@ TABLE = derived_table(
         col("first_id", "int64", MUST, "the participant expected to enter first", minimum=0),
         *gaussian("ttc", "s", MAY, "crossing TTC: the second's distance to the entry / its "
                   "speed, where the expected occupancies overlap (null otherwise)", minimum=0.0),
-        *gaussian("drac", "m/s²", MAY, "crossing DRAC: 2 (v2 - d2 / t1,exit) / t1,exit",
-                  minimum=0.0),
+        *gaussian("drac", "m/s²", MAY, "crossing DRAC: the smaller deceleration either would "
+                  "need to let the other pass first, 2 (v - d / t_other,exit) / t_other,exit "
+                  "(SUMO's)", minimum=0.0),
         *gaussian("ppet", "s", MAY, "predicted PET: expected entry of the second - expected exit "
                   "of the first (negative: overlap)"),
         col("pet", "float64", MAY, "observed PET at the crossing point (the same in every row of "
@@ -316,7 +354,7 @@ TABLE = derived_table(
 CONFLICTS = register(Derivation(
     name="conflicts",
     spec=TABLE,
-    version="1.0.0",
+    version="1.1.0",
     params=ConflictsParams,
     fn=compute,
     needs={"states": ("participant_id", "time", "x", "y", "heading", "vx", "vy"),

@@ -126,10 +126,15 @@ def _episode_draws(key: np.ndarray, t: np.ndarray, gap: float, K: int, rng) -> n
     return np.repeat(z, seg_len, axis=1)
 
 
-def compute(rec, p: CriticalityParams) -> pa.Table:
-    """The ``derived/criticality_summary`` table of ``rec``."""
+def compute(rec, p: CriticalityParams, core: tuple[float, float] | None = None) -> pa.Table:
+    """The ``derived/criticality_summary`` table of ``rec``; ``core`` ``(t0, t1)``: of the states
+    in ``[t0, t1)`` only, their sampling intervals from all states (a time window of a longer
+    recording, derive.streamed)."""
     thr = _ttc_threshold(rec, p)
     spid, st, sdt = _sample_dt(rec, p.max_gap_s)
+    if core is not None:
+        keep = (st >= core[0]) & (st < core[1])
+        spid, st, sdt = spid[keep], st[keep], sdt[keep]
     parts = rec.participants.column("participant_id").to_numpy()
     ids = np.unique(np.r_[parts, spid]).astype(np.int64)
     n = len(ids)

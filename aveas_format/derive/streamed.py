@@ -25,6 +25,7 @@ from __future__ import annotations
 import functools
 import shutil
 import tempfile
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +36,15 @@ import pyarrow.parquet as pq
 
 #: the derivations run per window
 WINDOW_DERIVATIONS = ("kinematics", "interactions", "conflicts")
+#: every derived table :func:`write_by_windows` writes
+WINDOW_TABLES = (*WINDOW_DERIVATIONS, "criticality_summary")
+#: the default window (s): its states, with the margins, and their derived rows are what one
+#: worker holds (docs/performance.md "Criticality")
+DEFAULT_WINDOW_S = 60.0
+#: rows per row group of a window's part files
+PART_ROW_GROUP = 16_384
+#: rows per sorted piece when a derived table is assembled from the windows' parts
+ASSEMBLE_ROWS = 250_000
 
 
 def _peak_kb() -> int | None:
@@ -47,74 +57,200 @@ def _peak_kb() -> int | None:
     return None
 
 
-def _split(path: Path, tmp: Path, window_s: float, margin_s: float) -> list[tuple[int, float, float]]:
-    """Write the states of each window (core plus margins) to ``tmp/w-K.parquet``; return
-    ``(K, t0, t1)`` of the windows with states in their core."""
-    from aveas_format.io.container import Container
+def _row_groups(source: Path, name: str | None = None) -> Iterator[pa.Table]:
+    """The row groups of ``states.parquet`` of the recording ``source`` (``name`` None) or of the
+    Parquet files ``source/part-*.parquet`` in order."""
+    if name is not None:
+        from aveas_format.io.container import Container
 
-    writers: dict[int, pq.ParquetWriter] = {}
-    cores: set[int] = set()  # windows with states in their core (not only in a margin)
-    with Container(path) as c:
-        pf = pq.ParquetFile(c.input_file("states.parquet"))
+        with Container(source) as c:
+            pf = pq.ParquetFile(c.input_file(name))
+            for g in range(pf.metadata.num_row_groups):
+                yield pf.read_row_group(g)
+        return
+    for f in sorted(source.glob("part-*.parquet")):
+        pf = pq.ParquetFile(f)
         for g in range(pf.metadata.num_row_groups):
-            rg = pf.read_row_group(g)
-            t = rg.column("time").to_numpy()
-            lo = np.floor((t - margin_s) / window_s).astype(np.int64)
-            hi = np.floor((t + margin_s) / window_s).astype(np.int64)
-            cores.update(np.unique(np.floor(t / window_s).astype(np.int64)).tolist())
-            for k in np.unique(np.r_[lo, hi]):
-                part = rg.filter(pa.array((lo <= k) & (hi >= k)))
+            yield pf.read_row_group(g)
+
+
+def _track_chunks(path: Path, tmp: Path, rows: int) -> list[int]:
+    """Write the states in chunks of whole tracks (about ``rows`` rows each, cut between
+    participants) to ``tmp/c-J.parquet``; return the chunk numbers."""
+    from aveas_format.errors import FormatError
+
+    out: list[int] = []
+    held: list[pa.Table] = []
+    n_held, last = 0, None
+
+    def flush(tables: list[pa.Table]) -> None:
+        j = len(out)
+        pq.write_table(pa.concat_tables(tables), tmp / f"c-{j}.parquet")
+        out.append(j)
+
+    for rg in _row_groups(path, "states.parquet"):
+        pid = rg.column("participant_id").to_numpy()
+        if len(pid) and (np.any(np.diff(pid) < 0) or (last is not None and pid[0] < last)):
+            raise FormatError("states.parquet is not sorted by participant_id (FORMAT.md): "
+                              "sort it (aveas-format repair) before deriving by windows")
+        if not len(pid):
+            continue
+        last = int(pid[-1])
+        held.append(rg)
+        n_held += len(pid)
+        if n_held >= rows:
+            whole = pa.concat_tables(held)
+            p = whole.column("participant_id").to_numpy()
+            cut = int(np.searchsorted(p, p[-1], side="left"))  # the last track may go on
+            if cut > 0:
+                flush([whole.slice(0, cut)])
+                held, n_held = [whole.slice(cut)], len(p) - cut
+    if n_held:
+        flush(held)
+    return out
+
+
+def _kinematics_task(j: int, *, path: str, tmp: str, out: str,
+                     params: dict[str, Any]) -> dict[str, Any]:
+    """``derived/kinematics`` of one chunk of whole tracks, written as ``out/kinematics/part-J``."""
+    from aveas_format.io.writer import prepare_table
+    from aveas_format.schema.tables import TABLES
+
+    rec = _window_recording(path, pq.read_table(Path(tmp) / f"c-{j}.parquet"))
+    t = prepare_table(_run(rec, "kinematics", params), TABLES["derived/kinematics"])
+    (Path(out) / "kinematics").mkdir(parents=True, exist_ok=True)
+    pq.write_table(t, Path(out) / "kinematics" / f"part-{j:06d}.parquet",
+                   row_group_size=PART_ROW_GROUP)
+    return {"rows": t.num_rows, "peak_kb": _peak_kb()}
+
+
+def _spans(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sorted participant ids of the states and each one's first and last time."""
+    ids, lo, hi = [], [], []
+    for rg in _row_groups(path, "states.parquet"):
+        pid, t = rg.column("participant_id").to_numpy(), rg.column("time").to_numpy()
+        if not len(pid):
+            continue
+        starts = np.r_[0, np.flatnonzero(np.diff(pid)) + 1]
+        ids.append(pid[starts])
+        lo.append(np.minimum.reduceat(t, starts))
+        hi.append(np.maximum.reduceat(t, starts))
+    if not ids:
+        return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+    i, a, b = np.concatenate(ids), np.concatenate(lo), np.concatenate(hi)
+    # a track cut between row groups appears twice (sorted by id): merge
+    u, inv = np.unique(i, return_inverse=True)
+    mn, mx = np.full(len(u), np.inf), np.full(len(u), -np.inf)
+    np.minimum.at(mn, inv, a)
+    np.maximum.at(mx, inv, b)
+    return u, mn, mx
+
+
+def _split(tables: Iterable[pa.Table], tmp: Path, prefix: str, window_s: float,
+           spans: tuple[np.ndarray, np.ndarray, np.ndarray]) -> set[int]:
+    """Write to ``tmp/PREFIX-K.parquet`` the rows of the whole tracks of the participants present
+    in time window K (``spans``: :func:`_spans`); return the windows with rows."""
+    writers: dict[int, pq.ParquetWriter] = {}
+    cores: set[int] = set()
+    try:
+        for rg in tables:
+            k = np.searchsorted(spans[0], rg.column("participant_id").to_numpy())
+            lo = np.floor(spans[1][k] / window_s).astype(np.int64)
+            hi = np.floor(spans[2][k] / window_s).astype(np.int64)
+            cores.update(np.unique(np.floor(rg.column("time").to_numpy() / window_s)
+                                   .astype(np.int64)).tolist())
+            for w in _windows_of(lo, hi):
+                part = rg.filter(pa.array((lo <= w) & (hi >= w)))
                 if not part.num_rows:
                     continue
-                if k not in writers:
-                    writers[int(k)] = pq.ParquetWriter(tmp / f"w-{int(k)}.parquet", part.schema)
-                writers[int(k)].write_table(part)
-    for w in writers.values():
-        w.close()
-    return [(k, k * window_s, (k + 1) * window_s) for k in sorted(writers) if k in cores]
+                if w not in writers:
+                    writers[w] = pq.ParquetWriter(tmp / f"{prefix}-{w}.parquet", part.schema)
+                writers[w].write_table(part)
+    finally:
+        for wr in writers.values():
+            wr.close()
+    return cores
 
 
-def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: str,
-                 params: dict[str, Any]) -> dict[str, Any]:
-    """Derive one window and write its core rows; returns its summary rows and counts."""
-    from aveas_format.derive.criticality import compute as summary
-    from aveas_format.derive.criticality import CriticalityParams
-    from aveas_format.derive.registry import derivations
+def _windows_of(lo: np.ndarray, hi: np.ndarray) -> list[int]:
+    """Every window number in some ``[lo, hi]``."""
+    if not len(lo):
+        return []
+    hit = np.zeros(int(hi.max() - lo.min()) + 1, bool)
+    base = int(lo.min())
+    for a, b in np.unique(np.stack([lo, hi], 1), axis=0):  # one per distinct track span
+        hit[a - base:b - base + 1] = True
+    return (np.flatnonzero(hit) + base).tolist()
+
+
+def _window_recording(path: str, states: pa.Table):
+    """A recording of the participants of ``states`` (with the source's metadata and map)."""
     from aveas_format.io.reader import open_recording
     from aveas_format.io.recording import Recording
 
-    k, t0, t1 = item
     head = open_recording(path, tables=["participants"], verify=False)
-    states = pq.read_table(Path(tmp) / f"w-{k}.parquet")
     ids = pa.array(np.unique(states.column("participant_id").to_numpy()))
     parts = head.participants.filter(pc.is_in(head.participants.column("participant_id"), ids))
-    rec = Recording(head.meta.model_copy(deep=True), {"participants": parts, "states": states},
-                    head.map_source)
-    # the derivations' functions directly: a window needs no provenance (input hashes would
-    # serialise its states once per derivation)
-    reg = derivations()
-    for name in WINDOW_DERIVATIONS:
-        d = reg[name]
-        p = d.params(**{k_: v for k_, v in params.items() if k_ in d.params.model_fields})
-        rec.derived[name] = d.fn(rec, p)
+    return Recording(head.meta.model_copy(deep=True), {"participants": parts, "states": states},
+                     head.map_source)
+
+
+def _run(rec, name: str, params: dict[str, Any]) -> pa.Table:
+    """Derivation ``name``'s function on ``rec`` with the ``params`` it has (directly: a window
+    needs no provenance; input hashes would serialise its states once per derivation)."""
+    from aveas_format.derive.registry import derivations
+
+    d = derivations()[name]
+    return d.fn(rec, d.params(**{k: v for k, v in params.items() if k in d.params.model_fields}))
+
+
+def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: str,
+                 margin_s: float, params: dict[str, Any]) -> dict[str, Any]:
+    """Derive one window and write its core rows; returns its summary rows and counts."""
+    from aveas_format.derive.criticality import compute as summary
+    from aveas_format.derive.criticality import CriticalityParams
+    from aveas_format.io.writer import prepare_table
+    from aveas_format.schema.tables import TABLES
+
+    k, t0, t1 = item
+    # the whole tracks of the participants present in the core: a crossing needs both paths up
+    # to the crossing point, a leader search the participant's later lanes (its route), however
+    # far ahead
+    rec = _window_recording(path, pq.read_table(Path(tmp) / f"x-{k}.parquet"))
+    rec.derived["kinematics"] = prepare_table(pq.read_table(Path(tmp) / f"y-{k}.parquet"),
+                                              TABLES["derived/kinematics"])
+    rec.derived["conflicts"] = _run(rec, "conflicts", params)
+    # the pairs of a time step need that step only (and the routes ahead): from the core's start
+    for name in ("states", "kinematics"):
+        t = rec.states if name == "states" else rec.derived[name]
+        t = t.filter(pc.greater_equal(t.column("time"), t0 - margin_s))
+        if name == "states":
+            rec.states = t
+        else:
+            rec.derived[name] = t
+    rec.derived["interactions"] = _run(rec, "interactions", params)
     counts = {}
     for name in WINDOW_DERIVATIONS:
+        if name == "kinematics":
+            continue
         t = rec.derived[name]
         tt = t.column("time")
         core = t.filter(pc.and_(pc.greater_equal(tt, t0), pc.less(tt, t1)))
         (Path(out) / name).mkdir(parents=True, exist_ok=True)
-        pq.write_table(core, Path(out) / name / f"part-{k:06d}.parquet")
+        # sorted as the table declares, in small row groups: assembling the table in key order
+        # (write_by_windows) reads each participant range from the parts by their statistics
+        core = prepare_table(core, TABLES[f"derived/{name}"])
+        pq.write_table(core, Path(out) / name / f"part-{k:06d}.parquet",
+                       row_group_size=PART_ROW_GROUP)
         counts[name] = core.num_rows
     # the window's summary over its core rows only (each sample counted once over all windows)
-    st = rec.states.column("time")
-    rec.states = rec.states.filter(pc.and_(pc.greater_equal(st, t0), pc.less(st, t1)))
     for name in ("interactions", "conflicts"):
         t = rec.derived[name]
         rec.derived[name] = t.filter(pc.and_(pc.greater_equal(t.column("time"), t0),
                                              pc.less(t.column("time"), t1)))
     rec.events = None
     cp = {k_: v for k_, v in params.items() if k_ in CriticalityParams.model_fields}
-    s = summary(rec, CriticalityParams(**cp))
+    s = summary(rec, CriticalityParams(**cp), core=(t0, t1))
     return {"window": k, "counts": counts, "summary": s, "peak_kb": _peak_kb()}
 
 
@@ -195,33 +331,52 @@ def merge_summaries(parts: list[pa.Table]) -> pa.Table:
     return _table(ids, out, counts, [[] for _ in range(n)], rv, [])
 
 
-def derive_by_windows(path: str | Path, out_dir: str | Path, *, window_s: float = 300.0,
-                      margin_s: float = 5.0, workers: int | None = 2,
-                      **params: Any) -> dict[str, Any]:
-    """Derive the criticality measures of the recording at ``path`` window by window into
-    ``out_dir`` (module docstring); ``params`` (flat: a parameter name and its value) go to every
-    derivation that has such a parameter. Windows of a few minutes keep the per-window overhead
-    (the kinematics smoother steps through a window's samples in lockstep) small against the
-    work; memory grows with the window, not with the recording. Returns counts: windows, rows per derived table, the
-    largest worker's peak memory (kB)."""
+def derive_by_windows(path: str | Path, out_dir: str | Path, *,
+                      window_s: float = DEFAULT_WINDOW_S, margin_s: float = 5.0,
+                      workers: int | None = 2, progress: bool = False,
+                      track_chunk_rows: int = 200_000, **params: Any) -> dict[str, Any]:
+    """Derive the criticality measures of the recording at ``path`` into ``out_dir`` (module
+    docstring): kinematics per chunk of whole tracks (about ``track_chunk_rows`` states), then
+    interactions, conflicts and the summary per time window; ``params`` (flat: a parameter name
+    and its value) go to every derivation that has such a parameter. Memory per worker grows
+    with the window (and the chunk), not with the recording; smaller windows cost a little
+    more per-window overhead (docs/performance.md). Returns counts: windows, rows per derived
+    table, the largest worker's peak memory (kB)."""
     from aveas_format.errors import AveasError
     from aveas_format.parallel import run_tasks
 
     path, out = Path(path), Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix="aveas-windows-", dir=out))
-    try:
-        windows = _split(path, tmp, window_s, margin_s)
-        fn = functools.partial(_window_task, path=str(path), tmp=str(tmp), out=str(out),
-                               params=params)
-        sums, counts, peak = [], dict.fromkeys(WINDOW_DERIVATIONS, 0), 0
-        for r in run_tasks(fn, windows, workers=workers, description="windows"):
+
+    def results(fn, items, what):
+        for r in run_tasks(fn, items, workers=workers, progress=progress, description=what):
             if not r.ok:
-                raise AveasError(f"window {r.item}: {r.error}", path=path)
-            sums.append(r.value["summary"])
-            for k, v in r.value["counts"].items():
-                counts[k] += v
-            peak = max(peak, r.value["peak_kb"] or 0)
+                raise AveasError(f"{what} {r.item}: {r.error}", path=path)
+            yield r.value
+
+    try:
+        chunks = _track_chunks(path, tmp, track_chunk_rows)
+        counts, peak = dict.fromkeys(WINDOW_DERIVATIONS, 0), 0
+        fn = functools.partial(_kinematics_task, path=str(path), tmp=str(tmp), out=str(out),
+                               params=params)
+        for v in results(fn, chunks, "tracks"):
+            counts["kinematics"] += v["rows"]
+            peak = max(peak, v["peak_kb"] or 0)
+        for j in chunks:
+            (tmp / f"c-{j}.parquet").unlink()
+        spans = _spans(path)
+        cores = _split(_row_groups(path, "states.parquet"), tmp, "x", window_s, spans)
+        _split(_row_groups(out / "kinematics"), tmp, "y", window_s, spans)
+        windows = [(k, k * window_s, (k + 1) * window_s) for k in sorted(cores)]
+        fn = functools.partial(_window_task, path=str(path), tmp=str(tmp), out=str(out),
+                               margin_s=margin_s, params=params)
+        sums = []
+        for v in results(fn, windows, "windows"):
+            sums.append(v["summary"])
+            for k, n in v["counts"].items():
+                counts[k] += n
+            peak = max(peak, v["peak_kb"] or 0)
         summary = merge_summaries(sums)
         pq.write_table(summary, out / "criticality_summary.parquet")
     finally:
@@ -230,4 +385,174 @@ def derive_by_windows(path: str | Path, out_dir: str | Path, *, window_s: float 
             "participants": summary.num_rows - 1}
 
 
-__all__ = ["WINDOW_DERIVATIONS", "derive_by_windows", "merge_summaries"]
+def _pid_ranges(dataset, rows: int) -> list[tuple[int, int]]:
+    """Consecutive participant-id ranges ``(lo, hi)`` (inclusive) of about ``rows`` rows each
+    (a participant's rows are never split)."""
+    pid = dataset.to_table(columns=["participant_id"]).column("participant_id")
+    if not len(pid):
+        return []
+    vc = pc.value_counts(pid)
+    ids = vc.field("values").to_numpy()
+    order = np.argsort(ids)
+    ids, n = ids[order], vc.field("counts").to_numpy()[order]
+    piece = np.cumsum(n) // max(rows, 1)
+    starts = np.r_[0, np.flatnonzero(np.diff(piece)) + 1]
+    ends = np.r_[starts[1:], len(ids)] - 1
+    return [(int(ids[a]), int(ids[b])) for a, b in zip(starts, ends)]
+
+
+def _assemble(parts: Path, spec, dest: Path, provenance: bytes) -> tuple[int, str]:
+    """Write the derived table whose window parts are in ``parts`` as one Parquet file ``dest``
+    in the table's key order, a participant range at a time; return (rows, SHA-256)."""
+    import pyarrow.dataset as ds
+
+    from aveas_format.derive.registry import DERIVED_KEY, _empty
+    from aveas_format.io.writer import ROW_GROUP_ROWS, parquet_options, prepare_table
+
+    files = sorted(parts.glob("part-*.parquet")) if parts.is_dir() else []
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    schemas = [pq.read_schema(f) for f in files]
+    data = ds.dataset([str(f) for f in files], schema=pa.unify_schemas(
+        schemas, promote_options="permissive")) if files else None
+    writer, rows = None, 0
+    pairs = None
+    if data is not None and "conflict_id" in data.schema.names and spec.name == "derived/conflicts":
+        # the windows number their conflicts each on their own: renumber by the pair of ids
+        # (derive.conflicts.pair_rank) over the whole recording
+        ids = data.to_table(columns=["participant_id", "other_id"])
+        a, b = (ids.column(c).to_numpy() for c in ("participant_id", "other_id"))
+        pairs = np.unique(np.minimum(a, b) * (1 << 32) + np.maximum(a, b))
+    try:
+        pieces = _pid_ranges(data, ASSEMBLE_ROWS) if data is not None else []
+        if not pieces:
+            pieces = [None]
+        for rng in pieces:
+            if rng is None:
+                t = data.to_table() if data is not None else _empty(spec.name)
+            else:
+                f = pc.field("participant_id")
+                t = data.to_table(filter=(f >= rng[0]) & (f <= rng[1]))
+            if pairs is not None and t.num_rows:
+                a, b = (t.column(c).to_numpy() for c in ("participant_id", "other_id"))
+                cid = np.searchsorted(pairs, np.minimum(a, b) * (1 << 32) + np.maximum(a, b))
+                t = t.set_column(t.schema.get_field_index("conflict_id"), "conflict_id",
+                                 pa.array(cid.astype(np.int64)))
+            t = prepare_table(t, spec)
+            if writer is None:
+                schema, options = parquet_options(t.schema.with_metadata(
+                    {**(t.schema.metadata or {}), DERIVED_KEY: provenance}), spec)
+                writer = pq.ParquetWriter(str(dest), schema, **options)
+            t = t.select(schema.names).cast(schema)
+            writer.write_table(t, row_group_size=ROW_GROUP_ROWS)
+            rows += t.num_rows
+    finally:
+        if writer is not None:
+            writer.close()
+    from aveas_format.io.container import Container
+
+    with Container(dest.parent) as c:
+        return rows, c.sha256(dest.name)
+
+
+def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEFAULT_WINDOW_S,
+                     margin_s: float = 5.0, workers: int | None = 2, overwrite: bool = False,
+                     progress: bool = False, **params: Any) -> dict[str, Any]:
+    """The recording at ``src`` with its criticality tables (``WINDOW_TABLES``) derived window by
+    window (:func:`derive_by_windows`), written to ``path`` (directory form, or ZIP when the name
+    ends in ``.zip``) without holding the recording in memory: the source's other files are
+    copied as they are, each derived table is assembled from the windows' parts one participant
+    range at a time, and ``recording.json`` gets their table entries and provenance as
+    :func:`aveas_format.derive.derive` writes them. Atomic; an existing ``path`` is replaced only
+    with ``overwrite``. Returns :func:`derive_by_windows`' counts and the derived table names."""
+    import json
+    import uuid
+    import zipfile
+    from datetime import datetime, timezone
+
+    from aveas_format.derive.registry import DERIVED_KEY, derivations
+    from aveas_format.errors import RecordingIOError
+    from aveas_format.io.container import Container, sha256_of
+    from aveas_format.io.reader import open_recording
+    from aveas_format.io.writer import (_fsync_dir, _replace, check_target, parquet_bytes,
+                                        prepare_table)
+    from aveas_format.schema.metadata import DerivedEntry, TableEntry
+    from aveas_format.schema.tables import TABLES
+    from aveas_format.schema.versions import FORMAT_VERSION
+
+    src, path = Path(src), Path(path)
+    parent = check_target(path, overwrite)
+    head = open_recording(src, tables=["participants"], verify=False)
+    meta = head.meta.model_copy(deep=True)
+    reg = derivations()
+    ours = {reg[n].table for n in WINDOW_TABLES}
+    work = parent / f".{path.name}.work-{uuid.uuid4().hex[:8]}"
+    tmp = parent / f".{path.name}.tmp-{uuid.uuid4().hex[:8]}"
+    try:
+        work.mkdir()
+        info = derive_by_windows(src, work, window_s=window_s, margin_s=margin_s,
+                                 workers=workers, progress=progress, **params)
+        tmp.mkdir()
+        with Container(src) as c:
+            for name in c.names():
+                if name == "recording.json" or name.removesuffix(".parquet") in ours:
+                    continue
+                target = tmp / name
+                target.parent.mkdir(parents=True, exist_ok=True)
+                with c.input_file(name) as f, open(target, "wb") as g:
+                    while block := f.read(1 << 22):
+                        g.write(block)
+        shas = {n: e.sha256 for n, e in meta.tables.items() if n not in ours}
+        created = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        for n in WINDOW_TABLES:
+            d = reg[n]
+            p = d.params(**{k: v for k, v in params.items() if k in d.params.model_fields})
+            inputs = {t: shas[t] for t in d.inputs() if t in shas}
+            pdump = p.model_dump(mode="json")
+            method = d.method(p)
+            prov = json.dumps({"derivation": n, "method": method, "version": d.version,
+                               "parameters": pdump, "inputs": inputs}).encode()
+            spec = TABLES[d.table]
+            if n == "criticality_summary":
+                t = prepare_table(pq.read_table(work / "criticality_summary.parquet"), spec)
+                t = t.replace_schema_metadata({**(t.schema.metadata or {}), DERIVED_KEY: prov})
+                buf = parquet_bytes(t, spec)
+                (tmp / spec.file).parent.mkdir(parents=True, exist_ok=True)
+                (tmp / spec.file).write_bytes(memoryview(buf))
+                rows, sha = t.num_rows, sha256_of(buf)
+            else:
+                rows, sha = _assemble(work / n, spec, tmp / spec.file, prov)
+            meta.tables[d.table] = TableEntry(rows=rows, sha256=sha)
+            shas[d.table] = sha
+            meta.derived = [e for e in meta.derived if e.table != d.table] + [DerivedEntry(
+                table=d.table, method=method, version=d.version, parameters=pdump,
+                created=created, inputs=inputs)]
+        meta.format_version = FORMAT_VERSION
+        (tmp / "recording.json").write_text(meta.to_json())
+        if path.name.endswith(".zip"):
+            z = parent / f".{path.name}.zip-{uuid.uuid4().hex[:8]}"
+            names = sorted((q.relative_to(tmp).as_posix() for q in tmp.rglob("*") if q.is_file()),
+                           key=lambda n: n != "recording.json")
+            with zipfile.ZipFile(z, "w", compression=zipfile.ZIP_STORED) as zf:
+                for n in names:
+                    zi = zipfile.ZipInfo(n, date_time=(1980, 1, 1, 0, 0, 0))
+                    big = (tmp / n).stat().st_size >= 1 << 31
+                    with open(tmp / n, "rb") as f, zf.open(zi, "w", force_zip64=big) as g:
+                        shutil.copyfileobj(f, g, 1 << 22)
+            shutil.rmtree(tmp, ignore_errors=True)
+            tmp = z
+        _replace(tmp, path, overwrite)
+        _fsync_dir(parent)
+    except OSError as e:
+        raise RecordingIOError(f"cannot write: {e.strerror or e}", path=path) from None
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+        if tmp.is_dir():
+            shutil.rmtree(tmp, ignore_errors=True)
+        elif tmp.exists():
+            tmp.unlink(missing_ok=True)
+    return {**info, "recording": str(path), "derived": list(WINDOW_TABLES),
+            "tables": {reg[n].table: meta.tables[reg[n].table].rows for n in WINDOW_TABLES}}
+
+
+__all__ = ["DEFAULT_WINDOW_S", "WINDOW_DERIVATIONS", "WINDOW_TABLES", "derive_by_windows",
+           "merge_summaries", "write_by_windows"]

@@ -91,21 +91,26 @@ def prepare_table(table: pa.Table, spec: TableSpec) -> pa.Table:
     return table
 
 
-def parquet_bytes(table: pa.Table, spec: TableSpec) -> pa.Buffer:
-    """Serialise one prepared table to Parquet bytes with the ``aveas`` key."""
+def parquet_options(schema: pa.Schema, spec: TableSpec) -> tuple[pa.Schema, dict]:
+    """The schema with the ``aveas`` key and the Parquet writer options of a table of the format
+    (one home for :func:`parquet_bytes` and writers that stream a table in pieces)."""
     key = {"format_version": FORMAT_VERSION, "table": spec.name,
            "creator": {"library": "aveas-format", "version": __version__}}
-    md = dict(table.schema.metadata or {})
+    md = dict(schema.metadata or {})
     md[AVEAS_KEY] = json.dumps(key).encode()
-    table = table.replace_schema_metadata(md)
-    dict_cols = [f.name for f in table.schema
+    dict_cols = [f.name for f in schema
                  if pa.types.is_dictionary(f.type) or pa.types.is_string(f.type)]
+    return schema.with_metadata(md), {
+        "compression": COMPRESSION, "compression_level": COMPRESSION_LEVEL,
+        "use_dictionary": dict_cols or False, "write_statistics": True}
+
+
+def parquet_bytes(table: pa.Table, spec: TableSpec) -> pa.Buffer:
+    """Serialise one prepared table to Parquet bytes with the ``aveas`` key."""
+    schema, options = parquet_options(table.schema, spec)
     sink = pa.BufferOutputStream()
-    pq.write_table(
-        table, sink, row_group_size=ROW_GROUP_ROWS, compression=COMPRESSION,
-        compression_level=COMPRESSION_LEVEL, use_dictionary=dict_cols or False,
-        write_statistics=True,
-    )
+    pq.write_table(table.replace_schema_metadata(schema.metadata), sink,
+                   row_group_size=ROW_GROUP_ROWS, **options)
     return sink.getvalue()
 
 
@@ -122,6 +127,18 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
+def check_target(path: Path, overwrite: bool) -> Path:
+    """The directory a recording is to be written into at ``path``; RecordingExistsError where
+    ``path`` exists and not ``overwrite``, RecordingIOError where the directory does not exist."""
+    if path.exists() and not overwrite:
+        raise RecordingExistsError("exists; pass overwrite=True (CLI: --overwrite) to replace it",
+                                   path=path)
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise RecordingIOError("parent directory does not exist", path=parent)
+    return parent
+
+
 def write_recording(rec, path: str | Path, *, overwrite: bool = False, form: str | None = None) -> Path:
     """Write ``rec`` (a Recording) to ``path`` atomically; return the path.
 
@@ -131,12 +148,7 @@ def write_recording(rec, path: str | Path, *, overwrite: bool = False, form: str
     form = form or ("zip" if path.name.endswith(".zip") else "directory")
     if form not in ("directory", "zip"):
         raise ValueError(f"form must be 'directory' or 'zip', got {form!r}")
-    if path.exists() and not overwrite:
-        raise RecordingExistsError("exists; pass overwrite=True (CLI: --overwrite) to replace it",
-                                   path=path)
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise RecordingIOError("parent directory does not exist", path=parent)
+    parent = check_target(path, overwrite)
 
     members: dict[str, pa.Buffer | bytes] = {}
     entries: dict[str, TableEntry] = {}

@@ -202,12 +202,13 @@ def _add_geo_reference(path: Path, proj: str) -> None:
 
 def junction_scenario(workdir: str | Path | None = None, *, duration: float = 120.0,
                       step: float = 0.1, seed: int = 1, flow_per_route: float = 150.0,
-                      arm_m: float = 200.0, speed: float = 13.9, timeout: float = 300.0,
+                      arm_m: float = 200.0, speed: float = 13.9, sigma: float = 0.5,
+                      timeout: float = 300.0,
                       geo_reference: str = "+proj=tmerc +lat_0=52.5 +lon_0=13.3 +k=1 +x_0=0 "
                       "+y_0=0 +ellps=WGS84 +units=m +no_defs") -> SsmRun:
     """A 4-way priority junction (east-west road has priority), every route (straight, left,
     right from each arm) with ``flow_per_route`` veh/h, simulated for ``duration`` s at ``step``
-    with the SSM device; the FCD becomes a recording on the OpenDRIVE map netconvert exports from
+    with the SSM device (drivers' imperfection ``sigma``, Krauss); the FCD becomes a recording on the OpenDRIVE map netconvert exports from
     the SUMO network. ``workdir`` keeps the files."""
     from aveas_format.converters import convert
 
@@ -223,7 +224,7 @@ def junction_scenario(workdir: str | Path | None = None, *, duration: float = 12
              log, "netconvert", timeout)
         _add_geo_reference(wd / "map.xodr", geo_reference)
         routes = ['<routes>', '  <vType id="car" vClass="passenger" length="5" width="1.8" '
-                  'minGap="2.5" sigma="0.5"/>']
+                  f'minGap="2.5" sigma="{sigma:g}"/>']
         arms = {"W": ("WC", "CW"), "E": ("EC", "CE"), "S": ("SC", "CS"), "N": ("NC", "CN")}
         for a, (into, _) in arms.items():
             for b, (_, out) in arms.items():
@@ -237,13 +238,49 @@ def junction_scenario(workdir: str | Path | None = None, *, duration: float = 12
         _run([str(find_sumo("sumo")), "-n", "net.net.xml", "-r", "routes.rou.xml",
               "--step-length", f"{step:g}", "--seed", str(seed), "--end", f"{duration:g}",
               "--fcd-output", "fcd.xml", "--fcd-output.attributes", "id,type,speed,lane,pos,x,y,"
-              "angle", "--no-step-log", "true", "--collision.action", "warn",
+              "angle,acceleration", "--no-step-log", "true", "--collision.action", "warn",
               *ssm_args("ssm.xml")], wd, wd / "sumo.log", "sumo", timeout)
         rec = convert("sumo-fcd", [wd / "fcd.xml"], map_source=wd / "map.xodr",
                       options={"net_file": str(wd / "net.net.xml"),
                                "vtypes": [str(wd / "routes.rou.xml")],
                                "partner": "aveas-format sim", "title": "SUMO junction with SSM"})
+        rec = with_fcd_acceleration(rec, wd / "fcd.xml")
         return SsmRun(rec, read_ssm(wd / "ssm.xml"), {"car": 2.5}, wd if keep else None)
+
+
+def with_fcd_acceleration(rec, fcd: str | Path):
+    """``rec`` with the states' ``ax``/``ay`` from the FCD's ``acceleration`` (SUMO's
+    longitudinal acceleration of the last step, along the heading): the crossing measures
+    extrapolate braking with it, as SUMO's device does with the same value (a smoothed
+    acceleration from derived/kinematics differs from it by the smoother's lag)."""
+    from aveas_format.safeio import iterparse
+
+    ids = _ids(rec)
+    keys, acc = [], []
+    t = 0.0
+    for _, el in iterparse(str(fcd), tag=("timestep", "vehicle")):
+        if el.tag == "timestep":
+            t = float(el.get("time"))
+            el.clear()
+            continue
+        a = el.get("acceleration")
+        if a is not None and el.get("id") in ids:
+            keys.append((ids[el.get("id")], round(t, 6)))
+            acc.append(float(a))
+    if not keys:
+        return rec
+    lookup = dict(zip(keys, acc))
+    st = rec.states
+    pid = st.column("participant_id").to_pylist()
+    tt = np.round(st.column("time").to_numpy(), 6).tolist()
+    a = np.array([lookup.get(k, np.nan) for k in zip(pid, tt)], float)
+    h = st.column("heading").to_numpy(zero_copy_only=False).astype(float)
+    for name, v in (("ax", a * np.cos(h)), ("ay", a * np.sin(h))):
+        arr = pa.array(v, pa.float64(), mask=~np.isfinite(v))
+        st = st.set_column(st.schema.get_field_index(name), name, arr) if name in \
+            st.column_names else st.append_column(name, arr)
+    rec.states = st
+    return rec
 
 
 def autobahn_scenario(workdir: str | Path | None = None, *, duration: float = 120.0,
@@ -383,10 +420,23 @@ def _globals_vs_leader(run: SsmRun, rel: float, time_decimals: int = 3) -> dict[
             "tgap": _agreement(ours[:, 1], g.column("tgap").to_numpy(), rel)}
 
 
+#: the junction's straight-on routes (crossing at right angles) and the pairs of left turns from
+#: opposite arms, whose SUMO lanes pass each other without crossing (SUMO warns "Crossing point
+#: between traffic from links ... not found" and logs them with a conflict distance of 0)
+STRAIGHT_ROUTES = frozenset({"WE", "EW", "SN", "NS"})
+OPPOSING_LEFT_TURNS = frozenset({frozenset({"WN", "ES"}), frozenset({"NE", "SW"})})
+
+
+def _route(vehicle: str) -> str:
+    return vehicle.split(".")[0]
+
+
 def _crossings(run: SsmRun, rel: float, time_decimals: int = 3) -> dict[str, Any]:
     """SUMO's crossing encounters (types 10/11) against ``derived/conflicts`` of the same ego,
-    foe and time (ttc, drac, ppet), and SUMO's PETs against the conflicts' observed ``pet``,
-    straight-on pairs (the junction's route ids WE, EW, SN, NS) and the others apart."""
+    foe and time (ttc, drac, ppet), overall and for straight-on pairs (``straight_*``, the
+    junction's routes WE, EW, SN, NS: a right-angle crossing) and the others (``turning_*``);
+    the pairs SUMO logs and those we find (``pairs``); SUMO's PETs against the conflicts'
+    observed ``pet``, straight-on pairs and the others apart."""
     import pyarrow.compute as pc
 
     rec = run.recording
@@ -400,17 +450,40 @@ def _crossings(run: SsmRun, rel: float, time_decimals: int = 3) -> dict[str, Any
     ours, n = _matched(e, ("ego", "foe"), _lookup(c, ("ego", "foe"), ("ttc", "drac", "ppet"),
                                                   time_decimals), time_decimals)
     out: dict[str, Any] = {"sumo_samples": e.num_rows, "matched": n}
+    egos, foes = e.column("ego").to_pylist(), e.column("foe").to_pylist()
+    straight = np.array([_route(a) in STRAIGHT_ROUTES and _route(b) in STRAIGHT_ROUTES
+                         for a, b in zip(egos, foes)], bool)
     for k, m in (("ttc", 0), ("drac", 1), ("ppet", 2)):
-        out[k] = _agreement(ours[:, m], e.column(k).to_numpy(), rel)
+        sumo = e.column(k).to_numpy()
+        out[k] = _agreement(ours[:, m], sumo, rel)
+        out[f"straight_{k}"] = _agreement(ours[straight, m], sumo[straight], rel)
+        out[f"turning_{k}"] = _agreement(ours[~straight, m], sumo[~straight], rel)
+    # the pairs: a crossing is found where both recorded paths reach it; a vehicle still queued
+    # when the run ends never does (SUMO knows its route)
+    st = rec.states
+    pid = st.column("participant_id").to_numpy()
+    t = st.column("time").to_numpy()
+    order = np.lexsort((t, pid))
+    ends = np.r_[np.flatnonzero(np.diff(pid[order])), len(order) - 1]
+    last = dict(zip(pid[order][ends].tolist(), t[order][ends].tolist()))
+    t_end = float(t.max()) if len(t) else 0.0
+    ids = _ids(rec)
+    found = set(zip(c.column("ego").to_pylist(), c.column("foe").to_pylist()))
+    sumo_pairs = set(zip(egos, foes))
+    left = {p for p in sumo_pairs if all(last.get(ids.get(v), t_end) < t_end for v in p)}
+    opposing = {p for p in sumo_pairs if frozenset(map(_route, p)) in OPPOSING_LEFT_TURNS}
+    out["pairs"] = {"sumo": len(sumo_pairs), "found": len(sumo_pairs & found),
+                    "both_left_before_the_end": len(left),
+                    "opposing_left_turns": len(opposing),
+                    "missed": sorted(f"{a}/{b}" for a, b in (left - opposing - found))}
     pet_ours: dict[tuple, float] = {}
     for ego, foe, v in zip(*(c.column(k).to_pylist() for k in ("ego", "foe", "pet"))):
         pet_ours.setdefault((ego, foe), np.nan if v is None else v)
-    straight = {"WE", "EW", "SN", "NS"}
     P = run.ssm["pet"].to_pydict()
     diffs: dict[str, list] = {"pet_straight": [], "pet_turning": []}
     for ego, foe, v in zip(P["ego"], P["foe"], P["pet"]):
-        key = ("pet_straight" if ego.split(".")[0] in straight and foe.split(".")[0] in straight
-               else "pet_turning")
+        key = ("pet_straight" if _route(ego) in STRAIGHT_ROUTES and _route(foe) in
+               STRAIGHT_ROUTES else "pet_turning")
         diffs[key].append(abs(v - pet_ours.get((ego, foe), np.nan)))
     for k, d in diffs.items():
         d = np.asarray(d, float)
@@ -454,4 +527,4 @@ def compare(run: SsmRun, rel: float = 0.01) -> dict[str, Any]:
 
 __all__ = ["CROSSING", "FOLLOWING_FOLLOWER", "MERGING", "SSM_MEASURES", "SsmRun",
            "autobahn_scenario", "compare", "follower_pairs", "junction_scenario", "read_ssm",
-           "ssm_args"]
+           "ssm_args", "with_fcd_acceleration"]

@@ -101,3 +101,21 @@ def test_repeated_times_and_single_samples():
 ])
 def test_numbers_in_messages_are_rounded_for_people(value, text):
     assert fmt_num(value) == text
+
+
+def test_keyed_normals_depend_on_the_keys_only():
+    """The draws of an element are the same in any batch; standard normal and uncorrelated
+    across draws and elements."""
+    from scipy import stats
+
+    from aveas_format.numeric import keyed_normals
+
+    a, b = np.arange(4000), np.arange(4000) * 7 + 3
+    z = keyed_normals(5, (a, b), 33)
+    assert z.shape == (33, 4000)
+    np.testing.assert_array_equal(keyed_normals(5, (a[[17, 3]], b[[17, 3]]), 33), z[:, [17, 3]])
+    assert not np.array_equal(keyed_normals(6, (a, b), 33), z)
+    assert not np.array_equal(keyed_normals(5, (b, a), 33), z)
+    assert stats.kstest(z.ravel(), "norm").pvalue > 1e-3
+    c = np.corrcoef(z)
+    assert np.abs(c[np.triu_indices(33, 1)]).max() < 0.08

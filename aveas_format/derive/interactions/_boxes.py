@@ -20,6 +20,7 @@ import numpy as np
 from aveas_format.derive._samples import Samples, ragged
 from aveas_format.derive.interactions._surrogates import box_surrogates, sample_std
 from aveas_format.derive.interactions._velocities import range_rate
+from aveas_format.numeric import keyed_normals
 
 if TYPE_CHECKING:
     from aveas_format.derive.interactions import InteractionsParams
@@ -187,20 +188,24 @@ def box_rows(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
     return {"i": i, "j": j, "ttc": ttc}
 
 
-def _draw(S: Samples, k: np.ndarray, K: int, rng: np.random.Generator):
-    """``K`` Monte Carlo draws of the states of rows ``k``: x, y, heading, length, width, vx, vy
-    (each ``(K, len(k))``)."""
-    z1, z2 = rng.standard_normal((2, K, len(k)))
+def _draw(S: Samples, k: np.ndarray, other: np.ndarray, K: int, seed: int):
+    """``K`` Monte Carlo draws of the states of rows ``k`` (in pairs with rows ``other``): x, y,
+    heading, length, width, vx, vy (each ``(K, len(k))``). The draws of a row depend only on the
+    seed, the two participants and the time (:func:`~aveas_format.numeric.keyed_normals`), so the
+    std of a pair at a time does not depend on which other rows are derived with it (time
+    windows, cut-outs)."""
+    tkey = np.round(S.t[k] * 1e6).astype(np.int64)
+    z = keyed_normals(seed, (S.pid[k], S.pid[other], tkey), 7 * K).reshape(7, K, len(k))
+    z1, z2, w1, w2 = z[:4]
     r = np.clip(S.rxy[k], -0.999, 0.999)
     x = S.x[k] + S.sx[k] * z1
     y = S.y[k] + S.sy[k] * (r * z1 + np.sqrt(1 - r * r) * z2)
-    w1, w2 = rng.standard_normal((2, K, len(k)))
     rv = np.clip(S.rv[k], -0.999, 0.999)
     vx = S.vx[k] + S.svx[k] * w1
     vy = S.vy[k] + S.svy[k] * (rv * w1 + np.sqrt(1 - rv * rv) * w2)
-    h = S.h[k] + S.sh[k] * rng.standard_normal((K, len(k)))
-    L = np.maximum(S.L[k] + S.sL[k] * rng.standard_normal((K, len(k))), 0.1)
-    W = np.maximum(S.W[k] + S.sW[k] * rng.standard_normal((K, len(k))), 0.1)
+    h = S.h[k] + S.sh[k] * z[4]
+    L = np.maximum(S.L[k] + S.sL[k] * z[5], 0.1)
+    W = np.maximum(S.W[k] + S.sW[k] * z[6], 0.1)
     return x, y, h, L, W, vx, vy
 
 
@@ -213,9 +218,8 @@ def box_std(S: Samples, i: np.ndarray, j: np.ndarray, p: InteractionsParams
     keys = ("ttc", "drac", "mdrac", "psd_i", "psd_j")
     if p.samples == 0 or len(i) == 0:
         return {k: np.full(len(i), np.nan) for k in keys}
-    rng = np.random.default_rng(p.seed)
-    a = _draw(S, i, p.samples, rng)
-    b = _draw(S, j, p.samples, rng)
+    a = _draw(S, i, j, p.samples, p.seed)
+    b = _draw(S, j, i, p.samples, p.seed)
     tt = ttc_boxes(*a, *b)
     w = np.hypot(b[5] - a[5], b[6] - a[6])
     drac, mdrac, psd_i = box_surrogates(tt, w, np.hypot(a[5], a[6]), p.reaction_time,
