@@ -187,18 +187,26 @@ class FitConfig(BaseModel):
                 x.append(self.scenario.cls(c).w99()[kind])
         return np.clip(np.array(x, np.float64), b[:, 0], b[:, 1])
 
-    def surface_step(self, recorded: dict[str, np.ndarray]) -> np.ndarray:
-        """The first response-surface design's half-width per parameter: about two standard errors
-        where the data tell them (mu: 2 s / sqrt(n), sigma: 2 s / sqrt(2 n) of the recorded mean
-        speeds), else ``refine_step`` x the bound width."""
-        b = self.bounds_array()
-        step = (b[:, 1] - b[:, 0]) * self.refine_step
+    def moment_se(self, recorded: dict[str, np.ndarray]) -> np.ndarray:
+        """Per parameter the standard error of the recorded values' own moment where the data tell
+        it (mean-speed metric: mu ``s / sqrt(n)``, sigma ``s / sqrt(2 n)`` of the recorded mean
+        speeds; more than 5 values), else NaN: no estimate from n vehicles is more precise than
+        the moments of their own desired speeds, so this bounds the standard error from below."""
+        out = np.full(len(self.names), np.nan)
         for i, n in enumerate(self.names):
             kind, _, c = n.partition("_")
             v = np.asarray(recorded.get(c, []), np.float64)
             if self.metric == "mean_speed" and kind in ("mu", "sigma") and len(v) > 5:
-                step[i] = 2.0 * v.std(ddof=1) / np.sqrt(len(v) * (1 if kind == "mu" else 2))
-        return step
+                out[i] = v.std(ddof=1) / np.sqrt(len(v) * (1 if kind == "mu" else 2))
+        return out
+
+    def surface_step(self, recorded: dict[str, np.ndarray]) -> np.ndarray:
+        """The first response-surface design's half-width per parameter: two standard errors of
+        the recorded moments where the data tell them (:meth:`moment_se`), else ``refine_step`` x
+        the bound width."""
+        b = self.bounds_array()
+        se = self.moment_se(recorded)
+        return np.where(np.isfinite(se), 2.0 * se, (b[:, 1] - b[:, 0]) * self.refine_step)
 
     def starts_array(self, recorded: dict[str, np.ndarray] | None = None) -> np.ndarray:
         """One starting point per restart (see ``starts``)."""
@@ -504,7 +512,8 @@ def _refine(res: FitResult, base: dict, workers: int | None, scheduler: str | No
     x = np.array([res.best[n] for n in config.names])
     return response_surface(x, config.surface_step(res.recorded), evaluate_all, b,
                             rounds=config.refine_rounds, seeds=config.refine_seeds,
-                            resample=resample if config.bootstrap >= 3 else None)
+                            resample=resample if config.bootstrap >= 3 else None,
+                            min_se=config.moment_se(res.recorded))
 
 
 def _bootstrap_values(x: np.ndarray, config: FitConfig, base: dict, sims: list[dict | None],

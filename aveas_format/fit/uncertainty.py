@@ -91,7 +91,8 @@ def fit_quadratic_blocks(u: np.ndarray, y: np.ndarray, block: np.ndarray
 def response_surface(x0: np.ndarray, step: np.ndarray,
                      evaluate: Callable[[Sequence[np.ndarray], int], list[float]], bounds: np.ndarray,
                      *, rounds: int = 3, seeds: int = 1,
-                     resample: Callable[[np.ndarray], np.ndarray] | None = None) -> dict:
+                     resample: Callable[[np.ndarray], np.ndarray] | None = None,
+                     min_se: np.ndarray | None = None) -> dict:
     """Estimate the minimum of a rough objective and its curvature around ``x0``.
 
     ``evaluate(points, r)`` maps a list of points to their -ln L (in parallel; NaN for a failed one)
@@ -100,6 +101,8 @@ def response_surface(x0: np.ndarray, step: np.ndarray,
     parameter. ``resample(x)``: the parametric bootstrap — -ln L of B recordings simulated at the
     estimate ``x``, at every point evaluated so far (in the order evaluated; shape (points, B));
     each bootstrap recording's minimum on the same surface gives the sampling covariance.
+    ``min_se``: a lower bound of the sampling part's standard errors (NaN: none), applied to the
+    result (the designs' steps follow the surface's own).
 
     Returns ``x`` (the estimate), ``fun`` (the surface's value there), ``se``, ``cov``,
     ``se_sampling`` (the recorded sample's part: the bootstrap's, else ``sqrt(diag(H^-1))``),
@@ -166,7 +169,15 @@ def response_surface(x0: np.ndarray, step: np.ndarray,
             stop = "the response surface's minimum lies outside the design (moved to its edge)"
         else:
             stop = "the response surface is not positive definite (no minimum resolved at this scale)"
-        out = {"x": xm_c, "fun": fm, "se": se, "cov": cov,
+        if pd and min_se is not None:  # the sampling part not below its bound
+            d_se = np.sqrt(np.diag(cov_sampling))
+            f_up = np.where(np.isfinite(min_se) & (d_se < min_se), min_se / d_se, 1.0)
+            cov_sampling = cov_sampling * np.outer(f_up, f_up)
+            cov = cov_sampling + np.where(np.isfinite(cov_seed), cov_seed, 0.0)
+            se_out = np.sqrt(np.diag(cov))
+        else:
+            se_out = se
+        out = {"x": xm_c, "fun": fm, "se": se_out, "cov": cov,
                "se_sampling": np.sqrt(np.diag(cov_sampling)), "se_seed": np.sqrt(np.diag(cov_seed)),
                "se_information": np.sqrt(np.diag(cov_information)), "bootstrap": boot,
                "seed_minima": minima, "seeds": int(len(present)), "converged": pd and inside,

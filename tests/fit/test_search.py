@@ -111,6 +111,24 @@ def test_the_bootstrap_gives_the_sampling_part_and_the_bias():
     np.testing.assert_allclose(r["bootstrap"]["bias"], 0.3 + e.mean(axis=0), atol=0.1)
 
 
+def test_the_standard_errors_sampling_part_has_a_lower_bound():
+    """``min_se`` (the recorded moments' own standard errors) raises a sampling part below it, and
+    leaves the estimate, the other parameters and the seed's part alone."""
+
+    def evaluate(points, seed):
+        return [rough_bowl(p + 0.2 * seed, noise=0.2) for p in points]
+
+    kw = {"seeds": 3}
+    a = response_surface(CENTRE, (BOUNDS[:, 1] - BOUNDS[:, 0]) * 0.03, evaluate, BOUNDS, **kw)
+    bound = np.array([2.0 * a["se_sampling"][0], np.nan, 0.5 * a["se_sampling"][2], np.nan])
+    b = response_surface(CENTRE, (BOUNDS[:, 1] - BOUNDS[:, 0]) * 0.03, evaluate, BOUNDS, min_se=bound,
+                         **kw)
+    np.testing.assert_allclose(b["x"], a["x"])
+    np.testing.assert_allclose(b["se_sampling"], [bound[0], *a["se_sampling"][1:]])
+    np.testing.assert_allclose(b["se_seed"], a["se_seed"])
+    np.testing.assert_allclose(b["se"] ** 2, b["se_sampling"] ** 2 + b["se_seed"] ** 2)
+
+
 def test_a_flat_surface_is_not_converged():
     r = response_surface(CENTRE, np.ones(4), lambda pts, seed: [
         1.0 - 0.01 * float(np.sum((p - CENTRE) ** 2)) for p in pts], BOUNDS, rounds=1)
