@@ -110,7 +110,7 @@ def main(argv: list[str]) -> dict:
     best = min(rows, key=lambda r: r["fun"])
     b = cfg.bounds_array()
 
-    def evaluate_all(points):
+    def evaluate_all(points, seed):  # the fit's seed only (refine_seeds = 1)
         return [evaluate(p, cfg, rec, net)[0] for p in points]
 
     ref = response_surface(np.array(best["x"]), (b[:, 1] - b[:, 0]) * 0.03, evaluate_all, b)

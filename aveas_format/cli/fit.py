@@ -92,7 +92,8 @@ def _fit(recordings: list[Path], output: Path, config: Path | None, metric: str,
         raise fail("every restart failed")
     s = res.summary()
     out.print(json.dumps({"best": {n: round(s[n], 3) for n in fc.names},
-                          "se": s.get("se"), "neg_log_likelihood": round(s["fun"], 4),
+                          "se": s.get("se"), "se_seed": s.get("se_seed"),
+                          "neg_log_likelihood": round(s["fun"], 4),
                           "converged": s["converged"], "stop": s["stop"], "method": s["method"],
                           "restarts": s["restarts"], "restarts_converged": s["restarts_converged"],
                           "restarts_agreeing": s["restarts_agreeing"],
@@ -122,7 +123,14 @@ _STARTS = typer.Option("data", "--starts", help="data: the first restart starts 
                        "others uniformly in the bounds; uniform: all uniformly (the paper's).")
 _REFINE = typer.Option(True, "--refine/--no-refine", help="Estimate and standard errors from a "
                        "quadratic response surface around the best restart (75 more simulations "
-                       "for 4 parameters).")
+                       "for 4 parameters, and 25 per further --surface-seeds).")
+_SURFACE_SEEDS = typer.Option(4, "--surface-seeds", min=1, help="Simulation seeds of the response "
+                              "surface: its last design runs under this many - 1 further seeds, the "
+                              "estimate averages them and the standard errors include the seed's "
+                              "noise (25 simulations per further seed for 4 parameters).")
+_BOOTSTRAP = typer.Option(40, "--bootstrap", min=0, help="Recordings of the parametric bootstrap "
+                          "(simulated at the estimate, refitted on the response surface): the "
+                          "standard errors' sampling part; below 3 the surface's curvature instead.")
 _DURATION = typer.Option(None, "--duration", help="Override the simulated demand period (s) of "
                          "each evaluation (default: the scenario's, 3,600 s).")
 _S_RANGE = typer.Option(None, "--s-range", help="Use only samples with road_s in MIN,MAX.")
@@ -142,6 +150,8 @@ def desired_speed(
     method: str = _METHOD,
     starts: str = _STARTS,
     refine: bool = _REFINE,
+    surface_seeds: int = _SURFACE_SEEDS,
+    bootstrap: int = _BOOTSTRAP,
     duration: float = _DURATION,
     bandwidth: str = typer.Option("silverman", "--bandwidth", help="KDE bandwidth: silverman, "
                                   "scott or a number (km/h)."),
@@ -153,7 +163,8 @@ def desired_speed(
     speeds of recordings (the paper's experiment)."""
     _fit(recordings, output, config, "mean_speed", None, {}, restarts, workers, scheduler, maxfev,
          seed, bandwidth, bounds, road, s_range,
-         {"method": method, "starts": starts, "refine": refine, "duration": duration})
+         {"method": method, "starts": starts, "refine": refine, "refine_seeds": surface_seeds,
+          "bootstrap": bootstrap, "duration": duration})
 
 
 @fit_app.command("car-following")
@@ -175,6 +186,8 @@ def car_following(
     method: str = _METHOD,
     starts: str = _STARTS,
     refine: bool = _REFINE,
+    surface_seeds: int = _SURFACE_SEEDS,
+    bootstrap: int = _BOOTSTRAP,
     duration: float = _DURATION,
     bandwidth: str = typer.Option("silverman", "--bandwidth", help="KDE bandwidth: silverman, "
                                   "scott or a number (in the metric's unit)."),
@@ -201,7 +214,8 @@ def car_following(
     options = {k: float(v) for k, v in options.items()}
     _fit(recordings, output, config, metric, param or ["cc1_car", "cc1_truck"], options, restarts,
          workers, scheduler, maxfev, seed, bandwidth, bounds, road, s_range,
-         {"method": method, "starts": starts, "refine": refine, "duration": duration})
+         {"method": method, "starts": starts, "refine": refine, "refine_seeds": surface_seeds,
+          "bootstrap": bootstrap, "duration": duration})
 
 
 
@@ -219,6 +233,8 @@ def study(
     restarts: int = typer.Option(1, "--restarts", "-r", min=1, help="Restarts per fit."),
     maxfev: int = typer.Option(100, "--maxfev", help="Evaluations per restart at most."),
     method: str = _METHOD,
+    surface_seeds: int = _SURFACE_SEEDS,
+    bootstrap: int = _BOOTSTRAP,
     workers: int = workers_option(),
     scheduler: str = _SCHEDULER,
 ) -> None:
@@ -236,7 +252,8 @@ def study(
         else paper_scenario(duration)
     try:
         cfg = StudyConfig(seeds=seeds, sizes=[s.strip() for s in sizes.split(",") if s.strip()],
-                          fit=FitConfig(scenario=sc, restarts=restarts, maxfev=maxfev, method=method))
+                          fit=FitConfig(scenario=sc, restarts=restarts, maxfev=maxfev, method=method,
+                                        refine_seeds=surface_seeds, bootstrap=bootstrap))
     except ValidationError as e:
         raise fail(f"study configuration: {format_validation_error(e)}", EXIT_USAGE) from None
     bad = set(cfg.sizes) - {"paper", "all"}

@@ -94,10 +94,21 @@ class FitConfig(BaseModel):
                          "response surface of -ln L around the best restart's end (three rounds of "
                          "2 n (n - 1) + 1 simulations; aveas_format.fit.uncertainty)")
     refine_rounds: int = Field(3, ge=1, le=10, description="rounds of the response-surface design")
+    refine_seeds: int = Field(4, ge=1, le=50, description="simulation seeds of the response "
+                              "surface: after its rounds under the fit's seed, one more design "
+                              "under each of refine_seeds - 1 further seeds; the estimate averages "
+                              "the seeds' minima and the standard errors include the seed's noise "
+                              "(aveas_format.fit.uncertainty); 1: the fit's seed only")
     refine_step: float = Field(0.03, gt=0, le=0.25, description="the first response-surface "
                                "design's half-width as a fraction of the bound widths (for mu/sigma "
                                "under the mean-speed metric: two standard errors of the recorded "
                                "values' mean and standard deviation instead)")
+    bootstrap: int = Field(40, ge=0, le=1000, description="recordings of the parametric "
+                           "bootstrap: simulated at the estimate with random desired speeds (as "
+                           "many vehicles per class as recorded), each refitted on the response "
+                           "surface; their spread is the standard error's sampling part (with "
+                           "vehicles held up together, not independent). Fewer than 3: the "
+                           "surface's curvature H^-1 instead")
     bandwidth: str | float = "silverman"
     kde_backend: str = "numpy"
     variance_correction: bool = Field(True, description="shrink the simulated values towards their "
@@ -176,18 +187,26 @@ class FitConfig(BaseModel):
                 x.append(self.scenario.cls(c).w99()[kind])
         return np.clip(np.array(x, np.float64), b[:, 0], b[:, 1])
 
-    def surface_step(self, recorded: dict[str, np.ndarray]) -> np.ndarray:
-        """The first response-surface design's half-width per parameter: about two standard errors
-        where the data tell them (mu: 2 s / sqrt(n), sigma: 2 s / sqrt(2 n) of the recorded mean
-        speeds), else ``refine_step`` x the bound width."""
-        b = self.bounds_array()
-        step = (b[:, 1] - b[:, 0]) * self.refine_step
+    def moment_se(self, recorded: dict[str, np.ndarray]) -> np.ndarray:
+        """Per parameter the standard error of the recorded values' own moment where the data tell
+        it (mean-speed metric: mu ``s / sqrt(n)``, sigma ``s / sqrt(2 n)`` of the recorded mean
+        speeds; more than 5 values), else NaN: no estimate from n vehicles is more precise than
+        the moments of their own desired speeds, so this bounds the standard error from below."""
+        out = np.full(len(self.names), np.nan)
         for i, n in enumerate(self.names):
             kind, _, c = n.partition("_")
             v = np.asarray(recorded.get(c, []), np.float64)
             if self.metric == "mean_speed" and kind in ("mu", "sigma") and len(v) > 5:
-                step[i] = 2.0 * v.std(ddof=1) / np.sqrt(len(v) * (1 if kind == "mu" else 2))
-        return step
+                out[i] = v.std(ddof=1) / np.sqrt(len(v) * (1 if kind == "mu" else 2))
+        return out
+
+    def surface_step(self, recorded: dict[str, np.ndarray]) -> np.ndarray:
+        """The first response-surface design's half-width per parameter: two standard errors of
+        the recorded moments where the data tell them (:meth:`moment_se`), else ``refine_step`` x
+        the bound width."""
+        b = self.bounds_array()
+        se = self.moment_se(recorded)
+        return np.where(np.isfinite(se), 2.0 * se, (b[:, 1] - b[:, 0]) * self.refine_step)
 
     def starts_array(self, recorded: dict[str, np.ndarray] | None = None) -> np.ndarray:
         """One starting point per restart (see ``starts``)."""
@@ -247,10 +266,36 @@ def run_restart(task: dict) -> dict:
     return out
 
 
-def evaluate_point(task: dict) -> float:
-    """-ln L at ``task["theta"]`` (a module-level function for the response surface's tasks)."""
+def evaluate_point(task: dict) -> dict:
+    """-ln L at ``task["theta"]`` and the simulated metric (a module-level function for the
+    response surface's tasks; the bootstrap re-uses the simulated values)."""
     config, recorded = _task_inputs(task)
-    return evaluate(np.asarray(task["theta"], np.float64), config, recorded, task.get("network"))[0]
+    f, sim = evaluate(np.asarray(task["theta"], np.float64), config, recorded, task.get("network"))
+    return {"f": f, "sim": {c: np.asarray(v, np.float64).tolist() for c, v in sim.items()}}
+
+
+def bootstrap_recording(task: dict) -> dict[str, list[float]]:
+    """One recording of the parametric bootstrap (a module-level function for the tasks): the
+    metric simulated at ``task["theta"]`` with random desired speeds and the task's seeds (further
+    seeds until every class has as many values as recorded), subsampled to the recorded sizes."""
+    config, recorded = _task_inputs(task)
+    theta = np.asarray(task["theta"], np.float64)
+    need = {c: len(v) for c, v in recorded.items() if len(v)}
+    got: dict[str, list[np.ndarray]] = {c: [] for c in need}
+    cfg = config.model_copy(update={"speed_sampling": "random"})
+    for seed in task["seeds"]:
+        sim = metric_at(theta, cfg.model_copy(update={"scenario": cfg.scenario.model_copy(
+            update={"seed": int(seed)})}), task.get("network"))
+        for c in need:
+            got[c].append(np.asarray(sim.get(c, []), np.float64))
+        if all(sum(map(len, got[c])) >= need[c] for c in need):
+            break
+    rng = np.random.default_rng(int(task["seeds"][0]))
+    out = {}
+    for c, n in need.items():
+        v = np.concatenate(got[c]) if got[c] else np.empty(0)
+        out[c] = (v[np.sort(rng.choice(len(v), n, replace=False))] if len(v) > n else v).tolist()
+    return out
 
 
 @dataclass
@@ -317,9 +362,23 @@ class FitResult:
             out["se"] = {n: _num(se[i]) for i, n in enumerate(names)}
             out["ci95"] = {n: [_num(est[n] - 1.96 * se[i]), _num(est[n] + 1.96 * se[i])]
                            for i, n in enumerate(names)}
+            sf = self.surface
+            out["se_sampling"] = {n: _num(sf["se_sampling"][i]) for i, n in enumerate(names)}
+            out["se_seed"] = {n: _num(sf["se_seed"][i]) for i, n in enumerate(names)}
+            out["se_information"] = {n: _num(v) for n, v in zip(
+                names, sf.get("se_information", [np.nan] * len(names)), strict=True)}
+            boot = sf.get("bootstrap") or {}
             out["response_surface"] = {
-                "method": "quadratic fit of -ln L to Box-Behnken designs around the best restart "
-                          "(observed information; the quadratic profile likelihood)",
+                "method": "quadratic fit of -ln L to Box-Behnken designs around the best restart, "
+                          "the last design under further simulation seeds (one gradient per seed, "
+                          "a common Hessian H); cov = cov(bootstrap minima) (else H^-1) + "
+                          "cov(seed minima) / seeds",
+                "bootstrap": boot.get("replicates", 0),
+                "bootstrap_bias": {n: _num(v) for n, v in zip(names, boot["bias"], strict=True)}
+                if boot else None,
+                "seeds": sf.get("seeds", 1),
+                "seed_minima": [{n: _num(v) for n, v in zip(names, row, strict=True)}
+                                for row in np.asarray(sf.get("seed_minima", np.empty((0, len(names)))))],
                 "rounds": self.surface["rounds"], "evaluations": self.surface["evaluations"],
                 "step": {n: _num(self.surface["step"][i]) for i, n in enumerate(names)},
                 "cov": [[_num(v) for v in row] for row in np.asarray(self.surface["cov"])]}
@@ -434,18 +493,75 @@ def _refine(res: FitResult, base: dict, workers: int | None, scheduler: str | No
     config = res.config
     b = config.bounds_array()
 
-    def evaluate_all(points: list[np.ndarray]) -> list[float]:
-        out = [np.nan] * len(points)
-        tasks = [{**base, "theta": p.tolist()} for p in points]
+    sims: list[dict | None] = []  # the simulated metric per evaluated point, in order
+
+    def evaluate_all(points: list[np.ndarray], seed: int = 0) -> list[float]:
+        out, sim = [np.nan] * len(points), [None] * len(points)
+        task_base = base if seed == 0 else {**base, "config": _with_seed(base["config"], seed)}
+        tasks = [{**task_base, "theta": p.tolist()} for p in points]
         for r in run_tasks(evaluate_point, tasks, workers=workers, scheduler=scheduler,
                            progress=progress, description="response surface"):
             if r.ok:
-                out[r.index] = r.value
+                out[r.index], sim[r.index] = r.value["f"], r.value["sim"]
+        sims.extend(sim)
         return out
+
+    def resample(x: np.ndarray) -> np.ndarray:
+        return _bootstrap_values(x, config, base, sims, workers, scheduler, progress)
 
     x = np.array([res.best[n] for n in config.names])
     return response_surface(x, config.surface_step(res.recorded), evaluate_all, b,
-                            rounds=config.refine_rounds)
+                            rounds=config.refine_rounds, seeds=config.refine_seeds,
+                            resample=resample if config.bootstrap >= 3 else None,
+                            min_se=config.moment_se(res.recorded))
+
+
+def _bootstrap_values(x: np.ndarray, config: FitConfig, base: dict, sims: list[dict | None],
+                      workers: int | None, scheduler: str | None, progress: bool) -> np.ndarray:
+    """-ln L of ``config.bootstrap`` recordings simulated at ``x`` (in parallel) under the simulated
+    values of every evaluated point: shape (points, recordings); NaN where a point or a recording
+    failed."""
+    from aveas_format.fit.objective import kde_logpdf
+    from aveas_format.parallel import run_tasks
+
+    seed0 = int(config.scenario.seed)
+    tasks = [{**base, "theta": x.tolist(),
+              "seeds": [(seed0 + SEED_STRIDE * (BOOTSTRAP_SEEDS + 100 * b + j)) % 2**31 for j in range(20)]}
+             for b in range(config.bootstrap)]
+    recs: list[dict | None] = [None] * len(tasks)
+    for r in run_tasks(bootstrap_recording, tasks, workers=workers, scheduler=scheduler,
+                       progress=progress, description="bootstrap"):
+        if r.ok:
+            recs[r.index] = r.value
+    y = np.full((len(sims), len(recs)), np.nan)
+    good = [i for i, rec in enumerate(recs) if rec is not None]
+    if not good:
+        return y
+    classes = [c for c in recs[good[0]] if recs[good[0]][c]]
+    for j, sim in enumerate(sims):
+        if sim is None:
+            continue
+        total = np.zeros(len(good))
+        for c in classes:  # one KDE call per point and class for every recording at once
+            vals = [np.asarray(recs[i][c], np.float64) for i in good]
+            lp = kde_logpdf(np.asarray(sim.get(c, []), np.float64), np.concatenate(vals),
+                            config.bandwidth, config.kde_backend, config.variance_correction)
+            total -= np.add.reduceat(lp, np.cumsum([0, *map(len, vals[:-1])]))
+        y[j, good] = total
+    return y
+
+
+#: further simulation seeds of the response surface: the fit's seed + r x this (r = 1, 2, ...)
+SEED_STRIDE = 7919
+#: the bootstrap's recordings use the fit's seed + SEED_STRIDE x (this + 100 b + j)
+BOOTSTRAP_SEEDS = 10_000
+
+
+def _with_seed(config: dict, r: int) -> dict:
+    """The task configuration (JSON) with the scenario's r-th further seed."""
+    sc = dict(config["scenario"])
+    sc["seed"] = (int(sc["seed"]) + SEED_STRIDE * r) % 2**31
+    return {**config, "scenario": sc}
 
 
 def _figures(res: FitResult, network) -> None:

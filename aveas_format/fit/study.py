@@ -113,6 +113,10 @@ def run_replicate(task: dict) -> dict:
         kind, _, c = n.partition("_")
         row[n] = s[n]
         row[f"se_{n}"] = (s.get("se") or {}).get(n)
+        row[f"se_seed_{n}"] = (s.get("se_seed") or {}).get(n)
+        row[f"se_information_{n}"] = (s.get("se_information") or {}).get(n)
+        row[f"bootstrap_bias_{n}"] = ((s.get("response_surface") or {}).get("bootstrap_bias") or {}).get(n)
+        row[f"seed_minima_{n}"] = [m[n] for m in (s.get("response_surface") or {}).get("seed_minima", [])]
         row[f"restart_{n}"] = s["best_restart"][n]
         moment = np.mean if kind == "mu" else (lambda a: np.std(a, ddof=1))
         row[f"floor_{n}"] = float(moment(desired[c][np.isfinite(desired[c])])) if kind in ("mu", "sigma") \
@@ -144,6 +148,9 @@ def summarise(rows: list[dict], cfg: StudyConfig) -> dict:
                                   "sd": float(e.std(ddof=1)),
                                   "coverage95": float(np.mean(np.abs(e) <= 1.96 * se)),
                                   "mean_se": float(np.nanmean(se)) if np.isfinite(se).any() else None}
+            se_seed = np.array([np.nan if r.get(f"se_seed_{n}") is None else r[f"se_seed_{n}"]
+                                for r in rs], np.float64)
+            st["mean_se_seed"] = float(np.nanmean(se_seed)) if np.isfinite(se_seed).any() else None
             for kind in ("floor", "naive"):
                 vals = [r[f"{kind}_{n}"] for r in rs]
                 if all(v is not None for v in vals):

@@ -142,7 +142,7 @@ def test_cc1_recovery_from_time_headways(sumo, tmp_path):
     assert len(recorded["car"]) > 100
     cfg = FitConfig(scenario=small_scenario(duration=600), metric="time_headway",
                     parameters=["cc1_car"], bounds={"cc1_car": (0.3, 1.8)}, restarts=2, maxfev=20,
-                    xatol=0.02, seed=4)
+                    xatol=0.02, seed=4, refine_seeds=1, bootstrap=0)
     res = fit_parameters(recorded, cfg, workers=2, outdir=tmp_path / "fit")
     assert len(res.runs) == 2 and not res.failed
     assert abs(res.best["cc1_car"] - 0.9) < 0.2, res.runs
@@ -158,10 +158,12 @@ def test_cli_fit_car_following(sumo, tmp_path):
     with pytest.raises(SystemExit) as e:
         main(["fit", "car-following", str(tmp_path / "rec.aveas"), "-c", str(cfg), "-o",
               str(tmp_path / "fit"), "-r", "1", "--maxfev", "5", "-p", "cc1_car",
-              "--option", "max_thw=5", "--bounds", '{"cc1_car": [0.5, 1.5]}'])
+              "--option", "max_thw=5", "--bounds", '{"cc1_car": [0.5, 1.5]}', "--surface-seeds", "2",
+              "--bootstrap", "3"])
     assert e.value.code == 0
     best = json.loads((tmp_path / "fit" / "best.json").read_text())
     assert 0.5 <= best["cc1_car"] <= 1.5
+    assert best["response_surface"]["seeds"] == 2 and set(best["se_seed"]) == {"cc1_car"}
     stored = json.loads((tmp_path / "fit" / "config.json").read_text())
     assert stored["metric"] == "time_headway" and stored["metric_options"] == {"max_thw": 5.0}
     for bad, msg in ((["--option", "max_thw"], "NAME=NUMBER"), (["--option", "foo=1"], "expected one of"),

@@ -45,20 +45,93 @@ def test_the_response_surface_finds_the_minimum_and_its_standard_errors_under_ju
     """Started 2 km/h off, the surface's minimum is within 0.35 standard errors of the bowl's
     centre, and its standard errors are within 30 % of the true ones."""
 
-    def evaluate(points):
+    def evaluate(points, seed):
+        assert seed == 0
         return [rough_bowl(p) for p in points]
 
     r = response_surface(CENTRE + np.array([2.0, -1.0, 1.5, 0.8]), (BOUNDS[:, 1] - BOUNDS[:, 0]) * 0.03,
                          evaluate, BOUNDS)
     se_true = np.sqrt(np.diag(COV))
-    assert r["converged"] and r["evaluations"] == 75
+    assert r["converged"] and r["evaluations"] == 75 and r["seeds"] == 1
     assert np.all(np.abs(r["x"] - CENTRE) < 0.35 * se_true), r["x"]
     np.testing.assert_allclose(r["se"], se_true, rtol=0.3)
+    np.testing.assert_allclose(r["se_sampling"], r["se"])
+    assert np.all(np.isnan(r["se_seed"]))
+
+
+def test_the_response_surface_averages_the_seeds_and_adds_their_spread():
+    """Every simulation seed moves the bowl's centre (as another seed moves the fitting
+    objective's minimum): with 8 seeds the estimate is the mean of the seeds' centres, the seed's
+    part of the standard error is their spread / sqrt(8), and the total adds it to the
+    curvature's part."""
+    seeds = 8
+    shift = np.random.default_rng(11).normal(0.0, [1.0, 0.8, 0.5, 0.3], (seeds, 4))
+    seen = set()
+
+    def evaluate(points, seed):
+        seen.add(seed)
+        return [rough_bowl(p - shift[seed], noise=0.2) for p in points]
+
+    r = response_surface(CENTRE + np.array([1.0, -1.0, 0.5, 0.5]), (BOUNDS[:, 1] - BOUNDS[:, 0]) * 0.03,
+                         evaluate, BOUNDS, seeds=seeds)
+    assert seen == set(range(seeds)) and r["seeds"] == seeds
+    assert r["converged"] and r["evaluations"] == 75 + 25 * (seeds - 1)
+    se_true = np.sqrt(np.diag(COV))
+    target = CENTRE + shift.mean(axis=0)
+    assert np.all(np.abs(r["x"] - target) < 0.25 * se_true), (r["x"], target)
+    np.testing.assert_allclose(r["seed_minima"], CENTRE + shift, atol=0.4)
+    np.testing.assert_allclose(r["se_seed"], shift.std(axis=0, ddof=1) / np.sqrt(seeds), rtol=0.3)
+    np.testing.assert_allclose(r["se_sampling"], se_true, rtol=0.3)
+    np.testing.assert_allclose(r["se"] ** 2, r["se_sampling"] ** 2 + r["se_seed"] ** 2)
+
+
+def test_the_bootstrap_gives_the_sampling_part_and_the_bias():
+    """``resample(x)`` returns -ln L of 60 bootstrap recordings at every evaluated point; recording
+    b's bowl is centred at x + 0.3 + e_b (an estimator biased by +0.3, with e_b of a known spread,
+    larger than the curvature's standard errors as with vehicles held up together): its spread is
+    the sampling part of the standard error and its mean offset the bias."""
+    spread = np.array([2.0, 1.5, 1.0, 0.6])
+    e = np.random.default_rng(4).normal(0.0, spread, (60, 4))
+    evaluated: list[np.ndarray] = []
+
+    def evaluate(points, seed):
+        evaluated.extend(points)
+        return [rough_bowl(p, noise=0.2) for p in points]
+
+    def resample(x):
+        pts = np.asarray(evaluated)
+        return np.array([[rough_bowl(q - (x + 0.3 + eb - CENTRE), noise=0.2) for eb in e] for q in pts])
+
+    r = response_surface(CENTRE + 1.0, (BOUNDS[:, 1] - BOUNDS[:, 0]) * 0.03, evaluate, BOUNDS,
+                         resample=resample)
+    assert r["converged"] and r["bootstrap"]["replicates"] == 60
+    np.testing.assert_allclose(r["se_sampling"], e.std(axis=0, ddof=1), rtol=0.1)
+    np.testing.assert_allclose(r["se_information"], np.sqrt(np.diag(COV)), rtol=0.3)
+    np.testing.assert_allclose(r["se"], r["se_sampling"])  # one seed: no seed part
+    np.testing.assert_allclose(r["bootstrap"]["bias"], 0.3 + e.mean(axis=0), atol=0.1)
+
+
+def test_the_standard_errors_sampling_part_has_a_lower_bound():
+    """``min_se`` (the recorded moments' own standard errors) raises a sampling part below it, and
+    leaves the estimate, the other parameters and the seed's part alone."""
+
+    def evaluate(points, seed):
+        return [rough_bowl(p + 0.2 * seed, noise=0.2) for p in points]
+
+    kw = {"seeds": 3}
+    a = response_surface(CENTRE, (BOUNDS[:, 1] - BOUNDS[:, 0]) * 0.03, evaluate, BOUNDS, **kw)
+    bound = np.array([2.0 * a["se_sampling"][0], np.nan, 0.5 * a["se_sampling"][2], np.nan])
+    b = response_surface(CENTRE, (BOUNDS[:, 1] - BOUNDS[:, 0]) * 0.03, evaluate, BOUNDS, min_se=bound,
+                         **kw)
+    np.testing.assert_allclose(b["x"], a["x"])
+    np.testing.assert_allclose(b["se_sampling"], [bound[0], *a["se_sampling"][1:]])
+    np.testing.assert_allclose(b["se_seed"], a["se_seed"])
+    np.testing.assert_allclose(b["se"] ** 2, b["se_sampling"] ** 2 + b["se_seed"] ** 2)
 
 
 def test_a_flat_surface_is_not_converged():
-    r = response_surface(CENTRE, np.ones(4), lambda pts: [1.0 - 0.01 * float(np.sum((p - CENTRE) ** 2))
-                                                          for p in pts], BOUNDS, rounds=1)
+    r = response_surface(CENTRE, np.ones(4), lambda pts, seed: [
+        1.0 - 0.01 * float(np.sum((p - CENTRE) ** 2)) for p in pts], BOUNDS, rounds=1)
     assert not r["converged"] and "not positive definite" in r["stop"]
     assert np.all(np.isnan(r["se"]))
 

@@ -39,7 +39,7 @@ def test_small_recovery_study(sumo, tmp_path):
     """Two seeds on a short road, both sample sizes, in 2 processes: every replicate has an
     estimate, a standard error and the floor; the run resumes; the figure is written."""
     fit = FitConfig(scenario=small_scenario(duration=180, length=400, inflow=100, lane_change_duration=0),
-                    bounds=NARROW, restarts=1, maxfev=8, refine_rounds=1)
+                    bounds=NARROW, restarts=1, maxfev=8, refine_rounds=1, refine_seeds=2, bootstrap=5)
     cfg = StudyConfig(seeds=2, sizes=["paper", "all"], sample={"car": 40, "truck": 8}, fit=fit)
     rows, summary = recovery_study(cfg, workers=2, outdir=tmp_path / "study")
     assert len(rows) == 4 and not summary["failed"]
@@ -48,6 +48,7 @@ def test_small_recovery_study(sumo, tmp_path):
         for n in fit.names:
             assert NARROW[n][0] <= r[n] <= NARROW[n][1]
             assert r[f"floor_{n}"] is not None and r[f"naive_{n}"] is not None
+            assert len(r[f"seed_minima_{n}"]) in (0, 2)  # 0: the surface not positive definite
         # the floor: the recorded vehicles' desired speeds, close to the truth at these sizes
         assert abs(r["floor_mu_car"] - PAPER_TRUTH["mu_car"]) < 12
     per = summary["sizes"]["all"]["parameters"]["mu_car"]
