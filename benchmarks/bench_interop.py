@@ -347,19 +347,28 @@ from aveas_format.converters import get_converter
 
 warnings.simplefilter("ignore")
 name, rec_dir, out = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3])
-rec = aveas_format.open(rec_dir)
-_ = rec.states, rec.participants, rec.map
-base = hwm_mb()
-t0 = time.perf_counter()
-get_converter(name, "export")(rec, out, options={"write_map": False} if name == "osi" else {})
+if name == "osi-import":  # the trace written by an earlier child, on the recording's map
+    from aveas_format.converters import convert
+
+    base = hwm_mb()
+    t0 = time.perf_counter()
+    n = convert("osi", [out], map_source=rec_dir / "map.xodr").states.num_rows
+else:
+    rec = aveas_format.open(rec_dir)
+    _ = rec.states, rec.participants, rec.map
+    n = rec.states.num_rows
+    base = hwm_mb()
+    t0 = time.perf_counter()
+    get_converter(name, "export")(rec, out, options={"write_map": False} if name == "osi" else {})
 dt = time.perf_counter() - t0
-print(json.dumps({"seconds": dt, "peak_mb": hwm_mb(), "before_mb": base, "states": rec.states.num_rows}))
+print(json.dumps({"seconds": dt, "peak_mb": hwm_mb(), "before_mb": base, "states": n}))
 """
 
 
 def large_osi_mcap(target_states: int) -> list[dict]:
-    """The OSI (.osi, .mcap) and MCAP exports of a recording of ``target_states`` states, each in
-    a fresh process (peak memory = its VmHWM, with the recording loaded)."""
+    """The OSI (.osi, .mcap) and MCAP exports of a recording of ``target_states`` states and the
+    OSI import of the .osi trace, each in a fresh process (peak memory = its VmHWM; the exports'
+    with the recording loaded)."""
     from aveas_format.sample import highway_scene
 
     tmp = Path(tempfile.mkdtemp(prefix="aveas-bench-interop-large-"))
@@ -370,12 +379,18 @@ def large_osi_mcap(target_states: int) -> list[dict]:
         n = rec.states.num_rows
         del rec, base
         rows = []
-        for name, file in (("osi", "rec.osi"), ("osi", "rec_osi.mcap"), ("mcap", "rec.mcap")):
+        for name, file in (("osi", "rec.osi"), ("osi", "rec_osi.mcap"), ("mcap", "rec.mcap"),
+                           ("osi-import", "rec.osi")):
             r = subprocess.run([sys.executable, "-c", _CHILD_PROTO, name, str(tmp / "rec"),
                                 str(tmp / file)], capture_output=True, text=True)
             if r.returncode:
                 raise RuntimeError(r.stderr[-2000:])
             e = json.loads(r.stdout.strip().splitlines()[-1])
+            if name == "osi-import":
+                rows.append(_row("import_osi_large (.osi)", e["states"], e["seconds"],
+                                 f"fresh process: peak {e['peak_mb']:.0f} MB ({e['before_mb']:.0f} MB "
+                                 "after imports)"))
+                continue
             rows.append(_row(f"export_{name}_large ({Path(file).suffix})", n, e["seconds"],
                              f"{(tmp / file).stat().st_size / 1e6:.0f} MB; fresh process: peak "
                              f"{e['peak_mb']:.0f} MB ({e['before_mb']:.0f} MB with the recording loaded)"))

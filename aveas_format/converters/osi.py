@@ -347,6 +347,24 @@ class _Findings:
                           message_index=msg, object_id=oid)
 
 
+#: light states already seen -> their values (an enum's name is looked up once, not per object)
+_BRAKE: dict[Any, float] = {}
+_INDICATOR: dict[Any, tuple[float, float, float]] = {}
+
+
+def _brake_value(state: Any) -> float:
+    name = _enum_name(state)
+    return math.nan if name in ("UNKNOWN", "OTHER") else 0.0 if name == "OFF" else 1.0
+
+
+def _indicator_values(state: Any) -> tuple[float, float, float]:
+    """(left, right, hazard) of an indicator state; NaN where unknown."""
+    name = _enum_name(state)
+    if name in ("UNKNOWN", "OTHER"):
+        return (math.nan,) * 3
+    return float(name == "LEFT"), float(name == "RIGHT"), float(name == "WARNING")
+
+
 def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dict[str, Any]],
             found: _Findings) -> None:
     oid = int(mo.id.value) if getattr(mo, "id", None) is not None else None
@@ -361,14 +379,10 @@ def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dic
     vc = mo.vehicle_classification
     ls = vc.light_state if vc is not None else None
     if ls is not None:
-        bname = _enum_name(ls.brake_light_state)
-        if bname not in ("UNKNOWN", "OTHER"):
-            brake = 0.0 if bname == "OFF" else 1.0
-        iname = _enum_name(ls.indicator_state)
-        if iname not in ("UNKNOWN", "OTHER"):
-            ind_l = 1.0 if iname == "LEFT" else 0.0
-            ind_r = 1.0 if iname == "RIGHT" else 0.0
-            hazard = 1.0 if iname == "WARNING" else 0.0
+        bs, ins = ls.brake_light_state, ls.indicator_state
+        brake = _BRAKE[bs] if bs in _BRAKE else _BRAKE.setdefault(bs, _brake_value(bs))
+        ind_l, ind_r, hazard = (_INDICATOR[ins] if ins in _INDICATOR else
+                                _INDICATOR.setdefault(ins, _indicator_values(ins)))
     cols["f"].append((
         t, *((p.x, p.y, p.z) if p is not None else (nan, nan, nan)),
         o.yaw if o is not None else 0.0,
