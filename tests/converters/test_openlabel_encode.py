@@ -91,3 +91,17 @@ def test_fast_frames_hand_over_to_ijson_where_they_cannot_cut(tmp_path, monkeypa
     assert len(want) == 41
     for block in (1 << 20, 700, 64):
         assert dict(_frames_of(path, monkeypatch, fast=True, block=block)) == dict(want)
+
+
+def test_layout_templates_keep_bits_and_optional_items():
+    """Rows of one layout: columns constant over the rows go into the template (by their bits:
+    -0.0 stays -0.0), optional items and their commas only where present."""
+    import numpy as np
+
+    lay = encode._Layout(3)
+    item = lay.mask(np.array([True, False, True]))
+    segs = [b"[", lay.floats(np.array([0.0, -0.0, 0.0])), b",", lay.ints(np.array([7, 7, 7])), b"]",
+            lay.join(b"{", [(True, [b'"a":', lay.floats(np.array([1.5, np.nan, 2.0]))]),
+                            (item, [b'"b%":', lay.floats(np.full((3, 2), 0.25))])], b"}", empty=b"")]
+    got = lay.rows(segs).tolist()
+    assert got == [b'[0.0,7]{"a":1.5,"b%":0.25,0.25}', b'[-0.0,7]{"a":null}', b'[0.0,7]{"a":2.0,"b%":0.25,0.25}']

@@ -19,7 +19,6 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterator
-from itertools import repeat
 from typing import Any
 
 import numpy as np
@@ -76,51 +75,170 @@ def texts(values: list) -> list[bytes]:
     return [cache[v] if v in cache else cache.setdefault(v, dumps(str(v))) for v in values]
 
 
-def _stack(parts: list, idx: np.ndarray) -> np.ndarray:
-    """The rows ``idx`` of a vector given as its components (arrays over all rows, or a number)."""
-    return np.column_stack([np.full(len(idx), c, dtype=np.float64) if np.isscalar(c) else c[idx]
-                            for c in parts])
+_TRUE_FALSE = np.array([b"false", b"true"], dtype=object)
 
 
-def _join(pieces: list, m: int) -> list[bytes]:
-    """Per row the concatenation of the pieces (a bytes: the same in every row; a list: one per row)."""
-    return list(map(b"".join, zip(*[repeat(p, m) if isinstance(p, bytes) else p for p in pieces])))
+class _Layout:
+    """The JSON text of ``m`` rows of one layout, built with one ``%`` format per row.
+
+    A row is a sequence of segments: constant bytes, *values* (a column of JSON fragments, one
+    per row: :meth:`floats`, :meth:`ints`, :meth:`text`), *joined lists* (:meth:`join`: items
+    separated by commas, each item present where its mask is true). Rows with the same items
+    present share a template (constants and columns constant over the rows inlined, one ``%s``
+    per varying value), so the text of a row is one ``template % values``: no Python step per
+    value. Numbers are formatted by one call per kind (float, int) over all of the rows'
+    numeric columns."""
+
+    def __init__(self, m: int) -> None:
+        self.m = m
+        self._floats: list[np.ndarray] = []
+        self._ints: list[np.ndarray] = []
+        #: value token -> ("f"|"i", column index) before formatting; bytes or an object array after
+        self._vals: list[Any] = []
+        self._masks: list[np.ndarray] = []
+        self._mask_ids: dict[bytes, int] = {}
+
+    # ---- values ---------------------------------------------------------------------------
+    def _number(self, a: Any, ints: bool) -> int:
+        if np.isscalar(a):
+            self._vals.append(numbers(np.array([a], dtype=np.int64 if ints else np.float64))[0])
+            return len(self._vals) - 1
+        a = np.asarray(a, dtype=np.int64 if ints else np.float64)
+        if a.ndim == 2:  # a vector's components: one fragment "a,b,c" per row
+            if len(a) and (a.view(np.int64) == a[:1].view(np.int64)).all():
+                self._vals.append(numbers(a[:1])[0])
+            else:
+                self._vals.append(np.array(numbers(a), dtype=object))
+            return len(self._vals) - 1
+        first = a[:1]
+        # the same bits in every row (-0.0 is not 0.0: the round trip keeps the sign)
+        if len(a) and ((a.view(np.int64) == first.view(np.int64)).all()
+                       or (not ints and np.isnan(a).all())):
+            self._vals.append(numbers(first)[0])  # constant over the rows: in the template
+        else:
+            store = self._ints if ints else self._floats
+            store.append(a)
+            self._vals.append(("i" if ints else "f", len(store) - 1))
+        return len(self._vals) - 1
+
+    def floats(self, a: Any) -> int:
+        """A float column (float64 values; NaN -> null), or one number for every row, or the
+        rows of a matrix (one fragment ``a,b,c`` per row)."""
+        return self._number(a, False)
+
+    def ints(self, a: Any) -> int:
+        return self._number(a, True)
+
+    def text(self, values: Any) -> int:
+        """A column of ready JSON fragments (bytes, one per row), or one bytes for every row."""
+        self._vals.append(values if isinstance(values, bytes) else np.asarray(values, dtype=object))
+        return len(self._vals) - 1
+
+    def booleans(self, a: np.ndarray) -> int:
+        return self.text(_TRUE_FALSE[np.asarray(a, dtype=bool).astype(np.int8)])
+
+    # ---- structure ------------------------------------------------------------------------
+    def mask(self, mask: np.ndarray | None) -> Any:
+        """An item's presence: True (every row), False (none) or a mask index."""
+        if mask is None:
+            return True
+        mask = np.asarray(mask, dtype=bool)
+        if mask.all():
+            return True
+        if not mask.any():
+            return False
+        key = np.packbits(mask).tobytes()
+        if key not in self._mask_ids:
+            self._masks.append(mask)
+            self._mask_ids[key] = len(self._masks) - 1
+        return self._mask_ids[key]
+
+    def join(self, head: bytes, items: list, tail: bytes, empty: bytes | None = None) -> tuple:
+        """``head`` + the present items separated by commas + ``tail``; ``empty`` (when not None)
+        instead where no item is present. ``items``: (mask index/True/False, segments)."""
+        return ("join", head, [(p, segs) for p, segs in items if p is not False], tail, empty)
+
+    # ---- text ---------------------------------------------------------------------------------
+    def _format_numbers(self) -> None:
+        for kind, store in (("f", self._floats), ("i", self._ints)):
+            if not store:
+                continue
+            mat = np.column_stack(store)  # rows x columns, one formatting call
+            vals = np.array(numbers(mat.reshape(-1)), dtype=object).reshape(mat.shape)
+            for k, v in enumerate(self._vals):
+                if isinstance(v, tuple) and v[0] == kind:
+                    self._vals[k] = vals[:, v[1]]
+            store.clear()
+
+    def rows(self, segments: list) -> np.ndarray:
+        """The text of each row (an object array of bytes) of the segments (bytes, value tokens
+        (ints), :meth:`join` tuples)."""
+        m = self.m
+        self._format_numbers()
+        out = np.empty(m, dtype=object)
+        if m == 0:
+            return out
+        if self._masks:
+            bits = np.column_stack(self._masks)
+            if bits.shape[1] < 63:
+                code = bits.astype(np.int64) @ (np.int64(1) << np.arange(bits.shape[1], dtype=np.int64))
+                shapes, inverse = np.unique(code, return_inverse=True)
+                present = [[bool(c >> b & 1) for b in range(bits.shape[1])] for c in shapes.tolist()]
+            else:
+                shapes, inverse = np.unique(bits, axis=0, return_inverse=True)
+                present = shapes.tolist()
+            inverse = inverse.reshape(-1)
+        else:
+            present, inverse = [[]], np.zeros(m, dtype=np.int64)
+        order = np.argsort(inverse, kind="stable")
+        cuts = np.r_[0, np.cumsum(np.bincount(inverse, minlength=len(present)))]
+        for g, on in enumerate(present):
+            idx = order[cuts[g]:cuts[g + 1]]
+            if not len(idx):
+                continue
+            parts: list = []
+            self._template(segments, on, parts)
+            tmpl = b"".join(p.replace(b"%", b"%%") if isinstance(p, bytes) else b"%s" for p in parts)
+            cols = [p[idx] for p in parts if not isinstance(p, bytes)]
+            if not cols:
+                out[idx] = [tmpl] * len(idx)
+            else:
+                out[idx] = list(map(tmpl.__mod__, zip(*cols)))
+        return out
+
+    def _template(self, segments: list, on: list[bool], parts: list) -> None:
+        for seg in segments:
+            if isinstance(seg, bytes):
+                parts.append(seg)
+            elif isinstance(seg, (int, np.integer)):
+                v = self._vals[int(seg)]
+                parts.append(v)
+            else:
+                _, head, items, tail, empty = seg
+                chosen = [segs for p, segs in items if p is True or on[p]]
+                if not chosen and empty is not None:
+                    parts.append(empty)
+                    continue
+                parts.append(head)
+                for k, segs in enumerate(chosen):
+                    if k:
+                        parts.append(b",")
+                    self._template(segs, on, parts)
+                parts.append(tail)
 
 
-def _item(name: str, vals: list[bytes], mask: np.ndarray | None = None, *, vec: bool = False) -> list[bytes]:
-    """``,{"name":NAME,"val":V}`` per row (``[V]`` for a vector), empty where ``mask`` is False."""
-    fmt = b',{"name":' + dumps(name).replace(b"%", b"%%") + (b',"val":[%s]}' if vec else b',"val":%s}')
-    if mask is None:
-        return [fmt % v for v in vals]
-    return [fmt % v if ok else b"" for v, ok in zip(vals, mask.tolist())]
+def _vector(lay: _Layout, parts: list, idx: np.ndarray) -> list:
+    """Segments of a vector's components (arrays over all rows, or numbers) for the rows ``idx``:
+    one fragment per row, or the vector in the template where it is the same in every row."""
+    m = len(idx)
+    return [lay.floats(np.column_stack([np.full(m, c, dtype=np.float64) if np.isscalar(c) else c[idx]
+                                        for c in parts]))]
 
 
-def _list(items: list[list[bytes]], m: int) -> list[bytes]:
-    """The inner text of a JSON list per row from its items (each starting with a comma)."""
-    if not items:
-        return [b""] * m
-    return [s[1:] for s in _join(items, m)]
-
-
-def _column_fragments(col: pa.ChunkedArray | pa.Array) -> tuple[np.ndarray, list[bytes]]:
-    """A states column's values as JSON fragments (``(valid, json)``): numbers vectorised, other
-    types through their Python values (as the extension block has them)."""
-    if isinstance(col, pa.ChunkedArray):
-        col = col.combine_chunks()
-    if pa.types.is_dictionary(col.type):
-        col = col.cast(col.type.value_type)
-    valid = col.is_valid().to_numpy(zero_copy_only=False)
-    t = col.type
-    if pa.types.is_floating(t) or pa.types.is_integer(t):
-        fill = 0 if pa.types.is_integer(t) else math.nan
-        a = col.fill_null(fill).to_numpy(zero_copy_only=False)
-        if pa.types.is_floating(t):
-            a = a.astype(np.float64)  # float32 as its float64 value (what to_pylist gives)
-        return valid, numbers(a)
-    if pa.types.is_boolean(t):
-        a = col.fill_null(False).to_numpy(zero_copy_only=False)
-        return valid, [b"true" if v else b"false" for v in a.tolist()]
-    return valid, [dumps(v) if v is not None else b"" for v in col.to_pylist()]
+def _named(name: str, val: list, *, vec: bool = False, quoted: bool = False) -> list:
+    """Segments of ``{"name":NAME,"val":V}`` (``[V]`` for a vector, ``"V"`` quoted)."""
+    head = b'{"name":' + dumps(name) + b',"val":' + (b"[" if vec else b'"' if quoted else b"")
+    return [head, *val, b"]}" if vec else b'"}' if quoted else b"}"]
 
 
 def frame_chunks(rows: dict[str, Any], *, chunk_rows: int = CHUNK_ROWS) -> Iterator[bytes]:
@@ -137,7 +255,7 @@ def frame_chunks(rows: dict[str, Any], *, chunk_rows: int = CHUNK_ROWS) -> Itera
         stop = min(start + chunk_rows, n)
         stop = int(np.searchsorted(fs, fs[stop - 1], side="right"))
         idx = order[start:stop]
-        objs = _objects_text(rows, idx)
+        objs = _objects_text(rows, idx).tolist()
         f = fs[start:stop]
         cuts = np.flatnonzero(np.diff(f)) + 1
         lo = np.r_[0, cuts]
@@ -152,54 +270,62 @@ def frame_chunks(rows: dict[str, Any], *, chunk_rows: int = CHUNK_ROWS) -> Itera
         start = stop
 
 
-def _objects_text(r: dict[str, Any], idx: np.ndarray) -> list[bytes]:
-    """``"uid":{"object_data":{...}}`` for the rows ``idx``."""
+def _objects_text(r: dict[str, Any], idx: np.ndarray) -> np.ndarray:
+    """``"uid":{"object_data":{...}}`` for the rows ``idx`` (an object array of bytes)."""
     m = len(idx)
+    lay = _Layout(m)
     pid = r["pid"][idx]
     on = r["on"][idx]
-    vec = [_join([b',{"name":"velocity","val":[', numbers(_stack(r["vel"], idx)),
-                  b']},{"name":"acceleration","val":[', numbers(_stack(r["acc"], idx)), b"]}"], m)]
+    vec = [(True, _named("velocity", _vector(lay, r["vel"], idx), vec=True)),
+           (True, _named("acceleration", _vector(lay, r["acc"], idx), vec=True))]
     if r["box_std"] is not None:
-        vec.append(_item("bounding_box/ustddev", numbers(_stack(r["box_std"], idx)), vec=True))
+        vec.append((True, _named("bounding_box/ustddev", _vector(lay, r["box_std"], idx), vec=True)))
     if r["vel_std"] is not None:
-        vec.append(_item("velocity/ustddev", numbers(_stack(r["vel_std"], idx)), r["vel_ok"][idx], vec=True))
+        vec.append((lay.mask(r["vel_ok"][idx]),
+                    _named("velocity/ustddev", _vector(lay, r["vel_std"], idx), vec=True)))
     if r["acc_std"] is not None:
-        vec.append(_item("acceleration/ustddev", numbers(_stack(r["acc_std"], idx)), r["acc_ok"][idx], vec=True))
+        vec.append((lay.mask(r["acc_ok"][idx]),
+                    _named("acceleration/ustddev", _vector(lay, r["acc_std"], idx), vec=True)))
     text, num, boolean = [], [], []
     if on.any():
-        text.append(_item("used_road_link", texts([r["road_id"][i] for i in idx.tolist()]), on))
+        p_on = lay.mask(on)
+        rid = r["road_id"]
+        text.append((p_on, _named("used_road_link", [lay.text(texts([rid[i] for i in idx.tolist()]))])))
         if r["lane_id"] is not None:
             lid = r["lane_id"][idx]
             ok = on & np.isfinite(lid)
-            text.append(_item("open_drive/lane_id", texts(np.where(ok, lid, 0).astype(np.int64).tolist()), ok))
-        vec.append(_item("open_drive/local_road_coordinates",
-                         numbers(np.column_stack([r["road_s"][idx], r["road_t"][idx]])), on, vec=True))
+            text.append((lay.mask(ok), _named("open_drive/lane_id",
+                                              [lay.ints(np.where(ok, lid, 0).astype(np.int64))], quoted=True)))
+        vec.append((p_on, _named("open_drive/local_road_coordinates",
+                                 _vector(lay, [r["road_s"], r["road_t"]], idx), vec=True)))
         facts = r["facts"]
         if facts is not None:
             lp = facts["lane_position"][idx]
-            num.append(_item("open_drive/lane_position", numbers(lp), on & np.isfinite(lp)))
-            road_user = on & r["road_class"][idx]
-            text.append(_item("road/classification", texts(facts["classification"][idx].tolist()), road_user))
+            num.append((lay.mask(on & np.isfinite(lp)), _named("open_drive/lane_position", [lay.floats(lp)])))
+            road_user = lay.mask(on & r["road_class"][idx])
+            text.append((road_user, _named("road/classification",
+                                           [lay.text(texts(facts["classification"][idx].tolist()))])))
             for side in ("left", "right"):
                 for kind, key in (("legal", f"{side}_legal"), ("physical", f"{side}_phys")):
-                    num.append(_item(f"road/number_lanes/{side}/{kind}", numbers(facts[key][idx]), road_user))
+                    num.append((road_user, _named(f"road/number_lanes/{side}/{kind}",
+                                                  [lay.ints(facts[key][idx])])))
     for c, name in LIGHTS.items():
         a = r["lights"].get(c)
         if a is not None:
             a = a[idx]
-            boolean.append(_item(name, [b"true" if v else b"false" for v in (a >= 0.5).tolist()],
-                                 np.isfinite(a)))
-    _irregular(r, idx, pid, vec, num, boolean)
-    return _join([b'"', numbers(pid), b'":{"object_data":{"cuboid":[{"name":"bounding_box","val":[',
-                  numbers(_stack(r["box"], idx)), b"]", _extension(r, idx), b'}],"vec":[', _list(vec, m),
-                  b'],"boolean":[', _list(boolean, m), b'],"num":[', _list(num, m),
-                  b'],"text":[', _list(text, m), b"]}}"], m)
+            boolean.append((lay.mask(np.isfinite(a)), _named(name, [lay.booleans(a >= 0.5)])))
+    _irregular(r, idx, pid, lay, vec, num, boolean)
+    segments = [b'"', lay.ints(pid), b'":{"object_data":{"cuboid":[{"name":"bounding_box","val":[',
+                *_vector(lay, r["box"], idx), b"]", *_extension(r, idx, lay), b"}],",
+                lay.join(b'"vec":[', vec, b"]"), b",", lay.join(b'"boolean":[', boolean, b"]"), b",",
+                lay.join(b'"num":[', num, b"]"), b",", lay.join(b'"text":[', text, b"]"), b"}}"]
+    return lay.rows(segments)
 
 
-def _irregular(r: dict[str, Any], idx: np.ndarray, pid: np.ndarray, vec: list, num: list,
-               boolean: list) -> None:
+def _irregular(r: dict[str, Any], idx: np.ndarray, pid: np.ndarray, lay: _Layout, vec: list,
+               num: list, boolean: list) -> None:
     """Interior signals and ``impact`` attributes: by (participant, time), only in the rows that
-    have them."""
+    have them (each a ready fragment of comma-separated list items)."""
     interior, impact = r["interior"], r["impact"]
     if not interior and not impact:
         return
@@ -221,8 +347,8 @@ def _irregular(r: dict[str, Any], idx: np.ndarray, pid: np.ndarray, vec: list, n
                             ("gear", "interior/gear")):
                 if irow.get(c) is not None:
                     nl.append({"name": name, "val": irow[c] if c == "gear" else float(irow[c])})
-            b_int[j] = b"".join(b"," + dumps(x) for x in bl)
-            n_int[j] = b"".join(b"," + dumps(x) for x in nl)
+            b_int[j] = b",".join(dumps(x) for x in bl)
+            n_int[j] = b",".join(dumps(x) for x in nl)
         imp = impact.get(key) if impact else None
         if imp:
             items = []
@@ -230,38 +356,56 @@ def _irregular(r: dict[str, Any], idx: np.ndarray, pid: np.ndarray, vec: list, n
                 if imp.get(f"{k}/values"):
                     items.append({"name": f"impact/{k}/object_ids", "val": imp[f"{k}/object_ids"]})
                     items.append({"name": f"impact/{k}/values", "val": imp[f"{k}/values"]})
-            v_imp[j] = b"".join(b"," + dumps(x) for x in items)
-    vec.append(v_imp)
-    boolean.append(b_int)
-    num.append(n_int)
+            v_imp[j] = b",".join(dumps(x) for x in items)
+    for target, frags in ((vec, v_imp), (boolean, b_int), (num, n_int)):
+        a = np.array(frags, dtype=object)
+        target.append((lay.mask(a != b""), [lay.text(a)]))
 
 
-def _extension(r: dict[str, Any], idx: np.ndarray) -> list[bytes] | bytes:
-    """``,"aveas_format":{...}`` per row where the row has extension values (the states' columns
-    the profile lacks, placeholders of null profile columns, exact values), else empty."""
+def _extension(r: dict[str, Any], idx: np.ndarray, lay: _Layout) -> list:
+    """Segments of ``,"aveas_format":{...}`` where the row has extension values (the states'
+    columns the profile lacks, placeholders of null profile columns, exact values), else none."""
     ext = r["ext"]
     if ext is None:
-        return b""
+        return []
     m = len(idx)
-    pieces: list = []
+    members: list = []
     ix = pa.array(idx)
 
-    def member(c: str, vals: list[bytes], mask: np.ndarray) -> list[bytes]:
-        fmt = b'"' + c.encode().replace(b"%", b"%%") + b'":%s,'
-        return [fmt % v if ok else b"" for v, ok in zip(vals, mask.tolist())]
+    def member(c: str, token: int, mask: np.ndarray | None) -> None:
+        members.append((lay.mask(mask), [b'"' + c.encode() + b'":', token]))
 
     for c, col in ext["columns"].items():
-        valid, frag = _column_fragments(col.take(ix))
-        pieces.append(member(c, frag, valid))
+        valid, token = _column_fragments(col.take(ix), lay)
+        member(c, token, valid)
     for c, isnull in ext["nullable"].items():
-        pieces.append(member(c, [b"null"] * m, isnull[idx]))
+        member(c, lay.text(b"null"), isnull[idx])
     for c, vals in ext["exact"].items():
         v = vals[idx]
-        pieces.append(member(c, numbers(v), ~np.isnan(v)))
-    if not pieces:
-        return b""
-    head = b',"' + EXT.encode() + b'":{'
-    return [head + s[:-1] + b"}" if s else b"" for s in _join(pieces, m)]
+        member(c, lay.floats(v), ~np.isnan(v))
+    if not members:
+        return []
+    return [lay.join(b',"' + EXT.encode() + b'":{', members, b"}", empty=b"")]
+
+
+def _column_fragments(col: pa.ChunkedArray | pa.Array, lay: _Layout) -> tuple[np.ndarray, int]:
+    """A states column's values as a value of ``lay`` (``(valid, token)``): numbers vectorised,
+    other types through their Python values (as the extension block has them)."""
+    if isinstance(col, pa.ChunkedArray):
+        col = col.combine_chunks()
+    if pa.types.is_dictionary(col.type):
+        col = col.cast(col.type.value_type)
+    valid = col.is_valid().to_numpy(zero_copy_only=False)
+    t = col.type
+    if pa.types.is_floating(t) or pa.types.is_integer(t):
+        fill = 0 if pa.types.is_integer(t) else math.nan
+        a = col.fill_null(fill).to_numpy(zero_copy_only=False)
+        if pa.types.is_floating(t):
+            return valid, lay.floats(a.astype(np.float64))  # float32 as its float64 value
+        return valid, lay.ints(a)
+    if pa.types.is_boolean(t):
+        return valid, lay.booleans(col.fill_null(False).to_numpy(zero_copy_only=False))
+    return valid, lay.text([dumps(v) if v is not None else b"" for v in col.to_pylist()])
 
 
 __all__ = ["CHUNK_ROWS", "dumps", "frame_chunks", "numbers", "texts"]
