@@ -109,3 +109,54 @@ def test_mcap_export_in_batches_writes_the_same_messages(rich, tmp_path, monkeyp
     assert e.metadata[0].key == "class" and e.texts[0].text.endswith(e.metadata[0].value)
     fix = LocationFix.FromString(next(d for topic, _, d in whole if topic == "/locations"))
     assert fix.frame_id.isdigit() and -90 <= fix.latitude <= 90 and fix.color.a > 0
+
+
+def test_bulk_messages_write_the_file_add_message_writes(rich, tmp_path, monkeypatch):
+    """``add_messages`` (records built with numpy, appended a chunk at a time) writes the bytes
+    mcap's ``add_message`` one by one writes: chunks cut at the same messages, the same indexes
+    and statistics — on random message sizes with small chunks, and on the whole export."""
+    import functools
+    import io
+
+    import mcap.writer
+
+    from aveas_format.converters import _protowire as pw
+    from aveas_format.converters import mcap_export
+
+    rng = np.random.default_rng(5)
+    lengths = rng.integers(0, 700, 3000)
+    data = pw.Ragged(rng.integers(0, 256, int(lengths.sum())).astype(np.uint8), lengths)
+    times = np.cumsum(rng.integers(0, 3, 3000)) + 10**9
+
+    def file(bulk: bool) -> bytes:
+        buf = io.BytesIO()
+        w = mcap.writer.Writer(buf, chunk_size=4096)
+        w.start()
+        ch = w.register_channel("/a", "protobuf", w.register_schema("a", "protobuf", b""))
+        other = w.register_channel("/b", "protobuf", 0)
+        w.add_message(other, 5, b"first", 5)  # a message of another channel in the same chunk
+        for a, b in ((0, 1), (1, 1000), (1000, 3000)):
+            if bulk:
+                mcap_export.add_messages(w, ch, times[a:b], pw.Ragged(
+                    data.data[data.offsets()[a]:data.offsets()[b]], lengths[a:b]))
+            else:
+                for t, d in zip(times[a:b].tolist(), data.tolist()[a:b]):
+                    w.add_message(ch, t, d, t)
+        w.finish()
+        return buf.getvalue()
+
+    assert file(True) == file(False)
+    with io.BytesIO(file(True)) as f:
+        got = [(m.log_time, m.data) for _, _, m in mcap_reader.make_reader(f).iter_messages()]
+    assert got[1:] == list(zip(times.tolist(), data.tolist()))
+
+    monkeypatch.setattr(mcap.writer, "Writer", functools.partial(mcap.writer.Writer, chunk_size=20000))
+    get_converter("mcap", "export")(rich, tmp_path / "bulk.mcap")
+
+    def one_by_one(w, channel, ts, d):
+        for t, x in zip(np.asarray(ts).tolist(), d.tolist()):
+            w.add_message(channel, t, x, t)
+
+    monkeypatch.setattr(mcap_export, "add_messages", one_by_one)
+    get_converter("mcap", "export")(rich, tmp_path / "single.mcap")
+    assert (tmp_path / "bulk.mcap").read_bytes() == (tmp_path / "single.mcap").read_bytes()
