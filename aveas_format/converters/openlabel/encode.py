@@ -241,21 +241,23 @@ def _named(name: str, val: list, *, vec: bool = False, quoted: bool = False) -> 
     return [head, *val, b"]}" if vec else b'"}' if quoted else b"}"]
 
 
-def frame_chunks(rows: dict[str, Any], *, chunk_rows: int = CHUNK_ROWS) -> Iterator[bytes]:
+def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
+                 chunk_rows: int = CHUNK_ROWS) -> Iterator[bytes]:
     """The members ``"k":{frame}`` of the ``frames`` object, comma-separated, in chunks of about
-    ``chunk_rows`` rows (``rows``: the per-row inputs prepared by the writer, see
-    :func:`aveas_format.converters.openlabel.write._frame_inputs`)."""
-    fr = rows["frame_of_row"]
-    order = np.argsort(fr, kind="stable")  # in a frame: the objects in the states' order
-    fs = fr[order]
-    ts = numbers(rows["times"])
+    ``chunk_rows`` rows (whole frames): ``frame_of_row`` = each state row's frame (an index into
+    ``times``), ``prepare(rows)`` = the per-row inputs of the state rows ``rows`` (in that order;
+    :func:`aveas_format.converters.openlabel.write.openlabel_chunks`), asked for one chunk at a
+    time."""
+    order = np.argsort(frame_of_row, kind="stable")  # in a frame: the objects in the states' order
+    fs = frame_of_row[order]
+    ts = numbers(times)
     n = len(order)
     start, first = 0, True
     while start < n:
         stop = min(start + chunk_rows, n)
         stop = int(np.searchsorted(fs, fs[stop - 1], side="right"))
-        idx = order[start:stop]
-        objs = _objects_text(rows, idx).tolist()
+        rows = order[start:stop]
+        objs = _objects_text(prepare(rows), np.arange(len(rows))).tolist()
         f = fs[start:stop]
         cuts = np.flatnonzero(np.diff(f)) + 1
         lo = np.r_[0, cuts]

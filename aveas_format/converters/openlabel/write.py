@@ -121,18 +121,32 @@ def openlabel_chunks(rec, *, opendrive: str = "map.xodr", extension: bool = True
     metadata = _profile_metadata(meta, opendrive, thr_out)
     if extension:
         metadata[EXT] = _extension(rec, thr)
-    cols = _Columns(rec)
+    static = _Statics(rec.participants)
+    t = column_numpy(rec.states, "time")
+    times, frame_of_row = np.unique(t, return_inverse=True)
+    del t
+    acc_w = _track_acceleration(rec)
+    summary = _Summary(static)
+    interior, impact = _interior_rows(rec.interior), _impact(rec.derived, times, thr_out)
+
+    def prepare(rows: np.ndarray) -> dict[str, Any]:
+        """The inputs of the frames' objects for the state rows ``rows`` (one chunk: the memory
+        of the export is the recording plus one chunk's columns)."""
+        cols = _Columns(rec, static, rows, acc_w)
+        summary.add(cols)
+        inputs = _frame_inputs(rec, cols, extension, road_attributes)
+        inputs.update(interior=interior, impact=impact)
+        return inputs
+
     yield b'{"openlabel":{"metadata":' + dumps(metadata) + b',"frames":{'
     del metadata
     with _no_gc():
-        yield from frame_chunks(_frame_inputs(rec, cols, thr_out, extension, road_attributes),
-                                chunk_rows=chunk_rows)
-    times = cols.times
+        yield from frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows)
     tail: dict[str, Any] = {}
     tail["frame_intervals"] = [{"frame_start": 0, "frame_end": int(len(times) - 1)}] if len(times) else []
-    speed = np.hypot(cols.vx, cols.vy)
-    tail["objects"] = _objects(rec.participants, cols, speed, extension)
-    tail["contexts"] = _contexts(rec, times, speed)
+    tail["objects"] = _objects(rec.participants, rec.states, static, frame_of_row, summary, extension)
+    del frame_of_row
+    tail["contexts"] = _contexts(rec, times, summary)
     events = _events(rec.events, times)
     if events:
         tail["events"] = events
@@ -163,25 +177,43 @@ def _profile_metadata(meta, opendrive: str, thr_out: dict[str, float]) -> dict[s
 # the states and participants as columns
 # ================================================================================================
 
-class _Columns:
-    """The states (one row per state) and participants as numpy columns: frame numbers (one frame
-    per distinct ``time``), the participants' sizes by id, and velocity and acceleration in the
-    profile's vehicle frame (``vu, vv``, ``au, av``; the world-frame acceleration ``ax_w, ay_w`` is
-    estimated where the states have none)."""
+class _Statics:
+    """The participants' static values, by id (sizes, class, size uncertainties)."""
 
-    def __init__(self, rec) -> None:
-        p, s = rec.participants, rec.states
-        self.pid = pid = s.column("participant_id").to_numpy()
-        self.t = t = s.column("time").to_numpy()
-        self.times, self.frame_of_row = np.unique(t, return_inverse=True)
-        self.n = n = s.num_rows
+    def __init__(self, p: pa.Table) -> None:
         self.part_ids = part_ids = p.column("participant_id").to_numpy()
+        ids = part_ids.tolist()
         self.classes = _pylist(p, "class")
-        self.cls_of = dict(zip(part_ids.tolist(), self.classes))
-        self.length = dict(zip(part_ids.tolist(), column_numpy(p, "length", missing=None).tolist()))
-        self.width = dict(zip(part_ids.tolist(), column_numpy(p, "width", missing=None).tolist()))
-        hcol = column_numpy(p, "height", missing=np.nan)
-        self.height = dict(zip(part_ids.tolist(), hcol.tolist()))
+        self.length = dict(zip(ids, column_numpy(p, "length", missing=None).tolist()))
+        self.width = dict(zip(ids, column_numpy(p, "width", missing=None).tolist()))
+        self.height = dict(zip(ids, column_numpy(p, "height", missing=np.nan).tolist()))
+        self.pos = {q: j for j, q in enumerate(ids)}
+        self.size_std = np.asarray([[float(v) if v is not None else 0.0 for v in (
+            (p.column(c)[j].as_py() if c in p.column_names else None)
+            for c in ("length_std", "width_std", "height_std"))] for j in range(len(ids))],
+            dtype=np.float64).reshape(-1, 3)
+        self.sizes = np.asarray([[self.length[q], self.width[q], self.height[q]] for q in ids],
+                                dtype=np.float64).reshape(-1, 3)
+        self.road_class = np.asarray([c in _ROAD_CLASSES for c in self.classes], dtype=bool)
+
+    def rows(self, pid: np.ndarray) -> np.ndarray:
+        """The participants' row of each state."""
+        pos = self.pos
+        return np.fromiter((pos[q] for q in pid.tolist()), dtype=np.int64, count=len(pid))
+
+
+class _Columns:
+    """The state rows ``rows`` (one chunk of the frames) as numpy columns, with velocity and
+    acceleration in the profile's vehicle frame (``vu, vv``, ``au, av``; the world-frame
+    acceleration ``ax_w, ay_w`` from :func:`_track_acceleration` where the states have none)."""
+
+    def __init__(self, rec, static: _Statics, rows: np.ndarray, acc_w: tuple | None) -> None:
+        self.static = static
+        self.s = s = rec.states.take(pa.array(rows))
+        self.pid = pid = s.column("participant_id").to_numpy()
+        self.prow = static.rows(pid)
+        self.t = column_numpy(s, "time")
+        self.n = n = s.num_rows
         self.x = column_numpy(s, "x", missing=None)
         self.y = column_numpy(s, "y", missing=None)
         self.h = h = column_numpy(s, "heading", missing=None)
@@ -189,7 +221,7 @@ class _Columns:
         self.vx, self.vy = vx, vy = tuple(column_numpy(s, c, missing=None) for c in ("vx", "vy"))
         self.vu, self.vv = _rot_body(vx, vy, h)
         self.ax, self.ay = ax, ay = tuple(column_numpy(s, c, missing=None) for c in ("ax", "ay"))
-        self.ax_w, self.ay_w = _world_acceleration(rec, pid, t, vx, vy, ax, ay)
+        self.ax_w, self.ay_w = (ax, ay) if acc_w is None else (acc_w[0][rows], acc_w[1][rows])
         self.au, self.av = _rot_body(np.nan_to_num(self.ax_w), np.nan_to_num(self.ay_w), h)
         self.yaw_rate = column_numpy(s, "yaw_rate", missing=None)
         self.stds = {c: column_numpy(s, c, missing=None) for c in
@@ -206,6 +238,51 @@ class _Columns:
         #: rows on a road (road id and s known)
         self.on = np.array([r is not None for r in road_id], dtype=bool) & np.isfinite(
             road_s if road_s is not None else np.full(n, np.nan))
+
+
+def _track_acceleration(rec) -> tuple[np.ndarray, np.ndarray] | None:
+    """The world-frame acceleration of every state where the states have none (it needs whole
+    tracks: from the derived kinematics, else estimated from the velocities), else None (the
+    states' own, read per chunk)."""
+    s = rec.states
+    if "ax" in s.column_names and "ay" in s.column_names:
+        return None
+    pid = s.column("participant_id").to_numpy()
+    t = column_numpy(s, "time")
+    vx, vy = (column_numpy(s, c, missing=None) for c in ("vx", "vy"))
+    ax, ay = (column_numpy(s, c, missing=None) for c in ("ax", "ay"))
+    return _world_acceleration(rec, pid, t, vx, vy, ax, ay)
+
+
+class _Summary:
+    """Per participant the extremes of speed and signed acceleration over its states, and the
+    fastest and slowest moving speeds of the recording, accumulated chunk by chunk."""
+
+    def __init__(self, static: _Statics) -> None:
+        m = len(static.part_ids)
+        self.count = np.zeros(m, np.int64)
+        self.speed_max, self.speed_min = np.full(m, -np.inf), np.full(m, np.inf)
+        self.acc_max, self.acc_min = np.full(m, -np.inf), np.full(m, np.inf)
+        self.moving_min = np.inf
+        self.nan_speed = False
+
+    def add(self, cols: _Columns) -> None:
+        speed = np.hypot(cols.vx, cols.vy)
+        ax_w, ay_w, h = np.nan_to_num(cols.ax_w), np.nan_to_num(cols.ay_w), cols.h
+        acc = np.hypot(ax_w, ay_w) * np.sign(ax_w * np.cos(h) + ay_w * np.sin(h))
+        r = cols.prow
+        np.add.at(self.count, r, 1)
+        for target, fn, v in ((self.speed_max, np.maximum, speed), (self.speed_min, np.minimum, speed),
+                              (self.acc_max, np.maximum, acc), (self.acc_min, np.minimum, acc)):
+            fn.at(target, r, v)  # NaN propagates, as numpy's max/min of the track
+        moving = speed[speed > 0]
+        if len(moving):
+            self.moving_min = min(self.moving_min, float(moving.min()))
+        self.nan_speed = self.nan_speed or bool(np.isnan(speed).any())
+
+    @property
+    def max_speed(self) -> float:
+        return math.nan if self.nan_speed else float(self.speed_max[self.count > 0].max())
 
 
 def _world_acceleration(rec, pid: np.ndarray, t: np.ndarray, vx: np.ndarray, vy: np.ndarray,
@@ -346,7 +423,7 @@ def _exact_values(s: pa.Table, cols: _Columns) -> dict[str, np.ndarray]:
         back.update(zip(("ax", "ay"), _rot_world(cols.au, cols.av, hw)))
     z = cols.z
     if z is not None:
-        hv = np.asarray([cols.height[q] for q in cols.pid.tolist()], float)
+        hv = cols.static.sizes[cols.prow, 2]
         hv = np.where(np.isfinite(hv), hv, 0.0)
         back["z"] = (np.where(np.isfinite(z), z, 0.0) + hv / 2) - hv / 2
     for c, b in back.items():
@@ -357,11 +434,10 @@ def _exact_values(s: pa.Table, cols: _Columns) -> dict[str, np.ndarray]:
     return exact
 
 
-def _uncertainty(p: pa.Table, cols: _Columns) -> tuple:
+def _uncertainty(cols: _Columns) -> tuple:
     """The ``/ustddev`` vectors, as lists of their components (arrays over the states, 0.0 where
     constant: ``box_std``, ``vel_std``, ``acc_std``; velocity and acceleration only in rows where
-    ``vel_ok``/``acc_ok``) and per participant (``size_std``):
-    ``(box_std, size_std, vel_std, vel_ok, acc_std, acc_ok)``."""
+    ``vel_ok``/``acc_ok``): ``(box_std, vel_std, vel_ok, acc_std, acc_ok)``."""
     n, stds, h = cols.n, cols.stds, cols.h
 
     def _z(a):
@@ -370,11 +446,6 @@ def _uncertainty(p: pa.Table, cols: _Columns) -> tuple:
     box_std = vel_std = acc_std = None
     if any(stds[c] is not None for c in ("x_std", "y_std", "heading_std")):
         box_std = [_z(stds["x_std"]), _z(stds["y_std"]), _z(stds["z_std"]), 0.0, 0.0, _z(stds["heading_std"])]
-    size_std = {}
-    for j, q in enumerate(cols.part_ids.tolist()):
-        size_std[q] = [float(v) if v is not None else 0.0 for v in (
-            (p.column(c)[j].as_py() if c in p.column_names else None)
-            for c in ("length_std", "width_std", "height_std"))]
     vel_ok = acc_ok = np.zeros(n, bool)
     if stds["vx_std"] is not None and stds["vy_std"] is not None:
         vel_ok = np.isfinite(stds["vx_std"]) & np.isfinite(stds["vy_std"])
@@ -384,36 +455,25 @@ def _uncertainty(p: pa.Table, cols: _Columns) -> tuple:
         acc_ok = np.isfinite(stds["ax_std"]) & np.isfinite(stds["ay_std"])
         su, sv = _body_std(_z(stds["ax_std"]), _z(stds["ay_std"]), cols.axay, h)
         acc_std = [su, sv, 0.0, 0.0, 0.0, 0.0]
-    return box_std, size_std, vel_std, vel_ok, acc_std, acc_ok
+    return box_std, vel_std, vel_ok, acc_std, acc_ok
 
 
 # ================================================================================================
 # frames: one object per state row
 # ================================================================================================
 
-def _frame_inputs(rec, cols: _Columns, thr_out: dict[str, float], extension: bool, road_attributes: bool
-                  ) -> dict[str, Any]:
-    """The per-row inputs of the frames as columns (numpy arrays over all state rows; dicts by
-    (participant, time) for the sparse interior and ``impact`` data), for
-    :func:`aveas_format.converters.openlabel.encode.frame_chunks`."""
-    s, p, n = rec.states, rec.participants, cols.n
-    pid = cols.pid
-    # per-row participant statics (sizes, class) through the participants' index
-    pos = {q: j for j, q in enumerate(cols.part_ids.tolist())}
-    prow = np.fromiter((pos[q] for q in pid.tolist()), dtype=np.int64, count=n)
-
-    def _by_row(d: dict) -> np.ndarray:
-        return np.asarray([d[q] for q in cols.part_ids.tolist()], dtype=np.float64)[prow]
-
-    length, width, height = _by_row(cols.length), _by_row(cols.width), _by_row(cols.height)
+def _frame_inputs(rec, cols: _Columns, extension: bool, road_attributes: bool) -> dict[str, Any]:
+    """The inputs of the frames' objects of the rows of ``cols`` as columns, for
+    :func:`aveas_format.converters.openlabel.encode.frame_chunks` (the sparse interior and
+    ``impact`` data, dicts by (participant, time), are added by the caller)."""
+    s, n, static, prow = cols.s, cols.n, cols.static, cols.prow
+    length, width, height = (static.sizes[prow, k] for k in range(3))
     hh = np.where(np.isfinite(height), height, 0.0)
     z = np.zeros(n) if cols.z is None else np.where(np.isfinite(cols.z), cols.z, 0.0)
     yr = 0.0 if cols.yaw_rate is None else np.where(np.isfinite(cols.yaw_rate), cols.yaw_rate, 0.0)
-    box_std, size_std, vel_std, vel_ok, acc_std, acc_ok = _uncertainty(p, cols)
+    box_std, vel_std, vel_ok, acc_std, acc_ok = _uncertainty(cols)
     if box_std is not None:
-        sz = np.asarray([size_std[q] for q in cols.part_ids.tolist()], dtype=np.float64)
-        box_std = [*box_std, *(sz[:, k][prow] for k in range(3))]
-    road_class = np.asarray([c in _ROAD_CLASSES for c in cols.classes], dtype=bool)[prow]
+        box_std = [*box_std, *(static.size_std[prow, k] for k in range(3))]
     ext = None
     if extension:
         nullable = [c for c in ("z", "z_std", "x_std", "y_std", "heading_std", "ax", "ay", "yaw_rate")
@@ -422,8 +482,8 @@ def _frame_inputs(rec, cols: _Columns, thr_out: dict[str, float], extension: boo
                "nullable": {c: s.column(c).is_null().to_numpy(zero_copy_only=False) for c in nullable},
                "exact": _exact_values(s, cols) if n else {}}
     return {
-        "pid": pid, "t": cols.t, "times": cols.times, "frame_of_row": cols.frame_of_row, "on": cols.on,
-        # vectors as lists of their components (stacked per chunk: no n x 9 matrices)
+        "pid": cols.pid, "t": cols.t, "on": cols.on,
+        # vectors as lists of their components
         "box": [cols.x, cols.y, z + hh / 2, 0.0, 0.0, cols.h, length, width, hh],
         "vel": [cols.vu, cols.vv, 0.0, 0.0, 0.0, yr],
         "acc": [cols.au, cols.av, 0.0, 0.0, 0.0, 0.0],
@@ -431,8 +491,7 @@ def _frame_inputs(rec, cols: _Columns, thr_out: dict[str, float], extension: boo
         "road_id": cols.road_id, "lane_id": cols.lane_id, "road_s": cols.road_s,
         "road_t": cols.road_t if cols.road_t is not None else np.full(n, np.nan),
         "facts": _row_road_facts(rec, cols) if road_attributes and cols.on.any() else None,
-        "road_class": road_class, "lights": cols.lights,
-        "interior": _interior_rows(rec.interior), "impact": _impact(rec.derived, cols.times, thr_out),
+        "road_class": static.road_class[prow], "lights": cols.lights,
         "ext": ext,
     }
 
@@ -441,13 +500,13 @@ def _frame_inputs(rec, cols: _Columns, thr_out: dict[str, float], extension: boo
 # objects, contexts, events, the extension block
 # ================================================================================================
 
-def _objects(p: pa.Table, cols: _Columns, speed: np.ndarray, extension: bool) -> dict[str, Any]:
+def _objects(p: pa.Table, s: pa.Table, static: _Statics, frame_of_row: np.ndarray, summary: _Summary,
+             extension: bool) -> dict[str, Any]:
     """``objects``: per participant its type, name, frame intervals and static data (size,
     classification PMF, speed and acceleration extremes, ``is_recorder``, ``attached_to``)."""
-    pid, h, part_ids, classes, height = cols.pid, cols.h, cols.part_ids, cols.classes, cols.height
-    length, width, ax_w, ay_w = cols.length, cols.width, cols.ax_w, cols.ay_w
-    acc = np.hypot(np.nan_to_num(ax_w), np.nan_to_num(ay_w)) * np.sign(
-        np.nan_to_num(ax_w) * np.cos(h) + np.nan_to_num(ay_w) * np.sin(h))
+    part_ids, classes, height = static.part_ids, static.classes, static.height
+    length, width = static.length, static.width
+    pid = s.column("participant_id").to_numpy()
     order = np.argsort(pid, kind="stable")
     bounds = np.searchsorted(pid[order], part_ids), np.searchsorted(pid[order], part_ids, side="right")
     pmf = None
@@ -469,17 +528,17 @@ def _objects(p: pa.Table, cols: _Columns, speed: np.ndarray, extension: bool) ->
         vec = [size]
         if any(c in p.column_names for c in ("length_std", "width_std")):
             vec.append({"name": "dimensions/size/ustddev",
-                        "val": [_part_std(p, q, c) for c in ("length_std", "width_std", "height_std")]})
+                        "val": static.size_std[j].tolist()})
         if pmf is not None and np.isfinite(pmf[j]).all():
             w = pmf[j].astype(np.float64)
             w = w / w.sum()
             vec.append({"name": "classification/uncertainties", "val": [float(v) for v in w]})
         num = []
         if len(rows):
-            num += [{"name": "summary/speed/max", "val": _f(speed[rows].max())},
-                    {"name": "summary/speed/min", "val": _f(speed[rows].min())},
-                    {"name": "summary/accel/max", "val": _f(acc[rows].max()), "type": "value"},
-                    {"name": "summary/accel/min", "val": _f(acc[rows].min()), "type": "value"}]
+            num += [{"name": "summary/speed/max", "val": _f(summary.speed_max[j])},
+                    {"name": "summary/speed/min", "val": _f(summary.speed_min[j])},
+                    {"name": "summary/accel/max", "val": _f(summary.acc_max[j]), "type": "value"},
+                    {"name": "summary/accel/min", "val": _f(summary.acc_min[j]), "type": "value"}]
         obj_data: dict[str, Any] = {"vec": vec, "num": num, "text": [], "boolean": []}
         if cls not in _NO_RECORDER:
             obj_data["boolean"].append({"name": "is_recorder", "val": roles[j] == "recording_vehicle"})
@@ -499,22 +558,13 @@ def _objects(p: pa.Table, cols: _Columns, speed: np.ndarray, extension: bool) ->
         objects[str(q)] = {
             "name": str(source_ids[j]) if source_ids else str(q),
             "type": CLASS_TO_TYPE[cls],
-            "frame_intervals": _intervals(cols.frame_of_row[rows]),
+            "frame_intervals": _intervals(frame_of_row[rows]),
             "object_data": obj_data,
         }
     return objects
 
 
-def _part_std(p: pa.Table, q: int, c: str) -> float:
-    if c not in p.column_names:
-        return 0.0
-    ids = p.column("participant_id").to_numpy()
-    j = int(np.flatnonzero(ids == q)[0])
-    v = p.column(c)[j].as_py()
-    return float(v) if v is not None else 0.0
-
-
-def _contexts(rec, times: np.ndarray, speed: np.ndarray) -> dict[str, Any]:
+def _contexts(rec, times: np.ndarray, summary: _Summary) -> dict[str, Any]:
     meta = rec.meta
     out: dict[str, Any] = {}
     site = meta.acquisition.site
@@ -527,11 +577,10 @@ def _contexts(rec, times: np.ndarray, speed: np.ndarray) -> dict[str, Any]:
                     {"name": "scenario/contains_urban", "val": rt in ("urban", "parking", "mixed")},
                     {"name": "scenario/contains_rural", "val": rt in ("rural", "mixed")}]
     num = []
-    if len(speed):
-        moving = speed[speed > 0]
-        num.append({"name": "scenario/maximum_vehicle_speed", "val": float(speed.max())})
-        if len(moving):
-            num.append({"name": "scenario/minimum_vehicle_speed", "val": float(moving.min())})
+    if summary.count.sum():
+        num.append({"name": "scenario/maximum_vehicle_speed", "val": summary.max_speed})
+        if math.isfinite(summary.moving_min):
+            num.append({"name": "scenario/minimum_vehicle_speed", "val": summary.moving_min})
     from aveas_format.schema.metadata import timestamp_ns
 
     wd = datetime.fromtimestamp(timestamp_ns(meta.start_time) / 1e9, tz=timezone.utc).isoweekday()
