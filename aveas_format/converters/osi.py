@@ -54,6 +54,7 @@ from __future__ import annotations
 import json
 import math
 import struct
+from array import array
 import warnings
 from pathlib import Path
 from typing import Any, Literal
@@ -162,8 +163,9 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     from aveas_format.mapref.crs import LocalFrame, crs_equal
     from aveas_format.opendrive import load_map
 
-    # one tuple of floats (_FLOAT_COLS) per sample, its object id and message index apart
-    cols: dict[str, list] = {"f": [], "id": [], "msg": []}
+    # the floats (_FLOAT_COLS) of each sample, its object id and message index apart: flat
+    # typed arrays (8 bytes a value, not a Python float each: ~110 B per sample)
+    cols: dict[str, Any] = {"f": array("d"), "id": array("q"), "msg": array("q")}
     static: dict[int, dict[str, Any]] = {}
     host_ids: set[int] = set()
     proj: tuple[str, tuple[float, float, float, float]] | None = None
@@ -199,8 +201,8 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
         except Exception as e:  # noqa: BLE001 - decoder errors of any kind
             raise FormatError(f"cannot decode OSI message {n_msg}: {type(e).__name__}: {e}",
                               path=path) from None
-    f = np.asarray(cols["f"], np.float64).reshape(-1, len(_FLOAT_COLS))
-    cols = {"id": np.asarray(cols["id"], np.int64), "msg": np.asarray(cols["msg"], np.int64),
+    f = np.frombuffer(cols["f"], np.float64).reshape(-1, len(_FLOAT_COLS))
+    cols = {"id": np.frombuffer(cols["id"], np.int64), "msg": np.frombuffer(cols["msg"], np.int64),
             **{k: f[:, j] for j, k in enumerate(_FLOAT_COLS)}}
     sizeless = [oid for oid, d in static.items() if d["length"] is None]
     for oid in sizeless:
@@ -365,7 +367,7 @@ def _indicator_values(state: Any) -> tuple[float, float, float]:
     return float(name == "LEFT"), float(name == "RIGHT"), float(name == "WARNING")
 
 
-def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dict[str, Any]],
+def _object(mo, t: float, msg: int, cols: dict[str, Any], static: dict[int, dict[str, Any]],
             found: _Findings) -> None:
     oid = int(mo.id.value) if getattr(mo, "id", None) is not None else None
     if oid is None or getattr(mo, "base", None) is None:
@@ -383,7 +385,7 @@ def _object(mo, t: float, msg: int, cols: dict[str, list], static: dict[int, dic
         brake = _BRAKE[bs] if bs in _BRAKE else _BRAKE.setdefault(bs, _brake_value(bs))
         ind_l, ind_r, hazard = (_INDICATOR[ins] if ins in _INDICATOR else
                                 _INDICATOR.setdefault(ins, _indicator_values(ins)))
-    cols["f"].append((
+    cols["f"].extend((
         t, *((p.x, p.y, p.z) if p is not None else (nan, nan, nan)),
         o.yaw if o is not None else 0.0,
         *((v.x, v.y) if v is not None else (0.0, 0.0)),
