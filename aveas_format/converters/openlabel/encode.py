@@ -291,8 +291,8 @@ def _objects_text(r: dict[str, Any], idx: np.ndarray) -> np.ndarray:
     text, num, boolean = [], [], []
     if on.any():
         p_on = lay.mask(on)
-        rid = r["road_id"]
-        text.append((p_on, _named("used_road_link", [lay.text(texts([rid[i] for i in idx.tolist()]))])))
+        words = np.array([*texts(r["road_words"]), b""], dtype=object)
+        text.append((p_on, _named("used_road_link", [lay.text(words[r["road_code"][idx]])])))
         if r["lane_id"] is not None:
             lid = r["lane_id"][idx]
             ok = on & np.isfinite(lid)

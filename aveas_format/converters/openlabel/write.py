@@ -71,6 +71,15 @@ def _pylist(table: pa.Table, name: str) -> list | None:
     return col.to_pylist()
 
 
+def _codes(col: pa.ChunkedArray | pa.Array) -> tuple[list, np.ndarray]:
+    """A column's distinct values and each row's index into them (-1 where null)."""
+    if isinstance(col, pa.ChunkedArray):
+        col = col.combine_chunks()
+    if not pa.types.is_dictionary(col.type):
+        col = col.dictionary_encode()
+    return col.dictionary.to_pylist(), col.indices.fill_null(-1).to_numpy(zero_copy_only=False).astype(np.int64)
+
+
 def _intervals(frames: np.ndarray) -> list[dict[str, int]]:
     """Sorted frame numbers -> contiguous frame intervals."""
     if len(frames) == 0:
@@ -229,14 +238,17 @@ class _Columns:
                       "ay_std", "yaw_rate_std")}
         self.vxvy = column_numpy(s, "vxvy_corr", missing=None)
         self.axay = column_numpy(s, "axay_corr", missing=None)
-        self.road_id = road_id = _pylist(s, "road_id") or [None] * n
+        #: road ids: the distinct values (``road_words``) and each row's index into them (-1: null)
+        self.road_words, self.road_code = _codes(s.column("road_id") if "road_id" in s.column_names
+                                                 else pa.nulls(n, pa.string()))
+        self.road_id = np.asarray([*self.road_words, None], dtype=object)[self.road_code]
         self.lane_id = column_numpy(s, "lane_id", missing=None)
         self.road_s = road_s = column_numpy(s, "road_s", missing=None)
         self.road_t = column_numpy(s, "road_t", missing=None)
         self.lane_offset = column_numpy(s, "lane_offset", missing=None)
         self.lights = {c: column_numpy(s, c, missing=None) for c in LIGHTS if c in s.column_names}
         #: rows on a road (road id and s known)
-        self.on = np.array([r is not None for r in road_id], dtype=bool) & np.isfinite(
+        self.on = (self.road_code >= 0) & np.isfinite(
             road_s if road_s is not None else np.full(n, np.nan))
 
 
@@ -358,7 +370,7 @@ def _row_road_facts(rec, cols: _Columns) -> dict[str, np.ndarray] | None:
     idx = np.flatnonzero(on)
     lid = np.nan_to_num(lane_id[idx]).astype(int) if lane_id is not None else np.zeros(len(idx), int)
     lo = lane_offset[idx] if lane_offset is not None else np.full(len(idx), np.nan)
-    f = _road_facts(rec.map, [cols.road_id[i] for i in idx], cols.road_s[idx], lid, lo)
+    f = _road_facts(rec.map, cols.road_id[idx], cols.road_s[idx], lid, lo)
     if f is None:
         return None
     facts = {k: np.empty(n, dtype=v.dtype) for k, v in f.items()}
@@ -488,7 +500,8 @@ def _frame_inputs(rec, cols: _Columns, extension: bool, road_attributes: bool) -
         "vel": [cols.vu, cols.vv, 0.0, 0.0, 0.0, yr],
         "acc": [cols.au, cols.av, 0.0, 0.0, 0.0, 0.0],
         "box_std": box_std, "vel_std": vel_std, "vel_ok": vel_ok, "acc_std": acc_std, "acc_ok": acc_ok,
-        "road_id": cols.road_id, "lane_id": cols.lane_id, "road_s": cols.road_s,
+        "road_words": cols.road_words, "road_code": cols.road_code, "lane_id": cols.lane_id,
+        "road_s": cols.road_s,
         "road_t": cols.road_t if cols.road_t is not None else np.full(n, np.nan),
         "facts": _row_road_facts(rec, cols) if road_attributes and cols.on.any() else None,
         "road_class": static.road_class[prow], "lights": cols.lights,
