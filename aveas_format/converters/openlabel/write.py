@@ -197,10 +197,8 @@ class _Statics:
         self.width = dict(zip(ids, column_numpy(p, "width", missing=None).tolist()))
         self.height = dict(zip(ids, column_numpy(p, "height", missing=np.nan).tolist()))
         self.pos = {q: j for j, q in enumerate(ids)}
-        self.size_std = np.asarray([[float(v) if v is not None else 0.0 for v in (
-            (p.column(c)[j].as_py() if c in p.column_names else None)
-            for c in ("length_std", "width_std", "height_std"))] for j in range(len(ids))],
-            dtype=np.float64).reshape(-1, 3)
+        self.size_std = np.column_stack([column_numpy(p, c, null=0.0, missing=0.0).astype(np.float64)
+                                         for c in ("length_std", "width_std", "height_std")]).reshape(-1, 3)
         self.sizes = np.asarray([[self.length[q], self.width[q], self.height[q]] for q in ids],
                                 dtype=np.float64).reshape(-1, 3)
         self.road_class = np.asarray([c in _ROAD_CLASSES for c in self.classes], dtype=bool)
@@ -532,6 +530,8 @@ def _objects(p: pa.Table, s: pa.Table, static: _Statics, frame_of_row: np.ndarra
     attached = _pylist(p, "attached_to")
     p_ext_cols = [c for c in p.column_names if c not in _PROFILE_PART_COLS]
     p_ext_vals = {c: _pylist(p, c) for c in p_ext_cols}
+    p_nulls = {c: p.column(c).is_null().to_numpy(zero_copy_only=False) for c in
+               ("height", "length_std", "width_std", "height_std", "class_pmf") if c in p.column_names}
     objects: dict[str, Any] = {}
     for j, q in enumerate(part_ids.tolist()):
         cls = classes[j]
@@ -562,8 +562,8 @@ def _objects(p: pa.Table, s: pa.Table, static: _Statics, frame_of_row: np.ndarra
             for c in p_ext_cols:
                 if p_ext_vals[c][j] is not None:
                     ext[c] = p_ext_vals[c][j]
-            for c in ("height", "length_std", "width_std", "height_std", "class_pmf"):
-                if c in p.column_names and p.column(c)[j].as_py() is None:
+            for c, isnull in p_nulls.items():
+                if isnull[j]:
                     ext[c] = None
             if pmf is not None and np.isfinite(pmf[j]).all():
                 ext["class_pmf"] = [float(v) for v in pmf[j]]
