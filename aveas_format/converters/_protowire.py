@@ -127,14 +127,28 @@ def f_strings(field: int, values: list[str]) -> Ragged:
     return f_message(field, body)
 
 
+_IOTA = np.arange(0, dtype=np.int64)
+
+
+def _ragged_index(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """The byte positions ``starts[i] + 0 .. starts[i] + lengths[i] - 1`` of every row, in order
+    (the gather / scatter index of a ragged copy): one repeat and one in-place add of a cached
+    ``arange`` (a view: no new range per call)."""
+    global _IOTA
+    total = int(lengths.sum())
+    if len(_IOTA) < total:
+        _IOTA = np.arange(max(total, 2 * len(_IOTA)), dtype=np.int64)
+    idx = np.repeat(starts - np.r_[0, np.cumsum(lengths)][:-1], lengths)
+    idx += _IOTA[:total]
+    return idx
+
+
 def take(r: Ragged, rows: np.ndarray) -> Ragged:
     """The given rows (any order, repeats allowed), e.g. a participant's bytes for each state."""
     rows = np.asarray(rows, np.int64)
     off = r.offsets()
     start, lengths = off[rows], r.lengths[rows]
-    sel = np.repeat(start - np.r_[0, np.cumsum(lengths)][:-1], lengths) + \
-        np.arange(int(lengths.sum()))
-    return Ragged(r.data[sel], lengths)
+    return Ragged(r.data[_ragged_index(start, lengths)], lengths)
 
 
 def keep(r: Ragged, mask: np.ndarray) -> Ragged:
@@ -159,10 +173,7 @@ def concat(*parts: Ragged) -> Ragged:
     before = np.zeros_like(lengths)
     for p in parts:
         if len(p.data):
-            starts = out_off + before
-            src_off = np.r_[0, np.cumsum(p.lengths)][:-1]
-            dest = np.repeat(starts - src_off, p.lengths) + np.arange(len(p.data))
-            out[dest] = p.data
+            out[_ragged_index(out_off + before, p.lengths)] = p.data
         before = before + p.lengths
     return Ragged(out, lengths)
 
@@ -175,9 +186,7 @@ def group(r: Ragged, bounds: np.ndarray) -> Ragged:
     start, end = off[b[:-1]], off[b[1:]]
     if b[0] == 0 and b[-1] == r.n:
         return Ragged(r.data, end - start)
-    sel = np.repeat(start - np.r_[0, np.cumsum(end - start)][:-1], end - start) + \
-        np.arange(int((end - start).sum()))
-    return Ragged(r.data[sel], end - start)
+    return Ragged(r.data[_ragged_index(start, end - start)], end - start)
 
 
 def length_prefixed(r: Ragged) -> bytes:
