@@ -80,8 +80,38 @@ def _ts(msg_field, ns: int) -> None:
            description="MCAP with Foxglove SceneUpdate boxes, lane lines and LocationFix",
            requires=("mcap", "foxglove_schemas_protobuf", "google.protobuf"), extra="mcap")
 def export_mcap(rec, output: Path, *, options: McapExportOptions) -> list[Path]:
-    import io
+    from aveas_format.safeio import write_chunks_atomic
 
+    return [write_chunks_atomic(Path(output), _mcap_chunks(rec, options))]
+
+
+class _Drain:
+    """The output stream of the MCAP writer, handed on in pieces (:meth:`drain`) so that the file
+    is written while it is built (``mcap`` asks the stream only to ``write`` and ``tell``)."""
+
+    def __init__(self) -> None:
+        self.parts: list[bytes] = []
+        self.pos = 0
+
+    def write(self, data) -> int:
+        self.parts.append(bytes(data))
+        self.pos += len(data)
+        return len(data)
+
+    def tell(self) -> int:
+        return self.pos
+
+    def flush(self) -> None:
+        pass
+
+    def drain(self) -> bytes:
+        out = b"".join(self.parts)
+        self.parts = []
+        return out
+
+
+def _mcap_chunks(rec, options: McapExportOptions):
+    """The MCAP file's bytes, a batch of states at a time (what :func:`export_mcap` writes)."""
     import shapely
 
     # the [mcap] extra: checked by the registry (requires=) before this runs
@@ -92,11 +122,10 @@ def export_mcap(rec, output: Path, *, options: McapExportOptions) -> list[Path]:
     from mcap.writer import CompressionType, Writer
 
     from aveas_format._version import __version__
-    from aveas_format.safeio import write_bytes_atomic
     from aveas_format.schema.metadata import timestamp_ns
 
     t0 = timestamp_ns(rec.meta.start_time)
-    buf = io.BytesIO()
+    buf = _Drain()
     comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
             "none": CompressionType.NONE}[options.compression]
     w = Writer(buf, compression=comp)
@@ -192,6 +221,7 @@ def export_mcap(rec, output: Path, *, options: McapExportOptions) -> list[Path]:
         scenes = _scene_updates(info, rows[a:z1], np.repeat(step_ns[k0:k1], np.diff(bounds[k0:k1 + 1])),
                                 life, x[o], y[o], z[o], h[o], bounds[k0:k1 + 1] - a)
         add_messages(w, ch_scene, step_ns[k0:k1], scenes)
+        yield buf.drain()
         k0 = k1
 
     # ---- geo --------------------------------------------------------------------------------------
@@ -209,8 +239,9 @@ def export_mcap(rec, output: Path, *, options: McapExportOptions) -> list[Path]:
         for a in range(0, len(o), BATCH_STATES):
             sl = slice(a, a + BATCH_STATES)
             add_messages(w, ch_loc, ns[sl], _location_fixes(info, prow[sl], ns[sl], lat[o[sl]], lon[o[sl]]))
+            yield buf.drain()
     w.finish()
-    return [write_bytes_atomic(Path(output), buf.getvalue())]
+    yield buf.drain()
 
 
 # ---- many messages into the MCAP writer at once ---------------------------------------------------
