@@ -367,6 +367,40 @@ if name == "osi-import":  # the trace written by an earlier child, on the record
     base = hwm_mb()
     t0 = time.perf_counter()
     n = convert("osi", [out], map_source=rec_dir / "map.xodr").states.num_rows
+elif name == "osi-decode":  # floor of the import: betterosi decoding + the fields the import reads
+    import betterosi as b
+
+    base = hwm_mb()
+    t0 = time.perf_counter()
+    n = 0
+    for g in b.read(str(out), return_ground_truth=True):
+        for mo in g.moving_object:
+            q = mo.base
+            _ = (mo.id.value, mo.type, q.position.x, q.position.y, q.position.z, q.orientation.yaw,
+                 q.velocity, q.acceleration, q.orientation_rate, q.dimension.length,
+                 mo.vehicle_classification, mo.assigned_lane_id)
+            n += 1
+elif name in ("osi-floor", "mcap-floor"):  # floors of the exports, one item per state
+    import pyarrow.parquet as pq
+
+    n = pq.ParquetFile(rec_dir / "states.parquet").metadata.num_rows
+    base = hwm_mb()
+    t0 = time.perf_counter()
+    if name == "osi-floor":  # the bindings: one MovingObject(id) built + serialized per state
+        import betterosi as b
+
+        for i in range(n):
+            b.MovingObject(id=b.Identifier(value=i)).to_binary()
+    else:  # mcap: one empty message written per state
+        import mcap.writer
+
+        with open(out, "wb") as f:
+            w = mcap.writer.Writer(f)
+            w.start()
+            ch = w.register_channel("/x", "protobuf", w.register_schema("x", "protobuf", b""))
+            for i in range(n):
+                w.add_message(ch, i, b"", i)
+            w.finish()
 else:
     rec = aveas_format.open(rec_dir)
     _ = rec.states, rec.participants, rec.map
@@ -393,21 +427,35 @@ def large_osi_mcap(target_states: int) -> list[dict]:
         n = rec.states.num_rows
         del rec, base
         rows = []
-        for name, file in (("osi", "rec.osi"), ("osi", "rec_osi.mcap"), ("mcap", "rec.mcap"),
-                           ("osi-import", "rec.osi")):
+        got = {}
+        for name, file in (("osi", "rec.osi"), ("osi-floor", "none"), ("osi", "rec_osi.mcap"),
+                           ("mcap", "rec.mcap"), ("mcap-floor", "floor.mcap"),
+                           ("osi-import", "rec.osi"), ("osi-decode", "rec.osi")):
             r = subprocess.run([sys.executable, "-c", _CHILD_PROTO, name, str(tmp / "rec"),
                                 str(tmp / file)], capture_output=True, text=True)
             if r.returncode:
                 raise RuntimeError(r.stderr[-2000:])
-            e = json.loads(r.stdout.strip().splitlines()[-1])
+            e = got[(name, file)] = json.loads(r.stdout.strip().splitlines()[-1])
             if name == "osi-import":
                 rows.append(_row("import_osi_large (.osi)", e["states"], e["seconds"],
                                  f"fresh process: peak {e['peak_mb']:.0f} MB ({e['before_mb']:.0f} MB "
                                  "after imports)"))
-                continue
-            rows.append(_row(f"export_{name}_large ({Path(file).suffix})", n, e["seconds"],
-                             f"{(tmp / file).stat().st_size / 1e6:.0f} MB; fresh process: peak "
-                             f"{e['peak_mb']:.0f} MB ({e['before_mb']:.0f} MB with the recording loaded)"))
+            elif name in ("osi", "mcap"):
+                rows.append(_row(f"export_{name}_large ({Path(file).suffix})", n, e["seconds"],
+                                 f"{(tmp / file).stat().st_size / 1e6:.0f} MB; fresh process: peak "
+                                 f"{e['peak_mb']:.0f} MB ({e['before_mb']:.0f} MB with the recording "
+                                 "loaded)"))
+        floors = {"export_osi_large (.osi)": (("osi-floor", "none"), "floor of the bindings: one "
+                                              "MovingObject(id) built + serialized per state (fresh process)"),
+                  "export_mcap_large (.mcap)": (("mcap-floor", "floor.mcap"), "floor of mcap: one empty "
+                                                "message written per state (fresh process)"),
+                  "import_osi_large (.osi)": (("osi-decode", "rec.osi"), "floor: betterosi decoding + "
+                                              "reading each object's fields the import reads (fresh process)")}
+        for r in list(rows):
+            if r["benchmark"] in floors:
+                key, note = floors[r["benchmark"]]
+                rows.append(_row(r["benchmark"], r["states"], r["seconds"], "(the same run)",
+                                 got[key]["seconds"], note))
         return rows
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
