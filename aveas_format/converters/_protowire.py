@@ -127,7 +127,11 @@ def f_strings(field: int, values: list[str]) -> Ragged:
     return f_message(field, body)
 
 
+#: a cached ``arange``, sliced as a view (int64: numpy indexes with intp, a narrower index would be
+#: converted on every gather)
 _IOTA = np.arange(0, dtype=np.int64)
+#: the longest range kept (64 MB: a batch's gathers fit); longer ones are made per call
+_IOTA_MAX = 1 << 23
 
 
 def _ragged_index(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
@@ -136,9 +140,11 @@ def _ragged_index(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     ``arange`` (a view: no new range per call)."""
     global _IOTA
     total = int(lengths.sum())
-    if len(_IOTA) < total:
-        _IOTA = np.arange(max(total, 2 * len(_IOTA)), dtype=np.int64)
     idx = np.repeat(starts - np.r_[0, np.cumsum(lengths)][:-1], lengths)
+    if total > _IOTA_MAX:
+        return idx + np.arange(total)
+    if len(_IOTA) < total:
+        _IOTA = np.arange(min(max(total, 2 * len(_IOTA)), _IOTA_MAX), dtype=np.int64)
     idx += _IOTA[:total]
     return idx
 

@@ -39,8 +39,8 @@ CLASS_COLOURS: dict[str, tuple[float, float, float, float]] = {
 }
 
 
-#: states encoded at once (bounds the memory of the encoding)
-BATCH_STATES = 100_000
+#: states encoded at once (bounds the memory of the encoding: ~3 kB per state)
+BATCH_STATES = 25_000
 
 
 class McapExportOptions(ConverterOptions):

@@ -468,7 +468,7 @@ def _light_state(b, brake: float, left: float, right: float, hazard: float):
 
 
 #: states encoded at once by the OSI export (bounds its memory: ~1 kB per state while encoding)
-BATCH_STATES = 100_000
+BATCH_STATES = 25_000
 
 #: heights (m) where a participant has none
 _DEFAULT_HEIGHT = {"pedestrian": 1.75, "bicycle": 1.7, "truck": 3.5, "bus": 3.2, "trailer": 3.5}
