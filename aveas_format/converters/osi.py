@@ -163,9 +163,11 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     from aveas_format.mapref.crs import LocalFrame, crs_equal
     from aveas_format.opendrive import load_map
 
-    # the floats (_FLOAT_COLS) of each sample, its object id and message index apart: flat
-    # typed arrays (8 bytes a value, not a Python float each: ~110 B per sample)
-    cols: dict[str, Any] = {"f": array("d"), "id": array("q"), "msg": array("q")}
+    # the floats (_FLOAT_COLS) of each sample (a tuple each, turned into a float64 block every
+    # _BLOCK samples: ~110 B per sample, not a Python float per value), its object id and message
+    # index apart (typed arrays)
+    cols: dict[str, Any] = {"f": [], "id": array("q"), "msg": array("q")}
+    blocks: list[np.ndarray] = []
     static: dict[int, dict[str, Any]] = {}
     host_ids: set[int] = set()
     proj: tuple[str, tuple[float, float, float, float]] | None = None
@@ -196,12 +198,17 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
                     for mo in gt.moving_object:
                         _object(mo, t, n_msg, cols, static, found)
                     n_msg += 1
+                    if len(cols["f"]) >= _BLOCK:
+                        blocks.append(np.asarray(cols["f"], np.float64))
+                        cols["f"].clear()
         except (FormatError, RecordingIOError):
             raise
         except Exception as e:  # noqa: BLE001 - decoder errors of any kind
             raise FormatError(f"cannot decode OSI message {n_msg}: {type(e).__name__}: {e}",
                               path=path) from None
-    f = np.frombuffer(cols["f"], np.float64).reshape(-1, len(_FLOAT_COLS))
+    blocks.append(np.asarray(cols["f"], np.float64).reshape(-1, len(_FLOAT_COLS)))
+    f = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
+    del blocks
     cols = {"id": np.frombuffer(cols["id"], np.int64), "msg": np.frombuffer(cols["msg"], np.int64),
             **{k: f[:, j] for j, k in enumerate(_FLOAT_COLS)}}
     sizeless = [oid for oid, d in static.items() if d["length"] is None]
@@ -314,6 +321,9 @@ def _shift_iso(iso: str, seconds: float) -> str:
     return dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
+#: samples kept as Python tuples before they become one float64 block (bounds the import's memory)
+_BLOCK = 65536
+
 #: the float columns of the samples (one tuple each), in order
 _FLOAT_COLS = ("t", "x", "y", "z", "yaw", "vx", "vy", "ax", "ay", "yaw_rate", "brake", "ind_l",
                "ind_r", "hazard")
@@ -385,7 +395,7 @@ def _object(mo, t: float, msg: int, cols: dict[str, Any], static: dict[int, dict
         brake = _BRAKE[bs] if bs in _BRAKE else _BRAKE.setdefault(bs, _brake_value(bs))
         ind_l, ind_r, hazard = (_INDICATOR[ins] if ins in _INDICATOR else
                                 _INDICATOR.setdefault(ins, _indicator_values(ins)))
-    cols["f"].extend((
+    cols["f"].append((
         t, *((p.x, p.y, p.z) if p is not None else (nan, nan, nan)),
         o.yaw if o is not None else 0.0,
         *((v.x, v.y) if v is not None else (0.0, 0.0)),

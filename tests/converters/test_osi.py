@@ -131,6 +131,18 @@ def test_binary_osi_ground_truth(tmp_path, road):
     assert report.counts["error"] == 0, report
 
 
+def test_samples_in_blocks_give_the_same_recording(tmp_path, road, monkeypatch):
+    """The import turns its samples into float blocks as it goes (bounded memory): any block
+    size gives the same states."""
+    from aveas_format.converters import osi
+
+    t, objs = truth()
+    trace = write_osi(tmp_path / "run_gt.osi", messages(t, objs))
+    whole = convert("osi", [trace], map_source=road).states
+    monkeypatch.setattr(osi, "_BLOCK", 3)
+    assert convert("osi", [trace], map_source=road).states.equals(whole)
+
+
 def test_binary_osi_sensor_view(tmp_path, road):
     t, objs = truth(20)
     trace = write_osi(tmp_path / "trace.osi", messages(t, objs, sensor_view=True))
