@@ -18,19 +18,17 @@ tests decode it with the bindings).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 VARINT, I64, LEN, I32 = 0, 1, 2, 5
 
 
-@dataclass
 class Ragged:
     """``n`` byte strings: ``data`` (uint8, all rows' bytes in order) and ``lengths`` (int64)."""
 
-    data: np.ndarray
-    lengths: np.ndarray
+    def __init__(self, data: np.ndarray, lengths: np.ndarray) -> None:
+        self.data = data
+        self.lengths = lengths
 
     @property
     def n(self) -> int:
@@ -165,23 +163,54 @@ def keep(r: Ragged, mask: np.ndarray) -> Ragged:
     return Ragged(r.data[per_byte], np.where(mask, r.lengths, 0))
 
 
+class _Concat(Ragged):
+    """Rows made of parts (row ``i`` = row ``i`` of every part, in order), their bytes copied
+    once, when first asked for: nested messages (a concat inside a length-prefixed field inside a
+    concat...) are laid out from their leaves straight into the final buffer instead of being
+    copied again at every level."""
+
+    def __init__(self, parts: tuple[Ragged, ...], lengths: np.ndarray) -> None:
+        self.parts = parts
+        self.lengths = lengths
+        self._data: np.ndarray | None = None
+
+    @property
+    def data(self) -> np.ndarray:
+        if self._data is None:
+            out = np.empty(int(self.lengths.sum()), np.uint8)
+            self._fill(out, np.r_[0, np.cumsum(self.lengths)][:-1])
+            self._data = out
+            self.parts = ()
+        return self._data
+
+    def _fill(self, out: np.ndarray, starts: np.ndarray) -> None:
+        before = starts
+        for p in self.parts:
+            if isinstance(p, _Concat) and p._data is None:
+                p._fill(out, before)
+            elif len(p.data):
+                w = int(p.lengths[0])
+                if (p.lengths == w).all():  # rows of one width: a 2-D index, no repeat
+                    out[(before[:, None] + _iota(w)).reshape(-1)] = p.data
+                else:
+                    out[_ragged_index(before, p.lengths)] = p.data
+            before = before + p.lengths
+
+
+def _iota(k: int) -> np.ndarray:
+    return _IOTA[:k] if k <= len(_IOTA) else np.arange(k)
+
+
 def concat(*parts: Ragged) -> Ragged:
-    """Row ``i`` of the result is row ``i`` of every part, in order."""
+    """Row ``i`` of the result is row ``i`` of every part, in order (the bytes laid out when first
+    used: :class:`_Concat`)."""
     parts = tuple(p for p in parts if p is not None)
     n = parts[0].n
     if n == 0:
         return Ragged(np.zeros(0, np.uint8), np.zeros(0, np.int64))
-    if all((p.lengths == p.lengths[0]).all() for p in parts):  # all fixed width: one hstack
-        return Ragged.fixed(np.hstack([p.data.reshape(n, -1) for p in parts]))
-    lengths = np.sum([p.lengths for p in parts], axis=0)
-    out_off = np.r_[0, np.cumsum(lengths)][:-1]
-    out = np.empty(int(lengths.sum()), np.uint8)
-    before = np.zeros_like(lengths)
-    for p in parts:
-        if len(p.data):
-            out[_ragged_index(out_off + before, p.lengths)] = p.data
-        before = before + p.lengths
-    return Ragged(out, lengths)
+    if all(not isinstance(p, _Concat) and (p.lengths == p.lengths[0]).all() for p in parts):
+        return Ragged.fixed(np.hstack([p.data.reshape(n, -1) for p in parts]))  # one hstack
+    return _Concat(parts, np.sum([p.lengths for p in parts], axis=0))
 
 
 def group(r: Ragged, bounds: np.ndarray) -> Ragged:
