@@ -237,5 +237,5 @@ def test_cli_shows_the_note_as_one_warning_line(tmp_path):
                           "--map", str(STRAIGHT_MAP), "-o", str(tmp_path / "k.aveas"), "--no-validate"],
                          capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
-    assert "warning: OpenLABEL labels.json: skipped 1 objects: 1 DontCare" in res.stderr
+    assert "labels.json: uid -1, json path $.openlabel.objects['-1'].type: OpenLABEL: skipped 1 objects: 1 DontCare" in res.stderr
     assert "UserWarning" not in res.stderr and "wrote " in res.stderr
