@@ -44,3 +44,25 @@ def test_fields_decode_with_protobuf():
     assert [Value.FromString(r).string_value for r in raw] == ["a", "é" * 200]
     framed = pw.length_prefixed(pw.f_double(2, np.array([3.0])))
     assert framed[:4] == (9).to_bytes(4, "little") and Value.FromString(framed[4:]).number_value == 3.0
+
+
+@given(st.lists(st.tuples(st.binary(max_size=9), st.binary(min_size=2, max_size=2), st.binary(max_size=4)),
+                min_size=1, max_size=25))
+def test_nested_concats_lay_out_their_leaves_once(rows):
+    """Concatenations inside length-prefixed fields inside concatenations (laid out lazily, each
+    leaf copied once into the final buffer) give the bytes of the eager, level-by-level layout —
+    also where a part's rows vary in width but add up to a fixed-width total."""
+    def ragged(parts):
+        return pw.Ragged(np.frombuffer(b"".join(parts), np.uint8).copy(),
+                         np.array([len(p) for p in parts], np.int64))
+
+    a, b, c = (ragged([r[k] for r in rows]) for k in range(3))
+    inner = pw.concat(a, b)
+    outer = pw.concat(c, pw.f_message(3, inner), a, pw.f_message(4, pw.concat(b, inner)))
+
+    def msg(field, body):
+        return pw.key(field, pw.LEN) + pw.varint_bytes(len(body)) + body
+
+    want = [z + msg(3, x + y) + x + msg(4, y + x + y) for x, y, z in rows]
+    assert outer.tolist() == want
+    assert pw.group(outer, np.array([0, len(rows)])).tolist() == [b"".join(want)]
