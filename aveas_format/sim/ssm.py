@@ -479,8 +479,8 @@ def _crossings(run: SsmRun, rel: float, time_decimals: int = 3) -> dict[str, Any
                                            pa.string()))
     e = run.ssm["encounters"]
     e = e.filter(pc.is_in(e.column("type"), pa.array(list(CROSSING), pa.int64())))
-    ours, n = _matched(e, ("ego", "foe"), _lookup(c, ("ego", "foe"), ("ttc", "drac", "ppet"),
-                                                  time_decimals), time_decimals)
+    rows = _lookup(c, ("ego", "foe"), ("ttc", "drac", "ppet"), time_decimals)
+    ours, n = _matched(e, ("ego", "foe"), rows, time_decimals)
     out: dict[str, Any] = {"sumo_samples": e.num_rows, "matched": n}
     egos, foes = e.column("ego").to_pylist(), e.column("foe").to_pylist()
     straight = np.array([_route(a) in STRAIGHT_ROUTES and _route(b) in STRAIGHT_ROUTES
@@ -504,10 +504,16 @@ def _crossings(run: SsmRun, rel: float, time_decimals: int = 3) -> dict[str, Any
     sumo_pairs = set(zip(egos, foes))
     left = {p for p in sumo_pairs if all(last.get(ids.get(v), t_end) < t_end for v in p)}
     opposing = {p for p in sumo_pairs if frozenset(map(_route, p)) in OPPOSING_LEFT_TURNS}
+    in_found = np.array([p in found for p in zip(egos, foes)], bool)
     out["pairs"] = {"sumo": len(sumo_pairs), "found": len(sumo_pairs & found),
                     "both_left_before_the_end": len(left),
                     "opposing_left_turns": len(opposing),
-                    "missed": sorted(f"{a}/{b}" for a, b in (left - opposing - found))}
+                    "missed": sorted(f"{a}/{b}" for a, b in (left - opposing - found)),
+                    # SUMO's samples of the pairs found, and how many of them have a row here
+                    "found_samples": int(in_found.sum()),
+                    "found_samples_matched": int(sum(k in rows for k, f in zip(
+                        zip(egos, foes, np.round(e.column("time").to_numpy(), time_decimals)
+                            .tolist()), in_found) if f))}
     pet_ours: dict[tuple, float] = {}
     for ego, foe, v in zip(*(c.column(k).to_pylist() for k in ("ego", "foe", "pet"))):
         pet_ours.setdefault((ego, foe), np.nan if v is None else v)
