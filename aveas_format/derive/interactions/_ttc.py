@@ -29,8 +29,7 @@ def follower_leader_metrics(gap: np.ndarray, gap_var: np.ndarray, leader_length:
     ``follower`` and ``leader`` are ``(v, a, v_var, a_var)``: speed and acceleration along the lane
     and their variances. ``ttc_std`` is NaN where the pair is not closing. Computed in chunks of
     :data:`CHUNK` pairs (the many temporaries of a chunk stay in the cache: 2-3x faster than whole
-    arrays for millions of pairs). ``gap`` and ``gap_var`` are the inputs themselves (not copied:
-    writing the outputs into fresh memory is most of the time, docs/performance.md)."""
+    arrays for millions of pairs). ``gap`` and ``gap_var`` are the inputs themselves (not copied)."""
     n = len(gap)
     args = [np.asarray(a, float) for a in (gap, gap_var, leader_length, *follower, *leader)]
     args = np.broadcast_arrays(*args) if n else args
