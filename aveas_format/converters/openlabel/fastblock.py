@@ -300,9 +300,12 @@ class ArrowAttributes:
         """Per box the first text of ``name`` (None where absent) as an object array."""
         out = np.full(self.n, None, object)
         got = self.values(name)
-        if got is not None:
+        if got is not None:  # (each distinct text one Python string)
             boxes, vals = got
-            out[boxes] = np.asarray(vals.to_numpy(zero_copy_only=False), object)
+            enc = vals.dictionary_encode()
+            distinct = np.empty(len(enc.dictionary) + 1, object)
+            distinct[:-1] = enc.dictionary.to_pylist()
+            out[boxes] = distinct[enc.indices.fill_null(-1).to_numpy()]
         return out
 
     def floats(self, name: str) -> np.ndarray:
