@@ -167,6 +167,15 @@ def _openlabel_rows(rec, tmp: Path) -> list[dict]:
         b_or = _best(lambda: orjson.loads(data), gc_off=True)
         rows.append(_row("import_openlabel", n, dt, "(the same run)", b_or,
                          "orjson.loads of the same bytes (no recording built, gc paused), best of 3"))
+        import aveas_format.converters.openlabel.fastblock as fb
+
+        read_block, fb.read_block = fb.read_block, lambda buf: None
+        try:
+            b_gen = _best(lambda: convert("openlabel", [out]))
+        finally:
+            fb.read_block = read_block
+        rows.append(_row("import_openlabel", n, dt, "(the same run)", b_gen,
+                         "the generic reader (frames as Python objects by orjson, then columns), best of 3"))
     del data
     rows += _compact_rows(rec, tmp, n, mb)
     return rows
