@@ -31,6 +31,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from aveas_format.converters.openlabel.columns import vector_columns
 from aveas_format.converters.openlabel.profile import EXT, LIGHTS, _enum_value
 
 try:
@@ -387,14 +388,7 @@ def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], list, dict[str,
     at = ArrowAttributes(od, n)
     if any(nm.startswith("interior/") for nm in at.code_of):
         raise _NotFast  # (the interior rows read the items as dicts: the generic path)
-    hv, (vu, vv, yr) = at.vector("velocity", (0, 1, 5))
-    _, (au, av) = at.vector("acceleration", (0, 1))
-    _, (xs, ys, zs, hs) = at.vector("bounding_box/ustddev", (0, 1, 2, 5))
-    _, (vus, vvs, yrs) = at.vector("velocity/ustddev", (0, 1, 5))
-    _, (aus, avs) = at.vector("acceleration/ustddev", (0, 1))
-    has_lrc, (rs, rt) = at.vector("open_drive/local_road_coordinates", (0, 1))
-    cols.update(vu=vu, vv=vv, yr=yr, au=au, av=av, x_std=xs, y_std=ys, z_std=zs, heading_std=hs,
-                vu_std=vus, vv_std=vvs, yr_std=yrs, au_std=aus, av_std=avs)
+    hv, has_lrc, (rs, rt) = vector_columns(at, cols)
     road = at.texts("used_road_link")
     if "open_drive/road_id" in at.code_of:
         alt = at.texts("open_drive/road_id")
