@@ -19,6 +19,7 @@ from aveas_format.sample import highway_scene
 from helpers_converters import assert_identical
 
 pytest.importorskip("orjson")
+_READ_BLOCK = fb.read_block
 
 
 @pytest.fixture(scope="module")
@@ -33,10 +34,9 @@ def exported(tmp_path_factory):
 def _import(path, monkeypatch, *, fast: bool):
     """``(recording, findings, (blocks the fast path took, blocks offered))``."""
     taken = []
-    orig = fb.read_block
 
     def read_block(buf):
-        out = orig(buf) if fast else None
+        out = _READ_BLOCK(buf) if fast else None
         taken.append(out is not None)
         return out
 
@@ -159,3 +159,16 @@ def test_structural_index_skips_strings():
     assert boxes == [{"object_data": {"text": [{"name": "n", "val": '{\\'}]}}, {"object_data": {}},
                      {"object_data": {"cuboid": []}}]
     assert np.all(ends > starts)
+
+
+@pytest.mark.parametrize("block", [3000, 50])
+def test_any_block_size_gives_the_same_recording(exported, monkeypatch, block):
+    """Many small blocks (a frame or less each; below a frame the reader hands over to ijson)."""
+    from aveas_format.converters.openlabel import stream
+
+    want, f_want, _ = _import(exported, monkeypatch, fast=False)
+    monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", block)
+    got, f_got, (n_fast, n) = _import(exported, monkeypatch, fast=True)
+    assert_identical(got, want)
+    assert f_got == f_want
+    assert n_fast == n and (n > 1 if block == 3000 else n == 0)
