@@ -44,7 +44,7 @@ from aveas_format.converters.openlabel.profile import (
     _to_utc,
     table_from_json,
 )
-from aveas_format.converters.openlabel.stream import _check_stream, _load_doc, _NotStrictJSON, _stream_doc
+from aveas_format.converters.openlabel.stream import COLUMNAR, _check_stream, _load_doc, _NotStrictJSON, _stream_doc
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, report_source
 from aveas_format.schema.taxonomy import CLASSES
@@ -159,8 +159,15 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     objects = ol.get("objects") or {}
     acc = _FrameRows(objects, _Frames(ol.get("coordinate_systems")), path)
     acc.profile = _claims_profile(md, objects)
-    for k, fr in (frames() if frames is not None else (ol.get("frames") or {}).items()):
-        acc.add(k, fr)
+    if frames is None:
+        for k, fr in (ol.get("frames") or {}).items():
+            acc.add(k, fr)
+    else:  # blocks of frames in columns (the profile's layout) or one frame at a time
+        for k, fr in frames(columnar=not acc.static_cuboids):
+            if k is COLUMNAR:
+                acc.add_columns(fr)
+            else:
+                acc.add(k, fr)
     fd = acc.finish()
     _report_frame_findings(fd, path)
     fnum, time_of, start_time, resolved = _frame_times(fd.fkeys, fd.stamps, ext, md, options, path)
