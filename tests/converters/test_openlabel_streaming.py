@@ -10,7 +10,6 @@ import random
 import tracemalloc
 import warnings
 
-import pyarrow as pa
 import pytest
 
 import aveas_format

@@ -15,7 +15,7 @@ from one ``(n, 9)`` array; other cuboids (generic files: rotations, coordinate s
 
 from __future__ import annotations
 
-from itertools import chain, compress, repeat
+from itertools import chain, repeat
 from operator import is_, is_not, itemgetter, methodcaller
 from typing import Any, Callable
 
