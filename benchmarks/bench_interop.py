@@ -16,6 +16,7 @@ recording is generated here, never stored in the repository. The compact forms (
     python benchmarks/bench_interop.py                 # the 23 k sample (make bench)
     python benchmarks/bench_interop.py --states 2000000
     python benchmarks/bench_interop.py --osi-mcap-states 2000000   # the OSI and MCAP rows alone
+    python benchmarks/bench_interop.py --openlabel-states 2000000  # the OpenLABEL rows alone
 """
 
 from __future__ import annotations
@@ -39,18 +40,44 @@ import aveas_format
 from aveas_format.converters import convert, get_converter
 
 what, rec_dir, out = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3])
+n = None
 if what == "export":
     rec = aveas_format.open(rec_dir)
     _ = rec.states, rec.participants, rec.map
     base = hwm_mb()
     t0 = time.perf_counter()
     get_converter("openlabel", "export")(rec, out)
+elif what == "parse":  # the floor of a Python-object reader: orjson on the same frames, streamed
+    import orjson
+    from aveas_format.converters.openlabel import stream
+    from aveas_format.safeio import scan_json_member
+
+    base = hwm_mb()
+    t0 = time.perf_counter()
+    with open(out, "rb") as f:
+        _, span, _ = scan_json_member(f, "openlabel", "frames")
+    loads, n = orjson.loads, 0
+
+    def counting(b):
+        global n
+        d = loads(b)
+        n += sum(len(fr.get("objects") or ()) for fr in d.values())
+        return d
+
+    stream.orjson = type("counting_orjson", (), {"loads": staticmethod(counting),
+                                                  "JSONDecodeError": orjson.JSONDecodeError})
+    for _ in stream._fast_frames(out, span):
+        pass
 else:
+    if what == "import_generic":  # the reader before the columnar blocks: frames as Python objects
+        import aveas_format.converters.openlabel.fastblock as fb
+        fb.read_block = lambda buf: None
     base = hwm_mb()
     t0 = time.perf_counter()
     rec = convert("openlabel", [out])
 dt = time.perf_counter() - t0
-print(json.dumps({"seconds": dt, "peak_mb": hwm_mb(), "before_mb": base, "states": rec.states.num_rows}))
+print(json.dumps({"seconds": dt, "peak_mb": hwm_mb(), "before_mb": base,
+                  "states": n if n is not None else rec.states.num_rows}))
 """
 
 
@@ -140,6 +167,15 @@ def _openlabel_rows(rec, tmp: Path) -> list[dict]:
         b_or = _best(lambda: orjson.loads(data), gc_off=True)
         rows.append(_row("import_openlabel", n, dt, "(the same run)", b_or,
                          "orjson.loads of the same bytes (no recording built, gc paused), best of 3"))
+        import aveas_format.converters.openlabel.fastblock as fb
+
+        read_block, fb.read_block = fb.read_block, lambda buf: None
+        try:
+            b_gen = _best(lambda: convert("openlabel", [out]))
+        finally:
+            fb.read_block = read_block
+        rows.append(_row("import_openlabel", n, dt, "(the same run)", b_gen,
+                         "the generic reader (frames as Python objects by orjson, then columns), best of 3"))
     del data
     rows += _compact_rows(rec, tmp, n, mb)
     return rows
@@ -325,9 +361,11 @@ def main(n_vehicles: int = 60, duration_s: float = 30.0) -> list[dict]:
     return rows
 
 
-def large(target_states: int) -> list[dict]:
+def large(target_states: int, generic: bool = True) -> list[dict]:
     """The OpenLABEL export and import of a recording of ``target_states`` states, each in a fresh
-    process (peak memory = its VmHWM; the export's includes the recording it reads)."""
+    process (peak memory = its VmHWM; the export's includes the recording it reads), beside
+    orjson parsing the same frames (streamed) and the generic reader (``generic``), each in a fresh
+    process too."""
     from aveas_format.sample import highway_scene
 
     tmp = Path(tempfile.mkdtemp(prefix="aveas-bench-interop-large-"))
@@ -342,12 +380,22 @@ def large(target_states: int) -> list[dict]:
         e = _child("export", tmp / "rec", out)
         mb = out.stat().st_size / 1e6
         i = _child("import", tmp / "rec", out)
-        return [
+        rows = [
             _row("export_openlabel_large", n, e["seconds"], f"{mb:.0f} MB; fresh process: peak "
                  f"{e['peak_mb']:.0f} MB with the recording loaded ({e['before_mb']:.0f} MB before the export)"),
             _row("import_openlabel_large", i["states"], i["seconds"],
                  f"fresh process: peak {i['peak_mb']:.0f} MB ({i['before_mb']:.0f} MB after imports)"),
         ]
+        p = _child("parse", tmp / "rec", out)
+        rows.append(_row("import_openlabel_large", i["states"], i["seconds"], "(the same run)", p["seconds"],
+                         f"orjson.loads of the same frames in 1 MiB blocks, nothing built ({p['states']:,} "
+                         f"boxes; peak {p['peak_mb']:.0f} MB)"))
+        if generic:
+            g = _child("import_generic", tmp / "rec", out)
+            rows.append(_row("import_openlabel_large", i["states"], i["seconds"], "(the same run)",
+                             g["seconds"], f"the generic reader (frames as Python objects, before the columnar "
+                             f"blocks), fresh process: peak {g['peak_mb']:.0f} MB"))
+        return rows
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
@@ -464,6 +512,8 @@ def large_osi_mcap(target_states: int) -> list[dict]:
 if __name__ == "__main__":
     if len(sys.argv) > 2 and sys.argv[1] == "--osi-mcap-states":
         result = large_osi_mcap(int(sys.argv[2]))
+    elif len(sys.argv) > 2 and sys.argv[1] == "--openlabel-states":
+        result = large(int(sys.argv[2]))
     elif len(sys.argv) > 2 and sys.argv[1] == "--states":
         result = large(int(sys.argv[2])) + large_osi_mcap(int(sys.argv[2]))
     else:

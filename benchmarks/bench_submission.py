@@ -10,6 +10,12 @@ rule). The split: the import alone and the rules alone on the imported recording
 scene as an ASAM OSI trace, checked the same way (``validate TRACE --map MAP``).
 
     python benchmarks/bench_submission.py
+    python benchmarks/bench_submission.py --states 2000000
+
+With ``--states N`` the scene of bench_interop's large rows (600 vehicles, 5 min, tiled in time to
+N states; generated here, never stored) is exported and checked by ``aveas-format validate`` in a
+fresh process (peak memory = its VmHWM), the import alone in another, beside the jsonschema
+baseline measured on a sample of the same file's frames in this process.
 """
 
 from __future__ import annotations
@@ -101,6 +107,93 @@ def main(n_vehicles: int = 60, duration_s: float = 30.0, schema_frames: int = 10
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+_CHILD = """
+import json, sys, time
+""" + "{hwm}" + """
+what, src = sys.argv[1], sys.argv[2]
+t0 = time.perf_counter()
+if what == "validate":
+    from aveas_format.cli.app import app
+    from aveas_format.cli.common import run
+
+    code = run(app, ["validate", src, "--format", "json", "-o", sys.argv[3]])
+    extra = {"exit": code, "rules": len(json.loads(open(sys.argv[3]).read())["rules_run"])}
+else:
+    from aveas_format.converters import convert
+
+    extra = {"states": convert("openlabel", [src]).states.num_rows}
+print(json.dumps({"seconds": time.perf_counter() - t0, "peak_mb": hwm_mb(), **extra}))
+"""
+
+
+def large(target_states: int, schema_frames: int = 2) -> list[dict]:
+    """``validate FILE`` on an OpenLABEL file of ``target_states`` states in a fresh process, and
+    the import alone in another, beside jsonschema on a sample of its frames."""
+    import subprocess
+
+    import jsonschema
+
+    from bench_validate_memory import HWM_MB_SRC, tiled
+
+    from aveas_format.converters import get_converter
+    from aveas_format.sample import highway_scene
+
+    child = _CHILD.replace("{hwm}", HWM_MB_SRC)
+    tmp = Path(tempfile.mkdtemp(prefix="aveas-bench-submission-large-"))
+    try:
+        base = highway_scene(n_vehicles=600, duration_s=300.0, seed=3)
+        rec = tiled(base, max(1, -(-target_states // base.states.num_rows)))
+        n = rec.states.num_rows
+        src = tmp / "submission.json"
+        get_converter("openlabel", "export")(rec, src)
+        del rec, base
+        out = {}
+        for what in ("validate", "import"):
+            r = subprocess.run([sys.executable, "-c", child, what, str(src), str(tmp / "report.json")],
+                               capture_output=True, text=True)
+            if r.returncode:
+                raise RuntimeError(r.stderr[-2000:])
+            out[what] = json.loads(r.stdout.strip().splitlines()[-1])
+        # the schema baseline: the first frames of the same file (read whole only up to them)
+        import uai_openlabel
+
+        schema_path = Path(uai_openlabel.__file__).parent / "official_schema" / "openlabel_json_schema.json"
+        schema = json.loads(schema_path.read_text())
+        validator = jsonschema.validators.validator_for(schema)(schema)
+        sample, n_sample = _first_frames(src, schema_frames)
+        dt_schema = _timed(lambda: validator.validate(sample))
+        v, i = out["validate"], out["import"]
+        mb = src.stat().st_size / 1e6
+        return [
+            _row("validate_openlabel_file_large", n, v["seconds"], f"{mb:.0f} MB OpenLABEL, import + "
+                 f"{v['rules']} rules, report to a file (exit {v['exit']}); fresh process: peak "
+                 f"{v['peak_mb']:.0f} MB", dt_schema,
+                 f"jsonschema on the ASAM OpenLABEL 1.0 schema alone, {n_sample} object-frames "
+                 f"({schema_frames} frames) scaled to {n:,}", n_sample),
+            _row("  import_openlabel_large", n, i["seconds"], f"the import alone, fresh process: peak "
+                 f"{i['peak_mb']:.0f} MB"),
+        ]
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _first_frames(src: Path, frames: int) -> tuple[dict, int]:
+    """The document of ``src`` with its first ``frames`` frames (parsed whole from the frames the
+    streamed reader hands out) and their object-frames."""
+    from aveas_format.converters.openlabel.stream import _stream_doc
+
+    ol, gen = _stream_doc(src)
+    ol = dict(ol)
+    ol["frames"] = {}
+    for k, fr in gen():
+        ol["frames"][k] = fr
+        if len(ol["frames"]) == frames:
+            break
+    ol.pop("frame_intervals", None)
+    n = sum(len(f.get("objects", {})) for f in ol["frames"].values())
+    return {"openlabel": ol}, n
+
+
 def _timed(fn) -> float:
     t0 = time.perf_counter()
     fn()
@@ -115,5 +208,10 @@ def _version(dist: str) -> str:
 
 if __name__ == "__main__":
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    for r in main():
+    rows = large(int(sys.argv[2])) if len(sys.argv) > 2 and sys.argv[1] == "--states" else main()
+    for r in rows:
         print(r)
+    try:
+        print("load average", Path("/proc/loadavg").read_text().split()[0], "(at the end)")
+    except OSError:
+        pass

@@ -149,3 +149,26 @@ def rich_recording(n_vehicles: int = 6, duration_s: float = 3.0):
     rec.meta.derived = [DerivedEntry(table="derived/interactions", method="hand_made", version="0",
                                      parameters={"scene": "rich"}, created="2024-05-13T08:15:00Z")]
     return rec
+
+
+def _tables(rec) -> dict:
+    out = {name: getattr(rec, name) for name in ("participants", "states", "events", "unobserved",
+                                                 "environment", "interior")}
+    out.update({f"derived/{k}": v for k, v in rec.derived.items()})
+    return out
+
+
+def assert_identical(a, b) -> None:
+    """Two recordings with the same tables (schemas and values) and metadata."""
+    ta, tb = _tables(a), _tables(b)
+    assert ta.keys() == tb.keys()
+    for name, t in ta.items():
+        u = tb[name]
+        if t is None or u is None:
+            assert t is None and u is None, name
+            continue
+        assert t.schema.equals(u.schema), name
+        assert t.equals(u), name
+    # (a generic file has no recording id: each import draws one)
+    assert a.meta.model_dump(exclude={"recording_id"}) == b.meta.model_dump(exclude={"recording_id"})
+    assert a.map_source == b.map_source

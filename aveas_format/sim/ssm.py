@@ -402,22 +402,54 @@ def _matched(sumo: pa.Table, keys: tuple[str, ...], ours: dict[tuple, tuple],
         sum(g is not None for g in got)
 
 
+def _lanes_at(rec, time_decimals: int) -> dict[tuple, tuple]:
+    """``{(participant, rounded time): (road, lane)}`` of the states on a lane outside junctions
+    (the roads of the map's junctions, i.e. SUMO's internal lanes, are left out)."""
+    st = rec.states
+    if not {"road_id", "lane_id"} <= set(st.column_names):
+        return {}
+    junction = {rid for rid, r in rec.map.roads.items() if r.junction is not None}
+    t = np.round(st.column("time").to_numpy(zero_copy_only=False).astype(float),
+                 time_decimals).tolist()
+    return {(p, tt): (r, ln) for p, tt, r, ln in zip(st.column("participant_id").to_pylist(), t,
+                                                     st.column("road_id").to_pylist(),
+                                                     st.column("lane_id").to_pylist())
+            if r is not None and ln is not None and r not in junction}
+
+
 def _globals_vs_leader(run: SsmRun, rel: float, time_decimals: int = 3) -> dict[str, Any]:
     """SUMO's SGAP and TGAP (global measures per vehicle and step) against ``gap`` and ``thw``
-    of our ``leader`` rows of the same vehicle and time."""
+    of our ``leader`` rows of the same vehicle and time: overall and where the vehicle and our
+    leader are on one lane outside the junction (``one_lane_*``; TGAP also for TGAPs up to
+    :data:`TTC_RESOLVED_S`, which the FCD's 6-decimal speeds resolve)."""
     import pyarrow.compute as pc
 
     rec = run.recording
     src = {v: k for k, v in _ids(rec).items()}
     it = rec.derived["interactions"]
     it = it.filter(pc.equal(it.column("relation"), "leader"))
+    lanes = _lanes_at(rec, time_decimals)
+    t = np.round(it.column("time").to_numpy(zero_copy_only=False).astype(float),
+                 time_decimals).tolist()
+    one = [float(lanes.get((p, tt)) is not None and lanes.get((p, tt)) == lanes.get((o, tt)))
+           for p, o, tt in zip(it.column("participant_id").to_pylist(),
+                               it.column("other_id").to_pylist(), t)]
     it = it.append_column("ego", pa.array([src.get(i) for i in
                                            it.column("participant_id").to_pylist()], pa.string()))
+    it = it.append_column("one_lane", pa.array(one, pa.float64()))
     ours, _ = _matched(run.ssm["globals"], ("ego",),
-                       _lookup(it, ("ego",), ("gap", "thw"), time_decimals), time_decimals)
+                       _lookup(it, ("ego",), ("gap", "thw", "one_lane"), time_decimals),
+                       time_decimals)
     g = run.ssm["globals"]
-    return {"sgap": _agreement(ours[:, 0], g.column("sgap").to_numpy(), rel),
-            "tgap": _agreement(ours[:, 1], g.column("tgap").to_numpy(), rel)}
+    sgap, tgap = g.column("sgap").to_numpy(), g.column("tgap").to_numpy()
+    on = ours[:, 2] == 1.0
+    out = {"sgap": _agreement(ours[:, 0], sgap, rel), "tgap": _agreement(ours[:, 1], tgap, rel)}
+    for m, k, b in (("sgap", 0, sgap), ("tgap", 1, tgap)):
+        share, n = _share_within(ours[on, k], b[on], rel)
+        out[m].update(one_lane_both_finite=n, one_lane_within=share)
+    low = on & (tgap <= TTC_RESOLVED_S)
+    out["tgap"]["one_lane_resolved_within"] = _share_within(ours[low, 1], tgap[low], rel)[0]
+    return out
 
 
 #: the junction's straight-on routes (crossing at right angles) and the pairs of left turns from
@@ -447,8 +479,8 @@ def _crossings(run: SsmRun, rel: float, time_decimals: int = 3) -> dict[str, Any
                                            pa.string()))
     e = run.ssm["encounters"]
     e = e.filter(pc.is_in(e.column("type"), pa.array(list(CROSSING), pa.int64())))
-    ours, n = _matched(e, ("ego", "foe"), _lookup(c, ("ego", "foe"), ("ttc", "drac", "ppet"),
-                                                  time_decimals), time_decimals)
+    rows = _lookup(c, ("ego", "foe"), ("ttc", "drac", "ppet"), time_decimals)
+    ours, n = _matched(e, ("ego", "foe"), rows, time_decimals)
     out: dict[str, Any] = {"sumo_samples": e.num_rows, "matched": n}
     egos, foes = e.column("ego").to_pylist(), e.column("foe").to_pylist()
     straight = np.array([_route(a) in STRAIGHT_ROUTES and _route(b) in STRAIGHT_ROUTES
@@ -472,10 +504,16 @@ def _crossings(run: SsmRun, rel: float, time_decimals: int = 3) -> dict[str, Any
     sumo_pairs = set(zip(egos, foes))
     left = {p for p in sumo_pairs if all(last.get(ids.get(v), t_end) < t_end for v in p)}
     opposing = {p for p in sumo_pairs if frozenset(map(_route, p)) in OPPOSING_LEFT_TURNS}
+    in_found = np.array([p in found for p in zip(egos, foes)], bool)
     out["pairs"] = {"sumo": len(sumo_pairs), "found": len(sumo_pairs & found),
                     "both_left_before_the_end": len(left),
                     "opposing_left_turns": len(opposing),
-                    "missed": sorted(f"{a}/{b}" for a, b in (left - opposing - found))}
+                    "missed": sorted(f"{a}/{b}" for a, b in (left - opposing - found)),
+                    # SUMO's samples of the pairs found, and how many of them have a row here
+                    "found_samples": int(in_found.sum()),
+                    "found_samples_matched": int(sum(k in rows for k, f in zip(
+                        zip(egos, foes, np.round(e.column("time").to_numpy(), time_decimals)
+                            .tolist()), in_found) if f))}
     pet_ours: dict[tuple, float] = {}
     for ego, foe, v in zip(*(c.column(k).to_pylist() for k in ("ego", "foe", "pet"))):
         pet_ours.setdefault((ego, foe), np.nan if v is None else v)

@@ -16,7 +16,6 @@ import pytest
 
 import aveas_format
 from aveas_format.converters import convert, get_converter
-from aveas_format.converters.openlabel import openlabel_to_recording, recording_to_openlabel
 from aveas_format.opendrive.builder import straight_highway
 
 from helpers_converters import assert_recordings_equal, assert_tables_equal

@@ -137,7 +137,7 @@ def test_skipped_extension_entries_are_located(tmp_path):
         convert("openlabel", [out])
     paths = sorted(f.location["json_path"] for f in found if f.code == "source.openlabel.extension_skipped")
     n = len(ext["derived_entries"]) - 1
-    assert paths == [f"$.openlabel.metadata.aveas_format.derived['no_such_table']",
+    assert paths == ["$.openlabel.metadata.aveas_format.derived['no_such_table']",
                      f"$.openlabel.metadata.aveas_format.derived_entries[{n}]"]
 
 

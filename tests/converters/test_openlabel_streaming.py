@@ -10,13 +10,14 @@ import random
 import tracemalloc
 import warnings
 
-import pyarrow as pa
 import pytest
 
 import aveas_format
 from aveas_format.converters import convert, get_converter
 from aveas_format.converters.openlabel import openlabel_to_recording
 from aveas_format.sample import highway_scene
+
+from helpers_converters import assert_identical
 
 
 STRAIGHT = aveas_format.__path__[0] + "/../tests/data/straight.xodr"
@@ -25,28 +26,6 @@ STRAIGHT = aveas_format.__path__[0] + "/../tests/data/straight.xodr"
 def _export(rec, path):
     get_converter("openlabel", "export")(rec, path)
     return path
-
-
-def _tables(rec) -> dict[str, pa.Table | None]:
-    out = {name: getattr(rec, name) for name in ("participants", "states", "events", "unobserved",
-                                                 "environment", "interior")}
-    out.update({f"derived/{k}": v for k, v in rec.derived.items()})
-    return out
-
-
-def assert_identical(a, b) -> None:
-    ta, tb = _tables(a), _tables(b)
-    assert ta.keys() == tb.keys()
-    for name, t in ta.items():
-        u = tb[name]
-        if t is None or u is None:
-            assert t is None and u is None, name
-            continue
-        assert t.schema.equals(u.schema), name
-        assert t.equals(u), name
-    # (a generic file has no recording id: each import draws one)
-    assert a.meta.model_dump(exclude={"recording_id"}) == b.meta.model_dump(exclude={"recording_id"})
-    assert a.map_source == b.map_source
 
 
 def _dict_path(path, map_source=None):

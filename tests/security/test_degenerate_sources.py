@@ -533,6 +533,7 @@ def test_derive_on_degenerate_recording(tmp_path, name, case):
     ("osi", r"run_gt\.osi: frame 1: participant '2' sampled twice at time 0\.05$"),
     ("highd", r"01_tracks\.csv: line 14: participant sampled twice"),
 ])
+@pytest.mark.filterwarnings("ignore:.*earlier than the previous message:UserWarning")  # OSI: sorted first
 def test_repeated_time_names_track_and_place(tmp_path, name, match):
     """A track sampled twice at one time: the error names the file, the line (or frame) of the
     repeat and, where the format has no lines, the track."""

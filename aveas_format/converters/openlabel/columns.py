@@ -15,7 +15,7 @@ from one ``(n, 9)`` array; other cuboids (generic files: rotations, coordinate s
 
 from __future__ import annotations
 
-from itertools import chain, compress, repeat
+from itertools import chain, repeat
 from operator import is_, is_not, itemgetter, methodcaller
 from typing import Any, Callable
 
@@ -272,6 +272,21 @@ def _lane_ids(lanes: list, roads: list) -> list:
     return out
 
 
+def vector_columns(at: Any, cols: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """The profile's vectors of a block's boxes into ``cols`` (velocity, acceleration, their and the
+    box's 1-sigma) from ``at`` (:class:`_Attributes` or :class:`.fastblock.ArrowAttributes`):
+    ``(has a velocity, has road coordinates, [road s, road t])``."""
+    hv, (vu, vv, yr) = at.vector("velocity", (0, 1, 5))
+    _, (au, av) = at.vector("acceleration", (0, 1))
+    _, (xs, ys, zs, hs) = at.vector("bounding_box/ustddev", (0, 1, 2, 5))
+    _, (vus, vvs, yrs) = at.vector("velocity/ustddev", (0, 1, 5))
+    _, (aus, avs) = at.vector("acceleration/ustddev", (0, 1))
+    has_lrc, st = at.vector("open_drive/local_road_coordinates", (0, 1))
+    cols.update(vu=vu, vv=vv, yr=yr, au=au, av=av, x_std=xs, y_std=ys, z_std=zs, heading_std=hs,
+                vu_std=vus, vv_std=vvs, yr_std=yrs, au_std=aus, av_std=avs)
+    return hv, has_lrc, st
+
+
 def block_columns(ods: list[dict], cubs: list[dict], place: Callable[[int], tuple]
                   ) -> tuple[dict[str, np.ndarray], list[tuple[float, float, float]], list, _Attributes]:
     """``(columns, sizes, ext items, attributes)`` of the boxes ``cubs`` with their ``object_data`` ``ods``;
@@ -319,14 +334,7 @@ def block_columns(ods: list[dict], cubs: list[dict], place: Callable[[int], tupl
 
     # the profile's attributes, by name
     at = _Attributes(ods)
-    hv, (vu, vv, yr) = at.vector("velocity", (0, 1, 5))
-    _, (au, av) = at.vector("acceleration", (0, 1))
-    _, (xs, ys, zs, hs) = at.vector("bounding_box/ustddev", (0, 1, 2, 5))
-    _, (vus, vvs, yrs) = at.vector("velocity/ustddev", (0, 1, 5))
-    _, (aus, avs) = at.vector("acceleration/ustddev", (0, 1))
-    has_lrc, (rs, rt) = at.vector("open_drive/local_road_coordinates", (0, 1))
-    cols.update(vu=vu, vv=vv, yr=yr, au=au, av=av, x_std=xs, y_std=ys, z_std=zs, heading_std=hs,
-                vu_std=vus, vv_std=vvs, yr_std=yrs, au_std=aus, av_std=avs)
+    hv, has_lrc, (rs, rt) = vector_columns(at, cols)
     road = at.scalar("used_road_link")
     if "open_drive/road_id" in at.code_of:
         road = [r if r is not None else alt for r, alt in zip(road, at.scalar("open_drive/road_id"))]

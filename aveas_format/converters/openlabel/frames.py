@@ -373,15 +373,7 @@ class _FrameRows:
             return _box_in_root(cubs[i], lambda name: self._resolve(name, j, u), keys[j], u, self.path)
 
         ch, sizes, ext, at = block_columns(ods, cubs, place)
-        ui = self.uid_index
-        ch["uidx"] = np.fromiter(map(ui.__getitem__, us), np.int64, len(us))
-        ch["occ"] = np.asarray(js, np.int64)
-        self._check_block(at, js, us)
-        self.chunks.append(ch)
-        self.ext_chunks.append((len(us), ext_chunk(ext)))
-        need = {u: self._needs_size(u) for u in dict.fromkeys(us)}
-        if any(need.values()):
-            self.sizes.extend((j, u, d) for j, u, d in zip(js, us, sizes) if need[u])
+        self._keep(ch, sizes, ext_chunk(ext), at, js, us)
         inames = [nm for nm in at.code_of if nm.startswith("interior/")]
         if inames:
             for i in at.boxes_with(inames).tolist():
@@ -389,6 +381,41 @@ class _FrameRows:
                 if irow:
                     self.interior.append((js[i], us[i], irow))
         self.p_edges = {}
+
+    def _keep(self, ch: dict[str, np.ndarray], sizes: list, ext: dict[str, tuple], at: Any,
+              js: list[int], us: list[str]) -> None:
+        """A block's columns (boxes of frames ``js``, objects ``us``), checked and kept."""
+        ui = self.uid_index
+        ch["uidx"] = np.fromiter(map(ui.__getitem__, us), np.int64, len(us))
+        ch["occ"] = np.asarray(js, np.int64)
+        self._check_block(at, js, us)
+        self.chunks.append(ch)
+        self.ext_chunks.append((len(us), ext))
+        need = {u: self._needs_size(u) for u in dict.fromkeys(us)}
+        if any(need.values()):
+            self.sizes.extend((j, u, d) for j, u, d in zip(js, us, sizes) if need[u])
+
+    def add_columns(self, blk: Any) -> None:
+        """A block of frames read into columns (:class:`.fastblock.FastBlock`: level boxes in the
+        root frame, each object's uid once per frame, rows in file order; the caller took it only
+        where no static cuboid needs the frames' transforms)."""
+        self._flush()
+        ui = self.uid_index
+        js: list[int] = []
+        us: list[str] = []
+        for k, fr in blk.frames:
+            j = len(self.keys)
+            self.keys.append(k)
+            self.stamps.append(_frame_timestamp(fr))
+            fobjs = fr.get("objects") or {}
+            if not fobjs.keys() <= ui.keys():
+                for u in fobjs:
+                    ui.setdefault(u, len(ui))
+            self.frame_uids.append(np.fromiter(map(ui.__getitem__, fobjs), np.int64, len(fobjs)))
+            js.extend(repeat(j, len(fobjs)))
+            us.extend(fobjs)
+        if us:
+            self._keep(blk.cols, blk.sizes, blk.ext, blk.at, js, us)
 
     def finish(self) -> _FrameData:
         self._flush()

@@ -25,12 +25,13 @@ import pyarrow as pa
 from aveas_format.converters.common import (TIMESTAMP_UNITS, load_map_bytes, resolve_timestamps,
                                             source_block)
 from aveas_format.converters.labels import LabelFilter, implausible_size, label_kind
+from aveas_format.converters.openlabel.findings import (_check_objects, _claims_profile, _jpath,
+                                                        _report_frame_findings)
 from aveas_format.converters.openlabel.frames import (_MISSING, _FrameData, _Frames, _FrameRows, _rep_list,
                                                       _rep_take, _utm_crs)
 from aveas_format.converters.openlabel.profile import (
     EXT,
     LIGHTS,
-    MANDATORY_OBJECT_ATTRIBUTES,
     PROFILE_TO_METHOD,
     TYPE_TO_CLASS,
     TYPE_TO_EVENT,
@@ -44,7 +45,7 @@ from aveas_format.converters.openlabel.profile import (
     _to_utc,
     table_from_json,
 )
-from aveas_format.converters.openlabel.stream import _check_stream, _load_doc, _NotStrictJSON, _stream_doc
+from aveas_format.converters.openlabel.stream import COLUMNAR, _check_stream, _load_doc, _NotStrictJSON, _stream_doc
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, report_source
 from aveas_format.schema.taxonomy import CLASSES
@@ -159,8 +160,15 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     objects = ol.get("objects") or {}
     acc = _FrameRows(objects, _Frames(ol.get("coordinate_systems")), path)
     acc.profile = _claims_profile(md, objects)
-    for k, fr in (frames() if frames is not None else (ol.get("frames") or {}).items()):
-        acc.add(k, fr)
+    if frames is None:
+        for k, fr in (ol.get("frames") or {}).items():
+            acc.add(k, fr)
+    else:  # blocks of frames in columns (the profile's layout) or one frame at a time
+        for k, fr in frames(columnar=not acc.static_cuboids):
+            if k is COLUMNAR:
+                acc.add_columns(fr)
+            else:
+                acc.add(k, fr)
     fd = acc.finish()
     _report_frame_findings(fd, path)
     fnum, time_of, start_time, resolved = _frame_times(fd.fkeys, fd.stamps, ext, md, options, path)
@@ -333,50 +341,6 @@ def _drop_non_participants(fd: _FrameData, objects: dict[str, Any], uids: list[s
             arr = np.asarray(fd.sizes[u], float).reshape(-1, 3)
             fd.sizes[u] = arr[~implausible_size(arr)].tolist()
     return [u for u in uids if keep_uid.get(u, True)]
-
-
-def _jpath(*keys: Any) -> str | None:
-    """A JSONPath into the document: ``$.openlabel.frames['12'].objects['3']...``; None where a key
-    is unknown."""
-    if any(k is None for k in keys):
-        return None
-    out = "$.openlabel"
-    for k in keys:
-        out += f".{k}" if isinstance(k, str) and k.isidentifier() else f"[{str(k)!r}]"
-    return out
-
-
-def _claims_profile(md: dict[str, Any], objects: Any) -> bool:
-    """Whether a file claims the AVEAS profile: its metadata has the profile's
-    ``acquisition_method``, or an object has one of the profile's types (``vehicle/car``...)."""
-    if isinstance(md, dict) and md.get("acquisition_method") is not None:
-        return True
-    return isinstance(objects, dict) and any(
-        isinstance(o, dict) and o.get("type") in TYPE_TO_CLASS for o in objects.values())
-
-
-def _report_frame_findings(fd: _FrameData, path: Path | None) -> None:
-    """What the frames' checks found (:meth:`_FrameRows._check_block`, the coordinate systems):
-    one finding per kind and attribute, at its first box, with the count."""
-    file = str(path) if path is not None else None
-    unknown = [what for (code, what) in fd.found if code == "source.openlabel.unknown_coordinate_system"]
-    for (code, what), (frame, uid, count) in fd.found.items():
-        if code == "source.openlabel.unknown_coordinate_system":
-            if what != unknown[0]:
-                continue  # one finding for all (as the one warning always said)
-            msg = ("coordinate system(s) " + ", ".join(map(repr, sorted(unknown)))
-                   + " are not in coordinate_systems: taken as the root frame")
-            count = len(unknown)
-            jp = _jpath("frames", frame, "objects", uid, "object_data", "cuboid") if uid else None
-        elif code == "source.openlabel.pmf_sum":
-            msg = f"{count} value(s) of {what!r} do not sum to 1 (first: frame {frame}, object {uid})"
-            jp = _jpath("frames", frame, "objects", uid, "object_data", "vec")
-        else:
-            msg = (f"{count} object(s) in frames lack the profile's mandatory attribute {what!r} "
-                   f"(first: frame {frame}, object {uid})")
-            jp = _jpath("frames", frame, "objects", uid, "object_data")
-        report_source(code, f"OpenLABEL: {msg}", count=count, stacklevel=4, file=file,
-                      frame=frame, uid=uid, json_path=jp)
 
 
 def _participant_ids(objects: dict[str, Any], uids: list[str]) -> tuple[dict, dict[str, int]]:
@@ -673,54 +637,6 @@ def _profile_participants(uids: list[str], objects: dict[str, Any], pid_of: dict
         part["attached_to"].append(pid_of.get(str(att)) if att is not None else None)
         part["role"].append("recording_vehicle" if is_ego else "observed")
     return part, ego_seen
-
-
-def _check_objects(uids: list[str], objects: dict[str, Any], frame_types: dict[str, str],
-                   profile: bool, path: Path | None) -> None:
-    """The objects' findings: a type that is not one of the profile's (in a file that claims the
-    profile; in any file a type no table knows, read as ``other``), a ``classification/
-    uncertainties`` PMF not summing to 1, a mandatory attribute missing (files that claim the
-    profile). One finding per kind (and type or attribute) at its first object, with the count."""
-
-    file = str(path) if path is not None else None
-    where = "OpenLABEL: "  # the file is the finding's location
-    types: dict[str, list] = {}
-    missing: dict[str, list] = {}
-    pmfs: list[tuple[str, Any]] = []
-    for u in uids:
-        obj = objects.get(u) if isinstance(objects.get(u), dict) else {}
-        od = obj.get("object_data") if isinstance(obj.get("object_data"), dict) else {}
-        otype = str(obj.get("type") or (od.get("type") if isinstance(od.get("type"), str) else None)
-                    or frame_types.get(u) or "other")
-        if otype not in TYPE_TO_CLASS and (profile or label_kind(otype) == ("other", "road_user")
-                                           and otype.lower() != "other"):
-            types.setdefault(otype, [u, 0])[1] += 1
-        attrs = _attrs(od)
-        pmf = _first(attrs, "classification/uncertainties")
-        if pmf is not None:
-            pmfs.append((u, pmf))
-        if profile and u in objects:
-            for name in MANDATORY_OBJECT_ATTRIBUTES:
-                if _first(attrs, name) is None:
-                    missing.setdefault(name, [u, 0])[1] += 1
-    for otype, (u, count) in types.items():
-        cls = TYPE_TO_CLASS.get(otype) or label_kind(otype)[0]
-        report_source("source.openlabel.unknown_type", where + f"object type {otype!r} is not one of the "
-                      f"AVEAS profile's types: read as class {cls} ({count} object(s), first {u})",
-                      count=count, stacklevel=3, file=file, uid=u, json_path=_jpath("objects", u, "type"))
-    for name, (u, count) in missing.items():
-        report_source("source.openlabel.missing_attribute", where + f"{count} object(s) lack the "
-                      f"profile's mandatory attribute {name!r} (first {u})", count=count, stacklevel=3,
-                      file=file, uid=u, json_path=_jpath("objects", u, "object_data"))
-    if pmfs:
-        from aveas_format.converters.openlabel.frames import _pmf_bad
-
-        bad = [u for u, v in pmfs if _pmf_bad(v)]
-        if bad:
-            report_source("source.openlabel.pmf_sum", where + f"{len(bad)} object(s)' "
-                          f"'classification/uncertainties' do not sum to 1 (first {bad[0]})",
-                          count=len(bad), stacklevel=3, file=file, uid=bad[0],
-                          json_path=_jpath("objects", bad[0], "object_data", "vec"))
 
 
 def _static_size(size: Any) -> list | None:

@@ -183,10 +183,10 @@ def _stream_doc(path: Path):
     if span is None:
         return ol, None
 
-    def frames():
+    def frames(columnar: bool = False):
         start = span[0]
         if orjson is not None:
-            start = yield from _fast_frames(path, span)
+            start = yield from _fast_frames(path, span, columnar)
             if start is None:
                 return
         with _open(path) as fr:
@@ -201,17 +201,26 @@ def _stream_doc(path: Path):
     return ol, frames
 
 
-#: bytes of the frames parsed at a time by the fast path (their Python objects: ~9x that)
+#: bytes of the frames parsed at a time by the fast path (their Python objects: ~9x that); by the
+#: columnar path (:mod:`.fastblock`: Arrow columns, ~the bytes)
 _BLOCK = 1 << 20
+_COLUMNAR_BLOCK = 2 << 20
+#: the key of a block of frames read into columns (:class:`.fastblock.FastBlock`) in ``frames()``
+COLUMNAR = object()
 _FRAME_HEAD = re.compile(rb'\s*"(?:[^"\\]|\\.)*"\s*:\s*\{\s*$')
 
 
-def _fast_frames(path: Path, span: tuple[int, int]):
+def _fast_frames(path: Path, span: tuple[int, int], columnar: bool = False):
     """The frames cut into blocks of whole frames where a frame starts with ``"key":{
     "frame_properties"`` (this library's exports, and files laid out like them) and each block
     parsed with orjson; a generator returning None when it took all frames, else the file offset
     (at a frame boundary) from which the caller goes on with ijson — at the first block it cannot
-    cut or parse (another layout, NaN, numbers orjson refuses: the exact error comes from ijson)."""
+    cut or parse (another layout, NaN, numbers orjson refuses: the exact error comes from ijson).
+    ``columnar``: a block that :func:`.fastblock.read_block` takes is yielded whole as
+    ``(COLUMNAR, FastBlock)`` (bigger blocks); the others as frames."""
+    from aveas_format.converters.openlabel.fastblock import read_block
+
+    size = _COLUMNAR_BLOCK if columnar else _BLOCK
     with _open(path) as f:
         f.seek(span[0])
         if f.read(1) != b"{":
@@ -219,18 +228,23 @@ def _fast_frames(path: Path, span: tuple[int, int]):
         pos, end = span[0] + 1, span[1] - 1  # the members between the braces
         buf = b""
         while pos < end:
-            data = f.read(min(_BLOCK, end - pos - len(buf)))
+            data = f.read(min(size, end - pos - len(buf)))
             buf += data
             last = not data or pos + len(buf) >= end
             cut = len(buf) if last else _last_cut(buf)
             if cut is None:  # no frame head in 4 blocks: another layout
-                if len(buf) > 4 * _BLOCK:
+                if len(buf) > 4 * size:
                     return span[0] if pos == span[0] + 1 else pos
                 continue
-            try:
-                block = orjson.loads(b"{" + buf[:cut] + b"}")
-            except orjson.JSONDecodeError:
-                block = None
+            fast = read_block(b"{" + buf[:cut] + b"}") if columnar else None
+            if fast is not None:
+                yield COLUMNAR, fast
+                block = {}
+            else:
+                try:
+                    block = orjson.loads(b"{" + buf[:cut] + b"}")
+                except orjson.JSONDecodeError:
+                    block = None
             if not isinstance(block, dict):
                 return span[0] if pos == span[0] + 1 else pos
             yield from block.items()

@@ -29,7 +29,7 @@ def follower_leader_metrics(gap: np.ndarray, gap_var: np.ndarray, leader_length:
     ``follower`` and ``leader`` are ``(v, a, v_var, a_var)``: speed and acceleration along the lane
     and their variances. ``ttc_std`` is NaN where the pair is not closing. Computed in chunks of
     :data:`CHUNK` pairs (the many temporaries of a chunk stay in the cache: 2-3x faster than whole
-    arrays for millions of pairs)."""
+    arrays for millions of pairs). ``gap`` and ``gap_var`` are the inputs themselves (not copied)."""
     n = len(gap)
     args = [np.asarray(a, float) for a in (gap, gap_var, leader_length, *follower, *leader)]
     args = np.broadcast_arrays(*args) if n else args
@@ -37,10 +37,16 @@ def follower_leader_metrics(gap: np.ndarray, gap_var: np.ndarray, leader_length:
     for lo in range(0, max(n, 1), CHUNK):
         part = _metrics(*(a[lo:lo + CHUNK] for a in args), reaction_time, max_deceleration)
         if not out:
-            out = {k: np.empty(n) for k in part}
+            out = {k: args[0] if k == "gap" else args[1] if k == "gap_var" else np.empty(n)
+                   for k in part}
         for k, v in part.items():
-            out[k][lo:lo + CHUNK] = v
+            if k not in PASSED_THROUGH:
+                out[k][lo:lo + CHUNK] = v
     return out
+
+
+#: outputs of :func:`follower_leader_metrics` that are its inputs
+PASSED_THROUGH = frozenset({"gap", "gap_var"})
 
 
 def _metrics(gap, gap_var, leader_length, vf, af, vfv, afv, vl, al, vlv, alv,

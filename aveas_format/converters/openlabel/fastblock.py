@@ -1,0 +1,427 @@
+"""A block of OpenLABEL frames into box columns without a Python object per value (the import's
+fast path).
+
+:func:`read_block` takes the bytes of a block of whole frames (``{"key":{...},...}``, as
+:func:`~.stream._fast_frames` cuts them) and:
+
+1. indexes its structure with numpy: the quotes that are not escaped, the brackets outside strings
+   and their depth (a cumulative sum); the boxes are the objects one level under a frame's
+   ``objects`` member, each with its byte span;
+2. parses the *skeleton* with orjson — the block with every box replaced by its row number — which
+   checks the structure around the boxes and gives the frame keys, ``frame_properties`` and, per
+   frame, the object uids (with the JSON semantics of repeated keys);
+3. parses the boxes' spans, joined as newline-delimited JSON, with Arrow's C++ JSON reader against
+   the AVEAS profile's layout (:data:`BOX_SCHEMA`: the cuboid with its ``aveas_format`` extension
+   item, the ``boolean``/``num``/``text``/``vec`` attribute lists);
+4. takes the attributes the import reads by name, in bulk (:class:`ArrowAttributes`), into the same
+   columns :func:`~.columns.block_columns` builds from parsed boxes.
+
+It verifies what it assumes and returns None where a block does not fit (a box without the
+profile's ``bounding_box`` cuboid first, a rotated or non-root cuboid, a value of another type than
+the profile's, an unexpected member, a ``null`` in a box, a repeated object uid in a frame,
+``interior/`` attributes, NaN...): the caller then parses that block with orjson and the generic
+path (:mod:`.columns`), which gives the same columns and the exact error where there is one.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from aveas_format.converters.openlabel.columns import vector_columns
+from aveas_format.converters.openlabel.profile import EXT, LIGHTS, _enum_value
+
+try:
+    import orjson
+except ImportError:  # pragma: no cover - the fast path needs the [fast] extra
+    orjson = None
+
+
+def _attr(val: pa.DataType) -> pa.DataType:
+    return pa.list_(pa.struct([("name", pa.string()), ("val", val)]))
+
+
+#: the kinds of attributes in the order :func:`~.profile._first` searches them, with their value type
+KINDS = (("boolean", pa.bool_()), ("num", pa.float64()), ("text", pa.string()),
+         ("vec", pa.list_(pa.float64())))
+#: the layout of one box (an object in a frame) of the AVEAS profile; the extension item's members
+#: are inferred (they are this library's state columns)
+BOX_SCHEMA = pa.schema([("object_data", pa.struct([
+    ("cuboid", pa.list_(pa.struct([("name", pa.string()), ("val", pa.list_(pa.float64())),
+                                   ("coordinate_system", pa.string())]))),
+    *((kind, _attr(t)) for kind, t in KINDS)]))])
+#: the attributes the import reads, with the kind the profile gives them (found in another kind:
+#: the generic path reads the block)
+READ_KIND = {"velocity": "vec", "acceleration": "vec", "bounding_box/ustddev": "vec",
+             "velocity/ustddev": "vec", "acceleration/ustddev": "vec",
+             "open_drive/local_road_coordinates": "vec", "used_road_link": "text",
+             "open_drive/road_id": "text", "open_drive/lane_id": "text", "open_drive/lane_position": "num",
+             **{name: "boolean" for name in LIGHTS.values()}}
+
+#: bytes of boxes per Arrow parse task: a block is one task (A/B on the sample, load 8: best of 3
+#: 1.28 s; 1.38 s with 1 MiB tasks, 1.52 s with 512 KiB — threads within a block do not pay here)
+ARROW_BLOCK = 1 << 22
+_OBJECTS_KEY = b'"objects"'
+_NEWLINES = bytes.maketrans(b"\r\n", b"  ")
+
+
+class _NotFast(Exception):
+    """The block does not fit the fast path: the generic path reads it."""
+
+
+def _structure(buf: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(positions, depths, kinds, quote positions)`` of the brackets outside strings (depth after an
+    opening bracket, before a closing one; 1 = the block's own braces) and the unescaped quotes."""
+    a = np.frombuffer(buf, np.uint8)
+    f = a | 0x20  # '[' -> '{', ']' -> '}'
+    idx = np.flatnonzero((a == 34) | (f == 0x7B) | (f == 0x7D))
+    k = a[idx]
+    isq = k == 34
+    if buf.find(b"\\") >= 0:  # quotes after an odd run of backslashes are inside strings
+        qpos = idx[isq]
+        prev = np.flatnonzero(a[np.maximum(qpos - 1, 0)] == 92)
+        esc = np.zeros(len(qpos), bool)
+        for i in prev.tolist():
+            j, run = int(qpos[i]) - 1, 0
+            while j >= 0 and buf[j] == 92:
+                run, j = run + 1, j - 1
+            esc[i] = run % 2 == 1
+        if esc.any():
+            drop = np.flatnonzero(isq)[esc]
+            keep = np.ones(len(idx), bool)
+            keep[drop] = False
+            idx, k, isq = idx[keep], k[keep], isq[keep]
+    instr = (np.cumsum(isq, dtype=np.uint8) & 1).astype(bool)  # (opening quote: 1; closing: 0)
+    if instr[-1:].any():
+        raise _NotFast
+    if buf.find(b"\n") >= 0 or buf.find(b"\r") >= 0:  # a raw line break in a string: broken JSON
+        nl = np.flatnonzero((a == 10) | (a == 13))
+        if (np.searchsorted(idx[isq], nl) & 1).any():
+            raise _NotFast
+    br = ~isq & ~instr
+    pos, kb = idx[br], k[br]
+    step = np.where((kb | 0x20) == 0x7B, np.int8(1), np.int8(-1))
+    depth = np.cumsum(step, dtype=np.int32)
+    depth[step < 0] += 1
+    return pos, depth, step, idx[isq]
+
+
+def _box_spans(buf: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """The byte spans ``[start, end)`` of the objects directly under a frame's ``objects`` member."""
+    pos, depth, step, quotes = _structure(buf)
+    if len(depth) == 0 or depth.min() < 1 or step[0] != 1 or depth[-1] != 1 or step[-1] != -1:
+        raise _NotFast
+    # the containers one level under a frame (its members' values): which are "objects"
+    c3 = np.flatnonzero((depth == 3) & (step > 0))
+    qi = np.searchsorted(quotes, pos[c3])  # the key's closing quote is quotes[qi - 1]
+    is_obj = np.zeros(len(c3), bool)
+    for i, (q, p) in enumerate(zip(qi.tolist(), pos[c3].tolist())):
+        if q >= 2 and buf[quotes[q - 2]:quotes[q - 1] + 1] == _OBJECTS_KEY \
+                and not buf[quotes[q - 1] + 1:p].strip(b" \t\r\n:"):
+            is_obj[i] = True
+    opens = np.flatnonzero((depth == 4) & (step > 0))
+    closes = np.flatnonzero((depth == 4) & (step < 0))
+    if len(opens) != len(closes):
+        raise _NotFast
+    owner = np.searchsorted(c3, opens) - 1  # the depth-3 container each depth-4 one is in
+    if (owner < 0).any():
+        raise _NotFast
+    sel = is_obj[owner] & (np.frombuffer(buf, np.uint8)[pos[opens]] == 0x7B)
+    if not is_obj.any():
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    # an array value under "objects" (or anything but objects) is not a box: the generic path
+    if not (is_obj[owner] <= sel).all():
+        raise _NotFast
+    return pos[opens][sel], pos[closes][sel] + 1
+
+
+class FastBlock:
+    """A block of frames read by :func:`read_block`: ``frames`` as ``(key, frame)`` with each
+    frame's ``objects`` mapping uid -> row, and the rows' columns (:func:`box_columns`)."""
+
+    def __init__(self, frames: list, cols: dict[str, np.ndarray], sizes: list, ext: dict[str, tuple],
+                 at: ArrowAttributes) -> None:
+        self.frames, self.cols, self.sizes, self.ext, self.at = frames, cols, sizes, ext, at
+
+
+def read_block(buf: bytes) -> FastBlock | None:
+    """The block ``buf`` (``{"key":{frame},...}``) as a :class:`FastBlock`, or None where it does
+    not fit the fast path (see the module's doc)."""
+    if orjson is None:
+        return None
+    try:
+        return _read_block(buf)
+    except (_NotFast, pa.ArrowInvalid, pa.ArrowTypeError, orjson.JSONDecodeError, KeyError, IndexError,
+            TypeError, ValueError):
+        return None
+
+
+def _read_block(buf: bytes) -> FastBlock | None:
+    starts, ends = _box_spans(buf)
+    n = len(starts)
+    if n == 0:
+        return None
+    sl, el = starts.tolist(), ends.tolist()
+    skel, prev = [], 0
+    for r, (s, e) in enumerate(zip(sl, el)):
+        skel += (buf[prev:s], b"%d" % r)
+        prev = e
+    skel.append(buf[prev:])
+    block = orjson.loads(b"".join(skel))
+    if not isinstance(block, dict):
+        return None
+    frames, seen = [], 0
+    for k, fr in block.items():
+        if not isinstance(fr, dict):
+            return None
+        objs = fr.get("objects")
+        if objs is not None:
+            if not isinstance(objs, dict) or set(map(type, objs.values())) - {int}:
+                return None
+            seen += len(objs)
+        frames.append((k, fr))
+    rows = [r for _, fr in frames for r in (fr.get("objects") or {}).values()]
+    if seen != n or rows != list(range(n)):  # a uid twice in a frame, a frame key twice: generic
+        return None
+    if b"\n" in buf or b"\r" in buf:  # (outside strings: _structure checked) whitespace
+        buf = buf.translate(_NEWLINES)
+    boxes = b"\n".join([buf[s:e] for s, e in zip(sl, el)])
+    if b"null" in boxes:  # (a null member would read as an absent one)
+        return None
+    if not boxes.isascii():
+        boxes.decode("utf-8")  # (UnicodeDecodeError is a ValueError: the generic path names it)
+    import pyarrow.json as pj
+
+    table = pj.read_json(pa.py_buffer(boxes), read_options=pj.ReadOptions(use_threads=True, block_size=ARROW_BLOCK),
+                         parse_options=pj.ParseOptions(explicit_schema=BOX_SCHEMA,
+                                                       unexpected_field_behavior="infer"))
+    if table.num_rows != n:
+        return None
+    cols, sizes, ext, at = box_columns(table)
+    return FastBlock(frames, cols, sizes, ext, at)
+
+
+# ------------------------------------------------------------------------------------------------
+
+class ArrowAttributes:
+    """The attribute items of a block's boxes by kind (Arrow lists of ``{name, val}``), read by name
+    as :class:`~.columns._Attributes` does: per box the first item of a name (kinds in the order
+    boolean, num, text, vec)."""
+
+    def __init__(self, od: pa.StructArray, n: int) -> None:
+        self.n = n
+        self.kinds: dict[str, tuple[np.ndarray, np.ndarray, pa.Array, dict[str, int]]] = {}
+        self.code_of: dict[str, None] = {}
+        for kind, _ in KINDS:
+            lists = od.field(kind)
+            if lists.null_count == len(lists) or len(lists.values) == 0:
+                continue
+            items = lists.flatten()
+            if items.null_count:
+                raise _NotFast
+            parent = pc.list_parent_indices(lists).to_numpy()
+            names = items.field("name")
+            if names.null_count:
+                raise _NotFast
+            enc = names.dictionary_encode()
+            dict_names = enc.dictionary.to_pylist()
+            self.kinds[kind] = (parent, enc.indices.to_numpy(), items.field("val"),
+                                {s: i for i, s in enumerate(dict_names)})
+            self.code_of.update(dict.fromkeys(dict_names))
+        for name, kind in READ_KIND.items():  # an attribute the import reads, in another kind
+            if any(name in codes for k, (_, _, _, codes) in self.kinds.items() if k != kind):
+                raise _NotFast
+
+    def _first_in(self, kind: str, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(boxes, item index)`` of the first item of ``name`` per box in ``kind``."""
+        parent, codes, _, code_of = self.kinds[kind]
+        sel = np.flatnonzero(codes == code_of[name])
+        boxes = parent[sel]
+        if len(boxes) > 1 and not (boxes[1:] > boxes[:-1]).all():  # a name twice in a box
+            boxes, first = np.unique(boxes, return_index=True)
+            sel = sel[first]
+        return boxes, sel
+
+    def first_items(self, name: str) -> list[tuple[str, np.ndarray, np.ndarray]]:
+        """Per kind holding ``name``: ``(kind, boxes, item indices)``, the boxes of an earlier kind
+        taken out of the later ones."""
+        out, taken = [], np.zeros(self.n, bool)
+        for kind, (_, _, _, code_of) in self.kinds.items():
+            if name in code_of:
+                boxes, sel = self._first_in(kind, name)
+                fresh = ~taken[boxes]
+                boxes, sel = boxes[fresh], sel[fresh]
+                taken[boxes] = True
+                out.append((kind, boxes, sel))
+        return out
+
+    def first(self, name: str) -> tuple[np.ndarray, list]:
+        """``(boxes that have the name, the first such item's value per box)`` (Python values: for
+        the few checks that read them, e.g. the PMFs)."""
+        parts = self.first_items(name)
+        if not parts:
+            return np.zeros(0, np.int64), []
+        boxes = np.concatenate([b for _, b, _ in parts])
+        vals = [v for kind, _, sel in parts for v in self.kinds[kind][2].take(pa.array(sel)).to_pylist()]
+        order = np.argsort(boxes, kind="stable")
+        return boxes[order], [vals[i] for i in order.tolist()]
+
+    def boxes_with(self, names: list[str]) -> np.ndarray:
+        found = [b for nm in names for _, b, _ in self.first_items(nm)]
+        return np.unique(np.concatenate(found)) if found else np.zeros(0, np.int64)
+
+    def values(self, name: str) -> tuple[np.ndarray, pa.Array] | None:
+        """``(boxes, values)`` of the first item of ``name`` per box (its kind is the profile's)."""
+        kind = READ_KIND[name]
+        if kind not in self.kinds or name not in self.kinds[kind][3]:
+            return None
+        boxes, sel = self._first_in(kind, name)
+        return boxes, self.kinds[kind][2].take(pa.array(sel))
+
+    def vector(self, name: str, elems: tuple[int, ...]) -> tuple[np.ndarray, list[np.ndarray]]:
+        """As :meth:`~.columns._Attributes.vector`: ``(has a non-null value, per element the value
+        or NaN)``."""
+        n = self.n
+        has = np.zeros(n, bool)
+        cols = [np.full(n, np.nan) for _ in elems]
+        got = self.values(name)
+        if got is None:
+            return has, cols
+        boxes, vals = got
+        has[boxes[vals.is_valid().to_numpy(zero_copy_only=False)]] = True
+        lens = pc.list_value_length(vals).fill_null(0).to_numpy()
+        offs = vals.offsets.to_numpy()[:-1]  # (into .values, whatever the array's offset)
+        flat = vals.values.fill_null(np.nan).to_numpy(zero_copy_only=False)
+        for c, e in zip(cols, elems):
+            m = lens > e
+            c[boxes[m]] = flat[offs[m] + e]
+        return has, cols
+
+    def texts(self, name: str) -> np.ndarray:
+        """Per box the first text of ``name`` (None where absent) as an object array."""
+        out = np.full(self.n, None, object)
+        got = self.values(name)
+        if got is not None:  # (each distinct text one Python string)
+            boxes, vals = got
+            enc = vals.dictionary_encode()
+            distinct = np.empty(len(enc.dictionary) + 1, object)
+            distinct[:-1] = enc.dictionary.to_pylist()
+            out[boxes] = distinct[enc.indices.fill_null(-1).to_numpy()]
+        return out
+
+    def floats(self, name: str) -> np.ndarray:
+        """Per box the first number / boolean of ``name`` as a float (NaN where absent or null)."""
+        out = np.full(self.n, np.nan)
+        got = self.values(name)
+        if got is not None:
+            boxes, vals = got
+            if pa.types.is_boolean(vals.type):
+                vals = pc.cast(vals, pa.float64())
+            out[boxes] = vals.fill_null(np.nan).to_numpy(zero_copy_only=False)
+        return out
+
+
+def _ext_reps(cub: pa.StructArray) -> dict[str, tuple]:
+    """The extension items (``aveas_format`` of the cuboids; no nulls in the block, so a null is an
+    absent member) as :func:`~.columns.ext_rep` columns."""
+    from aveas_format.converters.openlabel.columns import _MISSING
+
+    names = [cub.type.field(i).name for i in range(cub.type.num_fields)]
+    if EXT not in names:
+        return {}
+    ext = cub.field(EXT)
+    if not pa.types.is_struct(ext.type):
+        raise _NotFast
+    out: dict[str, tuple] = {}
+    absent_box = ~ext.is_valid().to_numpy(zero_copy_only=False)
+    for i in range(ext.type.num_fields):
+        name = ext.type.field(i).name
+        col = ext.field(i)
+        present = col.is_valid().to_numpy(zero_copy_only=False) & ~absent_box
+        if pa.types.is_floating(col.type):
+            out[name] = ("f", col.fill_null(np.nan).to_numpy(zero_copy_only=False).astype(float),
+                         present, np.zeros(len(col), bool))
+        elif pa.types.is_null(col.type):
+            continue
+        elif pa.types.is_nested(col.type):
+            raise _NotFast  # (lists or objects in the extension item: the generic path)
+        else:
+            vals = np.empty(len(col), object)
+            vals[:] = col.to_pylist()
+            vals[~present] = _MISSING
+            out[name] = ("o", vals)
+    return out
+
+
+def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], list, dict[str, tuple], ArrowAttributes]:
+    """``(columns, sizes, ext columns, attributes)`` of a block's boxes, as
+    :func:`~.columns.block_columns` and :func:`~.columns.ext_chunk` give them for the same boxes."""
+    n = table.num_rows
+    if table.schema.names != ["object_data"]:
+        raise _NotFast
+    od = table.column("object_data").combine_chunks()
+    if od.null_count or od.type.num_fields != len(BOX_SCHEMA.field("object_data").type):
+        raise _NotFast  # (an inferred member of object_data: a type, a bbox...)
+    cubl = od.field("cuboid")
+    if cubl.null_count or (pc.list_value_length(cubl).to_numpy() < 1).any():
+        raise _NotFast
+    cub = pc.list_element(cubl, 0)
+    if cub.null_count:
+        raise _NotFast
+    known = {"name", "val", "coordinate_system", EXT}
+    if {cub.type.field(i).name for i in range(cub.type.num_fields)} - known:
+        raise _NotFast  # (cuboid attributes, e.g. a per-box timestamp: the generic path)
+    if cub.field("coordinate_system").null_count != n or \
+            not pc.all(pc.equal(cub.field("name"), "bounding_box")).as_py():
+        raise _NotFast
+    val = cub.field("val")
+    if val.null_count or (pc.list_value_length(val).to_numpy() != 9).any():
+        raise _NotFast
+    V = val.flatten().to_numpy(zero_copy_only=False).reshape(n, 9)
+    if val.flatten().null_count or (V[:, 3] != 0.0).any() or (V[:, 4] != 0.0).any():
+        raise _NotFast  # (a rotated box: placed one at a time by the generic path)
+    cols: dict[str, np.ndarray] = {
+        "px": V[:, 0].copy(), "py": V[:, 1].copy(), "pz": V[:, 2] - V[:, 8] / 2.0, "yaw": V[:, 5].copy(),
+        "dl": V[:, 6].copy(), "dw": V[:, 7].copy(), "dh": V[:, 8].copy(),
+        "csroot": np.full(n, None, object), "cub_ts": np.full(n, np.nan)}
+    sizes = list(zip(cols["dl"].tolist(), cols["dw"].tolist(), cols["dh"].tolist()))
+    at = ArrowAttributes(od, n)
+    if any(nm.startswith("interior/") for nm in at.code_of):
+        raise _NotFast  # (the interior rows read the items as dicts: the generic path)
+    hv, has_lrc, (rs, rt) = vector_columns(at, cols)
+    road = at.texts("used_road_link")
+    if "open_drive/road_id" in at.code_of:
+        alt = at.texts("open_drive/road_id")
+        road = np.where(np.equal(road, None), alt, road)
+    has_road = ~np.equal(road, None)
+    on = has_road & has_lrc
+    cols["road_s"] = np.where(has_road, rs, np.nan)
+    cols["road_t"] = np.where(has_road, rt, np.nan)
+    cols["lane_position"] = at.floats("open_drive/lane_position")
+    for c, name in LIGHTS.items():
+        cols[c] = at.floats(name)
+    road_id = np.full(n, None, object)
+    road_id[on] = road[on]
+    cols["road_id"] = road_id
+    lane_id = np.full(n, None, object)
+    if "open_drive/lane_id" in at.code_of:
+        lanes = at.texts("open_drive/lane_id")
+        ok = ~np.equal(lanes, None) & has_road
+        if ok.any():
+            uniq, inv = np.unique(lanes[ok].astype(str), return_inverse=True)
+            conv = np.empty(len(uniq), object)
+            conv[:] = [_lane_int(v) for v in uniq.tolist()]
+            lane_id[ok] = conv[inv]
+    cols["lane_id"] = lane_id
+    cols["hv"], cols["hr"] = hv, on
+    return cols, sizes, _ext_reps(cub), at
+
+
+def _lane_int(v: str) -> Any:
+    try:
+        return int(str(_enum_value(v)))
+    except ValueError:
+        return None

@@ -1,0 +1,104 @@
+"""The OpenLABEL import's findings about the source (``source.openlabel.*``, rules in
+:mod:`aveas_format.validate.rules.source`): located by file, frame key, object uid and JSON path,
+one finding per kind at its first place with the count. Reported through
+:func:`aveas_format.errors.report_source` (a warning, or collected by ``validate FILE``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from aveas_format.converters.labels import label_kind
+from aveas_format.converters.openlabel.frames import _FrameData, _pmf_bad
+from aveas_format.converters.openlabel.profile import MANDATORY_OBJECT_ATTRIBUTES, TYPE_TO_CLASS, _attrs, _first
+from aveas_format.errors import report_source
+
+
+def _jpath(*keys: Any) -> str | None:
+    """A JSONPath into the document: ``$.openlabel.frames['12'].objects['3']...``; None where a key
+    is unknown."""
+    if any(k is None for k in keys):
+        return None
+    out = "$.openlabel"
+    for k in keys:
+        out += f".{k}" if isinstance(k, str) and k.isidentifier() else f"[{str(k)!r}]"
+    return out
+
+
+def _claims_profile(md: dict[str, Any], objects: Any) -> bool:
+    """Whether a file claims the AVEAS profile: its metadata has the profile's
+    ``acquisition_method``, or an object has one of the profile's types (``vehicle/car``...)."""
+    if isinstance(md, dict) and md.get("acquisition_method") is not None:
+        return True
+    return isinstance(objects, dict) and any(
+        isinstance(o, dict) and o.get("type") in TYPE_TO_CLASS for o in objects.values())
+
+
+def _report_frame_findings(fd: _FrameData, path: Path | None) -> None:
+    """What the frames' checks found (:meth:`_FrameRows._check_block`, the coordinate systems):
+    one finding per kind and attribute, at its first box, with the count."""
+    file = str(path) if path is not None else None
+    unknown = [what for (code, what) in fd.found if code == "source.openlabel.unknown_coordinate_system"]
+    for (code, what), (frame, uid, count) in fd.found.items():
+        if code == "source.openlabel.unknown_coordinate_system":
+            if what != unknown[0]:
+                continue  # one finding for all (as the one warning always said)
+            msg = ("coordinate system(s) " + ", ".join(map(repr, sorted(unknown)))
+                   + " are not in coordinate_systems: taken as the root frame")
+            count = len(unknown)
+            jp = _jpath("frames", frame, "objects", uid, "object_data", "cuboid") if uid else None
+        elif code == "source.openlabel.pmf_sum":
+            msg = f"{count} value(s) of {what!r} do not sum to 1 (first: frame {frame}, object {uid})"
+            jp = _jpath("frames", frame, "objects", uid, "object_data", "vec")
+        else:
+            msg = (f"{count} object(s) in frames lack the profile's mandatory attribute {what!r} "
+                   f"(first: frame {frame}, object {uid})")
+            jp = _jpath("frames", frame, "objects", uid, "object_data")
+        report_source(code, f"OpenLABEL: {msg}", count=count, stacklevel=4, file=file,
+                      frame=frame, uid=uid, json_path=jp)
+
+
+def _check_objects(uids: list[str], objects: dict[str, Any], frame_types: dict[str, str],
+                   profile: bool, path: Path | None) -> None:
+    """The objects' findings: a type that is not one of the profile's (in a file that claims the
+    profile; in any file a type no table knows, read as ``other``), a ``classification/
+    uncertainties`` PMF not summing to 1, a mandatory attribute missing (files that claim the
+    profile). One finding per kind (and type or attribute) at its first object, with the count."""
+
+    file = str(path) if path is not None else None
+    where = "OpenLABEL: "  # the file is the finding's location
+    types: dict[str, list] = {}
+    missing: dict[str, list] = {}
+    pmfs: list[tuple[str, Any]] = []
+    for u in uids:
+        obj = objects.get(u) if isinstance(objects.get(u), dict) else {}
+        od = obj.get("object_data") if isinstance(obj.get("object_data"), dict) else {}
+        otype = str(obj.get("type") or (od.get("type") if isinstance(od.get("type"), str) else None)
+                    or frame_types.get(u) or "other")
+        if otype not in TYPE_TO_CLASS and (profile or label_kind(otype) == ("other", "road_user")
+                                           and otype.lower() != "other"):
+            types.setdefault(otype, [u, 0])[1] += 1
+        attrs = _attrs(od)
+        pmf = _first(attrs, "classification/uncertainties")
+        if pmf is not None:
+            pmfs.append((u, pmf))
+        if profile and u in objects:
+            for name in MANDATORY_OBJECT_ATTRIBUTES:
+                if _first(attrs, name) is None:
+                    missing.setdefault(name, [u, 0])[1] += 1
+    for otype, (u, count) in types.items():
+        cls = TYPE_TO_CLASS.get(otype) or label_kind(otype)[0]
+        report_source("source.openlabel.unknown_type", where + f"object type {otype!r} is not one of the "
+                      f"AVEAS profile's types: read as class {cls} ({count} object(s), first {u})",
+                      count=count, stacklevel=3, file=file, uid=u, json_path=_jpath("objects", u, "type"))
+    for name, (u, count) in missing.items():
+        report_source("source.openlabel.missing_attribute", where + f"{count} object(s) lack the "
+                      f"profile's mandatory attribute {name!r} (first {u})", count=count, stacklevel=3,
+                      file=file, uid=u, json_path=_jpath("objects", u, "object_data"))
+    if pmfs:
+        bad = [u for u, v in pmfs if _pmf_bad(v)]
+        if bad:
+            report_source("source.openlabel.pmf_sum", where + f"{len(bad)} object(s)' "
+                          f"'classification/uncertainties' do not sum to 1 (first {bad[0]})",
+                          count=len(bad), stacklevel=3, file=file, uid=bad[0],
+                          json_path=_jpath("objects", bad[0], "object_data", "vec"))

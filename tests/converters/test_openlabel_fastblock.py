@@ -1,0 +1,174 @@
+"""The columnar fast path of the OpenLABEL import (issue 22, converters/openlabel/fastblock.py):
+blocks of frames in the profile's layout become columns through a numpy structural index, an
+orjson skeleton and Arrow's JSON reader; the recording and the located findings are those of the
+generic path, and every block it cannot take is handed over (never guessed)."""
+
+from __future__ import annotations
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+import aveas_format.converters.openlabel.fastblock as fb
+from aveas_format.converters import convert, get_converter
+from aveas_format.errors import collect_source_findings
+from aveas_format.sample import highway_scene
+
+from helpers_converters import assert_identical
+
+pytest.importorskip("orjson")
+_READ_BLOCK = fb.read_block
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("fastblock")
+    rec = highway_scene(n_vehicles=6, duration_s=4.0, seed=5)
+    path = tmp / "rec.json"
+    get_converter("openlabel", "export")(rec, path)
+    return path
+
+
+def _import(path, monkeypatch, *, fast: bool):
+    """``(recording, findings, (blocks the fast path took, blocks offered))``."""
+    taken = []
+
+    def read_block(buf):
+        out = _READ_BLOCK(buf) if fast else None
+        taken.append(out is not None)
+        return out
+
+    monkeypatch.setattr(fb, "read_block", read_block)
+    with collect_source_findings() as found, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = convert("openlabel", [path])
+    return rec, [(f.code, f.location, f.count) for f in found], (sum(taken), len(taken))
+
+
+def _same_both_ways(path, monkeypatch):
+    fast, f_fast, n_fast = _import(path, monkeypatch, fast=True)
+    slow, f_slow, _ = _import(path, monkeypatch, fast=False)
+    assert_identical(fast, slow)
+    assert f_fast == f_slow
+    return n_fast, f_fast
+
+
+def test_profile_export_goes_through_columns_with_the_same_result(exported, monkeypatch):
+    (n_fast, n), _ = _same_both_ways(exported, monkeypatch)
+    assert n_fast == n >= 1
+
+
+def test_pretty_printed_file_too(exported, tmp_path, monkeypatch):
+    p = tmp_path / "pretty.json"
+    p.write_text(json.dumps(json.loads(exported.read_bytes()), indent=2))
+    (tmp_path / "rec.xodr").write_bytes(exported.with_suffix(".xodr").read_bytes())
+    (n_fast, n), _ = _same_both_ways(p, monkeypatch)
+    assert n_fast == n >= 1
+
+
+def _edited(exported, tmp_path, edit, name="edited.json"):
+    doc = json.loads(exported.read_bytes())
+    edit(doc["openlabel"])
+    p = tmp_path / name
+    p.write_bytes(json.dumps(doc, separators=(",", ":")).encode())
+    (tmp_path / "rec.xodr").write_bytes(exported.with_suffix(".xodr").read_bytes())
+    return p
+
+
+def _first_box(ol):
+    fr = next(iter(ol["frames"].values()))
+    return next(iter(fr["objects"].values()))
+
+
+def _rotate(ol):
+    _first_box(ol)["object_data"]["cuboid"][0]["val"][3] = 0.01
+
+
+def _null_ext(ol):
+    _first_box(ol)["object_data"]["cuboid"][0]["aveas_format"]["lane_offset"] = None
+
+
+def _tricky_text(ol):
+    _first_box(ol)["object_data"]["text"].append({"name": "note", "val": 'a "{[}]" \\ b'})
+
+
+def _interior(ol):
+    _first_box(ol)["object_data"]["num"].append({"name": "interior/steering_angle", "val": 0.1})
+
+
+def _pmf(ol):
+    _first_box(ol)["object_data"]["vec"].append({"name": "classification/uncertainties", "val": [0.5, 0.4]})
+
+
+def _velocity_as_text(ol):
+    _first_box(ol)["object_data"]["vec"][0]["val"] = ["1", "2"]
+
+
+def _missing_velocity(ol):
+    vec = _first_box(ol)["object_data"]["vec"]
+    vec[:] = [v for v in vec if v["name"] != "velocity"]
+
+
+@pytest.mark.parametrize("edit, fast", [
+    (_rotate, False), (_null_ext, False), (_interior, False), (_velocity_as_text, False),
+    (_tricky_text, True), (_pmf, True), (_missing_velocity, True)])
+def test_blocks_it_cannot_take_are_handed_over(exported, tmp_path, monkeypatch, edit, fast):
+    """A rotated box, a null, interior attributes, a vector of texts: the generic path reads the
+    block; escaped quotes and brackets in strings, a PMF not summing to 1, a missing mandatory
+    attribute: read in columns, with the same recording and located findings."""
+    p = _edited(exported, tmp_path, edit)
+    taken, offered = _import(p, monkeypatch, fast=True)[2]
+    assert taken == (offered if fast else offered - 1)
+    _, found = _same_both_ways(p, monkeypatch)
+    if edit is _pmf:
+        assert [c for c, *_ in found] == ["source.openlabel.pmf_sum"]
+        assert found[0][1]["frame"] == "0"
+
+
+def test_a_uid_twice_in_a_frame_is_handed_over(exported, tmp_path, monkeypatch):
+    """A frame listing an object twice (JSON keeps the last): the generic path, the same result."""
+    raw = exported.read_bytes()
+    i = raw.index(b'"objects":{') + len(b'"objects":{')  # the first box of the first frame
+    end = _object_end(raw, raw.index(b"{", i))
+    p = tmp_path / "dup.json"
+    p.write_bytes(raw[:end] + b"," + raw[i:end] + raw[end:])
+    (tmp_path / "rec.xodr").write_bytes(exported.with_suffix(".xodr").read_bytes())
+    (n_fast, n), found = _same_both_ways(p, monkeypatch)
+    assert n_fast == n - 1
+    assert "source.openlabel.duplicate_state" not in [c for c, *_ in found]
+
+
+def _object_end(raw: bytes, start: int) -> int:
+    depth = 0
+    for k in range(start, len(raw)):
+        c = raw[k:k + 1]
+        depth += (c == b"{") - (c == b"}")
+        if depth == 0:
+            return k + 1
+    raise AssertionError
+
+
+def test_structural_index_skips_strings():
+    buf = (b'{"0":{"frame_properties":{"x":"}{[\\"]"},"objects":{"a\\"}":{"object_data":{"text":'
+           b'[{"name":"n","val":"{\\\\"}]}},"b":{"object_data":{}}}},'
+           b'"1":{"objects":{"c":{"object_data":{"cuboid":[]}}},"other":{"d":{"e":1}}}}')
+    starts, ends = fb._box_spans(buf)
+    boxes = [json.loads(buf[s:e]) for s, e in zip(starts.tolist(), ends.tolist())]
+    assert boxes == [{"object_data": {"text": [{"name": "n", "val": '{\\'}]}}, {"object_data": {}},
+                     {"object_data": {"cuboid": []}}]
+    assert np.all(ends > starts)
+
+
+@pytest.mark.parametrize("block", [3000, 50])
+def test_any_block_size_gives_the_same_recording(exported, monkeypatch, block):
+    """Many small blocks (a frame or less each; below a frame the reader hands over to ijson)."""
+    from aveas_format.converters.openlabel import stream
+
+    want, f_want, _ = _import(exported, monkeypatch, fast=False)
+    monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", block)
+    got, f_got, (n_fast, n) = _import(exported, monkeypatch, fast=True)
+    assert_identical(got, want)
+    assert f_got == f_want
+    assert n_fast == n and (n > 1 if block == 3000 else n == 0)
