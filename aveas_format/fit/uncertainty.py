@@ -107,9 +107,10 @@ def response_surface(x0: np.ndarray, step: np.ndarray,
     Returns ``x`` (the estimate), ``fun`` (the surface's value there), ``se``, ``cov``,
     ``se_sampling`` (the recorded sample's part: the bootstrap's, else ``sqrt(diag(H^-1))``),
     ``se_information`` (``sqrt(diag(H^-1))``), ``se_seed`` (the simulation seed's part; NaN with
-    one seed), ``seed_minima`` (one minimum per seed), ``bootstrap`` (replicates, their mean minus
-    the estimate: the estimator's bias), ``converged``, ``stop``, ``step`` (of the last design),
-    ``seeds``, ``rounds`` and ``evaluations``."""
+    one seed), ``seed_minima`` (one minimum per seed; none when the surface is not positive
+    definite), ``bootstrap`` (replicates, their mean minus the estimate: the estimator's bias),
+    ``converged``, ``stop``, ``step`` (of the last design), ``seeds``, ``rounds`` and
+    ``evaluations``."""
     x0 = np.asarray(x0, np.float64)
     n = len(x0)
     lo, hi = bounds[:, 0], bounds[:, 1]
@@ -157,7 +158,7 @@ def response_surface(x0: np.ndarray, step: np.ndarray,
         else:
             cov = cov_sampling = np.full((n, n), np.nan)
             xm = p[ok][np.argmin(f[ok])]
-            minima = xm[None, :]
+            minima = np.empty((0, n))  # no minimum per seed without a positive-definite surface
             se = np.full(n, np.nan)
         inside = bool(np.all(np.abs(xm - centre) <= step * (1 + 1e-9)))
         xm_c = np.clip(xm, np.maximum(centre - 2 * step, lo), np.minimum(centre + 2 * step, hi))

@@ -133,7 +133,7 @@ def test_a_flat_surface_is_not_converged():
     r = response_surface(CENTRE, np.ones(4), lambda pts, seed: [
         1.0 - 0.01 * float(np.sum((p - CENTRE) ** 2)) for p in pts], BOUNDS, rounds=1)
     assert not r["converged"] and "not positive definite" in r["stop"]
-    assert np.all(np.isnan(r["se"]))
+    assert np.all(np.isnan(r["se"])) and r["seed_minima"].shape == (0, 4)
 
 
 @pytest.mark.parametrize("method", ["cma", "nelder-mead", "bayes"])
