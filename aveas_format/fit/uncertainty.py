@@ -31,8 +31,9 @@ slow vehicle are not, and the curvature then understates the error (most for sig
 ``resample`` the fitter simulates B recordings at the estimate (random desired speeds, the
 recorded number of vehicles), computes each one's -ln L at every design point from the simulated
 values already there, and minimises it on the same surface (``centre - H^-1 g_b``): the covariance
-of these minima is the sampling part, their mean minus the estimate the estimator's bias.
-``cov = cov_bootstrap + cov_seed / S``. The recovery study (:mod:`aveas_format.fit.study`)
+of these minima is the sampling part, their mean minus the estimate the estimator's bias, which
+``bias_correction`` subtracts (the surface's minimum of sigma_car is about 0.5 km/h high at the
+paper's sample: the recovery study). ``cov = cov_bootstrap + cov_seed / S``. The recovery study (:mod:`aveas_format.fit.study`)
 measures the coverage.
 """
 
@@ -42,6 +43,11 @@ from collections.abc import Callable, Sequence
 from itertools import combinations
 
 import numpy as np
+
+
+#: bootstrap replicates below which the estimate is not bias-corrected (the bias's own noise,
+#: sd / sqrt(B), would then be a sizeable part of the standard error)
+MIN_BIAS_REPLICATES = 20
 
 
 def box_behnken(n: int) -> np.ndarray:
@@ -92,7 +98,7 @@ def response_surface(x0: np.ndarray, step: np.ndarray,
                      evaluate: Callable[[Sequence[np.ndarray], int], list[float]], bounds: np.ndarray,
                      *, rounds: int = 3, seeds: int = 1,
                      resample: Callable[[np.ndarray], np.ndarray] | None = None,
-                     min_se: np.ndarray | None = None) -> dict:
+                     min_se: np.ndarray | None = None, bias_correction: bool = False) -> dict:
     """Estimate the minimum of a rough objective and its curvature around ``x0``.
 
     ``evaluate(points, r)`` maps a list of points to their -ln L (in parallel; NaN for a failed one)
@@ -102,9 +108,11 @@ def response_surface(x0: np.ndarray, step: np.ndarray,
     estimate ``x``, at every point evaluated so far (in the order evaluated; shape (points, B));
     each bootstrap recording's minimum on the same surface gives the sampling covariance.
     ``min_se``: a lower bound of the sampling part's standard errors (NaN: none), applied to the
-    result (the designs' steps follow the surface's own).
+    result (the designs' steps follow the surface's own). ``bias_correction``: the estimate is the
+    minimum minus the bootstrap's bias (with at least :data:`MIN_BIAS_REPLICATES` replicates).
 
-    Returns ``x`` (the estimate), ``fun`` (the surface's value there), ``se``, ``cov``,
+    Returns ``x`` (the estimate), ``minimum`` (the surface's minimum: ``x`` unless bias-corrected),
+    ``bias_corrected``, ``fun`` (the surface's value at its minimum), ``se``, ``cov``,
     ``se_sampling`` (the recorded sample's part: the bootstrap's, else ``sqrt(diag(H^-1))``),
     ``se_information`` (``sqrt(diag(H^-1))``), ``se_seed`` (the simulation seed's part; NaN with
     one seed), ``seed_minima`` (one minimum per seed; none when the surface is not positive
@@ -178,7 +186,10 @@ def response_surface(x0: np.ndarray, step: np.ndarray,
             se_out = np.sqrt(np.diag(cov))
         else:
             se_out = se
-        out = {"x": xm_c, "fun": fm, "se": se_out, "cov": cov,
+        x_est, corrected = xm_c, False
+        if bias_correction and boot and boot["replicates"] >= MIN_BIAS_REPLICATES:
+            x_est, corrected = np.clip(xm_c - boot["bias"], lo, hi), True
+        out = {"x": x_est, "minimum": xm_c, "bias_corrected": corrected, "fun": fm, "se": se_out, "cov": cov,
                "se_sampling": np.sqrt(np.diag(cov_sampling)), "se_seed": np.sqrt(np.diag(cov_seed)),
                "se_information": np.sqrt(np.diag(cov_information)), "bootstrap": boot,
                "seed_minima": minima, "seeds": int(len(present)), "converged": pd and inside,
