@@ -165,8 +165,11 @@ def test_sentinel_sizes_never_reach_a_participant(tmp_path):
         doc["frames"][str(k)]["objects"]["7"] = {"object_data": {"cuboid": [
             {"name": "box3D", "coordinate_system": "CAM_LEFT", "val": [1, 1, 30, 0, 0, 0, -1, -1, -1]}]}}
     doc["frames"]["2"]["objects"]["1"]["object_data"]["cuboid"][0]["val"][6:9] = [0.0, 1.5, 1.7]
-    with pytest.warns(UserWarning, match=r"dropped 6 boxes with a sentinel or impossible size"):
+    with pytest.warns(UserWarning) as warned:
         rec = convert("openlabel", [write(tmp_path, doc)], map_source=STRAIGHT_MAP)
+    said = [str(w.message) for w in warned]
+    assert any("dropped 6 boxes with a sentinel or impossible size" in m for m in said), said
+    assert any("skipped 1 objects: 1 DontCare" in m for m in said), said
     p = rec.participants
     assert "Car7" not in p.column("source_id").to_pylist()
     assert (p.column("length").to_numpy() > 0).all() and (p.column("width").to_numpy() > 0).all()
@@ -237,5 +240,5 @@ def test_cli_shows_the_note_as_one_warning_line(tmp_path):
                           "--map", str(STRAIGHT_MAP), "-o", str(tmp_path / "k.aveas"), "--no-validate"],
                          capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
-    assert "warning: OpenLABEL labels.json: skipped 1 objects: 1 DontCare" in res.stderr
+    assert "labels.json: uid -1, json path $.openlabel.objects['-1'].type: OpenLABEL: skipped 1 objects: 1 DontCare" in res.stderr
     assert "UserWarning" not in res.stderr and "wrote " in res.stderr

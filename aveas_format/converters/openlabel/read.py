@@ -294,7 +294,7 @@ def _drop_non_participants(fd: _FrameData, objects: dict[str, Any], uids: list[s
             first_skipped = u
     rows = fd.rows
     n = len(rows["uidx"])
-    where = f"OpenLABEL {path.name if path else ''}: "
+    where = "OpenLABEL: "  # the file is the finding's location
     file = str(path) if path is not None else None
     note = labels.note("objects")
     if note:
@@ -358,7 +358,6 @@ def _claims_profile(md: dict[str, Any], objects: Any) -> bool:
 def _report_frame_findings(fd: _FrameData, path: Path | None) -> None:
     """What the frames' checks found (:meth:`_FrameRows._check_block`, the coordinate systems):
     one finding per kind and attribute, at its first box, with the count."""
-    name = path.name if path else ""
     file = str(path) if path is not None else None
     unknown = [what for (code, what) in fd.found if code == "source.openlabel.unknown_coordinate_system"]
     for (code, what), (frame, uid, count) in fd.found.items():
@@ -376,7 +375,7 @@ def _report_frame_findings(fd: _FrameData, path: Path | None) -> None:
             msg = (f"{count} object(s) in frames lack the profile's mandatory attribute {what!r} "
                    f"(first: frame {frame}, object {uid})")
             jp = _jpath("frames", frame, "objects", uid, "object_data")
-        report_source(code, f"OpenLABEL {name}: {msg}", count=count, stacklevel=4, file=file,
+        report_source(code, f"OpenLABEL: {msg}", count=count, stacklevel=4, file=file,
                       frame=frame, uid=uid, json_path=jp)
 
 
@@ -684,7 +683,7 @@ def _check_objects(uids: list[str], objects: dict[str, Any], frame_types: dict[s
     profile). One finding per kind (and type or attribute) at its first object, with the count."""
 
     file = str(path) if path is not None else None
-    where = f"OpenLABEL {path.name if path else ''}: "
+    where = "OpenLABEL: "  # the file is the finding's location
     types: dict[str, list] = {}
     missing: dict[str, list] = {}
     pmfs: list[tuple[str, Any]] = []
