@@ -66,14 +66,16 @@ def test_small_recovery_study(sumo, tmp_path):
 def test_full_recovery_study(sumo, tmp_path):
     """The issue's study: the paper's road and demand, 15 min recordings at the paper's estimates,
     seeds 1..10, fitted at the paper's sample size (178 cars, 33 trucks) and with every vehicle of
-    the 15 min; |bias| <= 1 km/h on both means and RMSE within 1.5x the sampling floor for every
-    parameter but sigma_car, which the mean speeds inform least (measured 1.74x at the paper's size:
-    docs/fitting.md; held to 2x here). About 12 min on 2 idle cores (3,600 simulations of 0.38 s
-    CPU each)."""
+    the 15 min; |bias| <= 1 km/h on both means, RMSE within 1.5x the sampling floor for every
+    parameter and the 95 % intervals covering the truth in at least 7 of 10 replicates (measured:
+    docs/fitting.md, "Recovery over seeds" — at the paper's size RMSE / floor 0.92 / 1.42 / 1.19 /
+    0.78 and coverage 100 / 90 / 90 / 100 %; the seeds are fixed, so a re-run gives the same
+    numbers). About 5,800 simulations of 0.37 s CPU: some 18 min on 2 idle cores."""
     rows, summary = recovery_study(StudyConfig(seeds=10), workers=None, outdir=tmp_path / "study")
     assert len(rows) == 20 and not summary["failed"]
     report = json.dumps(summary, indent=1)
-    assert summary["targets"]["|bias| <= 1 km/h on the means"], report
+    assert all(summary["targets"].values()), report
     for per in summary["sizes"].values():
+        assert per["converged"] == per["replicates"], report
         for n, p in per["parameters"].items():
-            assert p["rmse_ratio"] <= (2.0 if n == "sigma_car" else 1.5), (n, report)
+            assert p["rmse_ratio"] <= 1.5 and p["coverage95"] >= 0.7, (n, report)
