@@ -131,9 +131,9 @@ _SURFACE_SEEDS = typer.Option(4, "--surface-seeds", min=1, help="Simulation seed
 _BOOTSTRAP = typer.Option(40, "--bootstrap", min=0, help="Recordings of the parametric bootstrap "
                           "(simulated at the estimate, refitted on the response surface): the "
                           "standard errors' sampling part; below 3 the surface's curvature instead.")
-_BIAS = typer.Option(True, "--bias-correction/--no-bias-correction", help="Subtract the "
+_BIAS = typer.Option(False, "--bias-correction/--no-bias-correction", help="Subtract the "
                      "bootstrap's bias from the response surface's minimum (with >= 20 bootstrap "
-                     "recordings).")
+                     "recordings; see docs/fitting.md, recovery study).")
 _DURATION = typer.Option(None, "--duration", help="Override the simulated demand period (s) of "
                          "each evaluation (default: the scenario's, 3,600 s).")
 _S_RANGE = typer.Option(None, "--s-range", help="Use only samples with road_s in MIN,MAX.")

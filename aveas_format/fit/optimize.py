@@ -109,9 +109,11 @@ class FitConfig(BaseModel):
                            "surface; their spread is the standard error's sampling part (with "
                            "vehicles held up together, not independent). Fewer than 3: the "
                            "surface's curvature H^-1 instead")
-    bias_correction: bool = Field(True, description="the estimate is the response surface's "
+    bias_correction: bool = Field(False, description="the estimate is the response surface's "
                                   "minimum minus the bootstrap's bias (mean of the bootstrap minima "
-                                  "minus the minimum; with >= 20 bootstrap recordings)")
+                                  "minus the minimum; with >= 20 bootstrap recordings); off by "
+                                  "default: in the recovery study it helped sigma_car at the "
+                                  "paper's sample size and hurt it with every vehicle of 15 min")
     bandwidth: str | float = "silverman"
     kde_backend: str = "numpy"
     variance_correction: bool = Field(True, description="shrink the simulated values towards their "
