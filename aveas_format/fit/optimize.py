@@ -113,7 +113,7 @@ class FitConfig(BaseModel):
                                   "minimum minus the bootstrap's bias (mean of the bootstrap minima "
                                   "minus the minimum; with >= 20 bootstrap recordings); off by "
                                   "default: in the recovery study it helped sigma_car at the "
-                                  "paper's sample size and hurt it with every vehicle of 15 min")
+                                  "paper's sample size, not with every vehicle of 15 min")
     bandwidth: str | float = "silverman"
     kde_backend: str = "numpy"
     variance_correction: bool = Field(True, description="shrink the simulated values towards their "

@@ -33,8 +33,8 @@ recorded number of vehicles), computes each one's -ln L at every design point fr
 values already there, and minimises it on the same surface (``centre - H^-1 g_b``): the covariance
 of these minima is the sampling part, their mean minus the estimate the estimator's bias, which
 ``bias_correction`` subtracts (an option: in the recovery study it removed sigma_car's +0.5 km/h
-at the paper's sample size but over-corrected with every vehicle of 15 min). ``cov =
-cov_bootstrap + cov_seed / S``. The recovery study (:mod:`aveas_format.fit.study`)
+at the paper's sample size and made no difference with every vehicle of 15 min).
+``cov = cov_bootstrap + cov_seed / S``. The recovery study (:mod:`aveas_format.fit.study`)
 measures the coverage.
 """
 
