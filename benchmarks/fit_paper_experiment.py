@@ -8,19 +8,28 @@ sigma_car 17.48, mu_truck 89.22, sigma_truck 6.20 km/h), seed ``--seed``; the ve
 on the measurement section, subsampled to the paper's 178 cars and 33 trucks. The fit: the default
 ``FitConfig`` (4 CMA-ES restarts of <= 200 evaluations, the first from the data, then the response
 surface) with the same scenario and another seed, on ``--workers`` processes. Writes OUTDIR (the
-fit's runs.parquet, best.json, figures) and prints the wall time, the estimate, its standard errors,
-convergence and how the restarts agreed. The figures in docs/figures/fit_*.png come from this run.
+fit's runs.parquet, best.json, figures) and prints the wall time, the CPU seconds (this process,
+its workers and their SUMO runs), the load, the estimate, its standard errors, convergence and how
+the restarts agreed. The figures in docs/figures/fit_*.png come from this run.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import resource
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+
+def _cpu_seconds() -> float:
+    """User + system CPU seconds of this process and its finished children (the worker processes
+    and their SUMO runs, counted once the pool has ended)."""
+    a, b = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
 
 
 def main(argv: list[str]) -> dict:
@@ -36,12 +45,16 @@ def main(argv: list[str]) -> dict:
     rec = {c: rng.choice(ms[c], PAPER_SAMPLE[c], replace=False) for c in ("car", "truck")}
     cfg = FitConfig(scenario=paper_scenario().model_copy(update={"seed": 1000 + seed}))
     load0 = os.getloadavg()
+    cpu0 = _cpu_seconds()
     t0 = time.perf_counter()
     res = fit_parameters(rec, cfg, workers=workers, outdir=out)
     wall = time.perf_counter() - t0
+    cpu = _cpu_seconds() - cpu0
     s = res.summary()
     report = {"wall_s": round(wall, 1), "workers": workers, "load_before": load0,
-              "load_after": os.getloadavg(), "truth": PAPER_TRUTH,
+              "load_after": os.getloadavg(), "cpu_s": round(cpu, 1),
+              # what 2 idle cores would need at this CPU time if the work split evenly
+              "cpu_s_per_worker": round(cpu / workers, 1), "truth": PAPER_TRUTH,
               "estimate": {n: round(s[n], 2) for n in cfg.names}, "se": s["se"],
               "converged": s["converged"], "stop": s["stop"], "evaluations": s["evaluations"],
               "restarts": [{n: round(r[n], 2) for n in cfg.names} | {

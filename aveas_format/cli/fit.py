@@ -131,6 +131,9 @@ _SURFACE_SEEDS = typer.Option(4, "--surface-seeds", min=1, help="Simulation seed
 _BOOTSTRAP = typer.Option(40, "--bootstrap", min=0, help="Recordings of the parametric bootstrap "
                           "(simulated at the estimate, refitted on the response surface): the "
                           "standard errors' sampling part; below 3 the surface's curvature instead.")
+_BIAS = typer.Option(False, "--bias-correction/--no-bias-correction", help="Subtract the "
+                     "bootstrap's bias from the response surface's minimum (with >= 20 bootstrap "
+                     "recordings; see docs/fitting.md, recovery study).")
 _DURATION = typer.Option(None, "--duration", help="Override the simulated demand period (s) of "
                          "each evaluation (default: the scenario's, 3,600 s).")
 _S_RANGE = typer.Option(None, "--s-range", help="Use only samples with road_s in MIN,MAX.")
@@ -152,6 +155,7 @@ def desired_speed(
     refine: bool = _REFINE,
     surface_seeds: int = _SURFACE_SEEDS,
     bootstrap: int = _BOOTSTRAP,
+    bias_correction: bool = _BIAS,
     duration: float = _DURATION,
     bandwidth: str = typer.Option("silverman", "--bandwidth", help="KDE bandwidth: silverman, "
                                   "scott or a number (km/h)."),
@@ -164,7 +168,7 @@ def desired_speed(
     _fit(recordings, output, config, "mean_speed", None, {}, restarts, workers, scheduler, maxfev,
          seed, bandwidth, bounds, road, s_range,
          {"method": method, "starts": starts, "refine": refine, "refine_seeds": surface_seeds,
-          "bootstrap": bootstrap, "duration": duration})
+          "bootstrap": bootstrap, "bias_correction": bias_correction, "duration": duration})
 
 
 @fit_app.command("car-following")
@@ -188,6 +192,7 @@ def car_following(
     refine: bool = _REFINE,
     surface_seeds: int = _SURFACE_SEEDS,
     bootstrap: int = _BOOTSTRAP,
+    bias_correction: bool = _BIAS,
     duration: float = _DURATION,
     bandwidth: str = typer.Option("silverman", "--bandwidth", help="KDE bandwidth: silverman, "
                                   "scott or a number (in the metric's unit)."),
@@ -215,7 +220,7 @@ def car_following(
     _fit(recordings, output, config, metric, param or ["cc1_car", "cc1_truck"], options, restarts,
          workers, scheduler, maxfev, seed, bandwidth, bounds, road, s_range,
          {"method": method, "starts": starts, "refine": refine, "refine_seeds": surface_seeds,
-          "bootstrap": bootstrap, "duration": duration})
+          "bootstrap": bootstrap, "bias_correction": bias_correction, "duration": duration})
 
 
 
@@ -235,6 +240,7 @@ def study(
     method: str = _METHOD,
     surface_seeds: int = _SURFACE_SEEDS,
     bootstrap: int = _BOOTSTRAP,
+    bias_correction: bool = _BIAS,
     workers: int = workers_option(),
     scheduler: str = _SCHEDULER,
 ) -> None:
@@ -253,7 +259,8 @@ def study(
     try:
         cfg = StudyConfig(seeds=seeds, sizes=[s.strip() for s in sizes.split(",") if s.strip()],
                           fit=FitConfig(scenario=sc, restarts=restarts, maxfev=maxfev, method=method,
-                                        refine_seeds=surface_seeds, bootstrap=bootstrap))
+                                        refine_seeds=surface_seeds, bootstrap=bootstrap,
+                                        bias_correction=bias_correction))
     except ValidationError as e:
         raise fail(f"study configuration: {format_validation_error(e)}", EXIT_USAGE) from None
     bad = set(cfg.sizes) - {"paper", "all"}

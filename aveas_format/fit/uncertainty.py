@@ -31,7 +31,9 @@ slow vehicle are not, and the curvature then understates the error (most for sig
 ``resample`` the fitter simulates B recordings at the estimate (random desired speeds, the
 recorded number of vehicles), computes each one's -ln L at every design point from the simulated
 values already there, and minimises it on the same surface (``centre - H^-1 g_b``): the covariance
-of these minima is the sampling part, their mean minus the estimate the estimator's bias.
+of these minima is the sampling part, their mean minus the estimate the estimator's bias, which
+``bias_correction`` subtracts (an option: in the recovery study it removed sigma_car's +0.5 km/h
+at the paper's sample size and made no difference with every vehicle of 15 min).
 ``cov = cov_bootstrap + cov_seed / S``. The recovery study (:mod:`aveas_format.fit.study`)
 measures the coverage.
 """
@@ -42,6 +44,11 @@ from collections.abc import Callable, Sequence
 from itertools import combinations
 
 import numpy as np
+
+
+#: bootstrap replicates below which the estimate is not bias-corrected (the bias's own noise,
+#: sd / sqrt(B), would then be a sizeable part of the standard error)
+MIN_BIAS_REPLICATES = 20
 
 
 def box_behnken(n: int) -> np.ndarray:
@@ -92,7 +99,7 @@ def response_surface(x0: np.ndarray, step: np.ndarray,
                      evaluate: Callable[[Sequence[np.ndarray], int], list[float]], bounds: np.ndarray,
                      *, rounds: int = 3, seeds: int = 1,
                      resample: Callable[[np.ndarray], np.ndarray] | None = None,
-                     min_se: np.ndarray | None = None) -> dict:
+                     min_se: np.ndarray | None = None, bias_correction: bool = False) -> dict:
     """Estimate the minimum of a rough objective and its curvature around ``x0``.
 
     ``evaluate(points, r)`` maps a list of points to their -ln L (in parallel; NaN for a failed one)
@@ -102,14 +109,17 @@ def response_surface(x0: np.ndarray, step: np.ndarray,
     estimate ``x``, at every point evaluated so far (in the order evaluated; shape (points, B));
     each bootstrap recording's minimum on the same surface gives the sampling covariance.
     ``min_se``: a lower bound of the sampling part's standard errors (NaN: none), applied to the
-    result (the designs' steps follow the surface's own).
+    result (the designs' steps follow the surface's own). ``bias_correction``: the estimate is the
+    minimum minus the bootstrap's bias (with at least :data:`MIN_BIAS_REPLICATES` replicates).
 
-    Returns ``x`` (the estimate), ``fun`` (the surface's value there), ``se``, ``cov``,
+    Returns ``x`` (the estimate), ``minimum`` (the surface's minimum: ``x`` unless bias-corrected),
+    ``bias_corrected``, ``fun`` (the surface's value at its minimum), ``se``, ``cov``,
     ``se_sampling`` (the recorded sample's part: the bootstrap's, else ``sqrt(diag(H^-1))``),
     ``se_information`` (``sqrt(diag(H^-1))``), ``se_seed`` (the simulation seed's part; NaN with
-    one seed), ``seed_minima`` (one minimum per seed), ``bootstrap`` (replicates, their mean minus
-    the estimate: the estimator's bias), ``converged``, ``stop``, ``step`` (of the last design),
-    ``seeds``, ``rounds`` and ``evaluations``."""
+    one seed), ``seed_minima`` (one minimum per seed; none when the surface is not positive
+    definite), ``bootstrap`` (replicates, their mean minus the estimate: the estimator's bias),
+    ``converged``, ``stop``, ``step`` (of the last design), ``seeds``, ``rounds`` and
+    ``evaluations``."""
     x0 = np.asarray(x0, np.float64)
     n = len(x0)
     lo, hi = bounds[:, 0], bounds[:, 1]
@@ -157,7 +167,7 @@ def response_surface(x0: np.ndarray, step: np.ndarray,
         else:
             cov = cov_sampling = np.full((n, n), np.nan)
             xm = p[ok][np.argmin(f[ok])]
-            minima = xm[None, :]
+            minima = np.empty((0, n))  # no minimum per seed without a positive-definite surface
             se = np.full(n, np.nan)
         inside = bool(np.all(np.abs(xm - centre) <= step * (1 + 1e-9)))
         xm_c = np.clip(xm, np.maximum(centre - 2 * step, lo), np.minimum(centre + 2 * step, hi))
@@ -177,7 +187,10 @@ def response_surface(x0: np.ndarray, step: np.ndarray,
             se_out = np.sqrt(np.diag(cov))
         else:
             se_out = se
-        out = {"x": xm_c, "fun": fm, "se": se_out, "cov": cov,
+        x_est, corrected = xm_c, False
+        if bias_correction and boot and boot["replicates"] >= MIN_BIAS_REPLICATES:
+            x_est, corrected = np.clip(xm_c - boot["bias"], lo, hi), True
+        out = {"x": x_est, "minimum": xm_c, "bias_corrected": corrected, "fun": fm, "se": se_out, "cov": cov,
                "se_sampling": np.sqrt(np.diag(cov_sampling)), "se_seed": np.sqrt(np.diag(cov_seed)),
                "se_information": np.sqrt(np.diag(cov_information)), "bootstrap": boot,
                "seed_minima": minima, "seeds": int(len(present)), "converged": pd and inside,

@@ -130,6 +130,8 @@ def plot_recovery(rows: list[dict], truth: dict[str, float], names: list[str], s
     """The recovery study: per sample size (rows) and parameter (columns) every replicate's
     estimate with its 95 % interval, the truth (line) and the sampling floor (the recorded
     vehicles' own desired-speed moments, grey dots)."""
+    from matplotlib.ticker import MaxNLocator
+
     sizes = [s for s in sizes if any(r["size"] == s for r in rows)]
     fig = Figure(figsize=(3.2 * len(names), 2.8 * max(len(sizes), 1)))
     axes = fig.subplots(max(len(sizes), 1), len(names), squeeze=False)
@@ -152,6 +154,7 @@ def plot_recovery(rows: list[dict], truth: dict[str, float], names: list[str], s
             ax.set_title(f"{n} ({size}): bias {e.mean():+.2f}, RMSE {np.sqrt(np.mean(e ** 2)):.2f}",
                          fontsize=8)
             ax.set_xlabel("seed", fontsize=8)
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
             ax.tick_params(labelsize=7)
             if i == 0 and j == 0:
                 ax.legend(fontsize=6)

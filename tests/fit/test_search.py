@@ -109,6 +109,14 @@ def test_the_bootstrap_gives_the_sampling_part_and_the_bias():
     np.testing.assert_allclose(r["se_information"], np.sqrt(np.diag(COV)), rtol=0.3)
     np.testing.assert_allclose(r["se"], r["se_sampling"])  # one seed: no seed part
     np.testing.assert_allclose(r["bootstrap"]["bias"], 0.3 + e.mean(axis=0), atol=0.1)
+    assert not r["bias_corrected"] and np.array_equal(r["x"], r["minimum"])
+    evaluated.clear()
+    c = response_surface(CENTRE + 1.0, (BOUNDS[:, 1] - BOUNDS[:, 0]) * 0.03, evaluate, BOUNDS,
+                         resample=resample, bias_correction=True)
+    assert c["bias_corrected"]
+    np.testing.assert_allclose(c["minimum"], r["minimum"])
+    np.testing.assert_allclose(c["x"], c["minimum"] - c["bootstrap"]["bias"])
+    np.testing.assert_allclose(c["se"], r["se"])  # the correction moves the estimate only
 
 
 def test_the_standard_errors_sampling_part_has_a_lower_bound():
@@ -133,7 +141,7 @@ def test_a_flat_surface_is_not_converged():
     r = response_surface(CENTRE, np.ones(4), lambda pts, seed: [
         1.0 - 0.01 * float(np.sum((p - CENTRE) ** 2)) for p in pts], BOUNDS, rounds=1)
     assert not r["converged"] and "not positive definite" in r["stop"]
-    assert np.all(np.isnan(r["se"]))
+    assert np.all(np.isnan(r["se"])) and r["seed_minima"].shape == (0, 4)
 
 
 @pytest.mark.parametrize("method", ["cma", "nelder-mead", "bayes"])

@@ -37,9 +37,11 @@ def test_summary_statistics_on_known_rows():
 
 def test_small_recovery_study(sumo, tmp_path):
     """Two seeds on a short road, both sample sizes, in 2 processes: every replicate has an
-    estimate, a standard error and the floor; the run resumes; the figure is written."""
+    estimate, a standard error and the floor; the run resumes; the figure is written. Lean: the
+    cars' two parameters (a response-surface design of 5 points instead of 25 for all four)."""
     fit = FitConfig(scenario=small_scenario(duration=180, length=400, inflow=100, lane_change_duration=0),
-                    bounds=NARROW, restarts=1, maxfev=8, refine_rounds=1, refine_seeds=2, bootstrap=5)
+                    parameters=["mu_car", "sigma_car"], bounds=NARROW, restarts=1, maxfev=8,
+                    refine_rounds=1, refine_seeds=2, bootstrap=5)
     cfg = StudyConfig(seeds=2, sizes=["paper", "all"], sample={"car": 40, "truck": 8}, fit=fit)
     rows, summary = recovery_study(cfg, workers=2, outdir=tmp_path / "study")
     assert len(rows) == 4 and not summary["failed"]
@@ -64,14 +66,18 @@ def test_small_recovery_study(sumo, tmp_path):
 def test_full_recovery_study(sumo, tmp_path):
     """The issue's study: the paper's road and demand, 15 min recordings at the paper's estimates,
     seeds 1..10, fitted at the paper's sample size (178 cars, 33 trucks) and with every vehicle of
-    the 15 min; |bias| <= 1 km/h on both means and RMSE within 1.5x the sampling floor for every
-    parameter but sigma_car, which the mean speeds inform least (measured 1.74x at the paper's size:
-    docs/fitting.md; held to 2x here). About 12 min on 2 idle cores (3,600 simulations of 0.38 s
-    CPU each)."""
+    the 15 min. Thresholds as measured (docs/fitting.md, "Recovery over seeds"; the seeds are
+    fixed, so a re-run gives the same numbers): |bias| <= 1 km/h on both means; RMSE within 1.5x
+    the sampling floor for every parameter but sigma_car, which the mean speeds inform least
+    (measured 1.57x at the paper's size, 1.74x with every vehicle; held to 1.8x); every fit
+    converged; the 95 % intervals cover the truth in at least 7 of 10 replicates (measured 80-100 %).
+    About 5,800 simulations, 2,380 s of CPU measured: some 20 min on 2 idle cores."""
     rows, summary = recovery_study(StudyConfig(seeds=10), workers=None, outdir=tmp_path / "study")
     assert len(rows) == 20 and not summary["failed"]
     report = json.dumps(summary, indent=1)
     assert summary["targets"]["|bias| <= 1 km/h on the means"], report
     for per in summary["sizes"].values():
+        assert per["converged"] == per["replicates"], report
         for n, p in per["parameters"].items():
-            assert p["rmse_ratio"] <= (2.0 if n == "sigma_car" else 1.5), (n, report)
+            assert p["rmse_ratio"] <= (1.8 if n == "sigma_car" else 1.5), (n, report)
+            assert p["coverage95"] >= 0.7, (n, report)
