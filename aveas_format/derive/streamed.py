@@ -209,6 +209,8 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
     """Derive one window and write its core rows; returns its summary rows and counts."""
     from aveas_format.derive.criticality import compute as summary
     from aveas_format.derive.criticality import CriticalityParams
+    from aveas_format.derive.interactions import InteractionsParams
+    from aveas_format.derive.interactions import compute as interactions
     from aveas_format.io.writer import prepare_table
     from aveas_format.schema.tables import TABLES
 
@@ -220,15 +222,18 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
     rec.derived["kinematics"] = prepare_table(pq.read_table(Path(tmp) / f"y-{k}.parquet"),
                                               TABLES["derived/kinematics"])
     rec.derived["conflicts"] = _run(rec, "conflicts", params)
-    # the pairs of a time step need that step only (and the routes ahead): from the core's start
+    # the pairs of a time step need that step only, and the routes ahead (the later lanes of its
+    # participants): the rows of the core's time steps, the later states for the routes only
     for name in ("states", "kinematics"):
         t = rec.states if name == "states" else rec.derived[name]
-        t = t.filter(pc.greater_equal(t.column("time"), t0 - margin_s))
+        t = t.filter(pc.greater_equal(t.column("time"), t0))
         if name == "states":
             rec.states = t
         else:
             rec.derived[name] = t
-    rec.derived["interactions"] = _run(rec, "interactions", params)
+    ip = InteractionsParams(**{k_: v for k_, v in params.items()
+                               if k_ in InteractionsParams.model_fields})
+    rec.derived["interactions"] = interactions(rec, ip, core=(t0, t1))
     counts = {}
     for name in WINDOW_DERIVATIONS:
         if name == "kinematics":

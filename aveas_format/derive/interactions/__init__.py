@@ -97,17 +97,22 @@ class InteractionsParams(Params):
         "derived/kinematics' smoothed speed; auto: the one with the smaller std per sample")
 
 
-def compute(rec, p: InteractionsParams) -> pa.Table:
-    """The ``derived/interactions`` table of ``rec``."""
+def compute(rec, p: InteractionsParams, core: tuple[float, float] | None = None) -> pa.Table:
+    """The ``derived/interactions`` table of ``rec``; ``core`` ``(t0, t1)``: only the rows of the
+    time steps in ``[t0, t1)`` (a time window, derive.streamed), the states of the other times
+    only telling the participants' routes (a time step's rows need that step's states only, and
+    the later lanes of its participants)."""
     S = Samples(rec, p.time_resolution)
+    active = None if core is None else (S.t >= core[0]) & (S.t < core[1])
     if p.velocities != "states":
         smoothed_velocities(S, p.velocities)
-    lane = lane_rows(rec, S, p)
+    lane = lane_rows(rec, S, p, active)
     parts = []
     if lane:
         parts.append(lane)
     if p.box_2d:
-        conflicting = box_conflicts(S, lane, p)  # also gives the neighbour rows their 2D TTC
+        # also gives the neighbour rows their 2D TTC
+        conflicting = box_conflicts(S, lane, p, active)
         if conflicting:
             parts.append(conflicting)
     if not parts:
