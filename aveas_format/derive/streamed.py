@@ -110,66 +110,35 @@ def _track_chunks(path: Path, tmp: Path, rows: int) -> list[int]:
     return out
 
 
-def _kinematics_task(j: int, *, path: str, tmp: str, out: str,
-                     params: dict[str, Any]) -> dict[str, Any]:
-    """``derived/kinematics`` of one chunk of whole tracks, written as ``out/kinematics/part-J``."""
+def _chunk_task(j: int, *, path: str, tmp: str, out: str, window_s: float,
+                params: dict[str, Any]) -> dict[str, Any]:
+    """``derived/kinematics`` of chunk ``j`` of whole tracks, written as ``out/kinematics/part-J``;
+    and the chunk's states and kinematics split by time window: the whole tracks of the
+    participants present in window K go to ``tmp/x-K-J.parquet`` and ``tmp/y-K-J.parquet``
+    (where the window's derivations read them). Returns the windows with states (their cores),
+    the rows and the peak memory."""
     from aveas_format.io.writer import prepare_table
     from aveas_format.schema.tables import TABLES
 
-    rec = _window_recording(path, pq.read_table(Path(tmp) / f"c-{j}.parquet"))
+    states = pq.read_table(Path(tmp) / f"c-{j}.parquet")
+    rec = _window_recording(path, states)
     t = prepare_table(_run(rec, "kinematics", params), TABLES["derived/kinematics"])
     (Path(out) / "kinematics").mkdir(parents=True, exist_ok=True)
     pq.write_table(t, Path(out) / "kinematics" / f"part-{j:06d}.parquet",
                    row_group_size=PART_ROW_GROUP)
-    return {"rows": t.num_rows, "peak_kb": _peak_kb()}
-
-
-def _spans(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sorted participant ids of the states and each one's first and last time."""
-    ids, lo, hi = [], [], []
-    for rg in _row_groups(path, "states.parquet"):
-        pid, t = rg.column("participant_id").to_numpy(), rg.column("time").to_numpy()
-        if not len(pid):
-            continue
-        starts = np.r_[0, np.flatnonzero(np.diff(pid)) + 1]
-        ids.append(pid[starts])
-        lo.append(np.minimum.reduceat(t, starts))
-        hi.append(np.maximum.reduceat(t, starts))
-    if not ids:
-        return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
-    i, a, b = np.concatenate(ids), np.concatenate(lo), np.concatenate(hi)
-    # a track cut between row groups appears twice (sorted by id): merge
-    u, inv = np.unique(i, return_inverse=True)
-    mn, mx = np.full(len(u), np.inf), np.full(len(u), -np.inf)
-    np.minimum.at(mn, inv, a)
-    np.maximum.at(mx, inv, b)
-    return u, mn, mx
-
-
-def _split(tables: Iterable[pa.Table], tmp: Path, prefix: str, window_s: float,
-           spans: tuple[np.ndarray, np.ndarray, np.ndarray]) -> set[int]:
-    """Write to ``tmp/PREFIX-K.parquet`` the rows of the whole tracks of the participants present
-    in time window K (``spans``: :func:`_spans`); return the windows with rows."""
-    writers: dict[int, pq.ParquetWriter] = {}
-    cores: set[int] = set()
-    try:
-        for rg in tables:
-            k = np.searchsorted(spans[0], rg.column("participant_id").to_numpy())
-            lo = np.floor(spans[1][k] / window_s).astype(np.int64)
-            hi = np.floor(spans[2][k] / window_s).astype(np.int64)
-            cores.update(np.unique(np.floor(rg.column("time").to_numpy() / window_s)
-                                   .astype(np.int64)).tolist())
-            for w in _windows_of(lo, hi):
-                part = rg.filter(pa.array((lo <= w) & (hi >= w)))
-                if not part.num_rows:
-                    continue
-                if w not in writers:
-                    writers[w] = pq.ParquetWriter(tmp / f"{prefix}-{w}.parquet", part.schema)
-                writers[w].write_table(part)
-    finally:
-        for wr in writers.values():
-            wr.close()
-    return cores
+    pid, tm = states.column("participant_id").to_numpy(), states.column("time").to_numpy()
+    cores: list[int] = []
+    if len(pid):
+        starts = np.r_[0, np.flatnonzero(np.diff(pid)) + 1]  # whole tracks, sorted by id
+        lo = np.floor(np.minimum.reduceat(tm, starts) / window_s).astype(np.int64)
+        hi = np.floor(np.maximum.reduceat(tm, starts) / window_s).astype(np.int64)
+        cores = np.unique(np.floor(tm / window_s).astype(np.int64)).tolist()
+        for w in _windows_of(lo, hi):
+            ids = pa.array(pid[starts][(lo <= w) & (hi >= w)])
+            for prefix, table in (("x", states), ("y", t)):
+                part = table.filter(pc.is_in(table.column("participant_id"), ids))
+                pq.write_table(part, Path(tmp) / f"{prefix}-{w}-{j:06d}.parquet")
+    return {"rows": t.num_rows, "cores": cores, "peak_kb": _peak_kb()}
 
 
 def _windows_of(lo: np.ndarray, hi: np.ndarray) -> list[int]:
@@ -218,9 +187,13 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
     # the whole tracks of the participants present in the core: a crossing needs both paths up
     # to the crossing point, a leader search the participant's later lanes (its route), however
     # far ahead
-    rec = _window_recording(path, pq.read_table(Path(tmp) / f"x-{k}.parquet"))
-    rec.derived["kinematics"] = prepare_table(pq.read_table(Path(tmp) / f"y-{k}.parquet"),
-                                              TABLES["derived/kinematics"])
+
+    def read(prefix: str) -> pa.Table:
+        return pa.concat_tables([pq.read_table(f) for f in
+                                 sorted(Path(tmp).glob(f"{prefix}-{k}-*.parquet"))])
+
+    rec = _window_recording(path, read("x"))
+    rec.derived["kinematics"] = prepare_table(read("y"), TABLES["derived/kinematics"])
     rec.derived["conflicts"] = _run(rec, "conflicts", params)
     # the pairs of a time step need that step only, and the routes ahead (the later lanes of its
     # participants): the rows of the core's time steps, the later states for the routes only
@@ -363,16 +336,15 @@ def derive_by_windows(path: str | Path, out_dir: str | Path, *,
     try:
         chunks = _track_chunks(path, tmp, track_chunk_rows)
         counts, peak = dict.fromkeys(WINDOW_DERIVATIONS, 0), 0
-        fn = functools.partial(_kinematics_task, path=str(path), tmp=str(tmp), out=str(out),
-                               params=params)
+        fn = functools.partial(_chunk_task, path=str(path), tmp=str(tmp), out=str(out),
+                               window_s=window_s, params=params)
+        cores: set[int] = set()
         for v in results(fn, chunks, "tracks"):
             counts["kinematics"] += v["rows"]
+            cores.update(v["cores"])
             peak = max(peak, v["peak_kb"] or 0)
         for j in chunks:
             (tmp / f"c-{j}.parquet").unlink()
-        spans = _spans(path)
-        cores = _split(_row_groups(path, "states.parquet"), tmp, "x", window_s, spans)
-        _split(_row_groups(out / "kinematics"), tmp, "y", window_s, spans)
         windows = [(k, k * window_s, (k + 1) * window_s) for k in sorted(cores)]
         fn = functools.partial(_window_task, path=str(path), tmp=str(tmp), out=str(out),
                                margin_s=margin_s, params=params)
