@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
+import pyarrow.feather as feather
 import pyarrow.parquet as pq
 
 #: the derivations run per window
@@ -137,7 +138,9 @@ def _chunk_task(j: int, *, path: str, tmp: str, out: str, window_s: float,
             ids = pa.array(pid[starts][(lo <= w) & (hi >= w)])
             for prefix, table in (("x", states), ("y", t)):
                 part = table.filter(pc.is_in(table.column("participant_id"), ids))
-                pq.write_table(part, Path(tmp) / f"{prefix}-{w}-{j:06d}.parquet")
+                # Arrow IPC with LZ4: written and read back several times faster than Parquet
+                feather.write_feather(part, Path(tmp) / f"{prefix}-{w}-{j:06d}.arrow",
+                                      compression="lz4")
     return {"rows": t.num_rows, "cores": cores, "peak_kb": _peak_kb()}
 
 
@@ -189,8 +192,8 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
     # far ahead
 
     def read(prefix: str) -> pa.Table:
-        return pa.concat_tables([pq.read_table(f) for f in
-                                 sorted(Path(tmp).glob(f"{prefix}-{k}-*.parquet"))])
+        return pa.concat_tables([feather.read_table(f) for f in
+                                 sorted(Path(tmp).glob(f"{prefix}-{k}-*.arrow"))])
 
     rec = _window_recording(path, read("x"))
     rec.derived["kinematics"] = prepare_table(read("y"), TABLES["derived/kinematics"])
