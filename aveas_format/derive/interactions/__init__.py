@@ -51,6 +51,7 @@ from typing import Literal
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 from pydantic import Field
 
 from aveas_format.derive._samples import Samples
@@ -149,25 +150,29 @@ def _row_order(S: Samples, i: np.ndarray, j: np.ndarray, rel: np.ndarray) -> np.
 
 def _table(S: Samples, r: dict[str, np.ndarray]) -> pa.Table:
     i, j = r["i"].astype(np.int64), r["j"].astype(np.int64)
+    # the string columns as Arrow arrays at once (object arrays compare and gather slowly)
+    rel = pa.array(r["rel"], pa.string())
+    kind = pc.if_else(pa.array(np.isfinite(r["ttc"])), pa.array(r["kind"], pa.string()),
+                      pa.scalar(None, pa.string()))
     if len(i):
         # the table's order (participant, time, other, relation), sorted on the index arrays
-        rel = r["rel"]
-        rel_code = np.zeros(len(rel), np.int8)
-        for k, v in enumerate(sorted({str(x) for x in Relation})):  # a handful of values
-            rel_code[rel == v] = k
+        enc = pc.dictionary_encode(rel)
+        names = sorted({str(x) for x in Relation})
+        rel_code = np.array([names.index(v) for v in enc.dictionary.to_pylist()],
+                            np.int8)[enc.indices.to_numpy()]
         order = _row_order(S, i, j, rel_code)
-        r = {k: v[order] for k, v in r.items()}
+        r = {k: v[order] for k, v in r.items() if k not in ("rel", "kind")}
         i, j = i[order], j[order]
+        rel, kind = rel.take(pa.array(order)), kind.take(pa.array(order))
     ttc = r["ttc"]
-    kind = np.where(np.isfinite(ttc), r["kind"], None)
     t = pa.table({
         "participant_id": pa.array(S.pid[i], pa.int64()),
         "time": pa.array(S.t[i], pa.float64()),
         "other_id": pa.array(S.pid[j], pa.int64()),
-        "relation": pa.array(r["rel"].astype(object), pa.string()),
+        "relation": rel,
         "ttc": _f(ttc),
         "ttc_std": _f(np.where(np.isfinite(ttc), r["ttc_std"], np.nan)),
-        "ttc_kind": pa.array(list(kind), pa.string()),
+        "ttc_kind": kind,
         "gap": _f(r["gap"]),
         "gap_std": _f(np.sqrt(r["gap_var"])),
         "thw": _f(r["thw"]),
