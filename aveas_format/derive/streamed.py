@@ -77,7 +77,7 @@ def _row_groups(source: Path, name: str | None = None) -> Iterator[pa.Table]:
 
 def _track_chunks(path: Path, tmp: Path, rows: int) -> list[int]:
     """Write the states in chunks of whole tracks (about ``rows`` rows each, cut between
-    participants) to ``tmp/c-J.parquet``; return the chunk numbers."""
+    participants) to ``tmp/c-J.arrow``; return the chunk numbers."""
     from aveas_format.errors import FormatError
 
     out: list[int] = []
@@ -86,7 +86,7 @@ def _track_chunks(path: Path, tmp: Path, rows: int) -> list[int]:
 
     def flush(tables: list[pa.Table]) -> None:
         j = len(out)
-        pq.write_table(pa.concat_tables(tables), tmp / f"c-{j}.parquet")
+        feather.write_feather(pa.concat_tables(tables), tmp / f"c-{j}.arrow", compression="lz4")
         out.append(j)
 
     for rg in _row_groups(path, "states.parquet"):
@@ -111,6 +111,15 @@ def _track_chunks(path: Path, tmp: Path, rows: int) -> list[int]:
     return out
 
 
+def _write_part(table: pa.Table, path: Path) -> None:
+    """A window's or chunk's part of a derived table: small row groups (read back by their
+    statistics), dictionaries for the string columns only (as the format's writer: trying them
+    on every float column doubles the time to write and read)."""
+    pq.write_table(table, path, row_group_size=PART_ROW_GROUP,
+                   use_dictionary=[f.name for f in table.schema if pa.types.is_string(f.type)
+                                   or pa.types.is_dictionary(f.type)] or False)
+
+
 def _chunk_task(j: int, *, path: str, tmp: str, out: str, window_s: float,
                 params: dict[str, Any]) -> dict[str, Any]:
     """``derived/kinematics`` of chunk ``j`` of whole tracks, written as ``out/kinematics/part-J``;
@@ -121,12 +130,11 @@ def _chunk_task(j: int, *, path: str, tmp: str, out: str, window_s: float,
     from aveas_format.io.writer import prepare_table
     from aveas_format.schema.tables import TABLES
 
-    states = pq.read_table(Path(tmp) / f"c-{j}.parquet")
+    states = feather.read_table(Path(tmp) / f"c-{j}.arrow")
     rec = _window_recording(path, states)
     t = prepare_table(_run(rec, "kinematics", params), TABLES["derived/kinematics"])
     (Path(out) / "kinematics").mkdir(parents=True, exist_ok=True)
-    pq.write_table(t, Path(out) / "kinematics" / f"part-{j:06d}.parquet",
-                   row_group_size=PART_ROW_GROUP)
+    _write_part(t, Path(out) / "kinematics" / f"part-{j:06d}.parquet")
     pid, tm = states.column("participant_id").to_numpy(), states.column("time").to_numpy()
     cores: list[int] = []
     if len(pid):
@@ -221,8 +229,7 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
         # sorted as the table declares, in small row groups: assembling the table in key order
         # (write_by_windows) reads each participant range from the parts by their statistics
         core = prepare_table(core, TABLES[f"derived/{name}"])
-        pq.write_table(core, Path(out) / name / f"part-{k:06d}.parquet",
-                       row_group_size=PART_ROW_GROUP)
+        _write_part(core, Path(out) / name / f"part-{k:06d}.parquet")
         counts[name] = core.num_rows
     # the window's summary over its core rows only (each sample counted once over all windows)
     for name in ("interactions", "conflicts"):
@@ -347,7 +354,7 @@ def derive_by_windows(path: str | Path, out_dir: str | Path, *,
             cores.update(v["cores"])
             peak = max(peak, v["peak_kb"] or 0)
         for j in chunks:
-            (tmp / f"c-{j}.parquet").unlink()
+            (tmp / f"c-{j}.arrow").unlink()
         windows = [(k, k * window_s, (k + 1) * window_s) for k in sorted(cores)]
         fn = functools.partial(_window_task, path=str(path), tmp=str(tmp), out=str(out),
                                margin_s=margin_s, params=params)
