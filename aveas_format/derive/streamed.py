@@ -1,23 +1,27 @@
 """Every criticality measure of a recording too large for memory, by time window
 (docs/derive.md "Large recordings").
 
-:func:`derive_by_windows` reads ``states.parquet`` once, row group by row group, and splits it into
-time windows (each with ``margin_s`` of context on both sides: the kinematics smoother's and the
-pairs' lead-in) stored as temporary Parquet files; then each window is derived on its own
-(``kinematics``, ``interactions``, ``conflicts``, the window's criticality summary), in parallel
-worker processes, and the rows of its core ``[t0, t1)`` are written as parts of the derived tables:
-``OUT/kinematics/part-K.parquet``, ``OUT/interactions/...``, ``OUT/conflicts/...`` (a Parquet
-dataset each). The windows' summaries merge into ``OUT/criticality_summary.parquet`` (sums of
-TET, TIT, observed time and counts; minima with their std, time and pair; CPI weighted by time).
-Memory is bounded by one row group plus one window per worker, whatever the recording's length.
+:func:`derive_by_windows` reads ``states.parquet`` once, row group by row group, into chunks of
+whole tracks (temporary Arrow files). A worker process per chunk derives its ``kinematics`` (the
+smoother sees each track whole) and splits the chunk by time window: the whole tracks of the
+participants present in window K (states and kinematics) go to window K's temporary files. Then a
+worker per window ``[t0, t1)`` derives ``conflicts`` on those whole tracks (a crossing needs
+both paths up to the crossing point), ``interactions`` on the states of the window's own time
+steps (:func:`aveas_format.derive.interactions.compute` with ``core``: a time step's pairs need
+that step only; the later states of its participants tell only their routes, the lanes a leader
+search follows past a chain's end) and the window's criticality summary, and writes the rows of
+its core as parts of the derived tables: ``OUT/kinematics/part-J.parquet``,
+``OUT/interactions/part-K.parquet``, ``OUT/conflicts/...`` (a Parquet dataset each). The windows'
+summaries merge into ``OUT/criticality_summary.parquet`` (sums of TET, TIT, observed time and
+counts; minima with their std, time and pair; CPI weighted by time). A window's work grows with
+its own time steps (its share of the whole tracks is only read and searched for routes and
+crossings); memory is bounded by one row group in the parent and one chunk or window per
+worker, whatever the recording's length.
 
-Differences from deriving the whole recording at once (tests/derive/test_streamed.py): the
-kinematics smoother sees a window's tracks only and chooses its jerk density per track window by
-maximum likelihood, so smoothed speeds (and the TTC from them) differ by a fraction of their std
-(0.15 std median on the noisy sample highway in 8-s windows; identical rows with
-``velocities="states"``); a pair's
-TTC episode cut by a window boundary is two episodes for the TET/TIT Monte Carlo std (their
-variances add); a crossing is found where both paths fall into one window (with the margin).
+Differences from deriving the whole recording at once (tests/derive/test_streamed.py): none in
+the rows of kinematics, interactions and conflicts (the 2D Monte Carlo draws are keyed by pair
+and time); a pair's TTC episode cut by a window boundary is two episodes for the TET/TIT Monte
+Carlo std (their variances add).
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ from __future__ import annotations
 import functools
 import shutil
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +43,7 @@ import pyarrow.parquet as pq
 WINDOW_DERIVATIONS = ("kinematics", "interactions", "conflicts")
 #: every derived table :func:`write_by_windows` writes
 WINDOW_TABLES = (*WINDOW_DERIVATIONS, "criticality_summary")
-#: the default window (s): its states, with the margins, and their derived rows are what one
+#: the default window (s): its participants' whole tracks and its derived rows are what one
 #: worker holds (docs/performance.md "Criticality")
 DEFAULT_WINDOW_S = 60.0
 #: rows per row group of a window's part files
@@ -185,7 +189,7 @@ def _run(rec, name: str, params: dict[str, Any]) -> pa.Table:
 
 
 def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: str,
-                 margin_s: float, params: dict[str, Any]) -> dict[str, Any]:
+                 params: dict[str, Any]) -> dict[str, Any]:
     """Derive one window and write its core rows; returns its summary rows and counts."""
     from aveas_format.derive.criticality import compute as summary
     from aveas_format.derive.criticality import CriticalityParams
@@ -320,15 +324,14 @@ def merge_summaries(parts: list[pa.Table]) -> pa.Table:
 
 
 def derive_by_windows(path: str | Path, out_dir: str | Path, *,
-                      window_s: float = DEFAULT_WINDOW_S, margin_s: float = 5.0,
-                      workers: int | None = 2, progress: bool = False,
-                      track_chunk_rows: int = 200_000, **params: Any) -> dict[str, Any]:
+                      window_s: float = DEFAULT_WINDOW_S, workers: int | None = 2,
+                      progress: bool = False, track_chunk_rows: int = 200_000, **params: Any) -> dict[str, Any]:
     """Derive the criticality measures of the recording at ``path`` into ``out_dir`` (module
     docstring): kinematics per chunk of whole tracks (about ``track_chunk_rows`` states), then
     interactions, conflicts and the summary per time window; ``params`` (flat: a parameter name
     and its value) go to every derivation that has such a parameter. Memory per worker grows
-    with the window (and the chunk), not with the recording; smaller windows cost a little
-    more per-window overhead (docs/performance.md). Returns counts: windows, rows per derived
+    with the window (and the chunk), not with the recording; the CPU time hardly depends on the
+    window (docs/performance.md). Returns counts: windows, rows per derived
     table, the largest worker's peak memory (kB)."""
     from aveas_format.errors import AveasError
     from aveas_format.parallel import run_tasks
@@ -357,7 +360,7 @@ def derive_by_windows(path: str | Path, out_dir: str | Path, *,
             (tmp / f"c-{j}.arrow").unlink()
         windows = [(k, k * window_s, (k + 1) * window_s) for k in sorted(cores)]
         fn = functools.partial(_window_task, path=str(path), tmp=str(tmp), out=str(out),
-                               margin_s=margin_s, params=params)
+                               params=params)
         sums = []
         for v in results(fn, windows, "windows"):
             sums.append(v["summary"])
@@ -442,7 +445,7 @@ def _assemble(parts: Path, spec, dest: Path, provenance: bytes) -> tuple[int, st
 
 
 def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEFAULT_WINDOW_S,
-                     margin_s: float = 5.0, workers: int | None = 2, overwrite: bool = False,
+                     workers: int | None = 2, overwrite: bool = False,
                      progress: bool = False, **params: Any) -> dict[str, Any]:
     """The recording at ``src`` with its criticality tables (``WINDOW_TABLES``) derived window by
     window (:func:`derive_by_windows`), written to ``path`` (directory form, or ZIP when the name
@@ -476,8 +479,8 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
     tmp = parent / f".{path.name}.tmp-{uuid.uuid4().hex[:8]}"
     try:
         work.mkdir()
-        info = derive_by_windows(src, work, window_s=window_s, margin_s=margin_s,
-                                 workers=workers, progress=progress, **params)
+        info = derive_by_windows(src, work, window_s=window_s, workers=workers,
+                                 progress=progress, **params)
         tmp.mkdir()
         with Container(src) as c:
             for name in c.names():
