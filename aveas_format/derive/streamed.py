@@ -378,13 +378,15 @@ def derive_by_windows(path: str | Path, out_dir: str | Path, *,
 def _pid_ranges(dataset, rows: int) -> list[tuple[int, int]]:
     """Consecutive participant-id ranges ``(lo, hi)`` (inclusive) of about ``rows`` rows each
     (a participant's rows are never split)."""
-    pid = dataset.to_table(columns=["participant_id"]).column("participant_id")
-    if not len(pid):
+    vals, cnts = [], []
+    for frag in dataset.get_fragments():  # a part at a time: not the whole column in memory
+        vc = pc.value_counts(frag.to_table(columns=["participant_id"]).column("participant_id"))
+        vals.append(vc.field("values").to_numpy())
+        cnts.append(vc.field("counts").to_numpy())
+    if not vals or not sum(len(v) for v in vals):
         return []
-    vc = pc.value_counts(pid)
-    ids = vc.field("values").to_numpy()
-    order = np.argsort(ids)
-    ids, n = ids[order], vc.field("counts").to_numpy()[order]
+    ids, inv = np.unique(np.concatenate(vals), return_inverse=True)
+    n = np.bincount(inv.ravel(), weights=np.concatenate(cnts)).astype(np.int64)
     piece = np.cumsum(n) // max(rows, 1)
     starts = np.r_[0, np.flatnonzero(np.diff(piece)) + 1]
     ends = np.r_[starts[1:], len(ids)] - 1
