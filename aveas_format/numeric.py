@@ -94,7 +94,7 @@ def central_differences(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.nda
     return vx, vy, vx_std, vy_std
 
 
-__all__ = ["central_differences", "fmt_num", "same_participant", "wrap_angle"]
+__all__ = ["central_differences", "finite_quantiles", "fmt_num", "same_participant", "wrap_angle"]
 
 
 def instant_lateral_steps(same: np.ndarray, dt: np.ndarray, dx: np.ndarray, dy: np.ndarray,
@@ -152,3 +152,28 @@ def keyed_normals(seed: int, keys: tuple[np.ndarray, ...], n: int) -> np.ndarray
     np.multiply(r, np.cos(u2), out=out[:half])
     np.multiply(r, np.sin(u2), out=out[half:])
     return out[:n]
+
+
+def finite_quantiles(a: np.ndarray, qs: tuple[float, ...]) -> list[np.ndarray]:
+    """The quantiles ``qs`` over axis 0 of the finite values of each column of ``a`` (NaN where a
+    column has none): the values of ``np.nanquantile`` with its default (linear) method on the
+    array with its infinities made NaN, from one sort of the whole array instead of its loop
+    over columns (``apply_along_axis``, ~100 us per column; Monte Carlo stds have 10^5-10^6)."""
+    a = np.asarray(a, float)
+    fin = np.isfinite(a)
+    n = fin.sum(0)
+    srt = np.sort(np.where(fin, a, np.inf), axis=0)  # the finite values first, in order
+    out = []
+    for q in qs:
+        vi = (n - 1) * float(q)
+        lo = np.clip(np.floor(vi), 0, np.maximum(n - 1, 0)).astype(np.int64)
+        hi = np.minimum(lo + 1, np.maximum(n - 1, 0))
+        x0 = np.take_along_axis(srt, lo[None], 0)[0] if a.shape[0] else np.full(n.shape, np.nan)
+        x1 = np.take_along_axis(srt, hi[None], 0)[0] if a.shape[0] else x0
+        t = vi - lo
+        with np.errstate(invalid="ignore"):
+            d = x1 - x0
+            # numpy's _lerp: from the nearer end, so that t = 1 gives x1 exactly
+            v = np.where(t >= 0.5, x1 - d * (1 - t), x0 + d * t)
+        out.append(np.where(n > 0, v, np.nan))
+    return out

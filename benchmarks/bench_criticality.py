@@ -13,7 +13,8 @@ highway streamed by time window.
    (:func:`aveas_format.derive.streamed.derive_by_windows`) on 2 worker processes, in a fresh
    process whose peak memory (VmHWM) is reported. Target: <= 120 s.
 
-Run alone: ``.venv/bin/python benchmarks/bench_criticality.py [pairs|hour]``.
+Run alone: ``.venv/bin/python benchmarks/bench_criticality.py [pairs|hour [SECONDS [W1,W2...]]]``
+(``hour``: 60-s and 300-s windows on the same recording, the CPU ratio between them).
 """
 
 from __future__ import annotations
@@ -209,7 +210,7 @@ def _hour_child(path: str, workers: int, window_s: float) -> None:
 
     t0 = time.perf_counter()
     info = write_by_windows(path, Path(path).parent / "derived.aveas", window_s=window_s,
-                            workers=workers)
+                            workers=workers, overwrite=True)
     secs = time.perf_counter() - t0
     import resource
 
@@ -221,35 +222,50 @@ def _hour_child(path: str, workers: int, window_s: float) -> None:
     print(json.dumps({"seconds": secs, "cpu_s": cpu, "vmhwm_kb": hwm, **info}))
 
 
-def bench_hour(duration_s: float = 3600.0, workers: int = 2, window_s: float | None = None
-               ) -> list[dict]:
+def bench_hour(duration_s: float = 3600.0, workers: int = 2,
+               windows: tuple[float, ...] | None = None) -> list[dict]:
+    """The hour derived by windows of each of ``windows`` s (default: derive --window's default
+    and 300 s), each in a fresh process on the same recording; the CPU ratio to the last."""
     from aveas_format.derive.streamed import DEFAULT_WINDOW_S
 
-    window_s = window_s or DEFAULT_WINDOW_S
+    windows = windows or (DEFAULT_WINDOW_S, 300.0)
+    out, infos = [], []
     with tempfile.TemporaryDirectory(prefix="aveas-bench-hour-") as d:
         path = Path(d) / "hour.aveas"
         t0 = time.perf_counter()
         n = highway_hour(path, duration_s=duration_s)
         tb = time.perf_counter() - t0
-        res = subprocess.run([sys.executable, __file__, "_child", str(path), str(workers),
-                              str(window_s)], capture_output=True, text=True, check=False)
-        if res.returncode != 0:
-            raise RuntimeError(res.stderr[-3000:])
-        info = json.loads(res.stdout.strip().splitlines()[-1])
-    return [{"benchmark": "criticality.highway_hour", "rows": n,
-             "seconds": round(info["seconds"], 1), "rows_per_s": round(n / info["seconds"]),
-             "baseline_s": None, "speedup_vs_baseline": None,
-             "note": (f"{duration_s:g} s, ~100 concurrent vehicles at 25 Hz ({n:,} states; built "
-                      f"and written in {tb:.0f} s); every measure with std, {info['windows']} "
-                      f"windows of {window_s:g} s on {workers} workers; "
-                      f"CPU time of the deriving process and its workers {info['cpu_s']:.0f} s "
-                      f"(/{workers} = {info['cpu_s'] / workers:.0f} s: the wall time on "
-                      f"{workers} idle cores, less the idle gaps); "
-                      f"{info['interactions']:,} interaction rows, {info['conflicts']:,} conflict "
-                      f"rows; written as a recording; peak memory of the deriving process "
-                      f"(VmHWM, workers excluded) "
-                      f"{info['vmhwm_kb'] / 1024:.0f} MB, largest worker "
-                      f"{info['worker_peak_kb'] / 1024:.0f} MB; target <= 120 s")}]
+        for window_s in windows:
+            with open("/proc/loadavg") as f:
+                load0 = f.read().split()[0]
+            res = subprocess.run([sys.executable, __file__, "_child", str(path), str(workers),
+                                  str(window_s)], capture_output=True, text=True, check=False)
+            if res.returncode != 0:
+                raise RuntimeError(res.stderr[-3000:])
+            info = json.loads(res.stdout.strip().splitlines()[-1])
+            with open("/proc/loadavg") as f:
+                info["load"] = f"{load0}-{f.read().split()[0]}"
+            infos.append((window_s, info))
+    ref_w, ref = infos[-1]
+    for window_s, info in infos:
+        out.append({
+            "benchmark": "criticality.highway_hour", "rows": n,
+            "seconds": round(info["seconds"], 1), "rows_per_s": round(n / info["seconds"]),
+            "baseline_s": None, "speedup_vs_baseline": None,
+            "note": (f"{duration_s:g} s, ~100 concurrent vehicles at 25 Hz ({n:,} states; built "
+                     f"and written in {tb:.0f} s); every measure with std, {info['windows']} "
+                     f"windows of {window_s:g} s on {workers} workers; "
+                     f"CPU time of the deriving process and its workers {info['cpu_s']:.0f} s "
+                     f"(/{workers} = {info['cpu_s'] / workers:.0f} s: the wall time on "
+                     f"{workers} idle cores, less the idle gaps; "
+                     f"{info['cpu_s'] / ref['cpu_s']:.2f}x the CPU of {ref_w:g}-s windows); "
+                     f"{info['interactions']:,} interaction rows, {info['conflicts']:,} conflict "
+                     f"rows; written as a recording; peak memory of the deriving process "
+                     f"(VmHWM, workers excluded) "
+                     f"{info['vmhwm_kb'] / 1024:.0f} MB, largest worker "
+                     f"{info['worker_peak_kb'] / 1024:.0f} MB; load average {info['load']} "
+                     f"(start-end); target <= 120 s")})
+    return out
 
 
 def main() -> list[dict]:
@@ -264,7 +280,8 @@ if __name__ == "__main__":
             print(r)
     elif len(sys.argv) > 1 and sys.argv[1] == "hour":
         for r in bench_hour(float(sys.argv[2]) if len(sys.argv) > 2 else 3600.0,
-                            window_s=float(sys.argv[3]) if len(sys.argv) > 3 else None):
+                            windows=tuple(float(w) for w in sys.argv[3].split(","))
+                            if len(sys.argv) > 3 else None):
             print(r)
     else:
         for r in main():

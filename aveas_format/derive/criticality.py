@@ -42,7 +42,7 @@ import pyarrow as pa
 from pydantic import Field
 from scipy.special import ndtr
 
-from aveas_format.derive._samples import segments, string_values
+from aveas_format.derive._samples import find_rows, segments, string_values
 from aveas_format.derive.events import DEFAULT_THRESHOLD_S
 from aveas_format.derive.registry import Derivation, Params, register
 from aveas_format.io.arrow import column_numpy
@@ -98,11 +98,8 @@ def _lookup_dt(pid_s, t_s, dt_s, pid, t) -> np.ndarray:
     """dt of the states rows at (pid, t) (0 where there is none)."""
     if not len(pid):
         return np.zeros(0)
-    keys = np.rec.fromarrays([pid_s, t_s])
-    pos = np.searchsorted(keys, np.rec.fromarrays([pid, t]))
-    pos = np.clip(pos, 0, len(pid_s) - 1)
-    ok = (pid_s[pos] == pid) & (t_s[pos] == t)
-    return np.where(ok, dt_s[pos], 0.0)
+    pos, ok = find_rows(pid_s, t_s, pid, t)
+    return np.where(ok, dt_s[pos], 0.0) if len(pid_s) else np.zeros(len(pid))
 
 
 def _group_min(key: np.ndarray, v: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

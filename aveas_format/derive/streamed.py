@@ -1,23 +1,27 @@
 """Every criticality measure of a recording too large for memory, by time window
 (docs/derive.md "Large recordings").
 
-:func:`derive_by_windows` reads ``states.parquet`` once, row group by row group, and splits it into
-time windows (each with ``margin_s`` of context on both sides: the kinematics smoother's and the
-pairs' lead-in) stored as temporary Parquet files; then each window is derived on its own
-(``kinematics``, ``interactions``, ``conflicts``, the window's criticality summary), in parallel
-worker processes, and the rows of its core ``[t0, t1)`` are written as parts of the derived tables:
-``OUT/kinematics/part-K.parquet``, ``OUT/interactions/...``, ``OUT/conflicts/...`` (a Parquet
-dataset each). The windows' summaries merge into ``OUT/criticality_summary.parquet`` (sums of
-TET, TIT, observed time and counts; minima with their std, time and pair; CPI weighted by time).
-Memory is bounded by one row group plus one window per worker, whatever the recording's length.
+:func:`derive_by_windows` reads ``states.parquet`` once, row group by row group, into chunks of
+whole tracks (temporary Arrow files). A worker process per chunk derives its ``kinematics`` (the
+smoother sees each track whole) and splits the chunk by time window: the whole tracks of the
+participants present in window K (states and kinematics) go to window K's temporary files. Then a
+worker per window ``[t0, t1)`` derives ``conflicts`` on those whole tracks (a crossing needs
+both paths up to the crossing point), ``interactions`` on the states of the window's own time
+steps (:func:`aveas_format.derive.interactions.compute` with ``core``: a time step's pairs need
+that step only; the later states of its participants tell only their routes, the lanes a leader
+search follows past a chain's end) and the window's criticality summary, and writes the rows of
+its core as parts of the derived tables: ``OUT/kinematics/part-J.parquet``,
+``OUT/interactions/part-K.parquet``, ``OUT/conflicts/...`` (a Parquet dataset each). The windows'
+summaries merge into ``OUT/criticality_summary.parquet`` (sums of TET, TIT, observed time and
+counts; minima with their std, time and pair; CPI weighted by time). A window's work grows with
+its own time steps (its share of the whole tracks is only read and searched for routes and
+crossings); memory is bounded by one row group in the parent and one chunk or window per
+worker, whatever the recording's length.
 
-Differences from deriving the whole recording at once (tests/derive/test_streamed.py): the
-kinematics smoother sees a window's tracks only and chooses its jerk density per track window by
-maximum likelihood, so smoothed speeds (and the TTC from them) differ by a fraction of their std
-(0.15 std median on the noisy sample highway in 8-s windows; identical rows with
-``velocities="states"``); a pair's
-TTC episode cut by a window boundary is two episodes for the TET/TIT Monte Carlo std (their
-variances add); a crossing is found where both paths fall into one window (with the margin).
+Differences from deriving the whole recording at once (tests/derive/test_streamed.py): none in
+the rows of kinematics, interactions and conflicts (the 2D Monte Carlo draws are keyed by pair
+and time); a pair's TTC episode cut by a window boundary is two episodes for the TET/TIT Monte
+Carlo std (their variances add).
 """
 
 from __future__ import annotations
@@ -25,20 +29,21 @@ from __future__ import annotations
 import functools
 import shutil
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
+import pyarrow.feather as feather
 import pyarrow.parquet as pq
 
 #: the derivations run per window
 WINDOW_DERIVATIONS = ("kinematics", "interactions", "conflicts")
 #: every derived table :func:`write_by_windows` writes
 WINDOW_TABLES = (*WINDOW_DERIVATIONS, "criticality_summary")
-#: the default window (s): its states, with the margins, and their derived rows are what one
+#: the default window (s): its participants' whole tracks and its derived rows are what one
 #: worker holds (docs/performance.md "Criticality")
 DEFAULT_WINDOW_S = 60.0
 #: rows per row group of a window's part files
@@ -76,7 +81,7 @@ def _row_groups(source: Path, name: str | None = None) -> Iterator[pa.Table]:
 
 def _track_chunks(path: Path, tmp: Path, rows: int) -> list[int]:
     """Write the states in chunks of whole tracks (about ``rows`` rows each, cut between
-    participants) to ``tmp/c-J.parquet``; return the chunk numbers."""
+    participants) to ``tmp/c-J.arrow``; return the chunk numbers."""
     from aveas_format.errors import FormatError
 
     out: list[int] = []
@@ -85,7 +90,7 @@ def _track_chunks(path: Path, tmp: Path, rows: int) -> list[int]:
 
     def flush(tables: list[pa.Table]) -> None:
         j = len(out)
-        pq.write_table(pa.concat_tables(tables), tmp / f"c-{j}.parquet")
+        feather.write_feather(pa.concat_tables(tables), tmp / f"c-{j}.arrow", compression="lz4")
         out.append(j)
 
     for rg in _row_groups(path, "states.parquet"):
@@ -110,66 +115,45 @@ def _track_chunks(path: Path, tmp: Path, rows: int) -> list[int]:
     return out
 
 
-def _kinematics_task(j: int, *, path: str, tmp: str, out: str,
-                     params: dict[str, Any]) -> dict[str, Any]:
-    """``derived/kinematics`` of one chunk of whole tracks, written as ``out/kinematics/part-J``."""
+def _write_part(table: pa.Table, path: Path) -> None:
+    """A window's or chunk's part of a derived table: small row groups (read back by their
+    statistics), dictionaries for the string columns only (as the format's writer: trying them
+    on every float column doubles the time to write and read)."""
+    pq.write_table(table, path, row_group_size=PART_ROW_GROUP,
+                   use_dictionary=[f.name for f in table.schema if pa.types.is_string(f.type)
+                                   or pa.types.is_dictionary(f.type)] or False)
+
+
+def _chunk_task(j: int, *, path: str, tmp: str, out: str, window_s: float,
+                params: dict[str, Any]) -> dict[str, Any]:
+    """``derived/kinematics`` of chunk ``j`` of whole tracks, written as ``out/kinematics/part-J``;
+    and the chunk's states and kinematics split by time window: the whole tracks of the
+    participants present in window K go to ``tmp/x-K-J.parquet`` and ``tmp/y-K-J.parquet``
+    (where the window's derivations read them). Returns the windows with states (their cores),
+    the rows and the peak memory."""
     from aveas_format.io.writer import prepare_table
     from aveas_format.schema.tables import TABLES
 
-    rec = _window_recording(path, pq.read_table(Path(tmp) / f"c-{j}.parquet"))
+    states = feather.read_table(Path(tmp) / f"c-{j}.arrow")
+    rec = _window_recording(path, states)
     t = prepare_table(_run(rec, "kinematics", params), TABLES["derived/kinematics"])
     (Path(out) / "kinematics").mkdir(parents=True, exist_ok=True)
-    pq.write_table(t, Path(out) / "kinematics" / f"part-{j:06d}.parquet",
-                   row_group_size=PART_ROW_GROUP)
-    return {"rows": t.num_rows, "peak_kb": _peak_kb()}
-
-
-def _spans(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sorted participant ids of the states and each one's first and last time."""
-    ids, lo, hi = [], [], []
-    for rg in _row_groups(path, "states.parquet"):
-        pid, t = rg.column("participant_id").to_numpy(), rg.column("time").to_numpy()
-        if not len(pid):
-            continue
-        starts = np.r_[0, np.flatnonzero(np.diff(pid)) + 1]
-        ids.append(pid[starts])
-        lo.append(np.minimum.reduceat(t, starts))
-        hi.append(np.maximum.reduceat(t, starts))
-    if not ids:
-        return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
-    i, a, b = np.concatenate(ids), np.concatenate(lo), np.concatenate(hi)
-    # a track cut between row groups appears twice (sorted by id): merge
-    u, inv = np.unique(i, return_inverse=True)
-    mn, mx = np.full(len(u), np.inf), np.full(len(u), -np.inf)
-    np.minimum.at(mn, inv, a)
-    np.maximum.at(mx, inv, b)
-    return u, mn, mx
-
-
-def _split(tables: Iterable[pa.Table], tmp: Path, prefix: str, window_s: float,
-           spans: tuple[np.ndarray, np.ndarray, np.ndarray]) -> set[int]:
-    """Write to ``tmp/PREFIX-K.parquet`` the rows of the whole tracks of the participants present
-    in time window K (``spans``: :func:`_spans`); return the windows with rows."""
-    writers: dict[int, pq.ParquetWriter] = {}
-    cores: set[int] = set()
-    try:
-        for rg in tables:
-            k = np.searchsorted(spans[0], rg.column("participant_id").to_numpy())
-            lo = np.floor(spans[1][k] / window_s).astype(np.int64)
-            hi = np.floor(spans[2][k] / window_s).astype(np.int64)
-            cores.update(np.unique(np.floor(rg.column("time").to_numpy() / window_s)
-                                   .astype(np.int64)).tolist())
-            for w in _windows_of(lo, hi):
-                part = rg.filter(pa.array((lo <= w) & (hi >= w)))
-                if not part.num_rows:
-                    continue
-                if w not in writers:
-                    writers[w] = pq.ParquetWriter(tmp / f"{prefix}-{w}.parquet", part.schema)
-                writers[w].write_table(part)
-    finally:
-        for wr in writers.values():
-            wr.close()
-    return cores
+    _write_part(t, Path(out) / "kinematics" / f"part-{j:06d}.parquet")
+    pid, tm = states.column("participant_id").to_numpy(), states.column("time").to_numpy()
+    cores: list[int] = []
+    if len(pid):
+        starts = np.r_[0, np.flatnonzero(np.diff(pid)) + 1]  # whole tracks, sorted by id
+        lo = np.floor(np.minimum.reduceat(tm, starts) / window_s).astype(np.int64)
+        hi = np.floor(np.maximum.reduceat(tm, starts) / window_s).astype(np.int64)
+        cores = np.unique(np.floor(tm / window_s).astype(np.int64)).tolist()
+        for w in _windows_of(lo, hi):
+            ids = pa.array(pid[starts][(lo <= w) & (hi >= w)])
+            for prefix, table in (("x", states), ("y", t)):
+                part = table.filter(pc.is_in(table.column("participant_id"), ids))
+                # Arrow IPC with LZ4: written and read back several times faster than Parquet
+                feather.write_feather(part, Path(tmp) / f"{prefix}-{w}-{j:06d}.arrow",
+                                      compression="lz4")
+    return {"rows": t.num_rows, "cores": cores, "peak_kb": _peak_kb()}
 
 
 def _windows_of(lo: np.ndarray, hi: np.ndarray) -> list[int]:
@@ -205,10 +189,12 @@ def _run(rec, name: str, params: dict[str, Any]) -> pa.Table:
 
 
 def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: str,
-                 margin_s: float, params: dict[str, Any]) -> dict[str, Any]:
+                 params: dict[str, Any]) -> dict[str, Any]:
     """Derive one window and write its core rows; returns its summary rows and counts."""
     from aveas_format.derive.criticality import compute as summary
     from aveas_format.derive.criticality import CriticalityParams
+    from aveas_format.derive.interactions import InteractionsParams
+    from aveas_format.derive.interactions import compute as interactions
     from aveas_format.io.writer import prepare_table
     from aveas_format.schema.tables import TABLES
 
@@ -216,19 +202,26 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
     # the whole tracks of the participants present in the core: a crossing needs both paths up
     # to the crossing point, a leader search the participant's later lanes (its route), however
     # far ahead
-    rec = _window_recording(path, pq.read_table(Path(tmp) / f"x-{k}.parquet"))
-    rec.derived["kinematics"] = prepare_table(pq.read_table(Path(tmp) / f"y-{k}.parquet"),
-                                              TABLES["derived/kinematics"])
+
+    def read(prefix: str) -> pa.Table:
+        return pa.concat_tables([feather.read_table(f) for f in
+                                 sorted(Path(tmp).glob(f"{prefix}-{k}-*.arrow"))])
+
+    rec = _window_recording(path, read("x"))
+    rec.derived["kinematics"] = prepare_table(read("y"), TABLES["derived/kinematics"])
     rec.derived["conflicts"] = _run(rec, "conflicts", params)
-    # the pairs of a time step need that step only (and the routes ahead): from the core's start
+    # the pairs of a time step need that step only, and the routes ahead (the later lanes of its
+    # participants): the rows of the core's time steps, the later states for the routes only
     for name in ("states", "kinematics"):
         t = rec.states if name == "states" else rec.derived[name]
-        t = t.filter(pc.greater_equal(t.column("time"), t0 - margin_s))
+        t = t.filter(pc.greater_equal(t.column("time"), t0))
         if name == "states":
             rec.states = t
         else:
             rec.derived[name] = t
-    rec.derived["interactions"] = _run(rec, "interactions", params)
+    ip = InteractionsParams(**{k_: v for k_, v in params.items()
+                               if k_ in InteractionsParams.model_fields})
+    rec.derived["interactions"] = interactions(rec, ip, core=(t0, t1))
     counts = {}
     for name in WINDOW_DERIVATIONS:
         if name == "kinematics":
@@ -240,8 +233,7 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
         # sorted as the table declares, in small row groups: assembling the table in key order
         # (write_by_windows) reads each participant range from the parts by their statistics
         core = prepare_table(core, TABLES[f"derived/{name}"])
-        pq.write_table(core, Path(out) / name / f"part-{k:06d}.parquet",
-                       row_group_size=PART_ROW_GROUP)
+        _write_part(core, Path(out) / name / f"part-{k:06d}.parquet")
         counts[name] = core.num_rows
     # the window's summary over its core rows only (each sample counted once over all windows)
     for name in ("interactions", "conflicts"):
@@ -332,15 +324,14 @@ def merge_summaries(parts: list[pa.Table]) -> pa.Table:
 
 
 def derive_by_windows(path: str | Path, out_dir: str | Path, *,
-                      window_s: float = DEFAULT_WINDOW_S, margin_s: float = 5.0,
-                      workers: int | None = 2, progress: bool = False,
-                      track_chunk_rows: int = 200_000, **params: Any) -> dict[str, Any]:
+                      window_s: float = DEFAULT_WINDOW_S, workers: int | None = 2,
+                      progress: bool = False, track_chunk_rows: int = 200_000, **params: Any) -> dict[str, Any]:
     """Derive the criticality measures of the recording at ``path`` into ``out_dir`` (module
     docstring): kinematics per chunk of whole tracks (about ``track_chunk_rows`` states), then
     interactions, conflicts and the summary per time window; ``params`` (flat: a parameter name
     and its value) go to every derivation that has such a parameter. Memory per worker grows
-    with the window (and the chunk), not with the recording; smaller windows cost a little
-    more per-window overhead (docs/performance.md). Returns counts: windows, rows per derived
+    with the window (and the chunk), not with the recording; the CPU time hardly depends on the
+    window (docs/performance.md). Returns counts: windows, rows per derived
     table, the largest worker's peak memory (kB)."""
     from aveas_format.errors import AveasError
     from aveas_format.parallel import run_tasks
@@ -358,19 +349,18 @@ def derive_by_windows(path: str | Path, out_dir: str | Path, *,
     try:
         chunks = _track_chunks(path, tmp, track_chunk_rows)
         counts, peak = dict.fromkeys(WINDOW_DERIVATIONS, 0), 0
-        fn = functools.partial(_kinematics_task, path=str(path), tmp=str(tmp), out=str(out),
-                               params=params)
+        fn = functools.partial(_chunk_task, path=str(path), tmp=str(tmp), out=str(out),
+                               window_s=window_s, params=params)
+        cores: set[int] = set()
         for v in results(fn, chunks, "tracks"):
             counts["kinematics"] += v["rows"]
+            cores.update(v["cores"])
             peak = max(peak, v["peak_kb"] or 0)
         for j in chunks:
-            (tmp / f"c-{j}.parquet").unlink()
-        spans = _spans(path)
-        cores = _split(_row_groups(path, "states.parquet"), tmp, "x", window_s, spans)
-        _split(_row_groups(out / "kinematics"), tmp, "y", window_s, spans)
+            (tmp / f"c-{j}.arrow").unlink()
         windows = [(k, k * window_s, (k + 1) * window_s) for k in sorted(cores)]
         fn = functools.partial(_window_task, path=str(path), tmp=str(tmp), out=str(out),
-                               margin_s=margin_s, params=params)
+                               params=params)
         sums = []
         for v in results(fn, windows, "windows"):
             sums.append(v["summary"])
@@ -388,13 +378,15 @@ def derive_by_windows(path: str | Path, out_dir: str | Path, *,
 def _pid_ranges(dataset, rows: int) -> list[tuple[int, int]]:
     """Consecutive participant-id ranges ``(lo, hi)`` (inclusive) of about ``rows`` rows each
     (a participant's rows are never split)."""
-    pid = dataset.to_table(columns=["participant_id"]).column("participant_id")
-    if not len(pid):
+    vals, cnts = [], []
+    for frag in dataset.get_fragments():  # a part at a time: not the whole column in memory
+        vc = pc.value_counts(frag.to_table(columns=["participant_id"]).column("participant_id"))
+        vals.append(vc.field("values").to_numpy())
+        cnts.append(vc.field("counts").to_numpy())
+    if not vals or not sum(len(v) for v in vals):
         return []
-    vc = pc.value_counts(pid)
-    ids = vc.field("values").to_numpy()
-    order = np.argsort(ids)
-    ids, n = ids[order], vc.field("counts").to_numpy()[order]
+    ids, inv = np.unique(np.concatenate(vals), return_inverse=True)
+    n = np.bincount(inv.ravel(), weights=np.concatenate(cnts)).astype(np.int64)
     piece = np.cumsum(n) // max(rows, 1)
     starts = np.r_[0, np.flatnonzero(np.diff(piece)) + 1]
     ends = np.r_[starts[1:], len(ids)] - 1
@@ -455,7 +447,7 @@ def _assemble(parts: Path, spec, dest: Path, provenance: bytes) -> tuple[int, st
 
 
 def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEFAULT_WINDOW_S,
-                     margin_s: float = 5.0, workers: int | None = 2, overwrite: bool = False,
+                     workers: int | None = 2, overwrite: bool = False,
                      progress: bool = False, **params: Any) -> dict[str, Any]:
     """The recording at ``src`` with its criticality tables (``WINDOW_TABLES``) derived window by
     window (:func:`derive_by_windows`), written to ``path`` (directory form, or ZIP when the name
@@ -489,8 +481,8 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
     tmp = parent / f".{path.name}.tmp-{uuid.uuid4().hex[:8]}"
     try:
         work.mkdir()
-        info = derive_by_windows(src, work, window_s=window_s, margin_s=margin_s,
-                                 workers=workers, progress=progress, **params)
+        info = derive_by_windows(src, work, window_s=window_s, workers=workers,
+                                 progress=progress, **params)
         tmp.mkdir()
         with Container(src) as c:
             for name in c.names():

@@ -4,6 +4,7 @@ route), and the lead and lag in the adjacent lanes, on small hand-made junction 
 from __future__ import annotations
 
 import numpy as np
+import pyarrow as pa
 import pytest
 
 from aveas_format.derive import derive
@@ -296,3 +297,24 @@ def test_neighbours_across_lane_sections():
     lead = _rel(rec, 0, "left_neighbour")
     assert list(lead) == [1] and lead[1]["dhw"] == pytest.approx(10.0, abs=1e-9)
     assert _rel(rec, 1, "right_neighbour")[0]["dhw"] == pytest.approx(-10.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("route", [["1", "10", "2"], ["1", "11", "3"]])
+def test_core_time_steps_follow_the_route_from_later_states(route):
+    """``interactions.compute(core=(t0, t1))`` (a time window, derive.streamed): the rows of the
+    core's time steps only, the same as deriving at once; the later states still choose the
+    branch at the diverge (A is before it in the core, on its branch only afterwards)."""
+    from aveas_format.derive.interactions import InteractionsParams, compute
+
+    rec = _diverge(route)
+    p = InteractionsParams()
+    whole = compute(rec, p)
+    t = whole.column("time").to_numpy()
+    for t0, t1 in ((0.0, 0.25), (0.25, 1.05), (1.05, 3.0)):
+        part = compute(rec, p, core=(t0, t1))
+        want = whole.filter(pa.array((t >= t0) & (t < t1)))
+        assert part.num_rows == want.num_rows > 0
+        assert part.equals(want), (t0, t1)
+    lead = compute(rec, p, core=(0.0, 0.05)).to_pylist()
+    assert {r["other_id"] for r in lead if r["participant_id"] == 0
+            and r["relation"] == "leader"} == ({2} if route[1] == "10" else {1})

@@ -119,3 +119,27 @@ def test_keyed_normals_depend_on_the_keys_only():
     assert stats.kstest(z.ravel(), "norm").pvalue > 1e-3
     c = np.corrcoef(z)
     assert np.abs(c[np.triu_indices(33, 1)]).max() < 0.08
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 40), st.integers(1, 30), st.integers(0, 2**32 - 1))
+def test_finite_quantiles_equal_nanquantile(k, m, seed):
+    """The vectorised quantiles of the finite values are np.nanquantile's, bit for bit (with
+    infinities and all-NaN columns)."""
+    import warnings
+
+    from aveas_format.numeric import finite_quantiles
+
+    rng = np.random.default_rng(seed)
+    a = rng.standard_cauchy((k, m))
+    a[rng.random((k, m)) < rng.random(m)] = np.nan
+    a[rng.random((k, m)) < 0.1] = np.inf
+    a[rng.random((k, m)) < 0.05] = -np.inf
+    qs = (0.0, 0.25, 0.5, 0.75, 0.9, 1.0)
+    got = finite_quantiles(a, qs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for q, g in zip(qs, got):
+            ref = (np.nanquantile(np.where(np.isfinite(a), a, np.nan), q, axis=0) if k
+                   else np.full(m, np.nan))
+            np.testing.assert_array_equal(g, ref)

@@ -51,6 +51,7 @@ from typing import Literal
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 from pydantic import Field
 
 from aveas_format.derive._samples import Samples
@@ -97,17 +98,22 @@ class InteractionsParams(Params):
         "derived/kinematics' smoothed speed; auto: the one with the smaller std per sample")
 
 
-def compute(rec, p: InteractionsParams) -> pa.Table:
-    """The ``derived/interactions`` table of ``rec``."""
+def compute(rec, p: InteractionsParams, core: tuple[float, float] | None = None) -> pa.Table:
+    """The ``derived/interactions`` table of ``rec``; ``core`` ``(t0, t1)``: only the rows of the
+    time steps in ``[t0, t1)`` (a time window, derive.streamed), the states of the other times
+    only telling the participants' routes (a time step's rows need that step's states only, and
+    the later lanes of its participants)."""
     S = Samples(rec, p.time_resolution)
+    active = None if core is None else (S.t >= core[0]) & (S.t < core[1])
     if p.velocities != "states":
         smoothed_velocities(S, p.velocities)
-    lane = lane_rows(rec, S, p)
+    lane = lane_rows(rec, S, p, active)
     parts = []
     if lane:
         parts.append(lane)
     if p.box_2d:
-        conflicting = box_conflicts(S, lane, p)  # also gives the neighbour rows their 2D TTC
+        # also gives the neighbour rows their 2D TTC
+        conflicting = box_conflicts(S, lane, p, active)
         if conflicting:
             parts.append(conflicting)
     if not parts:
@@ -127,27 +133,46 @@ def _f(v: np.ndarray) -> pa.Array:
     return pa.array(v, pa.float64(), mask=~np.isfinite(v))
 
 
+def _row_order(S: Samples, i: np.ndarray, j: np.ndarray, rel: np.ndarray) -> np.ndarray:
+    """The order of the rows ``(i, j, rel)`` by participant, time, other participant and ``rel``
+    (small codes): ``np.lexsort((rel, S.pid[j], S.t[i], S.pid[i]))`` as one stable sort of an
+    integer key of their ranks (3x faster for a window's rows; times by time step); lexsort
+    where the key would not fit in 62 bits."""
+    ids, rank = np.unique(S.pid, return_inverse=True)
+    rank = rank.ravel()
+    n_step = int(S.tstep.max()) + 1 if S.n else 1
+    n_rel = int(rel.max()) + 1 if len(rel) else 1
+    if len(ids) ** 2 * n_step * n_rel >= 1 << 62:
+        return np.lexsort((rel, S.pid[j], S.t[i], S.pid[i]))
+    key = ((rank[i] * n_step + S.tstep[i]) * len(ids) + rank[j]) * n_rel + rel
+    return np.argsort(key, kind="stable")
+
+
 def _table(S: Samples, r: dict[str, np.ndarray]) -> pa.Table:
     i, j = r["i"].astype(np.int64), r["j"].astype(np.int64)
+    # the string columns as Arrow arrays at once (object arrays compare and gather slowly)
+    rel = pa.array(r["rel"], pa.string())
+    kind = pc.if_else(pa.array(np.isfinite(r["ttc"])), pa.array(r["kind"], pa.string()),
+                      pa.scalar(None, pa.string()))
     if len(i):
         # the table's order (participant, time, other, relation), sorted on the index arrays
-        rel = r["rel"]
-        rel_code = np.zeros(len(rel), np.int8)
-        for k, v in enumerate(sorted({str(x) for x in Relation})):  # a handful of values
-            rel_code[rel == v] = k
-        order = np.lexsort((rel_code, S.pid[j], S.t[i], S.pid[i]))
-        r = {k: v[order] for k, v in r.items()}
+        enc = pc.dictionary_encode(rel)
+        names = sorted({str(x) for x in Relation})
+        rel_code = np.array([names.index(v) for v in enc.dictionary.to_pylist()],
+                            np.int8)[enc.indices.to_numpy()]
+        order = _row_order(S, i, j, rel_code)
+        r = {k: v[order] for k, v in r.items() if k not in ("rel", "kind")}
         i, j = i[order], j[order]
+        rel, kind = rel.take(pa.array(order)), kind.take(pa.array(order))
     ttc = r["ttc"]
-    kind = np.where(np.isfinite(ttc), r["kind"], None)
     t = pa.table({
         "participant_id": pa.array(S.pid[i], pa.int64()),
         "time": pa.array(S.t[i], pa.float64()),
         "other_id": pa.array(S.pid[j], pa.int64()),
-        "relation": pa.array(r["rel"].astype(object), pa.string()),
+        "relation": rel,
         "ttc": _f(ttc),
         "ttc_std": _f(np.where(np.isfinite(ttc), r["ttc_std"], np.nan)),
-        "ttc_kind": pa.array(list(kind), pa.string()),
+        "ttc_kind": kind,
         "gap": _f(r["gap"]),
         "gap_std": _f(np.sqrt(r["gap_var"])),
         "thw": _f(r["thw"]),

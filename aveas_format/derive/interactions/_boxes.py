@@ -163,12 +163,15 @@ def lookup(sorted_keys: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return pos, found
 
 
-def box_rows(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
-             ) -> dict[str, np.ndarray]:
+def box_rows(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams,
+             active: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """2D TTC (``i``, ``j``, ``ttc``) of the candidate pairs that are not lane leader/follower and
-    can touch within the horizon."""
-    reach_all = 0.5 * np.hypot(S.L, S.W)
-    i, j = candidate_pairs(S.tstep, S.x, S.y, S.vx, S.vy, reach_all, p.horizon)
+    can touch within the horizon (among the rows ``active``, whole time steps; None: all)."""
+    act = np.arange(S.n) if active is None else np.flatnonzero(active)
+    reach_all = 0.5 * np.hypot(S.L[act], S.W[act])
+    i, j = candidate_pairs(S.tstep[act], S.x[act], S.y[act], S.vx[act], S.vy[act], reach_all,
+                           p.horizon)
+    i, j = act[i], act[j]
     if p.search_radius is not None:
         near = np.hypot(S.x[j] - S.x[i], S.y[j] - S.y[i]) <= p.search_radius
         i, j = i[near], j[near]
@@ -239,13 +242,13 @@ def _surrogate_values(S: Samples, i: np.ndarray, j: np.ndarray, ttc: np.ndarray,
     return {"drac": drac, "mdrac": mdrac, "psd_i": psd_i, "psd_j": psd_j}
 
 
-def box_conflicts(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
-                  ) -> dict[str, np.ndarray]:
+def box_conflicts(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams,
+                  active: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """The 2D TTC (up to ``horizon``, with its std) and the surrogates derived from it of the
     pairs :func:`box_rows` finds: the neighbour rows of ``lane`` take those of their pair
     (``lane`` is updated in place), the other pairs become ``conflicting`` rows, one per direction
-    (returned; empty if there are none)."""
-    box = box_rows(S, lane, p)
+    (returned; empty if there are none); ``active``: :func:`box_rows`."""
+    box = box_rows(S, lane, p, active)
     fin = np.isfinite(box["ttc"]) & (box["ttc"] <= p.horizon)
     bi, bj, bt = box["i"][fin], box["j"][fin], box["ttc"][fin]
     sd = box_std(S, bi, bj, p)

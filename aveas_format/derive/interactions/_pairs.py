@@ -83,15 +83,19 @@ def lane_samples(rec, S: Samples, p: InteractionsParams) -> LaneSamples | None:
                        a=S.ax[idx] * c + S.ay[idx] * sn, vp=vp, vv=vv, va=va)
 
 
-def lane_rows(rec, S: Samples, p: InteractionsParams) -> dict[str, np.ndarray]:
+def lane_rows(rec, S: Samples, p: InteractionsParams, active: np.ndarray | None = None
+              ) -> dict[str, np.ndarray]:
     """Leader/follower rows (along lane chains and, past a chain's end, along each participant's
-    route) and left/right neighbour rows (lead and lag in the adjacent lanes); empty if none."""
+    route) and left/right neighbour rows (lead and lag in the adjacent lanes); empty if none.
+    ``active`` (per states row, whole time steps): the rows that get relations (None: all); the
+    others only tell the routes."""
     L = lane_samples(rec, S, p)
     if L is None:
         return {}
+    sel = np.arange(len(L.idx)) if active is None else np.flatnonzero(active[L.idx])
     rows: dict[str, list] = {k: [] for k in ROW_KEYS}
-    _leader_rows(rows, S, L, p)
-    _neighbour_rows(rows, S, L, p)
+    _leader_rows(rows, S, L, p, sel)
+    _neighbour_rows(rows, S, L, p, sel)
     if not rows["i"]:
         return {}
     out = {k: np.concatenate(v) for k, v in rows.items()}
@@ -108,11 +112,11 @@ def _append(rows: dict[str, list], i: np.ndarray, j: np.ndarray, rel: str,
         rows[k].append(metrics[k])
 
 
-def _leader_rows(rows: dict[str, list], S: Samples, L: LaneSamples, p: InteractionsParams
-                 ) -> None:
+def _leader_rows(rows: dict[str, list], S: Samples, L: LaneSamples, p: InteractionsParams,
+                 sel: np.ndarray) -> None:
     """A ``leader`` row for every follower and a ``follower`` row for its leader, with the
-    follower's headways and the pair's 1D TTC."""
-    a, b, du = leaders(L, S.t, p.route_range)
+    follower's headways and the pair's 1D TTC (the followers ``sel``: positions in ``L``)."""
+    a, b, du = leaders(L, S.t, p.route_range, sel)
     if not len(a):
         return
     fi, li = L.idx[a], L.idx[b]
@@ -125,17 +129,18 @@ def _leader_rows(rows: dict[str, list], S: Samples, L: LaneSamples, p: Interacti
         _append(rows, i, j, rel, m)
 
 
-def _neighbour_rows(rows: dict[str, list], S: Samples, L: LaneSamples, p: InteractionsParams
-                    ) -> None:
+def _neighbour_rows(rows: dict[str, list], S: Samples, L: LaneSamples, p: InteractionsParams,
+                    among: np.ndarray) -> None:
     """Lead (front level with or ahead) and lag (front behind) in the adjacent lanes, within
-    ``neighbour_range`` of the participant's front along the lanes."""
+    ``neighbour_range`` of the participant's front along the lanes (of the samples ``among``,
+    whole time steps: positions in ``L``)."""
     nch = max(L.G.n, 1)
     key = L.ts.astype(np.int64) * nch + L.chain
     front = L.u + 0.5 * S.L[L.idx]
-    o2 = np.lexsort((front, key))
+    o2 = among[np.lexsort((front[among], key[among]))]
     k_sorted, f_sorted = key[o2], front[o2]
     for k, rel in enumerate(("left_neighbour", "right_neighbour")):
-        q = np.flatnonzero(L.adj_chain[k] >= 0)
+        q = among[L.adj_chain[k, among] >= 0]
         if not len(q):
             continue
         gq = L.ts[q].astype(np.int64) * nch + L.adj_chain[k, q]
@@ -163,10 +168,11 @@ def _neighbour_rows(rows: dict[str, list], S: Samples, L: LaneSamples, p: Intera
                 **{k: nan for k in SURROGATE_KEYS}})
 
 
-def leaders(L: LaneSamples, t: np.ndarray, route_range: float
+def leaders(L: LaneSamples, t: np.ndarray, route_range: float, sel: np.ndarray | None = None
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Follower/leader pairs ``(a, b, du)`` (positions in the lane samples, ``du``: centre
-    distance along the lanes; ``t``: the time of every states row).
+    distance along the lanes; ``t``: the time of every states row) among the samples ``sel``
+    (positions in ``L``, whole time steps; None: all), the routes from all of ``L``.
 
     Within a lane chain the leader is the next sample by ``u`` at the same time step (one sort).
     The last sample of a chain at a time step looks beyond the chain's end along its route
@@ -175,7 +181,7 @@ def leaders(L: LaneSamples, t: np.ndarray, route_range: float
     G, pid, ts, chain, u = L.G, L.pid, L.ts, L.chain, L.u
     nch = max(G.n, 1)
     key = ts.astype(np.int64) * nch + chain
-    order = np.lexsort((u, key))
+    order = np.lexsort((u, key)) if sel is None else sel[np.lexsort((u[sel], key[sel]))]
     ks, us = key[order], u[order]
     same = ks[:-1] == ks[1:]
     a, b = order[:-1][same], order[1:][same]
