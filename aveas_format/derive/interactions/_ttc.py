@@ -184,7 +184,8 @@ def _ttc_ca_std(g, vf, af, vl, al, ttc, gvar, vfv, afv, vlv, alv, taus=None):
     not the vehicle stopped, ``∂x/∂v = τ`` and ``∂x/∂a = τ²/2``. NaN where the TTC is infinite,
     0 (already touching) or the contact grazing (``∂gap/∂t = 0``)."""
     tf, tl = taus if taus is not None else _taus(ttc, vf, af, vl, al)
-    with np.errstate(invalid="ignore", divide="ignore"):
+    # over: an infinite variance (nan_to_num: the largest float) times tau² is inf, as meant
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         rate = (vl + al * tl) - (vf + af * tf)  # d gap / dt at the root
         var = (np.nan_to_num(gvar) + tf * tf * np.nan_to_num(vfv) + 0.25 * tf ** 4 * np.nan_to_num(afv)
                + tl * tl * np.nan_to_num(vlv) + 0.25 * tl ** 4 * np.nan_to_num(alv)) / (rate * rate)
