@@ -62,6 +62,7 @@ def test_numba_equals_numpy(backend):
     assert (a["ttc_ca"] == 0).any() and np.isnan(a["drac"]).any() and (a["ttc_ca_std"] == 0).any()
 
 
+@pytest.mark.slow  # compiles the prange loop (several seconds on a fresh checkout); bench only
 @pytest.mark.parametrize("backend", [NUMBA])
 def test_parallel_equals_serial(backend):
     from aveas_format.derive.interactions import _kernel
