@@ -145,20 +145,27 @@ def bench_pairs(n: int = 1_000_000, repeat: int = 5) -> list[dict]:
         return follower_leader_metrics(*args[:3], tuple(args[3:7]), tuple(args[7:]),
                                        backend=backend)
 
-    def best(fn):
+    cpu = {}
+
+    def best(fn, name=None):
+        """Best wall time of ``repeat`` warm calls (and, under ``name``, the best CPU time of
+        this thread: less sensitive to other processes on the cores than the wall time)."""
         fn()  # warm: the JIT compiled (or loaded from its cache), the allocator's arrays mapped
-        ts = []
+        ts, cs = [], []
         for _ in range(repeat):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.thread_time()
             r = fn()
             ts.append(time.perf_counter() - t0)
+            cs.append(time.thread_time() - c0)
+        if name:
+            cpu[name] = min(cs)
         return min(ts), r
 
     cold, warm = _first_calls()
-    t_jit, m = best(lambda: ours("numba"))
+    t_jit, m = best(lambda: ours("numba"), "numba")
     t_par, _ = best(lambda: {**_kernel.metrics(args, 1.0, 3.4, parallel=True)})
-    t_np, m_np = best(lambda: ours("numpy"))
-    t_an, b = best(lambda: baseline(**p, analytic=True))
+    t_np, m_np = best(lambda: ours("numpy"), "numpy")
+    t_an, b = best(lambda: baseline(**p, analytic=True), "baseline")
     t_fd, _ = best(lambda: baseline(**p))
     k_out = len(m) - len(PASSED_THROUGH)
     t_floor, _ = best(lambda: [np.full(n, 1.0) for _ in range(k_out)])
@@ -182,7 +189,10 @@ def bench_pairs(n: int = 1_000_000, repeat: int = 5) -> list[dict]:
         f"values equal to the baseline's: {same}; numba vs NumPy path max relative difference "
         f"{rel:.1e}; writing {k_out} fresh output arrays alone {t_floor:.3f} s; numba's first "
         f"call in a fresh process: cold (compiling) {cold['first_call_s']:.1f} s, warm "
-        f"(cache) {warm['first_call_s']:.2f} s (+ import {warm['import_s']:.2f} s)")
+        f"(cache) {warm['first_call_s']:.2f} s (+ import {warm['import_s']:.2f} s); CPU time "
+        f"(this thread, best of {repeat}): numba {cpu['numba']:.3f} s, NumPy path "
+        f"{cpu['numpy']:.3f} s, baseline {cpu['baseline']:.3f} s -> "
+        f"{cpu['baseline'] / cpu['numba']:.1f}x")
     return rows
 
 
