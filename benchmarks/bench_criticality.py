@@ -14,7 +14,10 @@ highway streamed by time window.
    (:func:`aveas_format.derive.streamed.derive_by_windows`) on 2 worker processes, in a fresh
    process whose peak memory (VmHWM) is reported. Target: <= 120 s.
 
-Run alone: ``.venv/bin/python benchmarks/bench_criticality.py [pairs|hour]``.
+3. ``sample``: the real pipeline (``derive(rec, only="interactions")``) on the sample highway on
+   each path of the follower/leader metrics, with the time spent in them; the tables compared.
+
+Run alone: ``.venv/bin/python benchmarks/bench_criticality.py [pairs|sample|hour]``.
 """
 
 from __future__ import annotations
@@ -196,6 +199,68 @@ def bench_pairs(n: int = 1_000_000, repeat: int = 5) -> list[dict]:
     return rows
 
 
+def bench_sample(repeat: int = 3) -> list[dict]:
+    """The real pipeline on the sample highway (``sample.highway_scene``: 60 vehicles, 30 s at
+    25 Hz): ``derive(rec, only="interactions")`` on each path of the follower/leader metrics, with
+    the time spent in them (``follower_leader_metrics`` timed where the pipeline calls it); the
+    interactions tables of both paths compared. Best of ``repeat``, same run."""
+    import os
+
+    from aveas_format.derive import derive
+    from aveas_format.derive.interactions import _pairs as pairs_mod
+    from aveas_format.derive.interactions._ttc import KERNEL_ENV
+    from aveas_format.sample import highway_scene
+
+    rec = highway_scene()
+    n_states = rec.states.num_rows
+    inner = pairs_mod.follower_leader_metrics
+    spent = {"s": 0.0, "pairs": 0}
+
+    def timed(*a, **k):
+        t0 = time.perf_counter()
+        r = inner(*a, **k)
+        spent["s"] += time.perf_counter() - t0
+        spent["pairs"] += len(a[0])
+        return r
+
+    res, tables = {}, {}
+    old = os.environ.get(KERNEL_ENV)
+    pairs_mod.follower_leader_metrics = timed
+    try:
+        for backend in ("numba", "numpy") * (repeat + 1):  # the first round warms up
+            os.environ[KERNEL_ENV] = backend
+            spent.update(s=0.0, pairs=0)
+            t0 = time.perf_counter()
+            derive(rec, only="interactions")
+            total = time.perf_counter() - t0
+            best = res.get(backend)
+            if backend in tables and (best is None or total < best[0]):
+                res[backend] = (total, spent["s"], spent["pairs"])
+            tables[backend] = rec.derived["interactions"]
+    finally:
+        pairs_mod.follower_leader_metrics = inner
+        os.environ.pop(KERNEL_ENV) if old is None else os.environ.__setitem__(KERNEL_ENV, old)
+    a, b = tables["numba"], tables["numpy"]
+    cols = [c for c in a.column_names if a.schema.field(c).type in ("double", "float")]
+    worst = 0.0
+    for c in cols:
+        x, y = (np.asarray(t[c].to_numpy(zero_copy_only=False), float) for t in (a, b))
+        assert np.array_equal(np.isnan(x), np.isnan(y)), c
+        f = np.isfinite(y)
+        worst = max(worst, float(np.max(np.abs(x[f] - y[f]) / np.maximum(np.abs(y[f]), 1e-300),
+                                        initial=0.0)))
+    (tj, fj, npairs), (tn, fn, _) = res["numba"], res["numpy"]
+    return [{"benchmark": "criticality.sample_interactions", "rows": n_states,
+             "seconds": round(tj, 3), "rows_per_s": round(n_states / tj),
+             "baseline_s": round(tn, 3), "speedup_vs_baseline": round(tn / tj, 2),
+             "note": (f"derive(only='interactions') on the sample highway ({n_states:,} states, "
+                      f"{a.num_rows:,} interaction rows, {npairs:,} follower/leader pairs): "
+                      f"numba path {tj:.3f} s, of it the follower measures {fj:.4f} s; NumPy path "
+                      f"{tn:.3f} s, of it {fn:.4f} s -> follower measures {fn / fj:.1f}x; the "
+                      f"interactions tables equal (NaN alike, {len(cols)} float columns, max "
+                      f"relative difference {worst:.1e})")}]
+
+
 # --- an hour of a busy highway ----------------------------------------------------------------------
 
 def highway_hour(path: Path, duration_s: float = 3600.0, concurrent: int = 100,
@@ -307,7 +372,7 @@ def bench_hour(duration_s: float = 3600.0, workers: int = 2, window_s: float | N
 
 
 def main() -> list[dict]:
-    return bench_pairs() + bench_hour()
+    return bench_pairs() + bench_sample() + bench_hour()
 
 
 if __name__ == "__main__":
@@ -317,6 +382,9 @@ if __name__ == "__main__":
         _hour_child(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]))
     elif len(sys.argv) > 1 and sys.argv[1] == "pairs":
         for r in bench_pairs():
+            print(r)
+    elif len(sys.argv) > 1 and sys.argv[1] == "sample":
+        for r in bench_sample():
             print(r)
     elif len(sys.argv) > 1 and sys.argv[1] == "hour":
         for r in bench_hour(float(sys.argv[2]) if len(sys.argv) > 2 else 3600.0,
