@@ -119,6 +119,14 @@ def _compile_child(cache_dir: str) -> None:
     print(json.dumps({"import_s": t1 - t0, "first_call_s": time.perf_counter() - t1}))
 
 
+def _need_numba() -> None:
+    import importlib.util
+
+    if importlib.util.find_spec("numba") is None:
+        raise SystemExit("bench_criticality pairs/sample measure the numba kernel against the NumPy "
+                         "path: pip install -e '.[jit]' (or '.[bench]') first")
+
+
 def _first_calls() -> tuple[dict, dict]:
     """The numba kernel's first call in a fresh process: cold (an empty cache: it compiles) and
     warm (a second process: it loads the cache that the first wrote)."""
@@ -137,6 +145,7 @@ def _first_calls() -> tuple[dict, dict]:
 def bench_pairs(n: int = 1_000_000, repeat: int = 5) -> list[dict]:
     """Ours on numba (serial; and prange over the cores), ours on NumPy, the two baselines, in
     one run; ratios against the baseline with the same analytic derivatives."""
+    _need_numba()
     from aveas_format.derive.interactions import _kernel
     from aveas_format.derive.interactions._ttc import PASSED_THROUGH, follower_leader_metrics
 
@@ -206,6 +215,7 @@ def bench_sample(repeat: int = 3) -> list[dict]:
     interactions tables of both paths compared. Best of ``repeat``, same run."""
     import os
 
+    _need_numba()
     from aveas_format.derive import derive
     from aveas_format.derive.interactions import _pairs as pairs_mod
     from aveas_format.derive.interactions._ttc import KERNEL_ENV
