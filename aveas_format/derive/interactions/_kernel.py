@@ -3,19 +3,19 @@ extra): every measure of :func:`._ttc.follower_leader_metrics` and its std for o
 with no temporaries.
 
 The NumPy path (``_ttc._metrics`` and :func:`._surrogates.lane_surrogates`) is the reference and
-the fallback: the formulas here are the same (``fastmath`` off; where the NumPy path divides
-several times by one quantity, the kernel multiplies by its reciprocal; it computes every branch
-and selects, as the NumPy path does), so both give the same numbers to rounding (a few units in
-the last place) (asserted in
-tests/derive/test_kernel.py over random and degenerate pairs: NaN inputs, zero closing speed,
-contact, negative gaps, stopping vehicles). NumPy's elementwise rules are spelled out where a plain
-scalar ``min``, ``max`` or cast would differ: ``np.minimum``/``np.maximum`` propagate NaN,
-``np.nan_to_num`` maps NaN to 0 and ±inf to the largest finite float, ``np.where`` takes the
-second branch where the condition compares a NaN.
+the fallback, and the formulas here are the same: ``fastmath`` off; every branch computed and the
+defined one selected, as the NumPy path does with ``np.where``; NumPy's elementwise rules spelled
+out where a scalar ``min``, ``max`` or cast would differ (``np.minimum``/``np.maximum`` propagate
+NaN, ``np.nan_to_num`` maps NaN to 0 and ±inf to the largest finite float, a comparison with NaN
+is false); where the NumPy path divides several times by one quantity, the kernel multiplies by
+its reciprocal. Both give the same numbers to a few units in the last place, NaN and ±inf in the
+same places (tests/derive/test_kernel.py, over random pairs and every combination of degenerate
+ones: NaN and infinite inputs, zero closing speed, contact, negative gaps, stopping vehicles).
 
 Imported only where the numba path runs (:func:`._ttc.kernel_backend` decides, in one place); the
-first call in an environment compiles the kernel (a few seconds) and caches it next to this module
-(numba's ``cache=True``): later processes load it in a fraction of a second.
+first call in an environment compiles the kernel (seconds) and caches it next to this module
+(numba's ``cache=True``); later processes load it with numba's import in well under a second
+when the machine is idle. docs/derive.md "Fast path".
 """
 
 from __future__ import annotations
