@@ -8,6 +8,9 @@ plus the leader's length). Conventions: docs/derive.md.
 
 from __future__ import annotations
 
+import importlib.util
+import os
+
 import numpy as np
 
 from aveas_format.derive.interactions._surrogates import lane_surrogates
@@ -17,10 +20,35 @@ from aveas_format.derive.interactions._surrogates import lane_surrogates
 CHUNK = 1 << 15
 
 
+#: the environment variable that picks the path of :func:`follower_leader_metrics`: ``numpy``,
+#: ``numba`` or ``auto`` (unset: auto, numba where it is installed)
+KERNEL_ENV = "AVEAS_FORMAT_KERNEL"
+KERNEL_BACKENDS = ("numpy", "numba")
+
+
+def kernel_backend(requested: str | None = None) -> str:
+    """Which path computes :func:`follower_leader_metrics`: ``"numba"`` (the fused compiled pass,
+    :mod:`._kernel`, the ``jit`` extra) or ``"numpy"`` (chunked arrays, below). ``requested``,
+    else the :data:`KERNEL_ENV` variable, else ``auto``: numba where it is installed. Asking for
+    numba without it is an error that says how to install it."""
+    req = (requested or os.environ.get(KERNEL_ENV) or "auto").strip().lower()
+    if req == "auto":
+        return "numba" if _HAS_NUMBA else "numpy"
+    if req not in KERNEL_BACKENDS:
+        src = "backend" if requested else KERNEL_ENV
+        raise ValueError(f"unknown kernel backend {req!r} ({src}): choose auto, numpy or numba")
+    if req == "numba" and not _HAS_NUMBA:
+        raise ImportError("the numba kernel needs numba: pip install 'aveas-format[jit]'")
+    return req
+
+
+_HAS_NUMBA = importlib.util.find_spec("numba") is not None
+
+
 def follower_leader_metrics(gap: np.ndarray, gap_var: np.ndarray, leader_length: np.ndarray,
                             follower: tuple[np.ndarray, ...], leader: tuple[np.ndarray, ...],
-                            reaction_time: float = 1.0, max_deceleration: float = 3.4
-                            ) -> dict[str, np.ndarray]:
+                            reaction_time: float = 1.0, max_deceleration: float = 3.4,
+                            backend: str | None = None) -> dict[str, np.ndarray]:
     """The 1D metrics of follower/leader pairs along their lane: ``closing``, ``ttc``,
     ``ttc_std``, ``ttc_ca`` (MTTC), ``ttc_ca_std``, ``thw`` and ``dhw`` (with ``gap`` and
     ``gap_var``), and the surrogates ``drac``, ``mdrac``, ``psd`` with their ``_std``
@@ -29,10 +57,17 @@ def follower_leader_metrics(gap: np.ndarray, gap_var: np.ndarray, leader_length:
     ``follower`` and ``leader`` are ``(v, a, v_var, a_var)``: speed and acceleration along the lane
     and their variances. ``ttc_std`` is NaN where the pair is not closing. Computed in chunks of
     :data:`CHUNK` pairs (the many temporaries of a chunk stay in the cache: 2-3x faster than whole
-    arrays for millions of pairs). ``gap`` and ``gap_var`` are the inputs themselves (not copied)."""
+    arrays for millions of pairs), or by the compiled kernel in one pass where numba is installed
+    (``backend``: :func:`kernel_backend`; the same numbers to rounding). ``gap`` and ``gap_var``
+    are the inputs themselves (not copied)."""
     n = len(gap)
     args = [np.asarray(a, float) for a in (gap, gap_var, leader_length, *follower, *leader)]
     args = np.broadcast_arrays(*args) if n else args
+    if n and kernel_backend(backend) == "numba":
+        from aveas_format.derive.interactions import _kernel
+
+        return {"gap": args[0], "gap_var": args[1],
+                **_kernel.metrics(args, reaction_time, max_deceleration)}
     out: dict[str, np.ndarray] = {}
     for lo in range(0, max(n, 1), CHUNK):
         part = _metrics(*(a[lo:lo + CHUNK] for a in args), reaction_time, max_deceleration)
@@ -149,7 +184,8 @@ def _ttc_ca_std(g, vf, af, vl, al, ttc, gvar, vfv, afv, vlv, alv, taus=None):
     not the vehicle stopped, ``∂x/∂v = τ`` and ``∂x/∂a = τ²/2``. NaN where the TTC is infinite,
     0 (already touching) or the contact grazing (``∂gap/∂t = 0``)."""
     tf, tl = taus if taus is not None else _taus(ttc, vf, af, vl, al)
-    with np.errstate(invalid="ignore", divide="ignore"):
+    # over: an infinite variance (nan_to_num: the largest float) times tau² is inf, as meant
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         rate = (vl + al * tl) - (vf + af * tf)  # d gap / dt at the root
         var = (np.nan_to_num(gvar) + tf * tf * np.nan_to_num(vfv) + 0.25 * tf ** 4 * np.nan_to_num(afv)
                + tl * tl * np.nan_to_num(vlv) + 0.25 * tl ** 4 * np.nan_to_num(alv)) / (rate * rate)
