@@ -71,7 +71,7 @@ elif what == "parse":  # the floor of a Python-object reader: orjson on the same
 else:
     if what == "import_generic":  # the reader before the columnar blocks: frames as Python objects
         import aveas_format.converters.openlabel.fastblock as fb
-        fb.read_block = lambda buf: None
+        fb.read_block = lambda *a, **k: None
     base = hwm_mb()
     t0 = time.perf_counter()
     rec = convert("openlabel", [out])
@@ -169,7 +169,7 @@ def _openlabel_rows(rec, tmp: Path) -> list[dict]:
                          "orjson.loads of the same bytes (no recording built, gc paused), best of 3"))
         import aveas_format.converters.openlabel.fastblock as fb
 
-        read_block, fb.read_block = fb.read_block, lambda buf: None
+        read_block, fb.read_block = fb.read_block, lambda *a, **k: None
         try:
             b_gen = _best(lambda: convert("openlabel", [out]))
         finally:

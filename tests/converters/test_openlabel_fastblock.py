@@ -31,19 +31,20 @@ def exported(tmp_path_factory):
     return path
 
 
-def _import(path, monkeypatch, *, fast: bool):
-    """``(recording, findings, (blocks the fast path took, blocks offered))``."""
+def _import(path, monkeypatch, *, fast: bool, workers: int = 1):
+    """``(recording, findings, (blocks the fast path took, blocks offered))`` (the blocks counted
+    where they are read in this process: ``workers=1``)."""
     taken = []
 
-    def read_block(buf):
-        out = _READ_BLOCK(buf) if fast else None
+    def read_block(buf, threads=True):
+        out = _READ_BLOCK(buf, threads) if fast else None
         taken.append(out is not None)
         return out
 
     monkeypatch.setattr(fb, "read_block", read_block)
     with collect_source_findings() as found, warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        rec = convert("openlabel", [path])
+        rec = convert("openlabel", [path], options={"workers": workers})
     return rec, [(f.code, f.location, f.count) for f in found], (sum(taken), len(taken))
 
 
@@ -172,3 +173,30 @@ def test_any_block_size_gives_the_same_recording(exported, monkeypatch, block):
     assert_identical(got, want)
     assert f_got == f_want
     assert n_fast == n and (n > 1 if block == 3000 else n == 0)
+
+
+def _mixed(ol):
+    """A PMF not summing to 1, a missing velocity and a rotated box (a block for the generic
+    path) in frames after the first."""
+    frames = list(ol["frames"].values())
+    boxes = [next(iter(frames[i]["objects"].values()))["object_data"] for i in (3, 7, 12)]
+    boxes[0]["vec"].append({"name": "classification/uncertainties", "val": [0.5, 0.4]})
+    boxes[1]["vec"][:] = [v for v in boxes[1]["vec"] if v["name"] != "velocity"]
+    boxes[2]["cuboid"][0]["val"][3] = 0.01
+
+
+def test_blocks_read_in_worker_processes_give_the_same_recording_and_findings(exported, tmp_path,
+                                                                                 monkeypatch):
+    """Two worker processes read the blocks (columns handed back in file order): the same
+    recording and the same located findings as in process, a block the fast path cannot take
+    included."""
+    from aveas_format.converters.openlabel import stream
+
+    p = _edited(exported, tmp_path, _mixed)
+    monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", 3000)  # ~a frame a block: many blocks in flight
+    want, f_want, (n_fast, n) = _import(p, monkeypatch, fast=True)
+    assert n_fast == n - 1 and n > 4
+    assert sorted(c for c, *_ in f_want) == ["source.openlabel.missing_attribute", "source.openlabel.pmf_sum"]
+    got, f_got, _ = _import(p, monkeypatch, fast=True, workers=2)
+    assert_identical(got, want)
+    assert f_got == f_want

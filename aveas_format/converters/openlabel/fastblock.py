@@ -31,7 +31,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from aveas_format.converters.openlabel.columns import vector_columns
+from aveas_format.converters.openlabel.columns import block_findings, vector_columns
 from aveas_format.converters.openlabel.profile import EXT, LIGHTS, _enum_value
 
 try:
@@ -140,26 +140,29 @@ def _box_spans(buf: bytes) -> tuple[np.ndarray, np.ndarray]:
 
 class FastBlock:
     """A block of frames read by :func:`read_block`: ``frames`` as ``(key, frame)`` with each
-    frame's ``objects`` mapping uid -> row, and the rows' columns (:func:`box_columns`)."""
+    frame's ``objects`` mapping uid -> row, the rows' columns (:func:`box_columns`) and what the
+    checks of the source found (:func:`~.columns.block_findings`, the profile's mandatory
+    attributes included: the caller keeps those for files that claim the profile). numpy arrays,
+    lists of numbers and the frames' skeleton: cheap to hand back from a worker process."""
 
     def __init__(self, frames: list, cols: dict[str, np.ndarray], sizes: list, ext: dict[str, tuple],
-                 at: ArrowAttributes) -> None:
-        self.frames, self.cols, self.sizes, self.ext, self.at = frames, cols, sizes, ext, at
+                 found: list[tuple[str, str, int, int]]) -> None:
+        self.frames, self.cols, self.sizes, self.ext, self.found = frames, cols, sizes, ext, found
 
 
-def read_block(buf: bytes) -> FastBlock | None:
+def read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
     """The block ``buf`` (``{"key":{frame},...}``) as a :class:`FastBlock`, or None where it does
-    not fit the fast path (see the module's doc)."""
+    not fit the fast path (see the module's doc). ``threads``: Arrow's reader on its thread pool."""
     if orjson is None:
         return None
     try:
-        return _read_block(buf)
+        return _read_block(buf, threads)
     except (_NotFast, pa.ArrowInvalid, pa.ArrowTypeError, orjson.JSONDecodeError, KeyError, IndexError,
             TypeError, ValueError):
         return None
 
 
-def _read_block(buf: bytes) -> FastBlock | None:
+def _read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
     starts, ends = _box_spans(buf)
     n = len(starts)
     if n == 0:
@@ -195,13 +198,13 @@ def _read_block(buf: bytes) -> FastBlock | None:
         boxes.decode("utf-8")  # (UnicodeDecodeError is a ValueError: the generic path names it)
     import pyarrow.json as pj
 
-    table = pj.read_json(pa.py_buffer(boxes), read_options=pj.ReadOptions(use_threads=True, block_size=ARROW_BLOCK),
+    table = pj.read_json(pa.py_buffer(boxes), read_options=pj.ReadOptions(use_threads=threads, block_size=ARROW_BLOCK),
                          parse_options=pj.ParseOptions(explicit_schema=BOX_SCHEMA,
                                                        unexpected_field_behavior="infer"))
     if table.num_rows != n:
         return None
     cols, sizes, ext, at = box_columns(table)
-    return FastBlock(frames, cols, sizes, ext, at)
+    return FastBlock(frames, cols, sizes, ext, block_findings(at, profile=True))
 
 
 # ------------------------------------------------------------------------------------------------

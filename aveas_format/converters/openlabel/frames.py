@@ -17,16 +17,16 @@ from __future__ import annotations
 import math
 import re
 from collections import defaultdict
-from itertools import chain, compress, repeat
+from itertools import compress, repeat
 from operator import is_not
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from aveas_format.converters.openlabel.columns import (_MISSING, as_obj, block_columns, box_parts, ext_chunk,
-                                                       split_boxes)
-from aveas_format.converters.openlabel.profile import (LIGHTS, _LONGITUDINAL, MANDATORY_FRAME_ATTRIBUTES, _attrs,
+from aveas_format.converters.openlabel.columns import (_MISSING, as_obj, block_columns, block_findings, box_parts,
+                                                       ext_chunk, split_boxes)
+from aveas_format.converters.openlabel.profile import (LIGHTS, _LONGITUDINAL, _attrs,
                                                        _first)
 from aveas_format.errors import FormatError
 
@@ -317,33 +317,12 @@ class _FrameRows:
         else:
             f[2] += count
 
-    def _check_block(self, at: Any, js: list[int], us: list[str]) -> None:
-        """The checks of the source in bulk: PMF attributes (``*/uncertainties``) that do not sum
-        to 1, and (files that claim the profile) boxes without a mandatory attribute."""
-        from aveas_format.schema.pmf import pmf_problems
-
-        for name in at.code_of:
-            if not name.endswith("/uncertainties"):
+    def _check_block(self, found: list[tuple[str, str, int, int]], js: list[int], us: list[str]) -> None:
+        """A block's :func:`block_findings` (box indices into ``js``/``us``), located."""
+        for code, name, i, count in found:
+            if code == "source.openlabel.missing_attribute" and not self.profile:
                 continue
-            boxes, vals = at.first(name)
-            try:
-                lens = set(map(len, vals))
-                m = np.fromiter(chain.from_iterable(vals), float).reshape(len(vals), -1) \
-                    if len(lens) == 1 else None
-            except (TypeError, ValueError):
-                m = None
-            bad = pmf_problems(m) if m is not None else np.fromiter(map(_pmf_bad, vals), bool, len(vals))
-            if bad.any():
-                i = int(boxes[np.argmax(bad)])
-                self._found("source.openlabel.pmf_sum", name, self.keys[js[i]], us[i], int(bad.sum()))
-        if self.profile:
-            for name in MANDATORY_FRAME_ATTRIBUTES:
-                has = np.zeros(at.n, bool)
-                has[at.first(name)[0]] = True
-                if not has.all():
-                    i = int(np.argmin(has))
-                    self._found("source.openlabel.missing_attribute", name, self.keys[js[i]], us[i],
-                                int((~has).sum()))
+            self._found(code, name, self.keys[js[i]], us[i], count)
 
     def _flush(self) -> None:
         """The waiting boxes into one chunk of columns (:func:`.columns.block_columns`)."""
@@ -373,7 +352,7 @@ class _FrameRows:
             return _box_in_root(cubs[i], lambda name: self._resolve(name, j, u), keys[j], u, self.path)
 
         ch, sizes, ext, at = block_columns(ods, cubs, place)
-        self._keep(ch, sizes, ext_chunk(ext), at, js, us)
+        self._keep(ch, sizes, ext_chunk(ext), block_findings(at, self.profile), js, us)
         inames = [nm for nm in at.code_of if nm.startswith("interior/")]
         if inames:
             for i in at.boxes_with(inames).tolist():
@@ -382,13 +361,14 @@ class _FrameRows:
                     self.interior.append((js[i], us[i], irow))
         self.p_edges = {}
 
-    def _keep(self, ch: dict[str, np.ndarray], sizes: list, ext: dict[str, tuple], at: Any,
-              js: list[int], us: list[str]) -> None:
-        """A block's columns (boxes of frames ``js``, objects ``us``), checked and kept."""
+    def _keep(self, ch: dict[str, np.ndarray], sizes: list, ext: dict[str, tuple],
+              found: list[tuple[str, str, int, int]], js: list[int], us: list[str]) -> None:
+        """A block's columns (boxes of frames ``js``, objects ``us``) and what its checks found
+        (:func:`block_findings`), kept."""
         ui = self.uid_index
         ch["uidx"] = np.fromiter(map(ui.__getitem__, us), np.int64, len(us))
         ch["occ"] = np.asarray(js, np.int64)
-        self._check_block(at, js, us)
+        self._check_block(found, js, us)
         self.chunks.append(ch)
         self.ext_chunks.append((len(us), ext))
         need = {u: self._needs_size(u) for u in dict.fromkeys(us)}
@@ -415,7 +395,7 @@ class _FrameRows:
             js.extend(repeat(j, len(fobjs)))
             us.extend(fobjs)
         if us:
-            self._keep(blk.cols, blk.sizes, blk.ext, blk.at, js, us)
+            self._keep(blk.cols, blk.sizes, blk.ext, blk.found, js, us)
 
     def finish(self) -> _FrameData:
         self._flush()
@@ -482,17 +462,6 @@ class _FrameRows:
                           sizes=sizes, interior=interior, has_vel=has_vel, has_road=has_road,
                           frame_types=self.frame_types, moving_static=sorted(self.moving_static),
                           unknown_cs=sorted(self.cs.unknown), found=self.found)
-
-
-def _pmf_bad(v: Any) -> bool:
-    """Whether one PMF value is no vector of numbers summing to 1 (within the schema's tolerance)."""
-    from aveas_format.schema.pmf import pmf_problems
-
-    try:
-        m = np.asarray([v], float)
-    except (TypeError, ValueError):
-        return True
-    return m.ndim != 2 or bool(pmf_problems(m)[0])
 
 
 def _frame_timestamp(fr: dict[str, Any]) -> Any:

@@ -21,6 +21,7 @@ from typing import Any, Literal
 
 import numpy as np
 import pyarrow as pa
+from pydantic import Field
 
 from aveas_format.converters.common import (TIMESTAMP_UNITS, load_map_bytes, resolve_timestamps,
                                             source_block)
@@ -70,6 +71,10 @@ class OpenLabelImportOptions(ImportOptions):
     """Unit of ``frame_properties.timestamp``: s, ms, us or ns; ``auto`` infers it from the values'
     magnitude (since the Unix epoch when they fall between 1990 and 2100) and spacing (since the
     start otherwise); the choice is recorded in the ``source`` block."""
+    workers: int = Field(0, ge=0, exclude=True)
+    """Processes reading the blocks of frames of a large file (0: one per core; 1: in this
+    process; CLI ``--workers``); the recording is the same whatever the number (not recorded in
+    the ``source`` block)."""
     keep_non_road_users: bool = False
     """Import objects whose type is no road user (barriers, signs, static persons...; see
     docs/converters.md "Labels that are not road users"), as class other; ignore-type objects
@@ -164,7 +169,7 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
         for k, fr in (ol.get("frames") or {}).items():
             acc.add(k, fr)
     else:  # blocks of frames in columns (the profile's layout) or one frame at a time
-        for k, fr in frames(columnar=not acc.static_cuboids):
+        for k, fr in frames(columnar=not acc.static_cuboids, workers=options.workers):
             if k is COLUMNAR:
                 acc.add_columns(fr)
             else:

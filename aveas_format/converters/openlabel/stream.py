@@ -11,6 +11,8 @@ anything, to report its JSON error where one exists.
 from __future__ import annotations
 
 import re
+from contextlib import closing
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -183,10 +185,10 @@ def _stream_doc(path: Path):
     if span is None:
         return ol, None
 
-    def frames(columnar: bool = False):
+    def frames(columnar: bool = False, workers: int | None = 1):
         start = span[0]
         if orjson is not None:
-            start = yield from _fast_frames(path, span, columnar)
+            start = yield from _fast_frames(path, span, columnar, workers)
             if start is None:
                 return
         with _open(path) as fr:
@@ -210,48 +212,75 @@ COLUMNAR = object()
 _FRAME_HEAD = re.compile(rb'\s*"(?:[^"\\]|\\.)*"\s*:\s*\{\s*$')
 
 
-def _fast_frames(path: Path, span: tuple[int, int], columnar: bool = False):
+def _fast_frames(path: Path, span: tuple[int, int], columnar: bool = False, workers: int | None = 1):
     """The frames cut into blocks of whole frames where a frame starts with ``"key":{
     "frame_properties"`` (this library's exports, and files laid out like them) and each block
     parsed with orjson; a generator returning None when it took all frames, else the file offset
     (at a frame boundary) from which the caller goes on with ijson — at the first block it cannot
     cut or parse (another layout, NaN, numbers orjson refuses: the exact error comes from ijson).
     ``columnar``: a block that :func:`.fastblock.read_block` takes is yielded whole as
-    ``(COLUMNAR, FastBlock)`` (bigger blocks); the others as frames."""
-    from aveas_format.converters.openlabel.fastblock import read_block
+    ``(COLUMNAR, FastBlock)`` (bigger blocks), read by ``workers`` processes (1: here; 0/None: one
+    per core; :func:`aveas_format.parallel.map_ordered`: in file order, a few blocks in flight);
+    the others as frames, parsed here."""
+    from aveas_format.parallel import map_ordered
 
     size = _COLUMNAR_BLOCK if columnar else _BLOCK
+    if not columnar or span[1] - span[0] <= 2 * size:  # (a small file: no processes to start)
+        workers = 1
     with _open(path) as f:
         f.seek(span[0])
         if f.read(1) != b"{":
             return span[0]
-        pos, end = span[0] + 1, span[1] - 1  # the members between the braces
-        buf = b""
-        while pos < end:
-            data = f.read(min(size, end - pos - len(buf)))
-            buf += data
-            last = not data or pos + len(buf) >= end
-            cut = len(buf) if last else _last_cut(buf)
-            if cut is None:  # no frame head in 4 blocks: another layout
-                if len(buf) > 4 * size:
-                    return span[0] if pos == span[0] + 1 else pos
-                continue
-            fast = read_block(b"{" + buf[:cut] + b"}") if columnar else None
-            if fast is not None:
-                yield COLUMNAR, fast
-                block = {}
-            else:
+        # (in worker processes Arrow's reader runs on one thread: the processes are the parallelism)
+        read = partial(_read_cut, threads=workers == 1) if columnar else _no_block
+        with closing(map_ordered(read, _cut_blocks(f, span, size), workers=workers)) as blocks:
+            for (pos, cut), fast in blocks:
+                if cut is None:  # no frame head in 4 blocks: another layout
+                    return pos
+                if fast is not None:
+                    yield COLUMNAR, fast
+                    continue
                 try:
-                    block = orjson.loads(b"{" + buf[:cut] + b"}")
+                    block = orjson.loads(b"{" + cut + b"}")
                 except orjson.JSONDecodeError:
                     block = None
-            if not isinstance(block, dict):
-                return span[0] if pos == span[0] + 1 else pos
-            yield from block.items()
-            pos += cut + 1  # past the comma between two frames
-            buf = buf[cut + 1:]
-            if last:
-                break
+                if not isinstance(block, dict):
+                    return pos
+                yield from block.items()
+    return None
+
+
+def _cut_blocks(f, span: tuple[int, int], size: int):
+    """``(offset, bytes)`` of the blocks of whole frames (the members between the braces of the
+    frames, without the commas between blocks) from ``f``, read past the frames' ``{``; ``(offset,
+    None)`` last where no frame head was found in 4 blocks (another layout)."""
+    pos, end = span[0] + 1, span[1] - 1
+    buf = b""
+    while pos < end:
+        data = f.read(min(size, end - pos - len(buf)))
+        buf += data
+        last = not data or pos + len(buf) >= end
+        cut = len(buf) if last else _last_cut(buf)
+        if cut is None:
+            if len(buf) > 4 * size:
+                yield (span[0] if pos == span[0] + 1 else pos), None
+                return
+            continue
+        yield (span[0] if pos == span[0] + 1 else pos), buf[:cut]
+        pos += cut + 1  # past the comma between two frames
+        buf = buf[cut + 1:]
+        if last:
+            break
+
+
+def _read_cut(item: tuple[int, bytes | None], threads: bool = True):
+    """A cut block into columns (:func:`.fastblock.read_block`; runs in a worker process)."""
+    from aveas_format.converters.openlabel.fastblock import read_block
+
+    return None if item[1] is None else read_block(b"{" + item[1] + b"}", threads=threads)
+
+
+def _no_block(item: tuple[int, bytes | None]) -> None:
     return None
 
 
