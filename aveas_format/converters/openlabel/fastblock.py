@@ -109,9 +109,10 @@ def _structure(buf: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarr
     return pos, depth, step, idx[isq]
 
 
-def _box_spans(buf: bytes) -> tuple[np.ndarray, np.ndarray]:
-    """The byte spans ``[start, end)`` of the objects directly under a frame's ``objects`` member."""
-    pos, depth, step, quotes = _structure(buf)
+def _box_spans(buf: bytes, structure: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The byte spans ``[start, end)`` of the objects directly under a frame's ``objects`` member
+    (``structure``: :func:`_structure` of ``buf`` where the caller has it)."""
+    pos, depth, step, quotes = structure or _structure(buf)
     if len(depth) == 0 or depth.min() < 1 or step[0] != 1 or depth[-1] != 1 or step[-1] != -1:
         raise _NotFast
     # the containers one level under a frame (its members' values): which are "objects"
@@ -145,9 +146,11 @@ class FastBlock:
     attributes included: the caller keeps those for files that claim the profile). numpy arrays,
     lists of numbers and the frames' skeleton: cheap to hand back from a worker process."""
 
-    def __init__(self, frames: list, cols: dict[str, np.ndarray], sizes: list, ext: dict[str, tuple],
-                 found: list[tuple[str, str, int, int]]) -> None:
-        self.frames, self.cols, self.sizes, self.ext, self.found = frames, cols, sizes, ext, found
+    def __init__(self, frames: list, cols: dict[str, np.ndarray], ext: dict[str, tuple],
+                 found: list[tuple[str, str, int, int]], depth: int) -> None:
+        self.frames, self.cols, self.ext, self.found = frames, cols, ext, found
+        #: the deepest nesting of containers in the block (its own braces: 1)
+        self.depth = depth
 
 
 def read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
@@ -162,8 +165,21 @@ def read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
         return None
 
 
+def block_depth(buf: bytes) -> int | None:
+    """The deepest nesting of containers in a block of frames ``{...}`` (its own braces: 1), None
+    where its strings or brackets do not balance."""
+    try:
+        _, depth, step, _ = _structure(buf)
+    except _NotFast:
+        return None
+    if len(depth) == 0 or depth.min() < 1 or depth[-1] != 1 or step[-1] != -1:
+        return None
+    return int(depth.max())
+
+
 def _read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
-    starts, ends = _box_spans(buf)
+    structure = _structure(buf)
+    starts, ends = _box_spans(buf, structure)
     n = len(starts)
     if n == 0:
         return None
@@ -203,8 +219,8 @@ def _read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
                                                        unexpected_field_behavior="infer"))
     if table.num_rows != n:
         return None
-    cols, sizes, ext, at = box_columns(table)
-    return FastBlock(frames, cols, sizes, ext, block_findings(at, profile=True))
+    cols, _, ext, at = box_columns(table)
+    return FastBlock(frames, cols, ext, block_findings(at, profile=True), int(structure[1].max()))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -359,9 +375,10 @@ def _ext_reps(cub: pa.StructArray) -> dict[str, tuple]:
     return out
 
 
-def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], list, dict[str, tuple], ArrowAttributes]:
-    """``(columns, sizes, ext columns, attributes)`` of a block's boxes, as
-    :func:`~.columns.block_columns` and :func:`~.columns.ext_chunk` give them for the same boxes."""
+def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], None, dict[str, tuple], ArrowAttributes]:
+    """``(columns, None, ext columns, attributes)`` of a block's boxes, as
+    :func:`~.columns.block_columns` and :func:`~.columns.ext_chunk` give them for the same boxes
+    (the sizes are the columns ``dl``, ``dw``, ``dh``)."""
     n = table.num_rows
     if table.schema.names != ["object_data"]:
         raise _NotFast
@@ -390,7 +407,6 @@ def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], list, dict[str,
         "px": V[:, 0].copy(), "py": V[:, 1].copy(), "pz": V[:, 2] - V[:, 8] / 2.0, "yaw": V[:, 5].copy(),
         "dl": V[:, 6].copy(), "dw": V[:, 7].copy(), "dh": V[:, 8].copy(),
         "csroot": np.full(n, None, object), "cub_ts": np.full(n, np.nan)}
-    sizes = list(zip(cols["dl"].tolist(), cols["dw"].tolist(), cols["dh"].tolist()))
     at = ArrowAttributes(od, n)
     if any(nm.startswith("interior/") for nm in at.code_of):
         raise _NotFast  # (the interior rows read the items as dicts: the generic path)
@@ -420,7 +436,7 @@ def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], list, dict[str,
             lane_id[ok] = conv[inv]
     cols["lane_id"] = lane_id
     cols["hv"], cols["hr"] = hv, on
-    return cols, sizes, _ext_reps(cub), at
+    return cols, None, _ext_reps(cub), at
 
 
 def _lane_int(v: str) -> Any:

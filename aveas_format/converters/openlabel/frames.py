@@ -238,7 +238,6 @@ class _FrameRows:
         self.p_edges: dict[int, tuple[dict, dict]] = {}  # frame -> (its transforms, resolve cache)
         self.chunks: list[dict[str, np.ndarray]] = []
         self.ext_chunks: list[tuple[int, dict[str, tuple]]] = []
-        self.sizes: list[tuple[int, str, tuple]] = []
         self.interior: list[tuple[int, str, dict]] = []
         self._need_size: dict[str, bool] = {}
         #: object type given inside a frame's object_data (TUM Traffic), by object
@@ -319,10 +318,8 @@ class _FrameRows:
 
     def _check_block(self, found: list[tuple[str, str, int, int]], js: list[int], us: list[str]) -> None:
         """A block's :func:`block_findings` (box indices into ``js``/``us``), located."""
-        for code, name, i, count in found:
-            if code == "source.openlabel.missing_attribute" and not self.profile:
-                continue
-            self._found(code, name, self.keys[js[i]], us[i], count)
+        for code, name, i, count in found:  # (missing attributes kept for files that claim the
+            self._found(code, name, self.keys[js[i]], us[i], count)  # profile: in finish)
 
     def _flush(self) -> None:
         """The waiting boxes into one chunk of columns (:func:`.columns.block_columns`)."""
@@ -351,8 +348,8 @@ class _FrameRows:
             j, u = js[i], us[i]
             return _box_in_root(cubs[i], lambda name: self._resolve(name, j, u), keys[j], u, self.path)
 
-        ch, sizes, ext, at = block_columns(ods, cubs, place)
-        self._keep(ch, sizes, ext_chunk(ext), block_findings(at, self.profile), js, us)
+        ch, _, ext, at = block_columns(ods, cubs, place)
+        self._keep(ch, ext_chunk(ext), block_findings(at, True), js, us)
         inames = [nm for nm in at.code_of if nm.startswith("interior/")]
         if inames:
             for i in at.boxes_with(inames).tolist():
@@ -361,7 +358,7 @@ class _FrameRows:
                     self.interior.append((js[i], us[i], irow))
         self.p_edges = {}
 
-    def _keep(self, ch: dict[str, np.ndarray], sizes: list, ext: dict[str, tuple],
+    def _keep(self, ch: dict[str, np.ndarray], ext: dict[str, tuple],
               found: list[tuple[str, str, int, int]], js: list[int], us: list[str]) -> None:
         """A block's columns (boxes of frames ``js``, objects ``us``) and what its checks found
         (:func:`block_findings`), kept."""
@@ -371,9 +368,24 @@ class _FrameRows:
         self._check_block(found, js, us)
         self.chunks.append(ch)
         self.ext_chunks.append((len(us), ext))
-        need = {u: self._needs_size(u) for u in dict.fromkeys(us)}
-        if any(need.values()):
-            self.sizes.extend((j, u, d) for j, u, d in zip(js, us, sizes) if need[u])
+
+    def _sizes(self, rows: dict[str, np.ndarray], names: list[str]) -> dict[str, list]:
+        """Per object without a static size (``objects`` known by now: a file may have them after
+        its frames) the (length, width, height) of its boxes in the frames kept."""
+        sizes: dict[str, list] = {}
+        if not len(rows["uidx"]):
+            return sizes
+        need = np.fromiter(map(self._needs_size, names), bool, len(names))
+        sel = np.flatnonzero(need[rows["uidx"]])
+        if len(sel):
+            ui = rows["uidx"][sel]
+            order = np.argsort(ui, kind="stable")
+            dims = np.column_stack([rows[c][sel[order]] for c in ("dl", "dw", "dh")]).tolist()
+            uniq, first = np.unique(ui[order], return_index=True)
+            bounds = [*first.tolist(), len(order)]
+            for k, u in enumerate(uniq.tolist()):
+                sizes[names[u]] = dims[bounds[k]:bounds[k + 1]]
+        return sizes
 
     def add_columns(self, blk: Any) -> None:
         """A block of frames read into columns (:class:`.fastblock.FastBlock`: level boxes in the
@@ -395,7 +407,7 @@ class _FrameRows:
             js.extend(repeat(j, len(fobjs)))
             us.extend(fobjs)
         if us:
-            self._keep(blk.cols, blk.sizes, blk.ext, blk.found, js, us)
+            self._keep(blk.cols, blk.ext, blk.found, js, us)
 
     def finish(self) -> _FrameData:
         self._flush()
@@ -437,10 +449,9 @@ class _FrameRows:
         else:
             rows = {c: np.asarray([]) for c in (*_FLOAT_COLS, *_OBJ_COLS)}
             rows["uidx"] = rows["rank"] = np.asarray([], np.int64)
-        sizes: dict[str, list] = defaultdict(list)
-        for j, u, dims in self.sizes:
-            if rank_of[j] >= 0:
-                sizes[u].append(dims)
+        sizes = self._sizes(rows, names)
+        if not self.profile:
+            self.found = {k: v for k, v in self.found.items() if k[0] != "source.openlabel.missing_attribute"}
 
         def interior(pid_of: dict, time_of: dict) -> dict[str, list]:
             out: dict[str, list] = defaultdict(list)

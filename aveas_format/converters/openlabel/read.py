@@ -29,7 +29,7 @@ from aveas_format.converters.labels import LabelFilter, implausible_size, label_
 from aveas_format.converters.openlabel.findings import (_check_objects, _claims_profile, _jpath,
                                                         _report_frame_findings)
 from aveas_format.converters.openlabel.frames import (_MISSING, _FrameData, _Frames, _FrameRows, _rep_list,
-                                                      _rep_take, _utm_crs)
+                                                      _rep_take, _static_cuboids, _utm_crs)
 from aveas_format.converters.openlabel.profile import (
     EXT,
     LIGHTS,
@@ -46,7 +46,8 @@ from aveas_format.converters.openlabel.profile import (
     _to_utc,
     table_from_json,
 )
-from aveas_format.converters.openlabel.stream import COLUMNAR, _check_stream, _load_doc, _NotStrictJSON, _stream_doc
+from aveas_format.converters.openlabel.stream import (COLUMNAR, _check_stream, _load_doc, _NotStrictJSON, _Rescan,
+                                                      _stream_doc)
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, report_source
 from aveas_format.schema.taxonomy import CLASSES
@@ -114,6 +115,13 @@ def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImport
         with _no_gc():
             try:
                 try:
+                    try:  # without the structural pre-scan of the frames, where it can
+                        ol, frames = _stream_doc(path, prescan=False)
+                        map_bytes = _find_map(path, ol, map_source, options)
+                        return _openlabel_to_recording(ol, map_bytes, options=options, path=path,
+                                                       frames=frames)
+                    except _Rescan:
+                        pass
                     ol, frames = _stream_doc(path)
                     map_bytes = _find_map(path, ol, map_source, options)
                     return _openlabel_to_recording(ol, map_bytes, options=options, path=path,
@@ -174,6 +182,11 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
                 acc.add_columns(fr)
             else:
                 acc.add(k, fr)
+        if "objects" not in ol or ol["objects"] is not objects:  # read after the frames (no pre-scan)
+            objects = ol.get("objects") or {}
+            if _static_cuboids(objects):  # (their boxes come from the frames' transforms)
+                raise _Rescan
+            acc.objects, acc.profile = objects, _claims_profile(md, objects)
     fd = acc.finish()
     _report_frame_findings(fd, path)
     fnum, time_of, start_time, resolved = _frame_times(fd.fkeys, fd.stamps, ext, md, options, path)
