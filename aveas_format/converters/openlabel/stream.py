@@ -145,6 +145,20 @@ def _check_stream(path: Path) -> None:
             raise _stream_error(e, path, r.pos) from None
 
 
+def _open_checked(path: Path):
+    """``(the file open for reading, whether its text starts with "{")``, its size checked first."""
+    check_json_size(path, max_bytes=MAX_BULK_JSON_BYTES)
+    try:
+        f = _open(path)
+    except OSError as e:
+        raise RecordingIOError(f"cannot read: {e.strerror or e}", path=path) from None
+    try:
+        return f, f.read(4096).lstrip(b" \t\r\n").startswith(b"{")
+    except BaseException:
+        f.close()
+        raise
+
+
 class _Rescan(Exception):
     """The frames of a file read without the structural pre-scan (:func:`_stream_doc` with
     ``prescan=False``) are not as that path needs them (a block it cannot cut or parse, nesting
@@ -175,14 +189,9 @@ def _stream_doc(path: Path, prescan: bool = True):
         if got is not None:
             return got
 
-    check_json_size(path, max_bytes=MAX_BULK_JSON_BYTES)
-    try:
-        f = _open(path)
-    except OSError as e:
-        raise RecordingIOError(f"cannot read: {e.strerror or e}", path=path) from None
+    f, is_object = _open_checked(path)
     with f:
-        head = f.read(4096).lstrip(b" \t\r\n")
-        if not head.startswith(b"{"):  # empty, a BOM, UTF-16/32, not an object: read it whole
+        if not is_object:  # empty, a BOM, UTF-16/32, not an object: read it whole
             return _load_doc(path), None
         depth, span, ok = scan_json_member(f, "openlabel", "frames")
     if not ok:  # broken (e.g. truncated: refused here in bounded memory) or a member repeats
@@ -226,13 +235,9 @@ def _frames_without_prescan(path: Path):
     ``prescan=False``, or None where the structure up to the frames does not allow it."""
     import ijson
 
-    check_json_size(path, max_bytes=MAX_BULK_JSON_BYTES)
-    try:
-        f = _open(path)
-    except OSError as e:
-        raise RecordingIOError(f"cannot read: {e.strerror or e}", path=path) from None
+    f, is_object = _open_checked(path)
     with f:
-        if not f.read(4096).lstrip(b" \t\r\n").startswith(b"{"):
+        if not is_object:
             return None
         depth, span, ok = scan_json_member(f, "openlabel", "frames", chunk=_HEAD_CHUNK, until_member=True)
         if not ok or span is None or span[1] is not None or depth >= MAX_JSON_DEPTH:
