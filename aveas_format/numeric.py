@@ -152,3 +152,23 @@ def keyed_normals(seed: int, keys: tuple[np.ndarray, ...], n: int) -> np.ndarray
     np.multiply(r, np.cos(u2), out=out[:half])
     np.multiply(r, np.sin(u2), out=out[half:])
     return out[:n]
+
+
+_TRIM: object = None
+
+
+def release_free_memory() -> None:
+    """Hand the memory freed by many small arrays back to the operating system (glibc's
+    ``malloc_trim``; a no-op where there is none): numpy allocates arrays below ~128 kB on the C
+    heap, whose freed pages stay with the process — after the column chunks of a large import
+    are concatenated, several hundred MB of them (``converters/openlabel/frames.py``)."""
+    global _TRIM
+    if _TRIM is None:
+        try:
+            import ctypes
+
+            _TRIM = ctypes.CDLL("libc.so.6").malloc_trim
+        except (OSError, AttributeError):  # not glibc (macOS, Windows, musl)
+            _TRIM = False
+    if _TRIM:
+        _TRIM(0)

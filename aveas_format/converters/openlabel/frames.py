@@ -29,6 +29,7 @@ from aveas_format.converters.openlabel.columns import (_MISSING, as_obj, block_c
 from aveas_format.converters.openlabel.profile import (LIGHTS, _LONGITUDINAL, _attrs,
                                                        _first)
 from aveas_format.errors import FormatError
+from aveas_format.numeric import release_free_memory
 
 
 # -- geometry of generic files -------------------------------------------------------------------
@@ -434,18 +435,23 @@ class _FrameRows:
             sel = np.flatnonzero(rank >= 0)
             sel = sel[np.argsort(rank[sel], kind="stable")]
             ident = len(sel) == len(rank) and bool((sel == np.arange(len(sel))).all())
-            for c in list(self.chunks[0]):  # one column at a time, freeing its chunks
+            for i, c in enumerate(list(self.chunks[0])):  # one column at a time, freeing its chunks
                 a = np.concatenate([ch.pop(c) for ch in self.chunks])
                 rows[c] = a if ident else a[sel]
+                if i % 4 == 3:  # (the chunks' small arrays: their pages back to the system)
+                    release_free_memory()
             self.chunks = []
             rows["rank"] = rank if ident else rank[sel]
             hv, hr = rows.pop("hv"), rows.pop("hr")
             has_vel, has_road = bool(hv.all()), bool(hr.any())
             keys = dict.fromkeys(c for _, reps in self.ext_chunks for c in reps)
-            for c in keys:
-                parts = [reps.get(c) or ("f", np.full(m, np.nan), np.zeros(m, bool), np.zeros(m, bool))
+            for c in keys:  # one member at a time, freeing its chunks (nothing kept twice)
+                parts = [reps.pop(c, None) or ("f", np.full(m, np.nan), np.zeros(m, bool), np.zeros(m, bool))
                          for m, reps in self.ext_chunks]
                 ext[c] = _rep_concat(parts) if ident else _rep_take(_rep_concat(parts), sel)
+                del parts
+            self.ext_chunks = []
+            release_free_memory()
         else:
             rows = {c: np.asarray([]) for c in (*_FLOAT_COLS, *_OBJ_COLS)}
             rows["uidx"] = rows["rank"] = np.asarray([], np.int64)
