@@ -177,3 +177,23 @@ def finite_quantiles(a: np.ndarray, qs: tuple[float, ...]) -> list[np.ndarray]:
             v = np.where(t >= 0.5, x1 - d * (1 - t), x0 + d * t)
         out.append(np.where(n > 0, v, np.nan))
     return out
+
+
+_TRIM: object = None
+
+
+def release_free_memory() -> None:
+    """Hand the memory freed by many small arrays back to the operating system (glibc's
+    ``malloc_trim``; a no-op where there is none): numpy allocates arrays below ~128 kB on the C
+    heap, whose freed pages stay with the process — after the column chunks of a large import
+    are concatenated, several hundred MB of them (``converters/openlabel/frames.py``)."""
+    global _TRIM
+    if _TRIM is None:
+        try:
+            import ctypes
+
+            _TRIM = ctypes.CDLL("libc.so.6").malloc_trim
+        except (OSError, AttributeError):  # not glibc (macOS, Windows, musl)
+            _TRIM = False
+    if _TRIM:
+        _TRIM(0)

@@ -169,3 +169,56 @@ class _Progress:
 
     def close(self) -> None:
         self._p.stop()
+
+
+def map_ordered(fn: Callable[[Any], Any], items: Iterable[Any], *, workers: int | None = 1,
+                ahead: int | None = None) -> Iterator[tuple[Any, Any]]:
+    """``(item, fn(item))`` for each item of a lazy iterable, in input order, ``fn`` run in ``workers``
+    local processes (1 = in this process; 0/None = one per core) with at most ``ahead`` in flight
+    (default ``2 * workers``): memory stays bounded by what those items and results hold. Meant
+    for the blocks of one large file (read, cut and sent by the caller, parsed by the workers).
+
+    An exception in ``fn`` is raised here at that item's position (the remaining items are
+    dropped). Where a worker process dies (crash, out of memory), that item and the ones after it
+    run in this process. Closing the generator early cancels what is still in flight."""
+    if not workers:
+        import multiprocessing
+
+        workers = 1 if multiprocessing.parent_process() is not None else default_workers()
+    if workers <= 1:
+        for item in items:
+            yield item, fn(item)
+        return
+    ahead = max(1, ahead or 2 * workers)
+    it = iter(items)
+    pool = ProcessPoolExecutor(max_workers=workers)
+    queue: list[tuple[Any, Future]] = []
+    try:
+        for item in it:
+            queue.append((item, _submit(pool, fn, item)))
+            if len(queue) < ahead:
+                continue
+            yield _take(fn, queue.pop(0))
+        while queue:
+            yield _take(fn, queue.pop(0))
+    finally:
+        for _, fut in queue:
+            fut.cancel()
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _submit(pool: ProcessPoolExecutor, fn: Callable[[Any], Any], item: Any) -> Future:
+    try:
+        return pool.submit(fn, item)
+    except BrokenProcessPool as e:  # (the pool broke earlier: the item runs here, in _take)
+        fut: Future = Future()
+        fut.set_exception(e)
+        return fut
+
+
+def _take(fn: Callable[[Any], Any], entry: tuple[Any, Future]) -> tuple[Any, Any]:
+    item, fut = entry
+    try:
+        return item, fut.result()
+    except BrokenProcessPool:  # a worker died: this item (and, via their futures, the later ones) here
+        return item, fn(item)

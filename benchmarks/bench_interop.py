@@ -71,12 +71,14 @@ elif what == "parse":  # the floor of a Python-object reader: orjson on the same
 else:
     if what == "import_generic":  # the reader before the columnar blocks: frames as Python objects
         import aveas_format.converters.openlabel.fastblock as fb
-        fb.read_block = lambda buf: None
+        fb.read_block = lambda *a, **k: None
     base = hwm_mb()
     t0 = time.perf_counter()
-    rec = convert("openlabel", [out])
+    rec = convert("openlabel", [out], options={"workers": 1 if what != "import" else 0})
 dt = time.perf_counter() - t0
+import resource  # the worker processes' peak (the largest of them; ru_maxrss in KiB on Linux)
 print(json.dumps({"seconds": dt, "peak_mb": hwm_mb(), "before_mb": base,
+                  "workers_peak_mb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024,
                   "states": n if n is not None else rec.states.num_rows}))
 """
 
@@ -153,10 +155,16 @@ def _openlabel_rows(rec, tmp: Path) -> list[dict]:
                  f"pyarrow Parquet write of the states, atomic ({(tmp / 'states.parquet').stat().st_size / 1e6:.1f}"
                  " MB)")]
     dt = _best(lambda: convert("openlabel", [out]))
+    dt1 = _best(lambda: convert("openlabel", [out], options={"workers": 1}))
     data = out.read_bytes()
     b_loads = _best(lambda: json.loads(data), gc_off=True)
     b_pqr = _best(lambda: pq.read_table(tmp / "states.parquet"))
-    rows += [_row("import_openlabel", n, dt, "lossless (aveas_format extension), streamed, best of 3",
+    from aveas_format.parallel import default_workers
+
+    rows += [_row("import_openlabel", n, dt, f"lossless (aveas_format extension), streamed, blocks in "
+                  f"{default_workers()} worker processes, best of 3", dt1,
+                  "the same import in one process (workers=1), best of 3"),
+             _row("import_openlabel", n, dt, "(the same run)",
                   b_loads, "json.loads of the same bytes (no recording built, gc paused as in the import), best of 3"),
              _row("import_openlabel", n, dt, "(the same run)", b_pqr, "pyarrow Parquet read of the states")]
     try:
@@ -169,7 +177,7 @@ def _openlabel_rows(rec, tmp: Path) -> list[dict]:
                          "orjson.loads of the same bytes (no recording built, gc paused), best of 3"))
         import aveas_format.converters.openlabel.fastblock as fb
 
-        read_block, fb.read_block = fb.read_block, lambda buf: None
+        read_block, fb.read_block = fb.read_block, lambda *a, **k: None
         try:
             b_gen = _best(lambda: convert("openlabel", [out]))
         finally:
@@ -380,11 +388,15 @@ def large(target_states: int, generic: bool = True) -> list[dict]:
         e = _child("export", tmp / "rec", out)
         mb = out.stat().st_size / 1e6
         i = _child("import", tmp / "rec", out)
+        i1 = _child("import_1", tmp / "rec", out)
         rows = [
             _row("export_openlabel_large", n, e["seconds"], f"{mb:.0f} MB; fresh process: peak "
                  f"{e['peak_mb']:.0f} MB with the recording loaded ({e['before_mb']:.0f} MB before the export)"),
             _row("import_openlabel_large", i["states"], i["seconds"],
-                 f"fresh process: peak {i['peak_mb']:.0f} MB ({i['before_mb']:.0f} MB after imports)"),
+                 f"blocks in worker processes (one per core); fresh process: peak {i['peak_mb']:.0f} MB "
+                 f"({i['before_mb']:.0f} MB after imports), each worker at most {i['workers_peak_mb']:.0f} MB",
+                 i1["seconds"],
+                 f"the same import in one process (workers=1), fresh process: peak {i1['peak_mb']:.0f} MB"),
         ]
         p = _child("parse", tmp / "rec", out)
         rows.append(_row("import_openlabel_large", i["states"], i["seconds"], "(the same run)", p["seconds"],

@@ -73,6 +73,12 @@ def main(n_vehicles: int = 60, duration_s: float = 30.0, schema_frames: int = 10
         dt = time.perf_counter() - t0
         checked = json.loads(report.read_text())
         assert code in (0, 1), f"validate exited {code}"
+        warm = {}  # the same again with the modules loaded: in worker processes, then in this one
+        for w in ("0", "1"):
+            t0 = time.perf_counter()
+            run(app, ["validate", str(src), "--workers", w, "--format", "json", "-o", str(report),
+                      "--overwrite"])
+            warm[w] = time.perf_counter() - t0
         t0 = time.perf_counter()
         imported = convert("openlabel", [src])
         dt_import = time.perf_counter() - t0
@@ -92,11 +98,15 @@ def main(n_vehicles: int = 60, duration_s: float = 30.0, schema_frames: int = 10
         code_osi = run(app, ["validate", str(trace), "--map", str(tmp / "submission.xodr"),
                              "--format", "json", "-o", str(tmp / "report_osi.json")])
         dt_osi = time.perf_counter() - t0
+        from aveas_format.parallel import default_workers
+
         return [
             _row("validate_openlabel_file", n, dt, f"{mb:.1f} MB OpenLABEL, import + "
                  f"{len(checked['rules_run'])} rules, report to a file (exit {code})", dt_schema,
                  f"jsonschema {_version('jsonschema')} on the ASAM OpenLABEL 1.0 schema alone, "
                  f"{n_sample} object-frames ({schema_frames} frames) scaled to {n:,}", n_sample),
+            _row("validate_openlabel_file", n, warm["0"], f"again, modules loaded; the frames read in "
+                 f"{default_workers()} worker processes", warm["1"], "the same with --workers 1 (in one process)"),
             _row("validate_openlabel_file", n, dt, "(the same run): split below"),
             _row("  import_openlabel", n, dt_import, "the import alone (lossless)"),
             _row("  rules", n, dt_rules, "every rule on the imported recording (in memory)"),
@@ -116,7 +126,8 @@ if what == "validate":
     from aveas_format.cli.app import app
     from aveas_format.cli.common import run
 
-    code = run(app, ["validate", src, "--format", "json", "-o", sys.argv[3]])
+    code = run(app, ["validate", src, "--format", "json", "-o", sys.argv[3], "--overwrite",
+                     "--workers", sys.argv[4]])
     extra = {"exit": code, "rules": len(json.loads(open(sys.argv[3]).read())["rules_run"])}
 else:
     from aveas_format.converters import convert
@@ -148,9 +159,9 @@ def large(target_states: int, schema_frames: int = 2) -> list[dict]:
         get_converter("openlabel", "export")(rec, src)
         del rec, base
         out = {}
-        for what in ("validate", "import"):
-            r = subprocess.run([sys.executable, "-c", child, what, str(src), str(tmp / "report.json")],
-                               capture_output=True, text=True)
+        for what, workers in (("validate", "0"), ("validate_1", "1"), ("import", "0")):
+            r = subprocess.run([sys.executable, "-c", child, what.split("_")[0], str(src),
+                                str(tmp / "report.json"), workers], capture_output=True, text=True)
             if r.returncode:
                 raise RuntimeError(r.stderr[-2000:])
             out[what] = json.loads(r.stdout.strip().splitlines()[-1])
@@ -170,6 +181,9 @@ def large(target_states: int, schema_frames: int = 2) -> list[dict]:
                  f"{v['peak_mb']:.0f} MB", dt_schema,
                  f"jsonschema on the ASAM OpenLABEL 1.0 schema alone, {n_sample} object-frames "
                  f"({schema_frames} frames) scaled to {n:,}", n_sample),
+            _row("validate_openlabel_file_large", n, v["seconds"], "(the same run; the frames read in "
+                 "worker processes, one per core)", out["validate_1"]["seconds"], "the same with --workers 1, "
+                 f"fresh process: peak {out['validate_1']['peak_mb']:.0f} MB"),
             _row("  import_openlabel_large", n, i["seconds"], f"the import alone, fresh process: peak "
                  f"{i['peak_mb']:.0f} MB"),
         ]

@@ -15,6 +15,7 @@ from aveas_format.cli.options import (
     check_output,
     converter_name_option,
     converter_options,
+    converter_workers,
     crs_option,
     format_option,
     map_option,
@@ -69,7 +70,8 @@ def convert(
     group: str = typer.Option(None, "--group", help="With --each: group input files into "
                               "recordings by the first capture group of this regular expression on "
                               "their names, e.g. '^(\\d+)_' for levelX."),
-    workers: int = workers_option(scope="With --each"),
+    workers: int = workers_option(scope="With --each; for one input, of a converter that reads it in "
+                                        "blocks (openlabel)"),
     scheduler: str = scheduler_option(scope="With --each",
                                       help="address of a Dask scheduler (tcp://HOST:PORT)."),
     validate_: bool = validate_option(),
@@ -97,7 +99,7 @@ def convert(
     check_output(output, overwrite)
     from aveas_format.converters.registry import convert as run
 
-    rec = run(source, inputs, map_source=map_file, options=raw)
+    rec = run(source, inputs, map_source=map_file, options=converter_workers(raw, conv.options, workers))
     path = rec.write(output, overwrite=overwrite)
     n = rec.states.num_rows
     on_map = (n - rec.states.column("road_id").null_count) / n if n else 0.0

@@ -335,6 +335,15 @@ def workers_option(*, scope: str = "") -> Any:
     return typer.Option(0, "--workers", "-j", min=0, help=_scoped(scope, WORKERS_HELP))
 
 
+def converter_workers(raw: dict[str, Any], model: type, workers: int) -> dict[str, Any]:
+    """``--workers`` into a converter's options where the converter reads one input in parallel
+    (its options have ``workers``, e.g. ``openlabel``: blocks of frames in processes); an
+    ``--option workers=N`` given explicitly wins."""
+    if "workers" in getattr(model, "model_fields", {}) and "workers" not in raw:
+        raw["workers"] = workers
+    return raw
+
+
 def scheduler_option(*, scope: str = "", help: str = "address of a Dask scheduler "
                      "(tcp://HOST:PORT) (needs aveas-format[dask]).") -> Any:
     """``--scheduler ADDRESS``: run on a Dask cluster instead of local processes."""

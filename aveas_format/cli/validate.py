@@ -28,6 +28,7 @@ from aveas_format.cli.options import (
     comma_list,
     converter_name_option,
     converter_options,
+    converter_workers,
     crs_option,
     discover_dataset,
     format_option,
@@ -88,7 +89,7 @@ def validate(
                                        "the JSON report and exit."),
     print_config: bool = typer.Option(False, "--print-config", help="Print the default "
                                       "thresholds as TOML and exit."),
-    workers: int = workers_option(scope="Dataset"),
+    workers: int = workers_option(scope="Dataset, or a submission file read in blocks (OpenLABEL)"),
     scheduler: str = scheduler_option(scope="Dataset", help="address of a Dask scheduler "
                                       "(tcp://HOST:PORT) to run on instead of local processes "
                                       "(needs aveas-format[dask])."),
@@ -149,8 +150,9 @@ def validate(
     figures = recording
     if submission:
         check_rules(only, skip)  # a usage error before the import's work
-        rec, found = import_submission(submission, source, map_file, converter_options(
-            options_file, option, _options_model(submission, source)), crs)
+        model = _options_model(submission, source)
+        rec, found = import_submission(submission, source, map_file, converter_workers(
+            converter_options(options_file, option, model), model, workers), crs)
         report = run(rec, select=only, ignore=skip, config=cfg, max_sample=max_sample,
                      source_findings=found, name=" ".join(str(p) for p in submission))
         figures = rec

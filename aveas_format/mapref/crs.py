@@ -128,6 +128,16 @@ def crs_equal(a: str, b: str) -> bool:
     return bool(ca == cb or ca.equals(cb, ignore_axis_order=True))
 
 
+@functools.lru_cache(maxsize=32)
+def _transformer(crs: str, inverse: bool) -> pyproj.Transformer:
+    """The transformer CRS -> WGS 84 (``inverse``: back), made once per process and CRS where it is
+    first used (making one costs ~50 ms: an import and validate made six for one file; pyproj's
+    transformers are thread-safe since 3.1)."""
+    c = parse_crs(crs).crs
+    return pyproj.Transformer.from_crs(WGS84, c, always_xy=True) if inverse else \
+        pyproj.Transformer.from_crs(c, WGS84, always_xy=True)
+
+
 class LocalFrame:
     """Transforms between a recording's local frame and WGS 84 (vectorised, both directions)."""
 
@@ -138,8 +148,15 @@ class LocalFrame:
             for note in self.parsed.notes:
                 warnings.warn(f"CRS {self.parsed.text!r}: {note}", GeoReferenceWarning, stacklevel=2)
         self.offset = offset or (0.0, 0.0, 0.0, 0.0)
-        self._fwd = pyproj.Transformer.from_crs(self.parsed.crs, WGS84, always_xy=True)
-        self._inv = pyproj.Transformer.from_crs(WGS84, self.parsed.crs, always_xy=True)
+        self._crs = crs
+
+    @property
+    def _fwd(self) -> pyproj.Transformer:
+        return _transformer(self._crs, False)
+
+    @property
+    def _inv(self) -> pyproj.Transformer:
+        return _transformer(self._crs, True)
 
     @classmethod
     def of(cls, rec, *, warn: bool = True) -> LocalFrame:

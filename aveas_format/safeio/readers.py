@@ -199,14 +199,17 @@ class _Peek:
             i += len(data)
 
 
-def scan_json_member(f: IO[bytes], key: str, member: str, *, chunk: int = 1024 * 1024
-                     ) -> tuple[int, tuple[int, int] | None, bool]:
+def scan_json_member(f: IO[bytes], key: str, member: str, *, chunk: int = 1024 * 1024,
+                     until_member: bool = False) -> tuple[int, tuple[int, int | None] | None, bool]:
     """A vectorised structural pass over the JSON text in the binary file ``f`` (read from its
     start in chunks; meant for text that a streaming parser checks anyway): returns
     ``(depth, span, ok)``. ``depth`` is the deepest nesting of containers, ``span`` the byte range
     ``[start, end)`` of the object value of ``doc[key][member]`` (None where there is none) and
     ``ok`` False where the structure is not as expected (unbalanced brackets or strings, ``key`` or
-    ``member`` appearing twice): then use another reader. Memory: a few arrays of one chunk."""
+    ``member`` appearing twice): then use another reader. Memory: a few arrays of one chunk.
+    ``until_member``: stop at the chunk where the member's value starts (``span`` is then
+    ``(start, None)``, ``depth`` and ``ok`` are of the bytes scanned so far): a reader that
+    verifies the member's value itself scans the rest (the OpenLABEL import's frames)."""
     import numpy as np
 
     peek = _Peek(f)
@@ -299,6 +302,9 @@ def scan_json_member(f: IO[bytes], key: str, member: str, *, chunk: int = 1024 *
             depth = int(dep[-1])
         parity = (parity + len(q)) & 1
         off += n
+        if until_member and mem_val is not None and mem_end is None:
+            f.seek(0)
+            return maxd, (mem_val, None), found_key == 1 and found_mem == 1
     f.seek(0)
     if depth != 0 or parity or found_key > 1 or found_mem > 1:
         return maxd, None, False

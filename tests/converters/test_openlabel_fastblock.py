@@ -31,19 +31,20 @@ def exported(tmp_path_factory):
     return path
 
 
-def _import(path, monkeypatch, *, fast: bool):
-    """``(recording, findings, (blocks the fast path took, blocks offered))``."""
+def _import(path, monkeypatch, *, fast: bool, workers: int = 1):
+    """``(recording, findings, (blocks the fast path took, blocks offered))`` (the blocks counted
+    where they are read in this process: ``workers=1``)."""
     taken = []
 
-    def read_block(buf):
-        out = _READ_BLOCK(buf) if fast else None
+    def read_block(buf, threads=True):
+        out = _READ_BLOCK(buf, threads) if fast else None
         taken.append(out is not None)
         return out
 
     monkeypatch.setattr(fb, "read_block", read_block)
     with collect_source_findings() as found, warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        rec = convert("openlabel", [path])
+        rec = convert("openlabel", [path], options={"workers": workers})
     return rec, [(f.code, f.location, f.count) for f in found], (sum(taken), len(taken))
 
 
@@ -172,3 +173,117 @@ def test_any_block_size_gives_the_same_recording(exported, monkeypatch, block):
     assert_identical(got, want)
     assert f_got == f_want
     assert n_fast == n and (n > 1 if block == 3000 else n == 0)
+
+
+def _mixed(ol, rotate: bool = True):
+    """A PMF not summing to 1, a missing velocity and a rotated box (a block for the generic
+    path) in frames after the first."""
+    frames = list(ol["frames"].values())
+    boxes = [next(iter(frames[i]["objects"].values()))["object_data"] for i in (3, 7, 12)]
+    boxes[0]["vec"].append({"name": "classification/uncertainties", "val": [0.5, 0.4]})
+    boxes[1]["vec"][:] = [v for v in boxes[1]["vec"] if v["name"] != "velocity"]
+    if rotate:
+        boxes[2]["cuboid"][0]["val"][3] = 0.01
+
+
+def test_blocks_read_in_worker_processes_give_the_same_recording_and_findings(exported, tmp_path,
+                                                                                 monkeypatch):
+    """Two worker processes read the blocks (columns handed back in file order): the same
+    recording and the same located findings as in process, a block the fast path cannot take
+    included."""
+    from aveas_format.converters.openlabel import stream
+
+    p = _edited(exported, tmp_path, _mixed)
+    monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", 3000)  # ~a frame a block: many blocks in flight
+    want, f_want, (n_fast, n) = _import(p, monkeypatch, fast=True)
+    assert n_fast == n - 1 and n > 4
+    assert sorted(c for c, *_ in f_want) == ["source.openlabel.missing_attribute", "source.openlabel.pmf_sum"]
+    got, f_got, _ = _import(p, monkeypatch, fast=True, workers=2)
+    assert_identical(got, want)
+    assert f_got == f_want
+
+
+def _outcome(path, monkeypatch, prescan: bool):
+    """The recording (or the error's message) of an import, with the frames read without the
+    structural pre-scan where that path takes them (``prescan=False``), else with it."""
+    from aveas_format.converters.openlabel import stream
+    from aveas_format.errors import FormatError
+
+    if prescan:
+        monkeypatch.setattr(stream, "_frames_without_prescan", lambda path: None)
+    try:
+        rec, found, _ = _import(path, monkeypatch, fast=True)
+        return rec, found
+    except FormatError as e:
+        return str(e), None
+    finally:
+        monkeypatch.undo()
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_frames_without_the_prescan_give_the_same_recording(exported, tmp_path, monkeypatch, workers):
+    """The structure scanned up to the frames only; the frames' blocks verify their own; the
+    members after the frames (the contexts) read at their end: the same recording and findings."""
+    from aveas_format.converters.openlabel import stream
+
+    monkeypatch.setattr(stream, "_HEAD_CHUNK", 512)  # (else the small file is scanned whole)
+    monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", 3000)
+    p = _edited(exported, tmp_path, lambda ol: _mixed(ol, rotate=False))
+    ol, frames = stream._stream_doc(p, prescan=False)
+    assert list(ol)[-1] == "frames"  # the members after the frames come with their end
+    n = sum(1 for _ in frames(columnar=True, workers=workers))
+    assert n > 4 and list(ol)[-1] != "frames" and ol["frames"] == {}
+    want_ol, _ = stream._stream_doc(p)
+    assert ol == want_ol
+    monkeypatch.setattr(stream, "_HEAD_CHUNK", 512)
+    monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", 3000)
+    got, f_got, _ = _import(p, monkeypatch, fast=True, workers=workers)
+    want, f_want = _outcome(p, monkeypatch, prescan=True)
+    assert_identical(got, want)
+    assert f_got == f_want
+
+
+def _deep(ol):
+    val = 1
+    for _ in range(70):
+        val = [val]
+    list(ol["frames"].values())[5]["frame_properties"]["deep"] = val
+
+
+def _nan(ol):
+    list(ol["frames"].values())[5]["frame_properties"]["timestamp"] = float("nan")
+
+
+@pytest.mark.parametrize("damage", ["deep", "nan", "rotated", "truncated", "frames_twice", "bad_tail",
+                                    "string_in_tail"])
+def test_files_the_prescan_must_judge_give_the_same_result_or_error(exported, tmp_path, monkeypatch,
+                                                                    damage):
+    """Nesting over the limit in a frame, NaN, a block for the generic path before the objects
+    are known, a truncated file, a second frames member, broken JSON after the frames, an
+    unclosed string: the path without the pre-scan hands over to it, with the same recording or
+    the same located error as the pre-scan path gives."""
+    from aveas_format.converters.openlabel import stream
+
+    if damage in ("deep", "nan", "rotated"):
+        doc = json.loads(exported.read_bytes())
+        {"deep": _deep, "nan": _nan, "rotated": _mixed}[damage](doc["openlabel"])
+        raw = json.dumps(doc, separators=(",", ":")).encode()
+    else:
+        raw = exported.read_bytes().rstrip()
+        raw = {"truncated": raw[:-40], "frames_twice": raw[:-2] + b',"frames":{}}}',
+               "bad_tail": raw[:-2] + b',"x":[1,}}', "string_in_tail": raw[:-2] + b',"x":"a}}'}[damage]
+    p = tmp_path / f"{damage}.json"
+    p.write_bytes(raw)
+    (tmp_path / "rec.xodr").write_bytes(exported.with_suffix(".xodr").read_bytes())
+    outcomes = []
+    for prescan in (False, True):
+        monkeypatch.setattr(stream, "_HEAD_CHUNK", 512)
+        monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", 3000)
+        outcomes.append(_outcome(p, monkeypatch, prescan))
+    (a, fa), (b, fb_) = outcomes
+    if isinstance(b, str):
+        assert a == b
+        assert damage != "nan"
+    else:
+        assert_identical(a, b)
+        assert fa == fb_

@@ -28,3 +28,32 @@ def test_a_task_that_kills_its_worker_is_reported_and_the_rest_complete():
     assert set(res) == set(range(8))
     assert "worker process died" in res[2].error
     assert all(res[i].value == i + 100 for i in range(8) if i != 2)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_map_ordered_keeps_the_input_order_of_a_lazy_iterable(workers):
+    from aveas_format.parallel import map_ordered
+
+    consumed = []
+
+    def items():
+        for i in range(12):
+            consumed.append(i)
+            yield i
+
+    out = []
+    for item, value in map_ordered(square, items(), workers=workers, ahead=3):
+        assert len(consumed) <= item + 1 + 3  # at most `ahead` items in flight past this one
+        out.append((item, value))
+    assert out == [(i, i * i) for i in range(12)]
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_map_ordered_raises_a_task_error_at_its_position(workers):
+    from aveas_format.parallel import map_ordered
+
+    got = []
+    with pytest.raises(ValueError, match="three is not allowed"):
+        for item, value in map_ordered(fail_on_three, range(8), workers=workers):
+            got.append(value)
+    assert got == [0, 1, 2]

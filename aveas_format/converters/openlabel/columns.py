@@ -23,7 +23,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from aveas_format.converters.openlabel.profile import EXT, LIGHTS, _enum_value
+from aveas_format.converters.openlabel.profile import EXT, LIGHTS, MANDATORY_FRAME_ATTRIBUTES, _enum_value
 
 #: an extension value the box does not carry (``None`` is a value: null)
 _MISSING = object()
@@ -370,3 +370,46 @@ def ext_chunk(es: list) -> dict[str, tuple]:
     es = [e if isinstance(e, dict) else {} for e in es]
     keys = dict.fromkeys(chain.from_iterable(es))
     return {c: ext_rep(list(map(methodcaller("get", c, _MISSING), es))) for c in keys}
+
+
+def block_findings(at: Any, profile: bool) -> list[tuple[str, str, int, int]]:
+    """The checks of the source on a block's attributes (:class:`_Attributes` or the fast path's
+    ``ArrowAttributes``), in bulk: PMF attributes (``*/uncertainties``) that do not sum to 1, and
+    (``profile``: files that claim it) boxes without a mandatory attribute. Per finding
+    ``(code, attribute, first box, count)`` (box indices into the block: numbers only, so that a
+    worker process hands them back cheaply)."""
+    from aveas_format.schema.pmf import pmf_problems
+
+    out = []
+    for name in at.code_of:
+        if not name.endswith("/uncertainties"):
+            continue
+        boxes, vals = at.first(name)
+        try:
+            lens = set(map(len, vals))
+            m = np.fromiter(chain.from_iterable(vals), float).reshape(len(vals), -1) \
+                if len(lens) == 1 else None
+        except (TypeError, ValueError):
+            m = None
+        bad = pmf_problems(m) if m is not None else np.fromiter(map(_pmf_bad, vals), bool, len(vals))
+        if bad.any():
+            out.append(("source.openlabel.pmf_sum", name, int(boxes[np.argmax(bad)]), int(bad.sum())))
+    if profile:
+        for name in MANDATORY_FRAME_ATTRIBUTES:
+            has = np.zeros(at.n, bool)
+            has[at.first(name)[0]] = True
+            if not has.all():
+                out.append(("source.openlabel.missing_attribute", name, int(np.argmin(has)),
+                            int((~has).sum())))
+    return out
+
+
+def _pmf_bad(v: Any) -> bool:
+    """Whether one PMF value is no vector of numbers summing to 1 (within the schema's tolerance)."""
+    from aveas_format.schema.pmf import pmf_problems
+
+    try:
+        m = np.asarray([v], float)
+    except (TypeError, ValueError):
+        return True
+    return m.ndim != 2 or bool(pmf_problems(m)[0])

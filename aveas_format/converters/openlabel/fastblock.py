@@ -31,7 +31,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from aveas_format.converters.openlabel.columns import vector_columns
+from aveas_format.converters.openlabel.columns import block_findings, vector_columns
 from aveas_format.converters.openlabel.profile import EXT, LIGHTS, _enum_value
 
 try:
@@ -109,9 +109,10 @@ def _structure(buf: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarr
     return pos, depth, step, idx[isq]
 
 
-def _box_spans(buf: bytes) -> tuple[np.ndarray, np.ndarray]:
-    """The byte spans ``[start, end)`` of the objects directly under a frame's ``objects`` member."""
-    pos, depth, step, quotes = _structure(buf)
+def _box_spans(buf: bytes, structure: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The byte spans ``[start, end)`` of the objects directly under a frame's ``objects`` member
+    (``structure``: :func:`_structure` of ``buf`` where the caller has it)."""
+    pos, depth, step, quotes = structure or _structure(buf)
     if len(depth) == 0 or depth.min() < 1 or step[0] != 1 or depth[-1] != 1 or step[-1] != -1:
         raise _NotFast
     # the containers one level under a frame (its members' values): which are "objects"
@@ -140,27 +141,45 @@ def _box_spans(buf: bytes) -> tuple[np.ndarray, np.ndarray]:
 
 class FastBlock:
     """A block of frames read by :func:`read_block`: ``frames`` as ``(key, frame)`` with each
-    frame's ``objects`` mapping uid -> row, and the rows' columns (:func:`box_columns`)."""
+    frame's ``objects`` mapping uid -> row, the rows' columns (:func:`box_columns`) and what the
+    checks of the source found (:func:`~.columns.block_findings`, the profile's mandatory
+    attributes included: the caller keeps those for files that claim the profile). numpy arrays,
+    lists of numbers and the frames' skeleton: cheap to hand back from a worker process."""
 
-    def __init__(self, frames: list, cols: dict[str, np.ndarray], sizes: list, ext: dict[str, tuple],
-                 at: ArrowAttributes) -> None:
-        self.frames, self.cols, self.sizes, self.ext, self.at = frames, cols, sizes, ext, at
+    def __init__(self, frames: list, cols: dict[str, np.ndarray], ext: dict[str, tuple],
+                 found: list[tuple[str, str, int, int]], depth: int) -> None:
+        self.frames, self.cols, self.ext, self.found = frames, cols, ext, found
+        #: the deepest nesting of containers in the block (its own braces: 1)
+        self.depth = depth
 
 
-def read_block(buf: bytes) -> FastBlock | None:
+def read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
     """The block ``buf`` (``{"key":{frame},...}``) as a :class:`FastBlock`, or None where it does
-    not fit the fast path (see the module's doc)."""
+    not fit the fast path (see the module's doc). ``threads``: Arrow's reader on its thread pool."""
     if orjson is None:
         return None
     try:
-        return _read_block(buf)
+        return _read_block(buf, threads)
     except (_NotFast, pa.ArrowInvalid, pa.ArrowTypeError, orjson.JSONDecodeError, KeyError, IndexError,
             TypeError, ValueError):
         return None
 
 
-def _read_block(buf: bytes) -> FastBlock | None:
-    starts, ends = _box_spans(buf)
+def block_depth(buf: bytes) -> int | None:
+    """The deepest nesting of containers in a block of frames ``{...}`` (its own braces: 1), None
+    where its strings or brackets do not balance."""
+    try:
+        _, depth, step, _ = _structure(buf)
+    except _NotFast:
+        return None
+    if len(depth) == 0 or depth.min() < 1 or depth[-1] != 1 or step[-1] != -1:
+        return None
+    return int(depth.max())
+
+
+def _read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
+    structure = _structure(buf)
+    starts, ends = _box_spans(buf, structure)
     n = len(starts)
     if n == 0:
         return None
@@ -195,13 +214,13 @@ def _read_block(buf: bytes) -> FastBlock | None:
         boxes.decode("utf-8")  # (UnicodeDecodeError is a ValueError: the generic path names it)
     import pyarrow.json as pj
 
-    table = pj.read_json(pa.py_buffer(boxes), read_options=pj.ReadOptions(use_threads=True, block_size=ARROW_BLOCK),
+    table = pj.read_json(pa.py_buffer(boxes), read_options=pj.ReadOptions(use_threads=threads, block_size=ARROW_BLOCK),
                          parse_options=pj.ParseOptions(explicit_schema=BOX_SCHEMA,
                                                        unexpected_field_behavior="infer"))
     if table.num_rows != n:
         return None
-    cols, sizes, ext, at = box_columns(table)
-    return FastBlock(frames, cols, sizes, ext, at)
+    cols, _, ext, at = box_columns(table)
+    return FastBlock(frames, cols, ext, block_findings(at, profile=True), int(structure[1].max()))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -356,9 +375,10 @@ def _ext_reps(cub: pa.StructArray) -> dict[str, tuple]:
     return out
 
 
-def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], list, dict[str, tuple], ArrowAttributes]:
-    """``(columns, sizes, ext columns, attributes)`` of a block's boxes, as
-    :func:`~.columns.block_columns` and :func:`~.columns.ext_chunk` give them for the same boxes."""
+def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], None, dict[str, tuple], ArrowAttributes]:
+    """``(columns, None, ext columns, attributes)`` of a block's boxes, as
+    :func:`~.columns.block_columns` and :func:`~.columns.ext_chunk` give them for the same boxes
+    (the sizes are the columns ``dl``, ``dw``, ``dh``)."""
     n = table.num_rows
     if table.schema.names != ["object_data"]:
         raise _NotFast
@@ -387,7 +407,6 @@ def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], list, dict[str,
         "px": V[:, 0].copy(), "py": V[:, 1].copy(), "pz": V[:, 2] - V[:, 8] / 2.0, "yaw": V[:, 5].copy(),
         "dl": V[:, 6].copy(), "dw": V[:, 7].copy(), "dh": V[:, 8].copy(),
         "csroot": np.full(n, None, object), "cub_ts": np.full(n, np.nan)}
-    sizes = list(zip(cols["dl"].tolist(), cols["dw"].tolist(), cols["dh"].tolist()))
     at = ArrowAttributes(od, n)
     if any(nm.startswith("interior/") for nm in at.code_of):
         raise _NotFast  # (the interior rows read the items as dicts: the generic path)
@@ -417,7 +436,7 @@ def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], list, dict[str,
             lane_id[ok] = conv[inv]
     cols["lane_id"] = lane_id
     cols["hv"], cols["hr"] = hv, on
-    return cols, sizes, _ext_reps(cub), at
+    return cols, None, _ext_reps(cub), at
 
 
 def _lane_int(v: str) -> Any:

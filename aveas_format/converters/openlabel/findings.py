@@ -9,7 +9,8 @@ from pathlib import Path
 from typing import Any
 
 from aveas_format.converters.labels import label_kind
-from aveas_format.converters.openlabel.frames import _FrameData, _pmf_bad
+from aveas_format.converters.openlabel.columns import _pmf_bad
+from aveas_format.converters.openlabel.frames import _FrameData
 from aveas_format.converters.openlabel.profile import MANDATORY_OBJECT_ATTRIBUTES, TYPE_TO_CLASS, _attrs, _first
 from aveas_format.errors import report_source
 

@@ -17,18 +17,19 @@ from __future__ import annotations
 import math
 import re
 from collections import defaultdict
-from itertools import chain, compress, repeat
+from itertools import compress, repeat
 from operator import is_not
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from aveas_format.converters.openlabel.columns import (_MISSING, as_obj, block_columns, box_parts, ext_chunk,
-                                                       split_boxes)
-from aveas_format.converters.openlabel.profile import (LIGHTS, _LONGITUDINAL, MANDATORY_FRAME_ATTRIBUTES, _attrs,
+from aveas_format.converters.openlabel.columns import (_MISSING, as_obj, block_columns, block_findings, box_parts,
+                                                       ext_chunk, split_boxes)
+from aveas_format.converters.openlabel.profile import (LIGHTS, _LONGITUDINAL, _attrs,
                                                        _first)
 from aveas_format.errors import FormatError
+from aveas_format.numeric import release_free_memory
 
 
 # -- geometry of generic files -------------------------------------------------------------------
@@ -238,7 +239,6 @@ class _FrameRows:
         self.p_edges: dict[int, tuple[dict, dict]] = {}  # frame -> (its transforms, resolve cache)
         self.chunks: list[dict[str, np.ndarray]] = []
         self.ext_chunks: list[tuple[int, dict[str, tuple]]] = []
-        self.sizes: list[tuple[int, str, tuple]] = []
         self.interior: list[tuple[int, str, dict]] = []
         self._need_size: dict[str, bool] = {}
         #: object type given inside a frame's object_data (TUM Traffic), by object
@@ -317,33 +317,10 @@ class _FrameRows:
         else:
             f[2] += count
 
-    def _check_block(self, at: Any, js: list[int], us: list[str]) -> None:
-        """The checks of the source in bulk: PMF attributes (``*/uncertainties``) that do not sum
-        to 1, and (files that claim the profile) boxes without a mandatory attribute."""
-        from aveas_format.schema.pmf import pmf_problems
-
-        for name in at.code_of:
-            if not name.endswith("/uncertainties"):
-                continue
-            boxes, vals = at.first(name)
-            try:
-                lens = set(map(len, vals))
-                m = np.fromiter(chain.from_iterable(vals), float).reshape(len(vals), -1) \
-                    if len(lens) == 1 else None
-            except (TypeError, ValueError):
-                m = None
-            bad = pmf_problems(m) if m is not None else np.fromiter(map(_pmf_bad, vals), bool, len(vals))
-            if bad.any():
-                i = int(boxes[np.argmax(bad)])
-                self._found("source.openlabel.pmf_sum", name, self.keys[js[i]], us[i], int(bad.sum()))
-        if self.profile:
-            for name in MANDATORY_FRAME_ATTRIBUTES:
-                has = np.zeros(at.n, bool)
-                has[at.first(name)[0]] = True
-                if not has.all():
-                    i = int(np.argmin(has))
-                    self._found("source.openlabel.missing_attribute", name, self.keys[js[i]], us[i],
-                                int((~has).sum()))
+    def _check_block(self, found: list[tuple[str, str, int, int]], js: list[int], us: list[str]) -> None:
+        """A block's :func:`block_findings` (box indices into ``js``/``us``), located."""
+        for code, name, i, count in found:  # (missing attributes kept for files that claim the
+            self._found(code, name, self.keys[js[i]], us[i], count)  # profile: in finish)
 
     def _flush(self) -> None:
         """The waiting boxes into one chunk of columns (:func:`.columns.block_columns`)."""
@@ -372,8 +349,8 @@ class _FrameRows:
             j, u = js[i], us[i]
             return _box_in_root(cubs[i], lambda name: self._resolve(name, j, u), keys[j], u, self.path)
 
-        ch, sizes, ext, at = block_columns(ods, cubs, place)
-        self._keep(ch, sizes, ext_chunk(ext), at, js, us)
+        ch, _, ext, at = block_columns(ods, cubs, place)
+        self._keep(ch, ext_chunk(ext), block_findings(at, True), js, us)
         inames = [nm for nm in at.code_of if nm.startswith("interior/")]
         if inames:
             for i in at.boxes_with(inames).tolist():
@@ -382,18 +359,34 @@ class _FrameRows:
                     self.interior.append((js[i], us[i], irow))
         self.p_edges = {}
 
-    def _keep(self, ch: dict[str, np.ndarray], sizes: list, ext: dict[str, tuple], at: Any,
-              js: list[int], us: list[str]) -> None:
-        """A block's columns (boxes of frames ``js``, objects ``us``), checked and kept."""
+    def _keep(self, ch: dict[str, np.ndarray], ext: dict[str, tuple],
+              found: list[tuple[str, str, int, int]], js: list[int], us: list[str]) -> None:
+        """A block's columns (boxes of frames ``js``, objects ``us``) and what its checks found
+        (:func:`block_findings`), kept."""
         ui = self.uid_index
         ch["uidx"] = np.fromiter(map(ui.__getitem__, us), np.int64, len(us))
         ch["occ"] = np.asarray(js, np.int64)
-        self._check_block(at, js, us)
+        self._check_block(found, js, us)
         self.chunks.append(ch)
         self.ext_chunks.append((len(us), ext))
-        need = {u: self._needs_size(u) for u in dict.fromkeys(us)}
-        if any(need.values()):
-            self.sizes.extend((j, u, d) for j, u, d in zip(js, us, sizes) if need[u])
+
+    def _sizes(self, rows: dict[str, np.ndarray], names: list[str]) -> dict[str, list]:
+        """Per object without a static size (``objects`` known by now: a file may have them after
+        its frames) the (length, width, height) of its boxes in the frames kept."""
+        sizes: dict[str, list] = {}
+        if not len(rows["uidx"]):
+            return sizes
+        need = np.fromiter(map(self._needs_size, names), bool, len(names))
+        sel = np.flatnonzero(need[rows["uidx"]])
+        if len(sel):
+            ui = rows["uidx"][sel]
+            order = np.argsort(ui, kind="stable")
+            dims = np.column_stack([rows[c][sel[order]] for c in ("dl", "dw", "dh")]).tolist()
+            uniq, first = np.unique(ui[order], return_index=True)
+            bounds = [*first.tolist(), len(order)]
+            for k, u in enumerate(uniq.tolist()):
+                sizes[names[u]] = dims[bounds[k]:bounds[k + 1]]
+        return sizes
 
     def add_columns(self, blk: Any) -> None:
         """A block of frames read into columns (:class:`.fastblock.FastBlock`: level boxes in the
@@ -415,7 +408,7 @@ class _FrameRows:
             js.extend(repeat(j, len(fobjs)))
             us.extend(fobjs)
         if us:
-            self._keep(blk.cols, blk.sizes, blk.ext, blk.at, js, us)
+            self._keep(blk.cols, blk.ext, blk.found, js, us)
 
     def finish(self) -> _FrameData:
         self._flush()
@@ -442,25 +435,29 @@ class _FrameRows:
             sel = np.flatnonzero(rank >= 0)
             sel = sel[np.argsort(rank[sel], kind="stable")]
             ident = len(sel) == len(rank) and bool((sel == np.arange(len(sel))).all())
-            for c in list(self.chunks[0]):  # one column at a time, freeing its chunks
+            for i, c in enumerate(list(self.chunks[0])):  # one column at a time, freeing its chunks
                 a = np.concatenate([ch.pop(c) for ch in self.chunks])
                 rows[c] = a if ident else a[sel]
+                if i % 4 == 3:  # (the chunks' small arrays: their pages back to the system)
+                    release_free_memory()
             self.chunks = []
             rows["rank"] = rank if ident else rank[sel]
             hv, hr = rows.pop("hv"), rows.pop("hr")
             has_vel, has_road = bool(hv.all()), bool(hr.any())
             keys = dict.fromkeys(c for _, reps in self.ext_chunks for c in reps)
-            for c in keys:
-                parts = [reps.get(c) or ("f", np.full(m, np.nan), np.zeros(m, bool), np.zeros(m, bool))
+            for c in keys:  # one member at a time, freeing its chunks (nothing kept twice)
+                parts = [reps.pop(c, None) or ("f", np.full(m, np.nan), np.zeros(m, bool), np.zeros(m, bool))
                          for m, reps in self.ext_chunks]
                 ext[c] = _rep_concat(parts) if ident else _rep_take(_rep_concat(parts), sel)
+                del parts
+            self.ext_chunks = []
+            release_free_memory()
         else:
             rows = {c: np.asarray([]) for c in (*_FLOAT_COLS, *_OBJ_COLS)}
             rows["uidx"] = rows["rank"] = np.asarray([], np.int64)
-        sizes: dict[str, list] = defaultdict(list)
-        for j, u, dims in self.sizes:
-            if rank_of[j] >= 0:
-                sizes[u].append(dims)
+        sizes = self._sizes(rows, names)
+        if not self.profile:
+            self.found = {k: v for k, v in self.found.items() if k[0] != "source.openlabel.missing_attribute"}
 
         def interior(pid_of: dict, time_of: dict) -> dict[str, list]:
             out: dict[str, list] = defaultdict(list)
@@ -482,17 +479,6 @@ class _FrameRows:
                           sizes=sizes, interior=interior, has_vel=has_vel, has_road=has_road,
                           frame_types=self.frame_types, moving_static=sorted(self.moving_static),
                           unknown_cs=sorted(self.cs.unknown), found=self.found)
-
-
-def _pmf_bad(v: Any) -> bool:
-    """Whether one PMF value is no vector of numbers summing to 1 (within the schema's tolerance)."""
-    from aveas_format.schema.pmf import pmf_problems
-
-    try:
-        m = np.asarray([v], float)
-    except (TypeError, ValueError):
-        return True
-    return m.ndim != 2 or bool(pmf_problems(m)[0])
 
 
 def _frame_timestamp(fr: dict[str, Any]) -> Any:

@@ -21,6 +21,7 @@ from typing import Any, Literal
 
 import numpy as np
 import pyarrow as pa
+from pydantic import Field
 
 from aveas_format.converters.common import (TIMESTAMP_UNITS, load_map_bytes, resolve_timestamps,
                                             source_block)
@@ -28,7 +29,7 @@ from aveas_format.converters.labels import LabelFilter, implausible_size, label_
 from aveas_format.converters.openlabel.findings import (_check_objects, _claims_profile, _jpath,
                                                         _report_frame_findings)
 from aveas_format.converters.openlabel.frames import (_MISSING, _FrameData, _Frames, _FrameRows, _rep_list,
-                                                      _rep_take, _utm_crs)
+                                                      _rep_take, _static_cuboids, _utm_crs)
 from aveas_format.converters.openlabel.profile import (
     EXT,
     LIGHTS,
@@ -45,7 +46,8 @@ from aveas_format.converters.openlabel.profile import (
     _to_utc,
     table_from_json,
 )
-from aveas_format.converters.openlabel.stream import COLUMNAR, _check_stream, _load_doc, _NotStrictJSON, _stream_doc
+from aveas_format.converters.openlabel.stream import (COLUMNAR, _check_stream, _load_doc, _NotStrictJSON, _Rescan,
+                                                      _stream_doc)
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, report_source
 from aveas_format.schema.taxonomy import CLASSES
@@ -70,6 +72,10 @@ class OpenLabelImportOptions(ImportOptions):
     """Unit of ``frame_properties.timestamp``: s, ms, us or ns; ``auto`` infers it from the values'
     magnitude (since the Unix epoch when they fall between 1990 and 2100) and spacing (since the
     start otherwise); the choice is recorded in the ``source`` block."""
+    workers: int = Field(0, ge=0, exclude=True)
+    """Processes reading the blocks of frames of a large file (0: one per core; 1: in this
+    process; CLI ``--workers``); the recording is the same whatever the number (not recorded in
+    the ``source`` block)."""
     keep_non_road_users: bool = False
     """Import objects whose type is no road user (barriers, signs, static persons...; see
     docs/converters.md "Labels that are not road users"), as class other; ignore-type objects
@@ -109,6 +115,13 @@ def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImport
         with _no_gc():
             try:
                 try:
+                    try:  # without the structural pre-scan of the frames, where it can
+                        ol, frames = _stream_doc(path, prescan=False)
+                        map_bytes = _find_map(path, ol, map_source, options)
+                        return _openlabel_to_recording(ol, map_bytes, options=options, path=path,
+                                                       frames=frames)
+                    except _Rescan:
+                        pass
                     ol, frames = _stream_doc(path)
                     map_bytes = _find_map(path, ol, map_source, options)
                     return _openlabel_to_recording(ol, map_bytes, options=options, path=path,
@@ -164,11 +177,16 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
         for k, fr in (ol.get("frames") or {}).items():
             acc.add(k, fr)
     else:  # blocks of frames in columns (the profile's layout) or one frame at a time
-        for k, fr in frames(columnar=not acc.static_cuboids):
+        for k, fr in frames(columnar=not acc.static_cuboids, workers=options.workers):
             if k is COLUMNAR:
                 acc.add_columns(fr)
             else:
                 acc.add(k, fr)
+        if "objects" not in ol or ol["objects"] is not objects:  # read after the frames (no pre-scan)
+            objects = ol.get("objects") or {}
+            if _static_cuboids(objects):  # (their boxes come from the frames' transforms)
+                raise _Rescan
+            acc.objects, acc.profile = objects, _claims_profile(md, objects)
     fd = acc.finish()
     _report_frame_findings(fd, path)
     fnum, time_of, start_time, resolved = _frame_times(fd.fkeys, fd.stamps, ext, md, options, path)

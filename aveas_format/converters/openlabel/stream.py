@@ -11,6 +11,8 @@ anything, to report its JSON error where one exists.
 from __future__ import annotations
 
 import re
+from contextlib import closing
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -143,7 +145,28 @@ def _check_stream(path: Path) -> None:
             raise _stream_error(e, path, r.pos) from None
 
 
-def _stream_doc(path: Path):
+def _open_checked(path: Path):
+    """``(the file open for reading, whether its text starts with "{")``, its size checked first."""
+    check_json_size(path, max_bytes=MAX_BULK_JSON_BYTES)
+    try:
+        f = _open(path)
+    except OSError as e:
+        raise RecordingIOError(f"cannot read: {e.strerror or e}", path=path) from None
+    try:
+        return f, f.read(4096).lstrip(b" \t\r\n").startswith(b"{")
+    except BaseException:
+        f.close()
+        raise
+
+
+class _Rescan(Exception):
+    """The frames of a file read without the structural pre-scan (:func:`_stream_doc` with
+    ``prescan=False``) are not as that path needs them (a block it cannot cut or parse, nesting
+    near the limit, a member that repeats, broken JSON): read the file again with the pre-scan,
+    which gives the exact result or error."""
+
+
+def _stream_doc(path: Path, prescan: bool = True):
     """Open an OpenLABEL file for a streamed import: ``(ol, frames)`` with ``ol`` the object under
     ``openlabel`` without its frames (read whole: metadata, objects, coordinate systems, ...) and
     ``frames`` a function that yields ``(frame key, frame)`` one at a time in file order (ijson);
@@ -152,17 +175,23 @@ def _stream_doc(path: Path):
 
     The size limit is checked before reading; the nesting limit on the structural pre-scan
     (:func:`aveas_format.safeio.scan_json_member`, which also finds the byte range of the frames).
-    Broken JSON and non-UTF-8 text give a :class:`FormatError` naming the file."""
+    Broken JSON and non-UTF-8 text give a :class:`FormatError` naming the file.
+
+    ``prescan=False`` (needs orjson): no second pass over the frames' bytes — the structure is
+    scanned up to where the frames start (:func:`_frames_without_prescan`); the frames' blocks
+    verify their own (balanced, their depth, each parsed whole); the members after the frames are
+    read when the frames are done (``ol`` is updated with them in place). Where that path cannot
+    be sure, the frames raise :class:`_Rescan`: read the file again with ``prescan=True``."""
     import ijson
 
-    check_json_size(path, max_bytes=MAX_BULK_JSON_BYTES)
-    try:
-        f = _open(path)
-    except OSError as e:
-        raise RecordingIOError(f"cannot read: {e.strerror or e}", path=path) from None
+    if not prescan and orjson is not None:
+        got = _frames_without_prescan(path)
+        if got is not None:
+            return got
+
+    f, is_object = _open_checked(path)
     with f:
-        head = f.read(4096).lstrip(b" \t\r\n")
-        if not head.startswith(b"{"):  # empty, a BOM, UTF-16/32, not an object: read it whole
+        if not is_object:  # empty, a BOM, UTF-16/32, not an object: read it whole
             return _load_doc(path), None
         depth, span, ok = scan_json_member(f, "openlabel", "frames")
     if not ok:  # broken (e.g. truncated: refused here in bounded memory) or a member repeats
@@ -183,10 +212,10 @@ def _stream_doc(path: Path):
     if span is None:
         return ol, None
 
-    def frames(columnar: bool = False):
+    def frames(columnar: bool = False, workers: int | None = 1):
         start = span[0]
         if orjson is not None:
-            start = yield from _fast_frames(path, span, columnar)
+            start = yield from _fast_frames(path, span, columnar, workers)
             if start is None:
                 return
         with _open(path) as fr:
@@ -201,6 +230,93 @@ def _stream_doc(path: Path):
     return ol, frames
 
 
+def _frames_without_prescan(path: Path):
+    """``(ol without the members after the frames, frames)`` as :func:`_stream_doc` gives them with
+    ``prescan=False``, or None where the structure up to the frames does not allow it."""
+    import ijson
+
+    f, is_object = _open_checked(path)
+    with f:
+        if not is_object:
+            return None
+        depth, span, ok = scan_json_member(f, "openlabel", "frames", chunk=_HEAD_CHUNK, until_member=True)
+        if not ok or span is None or span[1] is not None or depth >= MAX_JSON_DEPTH:
+            return None  # (no frames, a small file scanned whole, a repeated member, broken, deep)
+        start = span[0]
+        ol: dict[str, Any] = {}
+        r = _Suffixed(CountingReader(f, stop=start), b"{}}}")
+        try:  # the members up to the frames (the document closed after the frames' "{}")
+            for k, v in ijson.kvitems(r, "openlabel", use_float=True):
+                ol[k] = v
+        except ijson.JSONError:
+            return None
+        if "frames" not in ol or ol["frames"] != {}:
+            return None
+
+    def frames(columnar: bool = False, workers: int | None = 1):
+        from aveas_format.converters.openlabel.fastblock import block_depth
+        from aveas_format.parallel import map_ordered
+
+        size = _COLUMNAR_BLOCK if columnar else _BLOCK
+        read = partial(_read_cut, threads=workers == 1) if columnar else _no_block
+        generic = "objects" in ol
+        tail: list[bytes] = []
+        with _open(path) as f, closing(map_ordered(read, _cut_blocks(f, (start, None), size, tail),
+                                                   workers=workers)) as blocks:
+            f.seek(start + 1)
+            for (_, cut), fast in blocks:
+                if cut is None:  # no frame head in 4 blocks, no end of the frames
+                    raise _Rescan
+                if fast is not None:
+                    depth = fast.depth
+                elif not generic:  # (frames one at a time need the objects: after the frames here)
+                    raise _Rescan
+                else:
+                    buf = b"{" + cut + b"}"
+                    depth = block_depth(buf)
+                    try:
+                        fast = orjson.loads(buf) if depth is not None else None
+                    except orjson.JSONDecodeError:
+                        fast = None
+                    if not isinstance(fast, dict):
+                        raise _Rescan
+                if depth + 2 >= MAX_JSON_DEPTH:  # (the frames are at depth 3: the exact check decides)
+                    raise _Rescan
+                if isinstance(fast, dict):
+                    yield from fast.items()
+                else:
+                    yield COLUMNAR, fast
+        after = _members_after_frames(tail[0])
+        if {"metadata", "coordinate_systems"} & after.keys():  # (the import reads them first)
+            raise _Rescan
+        ol.update(after)
+
+    return ol, frames
+
+
+def _members_after_frames(tail: bytes) -> dict[str, Any]:
+    """The members of ``openlabel`` after its frames from the bytes after the frames' closing
+    brace (checked as the pre-scan checks the whole file: balanced, no repeated member, the
+    nesting limit), or :class:`_Rescan`."""
+    import io
+
+    import ijson
+
+    doc = b'{"openlabel":{"frames":{}' + tail
+    depth, span, ok = scan_json_member(io.BytesIO(doc), "openlabel", "frames")
+    if not ok or span is None or depth >= MAX_JSON_DEPTH:
+        raise _Rescan
+    try:
+        got = dict(ijson.kvitems(io.BytesIO(doc), "", use_float=True))
+    except ijson.JSONError:
+        raise _Rescan from None
+    out = dict(got.get("openlabel") or {})
+    out.pop("frames", None)
+    return out
+
+
+#: bytes scanned at a time up to the frames (where the frames start in the first: the whole file)
+_HEAD_CHUNK = 1 << 20
 #: bytes of the frames parsed at a time by the fast path (their Python objects: ~9x that); by the
 #: columnar path (:mod:`.fastblock`: Arrow columns, ~the bytes)
 _BLOCK = 1 << 20
@@ -210,49 +326,98 @@ COLUMNAR = object()
 _FRAME_HEAD = re.compile(rb'\s*"(?:[^"\\]|\\.)*"\s*:\s*\{\s*$')
 
 
-def _fast_frames(path: Path, span: tuple[int, int], columnar: bool = False):
+def _fast_frames(path: Path, span: tuple[int, int], columnar: bool = False, workers: int | None = 1):
     """The frames cut into blocks of whole frames where a frame starts with ``"key":{
     "frame_properties"`` (this library's exports, and files laid out like them) and each block
     parsed with orjson; a generator returning None when it took all frames, else the file offset
     (at a frame boundary) from which the caller goes on with ijson — at the first block it cannot
     cut or parse (another layout, NaN, numbers orjson refuses: the exact error comes from ijson).
     ``columnar``: a block that :func:`.fastblock.read_block` takes is yielded whole as
-    ``(COLUMNAR, FastBlock)`` (bigger blocks); the others as frames."""
-    from aveas_format.converters.openlabel.fastblock import read_block
+    ``(COLUMNAR, FastBlock)`` (bigger blocks), read by ``workers`` processes (1: here; 0/None: one
+    per core; :func:`aveas_format.parallel.map_ordered`: in file order, a few blocks in flight);
+    the others as frames, parsed here."""
+    from aveas_format.parallel import map_ordered
 
     size = _COLUMNAR_BLOCK if columnar else _BLOCK
+    if not columnar or span[1] - span[0] <= 2 * size:  # (a small file: no processes to start)
+        workers = 1
     with _open(path) as f:
         f.seek(span[0])
         if f.read(1) != b"{":
             return span[0]
-        pos, end = span[0] + 1, span[1] - 1  # the members between the braces
-        buf = b""
-        while pos < end:
-            data = f.read(min(size, end - pos - len(buf)))
-            buf += data
-            last = not data or pos + len(buf) >= end
-            cut = len(buf) if last else _last_cut(buf)
-            if cut is None:  # no frame head in 4 blocks: another layout
-                if len(buf) > 4 * size:
-                    return span[0] if pos == span[0] + 1 else pos
-                continue
-            fast = read_block(b"{" + buf[:cut] + b"}") if columnar else None
-            if fast is not None:
-                yield COLUMNAR, fast
-                block = {}
-            else:
+        # (in worker processes Arrow's reader runs on one thread: the processes are the parallelism)
+        read = partial(_read_cut, threads=workers == 1) if columnar else _no_block
+        with closing(map_ordered(read, _cut_blocks(f, span, size), workers=workers)) as blocks:
+            for (pos, cut), fast in blocks:
+                if cut is None:  # no frame head in 4 blocks: another layout
+                    return pos
+                if fast is not None:
+                    yield COLUMNAR, fast
+                    continue
                 try:
-                    block = orjson.loads(b"{" + buf[:cut] + b"}")
+                    block = orjson.loads(b"{" + cut + b"}")
                 except orjson.JSONDecodeError:
                     block = None
-            if not isinstance(block, dict):
-                return span[0] if pos == span[0] + 1 else pos
-            yield from block.items()
-            pos += cut + 1  # past the comma between two frames
-            buf = buf[cut + 1:]
-            if last:
-                break
+                if not isinstance(block, dict):
+                    return pos
+                yield from block.items()
     return None
+
+
+def _cut_blocks(f, span: tuple[int, int | None], size: int, tail: list | None = None):
+    """``(offset, bytes)`` of the blocks of whole frames (the members between the braces of the
+    frames, without the commas between blocks) from ``f``, read past the frames' ``{``; ``(offset,
+    None)`` last where no frame head was found in 4 blocks (another layout). ``span[1]`` None: the
+    end of the frames is not known — read to the end of the file, find it in the last block
+    (:func:`_frames_end`) and append the bytes after the frames' closing brace to ``tail``."""
+    pos, end = span[0] + 1, (span[1] - 1 if span[1] is not None else 1 << 62)
+    buf = b""
+    while pos < end:
+        data = f.read(min(size, end - pos - len(buf)))
+        buf += data
+        last = not data or pos + len(buf) >= end
+        if last and span[1] is None:
+            close = _frames_end(buf)
+            if close is None:
+                yield pos, None
+                return
+            tail.append(buf[close + 1:])
+            buf = buf[:close]
+        cut = len(buf) if last else _last_cut(buf)
+        if cut is None:
+            if len(buf) > 4 * size:
+                yield (span[0] if pos == span[0] + 1 else pos), None
+                return
+            continue
+        yield (span[0] if pos == span[0] + 1 else pos), buf[:cut]
+        pos += cut + 1  # past the comma between two frames
+        buf = buf[cut + 1:]
+        if last:
+            break
+
+
+def _read_cut(item: tuple[int, bytes | None], threads: bool = True):
+    """A cut block into columns (:func:`.fastblock.read_block`; runs in a worker process)."""
+    from aveas_format.converters.openlabel.fastblock import read_block
+
+    return None if item[1] is None else read_block(b"{" + item[1] + b"}", threads=threads)
+
+
+def _no_block(item: tuple[int, bytes | None]) -> None:
+    return None
+
+
+def _frames_end(buf: bytes) -> int | None:
+    """The offset in ``buf`` (members of the frames from a frame boundary to the end of the file) of
+    the frames' closing brace, None where the brackets outside strings do not close it."""
+    from aveas_format.converters.openlabel.fastblock import _NotFast, _structure
+
+    try:
+        pos, depth, step, _ = _structure(b"{" + buf)
+    except _NotFast:
+        return None
+    closes = pos[(depth == 1) & (step < 0)]
+    return int(closes[0]) - 1 if len(closes) else None
 
 
 def _last_cut(buf: bytes) -> int | None:
@@ -284,3 +449,18 @@ class _Prefixed:
             h, self.head = self.head, b""
             return h
         return self.rd.read(n)
+
+
+class _Suffixed:
+    """A reader that hands out what ``rd`` reads, then ``tail``."""
+
+    def __init__(self, rd: CountingReader, tail: bytes) -> None:
+        self.rd, self.tail = rd, tail
+
+    def read(self, n: int = -1) -> bytes:
+        if n == 0:  # (ijson probes the type of the reader with read(0))
+            return b""
+        data = self.rd.read(n)
+        if not data:
+            data, self.tail = self.tail, b""
+        return data
