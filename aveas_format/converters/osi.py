@@ -163,54 +163,11 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     from aveas_format.mapref.crs import LocalFrame, crs_equal
     from aveas_format.opendrive import load_map
 
-    # the floats (_FLOAT_COLS) of each sample (a tuple each, turned into a float64 block every
-    # _BLOCK samples: ~110 B per sample, not a Python float per value), its object id and message
-    # index apart (typed arrays)
-    cols: dict[str, Any] = {"f": [], "id": array("q"), "msg": array("q")}
-    blocks: list[np.ndarray] = []
-    static: dict[int, dict[str, Any]] = {}
-    host_ids: set[int] = set()
-    proj: tuple[str, tuple[float, float, float, float]] | None = None
-    n_msg = 0
-    last_t = -math.inf
-    found = _Findings()
-    for path in inputs:
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", DeprecationWarning)
-                for gt in _messages(path, options):
-                    t = _get(gt, "timestamp", "seconds", default=0.0) + \
-                        _get(gt, "timestamp", "nanos", default=0.0) * 1e-9
-                    if getattr(gt, "host_vehicle_id", None) is not None:
-                        host_ids.add(int(gt.host_vehicle_id.value))
-                    if proj is None and getattr(gt, "proj_string", ""):
-                        off = getattr(gt, "proj_frame_offset", None)
-                        o = (0.0, 0.0, 0.0, 0.0) if off is None else (
-                            _get(off, "position", "x", default=0.0),
-                            _get(off, "position", "y", default=0.0), 0.0,
-                            _get(off, "yaw", default=0.0))
-                        proj = (str(gt.proj_string), o)
-                    if t < last_t:
-                        found.add("source.osi.time_not_increasing", None, n_msg,
-                                  f"timestamp {t:.9g} s is earlier than the previous "
-                                  f"message's ({last_t:.9g} s); the states are sorted")
-                    last_t = max(last_t, t)
-                    for mo in gt.moving_object:
-                        _object(mo, t, n_msg, cols, static, found)
-                    n_msg += 1
-                    if len(cols["f"]) >= _BLOCK:
-                        blocks.append(np.asarray(cols["f"], np.float64))
-                        cols["f"].clear()
-        except (FormatError, RecordingIOError):
-            raise
-        except Exception as e:  # noqa: BLE001 - decoder errors of any kind
-            raise FormatError(f"cannot decode OSI message {n_msg}: {type(e).__name__}: {e}",
-                              path=path) from None
-    blocks.append(np.asarray(cols["f"], np.float64).reshape(-1, len(_FLOAT_COLS)))
-    f = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
-    del blocks
-    cols = {"id": np.frombuffer(cols["id"], np.int64), "msg": np.frombuffer(cols["msg"], np.int64),
-            **{k: f[:, j] for j, k in enumerate(_FLOAT_COLS)}}
+    try:  # the columnar decoder (osi_columns); betterosi for what it does not take
+        f, ids, msgs, static, host_ids, proj, found = _decode_columns(inputs, options)
+    except pw.Unsupported:
+        f, ids, msgs, static, host_ids, proj, found = _decode_objects(inputs, options)
+    cols = {"id": ids, "msg": msgs, **{k: f[:, j] for j, k in enumerate(_FLOAT_COLS)}}
     sizeless = [oid for oid, d in static.items() if d["length"] is None]
     for oid in sizeless:
         found.add("source.osi.missing_dimension", oid, static[oid]["no_size_msg"],
@@ -297,6 +254,123 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     )
 
 
+
+def _decode_objects(inputs: list[Path], options: OsiOptions):
+    """The samples of the traces decoded by betterosi, one message object at a time: (floats
+    (``_FLOAT_COLS``, one row per sample), object ids, message indices, per-object statics, host
+    ids, the first proj_string and its offset, the findings)."""
+    # the floats (_FLOAT_COLS) of each sample (a tuple each, turned into a float64 block every
+    # _BLOCK samples: ~110 B per sample, not a Python float per value), its object id and message
+    # index apart (typed arrays)
+    cols: dict[str, Any] = {"f": [], "id": array("q"), "msg": array("q")}
+    blocks: list[np.ndarray] = []
+    static: dict[int, dict[str, Any]] = {}
+    host_ids: set[int] = set()
+    proj: tuple[str, tuple[float, float, float, float]] | None = None
+    n_msg = 0
+    last_t = -math.inf
+    found = _Findings()
+    for path in inputs:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", DeprecationWarning)
+                for gt in _messages(path, options):
+                    t = _get(gt, "timestamp", "seconds", default=0.0) + \
+                        _get(gt, "timestamp", "nanos", default=0.0) * 1e-9
+                    if getattr(gt, "host_vehicle_id", None) is not None:
+                        host_ids.add(int(gt.host_vehicle_id.value))
+                    if proj is None and getattr(gt, "proj_string", ""):
+                        off = getattr(gt, "proj_frame_offset", None)
+                        o = (0.0, 0.0, 0.0, 0.0) if off is None else (
+                            _get(off, "position", "x", default=0.0),
+                            _get(off, "position", "y", default=0.0), 0.0,
+                            _get(off, "yaw", default=0.0))
+                        proj = (str(gt.proj_string), o)
+                    if t < last_t:
+                        found.add("source.osi.time_not_increasing", None, n_msg,
+                                  f"timestamp {t:.9g} s is earlier than the previous "
+                                  f"message's ({last_t:.9g} s); the states are sorted")
+                    last_t = max(last_t, t)
+                    for mo in gt.moving_object:
+                        _object(mo, t, n_msg, cols, static, found)
+                    n_msg += 1
+                    if len(cols["f"]) >= _BLOCK:
+                        blocks.append(np.asarray(cols["f"], np.float64))
+                        cols["f"].clear()
+        except (FormatError, RecordingIOError):
+            raise
+        except Exception as e:  # noqa: BLE001 - decoder errors of any kind
+            raise FormatError(f"cannot decode OSI message {n_msg}: {type(e).__name__}: {e}",
+                              path=path) from None
+    blocks.append(np.asarray(cols["f"], np.float64).reshape(-1, len(_FLOAT_COLS)))
+    f = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
+    del blocks
+    cols = {"id": np.frombuffer(cols["id"], np.int64), "msg": np.frombuffer(cols["msg"], np.int64)}
+    return f, cols["id"], cols["msg"], static, host_ids, proj, found
+
+
+def _decode_columns(inputs: list[Path], options: OsiOptions):
+    """What :func:`_decode_objects` gives, from the columnar decoder
+    (:mod:`aveas_format.converters.osi_columns`); :class:`~._protowire.Unsupported` where it does
+    not take the trace (then betterosi decodes it)."""
+    import betterosi as b
+
+    from aveas_format.converters.osi_columns import decode_trace
+
+    otypes = {int(m): m.name for m in b.MovingObject.Type}
+    vtypes = {int(m): m.name for m in b.MovingObject.VehicleClassification.Type}
+    fs, ids, msgs = [], [], []
+    static: dict[int, dict[str, Any]] = {}
+    host_ids: set[int] = set()
+    proj = None
+    n_msg = 0
+    last_t = -math.inf
+    for path in inputs:
+        if path.suffix.lower() == ".osi" and check_osi_framing(path) == 0:
+            raise FormatError("empty OSI trace", path=path)
+        n_file = 0
+        for ch in decode_trace(path, options.message_type):
+            t = ch["t"]
+            if len(t):
+                if (t < np.maximum.accumulate(np.r_[last_t, t])[:-1]).any():
+                    raise pw.Unsupported("a timestamp going back (a finding)")
+                last_t = max(last_t, float(t.max()))
+            host_ids |= ch["hosts"]
+            if proj is None:
+                proj = ch["proj"]
+            oid, dim = ch["id"], ch["dim"]
+            u, first = np.unique(oid, return_index=True)
+            for o, i in zip(u.tolist(), first.tolist()):
+                if o in static:
+                    continue
+                otype = otypes.get(int(ch["otype"][i]), "UNKNOWN")
+                has_vc = bool(ch["has_vc"][i])
+                vtype = (vtypes.get(int(ch["vtype"][i]), "UNKNOWN")
+                         if has_vc and otype == "VEHICLE" else None)
+                cls, unknown = _classify(otype, vtype, has_vc)
+                length, width, height = dim[i].tolist()
+                if unknown or not (length > 0 and width > 0):
+                    raise pw.Unsupported("an unknown type or a missing size (a finding)")
+                static[o] = {"class": cls, "length": length, "width": width,
+                             "height": height if height > 0 else None, "osi_type": otype,
+                             "lanes": set(), "no_size_msg": 0, "no_size_n": 0}
+            lane_obj, lane_id = ch["lanes"]
+            if len(lane_obj):
+                pairs = np.unique(np.stack([oid[lane_obj], lane_id], axis=1), axis=0)
+                for o, lane in pairs.tolist():
+                    static[o]["lanes"].add(lane)
+            fs.append(ch["f"])
+            ids.append(oid)
+            msgs.append(ch["msg"] + n_msg)
+            n_file += len(t)
+        n_msg += n_file
+    if not fs:
+        return np.zeros((0, len(_FLOAT_COLS))), np.zeros(0, np.int64), np.zeros(0, np.int64), \
+            static, host_ids, proj, _Findings()
+    return (np.concatenate(fs), np.concatenate(ids), np.concatenate(msgs), static, host_ids, proj,
+            _Findings())
+
+
 def _offset_crs(proj: str, offset: tuple[float, float, float, float]) -> str:
     """The CRS of the OSI frame: the trace's ``proj_string`` with its ``proj_frame_offset``
     (a translation; a rotated frame is refused) folded into the false easting/northing."""
@@ -377,6 +451,21 @@ def _indicator_values(state: Any) -> tuple[float, float, float]:
     return float(name == "LEFT"), float(name == "RIGHT"), float(name == "WARNING")
 
 
+def _classify(otype: str, vtype: str | None, has_vc: bool) -> tuple[str, bool]:
+    """The class of a moving object of OSI type ``otype`` (vehicle type ``vtype``), and whether
+    the types are unknown or unmapped (a finding: class other)."""
+    if otype == "PEDESTRIAN":
+        cls = "pedestrian"
+    elif otype == "ANIMAL":
+        cls = "animal"
+    elif otype == "VEHICLE":
+        cls = VEHICLE_CLASS.get(vtype, "other") if has_vc else "car"
+    else:
+        cls = "other"
+    return cls, otype not in ("PEDESTRIAN", "ANIMAL", "VEHICLE", "OTHER") or (
+        vtype is not None and vtype not in VEHICLE_CLASS and vtype != "OTHER")
+
+
 def _object(mo, t: float, msg: int, cols: dict[str, Any], static: dict[int, dict[str, Any]],
             found: _Findings) -> None:
     oid = int(mo.id.value) if getattr(mo, "id", None) is not None else None
@@ -407,16 +496,8 @@ def _object(mo, t: float, msg: int, cols: dict[str, Any], static: dict[int, dict
     if d is None:
         otype = _enum_name(mo.type)
         vtype = _enum_name(vc.type) if vc is not None and otype == "VEHICLE" else None
-        if otype == "PEDESTRIAN":
-            cls = "pedestrian"
-        elif otype == "ANIMAL":
-            cls = "animal"
-        elif otype == "VEHICLE":
-            cls = VEHICLE_CLASS.get(vtype, "other") if vc is not None else "car"
-        else:
-            cls = "other"
-        if otype not in ("PEDESTRIAN", "ANIMAL", "VEHICLE", "OTHER") or (
-                vtype is not None and vtype not in VEHICLE_CLASS and vtype != "OTHER"):
+        cls, unknown = _classify(otype, vtype, vc is not None)
+        if unknown:
             found.add("source.osi.unknown_type", oid, msg,
                       f"moving object {oid}: type {otype}"
                       + (f", vehicle type {vtype}" if vtype is not None else "")
