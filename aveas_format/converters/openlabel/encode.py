@@ -257,17 +257,20 @@ def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
         stop = min(start + chunk_rows, n)
         stop = int(np.searchsorted(fs, fs[stop - 1], side="right"))
         rows = order[start:stop]
-        objs = _objects_text(prepare(rows), np.arange(len(rows))).tolist()
+        objs = _objects_text(prepare(rows), np.arange(len(rows)))
         f = fs[start:stop]
-        cuts = np.flatnonzero(np.diff(f)) + 1
-        lo = np.r_[0, cuts]
-        hi = np.r_[cuts, len(f)]
-        parts = []
-        for a, b in zip(lo.tolist(), hi.tolist()):
-            k = int(f[a])
-            parts.append(b'"%d":{"frame_properties":{"timestamp":%s},"objects":{%s}}'
-                         % (k, ts[k], b",".join(objs[a:b])))
-        yield (b"" if first else b",") + b",".join(parts)
+        m = len(f)
+        lo = np.flatnonzero(np.r_[True, f[1:] != f[:-1]])  # the first row of each frame
+        # one list of pieces joined once: before each row its frame's head (first row) or a
+        # comma, after the last row of a frame "}}"
+        pieces = np.full(2 * m + len(lo), b",", dtype=object)
+        at = np.arange(m) * 2 + np.searchsorted(lo, np.arange(m), side="right") - 1
+        pieces[at + 1] = objs
+        pieces[at[lo]] = [b'%s"%d":{"frame_properties":{"timestamp":%s},"objects":{'
+                          % (b"" if first and j == 0 else b",", k, ts[k])
+                          for j, k in enumerate(f[lo].tolist())]
+        pieces[np.r_[at[lo[1:]] - 1, len(pieces) - 1]] = b"}}"
+        yield b"".join(pieces.tolist())
         first = False
         start = stop
 
