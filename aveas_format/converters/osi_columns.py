@@ -10,7 +10,8 @@ decodes the trace with betterosi) on anything whose handling it would have to re
 wire format (betterosi's error, located, is the one reported), a singular field twice or with
 another wire type, a moving object without id or base, a first sample of an object without a
 positive size or with an unmapped type, a SensorView without ground truth, a timestamp going back
-(those are the import's located findings, made by the betterosi path), a ``.mcap`` input.
+(those are the import's located findings, made by the betterosi path), an MCAP trace with other
+message kinds or encodings on its OSI topics.
 """
 
 from __future__ import annotations
@@ -219,24 +220,70 @@ def decode_chunk(buf: np.ndarray, start: np.ndarray, end: np.ndarray, sensor_vie
     return out
 
 
+def _decoded(raws: list[bytes], sensor_view: bool, msg0: int) -> dict[str, Any]:
+    """:func:`decode_chunk` of messages given as byte strings."""
+    lengths = np.fromiter(map(len, raws), np.int64, len(raws))
+    ends = np.cumsum(lengths)
+    try:
+        return decode_chunk(pw.padded(b"".join(raws)), ends - lengths, ends, sensor_view, msg0)
+    except pw.WireError as e:
+        raise Unsupported(f"message {msg0 + e.span}: {e.reason}") from None
+
+
+def _mcap_chunks(path: Path):
+    """The GroundTruth / SensorView messages of an MCAP trace, in chunks, as betterosi reads them
+    (its OSI topics, in log-time order); other message kinds and encodings: unsupported."""
+    from betterosi.mcap_reader import osi_type_name
+    from mcap.reader import make_reader
+
+    from aveas_format.safeio import check_mcap
+
+    check_mcap(path)
+    kind, raws, size, msg0 = None, [], 0, 0
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        topics = None
+        if summary is not None:
+            topics = [c.topic for c in summary.channels.values()
+                      if osi_type_name(summary.schemas.get(c.schema_id)) is not None] or None
+        for schema, channel, message in reader.iter_messages(topics=topics):
+            t = osi_type_name(schema)
+            if (t not in ("GroundTruth", "SensorView") or channel.message_encoding != "protobuf"
+                    or schema.encoding != "protobuf" or kind not in (None, t)):
+                raise Unsupported(f"MCAP channel {channel.topic}: {t} ({channel.message_encoding})")
+            kind = t
+            raws.append(message.data)
+            size += len(message.data)
+            if size >= CHUNK_BYTES:
+                yield _decoded(raws, kind == "SensorView", msg0)
+                msg0 += len(raws)
+                raws, size = [], 0
+    if raws:
+        yield _decoded(raws, kind == "SensorView", msg0)
+
+
 def decode_trace(path: Path, option: str):
-    """The chunks (:func:`decode_chunk`) of a binary .osi trace, in order."""
-    if path.suffix.lower() != ".osi":
-        raise Unsupported("not a binary .osi trace")
+    """The chunks (:func:`decode_chunk`) of a binary .osi or an MCAP trace, in order."""
+    suffix = path.suffix.lower()
+    if suffix == ".mcap":
+        yield from _mcap_chunks(path)
+        return
+    if suffix != ".osi":
+        raise Unsupported("not a binary .osi or .mcap trace")
     sensor_view = message_type(path, option) == "SensorView"
     starts, lengths = frames(path)
     ends = starts + lengths
     with open(path, "rb") as fh:
         i = 0
         while i < len(starts):
-            j = int(np.searchsorted(starts, starts[i] + CHUNK_BYTES, side="left"))
-            j = max(j, i + 1)
+            j = max(int(np.searchsorted(starts, starts[i] + CHUNK_BYTES, side="left")), i + 1)
             fh.seek(int(starts[i]) - 4)
             raw = fh.read(int(ends[j - 1] - starts[i] + 4))
-            buf = pw.padded(raw)
             base = int(starts[i]) - 4
             try:
-                yield decode_chunk(buf, starts[i:j] - base, ends[i:j] - base, sensor_view, i)
+                yield decode_chunk(pw.padded(raw), starts[i:j] - base, ends[i:j] - base,
+                                   sensor_view, i)
             except pw.WireError as e:
                 raise Unsupported(f"message {i + e.span}: {e.reason}") from None
             i = j

@@ -226,3 +226,18 @@ def test_chunks_give_the_same_samples(tmp_path, monkeypatch):
     chunked = osi._decode_columns([trace], osi.OsiOptions())
     np.testing.assert_array_equal(whole[0], chunked[0])
     assert whole[2].tolist() == chunked[2].tolist() and whole[3] == chunked[3]
+
+
+@pytest.mark.parametrize("sensor_view", [False, True])
+def test_mcap_traces_decode_the_same(tmp_path, sensor_view):
+    """An MCAP trace (the messages as betterosi's reader yields them): the same decoding."""
+    trace = tmp_path / "t.mcap"
+    msgs = _random_messages(np.random.default_rng(4), sensor_view=sensor_view)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        proto = b.SensorView() if sensor_view else b.GroundTruth()
+        with b.Writer(trace) as w:
+            for k, raw in enumerate(msgs):
+                w.add(osi._Encoded(raw, proto), log_time=k * 10**8)
+    cols = _same_decoding(trace)
+    assert len(cols[0]) == 36
