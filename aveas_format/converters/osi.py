@@ -167,31 +167,33 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
         f, ids, msgs, static, host_ids, proj, found = _decode_columns(inputs, options)
     except pw.Unsupported:
         f, ids, msgs, static, host_ids, proj, found = _decode_objects(inputs, options)
-    cols = {"id": ids, "msg": msgs, **{k: f[:, j] for j, k in enumerate(_FLOAT_COLS)}}
     sizeless = [oid for oid, d in static.items() if d["length"] is None]
     for oid in sizeless:
         found.add("source.osi.missing_dimension", oid, static[oid]["no_size_msg"],
                   f"moving object {oid} has no positive base.dimension (length, width) in any of "
                   f"its messages: not imported", count=static[oid]["no_size_n"])
     if sizeless:  # objects without a size cannot be participants: their samples go
-        keep = ~np.isin(cols["id"], sizeless)
-        cols = {k: v[keep] for k, v in cols.items()}
+        keep = ~np.isin(ids, sizeless)
+        f, ids, msgs = f[keep], ids[keep], msgs[keep]
         for oid in sizeless:
             del static[oid]
     found.report(inputs[0] if len(inputs) == 1 else None)
-    if not len(cols["t"]):
+    if not len(f):
         raise FormatError("no GroundTruth moving objects in the trace", path=inputs[0])
 
-    t = np.asarray(cols["t"])
+    t = f[:, 0]
     t0 = float(t.min())
     t = t - t0
-    src = np.asarray(cols["id"], np.int64)
-    uniq, pid = np.unique(src, return_inverse=True)
+    uniq, pid = np.unique(np.asarray(ids, np.int64), return_inverse=True)
     pid = pid.astype(np.int64)
     # a duplicate names the object id and the frame (0-based message index, the states'
     # source_frame) of its second sample
-    order = sort_states(pid, t, inputs[0] if len(inputs) == 1 else None,
-                        np.asarray(cols["msg"], np.int64), ids=uniq.tolist(), unit="frame")
+    msgs = np.asarray(msgs, np.int64)
+    order = sort_states(pid, t, inputs[0] if len(inputs) == 1 else None, msgs,
+                        ids=uniq.tolist(), unit="frame")
+    # the samples in the states' order: one gather of whole rows (not one per column)
+    f, pid, t, msgs = f[order], pid[order], t[order], msgs[order]
+    cols = {k: f[:, j] for j, k in enumerate(_FLOAT_COLS)}
 
     def arr(k: str) -> np.ndarray:
         return np.asarray(cols[k], np.float64)
@@ -220,9 +222,8 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
         "light_indicator_left_p": arr("ind_l").astype(np.float32),
         "light_indicator_right_p": arr("ind_r").astype(np.float32),
         "light_hazard_p": arr("hazard").astype(np.float32),
-        "source_frame": np.asarray(cols["msg"], np.int64),
+        "source_frame": msgs,
     }
-    states = {k: v[order] for k, v in states.items()}
     import pyarrow as pa
 
     for k in ("z", "ax", "ay", "yaw_rate", "light_brake_p", "light_indicator_left_p",
