@@ -27,7 +27,8 @@ import numpy as np
 from aveas_format.converters import _protowire as pw
 from aveas_format.converters._protowire import I64, LEN, VARINT, Unsupported
 
-#: bytes of messages decoded at once (bounds the memory of the decoding: ~40x this)
+#: bytes of messages decoded at once (bounds the decoding's memory: the chunk and its field tables,
+#: 41 B per field occurrence)
 CHUNK_BYTES = 8 << 20
 
 
