@@ -164,7 +164,12 @@ class _Layout:
             if not store:
                 continue
             mat = np.column_stack(store)  # rows x columns, one formatting call
-            vals = np.array(numbers(mat.reshape(-1)), dtype=object).reshape(mat.shape)
+            lo, hi = (int(mat.min()), int(mat.max())) if kind == "i" and mat.size else (0, 1 << 62)
+            if hi - lo < 65536:  # ids, counts, frames of a chunk: each distinct value's text once
+                table = np.array(numbers(np.arange(lo, hi + 1, dtype=np.int64)), dtype=object)
+                vals = table[mat - lo]
+            else:
+                vals = np.array(numbers(mat.reshape(-1)), dtype=object).reshape(mat.shape)
             for k, v in enumerate(self._vals):
                 if isinstance(v, tuple) and v[0] == kind:
                     self._vals[k] = vals[:, v[1]]
@@ -199,7 +204,8 @@ class _Layout:
             parts: list = []
             self._template(segments, on, parts)
             tmpl = b"".join(p.replace(b"%", b"%%") if isinstance(p, bytes) else b"%s" for p in parts)
-            cols = [p[idx] for p in parts if not isinstance(p, bytes)]
+            whole = len(idx) == m  # one layout for all rows: in order, no gather
+            cols = [p if whole else p[idx] for p in parts if not isinstance(p, bytes)]
             if not cols:
                 out[idx] = [tmpl] * len(idx)
             else:
