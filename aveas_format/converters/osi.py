@@ -327,7 +327,7 @@ def _decode_columns(inputs: list[Path], options: OsiOptions):
     n_msg = 0
     last_t = -math.inf
     for path in inputs:
-        if path.suffix.lower() == ".osi" and check_osi_framing(path) == 0:
+        if path.suffix.lower() == ".osi" and path.stat().st_size == 0:
             raise FormatError("empty OSI trace", path=path)
         n_file = 0
         for ch in decode_trace(path, options.message_type):
@@ -339,17 +339,16 @@ def _decode_columns(inputs: list[Path], options: OsiOptions):
             host_ids |= ch["hosts"]
             if proj is None:
                 proj = ch["proj"]
-            oid, dim = ch["id"], ch["dim"]
+            oid = ch["id"]
             u, first = np.unique(oid, return_index=True)
-            for o, i in zip(u.tolist(), first.tolist()):
-                if o in static:
-                    continue
-                otype = otypes.get(int(ch["otype"][i]), "UNKNOWN")
-                has_vc = bool(ch["has_vc"][i])
-                vtype = (vtypes.get(int(ch["vtype"][i]), "UNKNOWN")
-                         if has_vc and otype == "VEHICLE" else None)
+            new = np.fromiter((o not in static for o in u.tolist()), bool, len(u))
+            i = first[new]  # the first sample of each object not seen before
+            for o, ot, has_vc, vt, (length, width, height) in zip(
+                    u[new].tolist(), ch["otype"][i].tolist(), ch["has_vc"][i].tolist(),
+                    ch["vtype"][i].tolist(), ch["dim"][i].tolist()):
+                otype = otypes.get(ot, "UNKNOWN")
+                vtype = vtypes.get(vt, "UNKNOWN") if has_vc and otype == "VEHICLE" else None
                 cls, unknown = _classify(otype, vtype, has_vc)
-                length, width, height = dim[i].tolist()
                 if unknown or not (length > 0 and width > 0):
                     raise pw.Unsupported("an unknown type or a missing size (a finding)")
                 static[o] = {"class": cls, "length": length, "width": width,

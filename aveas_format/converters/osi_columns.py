@@ -32,21 +32,6 @@ from aveas_format.converters._protowire import I64, LEN, VARINT, Unsupported
 CHUNK_BYTES = 8 << 20
 
 
-def frames(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(start, length) of each message of a binary .osi trace (the framing checked before)."""
-    size = path.stat().st_size
-    starts, lengths = [], []
-    with open(path, "rb") as f:
-        offset = 0
-        while offset < size:
-            (n,) = struct.unpack("<I", f.read(4))
-            starts.append(offset + 4)
-            lengths.append(n)
-            f.seek(n, 1)
-            offset += 4 + n
-    return np.array(starts, np.int64), np.array(lengths, np.int64)
-
-
 def message_type(path: Path, option: str) -> str:
     """GroundTruth or SensorView, as betterosi resolves it (option, file name, first message)."""
     if option != "auto":
@@ -273,18 +258,30 @@ def decode_trace(path: Path, option: str):
     if suffix != ".osi":
         raise Unsupported("not a binary .osi or .mcap trace")
     sensor_view = message_type(path, option) == "SensorView"
-    starts, lengths = frames(path)
-    ends = starts + lengths
+    size = path.stat().st_size
     with open(path, "rb") as fh:
-        i = 0
-        while i < len(starts):
-            j = max(int(np.searchsorted(starts, starts[i] + CHUNK_BYTES, side="left")), i + 1)
-            fh.seek(int(starts[i]) - 4)
-            raw = fh.read(int(ends[j - 1] - starts[i] + 4))
-            base = int(starts[i]) - 4
+        off = msg = 0
+        while off < size:  # a chunk: the whole messages of the next CHUNK_BYTES (at least one)
+            fh.seek(off)
+            block = fh.read(CHUNK_BYTES)
+            starts, pos = [], 0
+            while pos + 4 <= len(block):
+                (n,) = struct.unpack_from("<I", block, pos)
+                if pos + 4 + n > len(block):
+                    break
+                starts.append(pos + 4)
+                pos += 4 + n
+            if not starts:  # a message longer than a chunk, or a truncated trace
+                if size - off < 4 or off + 4 + struct.unpack_from("<I", block)[0] > size:
+                    raise Unsupported(f"message {msg} truncated (the framing check reports it)")
+                fh.seek(off)
+                block = fh.read(4 + struct.unpack_from("<I", block)[0])
+                starts, pos = [4], len(block)
+            st = np.array(starts, np.int64)
+            ends = np.r_[st[1:] - 4, pos]
             try:
-                yield decode_chunk(pw.padded(raw), starts[i:j] - base, ends[i:j] - base,
-                                   sensor_view, i)
+                yield decode_chunk(pw.padded(block[:pos]), st, ends, sensor_view, msg)
             except pw.WireError as e:
-                raise Unsupported(f"message {i + e.span}: {e.reason}") from None
-            i = j
+                raise Unsupported(f"message {msg + e.span}: {e.reason}") from None
+            off += pos
+            msg += len(starts)
