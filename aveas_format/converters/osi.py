@@ -165,7 +165,10 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
 
     try:  # the columnar decoder (osi_columns); betterosi for what it does not take
         f, ids, msgs, static, host_ids, proj, found = _decode_columns(inputs, options)
-    except pw.Unsupported:
+    except (FormatError, RecordingIOError):
+        raise
+    except Exception:  # noqa: BLE001 - Unsupported, or bytes it trips on (a corrupt MCAP chunk,
+        # a proj_string not UTF-8...): the betterosi path decodes or reports them, located
         f, ids, msgs, static, host_ids, proj, found = _decode_objects(inputs, options)
     sizeless = [oid for oid, d in static.items() if d["length"] is None]
     for oid in sizeless:

@@ -241,3 +241,14 @@ def test_mcap_traces_decode_the_same(tmp_path, sensor_view):
                 w.add(osi._Encoded(raw, proto), log_time=k * 10**8)
     cols = _same_decoding(trace)
     assert len(cols[0]) == 36
+
+
+def test_bytes_it_trips_on_go_to_betterosi(tmp_path, monkeypatch):
+    """An error of any kind inside the columnar decoder is no traceback: the betterosi path takes
+    the trace (here: a proj_string that is not UTF-8, which betterosi reports, located)."""
+    good = _msg(5, _object(3, 1.0, shuffled=False)) + _msg(2, _v(1, 1))
+    trace = _write(tmp_path / "u_gt_.osi", [good + _field(14, pw.LEN, b"\xff\xfe")])
+    with pytest.raises(UnicodeDecodeError):
+        osi._decode_columns([trace], osi.OsiOptions())
+    with pytest.raises(FormatError, match="OSI message 0"):
+        convert("osi", [trace], map_source=tmp_path / "none.xodr")
