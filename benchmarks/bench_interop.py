@@ -271,6 +271,42 @@ def _osi_bindings(rec) -> bytes:
     return b"".join(out)
 
 
+def _upb_fields(path: Path) -> float:
+    """The alternative to the columnar decoder measured by brief 22f: the ``protobuf`` package's C
+    (upb) backend with OSI classes made from betterosi's descriptor set, each object's fields the
+    import reads accessed in Python (seconds)."""
+    import os
+    import struct
+
+    import betterosi
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    raw = (Path(os.path.dirname(betterosi.__file__)) / "generated" / "3.8.0" /
+           "osi3_descriptor_set.pb").read_bytes()
+    pool = descriptor_pool.DescriptorPool()
+    for fd in descriptor_pb2.FileDescriptorSet.FromString(raw).file:
+        pool.Add(fd)
+    gt_class = message_factory.GetMessageClass(pool.FindMessageTypeByName("osi3.GroundTruth"))
+    data = path.read_bytes()
+
+    def run() -> None:
+        off, out = 0, []
+        while off < len(data):
+            (n,) = struct.unpack_from("<I", data, off)
+            g = gt_class.FromString(data[off + 4:off + 4 + n])
+            off += 4 + n
+            t = g.timestamp.seconds + g.timestamp.nanos * 1e-9
+            for mo in g.moving_object:
+                q, vc = mo.base, mo.vehicle_classification
+                out.append((t, q.position.x, q.position.y, q.position.z, q.orientation.yaw,
+                            q.velocity.x, q.velocity.y, q.acceleration.x, q.acceleration.y,
+                            q.orientation_rate.yaw, mo.id.value, mo.type, vc.type,
+                            vc.light_state.brake_light_state, vc.light_state.indicator_state,
+                            q.dimension.length, len(mo.assigned_lane_id)))
+
+    return _best(run)
+
+
 def _osi_mcap_rows(rec, tmp: Path) -> list[dict]:
     """OSI (.osi, .mcap) export and import, MCAP (Foxglove) export, each beside its same-run
     baseline, and the floors of the libraries: one near-empty OSI message built and serialized
@@ -302,7 +338,22 @@ def _osi_mcap_rows(rec, tmp: Path) -> list[dict]:
                      "MovingObject(id) built + serialized per state"))
     dt = _timed(lambda: osi(rec, tmp / "rec_osi.mcap"))
     rows.append(_row("export_osi_mcap", n, dt, f"{(tmp / 'rec_osi.mcap').stat().st_size / 1e6:.1f} MB"))
-    dt = _timed(lambda: convert("osi", [tmp / "rec.osi"], map_source=tmp / "rec.xodr"))
+    import aveas_format.converters.osi as osi_mod
+
+    dt = _best(lambda: convert("osi", [tmp / "rec.osi"], map_source=tmp / "rec.xodr"))
+    dt_cols = _best(lambda: osi_mod._decode_columns([tmp / "rec.osi"], osi_mod.OsiOptions()))
+    columns = osi_mod._decode_columns
+
+    def columns_off(*a, **k):
+        raise osi_mod.pw.Unsupported("the betterosi path, for comparison")
+
+    osi_mod._decode_columns = columns_off
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)
+            dt_objects = _best(lambda: convert("osi", [tmp / "rec.osi"], map_source=tmp / "rec.xodr"))
+    finally:
+        osi_mod._decode_columns = columns
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         b_read = _timed(lambda: sum(len(g.moving_object) for g in
@@ -318,11 +369,19 @@ def _osi_mcap_rows(rec, tmp: Path) -> list[dict]:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-        b_touch = _timed(touch)
-    rows.append(_row("import_osi", n, dt, "the recording, on its map", b_read,
+        b_touch = _best(touch)
+    rows.append(_row("import_osi", n, dt, "the recording, on its map (best of 3)", b_read,
                      "betterosi decoding the trace alone (sub-messages decoded lazily, not read)"))
     rows.append(_row("import_osi", n, dt, "(the same run)", b_touch,
                      "floor: betterosi decoding + reading each object's fields the import reads"))
+    rows.append(_row("import_osi", n, dt, "(the same run)", dt_objects,
+                     "the import decoding with betterosi (the import before brief 22f)"))
+    rows.append(_row("decode_osi_columns", n, dt_cols, "the import's columnar decoder alone "
+                     "(samples and per-object statics)", b_touch,
+                     "betterosi decoding + reading the fields the import reads"))
+    rows.append(_row("decode_osi_columns", n, dt_cols, "(the same run)", _upb_fields(tmp / "rec.osi"),
+                     "the protobuf package's upb backend (classes from betterosi's descriptor set) "
+                     "+ reading the same fields in Python"))
     dt = _timed(lambda: mc(rec, tmp / "rec.mcap"))
     dt_noloc = _timed(lambda: mc(rec, tmp / "rec_noloc.mcap", options={"locations": False}))
 
@@ -421,12 +480,25 @@ from aveas_format.converters import get_converter
 
 warnings.simplefilter("ignore")
 name, rec_dir, out = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3])
-if name == "osi-import":  # the trace written by an earlier child, on the recording's map
+if name in ("osi-import", "osi-import-betterosi"):  # the trace of an earlier child, on its map
     from aveas_format.converters import convert
 
+    if name == "osi-import-betterosi":  # the import decoding with betterosi (before brief 22f)
+        import aveas_format.converters.osi as osi_mod
+
+        def _columns_off(*a, **k):
+            raise osi_mod.pw.Unsupported("the betterosi path, for comparison")
+
+        osi_mod._decode_columns = _columns_off
     base = hwm_mb()
     t0 = time.perf_counter()
     n = convert("osi", [out], map_source=rec_dir / "map.xodr").states.num_rows
+elif name == "osi-columns":  # the import's columnar decoder alone (samples and statics)
+    import aveas_format.converters.osi as osi_mod
+
+    base = hwm_mb()
+    t0 = time.perf_counter()
+    n = len(osi_mod._decode_columns([out], osi_mod.OsiOptions())[0])
 elif name == "osi-decode":  # floor of the import: betterosi decoding + the fields the import reads
     import betterosi as b
 
@@ -490,14 +562,18 @@ def large_osi_mcap(target_states: int) -> list[dict]:
         got = {}
         for name, file in (("osi", "rec.osi"), ("osi-floor", "none"), ("osi", "rec_osi.mcap"),
                            ("mcap", "rec.mcap"), ("mcap-floor", "floor.mcap"),
-                           ("osi-import", "rec.osi"), ("osi-decode", "rec.osi")):
+                           ("osi-import", "rec.osi"), ("osi-import-betterosi", "rec.osi"),
+                           ("osi-columns", "rec.osi"), ("osi-decode", "rec.osi")):
             r = subprocess.run([sys.executable, "-c", _CHILD_PROTO, name, str(tmp / "rec"),
                                 str(tmp / file)], capture_output=True, text=True)
             if r.returncode:
                 raise RuntimeError(r.stderr[-2000:])
             e = got[(name, file)] = json.loads(r.stdout.strip().splitlines()[-1])
-            if name == "osi-import":
-                rows.append(_row("import_osi_large (.osi)", e["states"], e["seconds"],
+            if name in ("osi-import", "osi-import-betterosi", "osi-columns"):
+                what = {"osi-import": "import_osi_large (.osi)",
+                        "osi-import-betterosi": "import_osi_large, decoded by betterosi (before 22f)",
+                        "osi-columns": "decode_osi_columns_large (the decoder alone)"}[name]
+                rows.append(_row(what, e["states"], e["seconds"],
                                  f"fresh process: peak {e['peak_mb']:.0f} MB ({e['before_mb']:.0f} MB "
                                  "after imports)"))
             elif name in ("osi", "mcap"):
@@ -510,7 +586,10 @@ def large_osi_mcap(target_states: int) -> list[dict]:
                   "export_mcap_large (.mcap)": (("mcap-floor", "floor.mcap"), "floor of mcap: one empty "
                                                 "message written per state (fresh process)"),
                   "import_osi_large (.osi)": (("osi-decode", "rec.osi"), "floor: betterosi decoding + "
-                                              "reading each object's fields the import reads (fresh process)")}
+                                              "reading each object's fields the import reads (fresh process)"),
+                  "decode_osi_columns_large (the decoder alone)": (
+                      ("osi-decode", "rec.osi"), "betterosi decoding + reading the same fields (fresh "
+                      "process)")}
         for r in list(rows):
             if r["benchmark"] in floors:
                 key, note = floors[r["benchmark"]]

@@ -229,3 +229,131 @@ def length_prefixed(r: Ragged) -> bytes:
     integer (the framing of a binary .osi trace)."""
     head = Ragged.fixed(r.lengths.astype("<u4").view(np.uint8).reshape(-1, 4))
     return concat(head, r).data.tobytes()
+
+
+# ---- decoding: the fields of many messages at once ---------------------------------------------
+
+class WireError(ValueError):
+    """Bytes that are not valid protobuf wire format: ``span`` is the index of the message (of the
+    spans walked) and ``offset`` the byte where it goes wrong."""
+
+    def __init__(self, span: int, offset: int, reason: str) -> None:
+        super().__init__(f"message {span}, byte {offset}: {reason}")
+        self.span, self.offset, self.reason = span, offset, reason
+
+
+#: zero bytes after the data (a varint read past the end stops there; the ends are checked)
+PAD = 16
+
+
+def padded(raw: bytes) -> np.ndarray:
+    """``raw`` as uint8 with :data:`PAD` zero bytes after it (what :func:`walk` reads)."""
+    buf = np.zeros(len(raw) + PAD, np.uint8)
+    buf[:len(raw)] = np.frombuffer(raw, np.uint8)
+    return buf
+
+
+def read_varints(buf: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The varint at each position: (value as uint64, its length in bytes); a varint longer than
+    10 bytes is a :class:`WireError` (``span`` = its index in ``pos``)."""
+    b = buf[pos]
+    val = (b & 0x7F).astype(np.uint64)
+    nbytes = np.ones(len(pos), np.int64)
+    idx = np.flatnonzero(b & 0x80)
+    k = 1
+    while idx.size:
+        if k == 10:
+            raise WireError(int(idx[0]), int(pos[idx[0]]), "varint longer than 10 bytes")
+        bk = buf[np.minimum(pos[idx] + k, len(buf) - 1)]
+        val[idx] |= (bk & 0x7F).astype(np.uint64) << np.uint64(7 * k)
+        nbytes[idx] += 1
+        idx = idx[(bk & 0x80) != 0]
+        k += 1
+    return val, nbytes
+
+
+class Fields:
+    """The fields of the messages walked, one row per field occurrence, span by span in the order
+    of the bytes: ``span`` (the message's index), ``number``, ``wire`` (type), ``pos`` (first byte
+    of the value: of the payload for a length-delimited field), ``length`` (bytes of the value),
+    ``value`` (a varint's value, uint64)."""
+
+    def __init__(self, span, number, wire, pos, length, value, n_spans: int) -> None:
+        self.span, self.number, self.wire = span, number, wire
+        self.pos, self.length, self.value = pos, length, value
+        self.n_spans = n_spans
+
+    def select(self, number: int, wire: int, *, singular: bool = True) -> np.ndarray:
+        """Rows of field ``number``; another wire type for it, or (``singular``) a span with it
+        twice, is :class:`Unsupported` (a decoder that merges or converts would be needed)."""
+        rows = np.flatnonzero(self.number == number)
+        if rows.size and (self.wire[rows] != wire).any():
+            raise Unsupported(f"field {number} with wire type "
+                              f"{int(self.wire[rows][self.wire[rows] != wire][0])}")
+        if singular and rows.size and np.bincount(self.span[rows]).max() > 1:
+            raise Unsupported(f"singular field {number} repeated in a message")
+        return rows
+
+
+class Unsupported(Exception):
+    """Valid wire format that the columnar decoder does not take (the caller falls back to a full
+    decoder)."""
+
+
+def walk(buf: np.ndarray, start: np.ndarray, end: np.ndarray) -> Fields:
+    """The fields of the messages ``buf[start[i]:end[i]]`` (``buf`` from :func:`padded`), all at
+    once: step ``k`` reads the ``k``-th field of every message that has one (numpy over the
+    messages, one step per field of the longest message)."""
+    start = np.asarray(start, np.int64)
+    end = np.asarray(end, np.int64)
+    pos = start.copy()
+    act = np.flatnonzero(pos < end)
+    out: list[tuple[np.ndarray, ...]] = []
+    while act.size:
+        p = pos[act]
+        key, kn = read_varints(buf, p)
+        wire = (key & np.uint64(7)).astype(np.int8)
+        number = (key >> np.uint64(3)).astype(np.int64)
+        q = p + kn
+        length = np.zeros(len(act), np.int64)
+        value = np.zeros(len(act), np.uint64)
+        for w, size in ((I64, 8), (I32, 4)):
+            length[wire == w] = size
+        v = np.flatnonzero(wire == VARINT)
+        if v.size:
+            value[v], length[v] = read_varints(buf, q[v])
+        d = np.flatnonzero(wire == LEN)
+        if d.size:
+            ln, n2 = read_varints(buf, q[d])
+            if (ln > np.uint64(1 << 40)).any():
+                i = d[np.argmax(ln > np.uint64(1 << 40))]
+                raise WireError(int(act[i]), int(p[i]), "length-delimited field longer than 1 TB")
+            q[d] += n2
+            length[d] = ln.astype(np.int64)
+        bad = ~np.isin(wire, (VARINT, I64, LEN, I32)) | (number == 0)
+        nxt = q + length
+        bad |= nxt > end[act]
+        if bad.any():
+            i = int(np.argmax(bad))
+            why = ("field number 0" if number[i] == 0 else
+                   f"wire type {int(wire[i])} (groups are not read)" if wire[i] not in (0, 1, 2, 5)
+                   else f"field {int(number[i])} ends {int(nxt[i] - end[act[i]])} bytes after "
+                        f"its message")
+            raise WireError(int(act[i]), int(p[i]), why)
+        out.append((act, number, wire, q, length, value))
+        pos[act] = nxt
+        act = act[nxt < end[act]]
+    if not out:
+        e = np.zeros(0, np.int64)
+        return Fields(e, e, e.astype(np.int8), e, e, e.astype(np.uint64), len(start))
+    cols = [np.concatenate(c) for c in zip(*out)]
+    order = np.argsort(cols[0], kind="stable")  # span by span, each in the order of its bytes
+    return Fields(*(c[order] for c in cols), n_spans=len(start))
+
+
+def doubles(buf: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """The little-endian doubles at the given positions (any alignment): one gather from the
+    buffer seen as a double at every byte (an unaligned view with a stride of one byte; 5x
+    faster than gathering eight bytes per value)."""
+    at_every_byte = np.ndarray(shape=(len(buf) - 7,), dtype="<f8", buffer=buf, strides=(1,))
+    return at_every_byte[pos]

@@ -163,6 +163,106 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     from aveas_format.mapref.crs import LocalFrame, crs_equal
     from aveas_format.opendrive import load_map
 
+    try:  # the columnar decoder (osi_columns); betterosi for what it does not take
+        f, ids, msgs, static, host_ids, proj, found = _decode_columns(inputs, options)
+    except (FormatError, RecordingIOError):
+        raise
+    except Exception:  # noqa: BLE001 - Unsupported, or bytes it trips on (a corrupt MCAP chunk,
+        # a proj_string not UTF-8...): the betterosi path decodes or reports them, located
+        f, ids, msgs, static, host_ids, proj, found = _decode_objects(inputs, options)
+    sizeless = [oid for oid, d in static.items() if d["length"] is None]
+    for oid in sizeless:
+        found.add("source.osi.missing_dimension", oid, static[oid]["no_size_msg"],
+                  f"moving object {oid} has no positive base.dimension (length, width) in any of "
+                  f"its messages: not imported", count=static[oid]["no_size_n"])
+    if sizeless:  # objects without a size cannot be participants: their samples go
+        keep = ~np.isin(ids, sizeless)
+        f, ids, msgs = f[keep], ids[keep], msgs[keep]
+        for oid in sizeless:
+            del static[oid]
+    found.report(inputs[0] if len(inputs) == 1 else None)
+    if not len(f):
+        raise FormatError("no GroundTruth moving objects in the trace", path=inputs[0])
+
+    t = f[:, 0]
+    t0 = float(t.min())
+    t = t - t0
+    uniq, pid = np.unique(np.asarray(ids, np.int64), return_inverse=True)
+    pid = pid.astype(np.int64)
+    # a duplicate names the object id and the frame (0-based message index, the states'
+    # source_frame) of its second sample
+    msgs = np.asarray(msgs, np.int64)
+    order = sort_states(pid, t, inputs[0] if len(inputs) == 1 else None, msgs,
+                        ids=uniq.tolist(), unit="frame")
+    # the samples in the states' order: one gather of whole rows (not one per column)
+    f, pid, t, msgs = f[order], pid[order], t[order], msgs[order]
+    cols = {k: f[:, j] for j, k in enumerate(_FLOAT_COLS)}
+
+    def arr(k: str) -> np.ndarray:
+        return np.asarray(cols[k], np.float64)
+
+    x, y, yaw = arr("x"), arr("y"), arr("yaw")
+    vx, vy, ax, ay = arr("vx"), arr("vy"), arr("ax"), arr("ay")
+    map_bytes = load_map_bytes(map_source)
+    header = load_map(map_bytes).header
+    kw: dict[str, Any] = {}
+    if proj is not None and not header.geo_reference and not options.crs:
+        # the map has no geoReference: the trace's proj_string (with its frame offset) is the frame
+        kw["crs"] = _offset_crs(proj[0], proj[1])
+    if proj is not None and header.geo_reference and not crs_equal(proj[0], header.geo_reference):
+        px, py = LocalFrame(proj[0], proj[1], warn=False).to_projected(x, y)
+        x, y, rot = projected_to_local(px, py, proj[0], header.geo_reference, header.offset)
+        rot = rot + proj[1][3]
+        yaw = yaw + rot
+        vx, vy = rotate(vx, vy, rot)
+        ax, ay = rotate(ax, ay, rot)
+    n = len(t)
+    states: dict[str, Any] = {
+        "participant_id": pid, "time": t, "x": x, "y": y, "z": arr("z"), "heading": yaw,
+        "vx": vx, "vy": vy, "ax": ax, "ay": ay, "yaw_rate": arr("yaw_rate"),
+        **{f"{c}_std": np.zeros(n) for c in ("x", "y", "heading", "vx", "vy")},
+        "light_brake_p": arr("brake").astype(np.float32),
+        "light_indicator_left_p": arr("ind_l").astype(np.float32),
+        "light_indicator_right_p": arr("ind_r").astype(np.float32),
+        "light_hazard_p": arr("hazard").astype(np.float32),
+        "source_frame": msgs,
+    }
+    import pyarrow as pa
+
+    for k in ("z", "ax", "ay", "yaw_rate", "light_brake_p", "light_indicator_left_p",
+              "light_indicator_right_p", "light_hazard_p"):
+        v = states[k]
+        states[k] = pa.array(v, mask=np.isnan(v))
+    m = len(uniq)
+    info = [static[int(u)] for u in uniq]
+    roles = [options.host_role if int(u) in host_ids else "simulated_agent" for u in uniq]
+    participants = {
+        "participant_id": np.arange(m, dtype=np.int64), "source_id": [str(int(u)) for u in uniq],
+        "class": [d["class"] for d in info],
+        "length": [d["length"] for d in info], "width": [d["width"] for d in info],
+        "height": [d["height"] for d in info],
+        "length_std": np.zeros(m), "width_std": np.zeros(m), "height_std": np.zeros(m),
+        "role": roles, "provenance": ["simulated"] * m,
+        "attributes": [json.dumps({"osi_type": d["osi_type"], "osi_lanes": sorted(d["lanes"])})
+                       for d in info],
+    }
+    zt = _zero_time(inputs[0])
+    if zt and not options.start_time:
+        kw["start_time"] = _shift_iso(zt, t0)
+    return wrap_recording(
+        "osi", inputs, options, map_bytes=map_bytes, participants=participants, states=states,
+        method=options.method, provenance="simulated", partner="ASAM OSI simulation",
+        acquisition={"platform": "ASAM OSI trace",
+                     "sensors": [{"id": "osi", "kind": "simulator"}]},
+        **kw,
+    )
+
+
+
+def _decode_objects(inputs: list[Path], options: OsiOptions):
+    """The samples of the traces decoded by betterosi, one message object at a time: (floats
+    (``_FLOAT_COLS``, one row per sample), object ids, message indices, per-object statics, host
+    ids, the first proj_string and its offset, the findings)."""
     # the floats (_FLOAT_COLS) of each sample (a tuple each, turned into a float64 block every
     # _BLOCK samples: ~110 B per sample, not a Python float per value), its object id and message
     # index apart (typed arrays)
@@ -209,92 +309,69 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     blocks.append(np.asarray(cols["f"], np.float64).reshape(-1, len(_FLOAT_COLS)))
     f = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
     del blocks
-    cols = {"id": np.frombuffer(cols["id"], np.int64), "msg": np.frombuffer(cols["msg"], np.int64),
-            **{k: f[:, j] for j, k in enumerate(_FLOAT_COLS)}}
-    sizeless = [oid for oid, d in static.items() if d["length"] is None]
-    for oid in sizeless:
-        found.add("source.osi.missing_dimension", oid, static[oid]["no_size_msg"],
-                  f"moving object {oid} has no positive base.dimension (length, width) in any of "
-                  f"its messages: not imported", count=static[oid]["no_size_n"])
-    if sizeless:  # objects without a size cannot be participants: their samples go
-        keep = ~np.isin(cols["id"], sizeless)
-        cols = {k: v[keep] for k, v in cols.items()}
-        for oid in sizeless:
-            del static[oid]
-    found.report(inputs[0] if len(inputs) == 1 else None)
-    if not len(cols["t"]):
-        raise FormatError("no GroundTruth moving objects in the trace", path=inputs[0])
+    cols = {"id": np.frombuffer(cols["id"], np.int64), "msg": np.frombuffer(cols["msg"], np.int64)}
+    return f, cols["id"], cols["msg"], static, host_ids, proj, found
 
-    t = np.asarray(cols["t"])
-    t0 = float(t.min())
-    t = t - t0
-    src = np.asarray(cols["id"], np.int64)
-    uniq, pid = np.unique(src, return_inverse=True)
-    pid = pid.astype(np.int64)
-    # a duplicate names the object id and the frame (0-based message index, the states'
-    # source_frame) of its second sample
-    order = sort_states(pid, t, inputs[0] if len(inputs) == 1 else None,
-                        np.asarray(cols["msg"], np.int64), ids=uniq.tolist(), unit="frame")
 
-    def arr(k: str) -> np.ndarray:
-        return np.asarray(cols[k], np.float64)
+def _decode_columns(inputs: list[Path], options: OsiOptions):
+    """What :func:`_decode_objects` gives, from the columnar decoder
+    (:mod:`aveas_format.converters.osi_columns`); :class:`~._protowire.Unsupported` where it does
+    not take the trace (then betterosi decodes it)."""
+    import betterosi as b
 
-    x, y, yaw = arr("x"), arr("y"), arr("yaw")
-    vx, vy, ax, ay = arr("vx"), arr("vy"), arr("ax"), arr("ay")
-    map_bytes = load_map_bytes(map_source)
-    header = load_map(map_bytes).header
-    kw: dict[str, Any] = {}
-    if proj is not None and not header.geo_reference and not options.crs:
-        # the map has no geoReference: the trace's proj_string (with its frame offset) is the frame
-        kw["crs"] = _offset_crs(proj[0], proj[1])
-    if proj is not None and header.geo_reference and not crs_equal(proj[0], header.geo_reference):
-        px, py = LocalFrame(proj[0], proj[1], warn=False).to_projected(x, y)
-        x, y, rot = projected_to_local(px, py, proj[0], header.geo_reference, header.offset)
-        rot = rot + proj[1][3]
-        yaw = yaw + rot
-        vx, vy = rotate(vx, vy, rot)
-        ax, ay = rotate(ax, ay, rot)
-    n = len(t)
-    states: dict[str, Any] = {
-        "participant_id": pid, "time": t, "x": x, "y": y, "z": arr("z"), "heading": yaw,
-        "vx": vx, "vy": vy, "ax": ax, "ay": ay, "yaw_rate": arr("yaw_rate"),
-        **{f"{c}_std": np.zeros(n) for c in ("x", "y", "heading", "vx", "vy")},
-        "light_brake_p": arr("brake").astype(np.float32),
-        "light_indicator_left_p": arr("ind_l").astype(np.float32),
-        "light_indicator_right_p": arr("ind_r").astype(np.float32),
-        "light_hazard_p": arr("hazard").astype(np.float32),
-        "source_frame": np.asarray(cols["msg"], np.int64),
-    }
-    states = {k: v[order] for k, v in states.items()}
-    import pyarrow as pa
+    from aveas_format.converters.osi_columns import decode_trace
 
-    for k in ("z", "ax", "ay", "yaw_rate", "light_brake_p", "light_indicator_left_p",
-              "light_indicator_right_p", "light_hazard_p"):
-        v = states[k]
-        states[k] = pa.array(v, mask=np.isnan(v))
-    m = len(uniq)
-    info = [static[int(u)] for u in uniq]
-    roles = [options.host_role if int(u) in host_ids else "simulated_agent" for u in uniq]
-    participants = {
-        "participant_id": np.arange(m, dtype=np.int64), "source_id": [str(int(u)) for u in uniq],
-        "class": [d["class"] for d in info],
-        "length": [d["length"] for d in info], "width": [d["width"] for d in info],
-        "height": [d["height"] for d in info],
-        "length_std": np.zeros(m), "width_std": np.zeros(m), "height_std": np.zeros(m),
-        "role": roles, "provenance": ["simulated"] * m,
-        "attributes": [json.dumps({"osi_type": d["osi_type"], "osi_lanes": sorted(d["lanes"])})
-                       for d in info],
-    }
-    zt = _zero_time(inputs[0])
-    if zt and not options.start_time:
-        kw["start_time"] = _shift_iso(zt, t0)
-    return wrap_recording(
-        "osi", inputs, options, map_bytes=map_bytes, participants=participants, states=states,
-        method=options.method, provenance="simulated", partner="ASAM OSI simulation",
-        acquisition={"platform": "ASAM OSI trace",
-                     "sensors": [{"id": "osi", "kind": "simulator"}]},
-        **kw,
-    )
+    otypes = {int(m): m.name for m in b.MovingObject.Type}
+    vtypes = {int(m): m.name for m in b.MovingObject.VehicleClassification.Type}
+    fs, ids, msgs = [], [], []
+    static: dict[int, dict[str, Any]] = {}
+    host_ids: set[int] = set()
+    proj = None
+    n_msg = 0
+    last_t = -math.inf
+    for path in inputs:
+        if path.suffix.lower() == ".osi" and path.stat().st_size == 0:
+            raise FormatError("empty OSI trace", path=path)
+        n_file = 0
+        for ch in decode_trace(path, options.message_type):
+            t = ch["t"]
+            if len(t):
+                if (t < np.maximum.accumulate(np.r_[last_t, t])[:-1]).any():
+                    raise pw.Unsupported("a timestamp going back (a finding)")
+                last_t = max(last_t, float(t.max()))
+            host_ids |= ch["hosts"]
+            if proj is None:
+                proj = ch["proj"]
+            oid = ch["id"]
+            u, first = np.unique(oid, return_index=True)
+            new = np.fromiter((o not in static for o in u.tolist()), bool, len(u))
+            i = first[new]  # the first sample of each object not seen before
+            for o, ot, has_vc, vt, (length, width, height) in zip(
+                    u[new].tolist(), ch["otype"][i].tolist(), ch["has_vc"][i].tolist(),
+                    ch["vtype"][i].tolist(), ch["dim"][i].tolist()):
+                otype = otypes.get(ot, "UNKNOWN")
+                vtype = vtypes.get(vt, "UNKNOWN") if has_vc and otype == "VEHICLE" else None
+                cls, unknown = _classify(otype, vtype, has_vc)
+                if unknown or not (length > 0 and width > 0):
+                    raise pw.Unsupported("an unknown type or a missing size (a finding)")
+                static[o] = {"class": cls, "length": length, "width": width,
+                             "height": height if height > 0 else None, "osi_type": otype,
+                             "lanes": set(), "no_size_msg": 0, "no_size_n": 0}
+            lane_obj, lane_id = ch["lanes"]
+            if len(lane_obj):
+                pairs = np.unique(np.stack([oid[lane_obj], lane_id], axis=1), axis=0)
+                for o, lane in pairs.tolist():
+                    static[o]["lanes"].add(lane)
+            fs.append(ch["f"])
+            ids.append(oid)
+            msgs.append(ch["msg"] + n_msg)
+            n_file += len(t)
+        n_msg += n_file
+    if not fs:
+        return np.zeros((0, len(_FLOAT_COLS))), np.zeros(0, np.int64), np.zeros(0, np.int64), \
+            static, host_ids, proj, _Findings()
+    return (np.concatenate(fs), np.concatenate(ids), np.concatenate(msgs), static, host_ids, proj,
+            _Findings())
 
 
 def _offset_crs(proj: str, offset: tuple[float, float, float, float]) -> str:
@@ -377,6 +454,21 @@ def _indicator_values(state: Any) -> tuple[float, float, float]:
     return float(name == "LEFT"), float(name == "RIGHT"), float(name == "WARNING")
 
 
+def _classify(otype: str, vtype: str | None, has_vc: bool) -> tuple[str, bool]:
+    """The class of a moving object of OSI type ``otype`` (vehicle type ``vtype``), and whether
+    the types are unknown or unmapped (a finding: class other)."""
+    if otype == "PEDESTRIAN":
+        cls = "pedestrian"
+    elif otype == "ANIMAL":
+        cls = "animal"
+    elif otype == "VEHICLE":
+        cls = VEHICLE_CLASS.get(vtype, "other") if has_vc else "car"
+    else:
+        cls = "other"
+    return cls, otype not in ("PEDESTRIAN", "ANIMAL", "VEHICLE", "OTHER") or (
+        vtype is not None and vtype not in VEHICLE_CLASS and vtype != "OTHER")
+
+
 def _object(mo, t: float, msg: int, cols: dict[str, Any], static: dict[int, dict[str, Any]],
             found: _Findings) -> None:
     oid = int(mo.id.value) if getattr(mo, "id", None) is not None else None
@@ -407,16 +499,8 @@ def _object(mo, t: float, msg: int, cols: dict[str, Any], static: dict[int, dict
     if d is None:
         otype = _enum_name(mo.type)
         vtype = _enum_name(vc.type) if vc is not None and otype == "VEHICLE" else None
-        if otype == "PEDESTRIAN":
-            cls = "pedestrian"
-        elif otype == "ANIMAL":
-            cls = "animal"
-        elif otype == "VEHICLE":
-            cls = VEHICLE_CLASS.get(vtype, "other") if vc is not None else "car"
-        else:
-            cls = "other"
-        if otype not in ("PEDESTRIAN", "ANIMAL", "VEHICLE", "OTHER") or (
-                vtype is not None and vtype not in VEHICLE_CLASS and vtype != "OTHER"):
+        cls, unknown = _classify(otype, vtype, vc is not None)
+        if unknown:
             found.add("source.osi.unknown_type", oid, msg,
                       f"moving object {oid}: type {otype}"
                       + (f", vehicle type {vtype}" if vtype is not None else "")

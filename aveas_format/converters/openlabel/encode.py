@@ -164,7 +164,12 @@ class _Layout:
             if not store:
                 continue
             mat = np.column_stack(store)  # rows x columns, one formatting call
-            vals = np.array(numbers(mat.reshape(-1)), dtype=object).reshape(mat.shape)
+            lo, hi = (int(mat.min()), int(mat.max())) if kind == "i" and mat.size else (0, 1 << 62)
+            if hi - lo < 65536:  # ids, counts, frames of a chunk: each distinct value's text once
+                table = np.array(numbers(np.arange(lo, hi + 1, dtype=np.int64)), dtype=object)
+                vals = table[mat - lo]
+            else:
+                vals = np.array(numbers(mat.reshape(-1)), dtype=object).reshape(mat.shape)
             for k, v in enumerate(self._vals):
                 if isinstance(v, tuple) and v[0] == kind:
                     self._vals[k] = vals[:, v[1]]
@@ -199,7 +204,8 @@ class _Layout:
             parts: list = []
             self._template(segments, on, parts)
             tmpl = b"".join(p.replace(b"%", b"%%") if isinstance(p, bytes) else b"%s" for p in parts)
-            cols = [p[idx] for p in parts if not isinstance(p, bytes)]
+            whole = len(idx) == m  # one layout for all rows: in order, no gather
+            cols = [p if whole else p[idx] for p in parts if not isinstance(p, bytes)]
             if not cols:
                 out[idx] = [tmpl] * len(idx)
             else:
@@ -257,17 +263,20 @@ def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
         stop = min(start + chunk_rows, n)
         stop = int(np.searchsorted(fs, fs[stop - 1], side="right"))
         rows = order[start:stop]
-        objs = _objects_text(prepare(rows), np.arange(len(rows))).tolist()
+        objs = _objects_text(prepare(rows), np.arange(len(rows)))
         f = fs[start:stop]
-        cuts = np.flatnonzero(np.diff(f)) + 1
-        lo = np.r_[0, cuts]
-        hi = np.r_[cuts, len(f)]
-        parts = []
-        for a, b in zip(lo.tolist(), hi.tolist()):
-            k = int(f[a])
-            parts.append(b'"%d":{"frame_properties":{"timestamp":%s},"objects":{%s}}'
-                         % (k, ts[k], b",".join(objs[a:b])))
-        yield (b"" if first else b",") + b",".join(parts)
+        m = len(f)
+        lo = np.flatnonzero(np.r_[True, f[1:] != f[:-1]])  # the first row of each frame
+        # one list of pieces joined once: before each row its frame's head (first row) or a
+        # comma, after the last row of a frame "}}"
+        pieces = np.full(2 * m + len(lo), b",", dtype=object)
+        at = np.arange(m) * 2 + np.searchsorted(lo, np.arange(m), side="right") - 1
+        pieces[at + 1] = objs
+        pieces[at[lo]] = [b'%s"%d":{"frame_properties":{"timestamp":%s},"objects":{'
+                          % (b"" if first and j == 0 else b",", k, ts[k])
+                          for j, k in enumerate(f[lo].tolist())]
+        pieces[np.r_[at[lo[1:]] - 1, len(pieces) - 1]] = b"}}"
+        yield b"".join(pieces.tolist())
         first = False
         start = stop
 
