@@ -19,10 +19,10 @@ def test_summary_statistics_on_known_rows():
                       truth={"mu_car": 130.0})
     rows = [{"seed": 1, "size": "paper", "converged": True, "evaluations": 10, "seconds": 1.0,
              "n_car": 178, "mu_car": 131.0, "se_mu_car": 0.4, "floor_mu_car": 129.0,
-             "naive_mu_car": 125.0},
+             "naive_mu_car": 125.0, "bootstrap_bias_mu_car": 0.5},
             {"seed": 2, "size": "paper", "converged": False, "evaluations": 20, "seconds": 3.0,
              "n_car": 178, "mu_car": 127.0, "se_mu_car": 2.0, "floor_mu_car": 132.0,
-             "naive_mu_car": 123.0}]
+             "naive_mu_car": 123.0, "bootstrap_bias_mu_car": -0.5}]
     s = summarise(rows, cfg)
     p = s["sizes"]["paper"]["parameters"]["mu_car"]
     assert p["bias"] == pytest.approx(-1.0) and p["rmse"] == pytest.approx(np.sqrt(5.0))
@@ -30,6 +30,14 @@ def test_summary_statistics_on_known_rows():
     assert p["floor_bias"] == pytest.approx(0.5) and p["floor_rmse"] == pytest.approx(np.sqrt(2.5))
     assert p["rmse_ratio"] == pytest.approx(np.sqrt(2.0))
     assert p["naive_bias"] == pytest.approx(-6.0)
+    assert p["rms_error_over_se"] == pytest.approx(np.sqrt((2.5 ** 2 + 1.5 ** 2) / 2))
+    # resamples of two replicates: ratios 1 (seed 1 twice), 1.5 (seed 2 twice) or sqrt(2)
+    lo, hi = p["rmse_ratio_ci90"]
+    assert 1.0 <= lo <= np.sqrt(2.0) <= hi <= 1.5
+    # the same rows with the bootstrap's bias subtracted: errors 0.5 and -2.5
+    c = p["corrected"]
+    assert c["bias"] == pytest.approx(-1.0) and c["rmse"] == pytest.approx(np.sqrt(3.25))
+    assert c["rmse_ratio"] == pytest.approx(np.sqrt(3.25 / 2.5)) and c["coverage95"] == 1.0
     assert s["sizes"]["paper"]["converged"] == 1
     assert s["targets"] == {"|bias| <= 1 km/h on the means": True,
                             "RMSE <= 1.5 x the sampling floor": True}
