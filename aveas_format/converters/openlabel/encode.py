@@ -379,7 +379,6 @@ def _extension(r: dict[str, Any], idx: np.ndarray, lay: _Layout) -> list:
     ext = r["ext"]
     if ext is None:
         return []
-    m = len(idx)
     members: list = []
     ix = pa.array(idx)
 
