@@ -74,7 +74,6 @@ def _triples(buf: np.ndarray, n: int, subs: list[tuple[np.ndarray, np.ndarray, n
     object has no such sub-message, 0.0 for a field absent from a present one. The common layout
     — up to three distinct double fields with one-byte keys, 9 bytes each — is read straight;
     anything else is walked."""
-    span = np.concatenate([s[0] for s in subs])
     start = np.concatenate([s[1] for s in subs])
     length = np.concatenate([s[2] for s in subs]) - start
     vals = np.zeros((len(start), 3))
