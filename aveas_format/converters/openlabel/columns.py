@@ -288,11 +288,11 @@ def vector_columns(at: Any, cols: dict[str, np.ndarray]) -> tuple[np.ndarray, np
 
 
 def block_columns(ods: list[dict], cubs: list[dict], place: Callable[[int], tuple]
-                  ) -> tuple[dict[str, np.ndarray], list[tuple[float, float, float]], list, _Attributes]:
-    """``(columns, sizes, ext items, attributes)`` of the boxes ``cubs`` with their ``object_data`` ``ods``;
+                  ) -> tuple[dict[str, np.ndarray], list, _Attributes]:
+    """``(columns, ext items, attributes)`` of the boxes ``cubs`` with their ``object_data`` ``ods``;
     ``place(i)`` is :func:`~.frames._box_in_root` of box ``i`` (the cuboids not placed in bulk).
     The columns are those of :data:`~.frames._FLOAT_COLS` and ``csroot``, ``road_id``, ``lane_id``,
-    ``hv``, ``hr``; ``sizes`` the boxes' (length, width, height)."""
+    ``hv``, ``hr`` (the sizes are the columns ``dl``, ``dw``, ``dh``)."""
     n = len(cubs)
     cols: dict[str, np.ndarray] = {}
     # the cuboids: level boxes in the root frame in bulk, the others one at a time
@@ -317,7 +317,6 @@ def block_columns(ods: list[dict], cubs: list[dict], place: Callable[[int], tupl
         dl[i], dw[i], dh[i] = dims
         csroot[i] = root
     cols.update(px=px, py=py, pz=ground, yaw=yaw, dl=dl, dw=dw, dh=dh, csroot=csroot)
-    sizes = list(zip(dl.tolist(), dw.tolist(), dh.tolist()))
 
     # a per-box measurement time (the ASAM example's cuboid attribute "timestamp")
     cts = np.full(n, np.nan)
@@ -362,7 +361,7 @@ def block_columns(ods: list[dict], cubs: list[dict], place: Callable[[int], tupl
         if "open_drive/lane_id" in at.code_of else np.full(n, None, object)
     cols["hv"], cols["hr"] = hv, on
     ext = list(map(methodcaller("get", EXT), cubs))
-    return cols, sizes, ext, at
+    return cols, ext, at
 
 
 def ext_chunk(es: list) -> dict[str, tuple]:

@@ -113,7 +113,7 @@ def _box_spans(buf: bytes, structure: tuple | None = None) -> tuple[np.ndarray, 
     """The byte spans ``[start, end)`` of the objects directly under a frame's ``objects`` member
     (``structure``: :func:`_structure` of ``buf`` where the caller has it)."""
     pos, depth, step, quotes = structure or _structure(buf)
-    if len(depth) == 0 or depth.min() < 1 or step[0] != 1 or depth[-1] != 1 or step[-1] != -1:
+    if not _closed(depth, step) or step[0] != 1:
         raise _NotFast
     # the containers one level under a frame (its members' values): which are "objects"
     c3 = np.flatnonzero((depth == 3) & (step > 0))
@@ -172,9 +172,13 @@ def block_depth(buf: bytes) -> int | None:
         _, depth, step, _ = _structure(buf)
     except _NotFast:
         return None
-    if len(depth) == 0 or depth.min() < 1 or depth[-1] != 1 or step[-1] != -1:
-        return None
-    return int(depth.max())
+    return int(depth.max()) if _closed(depth, step) else None
+
+
+def _closed(depth: np.ndarray, step: np.ndarray) -> bool:
+    """Whether the brackets of :func:`_structure` make one container: never below its own level,
+    closed by the last one."""
+    return bool(len(depth)) and depth.min() >= 1 and depth[-1] == 1 and step[-1] == -1
 
 
 def _read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
@@ -219,7 +223,7 @@ def _read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
                                                        unexpected_field_behavior="infer"))
     if table.num_rows != n:
         return None
-    cols, _, ext, at = box_columns(table)
+    cols, ext, at = box_columns(table)
     return FastBlock(frames, cols, ext, block_findings(at, profile=True), int(structure[1].max()))
 
 
@@ -375,8 +379,8 @@ def _ext_reps(cub: pa.StructArray) -> dict[str, tuple]:
     return out
 
 
-def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], None, dict[str, tuple], ArrowAttributes]:
-    """``(columns, None, ext columns, attributes)`` of a block's boxes, as
+def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], dict[str, tuple], ArrowAttributes]:
+    """``(columns, ext columns, attributes)`` of a block's boxes, as
     :func:`~.columns.block_columns` and :func:`~.columns.ext_chunk` give them for the same boxes
     (the sizes are the columns ``dl``, ``dw``, ``dh``)."""
     n = table.num_rows
@@ -436,7 +440,7 @@ def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], None, dict[str,
             lane_id[ok] = conv[inv]
     cols["lane_id"] = lane_id
     cols["hv"], cols["hr"] = hv, on
-    return cols, None, _ext_reps(cub), at
+    return cols, _ext_reps(cub), at
 
 
 def _lane_int(v: str) -> Any:

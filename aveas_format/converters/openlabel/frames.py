@@ -349,7 +349,7 @@ class _FrameRows:
             j, u = js[i], us[i]
             return _box_in_root(cubs[i], lambda name: self._resolve(name, j, u), keys[j], u, self.path)
 
-        ch, _, ext, at = block_columns(ods, cubs, place)
+        ch, ext, at = block_columns(ods, cubs, place)
         self._keep(ch, ext_chunk(ext), block_findings(at, True), js, us)
         inames = [nm for nm in at.code_of if nm.startswith("interior/")]
         if inames:
