@@ -255,14 +255,10 @@ def _frames_without_prescan(path: Path):
 
     def frames(columnar: bool = False, workers: int | None = 1):
         from aveas_format.converters.openlabel.fastblock import block_depth
-        from aveas_format.parallel import map_ordered
 
-        size = _COLUMNAR_BLOCK if columnar else _BLOCK
-        read = partial(_read_cut, threads=workers == 1) if columnar else _no_block
         generic = "objects" in ol
         tail: list[bytes] = []
-        with _open(path) as f, closing(map_ordered(read, _cut_blocks(f, (start, None), size, tail),
-                                                   workers=workers)) as blocks:
+        with _open(path) as f, _read_blocks(f, (start, None), columnar, workers, tail) as blocks:
             f.seek(start + 1)
             for (_, cut), fast in blocks:
                 if cut is None:  # no frame head in 4 blocks, no end of the frames
@@ -336,18 +332,13 @@ def _fast_frames(path: Path, span: tuple[int, int], columnar: bool = False, work
     ``(COLUMNAR, FastBlock)`` (bigger blocks), read by ``workers`` processes (1: here; 0/None: one
     per core; :func:`aveas_format.parallel.map_ordered`: in file order, a few blocks in flight);
     the others as frames, parsed here."""
-    from aveas_format.parallel import map_ordered
-
-    size = _COLUMNAR_BLOCK if columnar else _BLOCK
-    if not columnar or span[1] - span[0] <= 2 * size:  # (a small file: no processes to start)
+    if not columnar or span[1] - span[0] <= 2 * _COLUMNAR_BLOCK:  # (a small file: no processes)
         workers = 1
     with _open(path) as f:
         f.seek(span[0])
         if f.read(1) != b"{":
             return span[0]
-        # (in worker processes Arrow's reader runs on one thread: the processes are the parallelism)
-        read = partial(_read_cut, threads=workers == 1) if columnar else _no_block
-        with closing(map_ordered(read, _cut_blocks(f, span, size), workers=workers)) as blocks:
+        with _read_blocks(f, span, columnar, workers) as blocks:
             for (pos, cut), fast in blocks:
                 if cut is None:  # no frame head in 4 blocks: another layout
                     return pos
@@ -362,6 +353,20 @@ def _fast_frames(path: Path, span: tuple[int, int], columnar: bool = False, work
                     return pos
                 yield from block.items()
     return None
+
+
+def _read_blocks(f, span: tuple[int, int | None], columnar: bool, workers: int | None,
+                 tail: list | None = None):
+    """``((offset, bytes), FastBlock or None)`` of each block of :func:`_cut_blocks`, in file
+    order; with ``columnar`` the blocks read into columns by ``workers`` processes
+    (:func:`aveas_format.parallel.map_ordered`; in worker processes Arrow's reader runs on one
+    thread: the processes are the parallelism), else None each. A context manager (closing it
+    cancels the blocks in flight)."""
+    from aveas_format.parallel import map_ordered
+
+    size = _COLUMNAR_BLOCK if columnar else _BLOCK
+    read = partial(_read_cut, threads=workers == 1) if columnar else _no_block
+    return closing(map_ordered(read, _cut_blocks(f, span, size, tail), workers=workers))
 
 
 def _cut_blocks(f, span: tuple[int, int | None], size: int, tail: list | None = None):
