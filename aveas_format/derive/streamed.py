@@ -128,7 +128,7 @@ def _chunk_task(j: int, *, path: str, tmp: str, out: str, window_s: float,
                 params: dict[str, Any]) -> dict[str, Any]:
     """``derived/kinematics`` of chunk ``j`` of whole tracks, written as ``out/kinematics/part-J``;
     and the chunk's states and kinematics split by time window: the whole tracks of the
-    participants present in window K go to ``tmp/x-K-J.parquet`` and ``tmp/y-K-J.parquet``
+    participants present in window K go to ``tmp/x-K-J.arrow`` and ``tmp/y-K-J.arrow``
     (where the window's derivations read them). Returns the windows with states (their cores),
     the rows and the peak memory."""
     from aveas_format.io.writer import prepare_table
@@ -146,8 +146,9 @@ def _chunk_task(j: int, *, path: str, tmp: str, out: str, window_s: float,
         lo = np.floor(np.minimum.reduceat(tm, starts) / window_s).astype(np.int64)
         hi = np.floor(np.maximum.reduceat(tm, starts) / window_s).astype(np.int64)
         cores = np.unique(np.floor(tm / window_s).astype(np.int64)).tolist()
+        track_ids = pid[starts]
         for w in _windows_of(lo, hi):
-            ids = pa.array(pid[starts][(lo <= w) & (hi >= w)])
+            ids = pa.array(track_ids[(lo <= w) & (hi >= w)])
             for prefix, table in (("x", states), ("y", t)):
                 part = table.filter(pc.is_in(table.column("participant_id"), ids))
                 # Arrow IPC with LZ4: written and read back several times faster than Parquet
@@ -179,13 +180,14 @@ def _window_recording(path: str, states: pa.Table):
                      head.map_source)
 
 
-def _run(rec, name: str, params: dict[str, Any]) -> pa.Table:
+def _run(rec, name: str, params: dict[str, Any], **kw: Any) -> pa.Table:
     """Derivation ``name``'s function on ``rec`` with the ``params`` it has (directly: a window
-    needs no provenance; input hashes would serialise its states once per derivation)."""
+    needs no provenance; input hashes would serialise its states once per derivation); ``kw`` go
+    to the function (``core`` of interactions)."""
     from aveas_format.derive.registry import derivations
 
     d = derivations()[name]
-    return d.fn(rec, d.params(**{k: v for k, v in params.items() if k in d.params.model_fields}))
+    return d.fn(rec, d.params(**{k: v for k, v in params.items() if k in d.params.model_fields}), **kw)
 
 
 def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: str,
@@ -193,8 +195,6 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
     """Derive one window and write its core rows; returns its summary rows and counts."""
     from aveas_format.derive.criticality import compute as summary
     from aveas_format.derive.criticality import CriticalityParams
-    from aveas_format.derive.interactions import InteractionsParams
-    from aveas_format.derive.interactions import compute as interactions
     from aveas_format.io.writer import prepare_table
     from aveas_format.schema.tables import TABLES
 
@@ -202,7 +202,6 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
     # the whole tracks of the participants present in the core: a crossing needs both paths up
     # to the crossing point, a leader search the participant's later lanes (its route), however
     # far ahead
-
     def read(prefix: str) -> pa.Table:
         return pa.concat_tables([feather.read_table(f) for f in
                                  sorted(Path(tmp).glob(f"{prefix}-{k}-*.arrow"))])
@@ -219,9 +218,7 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
             rec.states = t
         else:
             rec.derived[name] = t
-    ip = InteractionsParams(**{k_: v for k_, v in params.items()
-                               if k_ in InteractionsParams.model_fields})
-    rec.derived["interactions"] = interactions(rec, ip, core=(t0, t1))
+    rec.derived["interactions"] = _run(rec, "interactions", params, core=(t0, t1))
     counts = {}
     for name in WINDOW_DERIVATIONS:
         if name == "kinematics":
