@@ -258,7 +258,6 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     )
 
 
-
 def _decode_objects(inputs: list[Path], options: OsiOptions):
     """The samples of the traces decoded by betterosi, one message object at a time: (floats
     (``_FLOAT_COLS``, one row per sample), object ids, message indices, per-object statics, host
@@ -309,8 +308,8 @@ def _decode_objects(inputs: list[Path], options: OsiOptions):
     blocks.append(np.asarray(cols["f"], np.float64).reshape(-1, len(_FLOAT_COLS)))
     f = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
     del blocks
-    cols = {"id": np.frombuffer(cols["id"], np.int64), "msg": np.frombuffer(cols["msg"], np.int64)}
-    return f, cols["id"], cols["msg"], static, host_ids, proj, found
+    return (f, np.frombuffer(cols["id"], np.int64), np.frombuffer(cols["msg"], np.int64), static,
+            host_ids, proj, found)
 
 
 def _decode_columns(inputs: list[Path], options: OsiOptions):

@@ -163,10 +163,11 @@ def summarise(rows: list[dict], cfg: StudyConfig) -> dict:
             se_seed = np.array([np.nan if r.get(f"se_seed_{n}") is None else r[f"se_seed_{n}"]
                                 for r in rs], np.float64)
             st["mean_se_seed"] = float(np.nanmean(se_seed)) if np.isfinite(se_seed).any() else None
+            errs = {}
             for kind in ("floor", "naive"):
                 vals = [r[f"{kind}_{n}"] for r in rs]
                 if all(v is not None for v in vals):
-                    ef = np.array(vals, np.float64) - t
+                    errs[kind] = ef = np.array(vals, np.float64) - t
                     st[f"{kind}_bias"] = float(ef.mean())
                     st[f"{kind}_rmse"] = float(np.sqrt(np.mean(ef ** 2)))
             z = e / se
@@ -180,8 +181,7 @@ def summarise(rows: list[dict], cfg: StudyConfig) -> dict:
                                    "coverage95": float(np.mean(np.abs(ec) <= 1.96 * se))}
             if st.get("floor_rmse"):
                 st["rmse_ratio"] = st["rmse"] / st["floor_rmse"]
-                st["rmse_ratio_ci90"] = _ratio_interval(e, np.array([r[f"floor_{n}"] for r in rs],
-                                                                    np.float64) - t)
+                st["rmse_ratio_ci90"] = _ratio_interval(e, errs["floor"])
                 if "corrected" in st:
                     st["corrected"]["rmse_ratio"] = st["corrected"]["rmse"] / st["floor_rmse"]
                 ok_ratio &= st["rmse_ratio"] <= TARGET_RMSE_RATIO
