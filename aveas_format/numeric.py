@@ -7,7 +7,9 @@ how a number is written in a message for people (:func:`fmt_num`).
 
 from __future__ import annotations
 
+import importlib.util
 import math
+import os
 from numbers import Real
 
 import numpy as np
@@ -197,3 +199,27 @@ def release_free_memory() -> None:
             _TRIM = False
     if _TRIM:
         _TRIM(0)
+
+
+#: the environment variable that picks the path of the compiled kernels (the follower/leader
+#: metrics of ``derive``, the OpenLABEL block reader): ``numpy``, ``numba`` or ``auto`` (unset:
+#: auto, numba where it is installed)
+KERNEL_ENV = "AVEAS_FORMAT_KERNEL"
+KERNEL_BACKENDS = ("numpy", "numba")
+_HAS_NUMBA = importlib.util.find_spec("numba") is not None
+
+
+def kernel_backend(requested: str | None = None) -> str:
+    """Which path runs where a compiled kernel exists: ``"numba"`` (the ``jit`` extra) or
+    ``"numpy"`` (the arrays-only path: NumPy, Arrow). ``requested``, else the :data:`KERNEL_ENV`
+    variable, else ``auto``: numba where it is installed. Asking for numba without it is an error
+    that says how to install it."""
+    req = (requested or os.environ.get(KERNEL_ENV) or "auto").strip().lower()
+    if req == "auto":
+        return "numba" if _HAS_NUMBA else "numpy"
+    if req not in KERNEL_BACKENDS:
+        src = "backend" if requested else KERNEL_ENV
+        raise ValueError(f"unknown kernel backend {req!r} ({src}): choose auto, numpy or numba")
+    if req == "numba" and not _HAS_NUMBA:
+        raise ImportError("the numba kernel needs numba: pip install 'aveas-format[jit]'")
+    return req

@@ -218,7 +218,7 @@ def bench_sample(repeat: int = 3) -> list[dict]:
     _need_numba()
     from aveas_format.derive import derive
     from aveas_format.derive.interactions import _pairs as pairs_mod
-    from aveas_format.derive.interactions._ttc import KERNEL_ENV
+    from aveas_format.numeric import KERNEL_ENV
     from aveas_format.sample import highway_scene
 
     rec = highway_scene()

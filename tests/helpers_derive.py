@@ -2,41 +2,15 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import os
-from contextlib import contextmanager
 
 import numpy as np
-import pytest
 
 from aveas_format.mapref.build import build_recording
 from aveas_format.opendrive.builder import straight_highway
 from aveas_format.sample import SITE_CRS
 
 from helpers_common import shared
-
-
-#: the two paths of the follower/leader metrics (derive/interactions/_ttc.kernel_backend), for
-#: ``pytest.mark.parametrize("backend", KERNEL_BACKENDS)``: the numba one skips without numba
-KERNEL_BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(
-    importlib.util.find_spec("numba") is None, reason="numba is not installed (the jit extra)"))]
-
-
-@contextmanager
-def kernel(backend: str):
-    """``derive`` computes the follower/leader metrics on ``backend`` within the block."""
-    from aveas_format.derive.interactions._ttc import KERNEL_ENV
-
-    old = os.environ.get(KERNEL_ENV)
-    os.environ[KERNEL_ENV] = backend
-    try:
-        yield
-    finally:
-        if old is None:
-            os.environ.pop(KERNEL_ENV, None)
-        else:
-            os.environ[KERNEL_ENV] = old
 
 
 def vectors() -> dict:

@@ -21,16 +21,54 @@ from aveas_format.numeric import fmt_num
 
 __all__ = [
     "build_recording", "factorize", "file_sha256", "load_map_bytes", "move_along_heading",
-    "navigation_deg_to_heading", "read_table", "source_block", "wrap_recording",
+    "navigation_deg_to_heading", "prefetch_sha256", "read_table", "source_block", "wrap_recording",
 ]
 
 
-def file_sha256(path: Path, chunk: int = 1 << 22) -> str:
+def _sha256(path: Path, chunk: int = 1 << 22) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
         while block := f.read(chunk):
             h.update(block)
     return h.hexdigest()
+
+
+#: digests being computed by :func:`prefetch_sha256`, by (path, size, mtime)
+_PENDING: dict[tuple, Any] = {}
+
+
+def _file_key(path: Path) -> tuple | None:
+    try:
+        st = Path(path).stat()
+    except OSError:
+        return None
+    return (str(Path(path).resolve()), st.st_size, st.st_mtime_ns)
+
+
+def prefetch_sha256(path: Path) -> None:
+    """Start hashing ``path`` in a thread (hashlib releases the GIL on large blocks), for a later
+    :func:`file_sha256` of the same unchanged file: a converter calls it before reading a large
+    input, so that the digest is not a serial step after the reading."""
+    key = _file_key(path)
+    if key is None or key in _PENDING:
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sha256")
+    _PENDING[key] = pool.submit(_sha256, Path(path))
+    pool.shutdown(wait=False)
+
+
+def file_sha256(path: Path, chunk: int = 1 << 22) -> str:
+    """The SHA-256 of the file ``path`` (hex; the one :func:`prefetch_sha256` started where the file
+    is unchanged since)."""
+    fut = _PENDING.pop(_file_key(path), None)
+    if fut is not None:
+        try:
+            return fut.result()
+        except OSError:
+            pass
+    return _sha256(path, chunk)
 
 
 def source_block(converter: str, inputs: Iterable[Path], options: Any, version: str = "1",

@@ -1,7 +1,9 @@
 """The columnar fast path of the OpenLABEL import (issue 22, converters/openlabel/fastblock.py):
 blocks of frames in the profile's layout become columns through a numpy structural index, an
-orjson skeleton and Arrow's JSON reader; the recording and the located findings are those of the
-generic path, and every block it cannot take is handed over (never guessed)."""
+orjson skeleton and Arrow's JSON reader — or, where numba is installed, the compiled reader
+(_jitblock.py; every test here runs on both: the ``backend`` fixture); the recording and the
+located findings are those of the generic path, and every block it cannot take is handed over
+(never guessed)."""
 
 from __future__ import annotations
 
@@ -16,10 +18,19 @@ from aveas_format.converters import convert, get_converter
 from aveas_format.errors import collect_source_findings
 from aveas_format.sample import highway_scene
 
+from helpers_common import KERNEL_BACKENDS, kernel
 from helpers_converters import assert_identical
 
 pytest.importorskip("orjson")
 _READ_BLOCK = fb.read_block
+
+
+@pytest.fixture(autouse=True, params=KERNEL_BACKENDS)
+def backend(request):
+    """Every test on the Arrow reader (``numpy``) and on the compiled one (``numba``; Arrow's where
+    it hands a block over)."""
+    with kernel(request.param):
+        yield request.param
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,8 @@ from hypothesis import strategies as st
 from aveas_format.derive import derive
 from aveas_format.derive.interactions import ttc_boxes
 
-from helpers_derive import KERNEL_BACKENDS, kernel, recording, road_map, row
+from helpers_common import KERNEL_BACKENDS, kernel
+from helpers_derive import recording, road_map, row
 
 angle = st.floats(-np.pi, np.pi, allow_nan=False)
 offset = st.floats(-5000, 5000, allow_nan=False)

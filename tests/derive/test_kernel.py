@@ -1,6 +1,6 @@
 """The follower/leader metrics on their two paths: the fused numba kernel gives the NumPy path's
 numbers (to a few units in the last place) on random pairs and on every degenerate kind of pair,
-and the path is chosen in one place (``_ttc.kernel_backend``)."""
+and the path is chosen in one place (``aveas_format.numeric.kernel_backend``)."""
 
 from __future__ import annotations
 
@@ -9,10 +9,11 @@ import itertools
 import numpy as np
 import pytest
 
-from aveas_format.derive.interactions import _ttc
-from aveas_format.derive.interactions._ttc import follower_leader_metrics, kernel_backend
+from aveas_format import numeric
+from aveas_format.derive.interactions._ttc import follower_leader_metrics
+from aveas_format.numeric import kernel_backend
 
-from helpers_derive import KERNEL_BACKENDS
+from helpers_common import KERNEL_BACKENDS
 
 NUMBA = KERNEL_BACKENDS[1]
 
@@ -91,17 +92,17 @@ def test_shapes_and_pass_through(backend):
 
 
 def test_backend_choice(monkeypatch):
-    monkeypatch.delenv(_ttc.KERNEL_ENV, raising=False)
+    monkeypatch.delenv(numeric.KERNEL_ENV, raising=False)
     assert kernel_backend("numpy") == "numpy"
-    monkeypatch.setenv(_ttc.KERNEL_ENV, "numpy")
+    monkeypatch.setenv(numeric.KERNEL_ENV, "numpy")
     assert kernel_backend() == "numpy"
-    monkeypatch.setenv(_ttc.KERNEL_ENV, "fortran")
+    monkeypatch.setenv(numeric.KERNEL_ENV, "fortran")
     with pytest.raises(ValueError, match="'fortran'.*AVEAS_FORMAT_KERNEL.*auto, numpy or numba"):
         kernel_backend()
-    monkeypatch.setattr(_ttc, "_HAS_NUMBA", False)
-    monkeypatch.delenv(_ttc.KERNEL_ENV)
+    monkeypatch.setattr(numeric, "_HAS_NUMBA", False)
+    monkeypatch.delenv(numeric.KERNEL_ENV)
     assert kernel_backend() == "numpy"
     with pytest.raises(ImportError, match=r"aveas-format\[jit\]"):
         kernel_backend("numba")
-    monkeypatch.setattr(_ttc, "_HAS_NUMBA", True)
+    monkeypatch.setattr(numeric, "_HAS_NUMBA", True)
     assert kernel_backend() == "numba" == kernel_backend("auto")

@@ -15,7 +15,8 @@ from aveas_format.derive.interactions._ttc import follower_leader_metrics
 from aveas_format.opendrive.builder import curved_highway
 from aveas_format.sample import SITE_CRS
 
-from helpers_derive import KERNEL_BACKENDS, kernel, recording, row
+from helpers_common import KERNEL_BACKENDS, kernel
+from helpers_derive import recording, row
 
 L, W = 4.0, 1.8
 

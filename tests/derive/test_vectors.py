@@ -10,7 +10,8 @@ import shapely
 from aveas_format.derive import derive
 from aveas_format.derive.interactions import ttc_boxes
 
-from helpers_derive import KERNEL_BACKENDS, kernel, recording, road_map, row, value, vectors
+from helpers_common import KERNEL_BACKENDS, kernel
+from helpers_derive import recording, road_map, row, value, vectors
 
 LANE_Y = -1.75  # centre of lane -1 of the test map
 

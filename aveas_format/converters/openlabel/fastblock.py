@@ -155,14 +155,33 @@ class FastBlock:
 
 def read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
     """The block ``buf`` (``{"key":{frame},...}``) as a :class:`FastBlock`, or None where it does
-    not fit the fast path (see the module's doc). ``threads``: Arrow's reader on its thread pool."""
+    not fit the fast path (see the module's doc). ``threads``: Arrow's reader on its thread pool.
+    Where numba is installed (:func:`aveas_format.numeric.kernel_backend`) the compiled reader
+    (:mod:`._jitblock`) reads the block, Arrow's reader where that one does not take it."""
     if orjson is None:
         return None
     try:
+        parse = compiled_parser()
+        if parse is not None:
+            blk = _read_block_jit(buf, parse)
+            if blk is not None:
+                return blk
         return _read_block(buf, threads)
     except (_NotFast, pa.ArrowInvalid, pa.ArrowTypeError, orjson.JSONDecodeError, KeyError, IndexError,
             TypeError, ValueError):
         return None
+
+
+def compiled_parser():
+    """:func:`._jitblock.parse_block` where the numba path runs, else None (imported, and compiled
+    or loaded from numba's cache, on the first call in a process)."""
+    from aveas_format.numeric import kernel_backend
+
+    if kernel_backend() != "numba":
+        return None
+    from aveas_format.converters.openlabel._jitblock import parse_block
+
+    return parse_block
 
 
 def block_depth(buf: bytes) -> int | None:
@@ -188,26 +207,8 @@ def _read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
     if n == 0:
         return None
     sl, el = starts.tolist(), ends.tolist()
-    skel, prev = [], 0
-    for r, (s, e) in enumerate(zip(sl, el)):
-        skel += (buf[prev:s], b"%d" % r)
-        prev = e
-    skel.append(buf[prev:])
-    block = orjson.loads(b"".join(skel))
-    if not isinstance(block, dict):
-        return None
-    frames, seen = [], 0
-    for k, fr in block.items():
-        if not isinstance(fr, dict):
-            return None
-        objs = fr.get("objects")
-        if objs is not None:
-            if not isinstance(objs, dict) or set(map(type, objs.values())) - {int}:
-                return None
-            seen += len(objs)
-        frames.append((k, fr))
-    rows = [r for _, fr in frames for r in (fr.get("objects") or {}).values()]
-    if seen != n or rows != list(range(n)):  # a uid twice in a frame, a frame key twice: generic
+    frames = _skeleton(buf, sl, el)
+    if frames is None:
         return None
     if b"\n" in buf or b"\r" in buf:  # (outside strings: _structure checked) whitespace
         buf = buf.translate(_NEWLINES)
@@ -227,6 +228,32 @@ def _read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
     return FastBlock(frames, cols, ext, block_findings(at, profile=True), int(structure[1].max()))
 
 
+def _skeleton(buf: bytes, sl: list[int], el: list[int]) -> list | None:
+    """``(key, frame)`` of the block ``buf`` with its boxes (spans ``sl``, ``el``) replaced by
+    their row numbers, parsed by orjson (which checks everything around the boxes); None where a
+    uid is repeated in a frame or a frame key in the block (the generic path: JSON's semantics)."""
+    skel, prev = [], 0
+    for r, (s, e) in enumerate(zip(sl, el)):
+        skel += (buf[prev:s], b"%d" % r)
+        prev = e
+    skel.append(buf[prev:])
+    block = orjson.loads(b"".join(skel))
+    if not isinstance(block, dict):
+        return None
+    frames, seen = [], 0
+    for k, fr in block.items():
+        if not isinstance(fr, dict):
+            return None
+        objs = fr.get("objects")
+        if objs is not None:
+            if not isinstance(objs, dict) or set(map(type, objs.values())) - {int}:
+                return None
+            seen += len(objs)
+        frames.append((k, fr))
+    rows = [r for _, fr in frames for r in (fr.get("objects") or {}).values()]
+    return frames if seen == len(sl) and rows == list(range(len(sl))) else None
+
+
 # ------------------------------------------------------------------------------------------------
 
 class ArrowAttributes:
@@ -234,29 +261,35 @@ class ArrowAttributes:
     as :class:`~.columns._Attributes` does: per box the first item of a name (kinds in the order
     boolean, num, text, vec)."""
 
-    def __init__(self, od: pa.StructArray, n: int) -> None:
+    def __init__(self, parts: dict[str, tuple[np.ndarray, np.ndarray, list[str], pa.Array]], n: int) -> None:
+        """``parts``: per kind (in :data:`KINDS`' order) ``(box of each item, code of its name,
+        the names, values)``, the items in box order."""
         self.n = n
         self.kinds: dict[str, tuple[np.ndarray, np.ndarray, pa.Array, dict[str, int]]] = {}
         self.code_of: dict[str, None] = {}
+        for kind, (parent, codes, names, vals) in parts.items():
+            self.kinds[kind] = (parent, codes, vals, {s: i for i, s in enumerate(names)})
+            self.code_of.update(dict.fromkeys(names))
+        for name, kind in READ_KIND.items():  # an attribute the import reads, in another kind
+            if any(name in codes for k, (_, _, _, codes) in self.kinds.items() if k != kind):
+                raise _NotFast
+
+    @classmethod
+    def from_object_data(cls, od: pa.StructArray, n: int) -> ArrowAttributes:
+        """From the ``object_data`` column of Arrow's reader (:data:`BOX_SCHEMA`)."""
+        parts = {}
         for kind, _ in KINDS:
             lists = od.field(kind)
             if lists.null_count == len(lists) or len(lists.values) == 0:
                 continue
             items = lists.flatten()
-            if items.null_count:
-                raise _NotFast
-            parent = pc.list_parent_indices(lists).to_numpy()
             names = items.field("name")
-            if names.null_count:
+            if items.null_count or names.null_count:
                 raise _NotFast
             enc = names.dictionary_encode()
-            dict_names = enc.dictionary.to_pylist()
-            self.kinds[kind] = (parent, enc.indices.to_numpy(), items.field("val"),
-                                {s: i for i, s in enumerate(dict_names)})
-            self.code_of.update(dict.fromkeys(dict_names))
-        for name, kind in READ_KIND.items():  # an attribute the import reads, in another kind
-            if any(name in codes for k, (_, _, _, codes) in self.kinds.items() if k != kind):
-                raise _NotFast
+            parts[kind] = (pc.list_parent_indices(lists).to_numpy(), enc.indices.to_numpy(),
+                           enc.dictionary.to_pylist(), items.field("val"))
+        return cls(parts, n)
 
     def _first_in(self, kind: str, name: str) -> tuple[np.ndarray, np.ndarray]:
         """``(boxes, item index)`` of the first item of ``name`` per box in ``kind``."""
@@ -404,14 +437,26 @@ def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], dict[str, tuple
     val = cub.field("val")
     if val.null_count or (pc.list_value_length(val).to_numpy() != 9).any():
         raise _NotFast
-    V = val.flatten().to_numpy(zero_copy_only=False).reshape(n, 9)
-    if val.flatten().null_count or (V[:, 3] != 0.0).any() or (V[:, 4] != 0.0).any():
+    if val.flatten().null_count:
+        raise _NotFast
+    cols = _cuboid_columns(val.flatten().to_numpy(zero_copy_only=False).reshape(n, 9))
+    at = ArrowAttributes.from_object_data(od, n)
+    return _attribute_columns(at, cols), _ext_reps(cub), at
+
+
+def _cuboid_columns(V: np.ndarray) -> dict[str, np.ndarray]:
+    """The columns of the boxes' cuboids (``V``: their 9 values per row, not rotated)."""
+    if (V[:, 3] != 0.0).any() or (V[:, 4] != 0.0).any():
         raise _NotFast  # (a rotated box: placed one at a time by the generic path)
-    cols: dict[str, np.ndarray] = {
-        "px": V[:, 0].copy(), "py": V[:, 1].copy(), "pz": V[:, 2] - V[:, 8] / 2.0, "yaw": V[:, 5].copy(),
-        "dl": V[:, 6].copy(), "dw": V[:, 7].copy(), "dh": V[:, 8].copy(),
-        "csroot": np.full(n, None, object), "cub_ts": np.full(n, np.nan)}
-    at = ArrowAttributes(od, n)
+    n = len(V)
+    return {"px": V[:, 0].copy(), "py": V[:, 1].copy(), "pz": V[:, 2] - V[:, 8] / 2.0, "yaw": V[:, 5].copy(),
+            "dl": V[:, 6].copy(), "dw": V[:, 7].copy(), "dh": V[:, 8].copy(),
+            "csroot": np.full(n, None, object), "cub_ts": np.full(n, np.nan)}
+
+
+def _attribute_columns(at: ArrowAttributes, cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``cols`` with the columns the import reads from the boxes' attributes."""
+    n = at.n
     if any(nm.startswith("interior/") for nm in at.code_of):
         raise _NotFast  # (the interior rows read the items as dicts: the generic path)
     hv, has_lrc, (rs, rt) = vector_columns(at, cols)
@@ -440,7 +485,7 @@ def box_columns(table: pa.Table) -> tuple[dict[str, np.ndarray], dict[str, tuple
             lane_id[ok] = conv[inv]
     cols["lane_id"] = lane_id
     cols["hv"], cols["hr"] = hv, on
-    return cols, _ext_reps(cub), at
+    return cols
 
 
 def _lane_int(v: str) -> Any:
@@ -448,3 +493,111 @@ def _lane_int(v: str) -> Any:
         return int(str(_enum_value(v)))
     except ValueError:
         return None
+
+
+# ------------------------------------------------------------------------------------------------
+# the compiled reader's arrays into the same columns
+
+def _packed(data: np.ndarray, offs: np.ndarray) -> pa.Array:
+    """The packed texts of :func:`._jitblock.parse_block` as an Arrow string array."""
+    return pa.Array.from_buffers(pa.large_string(), len(offs) - 1, [None, pa.py_buffer(offs), pa.py_buffer(data)])
+
+
+def _runs(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """The indices ``starts[i] .. starts[i] + counts[i] - 1`` of every run, concatenated."""
+    total = int(counts.sum())
+    if not total:
+        return np.zeros(0, np.int64)
+    ends = np.cumsum(counts)
+    return np.arange(total) + np.repeat(starts - (ends - counts), counts)
+
+
+def _read_block_jit(buf: bytes, parse) -> FastBlock | None:
+    """The block ``buf`` read by the compiled parser ``parse``, or None (not the profile's layout,
+    broken: the other paths read it or name the error)."""
+    if not buf.isascii():
+        buf.decode("utf-8")  # (UnicodeDecodeError is a ValueError: the generic path names it)
+    status, depth, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff = parse(
+        np.frombuffer(buf + b"\0", np.uint8))
+    n = len(boxes)
+    if status or not n:
+        return None
+    frames = _skeleton(buf, boxes[:, 0].tolist(), boxes[:, 1].tolist())
+    if frames is None:
+        return None
+    ntext = _packed(nbuf, noff)
+    nums = pc.cast(ntext, pa.float64()).to_numpy(zero_copy_only=False)
+    names = np.asarray(_packed(tbuf, toff).to_pylist(), object)
+    strs = _packed(sbuf, soff)
+    cols = _cuboid_columns(nums[boxes[:, 2, None] + np.arange(9)])
+    kind_of = items[:, 1]
+    parts = {}
+    for k, (kind, _) in enumerate(KINDS):
+        sel = np.flatnonzero(kind_of == k)
+        if not len(sel):
+            continue
+        it = items[sel]
+        ref = it[:, 3]
+        if kind == "vec":
+            counts = it[:, 4]
+            offsets = np.zeros(len(it) + 1, np.int32)
+            np.cumsum(counts, out=offsets[1:])
+            vals = pa.ListArray.from_arrays(pa.array(offsets), pa.array(nums[_runs(ref, counts)]))
+        elif kind == "num":
+            vals = pa.array(nums[ref])
+        elif kind == "text":
+            vals = strs.take(pa.array(ref))
+        else:
+            vals = pa.array(ref.astype(bool))
+        used, codes = np.unique(it[:, 2], return_inverse=True)
+        parts[kind] = (it[:, 0], codes, names[used].tolist(), vals)
+    at = ArrowAttributes(parts, n)
+    cols = _attribute_columns(at, cols)
+    return FastBlock(frames, cols, _ext_columns(ext, n, nums, ntext, names, strs),
+                     block_findings(at, profile=True), int(depth))
+
+
+def _ext_columns(ext: np.ndarray, n: int, nums: np.ndarray, ntext: pa.Array, names: np.ndarray,
+                 strs: pa.Array) -> dict[str, tuple]:
+    """The extension items' members (rows ``[box, key, kind, value]`` of the compiled parser) as
+    :func:`~.columns.ext_rep` columns: as a JSON parser gives them — a number with a fraction or
+    an exponent a float, else an int; ``("f", ...)`` where every value of a key is a float."""
+    from aveas_format.converters.openlabel import _jitblock as jb
+    from aveas_format.converters.openlabel.columns import _MISSING
+
+    if not len(ext):
+        return {}
+    keys, code = np.unique(ext[:, 1], return_inverse=True)
+    order = np.lexsort((ext[:, 0], code))
+    code_s, box_s = code[order], ext[order, 0]
+    if ((code_s[1:] == code_s[:-1]) & (box_s[1:] == box_s[:-1])).any():
+        raise _NotFast  # (a key twice in one extension item: JSON's last one wins, the generic path)
+    bounds = np.searchsorted(code_s, np.arange(len(keys) + 1))
+    out: dict[str, tuple] = {}
+    for c, key in enumerate(names[keys].tolist()):
+        rows = order[bounds[c]:bounds[c + 1]]
+        bx, kind, ref = ext[rows, 0], ext[rows, 2], ext[rows, 3]
+        present = np.zeros(n, bool)
+        present[bx] = True
+        if (kind == jb.E_FLOAT).all():
+            vals = np.full(n, np.nan)
+            vals[bx] = nums[ref]
+            out[key] = ("f", vals, present, np.zeros(n, bool))
+            continue
+        vals = np.full(n, _MISSING, object)
+        for k, get in ((jb.E_TRUE, lambda r: [True] * len(r)), (jb.E_FALSE, lambda r: [False] * len(r)),
+                       (jb.E_STR, lambda r: strs.take(pa.array(r)).to_pylist()),
+                       (jb.E_FLOAT, lambda r: nums[r].tolist()),
+                       # (an integer beyond int64: ArrowInvalid, the generic path)
+                       (jb.E_INT, lambda r: pc.cast(ntext.take(pa.array(r)), pa.int64()).to_pylist())):
+            m = kind == k
+            if m.any():
+                vals[bx[m]] = _objects(get(ref[m]))
+        out[key] = ("o", vals)
+    return out
+
+
+def _objects(values: list) -> np.ndarray:
+    a = np.empty(len(values), object)
+    a[:] = values
+    return a

@@ -24,7 +24,7 @@ import pyarrow as pa
 from pydantic import Field
 
 from aveas_format.converters.common import (TIMESTAMP_UNITS, load_map_bytes, resolve_timestamps,
-                                            source_block)
+                                            prefetch_sha256, source_block)
 from aveas_format.converters.labels import LabelFilter, implausible_size, label_kind
 from aveas_format.converters.openlabel.findings import (_check_objects, _claims_profile, _jpath,
                                                         _report_frame_findings)
@@ -101,6 +101,7 @@ def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImport
     if len(inputs) != 1:
         raise FormatError(f"openlabel: expected one input file, got {len(inputs)}")
     path = Path(inputs[0])
+    prefetch_sha256(path)
     import importlib.util
 
     if importlib.util.find_spec("ijson") is None:  # a dependency; without it: read whole, as before
@@ -426,10 +427,12 @@ def _drop_repeats(rows: dict[str, np.ndarray], fd: _FrameData, path: Path | None
     state_ext = fd.ext
     n = len(rows["time"])
     if n:
-        key = np.rec.fromarrays([np.asarray(rows["participant_id"]), np.asarray(rows["time"], float)])
-        _, first_idx = np.unique(key, return_index=True)
-        if len(first_idx) < n:
-            keep = np.sort(first_idx)
+        pid, t = np.asarray(rows["participant_id"]), np.asarray(rows["time"], float)
+        order = np.lexsort((t, pid))  # (stable: the first of equal keys first)
+        ps, ts = pid[order], t[order]
+        repeat = (ps[1:] == ps[:-1]) & (ts[1:] == ts[:-1])
+        if repeat.any():
+            keep = np.sort(order[np.concatenate([[True], ~repeat])])
             dup = np.ones(n, bool)
             dup[keep] = False
             i = int(np.argmax(dup))
@@ -517,20 +520,28 @@ def _file_road_coordinates(states: dict[str, Any], rows: dict[str, np.ndarray], 
     """The file's road coordinates into ``states`` (the lane offset from ``lane_position`` and the
     lane's width in the map)."""
     n = len(rows["time"])
-    states["road_id"] = pa.array(rows["road_id"].tolist(), pa.string())
-    states["lane_id"] = pa.array(rows["lane_id"].tolist(), pa.int16())
+    road = pa.array(rows["road_id"], pa.string(), from_pandas=True)
+    states["road_id"] = road
+    lanes = pa.array(rows["lane_id"], pa.int16(), from_pandas=True)
+    states["lane_id"] = lanes
     states["road_s"] = np.asarray(rows["road_s"], float)
     states["road_t"] = np.asarray(rows["road_t"], float)
     lp = np.asarray(rows["lane_position"], float)
     if np.isfinite(lp).any():
-        ok = np.isfinite(lp) & np.array([r is not None for r in rows["road_id"]])
+        enc = road.dictionary_encode()
+        code = enc.indices.fill_null(-1).to_numpy(zero_copy_only=False)
+        lane = lanes.fill_null(0).to_numpy(zero_copy_only=False).astype(np.int64)
+        ok = np.isfinite(lp) & (code >= 0)
         lo = np.full(n, np.nan)
         idx = np.flatnonzero(ok)
-        for r in {rows["road_id"][i] for i in idx}:
-            m = idx[[rows["road_id"][i] == r for i in idx]]
+        order = idx[np.argsort(code[idx], kind="stable")]
+        bounds = np.searchsorted(code[order], np.arange(len(enc.dictionary) + 1))
+        for k, r in enumerate(enc.dictionary.to_pylist()):
+            m = order[bounds[k]:bounds[k + 1]]
+            if not len(m):
+                continue
             try:
-                inner, outer = net.lane_borders(r, states["road_s"][m],
-                                                np.asarray([rows["lane_id"][i] or 0 for i in m]))
+                inner, outer = net.lane_borders(r, states["road_s"][m], lane[m])
                 lo[m] = lp[m] * np.abs(outer - inner)
             except Exception:  # noqa: BLE001 — a road the map lacks
                 pass

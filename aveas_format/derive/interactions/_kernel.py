@@ -12,7 +12,7 @@ its reciprocal. Both give the same numbers to a few units in the last place, NaN
 same places (tests/derive/test_kernel.py, over random pairs and every combination of degenerate
 ones: NaN and infinite inputs, zero closing speed, contact, negative gaps, stopping vehicles).
 
-Imported only where the numba path runs (:func:`._ttc.kernel_backend` decides, in one place); the
+Imported only where the numba path runs (:func:`aveas_format.numeric.kernel_backend` decides, in one place); the
 first call in an environment compiles the kernel (seconds) and caches it next to this module
 (numba's ``cache=True``); later processes load it with numba's import in well under a second
 when the machine is idle. docs/derive.md "Fast path".

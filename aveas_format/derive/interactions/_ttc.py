@@ -8,41 +8,13 @@ plus the leader's length). Conventions: docs/derive.md.
 
 from __future__ import annotations
 
-import importlib.util
-import os
-
 import numpy as np
 
 from aveas_format.derive.interactions._surrogates import lane_surrogates
-
+from aveas_format.numeric import kernel_backend
 
 #: elements per chunk of the 1D metrics (the temporaries of a chunk stay in the CPU's cache)
 CHUNK = 1 << 15
-
-
-#: the environment variable that picks the path of :func:`follower_leader_metrics`: ``numpy``,
-#: ``numba`` or ``auto`` (unset: auto, numba where it is installed)
-KERNEL_ENV = "AVEAS_FORMAT_KERNEL"
-KERNEL_BACKENDS = ("numpy", "numba")
-
-
-def kernel_backend(requested: str | None = None) -> str:
-    """Which path computes :func:`follower_leader_metrics`: ``"numba"`` (the fused compiled pass,
-    :mod:`._kernel`, the ``jit`` extra) or ``"numpy"`` (chunked arrays, below). ``requested``,
-    else the :data:`KERNEL_ENV` variable, else ``auto``: numba where it is installed. Asking for
-    numba without it is an error that says how to install it."""
-    req = (requested or os.environ.get(KERNEL_ENV) or "auto").strip().lower()
-    if req == "auto":
-        return "numba" if _HAS_NUMBA else "numpy"
-    if req not in KERNEL_BACKENDS:
-        src = "backend" if requested else KERNEL_ENV
-        raise ValueError(f"unknown kernel backend {req!r} ({src}): choose auto, numpy or numba")
-    if req == "numba" and not _HAS_NUMBA:
-        raise ImportError("the numba kernel needs numba: pip install 'aveas-format[jit]'")
-    return req
-
-
-_HAS_NUMBA = importlib.util.find_spec("numba") is not None
 
 
 def follower_leader_metrics(gap: np.ndarray, gap_var: np.ndarray, leader_length: np.ndarray,

@@ -1,0 +1,659 @@
+"""A compiled reader of a block of OpenLABEL frames in the AVEAS profile's layout (numba, the ``jit``
+extra): one pass over the bytes, a validating recursive-descent parser that knows the box layout
+and writes what the import reads as flat arrays, no Python object per value.
+
+:func:`parse_block` walks ``{"key":{frame},...}``: each frame's members (``objects`` read box by
+box, every other member skipped with its syntax checked: the caller parses the frames' skeleton
+with orjson), each box ``{"object_data":{"cuboid":[...],"boolean":[...],"num":[...],"text":[...],
+"vec":[...]}}`` strictly. It gives back
+
+- per box its byte span and where its cuboid's 9 numbers start;
+- per attribute item its box, kind (:data:`KINDS`' order), name and value (a number, a string,
+  a boolean, or a run of numbers for ``vec``);
+- per member of the cuboid's ``aveas_format`` extension item its box, key and scalar value;
+- the numbers as their JSON text, packed (the caller converts them in one Arrow cast: correctly
+  rounded, as a JSON parser reads them), the texts packed the same way, each distinct name once.
+
+Anything outside the profile's layout — a member the layout does not have, a repeated member, a
+``null``, a string with an escape in a box, a rotated or second cuboid, a value of another type —
+and any syntax error stops it with status 1: the caller falls back to the Arrow or the generic
+path, which reads the block or names the error. Imported only where numba is installed
+(:func:`aveas_format.numeric.kernel_backend` decides); the first call in an environment compiles
+it (seconds) and caches the machine code next to this module.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+_jit = numba.njit(cache=True, nogil=True, inline="always")
+_jit_call = numba.njit(cache=True, nogil=True)
+_jit_loop = numba.njit(cache=True, nogil=True)
+
+#: the item kinds: the order of :data:`.fastblock.KINDS`, then the cuboid
+K_BOOLEAN, K_NUM, K_TEXT, K_VEC, K_CUBOID = 0, 1, 2, 3, 4
+#: extension values: a number with a fraction or an exponent (a float to a JSON parser), true,
+#: false, a string, a number without (an int)
+E_FLOAT, E_TRUE, E_FALSE, E_STR, E_INT = 0, 1, 2, 3, 4
+#: the deepest nesting a skipped value may have here (deeper: the generic path, which knows the limit)
+_MAX_SKIP_DEPTH = 64
+
+
+def _word(s: bytes) -> np.ndarray:
+    return np.frombuffer(s, np.uint8).copy()
+
+
+_OBJECTS = _word(b"objects")
+_OBJECT_DATA = _word(b"object_data")
+_NAME = _word(b"name")
+_VAL = _word(b"val")
+_EXT = _word(b"aveas_format")
+_BOUNDING_BOX = _word(b"bounding_box")
+_KIND_BOOLEAN = _word(b"boolean")
+_KIND_NUM = _word(b"num")
+_KIND_TEXT = _word(b"text")
+_KIND_VEC = _word(b"vec")
+_KIND_CUBOID = _word(b"cuboid")
+_TRUE = _word(b"true")
+_FALSE = _word(b"false")
+_NULL = _word(b"null")
+
+
+@_jit
+def _ws(b, i):
+    while b[i] == 32 or b[i] == 10 or b[i] == 13 or b[i] == 9:
+        i += 1
+    return i
+
+
+@_jit
+def _eq(b, s, e, w):
+    """Whether ``b[s:e]`` is the word ``w``."""
+    if e - s != w.size:
+        return False
+    for k in range(w.size):
+        if b[s + k] != w[k]:
+            return False
+    return True
+
+
+@_jit
+def _hex(c):
+    return (48 <= c <= 57) or (65 <= c <= 70) or (97 <= c <= 102)
+
+
+@_jit_call
+def _string(b, i, n):
+    """``b[i]`` is a quote: ``(index past the closing quote or -1 where broken, has an escape)``;
+    escapes checked as JSON defines them, control characters refused."""
+    i += 1
+    esc = False
+    while i < n:
+        c = b[i]
+        if c == 34:
+            return i + 1, esc
+        if c == 92:
+            esc = True
+            d = b[i + 1]
+            if d == 117:
+                if not (_hex(b[i + 2]) and _hex(b[i + 3]) and _hex(b[i + 4]) and _hex(b[i + 5])):
+                    return -1, esc
+                i += 6
+                continue
+            if not (d == 34 or d == 92 or d == 47 or d == 98 or d == 102 or d == 110 or d == 114 or d == 116):
+                return -1, esc
+            i += 2
+            continue
+        if c < 32:
+            return -1, esc
+        i += 1
+    return -1, esc
+
+
+@_jit
+def _number(b, i):
+    """The end of the JSON number at ``i``, -1 where there is none (the strict grammar)."""
+    j = i
+    if b[j] == 45:
+        j += 1
+    if b[j] == 48:
+        j += 1
+    elif 49 <= b[j] <= 57:
+        while 48 <= b[j] <= 57:
+            j += 1
+    else:
+        return -1
+    if b[j] == 46:
+        j += 1
+        k = j
+        while 48 <= b[j] <= 57:
+            j += 1
+        if j == k:
+            return -1
+    if b[j] == 101 or b[j] == 69:
+        j += 1
+        if b[j] == 43 or b[j] == 45:
+            j += 1
+        k = j
+        while 48 <= b[j] <= 57:
+            j += 1
+        if j == k:
+            return -1
+    return j
+
+
+@_jit
+def _literal(b, i, w):
+    """The end of the literal ``w`` at ``i``, -1 where it is not there."""
+    for k in range(w.size):
+        if b[i + k] != w[k]:
+            return -1
+    return i + w.size
+
+
+@_jit_loop
+def _skip(b, i, n):
+    """``(end, nesting)`` of the JSON value at ``i``, its syntax checked (end -1: broken or
+    deeper than :data:`_MAX_SKIP_DEPTH`); ``nesting``: the containers' depth inside it."""
+    stack = np.zeros(_MAX_SKIP_DEPTH, np.uint8)  # 1: an object, 2: an array
+    d = 0
+    deepest = 0
+    while True:
+        # a value at i
+        c = b[i]
+        if c == 123 or c == 91:
+            if d == _MAX_SKIP_DEPTH:
+                return -1, deepest
+            stack[d] = 1 if c == 123 else 2
+            d += 1
+            deepest = max(deepest, d)
+            i = _ws(b, i + 1)
+            if (c == 123 and b[i] == 125) or (c == 91 and b[i] == 93):
+                d -= 1
+                i += 1
+            elif c == 123:
+                if b[i] != 34:
+                    return -1, deepest
+                i, _ = _string(b, i, n)
+                if i < 0:
+                    return -1, deepest
+                i = _ws(b, i)
+                if b[i] != 58:
+                    return -1, deepest
+                i = _ws(b, i + 1)
+                continue
+            else:
+                continue
+        elif c == 34:
+            i, _ = _string(b, i, n)
+        elif c == 116:
+            i = _literal(b, i, _TRUE)
+        elif c == 102:
+            i = _literal(b, i, _FALSE)
+        elif c == 110:
+            i = _literal(b, i, _NULL)
+        else:
+            i = _number(b, i)
+        if i < 0:
+            return -1, deepest
+        # after a value: a separator or the ends of containers
+        while True:
+            if d == 0:
+                return i, deepest
+            i = _ws(b, i)
+            c = b[i]
+            top = stack[d - 1]
+            if c == 44:
+                i = _ws(b, i + 1)
+                if top == 1:
+                    if b[i] != 34:
+                        return -1, deepest
+                    i, _ = _string(b, i, n)
+                    if i < 0:
+                        return -1, deepest
+                    i = _ws(b, i)
+                    if b[i] != 58:
+                        return -1, deepest
+                    i = _ws(b, i + 1)
+                break
+            if (c == 125 and top == 1) or (c == 93 and top == 2):
+                d -= 1
+                i += 1
+                continue
+            return -1, deepest
+
+
+@_jit_call
+def _grow(a, need):
+    """``a`` with room for ``need`` rows (doubled, the rows kept)."""
+    if need <= a.shape[0]:
+        return a
+    size = max(need, 2 * a.shape[0])
+    out = np.empty((size,) + a.shape[1:], a.dtype)
+    out[:a.shape[0]] = a
+    return out
+
+
+@_jit
+def _put(b, s, e, data, offs, k):
+    """``b[s:e]`` as the ``k``-th packed text of ``(data, offs)`` (offs[0] == 0)."""
+    if k + 2 > offs.size:
+        offs = _grow(offs, k + 2)
+    start = offs[k]
+    end = start + e - s
+    if end > data.size:
+        data = _grow(data, end)
+    data[start:end] = b[s:e]
+    offs[k + 1] = end
+    return data, offs
+
+
+@_jit
+def _intern(b, s, e, tbuf, toff, nt, hint):
+    """The code of the name ``b[s:e]`` in the table ``(tbuf, toff)`` of ``nt`` names (``hint``
+    tried first: the items of a box come in the same order box after box); a new name is added.
+    Returns ``(code, tbuf, toff, nt)``."""
+    size = e - s
+    for k in range(-1, nt):
+        c = hint if k < 0 else k
+        if c < 0 or c >= nt or toff[c + 1] - toff[c] != size:
+            continue
+        o = toff[c]
+        same = True
+        for j in range(size):
+            if tbuf[o + j] != b[s + j]:
+                same = False
+                break
+        if same:
+            return c, tbuf, toff, nt
+    tbuf, toff = _put(b, s, e, tbuf, toff, nt)
+    return nt, tbuf, toff, nt + 1
+
+
+@_jit
+def _floaty(b, s, e):
+    """Whether the number ``b[s:e]`` has a fraction or an exponent."""
+    for j in range(s, e):
+        if b[j] == 46 or b[j] == 101 or b[j] == 69:
+            return True
+    return False
+
+
+@_jit_loop
+def parse_block(b):
+    """Parse the block ``b`` (uint8, ``{...}`` followed by one NUL byte). Returns ``(status,
+    deepest nesting (the block's own braces: 1), boxes [start, end, first cuboid number],
+    items [box, kind, name, value, count], ext [box, key, kind, value], numbers' text and
+    offsets, texts' text and offsets, names' text and offsets)`` with the used rows only (the
+    names: of the attributes and of the extension's members, each once; ``name`` and ``key`` are
+    indices into them); status 0: read, 1: not this
+    layout or broken (nothing else is meaningful then)."""
+    n = b.size - 1
+    boxes = np.empty((max(16, n // 2048), 3), np.int64)
+    items = np.empty((max(16, n // 96), 5), np.int64)
+    ext = np.empty((max(16, n // 256), 4), np.int64)
+    nbuf = np.empty(max(64, n // 2), np.uint8)
+    noff = np.zeros(max(16, n // 20), np.int64)
+    sbuf = np.empty(max(64, n // 8), np.uint8)
+    soff = np.zeros(max(16, n // 40), np.int64)
+    tbuf = np.empty(1024, np.uint8)
+    toff = np.zeros(64, np.int64)
+    nb = ni = ne = nn = ns = nt = 0
+    hint = -1
+    deepest = 1
+    fail = (1, 0, boxes[:0], items[:0], ext[:0], nbuf[:0], noff[:1], sbuf[:0], soff[:1], tbuf[:0], toff[:1])
+
+    i = _ws(b, 0)
+    if b[i] != 123:
+        return fail
+    i = _ws(b, i + 1)
+    if b[i] == 125:
+        i += 1
+    else:
+        while True:  # the frames: "key": {members}
+            if b[i] != 34:
+                return fail
+            i, _ = _string(b, i, n)
+            if i < 0:
+                return fail
+            i = _ws(b, i)
+            if b[i] != 58:
+                return fail
+            i = _ws(b, i + 1)
+            if b[i] != 123:
+                return fail
+            deepest = max(deepest, 2)
+            i = _ws(b, i + 1)
+            if b[i] == 125:
+                i += 1
+            else:
+                while True:  # the frame's members
+                    if b[i] != 34:
+                        return fail
+                    ks = i
+                    i, esc = _string(b, i, n)
+                    if i < 0:
+                        return fail
+                    is_objects = not esc and _eq(b, ks + 1, i - 1, _OBJECTS)
+                    i = _ws(b, i)
+                    if b[i] != 58:
+                        return fail
+                    i = _ws(b, i + 1)
+                    if not is_objects:
+                        i, d = _skip(b, i, n)
+                        if i < 0:
+                            return fail
+                        deepest = max(deepest, 2 + d)
+                    else:
+                        if b[i] != 123:
+                            return fail
+                        deepest = max(deepest, 3)
+                        i = _ws(b, i + 1)
+                        if b[i] == 125:
+                            i += 1
+                        else:
+                            while True:  # the objects: "uid": {box}
+                                if b[i] != 34:
+                                    return fail
+                                i, _ = _string(b, i, n)
+                                if i < 0:
+                                    return fail
+                                i = _ws(b, i)
+                                if b[i] != 58:
+                                    return fail
+                                i = _ws(b, i + 1)
+                                # ---- a box: {"object_data": {kind: [items], ...}}
+                                if b[i] != 123:
+                                    return fail
+                                box_start = i
+                                deepest = max(deepest, 5)
+                                i = _ws(b, i + 1)
+                                if b[i] != 34:
+                                    return fail
+                                ks = i
+                                i, esc = _string(b, i, n)
+                                if i < 0 or esc or not _eq(b, ks + 1, i - 1, _OBJECT_DATA):
+                                    return fail
+                                i = _ws(b, i)
+                                if b[i] != 58:
+                                    return fail
+                                i = _ws(b, i + 1)
+                                if b[i] != 123:
+                                    return fail
+                                i = _ws(b, i + 1)
+                                seen = 0
+                                ncub = 0
+                                cub_first = -1
+                                if b[i] == 125:
+                                    return fail  # (no cuboid)
+                                while True:  # object_data's members: the kinds
+                                    if b[i] != 34:
+                                        return fail
+                                    ks = i
+                                    i, esc = _string(b, i, n)
+                                    if i < 0 or esc:
+                                        return fail
+                                    if _eq(b, ks + 1, i - 1, _KIND_VEC):
+                                        kind = K_VEC
+                                    elif _eq(b, ks + 1, i - 1, _KIND_NUM):
+                                        kind = K_NUM
+                                    elif _eq(b, ks + 1, i - 1, _KIND_TEXT):
+                                        kind = K_TEXT
+                                    elif _eq(b, ks + 1, i - 1, _KIND_BOOLEAN):
+                                        kind = K_BOOLEAN
+                                    elif _eq(b, ks + 1, i - 1, _KIND_CUBOID):
+                                        kind = K_CUBOID
+                                    else:
+                                        return fail
+                                    if seen & (1 << kind):
+                                        return fail
+                                    seen |= 1 << kind
+                                    i = _ws(b, i)
+                                    if b[i] != 58:
+                                        return fail
+                                    i = _ws(b, i + 1)
+                                    if b[i] != 91:
+                                        return fail
+                                    deepest = max(deepest, 6)
+                                    i = _ws(b, i + 1)
+                                    if b[i] == 93:
+                                        i += 1
+                                    else:
+                                        while True:  # the items: {"name": ..., "val": ..., ...}
+                                            if b[i] != 123:
+                                                return fail
+                                            deepest = max(deepest, 7)
+                                            i = _ws(b, i + 1)
+                                            name = -1
+                                            has_val = False
+                                            val = 0
+                                            count = 0
+                                            if b[i] == 125:
+                                                return fail
+                                            while True:  # the item's members
+                                                if b[i] != 34:
+                                                    return fail
+                                                ks = i
+                                                i, esc = _string(b, i, n)
+                                                if i < 0:
+                                                    return fail
+                                                ke = i - 1
+                                                i = _ws(b, i)
+                                                if b[i] != 58:
+                                                    return fail
+                                                i = _ws(b, i + 1)
+                                                if not esc and _eq(b, ks + 1, ke, _NAME):
+                                                    if name >= 0 or b[i] != 34:
+                                                        return fail
+                                                    s = i
+                                                    i, esc = _string(b, i, n)
+                                                    if i < 0 or esc:
+                                                        return fail
+                                                    if kind == K_CUBOID:
+                                                        if not _eq(b, s + 1, i - 1, _BOUNDING_BOX):
+                                                            return fail
+                                                        name = 0
+                                                    else:
+                                                        name, tbuf, toff, nt = _intern(b, s + 1, i - 1, tbuf, toff,
+                                                                                       nt, hint + 1)
+                                                        hint = name
+                                                elif not esc and _eq(b, ks + 1, ke, _VAL):
+                                                    if has_val:
+                                                        return fail
+                                                    has_val = True
+                                                    if kind == K_VEC or kind == K_CUBOID:
+                                                        if b[i] != 91:
+                                                            return fail
+                                                        deepest = max(deepest, 8)
+                                                        val = nn
+                                                        i = _ws(b, i + 1)
+                                                        if b[i] == 93:
+                                                            i += 1
+                                                        else:
+                                                            while True:
+                                                                e = _number(b, i)
+                                                                if e < 0:
+                                                                    return fail
+                                                                nbuf, noff = _put(b, i, e, nbuf, noff, nn)
+                                                                nn += 1
+                                                                i = _ws(b, e)
+                                                                if b[i] == 44:
+                                                                    i = _ws(b, i + 1)
+                                                                elif b[i] == 93:
+                                                                    i += 1
+                                                                    break
+                                                                else:
+                                                                    return fail
+                                                        count = nn - val
+                                                    elif kind == K_NUM:
+                                                        e = _number(b, i)
+                                                        if e < 0:
+                                                            return fail
+                                                        nbuf, noff = _put(b, i, e, nbuf, noff, nn)
+                                                        val = nn
+                                                        nn += 1
+                                                        i = e
+                                                    elif kind == K_TEXT:
+                                                        if b[i] != 34:
+                                                            return fail
+                                                        s = i
+                                                        i, esc = _string(b, i, n)
+                                                        if i < 0 or esc:
+                                                            return fail
+                                                        sbuf, soff = _put(b, s + 1, i - 1, sbuf, soff, ns)
+                                                        val = ns
+                                                        ns += 1
+                                                    else:
+                                                        e = _literal(b, i, _TRUE)
+                                                        val = 1
+                                                        if e < 0:
+                                                            e = _literal(b, i, _FALSE)
+                                                            val = 0
+                                                        if e < 0:
+                                                            return fail
+                                                        i = e
+                                                elif kind == K_CUBOID:
+                                                    if esc or not _eq(b, ks + 1, ke, _EXT) or b[i] != 123:
+                                                        return fail  # (coordinate_system, attributes...)
+                                                    deepest = max(deepest, 8)
+                                                    i = _ws(b, i + 1)
+                                                    if b[i] == 125:
+                                                        i += 1
+                                                    else:
+                                                        while True:  # the extension item: "key": scalar
+                                                            if b[i] != 34:
+                                                                return fail
+                                                            s = i
+                                                            i, esc = _string(b, i, n)
+                                                            if i < 0 or esc:
+                                                                return fail
+                                                            ext = _grow(ext, ne + 1)
+                                                            ext[ne, 0] = nb
+                                                            code, tbuf, toff, nt = _intern(b, s + 1, i - 1, tbuf, toff,
+                                                                                           nt, hint + 1)
+                                                            ext[ne, 1] = hint = code
+                                                            i = _ws(b, i)
+                                                            if b[i] != 58:
+                                                                return fail
+                                                            i = _ws(b, i + 1)
+                                                            c = b[i]
+                                                            if c == 34:
+                                                                s = i
+                                                                i, esc = _string(b, i, n)
+                                                                if i < 0 or esc:
+                                                                    return fail
+                                                                sbuf, soff = _put(b, s + 1, i - 1, sbuf, soff, ns)
+                                                                ext[ne, 2] = E_STR
+                                                                ext[ne, 3] = ns
+                                                                ns += 1
+                                                            elif c == 116:
+                                                                i = _literal(b, i, _TRUE)
+                                                                ext[ne, 2] = E_TRUE
+                                                                ext[ne, 3] = 0
+                                                            elif c == 102:
+                                                                i = _literal(b, i, _FALSE)
+                                                                ext[ne, 2] = E_FALSE
+                                                                ext[ne, 3] = 0
+                                                            else:
+                                                                e = _number(b, i)
+                                                                if e < 0:
+                                                                    return fail  # (null, a list...)
+                                                                nbuf, noff = _put(b, i, e, nbuf, noff, nn)
+                                                                ext[ne, 2] = E_FLOAT if _floaty(b, i, e) else E_INT
+                                                                ext[ne, 3] = nn
+                                                                nn += 1
+                                                                i = e
+                                                            if i < 0:
+                                                                return fail
+                                                            ne += 1
+                                                            i = _ws(b, i)
+                                                            if b[i] == 44:
+                                                                i = _ws(b, i + 1)
+                                                            elif b[i] == 125:
+                                                                i += 1
+                                                                break
+                                                            else:
+                                                                return fail
+                                                else:  # another member of an attribute: not read
+                                                    i, d = _skip(b, i, n)
+                                                    if i < 0:
+                                                        return fail
+                                                    deepest = max(deepest, 7 + d)
+                                                i = _ws(b, i)
+                                                if b[i] == 44:
+                                                    i = _ws(b, i + 1)
+                                                elif b[i] == 125:
+                                                    i += 1
+                                                    break
+                                                else:
+                                                    return fail
+                                            if name < 0 or not has_val:
+                                                return fail
+                                            if kind == K_CUBOID:
+                                                ncub += 1
+                                                cub_first = val
+                                                if count != 9:
+                                                    return fail
+                                            else:
+                                                items = _grow(items, ni + 1)
+                                                items[ni, 0] = nb
+                                                items[ni, 1] = kind
+                                                items[ni, 2] = name
+                                                items[ni, 3] = val
+                                                items[ni, 4] = count
+                                                ni += 1
+                                            i = _ws(b, i)
+                                            if b[i] == 44:
+                                                i = _ws(b, i + 1)
+                                            elif b[i] == 93:
+                                                i += 1
+                                                break
+                                            else:
+                                                return fail
+                                    i = _ws(b, i)
+                                    if b[i] == 44:
+                                        i = _ws(b, i + 1)
+                                    elif b[i] == 125:
+                                        i += 1
+                                        break
+                                    else:
+                                        return fail
+                                i = _ws(b, i)
+                                if b[i] != 125 or ncub != 1:  # (another member of the box; no or 2 cuboids)
+                                    return fail
+                                i += 1
+                                boxes = _grow(boxes, nb + 1)
+                                boxes[nb, 0] = box_start
+                                boxes[nb, 1] = i
+                                boxes[nb, 2] = cub_first
+                                nb += 1
+                                # ---- the next box or the end of the objects
+                                i = _ws(b, i)
+                                if b[i] == 44:
+                                    i = _ws(b, i + 1)
+                                elif b[i] == 125:
+                                    i += 1
+                                    break
+                                else:
+                                    return fail
+                    i = _ws(b, i)
+                    if b[i] == 44:
+                        i = _ws(b, i + 1)
+                    elif b[i] == 125:
+                        i += 1
+                        break
+                    else:
+                        return fail
+            i = _ws(b, i)
+            if b[i] == 44:
+                i = _ws(b, i + 1)
+            elif b[i] == 125:
+                i += 1
+                break
+            else:
+                return fail
+    if _ws(b, i) != n:
+        return fail
+    return (0, deepest, boxes[:nb], items[:ni], ext[:ne], nbuf[:noff[nn]], noff[:nn + 1],
+            sbuf[:soff[ns]], soff[:ns + 1], tbuf[:toff[nt]], toff[:nt + 1])

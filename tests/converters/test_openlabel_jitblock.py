@@ -1,0 +1,238 @@
+"""The compiled reader of OpenLABEL blocks (issue 22, converters/openlabel/_jitblock.py): a
+validating parser of the profile's box layout. It gives the same columns, extension columns,
+findings, frames and nesting depth as Arrow's reader of the same blocks; it refuses (status 1:
+the other paths read the block or name the error) every syntax error and everything outside the
+layout; numbers come back exactly as a JSON parser reads them."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+pytest.importorskip("numba", reason="numba is not installed (the jit extra)")
+pytest.importorskip("orjson")
+
+import aveas_format.converters.openlabel.fastblock as fb  # noqa: E402
+from aveas_format.converters import get_converter  # noqa: E402
+from aveas_format.converters.openlabel import _jitblock as jb  # noqa: E402
+from aveas_format.converters.openlabel import stream  # noqa: E402
+from aveas_format.converters.openlabel.columns import _MISSING, ext_chunk  # noqa: E402
+from aveas_format.sample import highway_scene  # noqa: E402
+from aveas_format.safeio import scan_json_member  # noqa: E402
+
+from helpers_common import kernel  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def blocks(tmp_path_factory):
+    """The blocks of frames of a sample export, as the import cuts them (~50 frames each)."""
+    path = tmp_path_factory.mktemp("jitblock") / "rec.json"
+    get_converter("openlabel", "export")(highway_scene(n_vehicles=8, duration_s=6.0, seed=2), path)
+    with open(path, "rb") as f:
+        _, span, _ = scan_json_member(f, "openlabel", "frames")
+        f.seek(span[0] + 1)
+        return [b"{" + cut + b"}" for _, cut in stream._cut_blocks(f, span, 40_000)]
+
+
+def _parse(buf: bytes):
+    return jb.parse_block(np.frombuffer(buf + b"\0", np.uint8))
+
+
+def _jit(buf: bytes):
+    return fb._read_block_jit(buf, jb.parse_block)
+
+
+def _same(a, b) -> None:
+    """Two FastBlocks hold the same frames, columns, extension columns, findings and depth."""
+    assert a.frames == b.frames and a.depth == b.depth and a.found == b.found
+    assert a.cols.keys() == b.cols.keys()
+    for k in a.cols:
+        x, y = a.cols[k], b.cols[k]
+        if x.dtype.kind == "f":
+            assert np.array_equal(x, y, equal_nan=True), k
+        else:
+            assert x.tolist() == y.tolist(), k
+    assert a.ext.keys() == b.ext.keys()
+    for k in a.ext:
+        assert _rep(a.ext[k]) == _rep(b.ext[k]), k
+
+
+def _rep(r: tuple) -> tuple:
+    """An extension column, comparable (NaN as None, the types of the values kept)."""
+    out = [r[0]]
+    for v in r[1:]:
+        if v.dtype.kind == "f":
+            out.append([None if np.isnan(x) else x for x in v.tolist()])
+        else:
+            out.append([(type(x).__name__, x) if x is not _MISSING else "missing" for x in v.tolist()])
+    return tuple(out)
+
+
+def test_the_sample_export_reads_as_arrow_reads_it(blocks):
+    assert len(blocks) > 3
+    for buf in blocks:
+        got = _jit(buf)
+        assert got is not None
+        _same(got, fb._read_block(buf))
+
+
+def test_pretty_printed_and_reordered_blocks_too(blocks):
+    """Whitespace everywhere and the members of boxes and items in another order: the same."""
+    buf = blocks[1]
+    doc = json.loads(buf)
+    for fr in doc.values():
+        for box in fr["objects"].values():
+            od = box["object_data"]
+            box["object_data"] = {k: [dict(reversed(list(it.items()))) for it in od[k]] for k in reversed(list(od))}
+    pretty = json.dumps(doc, indent=3).encode()
+    got = _jit(pretty)
+    assert got is not None
+    _same(got, fb._read_block(pretty))
+    _same(got, _jit(buf))
+
+
+def _with_box(box: str, frame_extra: str = "") -> bytes:
+    """A block of one frame holding ``box`` (JSON text) as its only object."""
+    return ('{"0":{"frame_properties":{"timestamp":0.0%s},"objects":{"7":%s}}}' % (frame_extra, box)).encode()
+
+
+#: a box of the profile's layout, with {VAL} where the tests put a velocity's values
+_BOX = ('{"object_data":{"cuboid":[{"name":"bounding_box","val":[1.5,2.5,0.75,0.0,0.0,0.1,4.5,1.8,1.5],'
+        '"aveas_format":{"vx":12.5,"interpolated":false,"source_frame":3,"note":"x"}}],'
+        '"vec":[{"name":"velocity","val":{VAL}},{"name":"open_drive/local_road_coordinates","val":[10.0,-1.5]}],"num":[{"name":"open_drive/lane_position","val":0.25}],'
+        '"text":[{"name":"used_road_link","val":"1"},{"name":"open_drive/lane_id","val":"-2"}],'
+        '"boolean":[{"name":"lights/brake","val":true}]}}')
+
+
+def _box(val: str = "[12.5,0.5,0,0,0,0.01]") -> str:
+    return _BOX.replace("{VAL}", val)
+
+
+def test_a_box_reads_as_a_json_parser_reads_it():
+    buf = _with_box(_box("[-0,1E+2,0.5e-3,-12.25,3]"))
+    got = _jit(buf)
+    assert got is not None
+    assert got.frames == [("0", {"frame_properties": {"timestamp": 0.0}, "objects": {"7": 0}})]
+    assert got.cols["px"].tolist() == [1.5] and got.cols["dl"].tolist() == [4.5]
+    assert got.cols["pz"].tolist() == [0.0] and got.cols["yaw"].tolist() == [0.1]
+    assert got.cols["road_id"].tolist() == ["1"] and got.cols["lane_id"].tolist() == [-2]
+    assert got.cols["road_s"].tolist() == [10.0] and got.cols["road_t"].tolist() == [-1.5]
+    assert got.cols["lane_position"].tolist() == [0.25] and got.cols["light_brake_p"].tolist() == [1.0]
+    # the extension item as a JSON parser gives it: floats "f", an int, a bool and a text as objects
+    want = ext_chunk([json.loads(buf)["0"]["objects"]["7"]["object_data"]["cuboid"][0]["aveas_format"]])
+    assert {k: _rep(v) for k, v in got.ext.items()} == {k: _rep(v) for k, v in want.items()}
+    assert got.ext["vx"][0] == "f" and got.ext["source_frame"][1].tolist() == [3]
+    assert type(got.ext["source_frame"][1][0]) is int and got.ext["interpolated"][1].tolist() == [False]
+    _same(got, fb._read_block(buf))
+
+
+@pytest.mark.parametrize("val", [
+    "[1,,2]", "[1 2]", "[1,]", "[01]", "[1.]", "[.5]", "[-]", "[1e]", "[+1]", "[NaN]", "[Infinity]",
+    "[1", "[null]", '["1"]', "[tru]", "[1]]", "{}", "[1}", "[0x10]", "[1.5.2]"])
+def test_broken_or_other_values_are_refused(val):
+    """Syntax errors and values of another type in a box: status 1 (the other paths decide)."""
+    assert _parse(_with_box(_box(val)))[0] == 1
+
+
+@pytest.mark.parametrize("box", [
+    _box().replace('"val":"1"', '"val":"1\\"x"'),  # an escape in a text
+    _box().replace('"val":"1"', '"val":"a\tb"'),  # a control character in a string
+    _box().replace('"val":"1"', '"val":"a\\qb"'),  # an invalid escape
+    _box().replace('"name":"velocity",', '"name":"velocity","name":"velocity",'),  # a repeated member
+    _box().replace('"vx":12.5,', '"vx":12.5,"vx":1.5,'),  # a repeated key in the extension item
+    _box().replace('"vx":12.5', '"vx":null'),  # a null
+    _box().replace('"vx":12.5', '"vx":[1]'),  # a list in the extension item
+    _box().replace('"x"}}],"vec"', '"x"}},{"name":"bounding_box","val":[1,2,3,0,0,0,1,1,1]}],"vec"'),  # 2 cuboids
+    _box().replace('"name":"bounding_box",', '"name":"bounding_box","coordinate_system":"odom",'),
+    _box().replace('"name":"bounding_box"', '"name":"box"'),
+    _box().replace('0.0,0.0,0.1,4.5', '0.0,0.1,4.5'),  # 8 values
+    _box().replace('{"object_data":', '{"name":"car","object_data":'),  # another member of the box
+    _box().replace('"boolean":', '"point2d":'),  # another kind
+    _box().replace('"num":[{"name":"open_drive/lane_position","val":0.25}]', '"num":[{"val":0.25}]'),
+    _box().replace('"val":true', '"val":1'),
+    _box().replace('"object_data":{', '"object_data":{"text":[],'),  # a kind twice
+    '{"object_data":{}}', '[]', '{"object_data":{"cuboid":[]}}'])
+def test_what_is_outside_the_layout_is_refused(box):
+    buf = _with_box(box)
+    assert box != _box()
+    try:
+        assert _parse(buf)[0] == 1 or _jit(buf) is None
+    except fb._NotFast:  # (found in the parser's arrays: a key twice in the extension item)
+        pass
+
+
+@pytest.mark.parametrize("block", [
+    b'{"0":{"objects":{"7":' + _box().encode() + b'}},}',  # a trailing comma
+    b'{"0":{"objects":{"7":' + _box().encode() + b'}}} x',  # something after the block
+    b'{"0":{"objects":{"7":' + _box().encode() + b'}}',  # unclosed
+    b'{"0":{"objects":{"7" ' + _box().encode() + b'}}}',  # no colon
+    b'{"0":{"frame_properties":{"a":[1,}]},"objects":{"7":' + _box().encode() + b'}}}',
+    b'{"0":{"frame_properties":{"a":' + b"[" * 80 + b"]" * 80 + b'},"objects":{"7":' + _box().encode() + b'}}}',
+    b'{"0":{"objects":[]}}'])
+def test_broken_frames_are_refused(block):
+    assert _parse(block)[0] == 1
+
+
+def test_other_members_of_items_and_frames_are_skipped_with_their_depth():
+    """Members the import does not read (an item's ``attributes``, a stream in the frame's
+    properties) are skipped, syntax checked; the block's depth counts them as Arrow's path does."""
+    box = _box().replace('"name":"velocity",', '"name":"velocity","attributes":{"a":[[{"b":"}"}]]},')
+    buf = _with_box(box, ',"streams":{"cam":{"stream_properties":{"sync":[{"x":[[]]}]}}}')
+    got = _jit(buf)
+    assert got is not None and got.depth == fb.block_depth(buf) == 11
+    _same(got, fb._read_block(buf))
+
+
+_json = st.recursive(
+    st.none() | st.booleans() | st.floats(allow_nan=False, allow_infinity=False) | st.integers()
+    | st.text(max_size=8),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=5), inner, max_size=4),
+    max_leaves=20)
+
+
+@settings(max_examples=150, deadline=None)
+@given(_json, st.booleans())
+def test_any_json_value_in_a_skipped_member_is_skipped(value, pretty):
+    """Any JSON value where the parser skips (a frame's property, an item's other member): read,
+    with the depth :func:`.fastblock.block_depth` gives."""
+    text = json.dumps(value, indent=1 if pretty else None, ensure_ascii=False)
+    box = _box().replace('"name":"velocity",', '"name":"velocity","extra":%s,' % text)
+    buf = _with_box(box, ',"p":%s' % text)
+    r = _parse(buf)
+    assert r[0] == 0 and int(r[1]) == fb.block_depth(buf)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(allow_nan=False, allow_infinity=False) | st.integers(-2**53, 2**53),
+                min_size=1, max_size=12))
+def test_numbers_come_back_exactly(values):
+    """Every float's shortest text and every integer: the value a JSON parser reads, bit for bit."""
+    state = _parse(_with_box(_box(json.dumps(values))))
+    assert state[0] == 0
+    items = state[3]
+    start, count = items[items[:, 1] == jb.K_VEC][0, 3:5].tolist()  # the velocity's numbers
+    nums = fb.pc.cast(fb._packed(state[5], state[6]), fb.pa.float64()).to_numpy()[start:start + count]
+    want = np.asarray([float(v) for v in json.loads(json.dumps(values))])
+    assert np.array_equal(nums, want) and np.array_equal(np.signbit(nums), np.signbit(want))
+
+
+def test_read_block_takes_the_compiled_reader_first(blocks, monkeypatch):
+    """With numba the compiled reader reads the blocks; a block it refuses goes to Arrow's."""
+    calls = []
+    real = fb._read_block
+
+    def arrow(buf, threads=True):
+        calls.append(1)
+        return real(buf, threads)
+
+    monkeypatch.setattr(fb, "_read_block", arrow)
+    with kernel("numba"):
+        assert fb.read_block(blocks[0]) is not None and calls == []
+        tricky = _with_box(_box().replace('"val":"1"', '"val":"1\\"x"'))
+        assert fb.read_block(tricky) is not None and calls == [1]
+    with kernel("numpy"):
+        assert fb.read_block(blocks[0]) is not None and calls == [1, 1]
