@@ -197,17 +197,18 @@ def _mixed(ol, rotate: bool = True):
         boxes[2]["cuboid"][0]["val"][3] = 0.01
 
 
+@pytest.mark.parametrize("block", [3000, 20_000])
 def test_blocks_read_in_worker_processes_give_the_same_recording_and_findings(exported, tmp_path,
-                                                                                 monkeypatch):
-    """Two worker processes read the blocks (columns handed back in file order): the same
-    recording and the same located findings as in process, a block the fast path cannot take
-    included."""
+                                                                                 monkeypatch, block):
+    """Two worker processes read the blocks (columns handed back in file order; with 20 kB blocks
+    the workers read their bytes themselves): the same recording and the same located findings
+    as in process, a block the fast path cannot take included."""
     from aveas_format.converters.openlabel import stream
 
     p = _edited(exported, tmp_path, _mixed)
-    monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", 3000)  # ~a frame a block: many blocks in flight
+    monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", block)  # ~a frame a block: many blocks in flight
     want, f_want, (n_fast, n) = _import(p, monkeypatch, fast=True)
-    assert n_fast == n - 1 and n > 4
+    assert n_fast == n - 1 and n > 4 - 2 * (block > 3000)
     assert sorted(c for c, *_ in f_want) == ["source.openlabel.missing_attribute", "source.openlabel.pmf_sum"]
     got, f_got, _ = _import(p, monkeypatch, fast=True, workers=2)
     assert_identical(got, want)
@@ -298,3 +299,35 @@ def test_files_the_prescan_must_judge_give_the_same_result_or_error(exported, tm
     else:
         assert_identical(a, b)
         assert fa == fb_
+
+
+@pytest.mark.parametrize("size, window", [(3000, 3000), (3000, 400), (20_000, 1 << 18)])
+def test_lazy_cuts_give_the_blocks_of_a_full_read(exported, monkeypatch, size, window):
+    """Where workers read their own blocks, the cuts found in a window before each block's end
+    (a window smaller than a frame: the block read here, as before) give whole frames each, the
+    same bytes in all."""
+    from aveas_format.converters.openlabel import stream
+    from aveas_format.safeio import scan_json_member
+
+    monkeypatch.setattr(stream, "_CUT_WINDOW", window)
+    cuts = {}
+    for lazy in (False, True):
+        with open(exported, "rb") as f:
+            _, span, _ = scan_json_member(f, "openlabel", "frames")
+            f.seek(span[0] + 1)
+            got = []
+            for pos, cut in stream._cut_blocks(f, span, size, lazy=lazy):
+                if isinstance(cut, tuple):  # (what the worker reads)
+                    start, n = cut
+                    cut = exported.read_bytes()[start:start + n]
+                got.append((pos, cut))
+            cuts[lazy] = got
+    assert b",".join(c for _, c in cuts[True]) == b",".join(c for _, c in cuts[False])
+    assert len(cuts[True]) > 3
+    for _, c in cuts[True]:
+        assert isinstance(json.loads(b"{" + c + b"}"), dict)
+    with open(exported, "rb") as f:  # (and the window's cut is taken where it is found)
+        _, span, _ = scan_json_member(f, "openlabel", "frames")
+        f.seek(span[0] + 1)
+        lazy = [c for _, c in stream._cut_blocks(f, span, size, lazy=True)]
+    assert any(isinstance(c, tuple) for c in lazy) == (size == 20_000)  # (a frame: ~7 kB)

@@ -198,6 +198,10 @@ class _Attributes:
         except KeyError:
             return boxes, list(map(dict.get, items, repeat("val")))
 
+    def first_boxes(self, name: str) -> np.ndarray:
+        """The boxes that have an item of ``name``."""
+        return self.first(name)[0]
+
     def boxes_with(self, names: list[str]) -> np.ndarray:
         """The boxes that have an item of any of ``names``, in order."""
         if self.layout is not None:
@@ -396,7 +400,7 @@ def block_findings(at: Any, profile: bool) -> list[tuple[str, str, int, int]]:
     if profile:
         for name in MANDATORY_FRAME_ATTRIBUTES:
             has = np.zeros(at.n, bool)
-            has[at.first(name)[0]] = True
+            has[at.first_boxes(name)] = True
             if not has.all():
                 out.append(("source.openlabel.missing_attribute", name, int(np.argmin(has)),
                             int((~has).sum())))

@@ -177,7 +177,10 @@ def compiled_parser():
     or loaded from numba's cache, on the first call in a process)."""
     from aveas_format.numeric import kernel_backend
 
-    if kernel_backend() != "numba":
+    try:
+        if kernel_backend() != "numba":
+            return None
+    except (ValueError, ImportError):  # (a kernel asked for that is not there: Arrow's reader)
         return None
     from aveas_format.converters.openlabel._jitblock import parse_block
 
@@ -324,6 +327,11 @@ class ArrowAttributes:
         vals = [v for kind, _, sel in parts for v in self.kinds[kind][2].take(pa.array(sel)).to_pylist()]
         order = np.argsort(boxes, kind="stable")
         return boxes[order], [vals[i] for i in order.tolist()]
+
+    def first_boxes(self, name: str) -> np.ndarray:
+        """The boxes that have an item of ``name`` (in no particular order)."""
+        parts = self.first_items(name)
+        return np.concatenate([b for _, b, _ in parts]) if parts else np.zeros(0, np.int64)
 
     def boxes_with(self, names: list[str]) -> np.ndarray:
         found = [b for nm in names for _, b, _ in self.first_items(nm)]

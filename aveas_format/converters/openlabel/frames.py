@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import re
 from collections import defaultdict
-from itertools import compress, repeat
+from itertools import chain, compress, repeat
 from operator import is_not
 from pathlib import Path
 from typing import Any
@@ -360,11 +360,12 @@ class _FrameRows:
         self.p_edges = {}
 
     def _keep(self, ch: dict[str, np.ndarray], ext: dict[str, tuple],
-              found: list[tuple[str, str, int, int]], js: list[int], us: list[str]) -> None:
-        """A block's columns (boxes of frames ``js``, objects ``us``) and what its checks found
-        (:func:`block_findings`), kept."""
+              found: list[tuple[str, str, int, int]], js: Any, us: list[str],
+              uidx: np.ndarray | None = None) -> None:
+        """A block's columns (boxes of frames ``js``, objects ``us``: their indices ``uidx`` where
+        the caller has them) and what its checks found (:func:`block_findings`), kept."""
         ui = self.uid_index
-        ch["uidx"] = np.fromiter(map(ui.__getitem__, us), np.int64, len(us))
+        ch["uidx"] = uidx if uidx is not None else np.fromiter(map(ui.__getitem__, us), np.int64, len(us))
         ch["occ"] = np.asarray(js, np.int64)
         self._check_block(found, js, us)
         self.chunks.append(ch)
@@ -394,21 +395,19 @@ class _FrameRows:
         where no static cuboid needs the frames' transforms)."""
         self._flush()
         ui = self.uid_index
-        js: list[int] = []
-        us: list[str] = []
-        for k, fr in blk.frames:
-            j = len(self.keys)
-            self.keys.append(k)
-            self.stamps.append(_frame_timestamp(fr))
-            fobjs = fr.get("objects") or {}
-            if not fobjs.keys() <= ui.keys():
-                for u in fobjs:
-                    ui.setdefault(u, len(ui))
-            self.frame_uids.append(np.fromiter(map(ui.__getitem__, fobjs), np.int64, len(fobjs)))
-            js.extend(repeat(j, len(fobjs)))
-            us.extend(fobjs)
+        j0 = len(self.keys)
+        objs = [fr.get("objects") or {} for _, fr in blk.frames]
+        self.keys.extend(k for k, _ in blk.frames)
+        self.stamps.extend(_frame_timestamp(fr) for _, fr in blk.frames)
+        us = list(chain.from_iterable(objs))
+        for u in us:
+            if u not in ui:
+                ui[u] = len(ui)
+        idx = np.fromiter(map(ui.__getitem__, us), np.int64, len(us))
+        lens = np.fromiter(map(len, objs), np.int64, len(objs))
+        self.frame_uids.extend(np.split(idx, np.cumsum(lens)[:-1]))
         if us:
-            self._keep(blk.cols, blk.ext, blk.found, js, us)
+            self._keep(blk.cols, blk.ext, blk.found, np.repeat(np.arange(j0, j0 + len(objs)), lens), us, idx)
 
     def finish(self) -> _FrameData:
         self._flush()
@@ -420,13 +419,11 @@ class _FrameRows:
         for r, k in enumerate(fkeys):
             rank_of[last[k]] = r
         names = list(self.uid_index)
-        seen: dict[str, None] = {}
         objects = self.objects
-        for k in fkeys:
-            for i in self.frame_uids[last[k]].tolist():
-                u = names[i]
-                if u not in objects and u not in seen:
-                    seen[u] = None
+        # the objects the frames list and the objects member does not, in order of appearance
+        listed = [self.frame_uids[last[k]] for k in fkeys]
+        uniq, first = np.unique(np.concatenate(listed) if listed else np.zeros(0, np.int64), return_index=True)
+        seen = {u: None for u in map(names.__getitem__, uniq[np.argsort(first)].tolist()) if u not in objects}
         rows: dict[str, np.ndarray] = {}
         ext: dict[str, tuple] = {}
         has_vel, has_road = True, False

@@ -206,7 +206,7 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     states = _state_columns(rows, x, y, heading, fd.has_vel)
     use_file = options.road_coordinates == "file" or (options.road_coordinates == "auto" and fd.has_road)
     if use_file and n:
-        _file_road_coordinates(states, rows, net)
+        _file_road_coordinates(states, rows, net, state_ext)
     _apply_state_extension(states, state_ext)
     del rows, state_ext  # the per-box columns are in ``states`` now
     fd.rows = fd.ext = None
@@ -516,9 +516,11 @@ def _state_columns(rows: dict[str, np.ndarray], x: np.ndarray, y: np.ndarray, he
     return states
 
 
-def _file_road_coordinates(states: dict[str, Any], rows: dict[str, np.ndarray], net) -> None:
+def _file_road_coordinates(states: dict[str, Any], rows: dict[str, np.ndarray], net,
+                           state_ext: dict[str, tuple] | None = None) -> None:
     """The file's road coordinates into ``states`` (the lane offset from ``lane_position`` and the
-    lane's width in the map)."""
+    lane's width in the map, except where this library's extension item gives it: it replaces
+    the map's value there, :func:`_apply_state_extension`)."""
     n = len(rows["time"])
     road = pa.array(rows["road_id"], pa.string(), from_pandas=True)
     states["road_id"] = road
@@ -532,6 +534,9 @@ def _file_road_coordinates(states: dict[str, Any], rows: dict[str, np.ndarray], 
         code = enc.indices.fill_null(-1).to_numpy(zero_copy_only=False)
         lane = lanes.fill_null(0).to_numpy(zero_copy_only=False).astype(np.int64)
         ok = np.isfinite(lp) & (code >= 0)
+        given = (state_ext or {}).get("lane_offset")
+        if given is not None and given[0] == "f":
+            ok &= ~given[2]  # (present in the extension: null or a value, the map's is not used)
         lo = np.full(n, np.nan)
         idx = np.flatnonzero(ok)
         order = idx[np.argsort(code[idx], kind="stable")]

@@ -10,6 +10,8 @@ anything, to report its JSON error where one exists.
 
 from __future__ import annotations
 
+import io
+import os
 import re
 from contextlib import closing
 from functools import partial
@@ -316,7 +318,9 @@ _HEAD_CHUNK = 1 << 20
 #: bytes of the frames parsed at a time by the fast path (their Python objects: ~9x that); by the
 #: columnar path (:mod:`.fastblock`: Arrow columns, ~the bytes)
 _BLOCK = 1 << 20
-_COLUMNAR_BLOCK = 2 << 20
+_COLUMNAR_BLOCK = 4 << 20
+#: bytes before a block's end where a lazy cut looks for the last frame that starts in it
+_CUT_WINDOW = 1 << 18
 #: the key of a block of frames read into columns (:class:`.fastblock.FastBlock`) in ``frames()``
 COLUMNAR = object()
 _FRAME_HEAD = re.compile(rb'\s*"(?:[^"\\]|\\.)*"\s*:\s*\{\s*$')
@@ -360,24 +364,57 @@ def _read_blocks(f, span: tuple[int, int | None], columnar: bool, workers: int |
     """``((offset, bytes), FastBlock or None)`` of each block of :func:`_cut_blocks`, in file
     order; with ``columnar`` the blocks read into columns by ``workers`` processes
     (:func:`aveas_format.parallel.map_ordered`; in worker processes Arrow's reader runs on one
-    thread: the processes are the parallelism), else None each. A context manager (closing it
-    cancels the blocks in flight)."""
+    thread: the processes are the parallelism), else None each. With workers and a plain file
+    the workers read their blocks' bytes themselves (the cuts found in a window before each:
+    :func:`_cut_blocks`' ``lazy``; the bytes are read here only for a block the fast path
+    refuses). A context manager (closing it cancels the blocks in flight)."""
     from aveas_format.parallel import map_ordered
 
     size = _COLUMNAR_BLOCK if columnar else _BLOCK
-    read = partial(_read_cut, threads=workers == 1) if columnar else _no_block
-    return closing(map_ordered(read, _cut_blocks(f, span, size, tail), workers=workers))
+    lazy = columnar and workers != 1 and isinstance(f, io.BufferedReader)
+    read = partial(_read_cut, threads=workers == 1, path=f.name if lazy else None) if columnar else _no_block
+    if columnar:
+        from aveas_format.converters.openlabel.fastblock import compiled_parser
+
+        compiled_parser()  # (compiled or loaded here, once: forked workers inherit it)
+    blocks = map_ordered(read, _cut_blocks(f, span, size, tail, lazy=lazy), workers=workers)
+    return closing(_bytes_here(blocks, f) if lazy else blocks)
 
 
-def _cut_blocks(f, span: tuple[int, int | None], size: int, tail: list | None = None):
+def _bytes_here(blocks, f):
+    """The blocks of a lazy cut with their bytes, read here where the fast path refused one."""
+    for (pos, cut), fast in blocks:
+        if isinstance(cut, tuple):
+            start, n = cut
+            if fast is None:
+                cut = os.pread(f.fileno(), n, start)
+        yield (pos, cut), fast
+
+
+def _cut_blocks(f, span: tuple[int, int | None], size: int, tail: list | None = None, lazy: bool = False):
     """``(offset, bytes)`` of the blocks of whole frames (the members between the braces of the
     frames, without the commas between blocks) from ``f``, read past the frames' ``{``; ``(offset,
     None)`` last where no frame head was found in 4 blocks (another layout). ``span[1]`` None: the
     end of the frames is not known — read to the end of the file, find it in the last block
-    (:func:`_frames_end`) and append the bytes after the frames' closing brace to ``tail``."""
+    (:func:`_frames_end`) and append the bytes after the frames' closing brace to ``tail``.
+    ``lazy`` (a plain file): a block is cut in a window of :data:`_CUT_WINDOW` bytes before its
+    end and given as ``(offset, (start, length))`` for the reader to read; the last block, and
+    any whose cut is not in its window, as bytes."""
     pos, end = span[0] + 1, (span[1] - 1 if span[1] is not None else 1 << 62)
     buf = b""
     while pos < end:
+        if lazy and not buf and end - pos > 2 * size:
+            w = min(_CUT_WINDOW, size)
+            f.seek(pos + size - w)
+            win = f.read(w)
+            cut = _last_cut(win) if len(win) == w else None
+            if cut is not None:
+                n = size - w + cut
+                yield (span[0] if pos == span[0] + 1 else pos), (pos, n)
+                pos += n + 1
+                continue
+        if lazy and not buf:
+            f.seek(pos)
         data = f.read(min(size, end - pos - len(buf)))
         buf += data
         last = not data or pos + len(buf) >= end
@@ -401,11 +438,19 @@ def _cut_blocks(f, span: tuple[int, int | None], size: int, tail: list | None = 
             break
 
 
-def _read_cut(item: tuple[int, bytes | None], threads: bool = True):
-    """A cut block into columns (:func:`.fastblock.read_block`; runs in a worker process)."""
+def _read_cut(item: tuple[int, Any], threads: bool = True, path: str | None = None):
+    """A cut block into columns (:func:`.fastblock.read_block`; runs in a worker process); its
+    bytes read here from ``path`` where the cut gives ``(start, length)``."""
     from aveas_format.converters.openlabel.fastblock import read_block
 
-    return None if item[1] is None else read_block(b"{" + item[1] + b"}", threads=threads)
+    cut = item[1]
+    if isinstance(cut, tuple):
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            cut = os.pread(fd, cut[1], cut[0])
+        finally:
+            os.close(fd)
+    return None if cut is None else read_block(b"{" + cut + b"}", threads=threads)
 
 
 def _no_block(item: tuple[int, bytes | None]) -> None:
