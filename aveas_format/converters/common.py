@@ -25,11 +25,13 @@ __all__ = [
 ]
 
 
-def _sha256(path: Path, chunk: int = 1 << 22) -> str:
+def _sha256(path: Path, chunk: int = 1 << 20) -> str:
     h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(chunk):
-            h.update(block)
+    buf = bytearray(chunk)  # (one buffer read into again and again: no fresh pages per read)
+    view = memoryview(buf)
+    with open(path, "rb", buffering=0) as f:
+        while n := f.readinto(buf):
+            h.update(view[:n])
     return h.hexdigest()
 
 

@@ -87,8 +87,21 @@ def prepare_table(table: pa.Table, spec: TableSpec) -> pa.Table:
                              if pa.types.is_dictionary(table.column(k).type) else table.column(k))
                          for k in keys})
         order = pc.sort_indices(view, sort_keys=[(k, "ascending") for k in keys])
-        table = table.take(order)
+        table = take_rows(table, order)
     return table
+
+
+def take_rows(table: pa.Table, order: pa.Array) -> pa.Table:
+    """``table.take(order)`` with the columns taken in threads (Arrow's take runs one column at a
+    time and releases the GIL: on a large table the columns go in parallel, one per core)."""
+    workers = min(table.num_columns, os.cpu_count() or 1)
+    if table.num_rows < 1 << 17 or workers < 2:
+        return table.take(order)
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(workers) as pool:
+        cols = list(pool.map(lambda c: pc.take(c, order), table.columns))
+    return pa.Table.from_arrays(cols, schema=table.schema)
 
 
 def parquet_options(schema: pa.Schema, spec: TableSpec) -> tuple[pa.Schema, dict]:

@@ -43,8 +43,7 @@ def write_chunks_atomic(path: str | Path, chunks: Iterable[bytes]) -> Path:
     try:
         os.fchmod(fd, 0o666 & ~_umask())
         with os.fdopen(fd, "wb") as f:
-            for data in chunks:
-                f.write(data)
+            _write_behind(f, chunks)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
@@ -52,6 +51,55 @@ def write_chunks_atomic(path: str | Path, chunks: Iterable[bytes]) -> Path:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+#: bytes written between two ``fdatasync`` of the writing thread (the disk writes back while the
+#: chunks are still being made; the last ``fsync`` has only the rest left)
+SYNC_EVERY = 256 << 20
+
+
+def _write_behind(f, chunks: Iterable[bytes]) -> None:
+    """Write ``chunks`` to ``f`` in a thread while the caller's iterator makes the next ones (the
+    writes and syncs release the GIL: encoding and writing overlap). An error of either side is
+    raised here, the other side stopped first."""
+    import queue
+    import threading
+
+    it = iter(chunks)
+    first = next(it, None)
+    if first is None:
+        return
+    q: queue.Queue = queue.Queue(maxsize=4)
+    failed: list[BaseException] = []
+
+    def run() -> None:
+        pending = 0
+        while (data := q.get()) is not None:
+            if failed:
+                continue  # (drain until the end marker)
+            try:
+                f.write(data)
+                pending += len(data)
+                if pending >= SYNC_EVERY:
+                    f.flush()
+                    getattr(os, "fdatasync", os.fsync)(f.fileno())
+                    pending = 0
+            except BaseException as e:  # noqa: BLE001 - raised in the caller's thread
+                failed.append(e)
+
+    t = threading.Thread(target=run, name="write-behind", daemon=True)
+    t.start()
+    try:
+        q.put(first)
+        for data in it:
+            if failed:
+                break
+            q.put(data)
+    finally:
+        q.put(None)
+        t.join()
+    if failed:
+        raise failed[0]
 
 
 def write_text_atomic(path: str | Path, text: str) -> Path:

@@ -38,12 +38,18 @@ def blocks(tmp_path_factory):
         return [b"{" + cut + b"}" for _, cut in stream._cut_blocks(f, span, 40_000)]
 
 
+@pytest.fixture(autouse=True)
+def _numba():
+    with kernel("numba"):
+        yield
+
+
 def _parse(buf: bytes):
-    return jb.parse_block(np.frombuffer(buf + b"\0", np.uint8))
+    return fb.compiled_parser()(fb.padded(buf))
 
 
 def _jit(buf: bytes):
-    return fb._read_block_jit(buf, jb.parse_block)
+    return fb._read_block_jit(fb.padded(buf), fb.compiled_parser())
 
 
 def _same(a, b) -> None:
@@ -236,3 +242,25 @@ def test_read_block_takes_the_compiled_reader_first(blocks, monkeypatch):
         assert fb.read_block(tricky) is not None and calls == [1]
     with kernel("numpy"):
         assert fb.read_block(blocks[0]) is not None and calls == [1, 1]
+
+
+def test_scratch_arrays_are_reused_and_grown_without_leaking_into_results(blocks):
+    """The parser's arrays are kept between blocks (grown for a larger one); what a block gives
+    back does not change when the next block is read."""
+    small = _jit(_with_box(_box()))
+    big = b"{" + b",".join(b[1:-1] for b in blocks) + b"}"
+    first = _jit(blocks[0])
+    want = {k: v.copy() for k, v in first.cols.items()}
+    assert _jit(big) is not None and _jit(blocks[1]) is not None
+    for k, v in want.items():
+        assert v.tolist() == first.cols[k].tolist() or np.array_equal(v, first.cols[k], equal_nan=True), k
+    assert small.cols["px"].tolist() == [1.5]
+
+
+def test_the_compiled_skeleton_is_the_python_one(blocks):
+    for buf in blocks[:3] + [_with_box(_box())]:
+        state = _parse(buf)
+        boxes = state[2]
+        assert len(boxes) >= 1
+        want = fb._skeleton_bytes(buf, boxes[:, 0].tolist(), boxes[:, 1].tolist())
+        assert jb.skeleton(np.frombuffer(buf, np.uint8), boxes).tobytes() == want

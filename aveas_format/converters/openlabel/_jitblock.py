@@ -280,29 +280,33 @@ def _floaty(b, s, e):
     return False
 
 
+def scratch(n: int) -> tuple:
+    """Fresh arrays for :func:`parse_block` sized for a block of ``n`` bytes (a caller keeps the
+    ones it returns for the next block: no fresh pages per block)."""
+    return (np.empty((max(16, n // 2048), 3), np.int64), np.empty((max(16, n // 96), 5), np.int64),
+            np.empty((max(16, n // 256), 4), np.int64), np.empty(max(64, n // 2), np.uint8),
+            np.zeros(max(16, n // 20), np.int64), np.empty(max(64, n // 8), np.uint8),
+            np.zeros(max(16, n // 40), np.int64), np.empty(1024, np.uint8), np.zeros(64, np.int64))
+
+
 @_jit_loop
-def parse_block(b):
-    """Parse the block ``b`` (uint8, ``{...}`` followed by one NUL byte). Returns ``(status,
-    deepest nesting (the block's own braces: 1), boxes [start, end, first cuboid number],
-    items [box, kind, name, value, count], ext [box, key, kind, value], numbers' text and
-    offsets, texts' text and offsets, names' text and offsets)`` with the used rows only (the
-    names: of the attributes and of the extension's members, each once; ``name`` and ``key`` are
-    indices into them); status 0: read, 1: not this
-    layout or broken (nothing else is meaningful then)."""
+def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
+    """Parse the block ``b`` (uint8, ``{...}`` followed by one NUL byte) into the arrays given
+    (:func:`scratch`; grown where needed). Returns ``(status, deepest nesting (the block's own
+    braces: 1), rows used of boxes, items, ext, numbers, texts, names, and the arrays)``: boxes
+    ``[start, end, first cuboid number]``, items ``[box, kind, name, value, count]``, ext ``[box,
+    key, kind, value]``, the numbers' text and offsets, the texts' text and offsets, the names'
+    text and offsets (the names of the attributes and of the extension's members, each once;
+    ``name`` and ``key`` are indices into them). Status 0: read, 1: not this layout or broken
+    (nothing else is meaningful then)."""
     n = b.size - 1
-    boxes = np.empty((max(16, n // 2048), 3), np.int64)
-    items = np.empty((max(16, n // 96), 5), np.int64)
-    ext = np.empty((max(16, n // 256), 4), np.int64)
-    nbuf = np.empty(max(64, n // 2), np.uint8)
-    noff = np.zeros(max(16, n // 20), np.int64)
-    sbuf = np.empty(max(64, n // 8), np.uint8)
-    soff = np.zeros(max(16, n // 40), np.int64)
-    tbuf = np.empty(1024, np.uint8)
-    toff = np.zeros(64, np.int64)
+    noff[0] = 0
+    soff[0] = 0
+    toff[0] = 0
     nb = ni = ne = nn = ns = nt = 0
     hint = -1
     deepest = 1
-    fail = (1, 0, boxes[:0], items[:0], ext[:0], nbuf[:0], noff[:1], sbuf[:0], soff[:1], tbuf[:0], toff[:1])
+    fail = (1, 0, 0, 0, 0, 0, 0, 0, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff)
 
     i = _ws(b, 0)
     if b[i] != 123:
@@ -655,5 +659,40 @@ def parse_block(b):
                 return fail
     if _ws(b, i) != n:
         return fail
-    return (0, deepest, boxes[:nb], items[:ni], ext[:ne], nbuf[:noff[nn]], noff[:nn + 1],
-            sbuf[:soff[ns]], soff[:ns + 1], tbuf[:toff[nt]], toff[:nt + 1])
+    return (0, deepest, nb, ni, ne, nn, ns, nt, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff)
+
+
+@_jit_loop
+def skeleton(b, boxes):
+    """The block ``b`` (its bytes, without the NUL) with each box (spans ``boxes[:, :2]``, in
+    order) replaced by its row number: what orjson parses for the frames around the boxes."""
+    n = b.size
+    size = n
+    for r in range(boxes.shape[0]):
+        size -= boxes[r, 1] - boxes[r, 0]
+        d = 1
+        v = r
+        while v >= 10:
+            v //= 10
+            d += 1
+        size += d
+    out = np.empty(size, np.uint8)
+    o = 0
+    prev = 0
+    for r in range(boxes.shape[0]):
+        s = boxes[r, 0]
+        out[o:o + s - prev] = b[prev:s]
+        o += s - prev
+        d = 1
+        v = r
+        while v >= 10:
+            v //= 10
+            d += 1
+        v = r
+        for k in range(d - 1, -1, -1):
+            out[o + k] = 48 + v % 10
+            v //= 10
+        o += d
+        prev = boxes[r, 1]
+    out[o:] = b[prev:n]
+    return out

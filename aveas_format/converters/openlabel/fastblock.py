@@ -25,6 +25,7 @@ path (:mod:`.columns`), which gives the same columns and the exact error where t
 
 from __future__ import annotations
 
+import threading
 from typing import Any
 
 import numpy as np
@@ -153,28 +154,39 @@ class FastBlock:
         self.depth = depth
 
 
-def read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
-    """The block ``buf`` (``{"key":{frame},...}``) as a :class:`FastBlock`, or None where it does
-    not fit the fast path (see the module's doc). ``threads``: Arrow's reader on its thread pool.
-    Where numba is installed (:func:`aveas_format.numeric.kernel_backend`) the compiled reader
-    (:mod:`._jitblock`) reads the block, Arrow's reader where that one does not take it."""
+def read_block(buf: bytes | np.ndarray, threads: bool = True) -> FastBlock | None:
+    """The block ``buf`` (``{"key":{frame},...}``; or as a uint8 array followed by one NUL byte:
+    :func:`padded`) as a :class:`FastBlock`, or None where it does not fit the fast path (see the
+    module's doc). ``threads``: Arrow's reader on its thread pool. Where numba is installed
+    (:func:`aveas_format.numeric.kernel_backend`) the compiled reader (:mod:`._jitblock`) reads
+    the block, Arrow's reader where that one does not take it."""
     if orjson is None:
         return None
     try:
         parse = compiled_parser()
         if parse is not None:
-            blk = _read_block_jit(buf, parse)
+            blk = _read_block_jit(buf if isinstance(buf, np.ndarray) else padded(buf), parse)
             if blk is not None:
                 return blk
-        return _read_block(buf, threads)
+        return _read_block(buf[:-1].tobytes() if isinstance(buf, np.ndarray) else buf, threads)
     except (_NotFast, pa.ArrowInvalid, pa.ArrowTypeError, orjson.JSONDecodeError, KeyError, IndexError,
             TypeError, ValueError):
         return None
 
 
+def padded(buf: bytes) -> np.ndarray:
+    """``buf`` as the compiled reader takes it: uint8, one NUL byte after it."""
+    return np.frombuffer(buf + b"\0", np.uint8)
+
+
+_LOCAL = threading.local()
+
+
 def compiled_parser():
-    """:func:`._jitblock.parse_block` where the numba path runs, else None (imported, and compiled
-    or loaded from numba's cache, on the first call in a process)."""
+    """The compiled reader where the numba path runs, else None: ``parse(b)`` of a :func:`padded`
+    block gives :func:`._jitblock.parse_block`'s status, depth and arrays, the used rows only
+    (views of this thread's scratch arrays, reused by the next call). numba and the reader are
+    imported, and compiled or loaded from numba's cache, on the first call in a process."""
     from aveas_format.numeric import kernel_backend
 
     try:
@@ -182,9 +194,18 @@ def compiled_parser():
             return None
     except (ValueError, ImportError):  # (a kernel asked for that is not there: Arrow's reader)
         return None
-    from aveas_format.converters.openlabel._jitblock import parse_block
+    from aveas_format.converters.openlabel import _jitblock as jb
 
-    return parse_block
+    def parse(b: np.ndarray) -> tuple:
+        sc = getattr(_LOCAL, "scratch", None) or jb.scratch(len(b))
+        r = jb.parse_block(b, *sc)
+        _LOCAL.scratch = r[8:]
+        status, depth, nb, ni, ne, nn, ns, nt = r[:8]
+        boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff = r[8:]
+        return (status, depth, boxes[:nb], items[:ni], ext[:ne], nbuf[:noff[nn]], noff[:nn + 1],
+                sbuf[:soff[ns]], soff[:ns + 1], tbuf[:toff[nt]], toff[:nt + 1])
+
+    return parse
 
 
 def block_depth(buf: bytes) -> int | None:
@@ -210,7 +231,7 @@ def _read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
     if n == 0:
         return None
     sl, el = starts.tolist(), ends.tolist()
-    frames = _skeleton(buf, sl, el)
+    frames = _skeleton(_skeleton_bytes(buf, sl, el), n)
     if frames is None:
         return None
     if b"\n" in buf or b"\r" in buf:  # (outside strings: _structure checked) whitespace
@@ -231,16 +252,22 @@ def _read_block(buf: bytes, threads: bool = True) -> FastBlock | None:
     return FastBlock(frames, cols, ext, block_findings(at, profile=True), int(structure[1].max()))
 
 
-def _skeleton(buf: bytes, sl: list[int], el: list[int]) -> list | None:
-    """``(key, frame)`` of the block ``buf`` with its boxes (spans ``sl``, ``el``) replaced by
-    their row numbers, parsed by orjson (which checks everything around the boxes); None where a
-    uid is repeated in a frame or a frame key in the block (the generic path: JSON's semantics)."""
-    skel, prev = [], 0
+def _skeleton_bytes(buf: bytes, sl: list[int], el: list[int]) -> bytes:
+    """The block ``buf`` with its boxes (spans ``sl``, ``el``) replaced by their row numbers."""
+    parts, prev = [], 0
     for r, (s, e) in enumerate(zip(sl, el)):
-        skel += (buf[prev:s], b"%d" % r)
+        parts += (buf[prev:s], b"%d" % r)
         prev = e
-    skel.append(buf[prev:])
-    block = orjson.loads(b"".join(skel))
+    parts.append(buf[prev:])
+    return b"".join(parts)
+
+
+def _skeleton(skel: Any, n: int) -> list | None:
+    """``(key, frame)`` of a block's skeleton ``skel`` (its ``n`` boxes replaced by their row
+    numbers: :func:`_skeleton_bytes`), parsed by orjson (which checks everything around the
+    boxes); None where a uid is repeated in a frame or a frame key in the block (the generic
+    path: JSON's semantics)."""
+    block = orjson.loads(skel)
     if not isinstance(block, dict):
         return None
     frames, seen = [], 0
@@ -254,7 +281,7 @@ def _skeleton(buf: bytes, sl: list[int], el: list[int]) -> list | None:
             seen += len(objs)
         frames.append((k, fr))
     rows = [r for _, fr in frames for r in (fr.get("objects") or {}).values()]
-    return frames if seen == len(sl) and rows == list(range(len(sl))) else None
+    return frames if seen == n and rows == list(range(n)) else None
 
 
 # ------------------------------------------------------------------------------------------------
@@ -520,17 +547,19 @@ def _runs(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return np.arange(total) + np.repeat(starts - (ends - counts), counts)
 
 
-def _read_block_jit(buf: bytes, parse) -> FastBlock | None:
-    """The block ``buf`` read by the compiled parser ``parse``, or None (not the profile's layout,
-    broken: the other paths read it or name the error)."""
-    if not buf.isascii():
-        buf.decode("utf-8")  # (UnicodeDecodeError is a ValueError: the generic path names it)
-    status, depth, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff = parse(
-        np.frombuffer(buf + b"\0", np.uint8))
+def _read_block_jit(b: np.ndarray, parse) -> FastBlock | None:
+    """The block ``b`` (:func:`padded`) read by the compiled parser ``parse``
+    (:func:`compiled_parser`), or None (not the profile's layout, broken: the other paths read it
+    or name the error). Nothing it returns refers to the parser's scratch arrays."""
+    from aveas_format.converters.openlabel._jitblock import skeleton
+
+    if b.max(initial=0) > 127:
+        b[:-1].tobytes().decode("utf-8")  # (UnicodeDecodeError is a ValueError: the generic path names it)
+    status, depth, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff = parse(b)
     n = len(boxes)
     if status or not n:
         return None
-    frames = _skeleton(buf, boxes[:, 0].tolist(), boxes[:, 1].tolist())
+    frames = _skeleton(memoryview(skeleton(b[:-1], boxes)), n)
     if frames is None:
         return None
     ntext = _packed(nbuf, noff)
@@ -557,7 +586,7 @@ def _read_block_jit(buf: bytes, parse) -> FastBlock | None:
             vals = strs.take(pa.array(ref))
         else:
             vals = pa.array(ref.astype(bool))
-        used, codes = np.unique(it[:, 2], return_inverse=True)
+        used, codes = _used_codes(it[:, 2], len(names))
         parts[kind] = (it[:, 0], codes, names[used].tolist(), vals)
     at = ArrowAttributes(parts, n)
     cols = _attribute_columns(at, cols)
@@ -575,16 +604,13 @@ def _ext_columns(ext: np.ndarray, n: int, nums: np.ndarray, ntext: pa.Array, nam
 
     if not len(ext):
         return {}
-    keys, code = np.unique(ext[:, 1], return_inverse=True)
-    order = np.lexsort((ext[:, 0], code))
-    code_s, box_s = code[order], ext[order, 0]
-    if ((code_s[1:] == code_s[:-1]) & (box_s[1:] == box_s[:-1])).any():
-        raise _NotFast  # (a key twice in one extension item: JSON's last one wins, the generic path)
-    bounds = np.searchsorted(code_s, np.arange(len(keys) + 1))
+    keys, code = _used_codes(ext[:, 1], len(names))
     out: dict[str, tuple] = {}
     for c, key in enumerate(names[keys].tolist()):
-        rows = order[bounds[c]:bounds[c + 1]]
+        rows = np.flatnonzero(code == c)  # (in box order)
         bx, kind, ref = ext[rows, 0], ext[rows, 2], ext[rows, 3]
+        if len(bx) > 1 and not (bx[1:] > bx[:-1]).all():
+            raise _NotFast  # (a key twice in one extension item: JSON's last one wins, the generic path)
         present = np.zeros(n, bool)
         present[bx] = True
         if (kind == jb.E_FLOAT).all():
@@ -603,6 +629,15 @@ def _ext_columns(ext: np.ndarray, n: int, nums: np.ndarray, ntext: pa.Array, nam
                 vals[bx[m]] = _objects(get(ref[m]))
         out[key] = ("o", vals)
     return out
+
+
+def _used_codes(codes: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(the codes < n that occur, ascending; each code's index among them)`` (as ``np.unique``
+    with ``return_inverse``, without sorting)."""
+    present = np.zeros(n, bool)
+    present[codes] = True
+    index = np.cumsum(present) - 1
+    return np.flatnonzero(present), index[codes]
 
 
 def _objects(values: list) -> np.ndarray:

@@ -46,6 +46,7 @@ from aveas_format.converters.openlabel.stream import (COLUMNAR, _check_stream, _
 from aveas_format.converters.openlabel.tables import _recording_metadata, _restore_derived, _tables
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, report_source
+from aveas_format.numeric import small_pages
 from aveas_format.schema.taxonomy import CLASSES
 
 
@@ -109,7 +110,7 @@ def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImport
                       "a dependency of aveas-format)",
                       stacklevel=2)
     else:
-        with _no_gc():
+        with _no_gc(), small_pages():
             try:
                 try:
                     try:  # without the structural pre-scan of the frames, where it can

@@ -18,6 +18,8 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from aveas_format.errors import FormatError, RecordingIOError
 
 try:  # the fast path of the frames (extra ``fast``)
@@ -318,7 +320,7 @@ _HEAD_CHUNK = 1 << 20
 #: bytes of the frames parsed at a time by the fast path (their Python objects: ~9x that); by the
 #: columnar path (:mod:`.fastblock`: Arrow columns, ~the bytes)
 _BLOCK = 1 << 20
-_COLUMNAR_BLOCK = 4 << 20
+_COLUMNAR_BLOCK = 8 << 20
 #: bytes before a block's end where a lazy cut looks for the last frame that starts in it
 _CUT_WINDOW = 1 << 18
 #: the key of a block of frames read into columns (:class:`.fastblock.FastBlock`) in ``frames()``
@@ -444,13 +446,26 @@ def _read_cut(item: tuple[int, Any], threads: bool = True, path: str | None = No
     from aveas_format.converters.openlabel.fastblock import read_block
 
     cut = item[1]
-    if isinstance(cut, tuple):
+    if isinstance(cut, tuple):  # (read into this process's block buffer: no fresh pages per block)
+        start, n = cut
+        global _BUFFER
+        if _BUFFER is None or len(_BUFFER) < n + 3:
+            _BUFFER = np.empty(max(n + 3, _COLUMNAR_BLOCK + 3), np.uint8)
+        b = _BUFFER[:n + 3]
         fd = os.open(path, os.O_RDONLY)
         try:
-            cut = os.pread(fd, cut[1], cut[0])
+            got = os.preadv(fd, [memoryview(b)[1:n + 1]], start)
         finally:
             os.close(fd)
+        if got != n:  # (the file changed under the import: the parent reads the block, and fails)
+            return None
+        b[0], b[n + 1], b[n + 2] = 0x7B, 0x7D, 0
+        return read_block(b, threads=threads)
     return None if cut is None else read_block(b"{" + cut + b"}", threads=threads)
+
+
+#: a worker's buffer for the blocks it reads (:func:`_read_cut`)
+_BUFFER = None
 
 
 def _no_block(item: tuple[int, bytes | None]) -> None:

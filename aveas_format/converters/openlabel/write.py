@@ -204,9 +204,18 @@ class _Statics:
         self.road_class = np.asarray([c in _ROAD_CLASSES for c in self.classes], dtype=bool)
 
     def rows(self, pid: np.ndarray) -> np.ndarray:
-        """The participants' row of each state."""
-        pos = self.pos
-        return np.fromiter((pos[q] for q in pid.tolist()), dtype=np.int64, count=len(pid))
+        """The participants' row of each state (KeyError: a state of no participant)."""
+        pid = np.asarray(pid)
+        if pid.dtype.kind not in "iu" or self.part_ids.dtype.kind not in "iu":
+            pos = self.pos
+            return np.fromiter((pos[q] for q in pid.tolist()), dtype=np.int64, count=len(pid))
+        order = np.argsort(self.part_ids, kind="stable")  # (an id twice: its last row, as the dict)
+        at = np.maximum(np.searchsorted(self.part_ids[order], pid, side="right") - 1, 0)
+        rows = order[at] if len(order) else np.zeros(len(pid), np.int64)
+        bad = self.part_ids[rows] != pid if len(order) else np.ones(len(pid), bool)
+        if bad.any():
+            raise KeyError(pid[np.argmax(bad)].item())
+        return rows.astype(np.int64)
 
 
 class _Columns:

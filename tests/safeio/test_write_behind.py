@@ -1,0 +1,62 @@
+"""Streamed atomic writes with the writing in a thread (safeio/atomic.py, issue 22): the chunks
+land in order, syncs happen along the way, and an error on either side leaves nothing behind."""
+
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from aveas_format.safeio import atomic
+from aveas_format.safeio.atomic import write_chunks_atomic
+
+
+def _chunks(n: int, size: int):
+    for i in range(n):
+        yield bytes([i % 251]) * size
+
+
+def test_chunks_land_in_order_with_syncs_along_the_way(tmp_path, monkeypatch):
+    synced = []
+    real = os.fdatasync
+    monkeypatch.setattr(atomic, "SYNC_EVERY", 10_000)
+    monkeypatch.setattr(os, "fdatasync", lambda fd: (synced.append(fd), real(fd))[1])
+    p = write_chunks_atomic(tmp_path / "out.bin", _chunks(200, 997))
+    assert p.read_bytes() == b"".join(_chunks(200, 997))
+    assert len(synced) == 200 // -(-10_000 // 997)  # (every 11 chunks of 997 bytes)
+    assert write_chunks_atomic(tmp_path / "empty.bin", iter(())).read_bytes() == b""
+
+
+def test_an_error_of_the_producer_leaves_nothing(tmp_path):
+    def broken():
+        yield b"x" * 1000
+        raise ValueError("bad row 7")
+
+    with pytest.raises(ValueError, match="bad row 7"):
+        write_chunks_atomic(tmp_path / "out.bin", broken())
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_error_of_the_writer_stops_the_producer_and_leaves_nothing(tmp_path, monkeypatch):
+    made = []
+
+    def many():
+        for i in range(10_000):
+            made.append(i)
+            yield b"y" * 100
+
+    class Full:  # the disk is full after the first chunk
+        def __init__(self, f):
+            self.f, self.n = f, 0
+
+        def write(self, data):
+            self.n += 1
+            if self.n > 1:
+                raise OSError(28, "No space left on device")
+            return self.f.write(data)
+
+    real = atomic._write_behind
+    monkeypatch.setattr(atomic, "_write_behind", lambda f, chunks: real(Full(f), chunks))
+    with pytest.raises(OSError, match="No space left"):
+        write_chunks_atomic(tmp_path / "out.bin", many())
+    assert list(tmp_path.iterdir()) == [] and len(made) < 10_000
