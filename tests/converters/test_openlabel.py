@@ -317,6 +317,18 @@ def test_poses_and_utm_names(openlabel_data):
     assert _utm_crs("vehicle-iso8855", "local_cs") is None
 
 
+@pytest.mark.parametrize("tf", [{"matrix4x4": [1.0] * 17}, {"quaternion": [0, 0, 1]}, {"euler_angles": "ab"},
+                                {"matrix4x4": [float("nan")] * 16}, "identity"])
+def test_an_unreadable_pose_is_a_located_error(tf):
+    """A pose that is no 4x4 matrix (a number too many after a flipped byte, a short quaternion,
+    NaN): a FormatError naming the coordinate system, not a traceback (found by the fuzz tests)."""
+    from aveas_format.converters.openlabel.frames import _Frames
+    from aveas_format.errors import FormatError
+
+    with pytest.raises(FormatError, match="pose_wrt_parent of coordinate system lidar"):
+        _Frames({"lidar": {"type": "sensor_cs", "parent": "odom", "pose_wrt_parent": tf}})
+
+
 def _crossing_scene():
     """Two cars along a lane and a third crossing it: all four derived tables, one PET below the
     threshold and one undefined (null) PET."""

@@ -61,12 +61,24 @@ def _axis_rotation(axis: str, angle: float) -> np.ndarray:
     return np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
 
 
-def _pose(tf: dict[str, Any] | list | None) -> np.ndarray | None:
+def _pose(tf: dict[str, Any] | list | None, where: str = "a transform") -> np.ndarray | None:
     """A 4x4 matrix of an OpenLABEL pose/transform: ``matrix4x4`` (row-major), or ``quaternion``
     (x, y, z, w) / ``euler_angles`` (values in the order of ``sequence``, default ZYX, i.e.
-    (rz, ry, rx)) with ``translation``."""
+    (rz, ry, rx)) with ``translation``. One that does not read as such (16 numbers, 4 of the
+    quaternion, 3 of the translation...) is a :class:`FormatError` naming ``where``."""
     if tf is None:
         return None
+    try:
+        m = _pose_matrix(tf)
+    except (TypeError, ValueError, KeyError, IndexError, AttributeError) as e:
+        raise FormatError(f"OpenLABEL: {where} is no readable pose ({type(e).__name__}: {e}): "
+                          f"{str(tf)[:120]}") from None
+    if m.shape != (4, 4) or not np.isfinite(m).all():
+        raise FormatError(f"OpenLABEL: {where} is no finite 4x4 pose: {str(tf)[:120]}")
+    return m
+
+
+def _pose_matrix(tf: dict[str, Any] | list) -> np.ndarray:
     if isinstance(tf, list):
         tf = {"matrix4x4": tf}
     m = np.eye(4)
@@ -99,7 +111,8 @@ class _Frames:
     def __init__(self, cs: dict[str, Any] | None) -> None:
         self.cs = cs if isinstance(cs, dict) else {}
         self.parent = {k: (v or {}).get("parent") or None for k, v in self.cs.items()}
-        self.static = {k: _pose((v or {}).get("pose_wrt_parent")) for k, v in self.cs.items()}
+        self.static = {k: _pose((v or {}).get("pose_wrt_parent"), f"the pose_wrt_parent of coordinate system {k}")
+                       for k, v in self.cs.items()}
         self.kind = {k: str((v or {}).get("type") or "") for k, v in self.cs.items()}
         self.children: dict[str, list[str]] = defaultdict(list)
         for k, p in self.parent.items():
@@ -121,7 +134,7 @@ class _Frames:
         for tf in (transforms or {}).values() if isinstance(transforms, dict) else ():
             if not (isinstance(tf, dict) and tf.get("src") and tf.get("dst")):
                 continue
-            m = _pose(tf.get("transform_src_to_dst"))
+            m = _pose(tf.get("transform_src_to_dst"), f"the transform {tf['src']} -> {tf['dst']}")
             if m is None:
                 continue
             src, dst = str(tf["src"]), str(tf["dst"])
