@@ -83,9 +83,11 @@ print(json.dumps({"seconds": dt, "peak_mb": hwm_mb(), "before_mb": base,
 """
 
 
-def _child(what: str, rec_dir: Path, out: Path) -> dict:
+def _child(what: str, rec_dir: Path, out: Path, env: dict | None = None) -> dict:
+    import os
+
     r = subprocess.run([sys.executable, "-c", _CHILD, what, str(rec_dir), str(out)],
-                       capture_output=True, text=True)
+                       capture_output=True, text=True, env={**os.environ, **(env or {})})
     if r.returncode:
         raise RuntimeError(r.stderr[-2000:])
     return json.loads(r.stdout.strip().splitlines()[-1])
@@ -448,6 +450,7 @@ def large(target_states: int, generic: bool = True) -> list[dict]:
         mb = out.stat().st_size / 1e6
         i = _child("import", tmp / "rec", out)
         i1 = _child("import_1", tmp / "rec", out)
+        ia = _child("import", tmp / "rec", out, env={"AVEAS_FORMAT_KERNEL": "numpy"})
         rows = [
             _row("export_openlabel_large", n, e["seconds"], f"{mb:.0f} MB; fresh process: peak "
                  f"{e['peak_mb']:.0f} MB with the recording loaded ({e['before_mb']:.0f} MB before the export)"),
@@ -457,6 +460,9 @@ def large(target_states: int, generic: bool = True) -> list[dict]:
                  i1["seconds"],
                  f"the same import in one process (workers=1), fresh process: peak {i1['peak_mb']:.0f} MB"),
         ]
+        rows.append(_row("import_openlabel_large", i["states"], i["seconds"], "(the same run)", ia["seconds"],
+                         f"the same import with Arrow's JSON reader instead of the compiled one "
+                         f"(AVEAS_FORMAT_KERNEL=numpy), fresh process: peak {ia['peak_mb']:.0f} MB"))
         p = _child("parse", tmp / "rec", out)
         rows.append(_row("import_openlabel_large", i["states"], i["seconds"], "(the same run)", p["seconds"],
                          f"orjson.loads of the same frames in 1 MiB blocks, nothing built ({p['states']:,} "

@@ -28,9 +28,16 @@ _READ_BLOCK = fb.read_block
 @pytest.fixture(autouse=True, params=KERNEL_BACKENDS)
 def backend(request):
     """Every test on the Arrow reader (``numpy``) and on the compiled one (``numba``; Arrow's where
-    it hands a block over)."""
-    with kernel(request.param):
-        yield request.param
+    it hands a block over; used here for files of any size)."""
+    from aveas_format.converters.openlabel import stream
+
+    old = stream._COMPILED_MIN
+    stream._COMPILED_MIN = 0
+    try:
+        with kernel(request.param):
+            yield request.param
+    finally:
+        stream._COMPILED_MIN = old
 
 
 @pytest.fixture(scope="module")
@@ -47,8 +54,8 @@ def _import(path, monkeypatch, *, fast: bool, workers: int = 1):
     where they are read in this process: ``workers=1``)."""
     taken = []
 
-    def read_block(buf, threads=True):
-        out = _READ_BLOCK(buf, threads) if fast else None
+    def read_block(buf, threads=True, compiled=True):
+        out = _READ_BLOCK(buf, threads, compiled) if fast else None
         taken.append(out is not None)
         return out
 

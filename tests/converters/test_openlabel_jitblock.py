@@ -264,3 +264,24 @@ def test_the_compiled_skeleton_is_the_python_one(blocks):
         assert len(boxes) >= 1
         want = fb._skeleton_bytes(buf, boxes[:, 0].tolist(), boxes[:, 1].tolist())
         assert jb.skeleton(np.frombuffer(buf, np.uint8), boxes).tobytes() == want
+
+
+def test_files_from_a_size_on_go_through_the_compiled_reader(tmp_path, monkeypatch):
+    """Below ``_COMPILED_MIN`` (loading numba costs more than it saves) Arrow's reader reads the
+    blocks; from it on the compiled one; the same recording either way."""
+    from aveas_format.converters import convert
+
+    from helpers_converters import assert_identical
+
+    path = tmp_path / "rec.json"
+    get_converter("openlabel", "export")(highway_scene(n_vehicles=4, duration_s=3.0, seed=1), path)
+    used = []
+    real = fb._read_block_jit
+    monkeypatch.setattr(fb, "_read_block_jit", lambda b, parse: used.append(1) or real(b, parse))
+    recs = []
+    for limit in (1 << 40, 0):
+        monkeypatch.setattr(stream, "_COMPILED_MIN", limit)
+        used.clear()
+        recs.append(convert("openlabel", [path], options={"workers": 1}))
+        assert bool(used) == (limit == 0)
+    assert_identical(*recs)

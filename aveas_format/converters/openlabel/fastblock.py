@@ -154,16 +154,16 @@ class FastBlock:
         self.depth = depth
 
 
-def read_block(buf: bytes | np.ndarray, threads: bool = True) -> FastBlock | None:
+def read_block(buf: bytes | np.ndarray, threads: bool = True, compiled: bool = True) -> FastBlock | None:
     """The block ``buf`` (``{"key":{frame},...}``; or as a uint8 array followed by one NUL byte:
     :func:`padded`) as a :class:`FastBlock`, or None where it does not fit the fast path (see the
-    module's doc). ``threads``: Arrow's reader on its thread pool. Where numba is installed
-    (:func:`aveas_format.numeric.kernel_backend`) the compiled reader (:mod:`._jitblock`) reads
-    the block, Arrow's reader where that one does not take it."""
+    module's doc). ``threads``: Arrow's reader on its thread pool. With ``compiled``, where numba
+    is installed (:func:`aveas_format.numeric.kernel_backend`), the compiled reader
+    (:mod:`._jitblock`) reads the block, Arrow's reader where that one does not take it."""
     if orjson is None:
         return None
     try:
-        parse = compiled_parser()
+        parse = compiled_parser() if compiled else None
         if parse is not None:
             blk = _read_block_jit(buf if isinstance(buf, np.ndarray) else padded(buf), parse)
             if blk is not None:

@@ -374,13 +374,29 @@ def _read_blocks(f, span: tuple[int, int | None], columnar: bool, workers: int |
 
     size = _COLUMNAR_BLOCK if columnar else _BLOCK
     lazy = columnar and workers != 1 and isinstance(f, io.BufferedReader)
-    read = partial(_read_cut, threads=workers == 1, path=f.name if lazy else None) if columnar else _no_block
-    if columnar:
+    compiled = columnar and _file_size(f) >= _COMPILED_MIN
+    read = partial(_read_cut, threads=workers == 1, path=f.name if lazy else None,
+                   compiled=compiled) if columnar else _no_block
+    if compiled:
         from aveas_format.converters.openlabel.fastblock import compiled_parser
 
         compiled_parser()  # (compiled or loaded here, once: forked workers inherit it)
     blocks = map_ordered(read, _cut_blocks(f, span, size, tail, lazy=lazy), workers=workers)
     return closing(_bytes_here(blocks, f) if lazy else blocks)
+
+
+#: the file size from which the compiled block reader is used (loading numba and the reader from
+#: its cache, ~0.4 s, pays from about 40k boxes on; smaller files: Arrow's reader)
+_COMPILED_MIN = 48 << 20
+
+
+def _file_size(f) -> int:
+    """The size of the file under ``f`` (a plain or a decompressing reader; 0 where unknown)."""
+    raw = getattr(f, "raw", f)
+    try:
+        return os.fstat(raw.fileno()).st_size
+    except (OSError, AttributeError, ValueError, io.UnsupportedOperation):
+        return 0
 
 
 def _bytes_here(blocks, f):
@@ -440,9 +456,10 @@ def _cut_blocks(f, span: tuple[int, int | None], size: int, tail: list | None = 
             break
 
 
-def _read_cut(item: tuple[int, Any], threads: bool = True, path: str | None = None):
-    """A cut block into columns (:func:`.fastblock.read_block`; runs in a worker process); its
-    bytes read here from ``path`` where the cut gives ``(start, length)``."""
+def _read_cut(item: tuple[int, Any], threads: bool = True, path: str | None = None, compiled: bool = True):
+    """A cut block into columns (:func:`.fastblock.read_block`, ``compiled``: the compiled reader
+    where numba is there; runs in a worker process); its bytes read here from ``path`` where the
+    cut gives ``(start, length)``."""
     from aveas_format.converters.openlabel.fastblock import read_block
 
     cut = item[1]
@@ -460,8 +477,8 @@ def _read_cut(item: tuple[int, Any], threads: bool = True, path: str | None = No
         if got != n:  # (the file changed under the import: the parent reads the block, and fails)
             return None
         b[0], b[n + 1], b[n + 2] = 0x7B, 0x7D, 0
-        return read_block(b, threads=threads)
-    return None if cut is None else read_block(b"{" + cut + b"}", threads=threads)
+        return read_block(b, threads=threads, compiled=compiled)
+    return None if cut is None else read_block(b"{" + cut + b"}", threads=threads, compiled=compiled)
 
 
 #: a worker's buffer for the blocks it reads (:func:`_read_cut`)
