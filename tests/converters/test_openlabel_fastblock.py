@@ -8,6 +8,7 @@ located findings are those of the generic path, and every block it cannot take i
 from __future__ import annotations
 
 import json
+import os
 import warnings
 
 import numpy as np
@@ -338,3 +339,25 @@ def test_lazy_cuts_give_the_blocks_of_a_full_read(exported, monkeypatch, size, w
         f.seek(span[0] + 1)
         lazy = [c for _, c in stream._cut_blocks(f, span, size, lazy=True)]
     assert any(isinstance(c, tuple) for c in lazy) == (size == 20_000)  # (a frame: ~7 kB)
+
+
+def test_a_worker_reads_its_block_with_or_without_preadv(exported, monkeypatch):
+    """The worker's read of a lazily cut block (``os.preadv`` into its buffer, ``os.pread`` where
+    the platform lacks it) gives the block the main process would have read."""
+    from aveas_format.converters.openlabel import stream
+    from aveas_format.safeio import scan_json_member
+
+    with open(exported, "rb") as f:
+        _, span, _ = scan_json_member(f, "openlabel", "frames")
+        f.seek(span[0] + 1)
+        pos, cut = next(c for c in stream._cut_blocks(f, span, 20_000, lazy=True) if isinstance(c[1], tuple))
+    start, n = cut
+    want = _READ_BLOCK(b"{" + exported.read_bytes()[start:start + n] + b"}")
+    assert want is not None
+    for drop in (False, True):
+        if drop:
+            monkeypatch.delattr(os, "preadv")
+        got = stream._read_cut((pos, cut), path=str(exported), threads=False)
+        assert got.frames == want.frames and got.cols.keys() == want.cols.keys()
+        assert all(np.array_equal(got.cols[k], want.cols[k], equal_nan=got.cols[k].dtype.kind == "f")
+                   for k in want.cols)

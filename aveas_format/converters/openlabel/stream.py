@@ -373,7 +373,7 @@ def _read_blocks(f, span: tuple[int, int | None], columnar: bool, workers: int |
     from aveas_format.parallel import map_ordered
 
     size = _COLUMNAR_BLOCK if columnar else _BLOCK
-    lazy = columnar and workers != 1 and isinstance(f, io.BufferedReader)
+    lazy = columnar and workers != 1 and isinstance(f, io.BufferedReader) and hasattr(os, "pread")
     compiled = columnar and _file_size(f) >= _COMPILED_MIN
     read = partial(_read_cut, threads=workers == 1, path=f.name if lazy else None,
                    compiled=compiled) if columnar else _no_block
@@ -471,7 +471,12 @@ def _read_cut(item: tuple[int, Any], threads: bool = True, path: str | None = No
         b = _BUFFER[:n + 3]
         fd = os.open(path, os.O_RDONLY)
         try:
-            got = os.preadv(fd, [memoryview(b)[1:n + 1]], start)
+            if hasattr(os, "preadv"):
+                got = os.preadv(fd, [memoryview(b)[1:n + 1]], start)
+            else:  # (macOS before 11: one copy more)
+                data = os.pread(fd, n, start)
+                got = len(data)
+                b[1:got + 1] = np.frombuffer(data, np.uint8)
         finally:
             os.close(fd)
         if got != n:  # (the file changed under the import: the parent reads the block, and fails)
