@@ -13,10 +13,12 @@ from aveas_format.cli.options import (
     OutputFormat,
     check_output,
     converter_options,
+    converter_workers,
     format_option,
     option_pairs_option,
     options_file_option,
     overwrite_option,
+    workers_option,
 )
 
 
@@ -31,6 +33,7 @@ def export(
     option: list[str] = option_pairs_option("Exporter"),
     options_file: Path = options_file_option("Exporter"),
     overwrite: bool = overwrite_option(help="Replace an existing output or companion file."),
+    workers: int = workers_option(scope="Of an exporter that writes one output in parallel (openlabel)"),
     list_: bool = typer.Option(False, "--list", help="List the exporters and exit."),
     fmt: OutputFormat = format_option(help="With --list: text (a table) or json."),
 ) -> None:
@@ -45,7 +48,7 @@ def export(
     if not target or not recording or not output:
         raise fail("--to NAME, RECORDING and --output are required (or --list)", EXIT_USAGE)
     conv = get_converter(target, "export")
-    raw = converter_options(options_file, option, conv.options)
+    raw = converter_workers(converter_options(options_file, option, conv.options), conv.options, workers)
     check_output(conv.outputs(output, raw), overwrite)  # the output and its companion files
     conv.require()  # a missing optional dependency before reading the recording
     import aveas_format

@@ -23,9 +23,9 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
 
 
 def write_chunks_atomic(path: str | Path, chunks: Iterable[bytes]) -> Path:
-    """Write the byte chunks one after the other to ``path`` through a temporary sibling and a
-    rename (a streamed export never holds the whole file); nothing is left behind when the
-    iterator raises. A directory that is missing or not writable is a
+    """Write the byte chunks (or :class:`FileSegment` s) one after the other to ``path`` through a
+    temporary sibling and a rename (a streamed export never holds the whole file); nothing is left
+    behind when the iterator raises. A directory that is missing or not writable is a
     :class:`~aveas_format.errors.RecordingIOError` naming ``path`` and the directory (not the
     temporary file)."""
     path = Path(path)
@@ -58,6 +58,38 @@ def write_chunks_atomic(path: str | Path, chunks: Iterable[bytes]) -> Path:
 SYNC_EVERY = 256 << 20
 
 
+class FileSegment:
+    """A chunk of :func:`write_chunks_atomic` given as a file (written by another process): its
+    bytes are copied into the output by the kernel (``os.copy_file_range``) and the file removed."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+
+    def copy_into(self, f) -> int:
+        """Append the file to the open output ``f`` (flushed first); the number of bytes."""
+        f.flush()
+        with open(self.path, "rb") as src:
+            size = os.fstat(src.fileno()).st_size
+            done = 0
+            try:
+                while done < size:
+                    n = os.copy_file_range(src.fileno(), f.fileno(), size - done)
+                    if n == 0:
+                        break
+                    done += n
+            except (AttributeError, OSError):  # (no copy_file_range here: through Python)
+                src.seek(done)
+                import shutil
+
+                shutil.copyfileobj(src, f, 1 << 20)
+                done = size
+        self.discard()
+        return size
+
+    def discard(self) -> None:
+        self.path.unlink(missing_ok=True)
+
+
 def _write_behind(f, chunks: Iterable[bytes]) -> None:
     """Write ``chunks`` to ``f`` in a thread while the caller's iterator makes the next ones (the
     writes and syncs release the GIL: encoding and writing overlap). An error of either side is
@@ -76,16 +108,19 @@ def _write_behind(f, chunks: Iterable[bytes]) -> None:
         pending = 0
         while (data := q.get()) is not None:
             if failed:
+                if isinstance(data, FileSegment):
+                    data.discard()
                 continue  # (drain until the end marker)
             try:
-                f.write(data)
-                pending += len(data)
+                pending += data.copy_into(f) if isinstance(data, FileSegment) else f.write(data)
                 if pending >= SYNC_EVERY:
                     f.flush()
                     getattr(os, "fdatasync", os.fsync)(f.fileno())
                     pending = 0
             except BaseException as e:  # noqa: BLE001 - raised in the caller's thread
                 failed.append(e)
+                if isinstance(data, FileSegment):
+                    data.discard()
 
     t = threading.Thread(target=run, name="write-behind", daemon=True)
     t.start()

@@ -254,3 +254,53 @@ def test_nan_and_infinity_as_json_loads_reads_them(tmp_path):
     p.write_bytes(_generic_doc('{"1": ' + _box(1.0, 0.0) + ', "2": ' + _box(2.0, 0.1).replace(
         '"objects"', '"x": NaN, "y": -Infinity, "objects"') + '}'))
     assert_identical(convert("openlabel", [p], map_source=STRAIGHT), _dict_path(p, STRAIGHT))
+
+
+@pytest.mark.parametrize("workers", [2, 3])
+def test_frames_encoded_in_forked_parts_give_the_same_file(tmp_path, monkeypatch, workers):
+    """The frames of a large export in parts, all but the first encoded by forked processes into
+    files next to the output and copied in by the kernel: the same bytes as in one process, no
+    part file left; a part whose process fails is encoded here instead."""
+    import os
+
+    from aveas_format.converters.openlabel import encode
+    from aveas_format.converters.openlabel.write import openlabel_chunks
+    from aveas_format.safeio import write_chunks_atomic
+    from aveas_format.sample import highway_scene
+
+    rec = highway_scene(n_vehicles=12, duration_s=20.0, seed=4)
+    monkeypatch.setattr(encode, "PARTS_MIN_ROWS", 0)
+    one = write_chunks_atomic(tmp_path / "one.json", openlabel_chunks(rec, chunk_rows=300)).read_bytes()
+    out = tmp_path / "parts"
+    out.mkdir()
+    got = write_chunks_atomic(out / "rec.json", openlabel_chunks(rec, chunk_rows=300, workers=workers,
+                                                                  spill_dir=out)).read_bytes()
+    assert got == one and [p.name for p in out.iterdir()] == ["rec.json"]
+    real = encode._encode_part
+    monkeypatch.setattr(encode, "_encode_part", lambda *a: os._exit(3) if a[5][0] > 0 else real(*a))
+    got = write_chunks_atomic(out / "again.json", openlabel_chunks(rec, chunk_rows=300, workers=workers,
+                                                                    spill_dir=out)).read_bytes()
+    assert got == one and sorted(p.name for p in out.iterdir()) == ["again.json", "rec.json"]
+
+
+def test_the_export_takes_workers_and_writes_the_same_file(tmp_path, monkeypatch):
+    from aveas_format.converters import get_converter
+    from aveas_format.converters.openlabel import encode
+    from aveas_format.sample import highway_scene
+
+    rec = highway_scene(n_vehicles=12, duration_s=20.0, seed=4)
+    from aveas_format.converters.openlabel import write
+
+    monkeypatch.setattr(encode, "PARTS_MIN_ROWS", 0)
+    monkeypatch.setattr(write, "CHUNK_ROWS", 300)
+    from aveas_format.safeio import atomic
+
+    copied = []  # (the parts copied in from the forked processes' files)
+    real = atomic.FileSegment.copy_into
+    monkeypatch.setattr(atomic.FileSegment, "copy_into", lambda seg, f: copied.append(1) or real(seg, f))
+    ex = get_converter("openlabel", "export")
+    opts = {"write_map": False, "map_file": "m.xodr"}
+    a = ex(rec, tmp_path / "a.json", options={**opts, "workers": 1})[0].read_bytes()
+    assert not copied
+    b = ex(rec, tmp_path / "b.json", options={**opts, "workers": 2})[0].read_bytes()
+    assert a == b and copied == [1]

@@ -60,3 +60,35 @@ def test_an_error_of_the_writer_stops_the_producer_and_leaves_nothing(tmp_path, 
     with pytest.raises(OSError, match="No space left"):
         write_chunks_atomic(tmp_path / "out.bin", many())
     assert list(tmp_path.iterdir()) == [] and len(made) < 10_000
+
+
+def test_file_segments_are_copied_in_place_and_removed(tmp_path):
+    from aveas_format.safeio.atomic import FileSegment
+
+    parts = []
+    for i in range(3):
+        p = tmp_path / f"part{i}"
+        p.write_bytes(bytes([65 + i]) * (100_000 + i))
+        parts.append(p)
+    chunks = [b"head", FileSegment(parts[0]), b"mid", FileSegment(parts[1]), FileSegment(parts[2]), b"tail"]
+    out = write_chunks_atomic(tmp_path / "out.bin", iter(chunks))
+    want = b"head" + b"A" * 100_000 + b"mid" + b"B" * 100_001 + b"C" * 100_002 + b"tail"
+    assert out.read_bytes() == want
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.bin"]
+
+
+def test_file_segments_not_written_are_removed_on_an_error(tmp_path, monkeypatch):
+    from aveas_format.safeio.atomic import FileSegment
+
+    seg = tmp_path / "part"
+    seg.write_bytes(b"x" * 1000)
+
+    def chunks():
+        yield b"head"
+        yield FileSegment(seg)
+        yield b"more"
+
+    monkeypatch.setattr(FileSegment, "copy_into", lambda self, f: (_ for _ in ()).throw(OSError(28, "full")))
+    with pytest.raises(OSError, match="full"):
+        write_chunks_atomic(tmp_path / "out.bin", chunks())
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

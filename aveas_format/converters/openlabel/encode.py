@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -248,20 +250,20 @@ def _named(name: str, val: list, *, vec: bool = False, quoted: bool = False) -> 
 
 
 def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
-                 chunk_rows: int = CHUNK_ROWS) -> Iterator[bytes]:
+                 chunk_rows: int = CHUNK_ROWS, part: tuple[int, int] | None = None) -> Iterator[bytes]:
     """The members ``"k":{frame}`` of the ``frames`` object, comma-separated, in chunks of about
     ``chunk_rows`` rows (whole frames): ``frame_of_row`` = each state row's frame (an index into
     ``times``), ``prepare(rows)`` = the per-row inputs of the state rows ``rows`` (in that order;
     :func:`aveas_format.converters.openlabel.write.openlabel_chunks`), asked for one chunk at a
-    time."""
+    time. ``part``: only the chunks ``[first, last)`` of :func:`chunk_bounds` (their text is the
+    same as in the whole sequence: a comma before every chunk but the very first)."""
     order = np.argsort(frame_of_row, kind="stable")  # in a frame: the objects in the states' order
     fs = frame_of_row[order]
     ts = numbers(times)
-    n = len(order)
-    start, first = 0, True
-    while start < n:
-        stop = min(start + chunk_rows, n)
-        stop = int(np.searchsorted(fs, fs[stop - 1], side="right"))
+    bounds = chunk_bounds(fs, chunk_rows)
+    c0, c1 = part if part is not None else (0, len(bounds) - 1)
+    for c in range(c0, c1):
+        start, stop = bounds[c], bounds[c + 1]
         rows = order[start:stop]
         objs = _objects_text(prepare(rows), np.arange(len(rows)))
         f = fs[start:stop]
@@ -273,12 +275,95 @@ def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
         at = np.arange(m) * 2 + np.searchsorted(lo, np.arange(m), side="right") - 1
         pieces[at + 1] = objs
         pieces[at[lo]] = [b'%s"%d":{"frame_properties":{"timestamp":%s},"objects":{'
-                          % (b"" if first and j == 0 else b",", k, ts[k])
+                          % (b"" if c == 0 and j == 0 else b",", k, ts[k])
                           for j, k in enumerate(f[lo].tolist())]
         pieces[np.r_[at[lo[1:]] - 1, len(pieces) - 1]] = b"}}"
         yield b"".join(pieces.tolist())
-        first = False
-        start = stop
+
+
+def chunk_bounds(fs: np.ndarray, chunk_rows: int = CHUNK_ROWS) -> list[int]:
+    """The row offsets where :func:`frame_chunks`' chunks start, and the number of rows last: about
+    ``chunk_rows`` rows each, cut after whole frames (``fs``: the sorted frame of each row)."""
+    n = len(fs)
+    out, start = [0], 0
+    while start < n:
+        stop = min(start + chunk_rows, n)
+        start = int(np.searchsorted(fs, fs[stop - 1], side="right"))
+        out.append(start)
+    return out
+
+
+#: rows from which the frames are encoded in parts by forked processes (below: the fork and the
+#: copy cost more than they save)
+PARTS_MIN_ROWS = 200_000
+
+
+def frames_in_parts(frame_of_row: np.ndarray, times: np.ndarray, prepare, summary: Any,
+                     chunk_rows: int, workers: int, spill_dir: Path) -> Iterator[Any]:
+    """The frames' chunks of :func:`frame_chunks` in ``workers`` parts of about equal rows: the
+    first encoded here and streamed, each other one by a forked process (which inherits the
+    recording) into a file in ``spill_dir``, handed on as a FileSegment, its participants'
+    extremes merged into ``summary`` (``state()`` / ``merge(state)``: the export's ``_Summary``). Where fork is not available, the rows are few, or a
+    process fails, the parts are encoded here (an error then raised as it would be in one
+    process)."""
+    import multiprocessing
+    import tempfile
+
+    from aveas_format.safeio.atomic import FileSegment
+
+    bounds = chunk_bounds(np.sort(frame_of_row), chunk_rows)
+    k = len(bounds) - 1
+    if (len(frame_of_row) < PARTS_MIN_ROWS or k < 2 * workers
+            or "fork" not in multiprocessing.get_all_start_methods()):
+        yield from frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows)
+        return
+    # the chunks where each part starts: about equal rows
+    cuts = [0, *np.searchsorted(bounds, [bounds[-1] * j / workers for j in range(1, workers)]).tolist(), k]
+    parts = [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+    ctx = multiprocessing.get_context("fork")
+    running = []
+    try:
+        for part in parts[1:]:  # (forked before this process starts encoding: empty extremes)
+            fd, spill = tempfile.mkstemp(prefix=".openlabel-frames.", suffix=".tmp", dir=spill_dir)
+            os.close(fd)
+            rd, wr = ctx.Pipe(duplex=False)
+            proc = ctx.Process(target=_encode_part, daemon=True,
+                               args=(frame_of_row, times, prepare, summary, chunk_rows, part, spill, wr))
+            proc.start()
+            wr.close()
+            running.append((part, Path(spill), proc, rd))
+        yield from frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows, part=parts[0])
+        while running:
+            part, spill, proc, rd = running.pop(0)
+            try:
+                state = rd.recv()
+            except EOFError:  # (the process died)
+                state = None
+            proc.join()
+            if state is not None and proc.exitcode == 0:
+                summary.merge(state)
+                yield FileSegment(spill)
+            else:  # here, with the real error if there is one
+                spill.unlink(missing_ok=True)
+                yield from frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows, part=part)
+    finally:
+        for _, spill, proc, _ in running:
+            proc.kill()
+            proc.join()
+            spill.unlink(missing_ok=True)
+
+
+def _encode_part(frame_of_row, times, prepare, summary: Any, chunk_rows: int, part: tuple[int, int],
+                 spill: str, conn) -> None:
+    """A forked process of :func:`frames_in_parts`: the chunks ``part`` into the file ``spill``,
+    then its participants' extremes sent back (nothing sent: it failed)."""
+    try:
+        with open(spill, "wb") as f:
+            for data in frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows, part=part):
+                f.write(data)
+        conn.send(summary.state())
+    finally:
+        conn.close()
 
 
 def _objects_text(r: dict[str, Any], idx: np.ndarray) -> np.ndarray:

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
+from pydantic import Field
 
 from aveas_format.converters.openlabel.profile import (
     _DEFAULT_THRESHOLDS,
@@ -45,7 +46,7 @@ from aveas_format.converters.openlabel.profile import (
     _rot_world,
     table_to_json,
 )
-from aveas_format.converters.openlabel.encode import CHUNK_ROWS, dumps, frame_chunks, orjson
+from aveas_format.converters.openlabel.encode import CHUNK_ROWS, dumps, frame_chunks, frames_in_parts, orjson
 from aveas_format.converters.openlabel.stream import compression
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.io.arrow import column_numpy
@@ -108,6 +109,10 @@ class OpenLabelExportOptions(ConverterOptions):
     """Compute ``road/classification`` and ``road/number_lanes/*`` from the map."""
     indent: int | None = None
     """JSON indentation (default: compact)."""
+    workers: int = Field(0, ge=0, exclude=True)
+    """Processes encoding the frames of a large compact ``.json`` (0 = one per core, 1 = in this
+    process; CLI ``--workers``): the other parts are encoded by forked processes into files next
+    to the output, copied in by the kernel. The file is the same whatever the number."""
 
 
 def recording_to_openlabel(rec, *, opendrive: str = "map.xodr", extension: bool = True,
@@ -120,10 +125,15 @@ def recording_to_openlabel(rec, *, opendrive: str = "map.xodr", extension: bool 
 
 
 def openlabel_chunks(rec, *, opendrive: str = "map.xodr", extension: bool = True,
-                     road_attributes: bool = True, chunk_rows: int = CHUNK_ROWS) -> Iterator[bytes]:
+                     road_attributes: bool = True, chunk_rows: int | None = None, workers: int = 1,
+                     spill_dir: Path | None = None) -> Iterator[Any]:
     """The compact JSON of the OpenLABEL document of a recording, streamed: the keys of the
     document in this order (metadata, frames, frame_intervals, objects, contexts, events), the
-    frames a chunk of about ``chunk_rows`` state rows at a time (never the whole text in memory)."""
+    frames a chunk of about ``chunk_rows`` (default :data:`CHUNK_ROWS`) state rows at a time (never
+    the whole text in memory). ``workers`` > 1 with a ``spill_dir`` (fork available, enough rows): the frames in that many
+    parts, all but the first encoded by forked processes into files in ``spill_dir``, given as
+    :class:`~aveas_format.safeio.atomic.FileSegment` s (for :func:`write_chunks_atomic`)."""
+    chunk_rows = chunk_rows or CHUNK_ROWS
     meta = rec.meta
     thr = meta.thresholds.model_dump() if meta.thresholds else {}
     thr_out = {k: (thr.get(k) or v) for k, v in _DEFAULT_THRESHOLDS.items()}
@@ -150,7 +160,10 @@ def openlabel_chunks(rec, *, opendrive: str = "map.xodr", extension: bool = True
     yield b'{"openlabel":{"metadata":' + dumps(metadata) + b',"frames":{'
     del metadata
     with _no_gc():
-        yield from frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows)
+        if workers > 1 and spill_dir is not None:
+            yield from frames_in_parts(frame_of_row, times, prepare, summary, chunk_rows, workers, spill_dir)
+        else:
+            yield from frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows)
     tail: dict[str, Any] = {}
     tail["frame_intervals"] = [{"frame_start": 0, "frame_end": int(len(times) - 1)}] if len(times) else []
     tail["objects"] = _objects(rec.participants, rec.states, static, frame_of_row, summary, extension)
@@ -298,6 +311,21 @@ class _Summary:
         if len(moving):
             self.moving_min = min(self.moving_min, float(moving.min()))
         self.nan_speed = self.nan_speed or bool(np.isnan(speed).any())
+
+    def state(self) -> tuple:
+        """What :meth:`merge` takes (the extremes accumulated here)."""
+        return (self.count, self.speed_max, self.speed_min, self.acc_max, self.acc_min, self.moving_min,
+                self.nan_speed)
+
+    def merge(self, state: tuple) -> None:
+        """The extremes of another part of the states (:meth:`state`) added to these."""
+        count, smax, smin, amax, amin, moving_min, nan_speed = state
+        self.count += count
+        for target, fn, v in ((self.speed_max, np.maximum, smax), (self.speed_min, np.minimum, smin),
+                              (self.acc_max, np.maximum, amax), (self.acc_min, np.minimum, amin)):
+            fn(target, v, out=target)  # NaN propagates, as in add
+        self.moving_min = min(self.moving_min, moving_min)
+        self.nan_speed = self.nan_speed or nan_speed
 
     @property
     def max_speed(self) -> float:
@@ -722,12 +750,17 @@ def export_openlabel(rec, output: Path, *, options: OpenLabelExportOptions) -> l
 
     output = Path(output)
     map_name = _map_name(output, options)
+    kind = compression(output)
+    plain = not kind and not options.indent
+    from aveas_format.parallel import default_workers
+
     chunks = openlabel_chunks(rec, opendrive=map_name, extension=options.extension,
-                              road_attributes=options.road_attributes)
+                              road_attributes=options.road_attributes,
+                              workers=(options.workers or default_workers()) if plain else 1,
+                              spill_dir=output.parent if plain else None)
     if options.indent:  # human-readable: the document whole (compact files are streamed)
         doc = json.loads(b"".join(chunks))
         chunks = iter([json.dumps(doc, indent=options.indent, allow_nan=False).encode()])
-    kind = compression(output)
     if kind:
         chunks = compressed(chunks, kind)
     written = [write_chunks_atomic(output, chunks)]
