@@ -454,8 +454,10 @@ def large(target_states: int, generic: bool = True) -> list[dict]:
         i1 = _child("import_1", tmp / "rec", out)
         ia = _child("import", tmp / "rec", out, env={"AVEAS_FORMAT_KERNEL": "numpy"})
         rows = [
-            _row("export_openlabel_large", n, e["seconds"], f"{mb:.0f} MB; fresh process: peak "
-                 f"{e['peak_mb']:.0f} MB with the recording loaded ({e['before_mb']:.0f} MB before the export)"),
+            _row("export_openlabel_large", n, e["seconds"], f"{mb:.0f} MB; frames in parts (one per core); "
+                 f"fresh process: peak {e['peak_mb']:.0f} MB with the recording loaded ({e['before_mb']:.0f} MB "
+                 f"before the export), the forked encoder at most {e['workers_peak_mb']:.0f} MB (shared pages "
+                 f"of the recording counted)"),
             _row("import_openlabel_large", i["states"], i["seconds"],
                  f"blocks in worker processes (one per core); fresh process: peak {i['peak_mb']:.0f} MB "
                  f"({i['before_mb']:.0f} MB after imports), each worker at most {i['workers_peak_mb']:.0f} MB",
