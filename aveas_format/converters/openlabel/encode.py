@@ -298,65 +298,81 @@ def chunk_bounds(fs: np.ndarray, chunk_rows: int = CHUNK_ROWS) -> list[int]:
 PARTS_MIN_ROWS = 200_000
 
 
-def frames_in_parts(frame_of_row: np.ndarray, times: np.ndarray, prepare, summary: Any,
-                     chunk_rows: int, workers: int, spill_dir: Path) -> Iterator[Any]:
+class FrameParts:
     """The frames' chunks of :func:`frame_chunks` in ``workers`` parts of about equal rows: the
-    first encoded here and streamed, each other one by a forked process (which inherits the
-    recording) into a file in ``spill_dir``, handed on as a FileSegment, its participants'
-    extremes merged into ``summary`` (``state()`` / ``merge(state)``: the export's ``_Summary``). Where fork is not available, the rows are few, or a
-    process fails, the parts are encoded here (an error then raised as it would be in one
-    process)."""
-    import multiprocessing
-    import tempfile
+    first encoded here and streamed (:meth:`frames`), each other one by a process forked when this
+    object is made (it inherits the recording; made before any thread of the writer starts, and
+    before ``prepare`` has run, so that its extremes start empty) into a file in ``spill_dir``,
+    handed on as a FileSegment, its participants' extremes merged into ``summary`` (``state()`` /
+    ``merge(state)``: the export's ``_Summary``). Where fork is not available, the rows are few,
+    or a process fails, the parts are encoded here (an error then raised as it would be in one
+    process). :meth:`close` stops what still runs and removes its files."""
 
-    from aveas_format.safeio.atomic import FileSegment
+    def __init__(self, frame_of_row: np.ndarray, times: np.ndarray, prepare, summary: Any,
+                 chunk_rows: int, workers: int, spill_dir: Path) -> None:
+        import multiprocessing
+        import tempfile
 
-    bounds = chunk_bounds(np.sort(frame_of_row), chunk_rows)
-    k = len(bounds) - 1
-    if (len(frame_of_row) < PARTS_MIN_ROWS or k < 2 * workers
-            or "fork" not in multiprocessing.get_all_start_methods()):
-        yield from frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows)
-        return
-    # the chunks where each part starts: about equal rows
-    cuts = [0, *np.searchsorted(bounds, [bounds[-1] * j / workers for j in range(1, workers)]).tolist(), k]
-    parts = [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
-    ctx = multiprocessing.get_context("fork")
-    running = []
-    try:
-        for part in parts[1:]:  # (forked before this process starts encoding: empty extremes)
-            fd, spill = tempfile.mkstemp(prefix=".openlabel-frames.", suffix=".tmp", dir=spill_dir)
-            os.close(fd)
-            rd, wr = ctx.Pipe(duplex=False)
-            proc = ctx.Process(target=_encode_part, daemon=True,
-                               args=(frame_of_row, times, prepare, summary, chunk_rows, part, spill, wr))
-            proc.start()
-            wr.close()
-            running.append((part, Path(spill), proc, rd))
-        yield from frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows, part=parts[0])
-        while running:
-            part, spill, proc, rd = running.pop(0)
+        self.args = (frame_of_row, times, prepare)
+        self.summary, self.chunk_rows = summary, chunk_rows
+        self.running: list = []
+        bounds = chunk_bounds(np.sort(frame_of_row), chunk_rows)
+        k = len(bounds) - 1
+        if (len(frame_of_row) < PARTS_MIN_ROWS or k < 2 * workers
+                or "fork" not in multiprocessing.get_all_start_methods()):
+            self.parts = [(0, k)]
+            return
+        # the chunks where each part starts: about equal rows
+        cuts = [0, *np.searchsorted(bounds, [bounds[-1] * j / workers for j in range(1, workers)]).tolist(), k]
+        self.parts = [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+        ctx = multiprocessing.get_context("fork")
+        try:
+            for part in self.parts[1:]:
+                fd, spill = tempfile.mkstemp(prefix=".openlabel-frames.", suffix=".tmp", dir=spill_dir)
+                os.close(fd)
+                rd, wr = ctx.Pipe(duplex=False)
+                proc = ctx.Process(target=_encode_part, daemon=True,
+                                   args=(*self.args, summary, chunk_rows, part, spill, wr))
+                proc.start()
+                wr.close()
+                self.running.append((part, Path(spill), proc, rd))
+        except BaseException:
+            self.close()
+            raise
+
+    def frames(self) -> Iterator[Any]:
+        from aveas_format.safeio.atomic import FileSegment
+
+        yield from frame_chunks(*self.args, chunk_rows=self.chunk_rows, part=self.parts[0])
+        while self.running:
+            part, spill, proc, rd = self.running.pop(0)
             try:
                 state = rd.recv()
             except EOFError:  # (the process died)
                 state = None
             proc.join()
             if state is not None and proc.exitcode == 0:
-                summary.merge(state)
+                self.summary.merge(state)
                 yield FileSegment(spill)
             else:  # here, with the real error if there is one
                 spill.unlink(missing_ok=True)
-                yield from frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows, part=part)
-    finally:
-        for _, spill, proc, _ in running:
+                yield from frame_chunks(*self.args, chunk_rows=self.chunk_rows, part=part)
+
+    def close(self) -> None:
+        for _, spill, proc, _ in self.running:
             proc.kill()
             proc.join()
             spill.unlink(missing_ok=True)
+        self.running = []
 
 
 def _encode_part(frame_of_row, times, prepare, summary: Any, chunk_rows: int, part: tuple[int, int],
                  spill: str, conn) -> None:
-    """A forked process of :func:`frames_in_parts`: the chunks ``part`` into the file ``spill``,
+    """A forked process of :class:`FrameParts`: the chunks ``part`` into the file ``spill``,
     then its participants' extremes sent back (nothing sent: it failed)."""
+    import gc
+
+    gc.disable()  # (as the export's own encoding: millions of acyclic small objects)
     try:
         with open(spill, "wb") as f:
             for data in frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows, part=part):

@@ -46,7 +46,7 @@ from aveas_format.converters.openlabel.profile import (
     _rot_world,
     table_to_json,
 )
-from aveas_format.converters.openlabel.encode import CHUNK_ROWS, dumps, frame_chunks, frames_in_parts, orjson
+from aveas_format.converters.openlabel.encode import CHUNK_ROWS, FrameParts, dumps, frame_chunks, orjson
 from aveas_format.converters.openlabel.stream import compression
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.io.arrow import column_numpy
@@ -157,13 +157,19 @@ def openlabel_chunks(rec, *, opendrive: str = "map.xodr", extension: bool = True
         inputs.update(interior=interior, impact=impact)
         return inputs
 
-    yield b'{"openlabel":{"metadata":' + dumps(metadata) + b',"frames":{'
-    del metadata
-    with _no_gc():
-        if workers > 1 and spill_dir is not None:
-            yield from frames_in_parts(frame_of_row, times, prepare, summary, chunk_rows, workers, spill_dir)
-        else:
-            yield from frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows)
+    parts = FrameParts(frame_of_row, times, prepare, summary, chunk_rows, workers, spill_dir) \
+        if workers > 1 and spill_dir is not None else None  # (forked before the writer's thread)
+    try:
+        yield b'{"openlabel":{"metadata":' + dumps(metadata) + b',"frames":{'
+        del metadata
+        with _no_gc():
+            if parts is not None:
+                yield from parts.frames()
+            else:
+                yield from frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows)
+    finally:
+        if parts is not None:
+            parts.close()
     tail: dict[str, Any] = {}
     tail["frame_intervals"] = [{"frame_start": 0, "frame_end": int(len(times) - 1)}] if len(times) else []
     tail["objects"] = _objects(rec.participants, rec.states, static, frame_of_row, summary, extension)
