@@ -178,10 +178,9 @@ def _skip(b, i, n):
                 i, _ = _string(b, i, n)
                 if i < 0:
                     return -1, deepest
-                i = _ws(b, i)
-                if b[i] != 58:
+                i = _colon(b, i)
+                if i < 0:
                     return -1, deepest
-                i = _ws(b, i + 1)
                 continue
             else:
                 continue
@@ -212,10 +211,9 @@ def _skip(b, i, n):
                     i, _ = _string(b, i, n)
                     if i < 0:
                         return -1, deepest
-                    i = _ws(b, i)
-                    if b[i] != 58:
+                    i = _colon(b, i)
+                    if i < 0:
                         return -1, deepest
-                    i = _ws(b, i + 1)
                 break
             if (c == 125 and top == 1) or (c == 93 and top == 2):
                 d -= 1
@@ -289,6 +287,25 @@ def scratch(n: int) -> tuple:
             np.zeros(max(16, n // 40), np.int64), np.empty(1024, np.uint8), np.zeros(64, np.int64))
 
 
+@_jit
+def _colon(b, i):
+    """Past the ``:`` after a key (at ``i``, whitespace around it skipped), -1 where there is none."""
+    i = _ws(b, i)
+    return _ws(b, i + 1) if b[i] == 58 else -1
+
+
+@_jit
+def _next(b, i, close):
+    """After a member or an element at ``i``: ``(past a comma, 1)``, ``(past the closing bracket
+    ``close``, 0)`` or ``(i, -1)`` where neither follows."""
+    i = _ws(b, i)
+    if b[i] == 44:
+        return _ws(b, i + 1), 1
+    if b[i] == close:
+        return i + 1, 0
+    return i, -1
+
+
 @_jit_loop
 def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
     """Parse the block ``b`` (uint8, ``{...}`` followed by one NUL byte) into the arrays given
@@ -321,10 +338,9 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
             i, _ = _string(b, i, n)
             if i < 0:
                 return fail
-            i = _ws(b, i)
-            if b[i] != 58:
+            i = _colon(b, i)
+            if i < 0:
                 return fail
-            i = _ws(b, i + 1)
             if b[i] != 123:
                 return fail
             deepest = max(deepest, 2)
@@ -340,10 +356,9 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                     if i < 0:
                         return fail
                     is_objects = not esc and _eq(b, ks + 1, i - 1, _OBJECTS)
-                    i = _ws(b, i)
-                    if b[i] != 58:
+                    i = _colon(b, i)
+                    if i < 0:
                         return fail
-                    i = _ws(b, i + 1)
                     if not is_objects:
                         i, d = _skip(b, i, n)
                         if i < 0:
@@ -363,10 +378,9 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                                 i, _ = _string(b, i, n)
                                 if i < 0:
                                     return fail
-                                i = _ws(b, i)
-                                if b[i] != 58:
+                                i = _colon(b, i)
+                                if i < 0:
                                     return fail
-                                i = _ws(b, i + 1)
                                 # ---- a box: {"object_data": {kind: [items], ...}}
                                 if b[i] != 123:
                                     return fail
@@ -379,10 +393,9 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                                 i, esc = _string(b, i, n)
                                 if i < 0 or esc or not _eq(b, ks + 1, i - 1, _OBJECT_DATA):
                                     return fail
-                                i = _ws(b, i)
-                                if b[i] != 58:
+                                i = _colon(b, i)
+                                if i < 0:
                                     return fail
-                                i = _ws(b, i + 1)
                                 if b[i] != 123:
                                     return fail
                                 i = _ws(b, i + 1)
@@ -413,10 +426,9 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                                     if seen & (1 << kind):
                                         return fail
                                     seen |= 1 << kind
-                                    i = _ws(b, i)
-                                    if b[i] != 58:
+                                    i = _colon(b, i)
+                                    if i < 0:
                                         return fail
-                                    i = _ws(b, i + 1)
                                     if b[i] != 91:
                                         return fail
                                     deepest = max(deepest, 6)
@@ -443,10 +455,9 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                                                 if i < 0:
                                                     return fail
                                                 ke = i - 1
-                                                i = _ws(b, i)
-                                                if b[i] != 58:
+                                                i = _colon(b, i)
+                                                if i < 0:
                                                     return fail
-                                                i = _ws(b, i + 1)
                                                 if not esc and _eq(b, ks + 1, ke, _NAME):
                                                     if name >= 0 or b[i] != 34:
                                                         return fail
@@ -481,14 +492,11 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                                                                     return fail
                                                                 nbuf, noff = _put(b, i, e, nbuf, noff, nn)
                                                                 nn += 1
-                                                                i = _ws(b, e)
-                                                                if b[i] == 44:
-                                                                    i = _ws(b, i + 1)
-                                                                elif b[i] == 93:
-                                                                    i += 1
-                                                                    break
-                                                                else:
+                                                                i, more = _next(b, e, 93)
+                                                                if more < 0:
                                                                     return fail
+                                                                if more == 0:
+                                                                    break
                                                         count = nn - val
                                                     elif kind == K_NUM:
                                                         e = _number(b, i)
@@ -537,10 +545,9 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                                                             code, tbuf, toff, nt = _intern(b, s + 1, i - 1, tbuf, toff,
                                                                                            nt, hint + 1)
                                                             ext[ne, 1] = hint = code
-                                                            i = _ws(b, i)
-                                                            if b[i] != 58:
+                                                            i = _colon(b, i)
+                                                            if i < 0:
                                                                 return fail
-                                                            i = _ws(b, i + 1)
                                                             c = b[i]
                                                             if c == 34:
                                                                 s = i
@@ -571,27 +578,21 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                                                             if i < 0:
                                                                 return fail
                                                             ne += 1
-                                                            i = _ws(b, i)
-                                                            if b[i] == 44:
-                                                                i = _ws(b, i + 1)
-                                                            elif b[i] == 125:
-                                                                i += 1
-                                                                break
-                                                            else:
+                                                            i, more = _next(b, i, 125)
+                                                            if more < 0:
                                                                 return fail
+                                                            if more == 0:
+                                                                break
                                                 else:  # another member of an attribute: not read
                                                     i, d = _skip(b, i, n)
                                                     if i < 0:
                                                         return fail
                                                     deepest = max(deepest, 7 + d)
-                                                i = _ws(b, i)
-                                                if b[i] == 44:
-                                                    i = _ws(b, i + 1)
-                                                elif b[i] == 125:
-                                                    i += 1
-                                                    break
-                                                else:
+                                                i, more = _next(b, i, 125)
+                                                if more < 0:
                                                     return fail
+                                                if more == 0:
+                                                    break
                                             if name < 0 or not has_val:
                                                 return fail
                                             if kind == K_CUBOID:
@@ -607,22 +608,16 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                                                 items[ni, 3] = val
                                                 items[ni, 4] = count
                                                 ni += 1
-                                            i = _ws(b, i)
-                                            if b[i] == 44:
-                                                i = _ws(b, i + 1)
-                                            elif b[i] == 93:
-                                                i += 1
-                                                break
-                                            else:
+                                            i, more = _next(b, i, 93)
+                                            if more < 0:
                                                 return fail
-                                    i = _ws(b, i)
-                                    if b[i] == 44:
-                                        i = _ws(b, i + 1)
-                                    elif b[i] == 125:
-                                        i += 1
-                                        break
-                                    else:
+                                            if more == 0:
+                                                break
+                                    i, more = _next(b, i, 125)
+                                    if more < 0:
                                         return fail
+                                    if more == 0:
+                                        break
                                 i = _ws(b, i)
                                 if b[i] != 125 or ncub != 1:  # (another member of the box; no or 2 cuboids)
                                     return fail
@@ -633,30 +628,21 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                                 boxes[nb, 2] = cub_first
                                 nb += 1
                                 # ---- the next box or the end of the objects
-                                i = _ws(b, i)
-                                if b[i] == 44:
-                                    i = _ws(b, i + 1)
-                                elif b[i] == 125:
-                                    i += 1
-                                    break
-                                else:
+                                i, more = _next(b, i, 125)
+                                if more < 0:
                                     return fail
-                    i = _ws(b, i)
-                    if b[i] == 44:
-                        i = _ws(b, i + 1)
-                    elif b[i] == 125:
-                        i += 1
-                        break
-                    else:
+                                if more == 0:
+                                    break
+                    i, more = _next(b, i, 125)
+                    if more < 0:
                         return fail
-            i = _ws(b, i)
-            if b[i] == 44:
-                i = _ws(b, i + 1)
-            elif b[i] == 125:
-                i += 1
-                break
-            else:
+                    if more == 0:
+                        break
+            i, more = _next(b, i, 125)
+            if more < 0:
                 return fail
+            if more == 0:
+                break
     if _ws(b, i) != n:
         return fail
     return (0, deepest, nb, ni, ne, nn, ns, nt, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff)
