@@ -38,7 +38,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from aveas_format.converters.openlabel.columns import block_findings, vector_columns
+from aveas_format.converters.openlabel.columns import as_obj, block_findings, vector_columns
 from aveas_format.converters.openlabel.profile import EXT, LIGHTS, _enum_value
 
 try:
@@ -632,7 +632,7 @@ def _ext_columns(ext: np.ndarray, n: int, nums: np.ndarray, ntext: pa.Array, nam
                        (jb.E_INT, lambda r: pc.cast(ntext.take(pa.array(r)), pa.int64()).to_pylist())):
             m = kind == k
             if m.any():
-                vals[bx[m]] = _objects(get(ref[m]))
+                vals[bx[m]] = as_obj(get(ref[m]))
         out[key] = ("o", vals)
     return out
 
@@ -644,9 +644,3 @@ def _used_codes(codes: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     present[codes] = True
     index = np.cumsum(present) - 1
     return np.flatnonzero(present), index[codes]
-
-
-def _objects(values: list) -> np.ndarray:
-    a = np.empty(len(values), object)
-    a[:] = values
-    return a
