@@ -93,9 +93,12 @@ def prepare_table(table: pa.Table, spec: TableSpec) -> pa.Table:
 
 def take_rows(table: pa.Table, order: pa.Array) -> pa.Table:
     """``table.take(order)`` with the columns taken in threads (Arrow's take runs one column at a
-    time and releases the GIL: on a large table the columns go in parallel, one per core)."""
+    time and releases the GIL: on a large table the columns go in parallel, one per core; in a
+    worker process of a parallel run, one thread: the processes are the parallelism)."""
+    import multiprocessing
+
     workers = min(table.num_columns, os.cpu_count() or 1)
-    if table.num_rows < 1 << 17 or workers < 2:
+    if table.num_rows < 1 << 17 or workers < 2 or multiprocessing.parent_process() is not None:
         return table.take(order)
     from concurrent.futures import ThreadPoolExecutor
 
