@@ -50,6 +50,19 @@ def default_workers() -> int:
     return max(1, (os.cpu_count() or 1))
 
 
+def background(fn: Callable[..., Any], *args: Any, name: str = "background") -> Future:
+    """``fn(*args)`` started in a thread of its own; its Future (``result()`` waits, and raises
+    what ``fn`` raised). For work that releases the GIL (hashing, PROJ, numpy, Arrow) overlapped
+    with other work of this process: the one home of such threads."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=name)
+    try:
+        return pool.submit(fn, *args)
+    finally:
+        pool.shutdown(wait=False)
+
+
 def run_tasks(fn: Callable[[Any], Any], items: Iterable[Any], *, workers: int | None = 1,
               scheduler: str | None = None, progress: bool = False, description: str = "tasks"
               ) -> Iterator[TaskResult]:

@@ -54,11 +54,9 @@ def prefetch_sha256(path: Path) -> None:
     key = _file_key(path)
     if key is None or key in _PENDING:
         return
-    from concurrent.futures import ThreadPoolExecutor
+    from aveas_format.parallel import background
 
-    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sha256")
-    _PENDING[key] = pool.submit(_sha256, Path(path))
-    pool.shutdown(wait=False)
+    _PENDING[key] = background(_sha256, Path(path), name="sha256")
 
 
 def file_sha256(path: Path, chunk: int = 1 << 22) -> str:

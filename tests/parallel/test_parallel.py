@@ -57,3 +57,15 @@ def test_map_ordered_raises_a_task_error_at_its_position(workers):
         for item, value in map_ordered(fail_on_three, range(8), workers=workers):
             got.append(value)
     assert got == [0, 1, 2]
+
+
+def test_background_runs_in_a_thread_of_its_own_and_hands_back_the_result_or_the_error():
+    import threading
+
+    from aveas_format.parallel import background
+
+    fut = background(lambda a, b: (threading.current_thread().name, a + b), 2, 3, name="sum")
+    name, value = fut.result(timeout=10)
+    assert value == 5 and name.startswith("sum") and name != threading.current_thread().name
+    with pytest.raises(ZeroDivisionError):
+        background(lambda: 1 / 0).result(timeout=10)
