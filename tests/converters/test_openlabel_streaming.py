@@ -53,6 +53,17 @@ def test_streamed_equals_dict_path(rich, scene_file, tmp_path):
         assert_identical(_streamed(path), _dict_path(path))
 
 
+def test_wgs84_in_a_thread_gives_the_same_recording(rich, scene_file, tmp_path, monkeypatch):
+    """The tail's WGS 84 coordinates computed in a thread (large imports) are the recording's own."""
+    from aveas_format.converters.openlabel import read
+
+    for path in (_export(rich, tmp_path / "rich.json"), scene_file):
+        before = _streamed(path)
+        monkeypatch.setattr(read, "_THREADED_MIN", 0)
+        assert_identical(_streamed(path), before)
+        monkeypatch.setattr(read, "_THREADED_MIN", 1 << 16)
+
+
 def test_shuffled_frame_order_gives_the_same_recording(scene_file, tmp_path):
     doc = json.loads(scene_file.read_bytes())
     frames = doc["openlabel"]["frames"]

@@ -15,8 +15,10 @@ zone from its name.
 from __future__ import annotations
 
 import math
+import os
 import re
 from collections import defaultdict
+from concurrent.futures import ThreadPoolExecutor
 from itertools import chain, compress, repeat
 from operator import is_not
 from pathlib import Path
@@ -445,11 +447,17 @@ class _FrameRows:
             sel = np.flatnonzero(rank >= 0)
             sel = sel[np.argsort(rank[sel], kind="stable")]
             ident = len(sel) == len(rank) and bool((sel == np.arange(len(sel))).all())
-            for i, c in enumerate(list(self.chunks[0])):  # one column at a time, freeing its chunks
-                a = np.concatenate([ch.pop(c) for ch in self.chunks])
-                rows[c] = a if ident else a[sel]
-                if i % 4 == 3:  # (the chunks' small arrays: their pages back to the system)
-                    release_free_memory()
+            chunks = self.chunks
+
+            def column(c: str) -> np.ndarray:  # (freeing its chunks)
+                a = np.concatenate([ch.pop(c) for ch in chunks])
+                return a if ident else a[sel]
+
+            names_ = list(chunks[0])
+            with ThreadPoolExecutor(min(2, os.cpu_count() or 1)) as pool:  # (numpy releases the GIL)
+                for b in range(0, len(names_), 4):  # four columns at a time, then their chunks'
+                    rows.update(zip(names_[b:b + 4], pool.map(column, names_[b:b + 4])))
+                    release_free_memory()  # pages back to the system
             self.chunks = []
             rows["rank"] = rank if ident else rank[sel]
             hv, hr = rows.pop("hv"), rows.pop("hr")

@@ -47,7 +47,11 @@ from aveas_format.converters.openlabel.tables import _recording_metadata, _resto
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, report_source
 from aveas_format.numeric import small_pages
+from aveas_format.parallel import background
 from aveas_format.schema.taxonomy import CLASSES
+
+#: states from which side work of the import's tail runs in a thread (WGS 84 coordinates)
+_THREADED_MIN = 1 << 16
 
 
 class OpenLabelImportOptions(ImportOptions):
@@ -204,6 +208,8 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     state_ext = _drop_repeats(rows, fd, path)
     n = len(rows["time"])
     x, y, heading = _to_local(rows, ol, local, options.world_crs)
+    # (WGS 84 in a thread while the other columns are made: PROJ releases the GIL)
+    lonlat = background(local.to_wgs84, x, y, name="wgs84") if n >= _THREADED_MIN else None
     states = _state_columns(rows, x, y, heading, fd.has_vel)
     use_file = options.road_coordinates == "file" or (options.road_coordinates == "auto" and fd.has_road)
     if use_file and n:
@@ -211,7 +217,12 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     _apply_state_extension(states, state_ext)
     del rows, state_ext  # the per-box columns are in ``states`` now
     fd.rows = fd.ext = None
+    same_xy = states["x"] is x and states["y"] is y and "lon" not in states and "lat" not in states
     states = _state_arrays(states, ext)
+    if lonlat is not None:
+        lon, lat = lonlat.result()
+        if same_xy:  # (else the extension changed them: build_recording's from the final ones)
+            states["lon"], states["lat"] = pa.array(lon), pa.array(lat)
 
     participants, ego_seen = _participants(uids, objects, pid_of, obj_ext, fd.sizes, ext, fd.frame_types)
     _check_objects(uids, objects, fd.frame_types, _claims_profile(md, objects), path)
@@ -571,6 +582,12 @@ def _apply_state_extension(states: dict[str, Any], state_ext: dict[str, tuple]) 
                 if not null.all():
                     states[c] = pa.array(np.where(pr, fv, base), mask=null, type=pa.float64())
                     continue
+        if base is None and rep[0] == "o":  # (bools, ints, texts: Arrow infers from the objects)
+            try:
+                states[c] = pa.array(rep[1], mask=rep[1] == _MISSING)
+                continue
+            except (pa.ArrowException, TypeError, ValueError):  # (mixed values: as a list below)
+                pass
         vals = _rep_list(rep)
         if base is None:
             states[c] = pa.array([None if v is _MISSING else v for v in vals])
