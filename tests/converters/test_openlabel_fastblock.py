@@ -361,3 +361,49 @@ def test_a_worker_reads_its_block_with_or_without_preadv(exported, monkeypatch):
         assert got.frames == want.frames and got.cols.keys() == want.cols.keys()
         assert all(np.array_equal(got.cols[k], want.cols[k], equal_nan=got.cols[k].dtype.kind == "f")
                    for k in want.cols)
+
+
+_FORKS: list | None = None
+
+
+def _at_fork() -> None:
+    import threading
+
+    if _FORKS is not None:
+        _FORKS.append(sorted(t.name for t in threading.enumerate() if t is not threading.main_thread()))
+
+
+def test_worker_processes_are_forked_before_the_digest_thread_starts(exported, monkeypatch):
+    """No thread of the import runs when its worker processes are forked (a fork copies a thread's
+    locks, not the thread): the input's SHA-256 starts after the first block came back."""
+    import hashlib
+    import os
+    import time
+
+    from aveas_format.converters.openlabel import stream
+
+    global _FORKS
+    if not hasattr(os, "register_at_fork"):
+        pytest.skip("no os.register_at_fork on this platform")
+    if not getattr(test_worker_processes_are_forked_before_the_digest_thread_starts, "hooked", False):
+        os.register_at_fork(before=_at_fork)
+        test_worker_processes_are_forked_before_the_digest_thread_starts.hooked = True
+    from aveas_format.converters import common
+
+    sha256 = common._sha256
+
+    def slow_sha256(path, *args):  # (as on a large file: still hashing when the workers start)
+        time.sleep(0.5)
+        return sha256(path, *args)
+
+    monkeypatch.setattr(common, "_sha256", slow_sha256)
+    monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", 3000)
+    _FORKS = []
+    try:
+        rec, _, _ = _import(exported, monkeypatch, fast=True, workers=2)
+        forks = _FORKS
+    finally:
+        _FORKS = None
+    assert rec.states.num_rows and len(forks) >= 2
+    assert not any(name.startswith("sha256") for names in forks for name in names), forks
+    assert rec.meta.source.inputs[0].sha256 == hashlib.sha256(exported.read_bytes()).hexdigest()

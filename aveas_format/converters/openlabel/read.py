@@ -106,7 +106,6 @@ def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImport
     if len(inputs) != 1:
         raise FormatError(f"openlabel: expected one input file, got {len(inputs)}")
     path = Path(inputs[0])
-    prefetch_sha256(path)
     import importlib.util
 
     if importlib.util.find_spec("ijson") is None:  # a dependency; without it: read whole, as before
@@ -180,6 +179,8 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
             acc.add(k, fr)
     else:  # blocks of frames in columns (the profile's layout) or one frame at a time
         for k, fr in frames(columnar=not acc.static_cuboids, workers=options.workers):
+            if path is not None and not acc.keys:  # (the input's digest in a thread from here on:
+                prefetch_sha256(path)              # the worker processes are forked by now)
             if k is COLUMNAR:
                 acc.add_columns(fr)
             else:
