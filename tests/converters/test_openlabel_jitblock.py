@@ -172,6 +172,52 @@ def test_what_is_outside_the_layout_is_refused(box):
         pass
 
 
+#: attribute items as the profile's reader takes them: the first of a name in a box, of the
+#: earliest kind (boolean, num, text, vec); PMFs and mandatory attributes checked on those
+_ITEMS = [
+    ('"vec":[{"name":"velocity","val":[1,2,0,0,0,0.5]},{"name":"velocity","val":[9,9,0,0,0,9]},'
+     '{"name":"acceleration","val":[0.5,0.25]}]'),  # a name twice; a short vector
+    ('"vec":[{"name":"classification/uncertainties","val":[0.5,0.4]},{"name":"velocity","val":[3]}],'
+     '"num":[{"name":"classification/uncertainties","val":1}]'),  # a PMF in two kinds; no acceleration
+    ('"vec":[{"name":"classification/uncertainties","val":[0.5,0.5]},{"name":"acceleration","val":[1,1]}],'
+     '"text":[{"name":"used_road_link","val":"4"},{"name":"used_road_link","val":"5"}]'),  # no velocity
+    ('"vec":[{"name":"velocity","val":[1,2,0,0,0,0.5]},{"name":"acceleration","val":[0,0]}],'
+     '"boolean":[{"name":"lights/brake","val":false},{"name":"lights/front","val":true}]'),
+]
+
+
+def _items_box(items: str) -> str:
+    return ('{"object_data":{"cuboid":[{"name":"bounding_box","val":[1.5,2.5,0.75,0.0,0.0,0.1,4.5,1.8,1.5]}],'
+            + items + '}}')
+
+
+def test_attribute_items_are_taken_by_name_as_the_profile_reads_them():
+    buf = ('{"0":{"frame_properties":{"timestamp":0.0},"objects":{%s}}}'
+           % ",".join('"%d":%s' % (k, _items_box(it)) for k, it in enumerate(_ITEMS))).encode()
+    got, want = _jit(buf), fb._read_block(buf)
+    assert got is not None and want is not None
+    _same(got, want)
+    np.testing.assert_array_equal(got.cols["vu"], [1.0, 3.0, np.nan, 1.0])
+    np.testing.assert_array_equal(got.cols["yr"], [0.5, np.nan, np.nan, 0.5])
+    np.testing.assert_array_equal(got.cols["au"], [0.5, np.nan, 1.0, 0.0])
+    np.testing.assert_array_equal(got.cols["light_brake_p"], [np.nan, np.nan, np.nan, 0.0])
+    assert sorted(c for c, *_ in got.found) == ["source.openlabel.missing_attribute"] * 2 + [
+        "source.openlabel.pmf_sum"]
+
+
+@pytest.mark.parametrize("extra", ['"num":[{"name":"velocity","val":1}]',
+                                   '"text":[{"name":"acceleration","val":"x"}]',
+                                   '"num":[{"name":"lights/high_beam","val":0.5}]'])
+def test_an_attribute_the_import_reads_in_another_kind_is_refused(extra):
+    """(As by Arrow's reader: the generic path reads that block.)"""
+    buf = _with_box(_items_box('"vec":[{"name":"velocity","val":[1,2,0,0,0,0]}],' + extra))
+    with pytest.raises(fb._NotFast):
+        _jit(buf)
+    with pytest.raises(fb._NotFast):
+        fb._read_block(buf)
+    assert fb.read_block(buf) is None
+
+
 @pytest.mark.parametrize("block", [
     b'{"0":{"objects":{"7":' + _box().encode() + b'}},}',  # a trailing comma
     b'{"0":{"objects":{"7":' + _box().encode() + b'}}} x',  # something after the block

@@ -682,3 +682,24 @@ def skeleton(b, boxes):
         prev = boxes[r, 1]
     out[o:] = b[prev:n]
     return out
+
+
+@_jit_loop
+def first_items(items, slot_of_code, want_kind, n):
+    """``(first, mixed)``: per slot (``slot_of_code``: the slot of each name code, -1: none) and
+    box the row in ``items`` of the first item of the slot's name — of the earliest kind in
+    :data:`KINDS`' order, the first of them (as the profile's reader takes attributes) — or -1;
+    ``mixed``: an item of a slot's name in another kind than ``want_kind`` of the slot (>= 0)."""
+    first = np.full((want_kind.size, n), -1, np.int64)
+    for r in range(items.shape[0]):
+        s = slot_of_code[items[r, 2]]
+        if s < 0:
+            continue
+        k = items[r, 1]
+        if want_kind[s] >= 0 and k != want_kind[s]:
+            return first, True
+        b = items[r, 0]
+        f = first[s, b]
+        if f < 0 or k < items[f, 1]:
+            first[s, b] = r
+    return first, False

@@ -399,15 +399,7 @@ class ArrowAttributes:
 
     def texts(self, name: str) -> np.ndarray:
         """Per box the first text of ``name`` (None where absent) as an object array."""
-        out = np.full(self.n, None, object)
-        got = self.values(name)
-        if got is not None:  # (each distinct text one Python string)
-            boxes, vals = got
-            enc = vals.dictionary_encode()
-            distinct = np.empty(len(enc.dictionary) + 1, object)
-            distinct[:-1] = enc.dictionary.to_pylist()
-            out[boxes] = distinct[enc.indices.fill_null(-1).to_numpy()]
-        return out
+        return _texts(self.n, self.values(name))
 
     def floats(self, name: str) -> np.ndarray:
         """Per box the first number / boolean of ``name`` as a float (NaN where absent or null)."""
@@ -419,6 +411,102 @@ class ArrowAttributes:
                 vals = pc.cast(vals, pa.float64())
             out[boxes] = vals.fill_null(np.nan).to_numpy(zero_copy_only=False)
         return out
+
+
+def _texts(n: int, got: tuple[np.ndarray, pa.Array] | None) -> np.ndarray:
+    """The texts ``got`` = ``(boxes, values)`` per box of ``n`` (None elsewhere) as an object array
+    (each distinct text one Python string)."""
+    out = np.full(n, None, object)
+    if got is not None:
+        boxes, vals = got
+        enc = vals.dictionary_encode()
+        distinct = np.empty(len(enc.dictionary) + 1, object)
+        distinct[:-1] = enc.dictionary.to_pylist()
+        out[boxes] = distinct[enc.indices.fill_null(-1).to_numpy()]
+    return out
+
+
+#: the kinds' codes (:data:`KINDS`' order: the compiled reader's)
+KIND_CODE = {kind: k for k, (kind, _) in enumerate(KINDS)}
+
+
+class CompiledAttributes:
+    """The compiled reader's attribute items (rows ``[box, kind, name, value, count]``) read by name
+    as :class:`ArrowAttributes` reads them (the same methods, the same results), the first item of
+    each name the import or its checks read found per box in one compiled pass
+    (:func:`._jitblock.first_items`) instead of Arrow lists per kind."""
+
+    def __init__(self, items: np.ndarray, names: np.ndarray, nums: np.ndarray, strs: pa.Array,
+                 n: int) -> None:
+        from aveas_format.converters.openlabel._jitblock import first_items
+
+        self.n, self.items, self.nums, self.strs = n, items, nums, strs
+        codes = _used_codes(items[:, 2], len(names))[0]
+        index = dict(zip(names[codes].tolist(), codes.tolist()))
+        self.code_of = dict.fromkeys(index)
+        self.slot = {nm: k for k, nm in enumerate(
+            nm for nm in index if nm in READ_KIND or nm.endswith("/uncertainties"))}
+        slot_of_code = np.full(len(names), -1, np.int64)
+        want = np.full(len(self.slot), -1, np.int64)
+        for nm, k in self.slot.items():
+            slot_of_code[index[nm]] = k
+            if nm in READ_KIND:
+                want[k] = KIND_CODE[READ_KIND[nm]]
+        self.first_rows, mixed = first_items(items, slot_of_code, want, n)
+        if mixed:  # (an attribute the import reads, in another kind: the generic path)
+            raise _NotFast
+
+    def _rows(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """``(boxes with an item of name, the row of its first item)``."""
+        k = self.slot.get(name)
+        if k is None:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        f = self.first_rows[k]
+        boxes = np.flatnonzero(f >= 0)
+        return boxes, f[boxes]
+
+    def first(self, name: str) -> tuple[np.ndarray, list]:
+        boxes, rows = self._rows(name)
+        it = self.items[rows]
+        vals = [None] * len(rows)
+        for k, get in ((0, lambda r: r[:, 3].astype(bool).tolist()),
+                       (1, lambda r: self.nums[r[:, 3]].tolist()),
+                       (2, lambda r: self.strs.take(pa.array(r[:, 3])).to_pylist()),
+                       (3, lambda r: [self.nums[a:a + c].tolist() for a, c in r[:, 3:5].tolist()])):
+            at = np.flatnonzero(it[:, 1] == k)
+            for i, v in zip(at.tolist(), get(it[at])):
+                vals[i] = v
+        return boxes, vals
+
+    def first_boxes(self, name: str) -> np.ndarray:
+        return self._rows(name)[0]
+
+    def values(self, name: str) -> tuple[np.ndarray, pa.Array] | None:
+        boxes, rows = self._rows(name)
+        if not len(boxes):
+            return None
+        ref = self.items[rows, 3]
+        kind = READ_KIND[name]
+        if kind == "text":
+            return boxes, self.strs.take(pa.array(ref))
+        return boxes, pa.array(ref.astype(bool) if kind == "boolean" else self.nums[ref])
+
+    def vector(self, name: str, elems: tuple[int, ...]) -> tuple[np.ndarray, list[np.ndarray]]:
+        n = self.n
+        has = np.zeros(n, bool)
+        cols = [np.full(n, np.nan) for _ in elems]
+        boxes, rows = self._rows(name)
+        has[boxes] = True
+        ref, count = self.items[rows, 3], self.items[rows, 4]
+        for c, e in zip(cols, elems):
+            m = count > e
+            c[boxes[m]] = self.nums[ref[m] + e]
+        return has, cols
+
+    def texts(self, name: str) -> np.ndarray:
+        return _texts(self.n, self.values(name))
+
+    floats = ArrowAttributes.floats
 
 
 def _ext_reps(cub: pa.StructArray) -> dict[str, tuple]:
@@ -544,15 +632,6 @@ def _packed(data: np.ndarray, offs: np.ndarray) -> pa.Array:
     return pa.Array.from_buffers(pa.large_string(), len(offs) - 1, [None, pa.py_buffer(offs), pa.py_buffer(data)])
 
 
-def _runs(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """The indices ``starts[i] .. starts[i] + counts[i] - 1`` of every run, concatenated."""
-    total = int(counts.sum())
-    if not total:
-        return np.zeros(0, np.int64)
-    ends = np.cumsum(counts)
-    return np.arange(total) + np.repeat(starts - (ends - counts), counts)
-
-
 def _read_block_jit(b: np.ndarray, parse) -> FastBlock | None:
     """The block ``b`` (:func:`padded`) read by the compiled parser ``parse``
     (:func:`compiled_parser`), or None (not the profile's layout, broken: the other paths read it
@@ -573,28 +652,7 @@ def _read_block_jit(b: np.ndarray, parse) -> FastBlock | None:
     names = np.asarray(_packed(tbuf, toff).to_pylist(), object)
     strs = _packed(sbuf, soff)
     cols = _cuboid_columns(nums[boxes[:, 2, None] + np.arange(9)])
-    kind_of = items[:, 1]
-    parts = {}
-    for k, (kind, _) in enumerate(KINDS):
-        sel = np.flatnonzero(kind_of == k)
-        if not len(sel):
-            continue
-        it = items[sel]
-        ref = it[:, 3]
-        if kind == "vec":
-            counts = it[:, 4]
-            offsets = np.zeros(len(it) + 1, np.int32)
-            np.cumsum(counts, out=offsets[1:])
-            vals = pa.ListArray.from_arrays(pa.array(offsets), pa.array(nums[_runs(ref, counts)]))
-        elif kind == "num":
-            vals = pa.array(nums[ref])
-        elif kind == "text":
-            vals = strs.take(pa.array(ref))
-        else:
-            vals = pa.array(ref.astype(bool))
-        used, codes = _used_codes(it[:, 2], len(names))
-        parts[kind] = (it[:, 0], codes, names[used].tolist(), vals)
-    at = ArrowAttributes(parts, n)
+    at = CompiledAttributes(items, names, nums, strs, n)
     cols = _attribute_columns(at, cols)
     return FastBlock(frames, cols, _ext_columns(ext, n, nums, ntext, names, strs),
                      block_findings(at, profile=True), int(depth))
