@@ -27,6 +27,7 @@ from aveas_format.safeio.readers import (
     MAX_BULK_JSON_BYTES,
     MAX_JSON_BYTES,
     MAX_JSON_DEPTH,
+    MAX_STREAMED_JSON_BYTES,
     MAX_ZIP_MEMBER_BYTES,
     MAX_ZIP_RATIO,
     CountingReader,
@@ -41,7 +42,8 @@ from aveas_format.safeio.readers import (
 
 __all__ = [
     "MAX_BULK_JSON_BYTES", "MAX_JSON_BYTES", "MAX_JSON_DEPTH", "MAX_MCAP_CHUNK_BYTES", "MAX_MCAP_RATIO",
-    "MAX_MCAP_UNCOMPRESSED_FLOOR", "MAX_ZIP_MEMBER_BYTES", "MAX_ZIP_RATIO", "CountingReader",
+    "MAX_MCAP_UNCOMPRESSED_FLOOR", "MAX_STREAMED_JSON_BYTES", "MAX_ZIP_MEMBER_BYTES", "MAX_ZIP_RATIO",
+    "CountingReader",
     "check_json_size", "check_mcap", "check_zip_member", "iterparse", "load_json",
     "save_figure_atomic", "scan_json_member", "stream_json_error", "write_bytes_atomic", "write_chunks_atomic",
     "write_parquet_atomic", "write_text_atomic", "xml_parser",

@@ -22,8 +22,11 @@ from aveas_format.errors import FormatError, RecordingIOError
 
 #: recording.json and other metadata files
 MAX_JSON_BYTES = 64 * 1024 * 1024
-#: OpenLABEL and other bulk JSON inputs
+#: OpenLABEL and other bulk JSON inputs read whole
 MAX_BULK_JSON_BYTES = 4 * 1024 * 1024 * 1024
+#: bulk JSON read as a stream (OpenLABEL frames: memory grows with the states kept, not with the
+#: text; an hour of a busy highway is ~10 GB, ~0.7 bytes of memory per byte of it)
+MAX_STREAMED_JSON_BYTES = 32 * 1024 * 1024 * 1024
 MAX_JSON_DEPTH = 64
 #: a compressed ZIP member is decompressed into memory: at most this many bytes ...
 MAX_ZIP_MEMBER_BYTES = 8 * 1024 * 1024 * 1024

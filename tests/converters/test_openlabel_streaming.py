@@ -154,8 +154,21 @@ def test_not_utf8(tmp_path):
 def test_size_limit(scene_file, monkeypatch):
     import aveas_format.converters.openlabel.stream as ol
 
-    monkeypatch.setattr(ol, "MAX_BULK_JSON_BYTES", 1000)
+    monkeypatch.setattr(ol, "MAX_STREAMED_JSON_BYTES", 1000)
     _err(scene_file, "exceeds the limit of 1,000")
+
+
+def test_a_streamed_file_may_be_larger_than_a_file_read_whole(scene_file, tmp_path, monkeypatch):
+    """The 1-hour file (~10 GB) is over the limit of JSON read whole (4 GiB): streamed, its memory
+    grows with its states, not its text; a file that has to be read whole keeps that limit."""
+    import aveas_format.converters.openlabel.stream as ol
+
+    want = _streamed(scene_file)
+    monkeypatch.setattr(ol, "MAX_BULK_JSON_BYTES", 1000)
+    assert_identical(_streamed(scene_file), want)
+    nan = tmp_path / "nan.json"  # (NaN: the streaming parser refuses it, the file is read whole)
+    nan.write_bytes(scene_file.read_bytes().replace(b'"timestamp":0.0', b'"timestamp":NaN', 1))
+    _err(nan, "exceeds the limit of 1,000")
 
 
 def test_deep_nesting(tmp_path):

@@ -26,8 +26,8 @@ try:  # the fast path of the frames (extra ``fast``)
     import orjson
 except ImportError:  # pragma: no cover - exercised by a test that hides it
     orjson = None
-from aveas_format.safeio import (MAX_BULK_JSON_BYTES, MAX_JSON_DEPTH, CountingReader, check_json_size,
-                                 load_json, scan_json_member, stream_json_error)
+from aveas_format.safeio import (MAX_BULK_JSON_BYTES, MAX_JSON_DEPTH, MAX_STREAMED_JSON_BYTES, CountingReader,
+                                 check_json_size, load_json, scan_json_member, stream_json_error)
 
 
 #: the compact forms: name suffix -> (module, what to install)
@@ -72,8 +72,8 @@ class _Decompressed:
         except (OSError, EOFError, ValueError) as e:  # gzip.BadGzipFile, zstd.ZstdError, truncated
             raise FormatError(f"cannot decompress ({self.kind}): {e}", path=self.path) from None
         self.pos += len(data)
-        if self.pos > MAX_BULK_JSON_BYTES:  # (a decompression bomb: the plain file's limit)
-            raise FormatError(f"JSON of more than {MAX_BULK_JSON_BYTES:,} bytes once decompressed "
+        if self.pos > MAX_STREAMED_JSON_BYTES:  # (a decompression bomb: the plain file's limit)
+            raise FormatError(f"JSON of more than {MAX_STREAMED_JSON_BYTES:,} bytes once decompressed "
                               "exceeds the limit", path=self.path)
         return data
 
@@ -114,6 +114,7 @@ def _load_doc(path: Path) -> dict[str, Any]:
             with _open(path) as f:  # (at most one byte over the limit: load_json refuses it)
                 raw = f.read(MAX_BULK_JSON_BYTES + 1)
         else:
+            check_json_size(path, max_bytes=MAX_BULK_JSON_BYTES)  # (before reading it whole)
             raw = path.read_bytes()
     except OSError as e:
         raise RecordingIOError(f"cannot read: {e.strerror or e}", path=path) from None
@@ -150,8 +151,9 @@ def _check_stream(path: Path) -> None:
 
 
 def _open_checked(path: Path):
-    """``(the file open for reading, whether its text starts with "{")``, its size checked first."""
-    check_json_size(path, max_bytes=MAX_BULK_JSON_BYTES)
+    """``(the file open for reading, whether its text starts with "{")``, its size checked first
+    (the streamed reading's limit: a file read whole is held to :data:`MAX_BULK_JSON_BYTES`)."""
+    check_json_size(path, max_bytes=MAX_STREAMED_JSON_BYTES)
     try:
         f = _open(path)
     except OSError as e:
