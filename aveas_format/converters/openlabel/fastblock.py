@@ -158,6 +158,8 @@ class FastBlock:
         self.frames, self.cols, self.ext, self.found = frames, cols, ext, found
         #: the deepest nesting of containers in the block (its own braces: 1)
         self.depth = depth
+        #: the block's size in bytes (:func:`read_block`; for the reader's estimate of the rows)
+        self.nbytes = 0
 
 
 def read_block(buf: bytes | np.ndarray, threads: bool = True, compiled: bool = True) -> FastBlock | None:
@@ -170,11 +172,14 @@ def read_block(buf: bytes | np.ndarray, threads: bool = True, compiled: bool = T
         return None
     try:
         parse = compiled_parser() if compiled else None
+        blk = None
         if parse is not None:
             blk = _read_block_jit(buf if isinstance(buf, np.ndarray) else padded(buf), parse)
-            if blk is not None:
-                return blk
-        return _read_block(buf[:-1].tobytes() if isinstance(buf, np.ndarray) else buf, threads)
+        if blk is None:
+            blk = _read_block(buf[:-1].tobytes() if isinstance(buf, np.ndarray) else buf, threads)
+        if blk is not None:
+            blk.nbytes = len(buf)
+        return blk
     except (_NotFast, pa.ArrowInvalid, pa.ArrowTypeError, orjson.JSONDecodeError, KeyError, IndexError,
             TypeError, ValueError):
         return None

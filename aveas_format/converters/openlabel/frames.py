@@ -18,7 +18,6 @@ import math
 import os
 import re
 from collections import defaultdict
-from concurrent.futures import ThreadPoolExecutor
 from itertools import chain, compress, repeat
 from operator import is_not
 from pathlib import Path
@@ -235,6 +234,52 @@ class _FrameData:
         self.__dict__.update(kw)
 
 
+class _ColumnStore:
+    """The boxes' columns appended block by block: numbers straight into one array per column,
+    allocated for the rows expected (:meth:`expect`; grown by doubling where more come — pages
+    untouched until written cost nothing), so that a block's arrays are freed as soon as they are
+    copied (their memory serves the next block) and no column is concatenated at the end; object
+    columns, and a column whose type changes, kept in chunks."""
+
+    def __init__(self) -> None:
+        self.n = self.cap = self.hint = 0
+        self.arrays: dict[str, np.ndarray] = {}
+        self.chunks: dict[str, list[np.ndarray]] = {}
+
+    def expect(self, rows: int) -> None:
+        self.hint = max(self.hint, rows)
+
+    def append(self, ch: dict[str, np.ndarray]) -> None:
+        m = len(next(iter(ch.values())))
+        end = self.n + m
+        if end > self.cap:
+            self.cap = max(end, 2 * self.cap, self.hint)
+            for c, a in self.arrays.items():
+                self.arrays[c] = grown = np.empty(self.cap, a.dtype)
+                grown[:self.n] = a[:self.n]
+        for c, a in ch.items():
+            arr = self.arrays.get(c)
+            if arr is not None and arr.dtype == a.dtype:
+                arr[self.n:end] = a
+            elif not self.n and a.dtype != object:
+                self.arrays[c] = arr = np.empty(self.cap, a.dtype)
+                arr[:end] = a
+            else:
+                if arr is not None:  # (another type than before: chunks, numpy's promotion at the end)
+                    self.chunks[c] = [self.arrays.pop(c)[:self.n]]
+                self.chunks.setdefault(c, []).append(a)
+        self.n = end
+
+    def names(self) -> list[str]:
+        return [*self.arrays, *self.chunks]
+
+    def pop(self, c: str) -> np.ndarray:
+        """The column ``c`` whole (handed over: the store forgets it)."""
+        if c in self.arrays:
+            return self.arrays.pop(c)[:self.n]
+        return np.concatenate(self.chunks.pop(c))
+
+
 class _FrameRows:
     """The frames of an OpenLABEL file, one ``(key, frame)`` at a time in any order: per box the
     values of one state in column chunks (numpy), per frame its key, timestamp and object ids.
@@ -252,7 +297,7 @@ class _FrameRows:
         self.p_u: list[str] = []
         self.p_oif: list[Any] = []
         self.p_edges: dict[int, tuple[dict, dict]] = {}  # frame -> (its transforms, resolve cache)
-        self.chunks: list[dict[str, np.ndarray]] = []
+        self.columns = _ColumnStore()
         self.ext_chunks: list[tuple[int, dict[str, tuple]]] = []
         self.interior: list[tuple[int, str, dict]] = []
         self._need_size: dict[str, bool] = {}
@@ -383,7 +428,7 @@ class _FrameRows:
         ch["uidx"] = uidx if uidx is not None else np.fromiter(map(ui.__getitem__, us), np.int64, len(us))
         ch["occ"] = np.asarray(js, np.int64)
         self._check_block(found, js, us)
-        self.chunks.append(ch)
+        self.columns.append(ch)
         self.ext_chunks.append((len(us), ext))
 
     def _sizes(self, rows: dict[str, np.ndarray], names: list[str]) -> dict[str, list]:
@@ -415,6 +460,11 @@ class _FrameRows:
         self.keys.extend(k for k, _ in blk.frames)
         self.stamps.extend(_frame_timestamp(fr) for _, fr in blk.frames)
         us = list(chain.from_iterable(objs))
+        if not self.columns.cap and blk.nbytes and self.path is not None:  # (the rows to expect)
+            try:
+                self.columns.expect(int(os.stat(self.path).st_size / blk.nbytes * len(us) * 1.2) + len(us))
+            except OSError:
+                pass
         for u in us:
             if u not in ui:
                 ui[u] = len(ui)
@@ -442,23 +492,17 @@ class _FrameRows:
         rows: dict[str, np.ndarray] = {}
         ext: dict[str, tuple] = {}
         has_vel, has_road = True, False
-        if self.chunks:
-            rank = rank_of[np.concatenate([ch.pop("occ") for ch in self.chunks])]
+        store = self.columns
+        if store.n:
+            rank = rank_of[store.pop("occ")]
             sel = np.flatnonzero(rank >= 0)
             sel = sel[np.argsort(rank[sel], kind="stable")]
             ident = len(sel) == len(rank) and bool((sel == np.arange(len(sel))).all())
-            chunks = self.chunks
-
-            def column(c: str) -> np.ndarray:  # (freeing its chunks)
-                a = np.concatenate([ch.pop(c) for ch in chunks])
-                return a if ident else a[sel]
-
-            names_ = list(chunks[0])
-            with ThreadPoolExecutor(min(2, os.cpu_count() or 1)) as pool:  # (numpy releases the GIL)
-                for b in range(0, len(names_), 4):  # four columns at a time, then their chunks'
-                    rows.update(zip(names_[b:b + 4], pool.map(column, names_[b:b + 4])))
-                    release_free_memory()  # pages back to the system
-            self.chunks = []
+            for c in store.names():  # one column at a time (a chunked one: its chunks freed)
+                a = store.pop(c)
+                rows[c] = a if ident else a[sel]
+            self.columns = _ColumnStore()
+            release_free_memory()  # (the chunks' pages back to the system)
             rows["rank"] = rank if ident else rank[sel]
             hv, hr = rows.pop("hv"), rows.pop("hr")
             has_vel, has_road = bool(hv.all()), bool(hr.any())
