@@ -205,15 +205,13 @@ class StatesView:
 
     @cached_property
     def vehicle(self) -> np.ndarray:
-        return np.isin(self.cls, list(VEHICLE_CLASSES))
+        return self._part(np.isin(self.parts.cls.astype(object), list(VEHICLE_CLASSES)), False).astype(bool)
 
     def per_sample(self, values_by_class: dict[str, float | None]) -> np.ndarray:
-        """A per-class number for every sample (NaN where the class has none)."""
-        out = np.full(self.n, np.nan)
-        for c, v in values_by_class.items():
-            if v is not None:
-                out[self.cls == c] = v
-        return out
+        """A per-class number for every sample (NaN where the class has none; per participant,
+        then to its samples)."""
+        per_part = [values_by_class.get(c) if isinstance(c, str) else None for c in self.parts.cls.tolist()]
+        return self._part(np.asarray([np.nan if v is None else v for v in per_part], float), np.nan)
 
     def ahead(self, window: float) -> np.ndarray:
         """Index of the first sample of the same participant at least ``window`` s later (-1 if
