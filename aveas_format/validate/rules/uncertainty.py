@@ -21,12 +21,23 @@ from aveas_format.validate.views import StatesView, ints, num
 STATE_STDS = ("x_std", "y_std", "heading_std", "vx_std", "vy_std")
 
 
-def seg_median(seg: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(segments, median of ``values`` per segment) for values grouped by ``seg`` (NaN dropped)."""
+def seg_median(seg: np.ndarray, values: np.ndarray, backend: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(segments, median of ``values`` per segment) for values grouped by ``seg`` (NaN dropped).
+    Segments in runs (``seg`` non-decreasing: the states view's) on the numba path
+    (:func:`~aveas_format.numeric.kernel_backend`) take one selection per run, the others one
+    sort by segment and value: the same numbers."""
+    from aveas_format.numeric import kernel_backend
+
     ok = ~np.isnan(values)
     seg, values = seg[ok], values[ok]
     if not len(seg):
         return np.zeros(0, np.int64), np.zeros(0)
+    if kernel_backend(backend) == "numba" and bool((seg[1:] >= seg[:-1]).all()):
+        from aveas_format.validate.rules._median import segment_medians
+
+        first = np.r_[0, np.flatnonzero(seg[1:] != seg[:-1]) + 1]
+        return seg[first], segment_medians(np.ascontiguousarray(values, np.float64), first,
+                                           np.r_[first[1:], len(seg)])
     order = np.lexsort((values, seg))
     s, v = seg[order], values[order]
     first = np.r_[0, np.flatnonzero(np.diff(s)) + 1]
