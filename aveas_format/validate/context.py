@@ -44,6 +44,18 @@ _STREAMABLE = ("states", "interior")
 _SHARED_CACHE = ("map.checks", "unobserved.geoms", "geo.coverage")
 
 
+def checked(table: pa.Table) -> pa.Table:
+    """``table`` after Arrow's full validation of every column (a damaged file can decode into text
+    that is no UTF-8, offsets past the data...: what the rules would trip over); an ArrowInvalid
+    naming the column where it fails (the caller reports the table as unreadable)."""
+    for name, col in zip(table.column_names, table.columns):
+        try:
+            col.validate(full=True)
+        except pa.ArrowInvalid as e:
+            raise pa.ArrowInvalid(f"column {name!r}: {str(e).splitlines()[0]}") from None
+    return table
+
+
 @dataclass
 class Streamed:
     """A table validated in batches: its Parquet file and whether batches keep participants whole."""
@@ -63,7 +75,7 @@ class Streamed:
         n = 0
         last = md.num_row_groups - 1
         for g in range(md.num_row_groups):
-            t = self.pf.read_row_group(g)
+            t = checked(self.pf.read_row_group(g))
             pending.append(t)
             pending_rows.append(np.arange(offsets[g], offsets[g] + t.num_rows, dtype=np.int64))
             n += t.num_rows
@@ -338,7 +350,13 @@ class Context:
 
     def _read(self, name: str) -> pa.Table | None:
         if self.recording is not None:
-            return self.recording.table(name)
+            t = self.recording.table(name)
+            try:
+                return checked(t) if t is not None else None
+            except pa.ArrowInvalid as e:
+                self.problem("unreadable_table", file=TABLES[name].file, table=name,
+                             error=str(e).splitlines()[0])
+                return None
         assert self.container is not None
         spec = TABLES[name]
         if not self.container.exists(spec.file):
@@ -354,7 +372,7 @@ class Context:
             info["kv"] = (pf.schema_arrow.metadata or {}).get(b"aveas")
             info["rows"] = pf.metadata.num_rows
             info["row_groups"] = pf.metadata.num_row_groups
-            return pf.read()
+            return checked(pf.read())
         except (pa.ArrowException, OSError) as e:
             self.problem("unreadable_table", file=spec.file, table=name,
                          error=str(e).splitlines()[0])

@@ -138,3 +138,31 @@ def _mixed_case():
     corpus.c_overlap(sc)
     sc["meta"]["duration_s"] = 5.9
     return vf.build(sc)
+
+
+def _no_utf8(table, column: str, row: int):
+    """``table`` with the text of ``column`` at ``row`` made of bytes that are no UTF-8 (as a
+    flipped byte in a Parquet file decodes), the column plain strings."""
+    import pyarrow as pa
+
+    vals = [v.encode() if v is not None else b"" for v in table.column(column).cast(pa.string()).to_pylist()]
+    vals[row] = b"\xe3x"
+    offsets = np.r_[0, np.cumsum([len(v) for v in vals])].astype(np.int32)
+    bad = pa.Array.from_buffers(pa.string(), len(vals), [None, pa.py_buffer(offsets.tobytes()),
+                                                         pa.py_buffer(b"".join(vals))])
+    return table.set_column(table.column_names.index(column), column, bad)
+
+
+@pytest.mark.parametrize("table,column,config", [("participants", "class", None),
+                                                 ("states", "road_id", None),
+                                                 ("states", "road_id", STREAM)])
+def test_text_that_is_no_utf8_makes_the_table_unreadable_not_the_rules_fail(tmp_path, monkeypatch, table, column,
+                                                                           config):
+    """(Found by the fuzz tests: a flipped byte in participants.parquet made 37 rules fail.)"""
+    path = _write(vf.build(vf.fresh()), tmp_path / "r.aveas", monkeypatch)
+    f = path / f"{table}.parquet"
+    pq.write_table(_no_utf8(pq.read_table(f), column, 3), f)
+    report = aveas_format.validate(path, config=config)
+    assert report.failures == []
+    found = [x for r in report.results if r.code == "structure.unreadable_table" for x in r.sample]
+    assert found and f"column '{column}'" in found[0].message and "UTF8" in found[0].message
