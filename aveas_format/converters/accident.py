@@ -196,6 +196,9 @@ def build_map_from_lines(roads: dict[str, dict[str, tuple[str, np.ndarray]]], ge
                         attributes={"weight": "standard", "color": "standard", "width": "0.15",
                                     "laneChange": "none" if kind == "edge" else "both"})
 
+    if not roads:
+        raise FormatError("no road lines (the table of road lines has no rows): the map is built "
+                          "from them", path=path)
     out_roads = []
     xs, ys = [], []
     for rid, lines in roads.items():

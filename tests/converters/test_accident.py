@@ -137,3 +137,6 @@ def test_malformed_inputs_are_located(tmp_path):
     d = write_case(tmp_path / "bad5", roads="road_id,line_id,kind,seq,x,y\n1,e,edge,0,0,0\n1,e,edge,1,10,0\n")
     with pytest.raises(aveas_format.FormatError, match=r"roads.csv: road '1' has no reference line"):
         convert("accident", [d])
+    d = write_case(tmp_path / "bad6", roads="road_id,line_id,kind,seq,x,y\n")  # (found by make fuzz)
+    with pytest.raises(aveas_format.FormatError, match=r"roads.csv: no road lines"):
+        convert("accident", [d])

@@ -26,7 +26,7 @@ def test_both_paths_give_the_same_medians(pairs, runs):
         seg, vals = seg[order], vals[order]
     with np.errstate(invalid="ignore"):  # (inf - inf in a middle pair: NaN on both paths)
         want = seg_median(seg, vals, "numpy")
-    got = seg_median(seg, vals, "numba")
+        got = seg_median(seg, vals, "numba")
     assert np.array_equal(got[0], want[0])
     assert np.array_equal(got[1], want[1], equal_nan=True)
 
