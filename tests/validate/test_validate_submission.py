@@ -317,3 +317,21 @@ def test_ambiguous_extension_needs_from_unless_the_content_tells(capsys, tmp_pat
     other.write_text(json.dumps({"tracks": []}))
     code, _, err = cli(capsys, "validate", other)
     assert code == 2 and "several converters read .json" in err and "--from" in err
+
+
+def test_openscenario_bounding_box_that_is_no_number_is_located(capsys, tmp_path):
+    """(Found by make fuzz: a flipped byte in a Dimensions value was a ValueError traceback.)"""
+    (tmp_path / "map.xodr").write_bytes(STRAIGHT_MAP.read_bytes())
+    p = tmp_path / "s.xosc"
+    bad = XOSC.replace('<ScenarioObject name="Odd"><Vehicle name="x" vehicleCategory="hovercraft"><BoundingBox>'
+                       '<Center x="0" y="0" z="0.7"/>\n<Dimensions width="1.8" length="4.5"',
+                       '<ScenarioObject name="Odd"><Vehicle name="x" vehicleCategory="hovercraft"><BoundingBox>'
+                       '<Center x="0" y="0" z="0.7"/>\n<Dimensions width="1.8" length=":.5"')
+    assert bad != XOSC
+    p.write_text(bad)
+    code, out, err = cli(capsys, "validate", p, "--format", "json")
+    assert code == 1, err
+    found = {(f.location.entity, f.location.line) for f in
+             source_results(Report.from_json(out))["source.openscenario.no_bounding_box"].sample}
+    lines = bad.splitlines()
+    assert ("Odd", next(i for i, t in enumerate(lines, 1) if 'length=":.5"' in t)) in found

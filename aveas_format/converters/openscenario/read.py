@@ -124,6 +124,7 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
     """
     from aveas_format.converters.openscenario.params import Catalogs, declare, resolve_tree
     from aveas_format.converters.openscenario.replay import Replay
+    from aveas_format.converters.openscenario.shapes import ShapeError, attr
     from aveas_format.mapref.crs import LocalFrame
     from aveas_format.opendrive import load_map
 
@@ -171,8 +172,13 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
             report_source("source.openscenario.unknown_category",
                           f"entity {name!r}: category {cat!r} has no class of the format: class "
                           "other", file=str(path), entity=name, line=el.sourceline)
-        f = {k: float(dims.get(k, "nan")) for k in ("length", "width", "height")}
-        c = {k: float(centre.get(k, "0")) if centre is not None else 0.0 for k in ("x", "y")}
+        try:
+            f = {k: attr(dims, k, math.nan) for k in ("length", "width", "height")}
+            c = {k: attr(centre, k, 0.0) if centre is not None else 0.0 for k in ("x", "y")}
+        except ShapeError as e:  # (a value that is no number: the entity is not converted)
+            problems[name] = f"its BoundingBox: {e.message}"
+            where[name] = ("source.openscenario.no_bounding_box", e.where.get("line"))
+            continue
         info[name] = {"class": props.get("aveas:class") or CATEGORY_TO_CLASS.get(cat or "", "other"),
                       **f, "cx": c["x"], "cy": c["y"],
                       "participant_id": props.get("aveas:participant_id"),
