@@ -474,11 +474,11 @@ class CompiledAttributes:
         boxes, rows = self._rows(name)
         it = self.items[rows]
         vals = [None] * len(rows)
-        for k, get in ((0, lambda r: r[:, 3].astype(bool).tolist()),
-                       (1, lambda r: self.nums[r[:, 3]].tolist()),
-                       (2, lambda r: self.strs.take(pa.array(r[:, 3])).to_pylist()),
-                       (3, lambda r: [self.nums[a:a + c].tolist() for a, c in r[:, 3:5].tolist()])):
-            at = np.flatnonzero(it[:, 1] == k)
+        for kind, get in (("boolean", lambda r: r[:, 3].astype(bool).tolist()),
+                          ("num", lambda r: self.nums[r[:, 3]].tolist()),
+                          ("text", lambda r: self.strs.take(pa.array(r[:, 3])).to_pylist()),
+                          ("vec", lambda r: [self.nums[a:a + c].tolist() for a, c in r[:, 3:5].tolist()])):
+            at = np.flatnonzero(it[:, 1] == KIND_CODE[kind])
             for i, v in zip(at.tolist(), get(it[at])):
                 vals[i] = v
         return boxes, vals
