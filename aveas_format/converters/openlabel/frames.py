@@ -290,7 +290,10 @@ class _FrameRows:
         self.objects, self.cs, self.path = objects, cs, path
         self.keys: list = []  # per frame occurrence (file order)
         self.stamps: list = []
-        self.frame_uids: list[np.ndarray] = []
+        #: the objects' indices (into ``uid_index``) of every frame occurrence, flat in parts, and
+        #: how many each frame has
+        self.uid_parts: list[np.ndarray] = []
+        self.frame_len: list[int] = []
         self.uid_index: dict[str, int] = {}
         # the boxes of the frames not yet converted: per object in a frame its frame, uid, value
         self.p_j: list[int] = []
@@ -338,7 +341,8 @@ class _FrameRows:
         if not fobjs.keys() <= ui.keys():
             for u in fobjs:
                 ui.setdefault(u, len(ui))
-        self.frame_uids.append(np.fromiter(map(ui.__getitem__, fobjs), np.int64, len(fobjs)))
+        self.uid_parts.append(np.fromiter(map(ui.__getitem__, fobjs), np.int64, len(fobjs)))
+        self.frame_len.append(len(fobjs))
         fp = fr.get("frame_properties")
         edges = self.cs.frame_edges(fp.get("transforms") if isinstance(fp, dict) else None)
         self.p_edges[j] = (edges, {})
@@ -353,7 +357,8 @@ class _FrameRows:
                 _, _, moving = self._resolve(cub.get("coordinate_system"), j)
                 if moving:  # the static cuboid, placed by this frame's transforms
                     ui.setdefault(u, len(ui))
-                    self.frame_uids[-1] = np.append(self.frame_uids[-1], ui[u])
+                    self.uid_parts[-1] = np.append(self.uid_parts[-1], ui[u])
+                    self.frame_len[-1] += 1
                     self.moving_static.add(u)
                     self.p_j.append(j)
                     self.p_u.append(u)
@@ -470,7 +475,8 @@ class _FrameRows:
                 ui[u] = len(ui)
         idx = np.fromiter(map(ui.__getitem__, us), np.int64, len(us))
         lens = np.fromiter(map(len, objs), np.int64, len(objs))
-        self.frame_uids.extend(np.split(idx, np.cumsum(lens)[:-1]))
+        self.uid_parts.append(idx)
+        self.frame_len.extend(lens.tolist())
         if us:
             self._keep(blk.cols, blk.ext, blk.found, np.repeat(np.arange(j0, j0 + len(objs)), lens), us, idx)
 
@@ -486,8 +492,14 @@ class _FrameRows:
         names = list(self.uid_index)
         objects = self.objects
         # the objects the frames list and the objects member does not, in order of appearance
-        listed = [self.frame_uids[last[k]] for k in fkeys]
-        uniq, first = np.unique(np.concatenate(listed) if listed else np.zeros(0, np.int64), return_index=True)
+        flat = np.concatenate(self.uid_parts) if self.uid_parts else np.zeros(0, np.int64)
+        flen = np.asarray(self.frame_len, np.int64)
+        js = np.asarray([last[k] for k in fkeys], np.int64)
+        if len(js) != len(flen) or (js != np.arange(len(js))).any():  # (the frames' uids in key order)
+            lens = flen[js]
+            ends = np.cumsum(lens)
+            flat = flat[np.arange(int(lens.sum())) + np.repeat((np.cumsum(flen) - flen)[js] - (ends - lens), lens)]
+        uniq, first = np.unique(flat, return_index=True)
         seen = {u: None for u in map(names.__getitem__, uniq[np.argsort(first)].tolist()) if u not in objects}
         rows: dict[str, np.ndarray] = {}
         ext: dict[str, tuple] = {}
