@@ -295,8 +295,7 @@ class Context:
             try:
                 self._keys[ck] = st.pf.read(columns=present)
             except (pa.ArrowException, OSError) as e:
-                self.problem("unreadable_table", file=spec.file, table=name,
-                             error=str(e).splitlines()[0])
+                self._unreadable(name, e)
                 self._keys[ck] = None
         t = self._keys[ck]
         return t.select([c for c in columns or spec.key if c in t.column_names]) if t is not None \
@@ -319,8 +318,7 @@ class Context:
                     yield self._batch(name, table, rows, k)
                     k += 1
             except (pa.ArrowException, OSError) as e:
-                self.problem("unreadable_table", file=TABLES[name].file, table=name,
-                             error=f"batch {k}: " + str(e).splitlines()[0])
+                self._unreadable(name, e, f"batch {k}: ")
 
     def _batch(self, name: str, table: pa.Table, rows: np.ndarray, k: int) -> Context:
         b = Context.__new__(Context)
@@ -354,8 +352,7 @@ class Context:
             try:
                 return checked(t) if t is not None else None
             except pa.ArrowInvalid as e:
-                self.problem("unreadable_table", file=TABLES[name].file, table=name,
-                             error=str(e).splitlines()[0])
+                self._unreadable(name, e)
                 return None
         assert self.container is not None
         spec = TABLES[name]
@@ -374,9 +371,13 @@ class Context:
             info["row_groups"] = pf.metadata.num_row_groups
             return checked(pf.read())
         except (pa.ArrowException, OSError) as e:
-            self.problem("unreadable_table", file=spec.file, table=name,
-                         error=str(e).splitlines()[0])
+            self._unreadable(name, e)
             return None
+
+    def _unreadable(self, name: str, e: Exception, prefix: str = "") -> None:
+        """The table ``name`` could not be read (``e``: its first line is the finding's error)."""
+        self.problem("unreadable_table", file=TABLES[name].file, table=name,
+                     error=prefix + str(e).splitlines()[0])
 
     def _stream(self, name: str) -> bool:
         """Register ``name`` as streamed when it is large enough (and, for states, sorted by
