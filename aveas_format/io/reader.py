@@ -158,18 +158,9 @@ def read_table(container: Container, name: str, meta: RecordingMeta, *,
                                 "truncated after writing)", path=where)
         if plan is not None:
             plan.hashed.append(name)
-    try:
-        pf = pq.ParquetFile(pa.BufferReader(buf))
-    except (pa.ArrowException, OSError) as e:
-        raise RecordingIOError(f"not a readable Parquet file (truncated or corrupt): "
-                               f"{str(e).splitlines()[0]}", path=where) from None
-    if entry is not None and pf.metadata.num_rows != entry.rows:
-        raise ChecksumError(f"{pf.metadata.num_rows} rows, recording.json says {entry.rows}",
-                            path=where)
-    _aveas_key(pf, name, where)
     steps = list(migrations)
-    if not steps:  # fail fast, before decoding anything (migrated tables are checked after)
-        _check_types(pf.schema_arrow, spec, where)
+    # (migrated tables are checked after the migration)
+    pf = _checked_file(pa.BufferReader(buf), meta, name, where, check_types=not steps)
 
     names = pf.schema_arrow.names
     read_cols: list[str] | None = None
@@ -202,6 +193,63 @@ def read_table(container: Container, name: str, meta: RecordingMeta, *,
     return conform(table, spec, where=where)
 
 
+def _checked_file(source: Any, meta: RecordingMeta, name: str, where: str, *,
+                  check_types: bool = True) -> pq.ParquetFile:
+    """A table's Parquet file after the checks that decode nothing (fail fast): readable, the rows
+    recording.json states, the ``aveas`` key, the declared column types."""
+    try:
+        pf = pq.ParquetFile(source)
+    except (pa.ArrowException, OSError) as e:
+        raise RecordingIOError(f"not a readable Parquet file (truncated or corrupt): "
+                               f"{str(e).splitlines()[0]}", path=where) from None
+    entry = meta.tables.get(name)
+    if entry is not None and pf.metadata.num_rows != entry.rows:
+        raise ChecksumError(f"{pf.metadata.num_rows} rows, recording.json says {entry.rows}",
+                            path=where)
+    _aveas_key(pf, name, where)
+    if check_types:
+        _check_types(pf.schema_arrow, TABLES[name], where)
+    return pf
+
+
+class TableParts:
+    """One table of a recording on disk read part by part, never whole (bounded memory): the
+    checks of :func:`read_table` that decode nothing when made, :meth:`read` a row group or some
+    columns as :func:`read_table` would give them (cast to the declared types), :meth:`verify`
+    the file's SHA-256 against recording.json, hashed in blocks (for a background thread while
+    the parts are read). Not for a recording that needs a migration (``Recording.migrated_from``):
+    read it whole."""
+
+    def __init__(self, path: str | Path, meta: RecordingMeta, name: str) -> None:
+        self.name, self.meta = name, meta
+        self.container = Container(path)
+        self.where = self.container.location(TABLES[name].file)
+        self.pf = _checked_file(self.container.input_file(TABLES[name].file), meta, name, self.where)
+        self.num_rows = self.pf.metadata.num_rows
+        self.num_row_groups = self.pf.metadata.num_row_groups
+        self.column_names = self.pf.schema_arrow.names
+
+    def read(self, row_group: int | None = None, columns: Sequence[str] | None = None) -> pa.Table:
+        """Row group ``row_group`` (None: every row) of ``columns`` (None: all), conformed."""
+        try:
+            t = (self.pf.read(columns=columns) if row_group is None
+                 else self.pf.read_row_group(row_group, columns=columns))
+        except (pa.ArrowException, OSError) as e:
+            raise RecordingIOError(f"cannot decode Parquet data (corrupt file): "
+                                   f"{str(e).splitlines()[0]}", path=self.where) from None
+        return conform(t, TABLES[self.name], where=self.where)
+
+    def verify(self) -> None:
+        """A ChecksumError when the file's SHA-256 is not the one recording.json states."""
+        entry = self.meta.tables.get(self.name)
+        if entry is not None and self.container.sha256(TABLES[self.name].file) != entry.sha256:
+            raise ChecksumError("SHA-256 differs from recording.json (the file was changed or "
+                                "truncated after writing)", path=self.where)
+
+    def close(self) -> None:
+        self.container.close()
+
+
 def _filter(table: pa.Table, participants: np.ndarray | None,
             time_range: tuple[float, float] | None) -> pa.Table:
     mask = None
@@ -232,14 +280,17 @@ def open_recording(path: str | Path, *, tables: Iterable[str] | None = None,
                    columns: Sequence[str] | dict[str, Sequence[str]] | None = None,
                    participants: Iterable[int] | None = None,
                    time_range: tuple[float, float] | None = None,
-                   verify: bool | None = None, plan: ReadPlan | None = None):  # -> Recording
+                   verify: bool | None = None, plan: ReadPlan | None = None,
+                   states: bool = True):  # -> Recording
     """Open a recording (directory or ZIP form).
 
     tables: names of the tables to read (default: all present). columns: a list (for states) or a
     dict ``{table: [columns]}``; key columns are always read. participants: ids to keep (participants,
     states, interior). time_range: (t0, t1) seconds, inclusive; interval tables keep the rows that
     overlap it. verify: hash tables (default: when a table is read whole). plan: filled with what was
-    read.
+    read. states False: every table but the states (``Recording.states`` None), for a consumer
+    that reads them part by part from ``Recording.path`` (:class:`TableParts`; an exporter that
+    streams them: ``Converter.streams_states``).
     """
     from aveas_format.io.recording import Recording
 
@@ -263,6 +314,8 @@ def open_recording(path: str | Path, *, tables: Iterable[str] | None = None,
                 raise RecordingIOError("file listed in recording.json:tables is missing",
                                        path=container.location(TABLES[name].file))
         wanted = present if tables is None else [t for t in present if t in set(tables)]
+        if not states:
+            wanted = [t for t in wanted if t != "states"]
         if tables is not None:
             unknown = sorted({t for t in tables if t not in TABLES})
             if unknown:

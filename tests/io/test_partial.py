@@ -85,6 +85,33 @@ def test_tables_selection(many_groups):
         aveas_format.open(many_groups, tables=["trajectories"])
 
 
+@pytest.mark.parametrize("form", ["m.aveas", "m.aveas.zip"])
+def test_table_parts_read_the_states_part_by_part(tmp_path, monkeypatch, form):
+    """Without the states (``states=False``), then row group by row group through TableParts: the
+    table read whole, the same types; the hash checked on demand."""
+    import pyarrow as pa
+
+    from aveas_format.io.reader import TableParts
+
+    monkeypatch.setattr(writer, "ROW_GROUP_ROWS", 100)
+    path = small_recording(n=20, steps=100).write(tmp_path / form)
+    rec = aveas_format.open(path, states=False)
+    assert rec.states is None and rec.participants.num_rows == 20
+    whole = aveas_format.open(path).states
+    parts = TableParts(path, rec.meta, "states")
+    try:
+        assert parts.num_row_groups == 20 and parts.num_rows == whole.num_rows
+        got = pa.concat_tables([parts.read(g) for g in range(parts.num_row_groups)])
+        assert got.equals(whole) and got.schema.equals(whole.schema)
+        assert parts.read(columns=["time"]).column("time").equals(whole.column("time"))
+        parts.verify()
+        rec.meta.tables["states"].sha256 = "0" * 64
+        with pytest.raises(aveas_format.ChecksumError, match="states.parquet"):
+            parts.verify()
+    finally:
+        parts.close()
+
+
 def test_partial_read_from_zip(tmp_path, monkeypatch):
     monkeypatch.setattr(writer, "ROW_GROUP_ROWS", 100)
     path = small_recording(n=10, steps=100).write(tmp_path / "z.aveas.zip")
