@@ -53,6 +53,7 @@ def export(
     conv.require()  # a missing optional dependency before reading the recording
     import aveas_format
 
-    rec = aveas_format.open(recording)
+    # (an exporter that streams the states reads them from the file: bounded memory)
+    rec = aveas_format.open(recording, states=not conv.streams_states)
     for p in conv(rec, output, options=raw):
         err.print(f"wrote {p}")

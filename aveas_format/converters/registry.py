@@ -10,7 +10,9 @@ Exporters (recording -> foreign format) register with ``direction="export"`` and
 refuses to replace any of them without ``--overwrite`` (:meth:`Converter.outputs`). The map next
 to the output (options ``write_map``/``map_file``, ``converters.common.companion_map_path``) is
 counted by default; an exporter that writes other files next to its output declares them with
-``outputs=``.
+``outputs=``. An exporter that reads the states itself, part by part from the recording's file
+when given a recording opened without them (``open_recording(path, states=False)``), declares
+``streams_states=True``: the CLI's ``export`` then opens the recording so (bounded memory).
 
 An importer declares which of the recording.json values a person must state (:data:`ASKED`:
 partner, start time, licence) its source can carry, ``provides=("start_time",)``: for the others
@@ -97,6 +99,9 @@ class Converter:
     outputs_fn: Callable[[Path, Any], list[Path]] | None = None
     #: which of :data:`ASKED` the source can carry (an importer)
     provides: tuple[str, ...] = ()
+    #: an exporter that reads the states itself from a recording opened without them
+    #: (``open_recording(path, states=False)``), in bounded memory: the CLI opens it so
+    streams_states: bool = False
 
     def unstated(self, options: dict[str, Any] | None) -> list[str]:
         """The values of :data:`ASKED` that neither the source can carry nor ``options`` give: an
@@ -172,11 +177,12 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
               direction: str = "import", needs_map: bool = True, version: str = "1",
               requires: tuple[str, ...] = (), extra: str | None = None,
               outputs: Callable[[Path, Any], list[Path]] | None = None,
-              provides: tuple[str, ...] = (),
+              provides: tuple[str, ...] = (), streams_states: bool = False,
               ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Register a converter function (decorator); ``requires``/``extra``: its optional
     dependencies, ``outputs``: an exporter's files, ``provides``: the :data:`ASKED` values its
-    source carries (see the module docstring)."""
+    source carries, ``streams_states``: an exporter reads the states from the recording's file
+    (see the module docstring)."""
     if direction not in ("import", "export"):
         raise ValueError("direction must be 'import' or 'export'")
     key = name if direction == "import" else f"{name}:export"
@@ -188,7 +194,8 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
         CONVERTERS[key] = Converter(name=name, direction=direction, description=description,
                                     patterns=patterns, method=method, options=options, fn=fn,
                                     needs_map=needs_map, version=version, requires=requires,
-                                    extra=extra, outputs_fn=outputs, provides=provides)
+                                    extra=extra, outputs_fn=outputs, provides=provides,
+                                    streams_states=streams_states)
         return fn
 
     return register

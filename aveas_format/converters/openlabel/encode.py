@@ -258,6 +258,8 @@ def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
     time. ``part``: only the chunks ``[first, last)`` of :func:`chunk_bounds` (their text is the
     same as in the whole sequence: a comma before every chunk but the very first)."""
     order = np.argsort(frame_of_row, kind="stable")  # in a frame: the objects in the states' order
+    if len(order) < 2**31:
+        order = order.astype(np.int32)  # (half the memory: one index per state)
     fs = frame_of_row[order]
     ts = numbers(times)
     bounds = chunk_bounds(fs, chunk_rows)

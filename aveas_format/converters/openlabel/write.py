@@ -47,6 +47,7 @@ from aveas_format.converters.openlabel.profile import (
     table_to_json,
 )
 from aveas_format.converters.openlabel.encode import CHUNK_ROWS, FrameParts, dumps, frame_chunks, orjson
+from aveas_format.converters.openlabel.states import open_states
 from aveas_format.converters.openlabel.stream import compression
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.io.arrow import column_numpy
@@ -130,28 +131,40 @@ def openlabel_chunks(rec, *, opendrive: str = "map.xodr", extension: bool = True
     """The compact JSON of the OpenLABEL document of a recording, streamed: the keys of the
     document in this order (metadata, frames, frame_intervals, objects, contexts, events), the
     frames a chunk of about ``chunk_rows`` (default :data:`CHUNK_ROWS`) state rows at a time (never
-    the whole text in memory). ``workers`` > 1 with a ``spill_dir`` (fork available, enough rows): the frames in that many
-    parts, all but the first encoded by forked processes into files in ``spill_dir``, given as
-    :class:`~aveas_format.safeio.atomic.FileSegment` s (for :func:`write_chunks_atomic`)."""
+    the whole text in memory). ``workers`` > 1 with a ``spill_dir`` (fork available, enough
+    rows): the frames in that many parts, all but the first encoded by forked processes into
+    files in ``spill_dir``, given as :class:`~aveas_format.safeio.atomic.FileSegment` s (for
+    :func:`write_chunks_atomic`). A recording opened without its states
+    (``open_recording(path, states=False)``) has them read from its file in bounded memory
+    (:class:`~.states.SpilledStates`, spilled to a temporary directory in ``spill_dir``)."""
     chunk_rows = chunk_rows or CHUNK_ROWS
     meta = rec.meta
+    states = open_states(rec, chunk_rows, spill_dir)
+    try:
+        yield from _document(rec, states, meta, opendrive, extension, road_attributes, chunk_rows,
+                             workers, spill_dir)
+    finally:
+        states.close()
+
+
+def _document(rec, states, meta, opendrive: str, extension: bool, road_attributes: bool,
+              chunk_rows: int, workers: int, spill_dir: Path | None) -> Iterator[Any]:
+    """The chunks of :func:`openlabel_chunks`, the states read through ``states``
+    (:func:`~.states.open_states`)."""
     thr = meta.thresholds.model_dump() if meta.thresholds else {}
     thr_out = {k: (thr.get(k) or v) for k, v in _DEFAULT_THRESHOLDS.items()}
     metadata = _profile_metadata(meta, opendrive, thr_out)
     if extension:
-        metadata[EXT] = _extension(rec, thr)
+        metadata[EXT] = _extension(rec, thr, states.column_names)
     static = _Statics(rec.participants)
-    t = column_numpy(rec.states, "time")
-    times, frame_of_row = np.unique(t, return_inverse=True)
-    del t
-    acc_w = _track_acceleration(rec)
+    times, frame_of_row = states.times, states.frame_of_row
     summary = _Summary(static)
     interior, impact = _interior_rows(rec.interior), _impact(rec.derived, times, thr_out)
 
     def prepare(rows: np.ndarray) -> dict[str, Any]:
         """The inputs of the frames' objects for the state rows ``rows`` (one chunk: the memory
-        of the export is the recording plus one chunk's columns)."""
-        cols = _Columns(rec, static, rows, acc_w)
+        of the export is the states as ``states`` holds them plus one chunk's columns)."""
+        cols = _Columns(*states.take(rows), static)
         summary.add(cols)
         inputs = _frame_inputs(rec, cols, extension, road_attributes)
         inputs.update(interior=interior, impact=impact)
@@ -172,7 +185,8 @@ def openlabel_chunks(rec, *, opendrive: str = "map.xodr", extension: bool = True
             parts.close()
     tail: dict[str, Any] = {}
     tail["frame_intervals"] = [{"frame_start": 0, "frame_end": int(len(times) - 1)}] if len(times) else []
-    tail["objects"] = _objects(rec.participants, rec.states, static, frame_of_row, summary, extension)
+    tail["objects"] = _objects(rec.participants, states.participant_ids(), static, frame_of_row, summary,
+                               extension)
     del frame_of_row
     tail["contexts"] = _contexts(rec, times, summary)
     events = _events(rec.events, times)
@@ -238,13 +252,14 @@ class _Statics:
 
 
 class _Columns:
-    """The state rows ``rows`` (one chunk of the frames) as numpy columns, with velocity and
+    """The state rows ``s`` (one chunk of the frames) as numpy columns, with velocity and
     acceleration in the profile's vehicle frame (``vu, vv``, ``au, av``; the world-frame
-    acceleration ``ax_w, ay_w`` from :func:`_track_acceleration` where the states have none)."""
+    acceleration ``ax_w, ay_w``: ``acc_w`` where the states have none, see
+    :func:`~.states.world_acceleration`)."""
 
-    def __init__(self, rec, static: _Statics, rows: np.ndarray, acc_w: tuple | None) -> None:
+    def __init__(self, s: pa.Table, acc_w: tuple | None, static: _Statics) -> None:
         self.static = static
-        self.s = s = rec.states.take(pa.array(rows))
+        self.s = s
         self.pid = pid = s.column("participant_id").to_numpy()
         self.prow = static.rows(pid)
         self.t = column_numpy(s, "time")
@@ -256,7 +271,7 @@ class _Columns:
         self.vx, self.vy = vx, vy = tuple(column_numpy(s, c, missing=None) for c in ("vx", "vy"))
         self.vu, self.vv = _rot_body(vx, vy, h)
         self.ax, self.ay = ax, ay = tuple(column_numpy(s, c, missing=None) for c in ("ax", "ay"))
-        self.ax_w, self.ay_w = (ax, ay) if acc_w is None else (acc_w[0][rows], acc_w[1][rows])
+        self.ax_w, self.ay_w = (ax, ay) if acc_w is None else acc_w
         self.au, self.av = _rot_body(np.nan_to_num(self.ax_w), np.nan_to_num(self.ay_w), h)
         self.yaw_rate = column_numpy(s, "yaw_rate", missing=None)
         self.stds = {c: column_numpy(s, c, missing=None) for c in
@@ -276,20 +291,6 @@ class _Columns:
         #: rows on a road (road id and s known)
         self.on = (self.road_code >= 0) & np.isfinite(
             road_s if road_s is not None else np.full(n, np.nan))
-
-
-def _track_acceleration(rec) -> tuple[np.ndarray, np.ndarray] | None:
-    """The world-frame acceleration of every state where the states have none (it needs whole
-    tracks: from the derived kinematics, else estimated from the velocities), else None (the
-    states' own, read per chunk)."""
-    s = rec.states
-    if "ax" in s.column_names and "ay" in s.column_names:
-        return None
-    pid = s.column("participant_id").to_numpy()
-    t = column_numpy(s, "time")
-    vx, vy = (column_numpy(s, c, missing=None) for c in ("vx", "vy"))
-    ax, ay = (column_numpy(s, c, missing=None) for c in ("ax", "ay"))
-    return _world_acceleration(rec, pid, t, vx, vy, ax, ay)
 
 
 class _Summary:
@@ -336,25 +337,6 @@ class _Summary:
     @property
     def max_speed(self) -> float:
         return math.nan if self.nan_speed else float(self.speed_max[self.count > 0].max())
-
-
-def _world_acceleration(rec, pid: np.ndarray, t: np.ndarray, vx: np.ndarray, vy: np.ndarray,
-                        ax: np.ndarray | None, ay: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """The states' acceleration, else the derived kinematics', else estimated from the velocities."""
-    if ax is None or ay is None:
-        kin = rec.derived.get("kinematics") if rec.derived else None
-        a_est = None
-        if kin is not None and kin.num_rows == len(t):
-            a_est = tuple(column_numpy(kin, c, missing=None) for c in ("ax", "ay"))
-        if a_est is None:
-            from aveas_format.mapref.build import velocity_from_positions
-
-            a_est = velocity_from_positions(pid, t, vx, vy)
-        ax_w = np.nan_to_num(a_est[0]) if ax is None else ax
-        ay_w = np.nan_to_num(a_est[1]) if ay is None else ay
-    else:
-        ax_w, ay_w = ax, ay
-    return ax_w, ay_w
 
 
 # ================================================================================================
@@ -554,13 +536,13 @@ def _frame_inputs(rec, cols: _Columns, extension: bool, road_attributes: bool) -
 # objects, contexts, events, the extension block
 # ================================================================================================
 
-def _objects(p: pa.Table, s: pa.Table, static: _Statics, frame_of_row: np.ndarray, summary: _Summary,
-             extension: bool) -> dict[str, Any]:
+def _objects(p: pa.Table, pid: np.ndarray, static: _Statics, frame_of_row: np.ndarray,
+             summary: _Summary, extension: bool) -> dict[str, Any]:
     """``objects``: per participant its type, name, frame intervals and static data (size,
-    classification PMF, speed and acceleration extremes, ``is_recorder``, ``attached_to``)."""
+    classification PMF, speed and acceleration extremes, ``is_recorder``, ``attached_to``; ``pid``:
+    the participant of each state row)."""
     part_ids, classes, height = static.part_ids, static.classes, static.height
     length, width = static.length, static.width
-    pid = s.column("participant_id").to_numpy()
     order = np.argsort(pid, kind="stable")
     bounds = np.searchsorted(pid[order], part_ids), np.searchsorted(pid[order], part_ids, side="right")
     pmf = None
@@ -682,10 +664,10 @@ def _events(ev: pa.Table | None, times: np.ndarray) -> dict[str, Any]:
     return events
 
 
-def _extension(rec, thr: dict[str, Any]) -> dict[str, Any]:
+def _extension(rec, thr: dict[str, Any], states_columns: list[str]) -> dict[str, Any]:
     """``metadata.aveas_format``: what the profile cannot carry (recording.json, the small tables,
     column lists, the derived tables with their recording.json entries)."""
-    meta, p, s = rec.meta, rec.participants, rec.states
+    meta, p = rec.meta, rec.participants
     md = meta.model_dump(mode="json", exclude_none=True)
     for k in ("tables", "derived", "map", "source"):
         md.pop(k, None)
@@ -696,7 +678,7 @@ def _extension(rec, thr: dict[str, Any]) -> dict[str, Any]:
         "recording": md,
         "map": meta.map.model_dump(mode="json"),
         "thresholds_given": sorted(k for k, v in thr.items() if v is not None),
-        "states_columns": s.column_names,
+        "states_columns": states_columns,
         "participants_columns": p.column_names,
         "tables": {name: table_to_json(getattr(rec, name)) for name in
                    ("unobserved", "events", "environment", "interior")
@@ -749,6 +731,7 @@ def compressed(chunks, kind: str):
 
 
 @converter("openlabel", direction="export", options=OpenLabelExportOptions, outputs=_outputs,
+           streams_states=True,
            description="ASAM OpenLABEL 1.0 JSON, AVEAS profile (+ the map as .xodr next to it); "
                        "OUT.json.gz / OUT.json.zst: compressed")
 def export_openlabel(rec, output: Path, *, options: OpenLabelExportOptions) -> list[Path]:
