@@ -218,8 +218,6 @@ class SpilledStates:
     def take(self, rows: np.ndarray) -> tuple[pa.Table, tuple | None]:
         """The state rows ``rows`` (one chunk of frames, in frame order) and their world-frame
         acceleration (None: the states' own)."""
-        if not len(rows):
-            return pa.table({c: [] for c in self.column_names}), None
         b = int(self.bucket_of_frame[self.frame_of_row[rows[0]]])
         if b != self._bucket:
             self._table = None  # (the last bucket freed before the next is read)

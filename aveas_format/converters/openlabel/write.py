@@ -138,19 +138,19 @@ def openlabel_chunks(rec, *, opendrive: str = "map.xodr", extension: bool = True
     (``open_recording(path, states=False)``) has them read from its file in bounded memory
     (:class:`~.states.SpilledStates`, spilled to a temporary directory in ``spill_dir``)."""
     chunk_rows = chunk_rows or CHUNK_ROWS
-    meta = rec.meta
     states = open_states(rec, chunk_rows, spill_dir)
     try:
-        yield from _document(rec, states, meta, opendrive, extension, road_attributes, chunk_rows,
-                             workers, spill_dir)
+        yield from _document(rec, states, opendrive, extension, road_attributes, chunk_rows, workers,
+                             spill_dir)
     finally:
         states.close()
 
 
-def _document(rec, states, meta, opendrive: str, extension: bool, road_attributes: bool,
-              chunk_rows: int, workers: int, spill_dir: Path | None) -> Iterator[Any]:
+def _document(rec, states, opendrive: str, extension: bool, road_attributes: bool, chunk_rows: int,
+              workers: int, spill_dir: Path | None) -> Iterator[Any]:
     """The chunks of :func:`openlabel_chunks`, the states read through ``states``
     (:func:`~.states.open_states`)."""
+    meta = rec.meta
     thr = meta.thresholds.model_dump() if meta.thresholds else {}
     thr_out = {k: (thr.get(k) or v) for k, v in _DEFAULT_THRESHOLDS.items()}
     metadata = _profile_metadata(meta, opendrive, thr_out)
