@@ -124,3 +124,22 @@ def test_the_cli_export_reads_the_states_from_the_file(tmp_path, monkeypatch, sm
     want = _export(aveas_format.open(path), tmp_path / "loaded")
     assert (tmp_path / "cli.json").read_bytes() == want.replace(b'"opendrive":"map.xodr"',
                                                                 b'"opendrive":"cli.xodr"')
+
+
+def test_a_compressed_export_spills_next_to_its_output(tmp_path, monkeypatch, small_spill):
+    import gzip
+
+    from aveas_format.converters import get_converter
+
+    rec = highway_scene(n_vehicles=6, duration_s=6.0, seed=2)
+    path = _written(tmp_path, rec, monkeypatch)
+    dirs = []
+    real = states.SpilledStates.__init__
+    monkeypatch.setattr(states.SpilledStates, "__init__",
+                        lambda self, r, rows, spill_dir=None: (dirs.append(spill_dir), real(self, r, rows, spill_dir))[1])
+    export = get_converter("openlabel", "export")
+    for name, r in (("loaded", aveas_format.open(path)), ("spilled", aveas_format.open(path, states=False))):
+        (tmp_path / name).mkdir()
+        export(r, tmp_path / name / "x.json.gz", options={"write_map": False})
+    assert dirs == [tmp_path / "spilled"] and [p.name for p in (tmp_path / "spilled").iterdir()] == ["x.json.gz"]
+    assert gzip.open(tmp_path / "spilled" / "x.json.gz").read() == gzip.open(tmp_path / "loaded" / "x.json.gz").read()

@@ -746,7 +746,7 @@ def export_openlabel(rec, output: Path, *, options: OpenLabelExportOptions) -> l
     chunks = openlabel_chunks(rec, opendrive=map_name, extension=options.extension,
                               road_attributes=options.road_attributes,
                               workers=(options.workers or default_workers()) if plain else 1,
-                              spill_dir=output.parent if plain else None)
+                              spill_dir=output.parent)  # (parts: only with workers > 1)
     if options.indent:  # human-readable: the document whole (compact files are streamed)
         doc = json.loads(b"".join(chunks))
         chunks = iter([json.dumps(doc, indent=options.indent, allow_nan=False).encode()])
