@@ -175,14 +175,8 @@ def read_table(container: Container, name: str, meta: RecordingMeta, *,
     groups = _select_row_groups(pf, pid_filter, time_range, "time" if time_col == "time" else None)
     if plan is not None:
         plan.row_groups[name] = (len(groups), pf.metadata.num_row_groups)
-    try:
-        if len(groups) == pf.metadata.num_row_groups:
-            table = pf.read(columns=read_cols)
-        else:
-            table = pf.read_row_groups(groups, columns=read_cols)
-    except (pa.ArrowException, OSError) as e:
-        raise RecordingIOError(f"cannot decode Parquet data (corrupt file): {str(e).splitlines()[0]}",
-                               path=where) from None
+    table = _decoded(lambda: pf.read(columns=read_cols) if len(groups) == pf.metadata.num_row_groups
+                     else pf.read_row_groups(groups, columns=read_cols), where)
     table = _filter(table, pid_filter, time_range)
     for step in steps:
         fn = TABLE_MIGRATIONS.get(step, {}).get(name)
@@ -191,6 +185,15 @@ def read_table(container: Container, name: str, meta: RecordingMeta, *,
     if steps:
         _check_types(table.schema, spec, where)
     return conform(table, spec, where=where)
+
+
+def _decoded(read, where: str) -> pa.Table:
+    """``read()`` (a Parquet read), a corrupt file a RecordingIOError naming ``where``."""
+    try:
+        return read()
+    except (pa.ArrowException, OSError) as e:
+        raise RecordingIOError(f"cannot decode Parquet data (corrupt file): {str(e).splitlines()[0]}",
+                               path=where) from None
 
 
 def _checked_file(source: Any, meta: RecordingMeta, name: str, where: str, *,
@@ -231,12 +234,8 @@ class TableParts:
 
     def read(self, row_group: int | None = None, columns: Sequence[str] | None = None) -> pa.Table:
         """Row group ``row_group`` (None: every row) of ``columns`` (None: all), conformed."""
-        try:
-            t = (self.pf.read(columns=columns) if row_group is None
-                 else self.pf.read_row_group(row_group, columns=columns))
-        except (pa.ArrowException, OSError) as e:
-            raise RecordingIOError(f"cannot decode Parquet data (corrupt file): "
-                                   f"{str(e).splitlines()[0]}", path=self.where) from None
+        t = _decoded(lambda: self.pf.read(columns=columns) if row_group is None
+                     else self.pf.read_row_group(row_group, columns=columns), self.where)
         return conform(t, TABLES[self.name], where=self.where)
 
     def verify(self) -> None:
