@@ -97,17 +97,17 @@ def convert(
                       validate_, workers, scheduler)
         return
     check_output(output, overwrite)
-    from aveas_format.converters.registry import convert as run
+    from aveas_format.converters.registry import convert_to
 
-    rec = run(source, inputs, map_source=map_file, options=converter_workers(raw, conv.options, workers))
-    path = rec.write(output, overwrite=overwrite)
-    n = rec.states.num_rows
-    on_map = (n - rec.states.column("road_id").null_count) / n if n else 0.0
+    rec, n, on_road = convert_to(source, inputs, output, map_source=map_file, overwrite=overwrite,
+                                 options=converter_workers(raw, conv.options, workers))
+    path = rec.path
+    on_map = on_road / n if n else 0.0
     err.print(f"wrote {path}: {rec.participants.num_rows} participants, {n:,} states, "
               f"{on_map:.1%} on the map")
     if validate_:
         validate_written(path)  # map.mostly_off_road among the rules
-    else:
+    elif on_road < n:  # (every state on a road: nothing to say, and nothing to read again)
         _off_map_note(path)
 
 

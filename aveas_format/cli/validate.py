@@ -1,18 +1,21 @@
 """``aveas-format validate REC``: check a recording against the format; ``validate FILE``: a
 submitted file of any importable format (OpenLABEL, OSI, OpenSCENARIO...), imported on the fly.
 
-A submission is imported in memory by its converter (``--from NAME``, else the one whose file
-patterns match; ``.json`` / ``.mcap``, which several converters read, are told apart by their first
-bytes) with :func:`aveas_format.errors.collect_source_findings` active, and validated as a
-recording: the import's findings about the file become the ``source.*`` rules' findings, located
-in the source's own terms, next to the format's rules. Memory: the imported recording's columns
-(about 0.3 kB per state), as ``convert`` holds them before writing.
+A submission is imported by its converter (``--from NAME``, else the one whose file patterns
+match; ``.json`` / ``.mcap``, which several converters read, are told apart by their first bytes)
+with :func:`aveas_format.errors.collect_source_findings` active, and validated as a recording: the
+import's findings about the file become the ``source.*`` rules' findings, located in the source's
+own terms, next to the format's rules. Memory: a converter that writes the recording itself
+(``Converter.writes``: OpenLABEL) writes a large file's into a temporary directory, its states in
+parts, and the recording is validated from there (streamed: bounded memory); others hold the
+imported recording's columns (about 0.3 kB per state), as ``convert`` holds them before writing.
 """
 
 from __future__ import annotations
 
 import functools
 import json
+import tempfile
 from enum import Enum
 from pathlib import Path
 from typing import NoReturn
@@ -127,7 +130,6 @@ def validate(
 
     from aveas_format.errors import FormatError
     from aveas_format.validate import validate as run
-    from aveas_format.validate.render import render_json, render_text
 
     try:
         cfg = ValidationConfig.load(config)
@@ -147,22 +149,29 @@ def validate(
                [output] if output is not None else [])
     if out_dir is None or out_dir.is_dir():
         check_output(targets, overwrite)
-    figures = recording
     if submission:
         check_rules(only, skip)  # a usage error before the import's work
         model = _options_model(submission, source)
-        rec, found = import_submission(submission, source, map_file, converter_workers(
-            converter_options(options_file, option, model), model, workers), crs)
-        report = run(rec, select=only, ignore=skip, config=cfg, max_sample=max_sample,
-                     source_findings=found, name=" ".join(str(p) for p in submission))
-        figures = rec
-    else:
-        try:
-            report = run(recording, select=only, ignore=skip, config=cfg, max_sample=max_sample)
-        except ValueError as e:
-            if "unknown rule or family" in str(e):
-                raise fail(str(e), EXIT_USAGE) from None
-            raise
+        with tempfile.TemporaryDirectory(prefix="aveas-validate-") as work:  # (a large file's recording)
+            rec, found = import_submission(submission, source, map_file, converter_workers(
+                converter_options(options_file, option, model), model, workers), crs, Path(work))
+            report = run(rec, select=only, ignore=skip, config=cfg, max_sample=max_sample,
+                         source_findings=found, name=" ".join(str(p) for p in submission))
+            _finish(report, rec, out_dir, output, fmt, fail_on, docs_url)
+    try:
+        report = run(recording, select=only, ignore=skip, config=cfg, max_sample=max_sample)
+    except ValueError as e:
+        if "unknown rule or family" in str(e):
+            raise fail(str(e), EXIT_USAGE) from None
+        raise
+    _finish(report, recording, out_dir, output, fmt, fail_on, docs_url)
+
+
+def _finish(report, figures, out_dir: Path | None, output: Path | None, fmt, fail_on, docs_url) -> NoReturn:
+    """The report written (``-o DIR/``: JSON and HTML; ``-o FILE``; else stdout) and the exit
+    code (``figures``: the recording, or its path, for the HTML's figures)."""
+    from aveas_format.validate.render import render_json, render_text
+
     if out_dir is not None:
         from aveas_format.plot.report_html import render_html
         from aveas_format.safeio import write_text_atomic
@@ -190,6 +199,8 @@ def validate(
     else:
         print(text, end="" if text.endswith("\n") else "\n")
     raise typer.Exit(report.exit_code(fail_on.value))
+
+
 
 
 def _output_dir(typed: str | None) -> Path | None:
@@ -309,24 +320,32 @@ def _options_model(inputs: list[Path], source: str | None) -> type:
 
 
 def import_submission(inputs: list[Path], source: str | None = None, map_file: Path | None = None,
-                      options: dict | None = None, crs: str | None = None):
-    """Import a submitted file in memory and collect what the import finds about it: ``(recording,
-    [SourceFinding])``. Findings without a file name the (first) input; a warning of a converter
-    that does not report located findings yet becomes a ``source.other`` finding, so that nothing
-    it says is lost. An unimportable file raises the converter's (located) error."""
+                      options: dict | None = None, crs: str | None = None, workdir: Path | None = None):
+    """Import a submitted file and collect what the import finds about it: ``(recording,
+    [SourceFinding])``; with ``workdir``, a converter that writes the recording itself writes it
+    there (a large file's states in parts) and the recording is its path where its states were
+    not loaded. Findings without a file name the (first) input; a warning of a converter that
+    does not report located findings yet becomes a ``source.other`` finding, so that nothing it
+    says is lost. An unimportable file raises the converter's (located) error."""
     import dataclasses
     import warnings
 
-    from aveas_format.converters.registry import convert
+    from aveas_format.converters.registry import convert, convert_to, get_converter
     from aveas_format.errors import MissingCrsError, SourceFinding, collect_source_findings
 
     name = _converter_name(inputs, source)
+    to_disk = workdir is not None and get_converter(name).writes is not None
     with collect_source_findings() as found, warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         warnings.simplefilter("ignore", DeprecationWarning)
         warnings.simplefilter("ignore", PendingDeprecationWarning)
         try:
-            rec = convert(name, inputs, map_source=map_file, options=options, crs=crs)
+            if to_disk:
+                rec, _, _ = convert_to(name, inputs, workdir / "submission.aveas", map_source=map_file,
+                                       options=options, crs=crs)
+                rec = rec if rec.states is not None else rec.path
+            else:
+                rec = convert(name, inputs, map_source=map_file, options=options, crs=crs)
         except MissingCrsError as e:  # its message shows the convert command: show this one
             raise MissingCrsError(e.message.replace("aveas-format convert ", "aveas-format "
                                                     "validate ").replace(" -o OUT.aveas", ""),

@@ -2,6 +2,7 @@
 
 >>> from aveas_format.converters import convert
 >>> rec = convert("sumo-fcd", ["fcd.xml"], map_source="net.xodr", options={"net_file": "net.net.xml"})
+>>> rec, states, on_map = convert_to("openlabel", ["big.json"], "big.aveas")  # written (bounded memory)
 """
 
 from aveas_format.converters.registry import (
@@ -10,10 +11,11 @@ from aveas_format.converters.registry import (
     ConverterOptions,
     ImportOptions,
     convert,
+    convert_to,
     converter,
     get_converter,
     load_converters,
 )
 
-__all__ = ["CONVERTERS", "Converter", "ConverterOptions", "ImportOptions", "convert", "converter", "get_converter",
+__all__ = ["CONVERTERS", "Converter", "ConverterOptions", "ImportOptions", "convert", "convert_to", "converter", "get_converter",
            "load_converters"]

@@ -13,6 +13,9 @@ counted by default; an exporter that writes other files next to its output decla
 ``outputs=``. An exporter that reads the states itself, part by part from the recording's file
 when given a recording opened without them (``open_recording(path, states=False)``), declares
 ``streams_states=True``: the CLI's ``export`` then opens the recording so (bounded memory).
+An importer that can write the recording itself, its states in parts (bounded memory), declares
+``writes=FUNCTION`` (``(inputs, output, *, map_source, options, overwrite)``): :func:`convert_to`
+and the CLI's ``convert`` of one recording call it.
 
 An importer declares which of the recording.json values a person must state (:data:`ASKED`:
 partner, start time, licence) its source can carry, ``provides=("start_time",)``: for the others
@@ -102,6 +105,10 @@ class Converter:
     #: an exporter that reads the states itself from a recording opened without them
     #: (``open_recording(path, states=False)``), in bounded memory: the CLI opens it so
     streams_states: bool = False
+    #: an importer that writes the recording itself: ``(inputs, output, *, map_source, options,
+    #: overwrite) -> (the recording as written, its states, those on the map)`` (its states not
+    #: loaded where they were written in parts)
+    writes: Callable[..., Any] | None = None
 
     def unstated(self, options: dict[str, Any] | None) -> list[str]:
         """The values of :data:`ASKED` that neither the source can carry nor ``options`` give: an
@@ -178,11 +185,12 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
               requires: tuple[str, ...] = (), extra: str | None = None,
               outputs: Callable[[Path, Any], list[Path]] | None = None,
               provides: tuple[str, ...] = (), streams_states: bool = False,
+              writes: Callable[..., Any] | None = None,
               ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Register a converter function (decorator); ``requires``/``extra``: its optional
     dependencies, ``outputs``: an exporter's files, ``provides``: the :data:`ASKED` values its
-    source carries, ``streams_states``: an exporter reads the states from the recording's file
-    (see the module docstring)."""
+    source carries, ``streams_states``: an exporter reads the states from the recording's file,
+    ``writes``: an importer writes the recording itself (see the module docstring)."""
     if direction not in ("import", "export"):
         raise ValueError("direction must be 'import' or 'export'")
     key = name if direction == "import" else f"{name}:export"
@@ -195,7 +203,7 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
                                     patterns=patterns, method=method, options=options, fn=fn,
                                     needs_map=needs_map, version=version, requires=requires,
                                     extra=extra, outputs_fn=outputs, provides=provides,
-                                    streams_states=streams_states)
+                                    streams_states=streams_states, writes=writes)
         return fn
 
     return register
@@ -223,6 +231,32 @@ def convert(name: str, inputs: list[str | Path], *, map_source: str | Path | byt
 
     ``crs`` is the recording's CRS where the map has no ``<geoReference>`` (the common import
     option ``crs``; it wins over ``options["crs"]``)."""
+    return _run(name, inputs, map_source, options, crs,
+                lambda conv, paths, opts: conv(paths, map_source=map_source, options=opts))
+
+
+def convert_to(name: str, inputs: list[str | Path], output: str | Path, *,
+               map_source: str | Path | bytes | None = None, options: dict[str, Any] | None = None,
+               crs: str | None = None, overwrite: bool = False) -> tuple[Any, int, int]:
+    """Run the importer ``name`` on ``inputs`` and write the recording to ``output``: ``(the
+    recording as written, its states, those on the map)``. An importer that ``writes`` the
+    recording itself writes its states in parts (bounded memory; the recording returned has
+    them not loaded), others return a recording in memory, written here."""
+    def run(conv: Converter, paths: list[Path], opts: ConverterOptions) -> tuple[Any, int, int]:
+        if conv.writes is not None:
+            conv.require()
+            return conv.writes(paths, Path(output), map_source=map_source, options=opts,
+                               overwrite=overwrite)
+        rec = conv(paths, map_source=map_source, options=opts)
+        rec.write(output, overwrite=overwrite)
+        n = rec.states.num_rows
+        return rec, n, n - rec.states.column("road_id").null_count
+
+    return _run(name, inputs, map_source, options, crs, run)
+
+
+def _run(name: str, inputs: list[str | Path], map_source: Any, options: dict[str, Any] | None,
+         crs: str | None, call: Callable[[Converter, list[Path], ConverterOptions], Any]) -> Any:
     conv = get_converter(name)
     if crs is not None:
         options = {**(options or {}), "crs": crs}
@@ -235,7 +269,7 @@ def convert(name: str, inputs: list[str | Path], *, map_source: str | Path | byt
 
             raise RecordingIOError("input not found", path=p)
     try:
-        return conv(paths, map_source=map_source, options=opts)
+        return call(conv, paths, opts)
     except MissingCrsError as e:
         from aveas_format.mapref.build import EXAMPLE_CRS
 

@@ -155,10 +155,22 @@ def check_target(path: Path, overwrite: bool) -> Path:
     return parent
 
 
-def write_recording(rec, path: str | Path, *, overwrite: bool = False, form: str | None = None) -> Path:
+class StatesFile:
+    """A ``states.parquet`` written elsewhere in parts (an importer that writes its states row
+    group by row group: bounded memory), to be taken into a recording as it is: the file (on the
+    same file system as the recording), its rows and SHA-256. :func:`write_recording` moves it in."""
+
+    def __init__(self, path: Path, rows: int, sha256: str) -> None:
+        self.path, self.rows, self.sha256 = Path(path), rows, sha256
+
+
+def write_recording(rec, path: str | Path, *, overwrite: bool = False, form: str | None = None,
+                    states_file: StatesFile | None = None) -> Path:
     """Write ``rec`` (a Recording) to ``path`` atomically; return the path.
 
-    form: "directory" or "zip" (default: zip when the name ends in ``.zip``).
+    form: "directory" or "zip" (default: zip when the name ends in ``.zip``). states_file: the
+    states as a :class:`StatesFile` (moved in, not read; ``rec.states`` is then left out and
+    None afterwards).
     """
     path = Path(path)
     form = form or ("zip" if path.name.endswith(".zip") else "directory")
@@ -171,6 +183,9 @@ def write_recording(rec, path: str | Path, *, overwrite: bool = False, form: str
     prepared: dict[str, pa.Table] = {}
     for name, table in rec.tables().items():
         spec = TABLES[name]
+        if states_file is not None and name == "states":
+            entries[name] = TableEntry(rows=states_file.rows, sha256=states_file.sha256)
+            continue
         t = prepare_table(table, spec)
         buf = parquet_bytes(t, spec)
         members[spec.file] = buf
@@ -193,6 +208,8 @@ def write_recording(rec, path: str | Path, *, overwrite: bool = False, form: str
         if form == "directory":
             tmp.mkdir()
             # recording.json last: a directory without it never reads as a recording
+            if states_file is not None:  # (written and synced by its writer)
+                os.replace(states_file.path, tmp / TABLES["states"].file)
             for name in sorted(members, key=lambda n: n == "recording.json"):
                 target = tmp / name
                 target.parent.mkdir(parents=True, exist_ok=True)
@@ -206,6 +223,10 @@ def write_recording(rec, path: str | Path, *, overwrite: bool = False, form: str
                     zf.writestr(zipfile.ZipInfo(name, date_time=(1980, 1, 1, 0, 0, 0)),
                                 memoryview(members[name]).tobytes() if not isinstance(members[name], bytes)
                                 else members[name])
+                if states_file is not None:  # (streamed in, not read whole)
+                    info = zipfile.ZipInfo(TABLES["states"].file, date_time=(1980, 1, 1, 0, 0, 0))
+                    with open(states_file.path, "rb") as src, zf.open(info, "w", force_zip64=True) as dst:
+                        shutil.copyfileobj(src, dst, 1 << 20)
             with open(tmp, "rb+") as f:
                 os.fsync(f.fileno())
         _replace(tmp, path, overwrite)
@@ -218,6 +239,8 @@ def write_recording(rec, path: str | Path, *, overwrite: bool = False, form: str
         raise
     rec.meta = meta
     rec.replace_tables(prepared)
+    if states_file is not None:
+        rec.states = None
     rec.path = path
     return path
 

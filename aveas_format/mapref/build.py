@@ -179,7 +179,7 @@ def build_recording(
     p = _fill_participants(p, rec_prov)
     s = prepare_table(conform(s, TABLES["states"]), TABLES["states"])
     frame = LocalFrame(crs, offset=net.header.offset)
-    s = _fill_states(s, frame, net if reference else None)
+    s = fill_states(s, frame, net if reference else None)
 
     t = s.column("time").to_numpy() if s.num_rows else np.zeros(0)
     pid = s.column("participant_id").to_numpy() if s.num_rows else np.zeros(0, np.int64)
@@ -246,7 +246,10 @@ def _fill_participants(p: pa.Table, prov: RecordingProvenance) -> pa.Table:
     return prepare_table(p, TABLES["participants"])
 
 
-def _fill_states(s: pa.Table, frame, net) -> pa.Table:
+def fill_states(s: pa.Table, frame, net) -> pa.Table:
+    """The states' velocity, heading, WGS 84 and (``net``: from the map) road coordinates where
+    ``s`` has not got them (rows sorted by participant and time; whole tracks: an importer that
+    writes its states in parts gives them a participant at a time)."""
     for need in ("participant_id", "time", "x", "y"):
         if need not in s.column_names:
             raise FormatError(f"states: column {need!r} is required")

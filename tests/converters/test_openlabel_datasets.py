@@ -18,56 +18,12 @@ from aveas_format.converters.common import resolve_timestamps
 from aveas_format.converters.labels import label_kind
 
 from helpers_common import STRAIGHT_MAP
-
-# KITTI's rectified left camera, 1.65 m above the ground, looking along the vehicle's x axis:
-# camera x = -vehicle y, camera y = -vehicle z, camera z = vehicle x
-CAM = [0.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0, 1.65, 0.0, 0.0, 0.0, 1.0]
-CS = {"odom": {"type": "scene_cs", "parent": "", "children": ["vehicle-iso8855"]},
-      "vehicle-iso8855": {"type": "local_cs", "parent": "odom", "children": ["CAM_LEFT"]},
-      "CAM_LEFT": {"type": "sensor_cs", "parent": "vehicle-iso8855", "children": [],
-                   "pose_wrt_parent": {"matrix4x4": CAM}}}
-
-
-def kitti_box(x_fwd, y_left, ground_z, ry, length, height, width):
-    """A KITTI-style cuboid (VCD's OpenLABEL form): the box centre in CAM_LEFT, rotation ry about
-    the camera's y axis, sizes along the camera axes (x: length, y: height, z: width)."""
-    centre_cam = [-y_left, 1.65 - (ground_z + height / 2), x_fwd]
-    return {"name": "box3D", "coordinate_system": "CAM_LEFT",
-            "val": [*centre_cam, 0, ry, 0, length, height, width]}
-
+from helpers_converters import kitti_box, kitti_doc
 
 def write(tmp_path, doc, name="labels.json"):
     p = tmp_path / name
     p.write_text(json.dumps({"openlabel": doc}))
     return p
-
-
-def kitti_doc(n=20, stamps=None, ego_step=1.0):
-    """A pedestrian walking across 10 m ahead, a car driving ahead, KITTI's DontCare with sentinel
-    sizes, and the ego car as a static cuboid in vehicle-iso8855 moved by per-frame odometry."""
-    objects = {"0": {"name": "Pedestrian0", "type": "Pedestrian"}, "1": {"name": "Car1", "type": "Car"},
-               "-1": {"name": "DontCare", "type": "DontCare"},
-               "-2": {"name": "Egocar", "type": "Egocar", "object_data": {"cuboid": [
-                   {"name": "box3D", "coordinate_system": "vehicle-iso8855",
-                    "val": [1.35, 0.0, 0.736, 0.0, 0.0, 0.0, 4.765, 1.82, 1.47]}]}}}
-    frames = {}
-    for k in range(n):
-        odo = np.eye(4)
-        odo[0, 3] = ego_step * k  # the ego drives along x of odom
-        fp = {"transforms": {"vehicle-iso8855_to_odom": {
-            "src": "vehicle-iso8855", "dst": "odom",
-            "transform_src_to_dst": {"matrix4x4": odo.ravel().tolist()}}}}
-        if stamps is not None:
-            fp["timestamp"] = stamps[k]
-        frames[str(k)] = {"frame_properties": fp, "objects": {
-            # walking along -y (to the right) at 1 m/frame... of 0.1 s = 1.4 m/s: 0.14 m per frame
-            "0": {"object_data": {"cuboid": [kitti_box(10.0, 3.0 - 0.14 * k, 0.0, 0.0, 0.8, 1.75, 0.6)]}},
-            "1": {"object_data": {"cuboid": [kitti_box(20.0 + 0.5 * k, -3.5, 0.0, -math.pi / 2, 4.2, 1.5,
-                                                       1.7)]}},
-            "-1": {"object_data": {"cuboid": [{"name": "box3D", "coordinate_system": "CAM_LEFT",
-                                               "val": [-10, 499, -1, 0, -1, 0, -1000, -1000, -1000]}]}}}}
-    return {"metadata": {"schema_version": "1.0.0"}, "coordinate_systems": CS, "objects": objects,
-            "frames": frames}
 
 
 def by_source(rec, source_id):

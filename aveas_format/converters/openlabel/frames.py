@@ -315,6 +315,11 @@ class _FrameRows:
         #: what the frames' checks found: (code, attribute or coordinate system) ->
         #: [first frame key, first object uid, count]
         self.found: dict[tuple[str, str], list] = {}
+        #: the import's parts (:class:`.parts.Parts`: an import that writes its recording itself)
+        #: decide at the first block whether the rows are spilled (:class:`.spill.RowSpill`)
+        self.parts = None
+        self.spill = None
+        self._spill_decided = False
 
     def _needs_size(self, u: str) -> bool:
         need = self._need_size.get(u)
@@ -341,7 +346,7 @@ class _FrameRows:
         if not fobjs.keys() <= ui.keys():
             for u in fobjs:
                 ui.setdefault(u, len(ui))
-        self.uid_parts.append(np.fromiter(map(ui.__getitem__, fobjs), np.int64, len(fobjs)))
+        self.uid_parts.append(np.fromiter(map(ui.__getitem__, fobjs), np.int32, len(fobjs)))
         self.frame_len.append(len(fobjs))
         fp = fr.get("frame_properties")
         edges = self.cs.frame_edges(fp.get("transforms") if isinstance(fp, dict) else None)
@@ -430,11 +435,29 @@ class _FrameRows:
         """A block's columns (boxes of frames ``js``, objects ``us``: their indices ``uidx`` where
         the caller has them) and what its checks found (:func:`block_findings`), kept."""
         ui = self.uid_index
-        ch["uidx"] = uidx if uidx is not None else np.fromiter(map(ui.__getitem__, us), np.int64, len(us))
+        ch["uidx"] = uidx if uidx is not None else np.fromiter(map(ui.__getitem__, us), np.int32, len(us))
         ch["occ"] = np.asarray(js, np.int64)
         self._check_block(found, js, us)
+        if not self._spill_decided:
+            self._spill_decided = True
+            if self.parts is not None and self.parts.spills(max(self.columns.hint, len(us))):
+                self.spill = self.parts.row_spill()
+        if self.spill is not None:
+            if self.spill.append(ch, ext):
+                return
+            self._unspill()  # (a block Arrow cannot hold exactly: all in memory from here)
         self.columns.append(ch)
         self.ext_chunks.append((len(us), ext))
+
+    def _unspill(self) -> None:
+        """The spilled rows back into memory (and no spill from here on)."""
+        spill, self.spill = self.spill, None
+
+        def keep(ch: dict[str, np.ndarray], ext: dict[str, tuple]) -> None:
+            self.columns.append(ch)
+            self.ext_chunks.append((len(ch["uidx"]), ext))
+
+        spill.load_into(keep)
 
     def _sizes(self, rows: dict[str, np.ndarray], names: list[str]) -> dict[str, list]:
         """Per object without a static size (``objects`` known by now: a file may have them after
@@ -473,15 +496,45 @@ class _FrameRows:
         for u in us:
             if u not in ui:
                 ui[u] = len(ui)
-        idx = np.fromiter(map(ui.__getitem__, us), np.int64, len(us))
+        idx = np.fromiter(map(ui.__getitem__, us), np.int32, len(us))
         lens = np.fromiter(map(len, objs), np.int64, len(objs))
         self.uid_parts.append(idx)
         self.frame_len.extend(lens.tolist())
         if us:
             self._keep(blk.cols, blk.ext, blk.found, np.repeat(np.arange(j0, j0 + len(objs)), lens), us, idx)
 
-    def finish(self) -> _FrameData:
+    def _first_seen(self, rank_of: np.ndarray) -> np.ndarray:
+        """The objects of the frames kept (``rank_of`` >= 0), in order of their first appearance
+        in frame key order (then in the frame's order): per object the least (rank, place in its
+        frame), about a million boxes at a time (no sort of all boxes)."""
+        flen = np.asarray(self.frame_len, np.int64)
+        ends = np.cumsum(flen)
+        width = int(flen.max()) + 1 if len(flen) else 1
+        none = np.iinfo(np.int64).max
+        first = np.full(len(self.uid_index), none, np.int64)
+        group: list[np.ndarray] = []
+        e0 = size = 0
+        for i, part in enumerate(self.uid_parts):
+            group.append(part)
+            size += len(part)
+            if size < 1 << 20 and i < len(self.uid_parts) - 1:
+                continue
+            idx = np.concatenate(group)
+            frame = np.searchsorted(ends, np.arange(e0, e0 + size), side="right")
+            key = rank_of[frame] * width + (np.arange(e0, e0 + size) - (ends[frame] - flen[frame]))
+            kept = rank_of[frame] >= 0
+            np.minimum.at(first, idx[kept], key[kept])
+            e0 += size
+            group, size = [], 0
+        order = np.argsort(first, kind="stable")
+        return order[first[order] < none]
+
+    def finish(self, materialise: bool = False) -> _FrameData:
+        """The frames in key order; with a spill, the rows stay on disk (``rows`` None: the
+        import's parts read them) unless ``materialise``."""
         self._flush()
+        if self.spill is not None and materialise:
+            self._unspill()
         last: dict = {}
         for j, k in enumerate(self.keys):
             last[k] = j
@@ -492,20 +545,14 @@ class _FrameRows:
         names = list(self.uid_index)
         objects = self.objects
         # the objects the frames list and the objects member does not, in order of appearance
-        flat = np.concatenate(self.uid_parts) if self.uid_parts else np.zeros(0, np.int64)
-        flen = np.asarray(self.frame_len, np.int64)
-        js = np.asarray([last[k] for k in fkeys], np.int64)
-        if len(js) != len(flen) or (js != np.arange(len(js))).any():  # (the frames' uids in key order)
-            lens = flen[js]
-            ends = np.cumsum(lens)
-            flat = flat[np.arange(int(lens.sum())) + np.repeat((np.cumsum(flen) - flen)[js] - (ends - lens), lens)]
-        uniq, first = np.unique(flat, return_index=True)
-        seen = {u: None for u in map(names.__getitem__, uniq[np.argsort(first)].tolist()) if u not in objects}
+        seen = {u: None for u in map(names.__getitem__, self._first_seen(rank_of).tolist()) if u not in objects}
         rows: dict[str, np.ndarray] = {}
         ext: dict[str, tuple] = {}
         has_vel, has_road = True, False
         store = self.columns
-        if store.n:
+        if self.spill is not None:
+            rows, sizes = None, {}
+        elif store.n:
             rank = rank_of[store.pop("occ")]
             sel = np.flatnonzero(rank >= 0)
             sel = sel[np.argsort(rank[sel], kind="stable")]
@@ -529,7 +576,8 @@ class _FrameRows:
         else:
             rows = {c: np.asarray([]) for c in (*_FLOAT_COLS, *_OBJ_COLS)}
             rows["uidx"] = rows["rank"] = np.asarray([], np.int64)
-        sizes = self._sizes(rows, names)
+        if rows is not None:
+            sizes = self._sizes(rows, names)
         if not self.profile:
             self.found = {k: v for k, v in self.found.items() if k[0] != "source.openlabel.missing_attribute"}
 
@@ -552,7 +600,9 @@ class _FrameRows:
                           seen_in_frames=list(seen), uid_names=names, rows=rows, ext=ext,
                           sizes=sizes, interior=interior, has_vel=has_vel, has_road=has_road,
                           frame_types=self.frame_types, moving_static=sorted(self.moving_static),
-                          unknown_cs=sorted(self.cs.unknown), found=self.found)
+                          unknown_cs=sorted(self.cs.unknown), found=self.found,
+                          spill=self.spill, rank_of=rank_of, needs_size=self._needs_size,
+                          sizes_of=lambda rows: self._sizes(rows, names))
 
 
 def _frame_timestamp(fr: dict[str, Any]) -> Any:

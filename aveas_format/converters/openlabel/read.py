@@ -28,6 +28,7 @@ from aveas_format.converters.common import (TIMESTAMP_UNITS, load_map_bytes, res
 from aveas_format.converters.labels import LabelFilter, implausible_size, label_kind
 from aveas_format.converters.openlabel.findings import (_check_objects, _claims_profile, _jpath,
                                                         _report_frame_findings)
+from aveas_format.converters.openlabel.parts import import_openlabel_to
 from aveas_format.converters.openlabel.frames import (_MISSING, _FrameData, _Frames, _FrameRows, _rep_list,
                                                       _rep_take, _static_cuboids, _utm_crs)
 from aveas_format.converters.openlabel.profile import (
@@ -101,8 +102,9 @@ def _find_map(path: Path, ol: dict[str, Any], map_source, options) -> bytes:
 
 @converter("openlabel", description="ASAM OpenLABEL 1.0 JSON (AVEAS profile and generic cuboids)",
            patterns=("*.json", "*.json.gz", "*.json.zst"), method=None, options=OpenLabelImportOptions,
-           needs_map=False, provides=("partner", "start_time", "license"))
-def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImportOptions):
+           needs_map=False, provides=("partner", "start_time", "license"), writes=import_openlabel_to)
+def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImportOptions, parts=None):
+    """``parts``: an import that writes its recording itself (:func:`.parts.import_openlabel_to`)."""
     if len(inputs) != 1:
         raise FormatError(f"openlabel: expected one input file, got {len(inputs)}")
     path = Path(inputs[0])
@@ -120,13 +122,13 @@ def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImport
                         ol, frames = _stream_doc(path, prescan=False)
                         map_bytes = _find_map(path, ol, map_source, options)
                         return _openlabel_to_recording(ol, map_bytes, options=options, path=path,
-                                                       frames=frames)
+                                                       frames=frames, parts=parts)
                     except _Rescan:
                         pass
                     ol, frames = _stream_doc(path)
                     map_bytes = _find_map(path, ol, map_source, options)
                     return _openlabel_to_recording(ol, map_bytes, options=options, path=path,
-                                                   frames=frames)
+                                                   frames=frames, parts=parts)
                 except (_NotStrictJSON, FormatError) as e:
                     if isinstance(e, _NotStrictJSON) or str(e.message).startswith(
                             ("broken JSON", "not UTF-8", "JSON ")):
@@ -153,9 +155,11 @@ def openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=None
 
 
 def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=None,
-                            path: Path | None = None, frames=None):
+                            path: Path | None = None, frames=None, parts=None):
     """``frames``: a function yielding ``(key, frame)`` in file order (the streamed import); else
-    the frames are ``ol["frames"]``. Both go through :class:`_FrameRows`."""
+    the frames are ``ol["frames"]``. Both go through :class:`_FrameRows`. ``parts``: an import
+    that writes its recording itself (:class:`.parts.Parts`; the states are then not in the
+    recording returned, but in ``parts.states_file``)."""
     from aveas_format.mapref.build import build_recording
     from aveas_format.mapref.crs import LocalFrame
     from aveas_format.opendrive import load_map
@@ -174,6 +178,7 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     objects = ol.get("objects") or {}
     acc = _FrameRows(objects, _Frames(ol.get("coordinate_systems")), path)
     acc.profile = _claims_profile(md, objects)
+    acc.parts = parts
     if frames is None:
         for k, fr in (ol.get("frames") or {}).items():
             acc.add(k, fr)
@@ -195,35 +200,16 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     fnum, time_of, start_time, resolved = _frame_times(fd.fkeys, fd.stamps, ext, md, options, path)
     uids = list(objects)
     uids += fd.seen_in_frames
-    if ext is None:  # a foreign file: objects that are no road users, sentinel sizes
-        uids = _drop_non_participants(fd, objects, uids, options, path)
-    obj_ext, pid_of = _participant_ids(objects, uids)
-
-    # per object and frame: one state per box
-    rows = _box_rows(fd, pid_of, time_of)
+    ctx = _Context(ol=ol, ext=ext, objects=objects, options=options, path=path, local=local, net=net)
+    got = None
+    if fd.rows is None:  # (spilled: the states written in parts, or None: read back into memory)
+        got = parts.write_states(fd, uids, time_of, start_time, ctx)
+        if got is None:
+            fd = acc.finish(materialise=True)
+    if got is None:
+        got = _states_in_memory(fd, uids, time_of, start_time, resolved, ctx)
+    uids, obj_ext, pid_of, states, n, start_time, use_file, meta_kw = got
     interior = fd.interior(pid_of, time_of)
-    n = len(rows["time"])
-    if n == 0 and uids:
-        raise _no_boxes_error(objects, path)
-    start_time = _box_timestamps(rows, ext, options, start_time, resolved)
-    state_ext = _drop_repeats(rows, fd, path)
-    n = len(rows["time"])
-    x, y, heading = _to_local(rows, ol, local, options.world_crs)
-    # (WGS 84 in a thread while the other columns are made: PROJ releases the GIL)
-    lonlat = background(local.to_wgs84, x, y, name="wgs84") if n >= _THREADED_MIN else None
-    states = _state_columns(rows, x, y, heading, fd.has_vel)
-    use_file = options.road_coordinates == "file" or (options.road_coordinates == "auto" and fd.has_road)
-    if use_file and n:
-        _file_road_coordinates(states, rows, net, state_ext)
-    _apply_state_extension(states, state_ext)
-    del rows, state_ext  # the per-box columns are in ``states`` now
-    fd.rows = fd.ext = None
-    same_xy = states["x"] is x and states["y"] is y and "lon" not in states and "lat" not in states
-    states = _state_arrays(states, ext)
-    if lonlat is not None:
-        lon, lat = lonlat.result()
-        if same_xy:  # (else the extension changed them: build_recording's from the final ones)
-            states["lon"], states["lat"] = pa.array(lon), pa.array(lat)
 
     participants, ego_seen = _participants(uids, objects, pid_of, obj_ext, fd.sizes, ext, fd.frame_types)
     _check_objects(uids, objects, fd.frame_types, _claims_profile(md, objects), path)
@@ -233,6 +219,7 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     tables, conditions, staged = _tables(ol, ext, {fnum[k]: time_of[k] for k in fd.fkeys}, pid_of,
                                          interior)
     meta_args, kw = _recording_metadata(options, md, rmeta, ext, path, n, ego_seen, staged, conditions)
+    kw = {**meta_kw, **kw}  # (the states' duration, rate and location where they were written in parts)
     rec = build_recording(
         map_source=map_bytes, participants=participants, states=states, **tables, crs=crs,
         **meta_args, start_time=start_time,
@@ -244,6 +231,49 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     if ext is not None:
         _restore_derived(rec, ext, path)
     return rec
+
+
+class _Context:
+    """What the states of an import are made with, besides the boxes."""
+
+    def __init__(self, **kw: Any) -> None:
+        self.__dict__.update(kw)
+
+
+def _states_in_memory(fd: _FrameData, uids: list[str], time_of: dict, start_time: str,
+                      resolved: dict[str, str], ctx: _Context) -> tuple:
+    """``(uids, obj_ext, pid_of, states columns, n, start_time, use_file, {})``: the boxes of all
+    frames (``fd.rows``) into the states' columns at once."""
+    objects, ext, options, path = ctx.objects, ctx.ext, ctx.options, ctx.path
+    if ext is None:  # a foreign file: objects that are no road users, sentinel sizes
+        uids = _drop_non_participants(fd, objects, uids, options, path)
+    obj_ext, pid_of = _participant_ids(objects, uids)
+
+    # per object and frame: one state per box
+    rows = _box_rows(fd, pid_of, time_of)
+    n = len(rows["time"])
+    if n == 0 and uids:
+        raise _no_boxes_error(objects, path)
+    start_time = _box_timestamps(rows, ext, options, start_time, resolved)
+    state_ext = _drop_repeats(rows, fd, path)
+    n = len(rows["time"])
+    x, y, heading = _to_local(rows, ctx.ol, ctx.local, options.world_crs)
+    # (WGS 84 in a thread while the other columns are made: PROJ releases the GIL)
+    lonlat = background(ctx.local.to_wgs84, x, y, name="wgs84") if n >= _THREADED_MIN else None
+    states = _state_columns(rows, x, y, heading, fd.has_vel)
+    use_file = options.road_coordinates == "file" or (options.road_coordinates == "auto" and fd.has_road)
+    if use_file and n:
+        _file_road_coordinates(states, rows, ctx.net, state_ext)
+    _apply_state_extension(states, state_ext)
+    del rows, state_ext  # the per-box columns are in ``states`` now
+    fd.rows = fd.ext = None
+    same_xy = states["x"] is x and states["y"] is y and "lon" not in states and "lat" not in states
+    states = _state_arrays(states, ext)
+    if lonlat is not None:
+        lon, lat = lonlat.result()
+        if same_xy:  # (else the extension changed them: build_recording's from the final ones)
+            states["lon"], states["lat"] = pa.array(lon), pa.array(lat)
+    return uids, obj_ext, pid_of, states, n, start_time, use_file, {}
 
 
 # ================================================================================================
@@ -317,6 +347,30 @@ def _drop_non_participants(fd: _FrameData, objects: dict[str, Any], uids: list[s
     ``keep_non_road_users``) or an ignore type (KITTI's DontCare), nor boxes with a sentinel or
     impossible size (a -1000, a 0): each is dropped from the frames' rows, with one warning
     saying how many and why. An object left without boxes is dropped when it had any."""
+    keep_uid, report_skipped = _object_filter(fd, objects, uids, options, path)
+    report_skipped()
+    rows = fd.rows
+    if len(rows["uidx"]):
+        keep, dropped = _box_filter(rows, keep_uid, fd.uid_names)
+        if dropped.any():
+            first = int(np.argmax(dropped))
+            _report_bad_sizes(int(dropped.sum()), {fd.uid_names[i] for i in np.unique(rows["uidx"][dropped])},
+                              fd.fkeys[int(rows["rank"][first])], fd.uid_names[int(rows["uidx"][first])], path)
+        if not keep.all():
+            had = set(np.unique(rows["uidx"]).tolist())
+            left = set(np.unique(rows["uidx"][keep]).tolist())
+            for i in had - left:
+                keep_uid[fd.uid_names[i]] = False
+            idx = np.flatnonzero(keep)
+            for c in list(rows):
+                rows[c] = rows[c][idx]
+            fd.ext = {c: _rep_take(r, idx) for c, r in fd.ext.items()}
+    return _kept_uids(fd, uids, keep_uid)
+
+
+def _object_filter(fd: _FrameData, objects: dict[str, Any], uids: list[str],
+                   options: OpenLabelImportOptions, path: Path | None) -> tuple[dict[str, bool], Any]:
+    """``(whether each object is imported by its type, a function reporting those that are not)``."""
     labels = LabelFilter(options.keep_non_road_users)
     keep_uid: dict[str, bool] = {}
     first_skipped = None
@@ -328,40 +382,38 @@ def _drop_non_participants(fd: _FrameData, objects: dict[str, Any], uids: list[s
         keep_uid[u] = labels(otype) is not None
         if first_skipped is None and not keep_uid[u]:
             first_skipped = u
-    rows = fd.rows
-    n = len(rows["uidx"])
-    where = "OpenLABEL: "  # the file is the finding's location
-    file = str(path) if path is not None else None
-    note = labels.note("objects")
-    if note:
-        report_source("source.openlabel.skipped_object", where + note, count=sum(labels.skipped.values()),
-                      stacklevel=3, file=file, uid=first_skipped,
-                      json_path=_jpath("objects", first_skipped, "type"))
-    if n:
-        by_index = np.asarray([keep_uid.get(u, True) for u in fd.uid_names], bool)
-        keep = by_index[rows["uidx"]]
-        bad = implausible_size(np.c_[rows["dl"], rows["dw"], rows["dh"]])
-        dropped = keep & bad
-        if dropped.any():
-            who = sorted({fd.uid_names[i] for i in np.unique(rows["uidx"][dropped])})
-            first = int(np.argmax(dropped))
-            frame, uid = fd.fkeys[int(rows["rank"][first])], fd.uid_names[int(rows["uidx"][first])]
-            report_source("source.openlabel.bad_size",
-                          where + f"dropped {int(dropped.sum())} boxes with a sentinel or impossible size "
-                          f"(<= 0, not finite or > 400 m) of object(s) {', '.join(who[:5])}"
-                          + (" ..." if len(who) > 5 else ""), count=int(dropped.sum()), stacklevel=3,
-                          file=file, frame=frame, uid=uid,
-                          json_path=_jpath("frames", frame, "objects", uid, "object_data", "cuboid"))
-        keep &= ~bad
-        if not keep.all():
-            had = set(np.unique(rows["uidx"]).tolist())
-            left = set(np.unique(rows["uidx"][keep]).tolist())
-            for i in had - left:
-                keep_uid[fd.uid_names[i]] = False
-            idx = np.flatnonzero(keep)
-            for c in list(rows):
-                rows[c] = rows[c][idx]
-            fd.ext = {c: _rep_take(r, idx) for c, r in fd.ext.items()}
+
+    def report() -> None:
+        note = labels.note("objects")
+        if note:  # (the file is the finding's location)
+            report_source("source.openlabel.skipped_object", "OpenLABEL: " + note,
+                          count=sum(labels.skipped.values()), stacklevel=4,
+                          file=str(path) if path is not None else None, uid=first_skipped,
+                          json_path=_jpath("objects", first_skipped, "type"))
+    return keep_uid, report
+
+
+def _box_filter(rows: dict[str, np.ndarray], keep_uid: dict[str, bool], names: list[str]
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """``(the boxes kept, those dropped for their size)`` of objects kept by type."""
+    by_index = np.asarray([keep_uid.get(u, True) for u in names], bool)
+    keep = by_index[rows["uidx"]]
+    bad = implausible_size(np.c_[rows["dl"], rows["dw"], rows["dh"]])
+    return keep & ~bad, keep & bad
+
+
+def _report_bad_sizes(count: int, who: set[str], frame: Any, uid: str, path: Path | None) -> None:
+    who_ = sorted(who)
+    report_source("source.openlabel.bad_size",
+                  f"OpenLABEL: dropped {count} boxes with a sentinel or impossible size "
+                  f"(<= 0, not finite or > 400 m) of object(s) {', '.join(who_[:5])}"
+                  + (" ..." if len(who_) > 5 else ""), count=count, stacklevel=4,
+                  file=str(path) if path is not None else None, frame=frame, uid=uid,
+                  json_path=_jpath("frames", frame, "objects", uid, "object_data", "cuboid"))
+
+
+def _kept_uids(fd: _FrameData, uids: list[str], keep_uid: dict[str, bool]) -> list[str]:
+    """The objects imported; ``fd.sizes`` of those, without implausible sizes."""
     for u in list(fd.sizes):
         if not keep_uid.get(u, True):
             del fd.sizes[u]
@@ -434,9 +486,11 @@ def _box_timestamps(rows: dict[str, np.ndarray], ext: dict[str, Any] | None,
     return start_time
 
 
-def _drop_repeats(rows: dict[str, np.ndarray], fd: _FrameData, path: Path | None) -> dict[str, tuple]:
+def _drop_repeats(rows: dict[str, np.ndarray], fd: _FrameData, path: Path | None,
+                  dropped: list | None = None) -> dict[str, tuple]:
     """One state per participant and time: later duplicates are dropped (from ``rows``, in place,
-    and from the extension columns ``fd.ext``, returned), reported at the first one dropped."""
+    and from the extension columns ``fd.ext``, returned), reported at the first one dropped; or,
+    given a list ``dropped``, ``(count, index of the first, frame, object)`` appended to it."""
     state_ext = fd.ext
     n = len(rows["time"])
     if n:
@@ -450,28 +504,37 @@ def _drop_repeats(rows: dict[str, np.ndarray], fd: _FrameData, path: Path | None
             dup[keep] = False
             i = int(np.argmax(dup))
             frame, uid = fd.fkeys[int(rows["rank"][i])], fd.uid_names[int(rows["uidx"][i])]
-            report_source("source.openlabel.duplicate_state",
-                          f"OpenLABEL: {n - len(keep)} boxes repeat a (participant, time) and were "
-                          f"dropped (first: frame {frame}, object {uid})", count=n - len(keep),
-                          stacklevel=3, file=str(path) if path is not None else None, frame=frame,
-                          uid=uid, json_path=_jpath("frames", frame, "objects", uid))
+            if dropped is not None:
+                dropped.append((n - len(keep), i, frame, uid))
+            else:
+                _report_repeats(n - len(keep), frame, uid, path)
             for c in list(rows):
                 rows[c] = rows[c][keep]
             state_ext = {c: _rep_take(r, keep) for c, r in state_ext.items()}
     return state_ext
 
 
-def _to_local(rows: dict[str, np.ndarray], ol: dict[str, Any], local, root_crs: str | None
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _report_repeats(count: int, frame: Any, uid: str, path: Path | None) -> None:
+    report_source("source.openlabel.duplicate_state",
+                  f"OpenLABEL: {count} boxes repeat a (participant, time) and were "
+                  f"dropped (first: frame {frame}, object {uid})", count=count,
+                  stacklevel=4, file=str(path) if path is not None else None, frame=frame,
+                  uid=uid, json_path=_jpath("frames", frame, "objects", uid))
+
+
+def _to_local(rows: dict[str, np.ndarray], ol: dict[str, Any], local, root_crs: str | None,
+              roots: set | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Box centres and yaw in the map's local frame: through WGS84 where the root coordinate system
-    has a CRS (``world_crs``, or a UTM root's name), else the root is the map frame."""
+    has a CRS (``world_crs``, or a UTM root's name), else the root is the map frame. ``roots``:
+    the root coordinate systems of all boxes (default: of ``rows``)."""
     from aveas_format.mapref.crs import parse_crs
     from aveas_format.numeric import wrap_angle
 
     n = len(rows["time"])
     px, py = np.asarray(rows["px"], float), np.asarray(rows["py"], float)
     yaw = np.asarray(rows["yaw"], float)
-    roots = {r for r in rows["csroot"] if r}
+    if roots is None:
+        roots = {r for r in rows["csroot"] if r}
     wcrs = root_crs
     if wcrs is None and len(roots) == 1:
         r = next(iter(roots))
@@ -491,9 +554,10 @@ def _to_local(rows: dict[str, np.ndarray], ol: dict[str, Any], local, root_crs: 
 
 
 def _state_columns(rows: dict[str, np.ndarray], x: np.ndarray, y: np.ndarray, heading: np.ndarray,
-                   has_vel: bool) -> dict[str, Any]:
+                   has_vel: bool, has_acc: bool | None = None) -> dict[str, Any]:
     """The states' columns from the profile's attributes: position, velocity and acceleration
-    (vehicle -> world frame) with their 1-sigma, yaw rate, lights."""
+    (vehicle -> world frame) with their 1-sigma, yaw rate, lights. ``has_acc``: every box has an
+    acceleration (default: every box of ``rows``)."""
     n = len(rows["time"])
     pid = np.asarray(rows["participant_id"], np.int64)
     t = np.asarray(rows["time"], float)
@@ -506,7 +570,9 @@ def _state_columns(rows: dict[str, np.ndarray], x: np.ndarray, y: np.ndarray, he
         if np.isfinite(yr).any():
             states["yaw_rate"] = yr
         au, av = np.asarray(rows["au"], float), np.asarray(rows["av"], float)
-        if np.isfinite(au).all() and np.isfinite(av).all():
+        if has_acc is None:
+            has_acc = bool(np.isfinite(au).all() and np.isfinite(av).all())
+        if has_acc:
             states["ax"], states["ay"] = _rot_world(au, av, heading)
         for c in ("x_std", "y_std", "z_std", "heading_std"):
             a = np.asarray(rows[c], float)

@@ -1,0 +1,495 @@
+"""The OpenLABEL import that writes its recording itself: the states in parts (bounded memory).
+
+An OpenLABEL file is time-major (a frame holds every object present at its time), a recording's
+states participant-major. Imported into memory, a one-hour file holds every box's values at once
+(~570 B per state). :func:`import_openlabel_to` (the CLI's ``convert`` of one file) instead:
+
+1. reads the frames as the import does, the boxes' columns spilled block by block
+   (:class:`.spill.RowSpill`) from :data:`SPILL_MIN_ROWS` expected boxes on;
+2. after the frames (their keys, times and objects known): one pass over the spill writes each
+   kept box to the file of its *bucket* — consecutive participants, about :data:`BUCKET_BYTES`
+   of boxes each — dropping what the import drops per box (frames whose key repeats, objects that
+   are no road users, boxes with an impossible size) and gathering what the import decides over
+   all boxes (has every box a velocity, an acceleration, road coordinates; the root coordinate
+   systems);
+3. per bucket, in participant order: its boxes in frame order, then exactly the in-memory
+   import's steps (repeated states dropped, world -> map frame, vehicle -> world frame, the
+   file's road coordinates, the extension's exact values, :func:`~aveas_format.mapref.build.fill_states`)
+   -> the states of those participants, spilled again;
+4. the buckets' states written to ``states.parquet`` in the recording's row groups (one schema
+   over all buckets), hashed as written, and moved into the recording
+   (:class:`~aveas_format.io.writer.StatesFile`).
+
+The result is the in-memory import's recording (tests/converters/test_openlabel_parts.py: the
+same tables, the location's mean summed per bucket). Where a step needs all boxes at once (the
+boxes' own timestamps of a foreign file, resolved over all of them) or a block cannot be spilled
+exactly, the rows are read back into memory and the import goes on as before.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+
+from aveas_format.converters.openlabel.spill import RowSpill, from_table
+from aveas_format.io.arrow import conform
+from aveas_format.io.writer import ROW_GROUP_ROWS, StatesFile, parquet_options, prepare_table
+from aveas_format.numeric import same_participant
+from aveas_format.schema.tables import TABLES
+
+#: from this many boxes (expected from the first block and the file's size) the rows are spilled
+SPILL_MIN_ROWS = 500_000
+#: about this many bytes of spilled boxes per bucket (one bucket is held at a time)
+BUCKET_BYTES = 24 << 20
+#: at most this many buckets (their files are open at once)
+MAX_BUCKETS = 256
+_SPEC = TABLES["states"]
+_IPC = pa.ipc.IpcWriteOptions(compression="lz4")
+
+
+class Parts:
+    """The working files of one import that writes its recording itself, in a hidden temporary
+    directory in ``parent`` (next to the output: the states file is moved in, not copied)."""
+
+    def __init__(self, parent: Path, min_rows: int = SPILL_MIN_ROWS) -> None:
+        self.parent, self.min_rows = Path(parent), min_rows
+        self.dir: Path | None = None
+        self._spills: list[RowSpill] = []
+        #: the states written (None: in the recording returned)
+        self.states_file: StatesFile | None = None
+        self.on_road = 0
+
+    def spills(self, rows_expected: int) -> bool:
+        return rows_expected >= self.min_rows
+
+    def row_spill(self) -> RowSpill:
+        self._dir()
+        s = RowSpill(self.dir)
+        self._spills.append(s)
+        return s
+
+    def _dir(self) -> Path:
+        if self.dir is None:
+            self.dir = Path(tempfile.mkdtemp(prefix=".openlabel-import.", dir=self.parent))
+        return self.dir
+
+    def close(self) -> None:
+        for s in self._spills:
+            s.close()
+        if self.dir is not None:
+            shutil.rmtree(self.dir, ignore_errors=True)
+
+    def __enter__(self) -> Parts:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---- the states in parts ----------------------------------------------------------------
+    def write_states(self, fd, uids: list[str], time_of: dict, start_time: str, ctx) -> tuple | None:
+        """The states of the spilled boxes ``fd.spill`` written in parts (module docstring); as
+        :func:`~.read._states_in_memory` returns them, with an empty states table, or None where
+        the import needs its rows in memory (nothing reported then: the import reports)."""
+        spill = fd.spill
+        schema = spill.schema()
+        if any(c.startswith("__ef:") and f"__eo:{c[5:]}" in schema.names for c in schema.names):
+            return None  # (a member numbers in one block, other values in another)
+        work = _Buckets(self._dir(), fd, uids, ctx, spill, schema)
+        try:
+            got = work.run(time_of, start_time)
+            if got is None:
+                return None
+            self.states_file, self.on_road = work.states_file, work.on_road
+            spill.close()
+            return got
+        finally:
+            work.close()
+
+
+class _Buckets:
+    """Steps 2-4 of the module docstring for one import."""
+
+    def __init__(self, parent: Path, fd, uids: list[str], ctx, spill: RowSpill, schema: pa.Schema) -> None:
+        self.dir = Path(tempfile.mkdtemp(prefix="buckets.", dir=parent))
+        self.fd, self.uids, self.ctx, self.spill, self.schema = fd, uids, ctx, spill, schema
+        self.states_file: StatesFile | None = None
+        self.on_road = 0
+
+    def close(self) -> None:
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+    def run(self, time_of: dict, start_time: str) -> tuple | None:
+        from aveas_format.converters.openlabel import read as R
+
+        fd, ctx = self.fd, self.ctx
+        objects, ext, options, path = ctx.objects, ctx.ext, ctx.options, ctx.path
+        names = fd.uid_names
+        uidx, occ = self.spill.keys()
+        rank_of = fd.rank_of.astype(np.int32)
+        valid = rank_of[occ] >= 0
+        # each box's place in frame order (by frame key, then file order: as in memory): a frame's
+        # boxes are consecutive, so the place is where its frame starts plus the box's place in it
+        per_rank = np.zeros(int(rank_of.max()) + 1 if len(rank_of) else 0, np.int64)
+        kept_occ = np.flatnonzero(rank_of >= 0)
+        per_rank[rank_of[kept_occ]] = np.bincount(occ, minlength=len(rank_of))[kept_occ]
+        frame_start = np.cumsum(per_rank) - per_rank
+        keep_uid, report_skipped = R._object_filter(fd, objects, self.uids, options, path) \
+            if ext is None else (None, None)
+        # buckets of consecutive participants (the ids as the objects give them now: their order
+        # is the final ids' order, checked below)
+        _, pid0 = R._participant_ids(objects, self.uids)
+        self._buckets(np.asarray([pid0.get(u, 0) for u in names], np.int64),
+                      np.bincount(uidx[valid], minlength=len(names)), int(valid.sum()))
+        del valid
+        p = self._pass(uidx, occ, rank_of, frame_start, keep_uid)
+        del uidx, occ
+        if not p["kept"] or (ext is None and p["cts_all"]):
+            return None  # (no box: the import's errors; the boxes' timestamps: over all at once)
+        uids = self.uids
+        if keep_uid is not None:
+            for i in p["had"] - p["left"]:
+                keep_uid[names[i]] = False
+        fd.sizes = fd.sizes_of(_in_order(p["sizes"])) if p["sizes"] else {}
+        if keep_uid is not None:
+            uids = R._kept_uids(fd, uids, keep_uid)
+        obj_ext, pid_of = R._participant_ids(objects, uids)
+        pid_idx = np.asarray([pid_of.get(u, 0) for u in names], np.int64)
+        if not self._ordered(pid_idx, p["left"]):
+            return None
+        use_file = options.road_coordinates == "file" or (options.road_coordinates == "auto" and p["hr_any"])
+        b = self._states(pid_idx, np.asarray([time_of[k] for k in fd.fkeys], float), p, use_file)
+        if b is None:
+            return None
+        n, meta_kw, empty = self._write(b["schemas"])
+        if report_skipped is not None:  # the findings, in the in-memory import's order
+            report_skipped()
+        if p["bad"][0]:
+            R._report_bad_sizes(p["bad"][0], p["bad"][1], p["bad"][3], p["bad"][4], path)
+        if b["repeats"]:
+            first = min(b["repeats"], key=lambda r: r[1])
+            R._report_repeats(sum(r[0] for r in b["repeats"]), first[2], first[3], path)
+        return uids, obj_ext, pid_of, empty, n, start_time, use_file, meta_kw
+
+    # ---- step 2 -----------------------------------------------------------------------------
+    def _buckets(self, pid0_of_idx: np.ndarray, counts: np.ndarray, total: int) -> None:
+        upid, inv = np.unique(pid0_of_idx, return_inverse=True)
+        per_pid = np.bincount(inv, weights=counts, minlength=len(upid))
+        per = max(BUCKET_BYTES / max(self.spill.row_bytes, 1.0), total / MAX_BUCKETS, 1.0)
+        starts = np.cumsum(per_pid) - per_pid
+        _, bucket_of_pid = np.unique(np.floor(starts / per).astype(np.int64), return_inverse=True)
+        self.bucket_of_idx = bucket_of_pid.reshape(-1)[inv.reshape(-1)] if len(inv) else np.zeros(0, np.int64)
+        self.n_buckets = int(bucket_of_pid.max()) + 1 if len(bucket_of_pid) else 0
+
+    def _pass(self, uidx: np.ndarray, occ: np.ndarray, rank_of: np.ndarray, frame_start: np.ndarray,
+              keep_uid: dict | None) -> dict[str, Any]:
+        from aveas_format.converters.openlabel import read as R
+
+        fd = self.fd
+        names = fd.uid_names
+        need_size = np.fromiter(map(fd.needs_size, names), bool, len(names))
+        p: dict[str, Any] = {"kept": 0, "hv_all": True, "hr_any": False, "acc_all": True,
+                             "cts_all": True, "roots": set(), "had": set(), "left": set(),
+                             "sizes": [], "bad": [0, set(), None, None, None]}
+        writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
+        offset = carried = 0
+        try:
+            for batch in self.spill.batches():
+                m = batch.num_rows
+                t = _conformed(pa.Table.from_batches([batch]), self.schema)
+                u, oc = uidx[offset:offset + m], occ[offset:offset + m]
+                rk = rank_of[oc]
+                v = rk >= 0
+                # (the box's place in its frame: a frame's boxes may begin in the last batch)
+                run = np.r_[True, oc[1:] != oc[:-1]]
+                run_start = np.flatnonzero(run)
+                within = np.arange(m) - np.repeat(run_start, np.diff(np.r_[run_start, m]))
+                if offset and oc[0] == occ[offset - 1]:
+                    within[:np.diff(np.r_[run_start, m])[0]] += carried
+                carried = int(within[-1]) + 1
+                ps = np.where(v, frame_start[np.maximum(rk, 0)] + within, -1)
+                offset += m
+                hv, hr = (t.column(c).to_numpy(zero_copy_only=False) for c in ("hv", "hr"))
+                p["hv_all"] &= bool(hv[v].all())
+                p["hr_any"] |= bool(hr[v].any())
+                dims = {c: _f(t, c) for c in ("dl", "dw", "dh")}
+                sz = v & need_size[u]
+                if sz.any():
+                    p["sizes"].append((ps[sz], u[sz], *(dims[c][sz] for c in ("dl", "dw", "dh"))))
+                keep = v
+                if keep_uid is not None:
+                    k, dropped = R._box_filter({"uidx": u, **dims}, keep_uid, names)
+                    keep, dropped = k & v, dropped & v
+                    if dropped.any():
+                        bad = p["bad"]
+                        bad[0] += int(dropped.sum())
+                        bad[1] |= {names[i] for i in np.unique(u[dropped]).tolist()}
+                        i = int(np.flatnonzero(dropped)[np.argmin(ps[dropped])])
+                        if bad[2] is None or ps[i] < bad[2]:
+                            bad[2:] = [int(ps[i]), fd.fkeys[int(rk[i])], names[int(u[i])]]
+                    p["had"] |= set(np.unique(u[v]).tolist())
+                    p["left"] |= set(np.unique(u[keep]).tolist())
+                idx = np.flatnonzero(keep)
+                if not len(idx):
+                    continue
+                if keep_uid is None:
+                    p["left"] |= set(np.unique(u[idx]).tolist())
+                p["kept"] += len(idx)
+                p["acc_all"] &= bool(np.isfinite(_f(t, "au")[idx]).all() and np.isfinite(_f(t, "av")[idx]).all())
+                p["cts_all"] &= bool(np.isfinite(_f(t, "cub_ts")[idx]).all())
+                bk = self.bucket_of_idx[u[idx]]
+                order = np.argsort(bk, kind="stable")
+                sb, idx = bk[order], idx[order]
+                kept = t.drop_columns(["hv", "hr"]).take(pa.array(idx))
+                p["roots"] |= {r for r in pc.unique(kept.column("csroot")).to_pylist() if r}
+                kept = kept.append_column("uidx", pa.array(u[idx].astype(np.int64))) \
+                           .append_column("rank", pa.array(rk[idx].astype(np.int64))) \
+                           .append_column("__pos", pa.array(ps[idx]))
+                cuts = np.r_[0, np.flatnonzero(sb[1:] != sb[:-1]) + 1, len(sb)]
+                for lo, hi in zip(cuts[:-1].tolist(), cuts[1:].tolist()):
+                    k = int(sb[lo])
+                    w = writers.get(k)
+                    if w is None:
+                        w = writers[k] = pa.ipc.new_stream(str(self.dir / f"b{k}.arrow"), kept.schema,
+                                                           options=_IPC)
+                    w.write_table(kept.slice(lo, hi - lo))
+        finally:
+            for w in writers.values():
+                w.close()
+        pa.default_memory_pool().release_unused()
+        return p
+
+    def _ordered(self, pid_idx: np.ndarray, objects: set[int]) -> bool:
+        """Do the buckets hold consecutive participants by their final ids (each id in one)?"""
+        if not objects:
+            return True
+        idx = np.fromiter(objects, np.int64, len(objects))
+        b, pid = self.bucket_of_idx[idx], pid_idx[idx]
+        lo = np.full(self.n_buckets, np.iinfo(np.int64).max)
+        hi = np.full(self.n_buckets, np.iinfo(np.int64).min)
+        np.minimum.at(lo, b, pid)
+        np.maximum.at(hi, b, pid)
+        used = lo <= hi
+        lo, hi = lo[used], hi[used]
+        return bool((hi[:-1] < lo[1:]).all())
+
+    # ---- step 3 -----------------------------------------------------------------------------
+    def _states(self, pid_idx: np.ndarray, time_arr: np.ndarray, p: dict, use_file: bool) -> dict | None:
+        """Each bucket's states (:meth:`_bucket`), in worker processes where there are cores and
+        buckets (forked: they inherit this object; their results are a few numbers each)."""
+        from aveas_format.parallel import map_ordered
+
+        global _WORK
+        self._step3 = (pid_idx, time_arr, p, use_file)
+        ks = [k for k in range(self.n_buckets) if (self.dir / f"b{k}.arrow").exists()]
+        workers = self.ctx.options.workers if len(ks) > 1 else 1
+        out: dict[str, Any] = {"repeats": [], "schemas": []}
+        acc_after, roots_after = True, set()
+        _WORK = self
+        try:
+            for k, r in map_ordered(_bucket_of_work, ks, workers=workers):
+                out["schemas"].append((k, r["schema"]))
+                if r["repeats"] is not None:
+                    out["repeats"].append(r["repeats"])
+                acc_after &= r["acc"]
+                roots_after |= r["roots"]
+        finally:
+            _WORK = None
+        if (acc_after and not p["acc_all"]) or roots_after != p["roots"]:
+            return None  # (a decision over all boxes that the repeated states dropped would change)
+        return out
+
+    def _bucket(self, k: int) -> dict[str, Any]:
+        """Bucket ``k``'s boxes in frame order through the in-memory import's steps into states
+        (spilled to ``s{k}.arrow``): their schema, the first repeated state dropped, and what
+        the decisions over all boxes are checked against."""
+        from aveas_format.converters.openlabel import read as R
+        from aveas_format.converters.openlabel.frames import _FrameData
+        from aveas_format.mapref.build import fill_states
+
+        pid_idx, time_arr, p, use_file = self._step3
+        fd, ctx = self.fd, self.ctx
+        f = self.dir / f"b{k}.arrow"
+        with pa.memory_map(str(f)) as mm:
+            t = pa.ipc.open_stream(mm).read_all()
+        t = t.take(pc.sort_indices(t.column("__pos")))
+        pos = t.column("__pos").to_numpy()
+        rows, bext = from_table(t)
+        del t
+        bfd = _FrameData(**{**fd.__dict__, "rows": rows, "ext": bext})
+        rows["participant_id"] = pid_idx[rows["uidx"]]
+        rows["time"] = time_arr[rows["rank"]]
+        dropped: list = []
+        state_ext = R._drop_repeats(rows, bfd, ctx.path, dropped)
+        r: dict[str, Any] = {"repeats": None, "acc": bool(np.isfinite(rows["au"]).all() and np.isfinite(rows["av"]).all()),
+                             "roots": {x for x in set(rows["csroot"].tolist()) if x}}
+        if dropped:
+            c, i, frame, uid = dropped[0]
+            r["repeats"] = (c, int(pos[i]), frame, uid)
+        x, y, heading = R._to_local(rows, ctx.ol, ctx.local, ctx.options.world_crs, roots=p["roots"])
+        states = R._state_columns(rows, x, y, heading, p["hv_all"], p["acc_all"])
+        if use_file:
+            R._file_road_coordinates(states, rows, ctx.net, state_ext)
+        R._apply_state_extension(states, state_ext)
+        del rows, state_ext
+        same_xy = states["x"] is x and states["y"] is y and "lon" not in states and "lat" not in states
+        states = R._state_arrays(states, ctx.ext)
+        if same_xy:
+            lon, lat = ctx.local.to_wgs84(x, y)
+            states["lon"], states["lat"] = pa.array(lon), pa.array(lat)
+        s = fill_states(prepare_table(conform(pa.table(states), _SPEC), _SPEC), ctx.local,
+                        None if use_file else ctx.net)
+        with pa.ipc.new_stream(str(self.dir / f"s{k}.arrow"), s.schema, options=_IPC) as w:
+            w.write_table(s)
+        f.unlink()
+        r["schema"] = s.schema
+        return r
+
+    # ---- step 4 -----------------------------------------------------------------------------
+    def _write(self, schemas: list[tuple[int, pa.Schema]]) -> tuple[int, dict, pa.Table]:
+        """The buckets' states into one ``states.parquet`` (the recording's row groups, one
+        schema); ``(rows, the recording's duration, rate and location, an empty table)``."""
+        declared = [c.name for c in _SPEC.columns]
+        fields: dict[str, pa.Field] = {}
+        for _, sc in schemas:
+            for fld in sc:
+                if fld.name in fields and fields[fld.name].type != fld.type:
+                    fields[fld.name] = pa.unify_schemas([pa.schema([fields[fld.name]]), pa.schema([fld])],
+                                                        promote_options="permissive").field(0)
+                else:
+                    fields.setdefault(fld.name, fld)
+        order = [c for c in declared if c in fields] + sorted(c for c in fields if c not in _SPEC)
+        schema = pa.schema([fields[c] for c in order])
+        wschema, options = parquet_options(schema, _SPEC)
+        target = self.dir.parent / "states.parquet"
+        h = hashlib.sha256()
+        n, tmax, nulls = 0, -np.inf, 0
+        sums = np.zeros(2)
+        dts: dict[float, int] = {}
+        pending: list[pa.Table] = []
+        held = 0
+        with open(target, "wb") as raw:
+            sink = _Hashing(raw, h)
+            with pq.ParquetWriter(sink, wschema, **options) as pw:
+                for k, _ in schemas:
+                    with pa.memory_map(str(self.dir / f"s{k}.arrow")) as mm:
+                        s = pa.ipc.open_stream(mm).read_all()
+                    os.unlink(self.dir / f"s{k}.arrow")
+                    s = _conformed(s, schema).replace_schema_metadata(wschema.metadata)
+                    pid, t = s.column("participant_id").to_numpy(), s.column("time").to_numpy()
+                    n += s.num_rows
+                    tmax = max(tmax, float(t.max()))
+                    dt = np.diff(t)[same_participant(pid)]
+                    vals, cnt = np.unique(dt[dt > 0], return_counts=True)
+                    for v_, c_ in zip(vals.tolist(), cnt.tolist()):
+                        dts[v_] = dts.get(v_, 0) + c_
+                    sums += [float(np.sum(s.column(c).to_numpy())) for c in ("lon", "lat")]
+                    nulls += s.column("road_id").null_count
+                    pending.append(s)
+                    held += s.num_rows
+                    if held >= ROW_GROUP_ROWS:  # whole row groups, the rest held for the next
+                        whole = pa.concat_tables(pending)
+                        cut = held - held % ROW_GROUP_ROWS
+                        pw.write_table(whole.slice(0, cut), row_group_size=ROW_GROUP_ROWS)
+                        pending, held = [whole.slice(cut)], held - cut
+                if held:
+                    pw.write_table(pa.concat_tables(pending), row_group_size=ROW_GROUP_ROWS)
+            raw.flush()
+            os.fsync(raw.fileno())
+        self.states_file = StatesFile(target, n, h.hexdigest())
+        self.on_road = n - nulls
+        meta_kw = {"duration_s": tmax, "nominal_rate_hz": _median_rate(dts),
+                   "location": {"lon": sums[0] / n, "lat": sums[1] / n}}
+        return n, meta_kw, schema.empty_table()
+
+
+#: the import whose buckets the worker processes work on (set while they run: forked, they have it)
+_WORK: _Buckets | None = None
+
+
+def _bucket_of_work(k: int) -> dict[str, Any]:
+    return _WORK._bucket(k)
+
+
+class _Hashing:
+    """A file the Parquet writer writes to, hashed as it is written."""
+
+    def __init__(self, f, h) -> None:
+        self.f, self.h, self.closed = f, h, False
+
+    def write(self, b) -> int:
+        self.h.update(b)
+        return self.f.write(b)
+
+    def flush(self) -> None:
+        self.f.flush()
+
+    def close(self) -> None:
+        self.closed = True
+
+    def tell(self) -> int:
+        return self.f.tell()
+
+
+def _median_rate(dts: dict[float, int]) -> float:
+    """``round(1 / median, 6)`` of the time steps (value -> count), as build_recording takes it."""
+    if not dts:
+        return 1.0
+    vals = np.asarray(sorted(dts))
+    cum = np.cumsum([dts[v] for v in vals.tolist()])
+    total = int(cum[-1])
+    a = float(vals[np.searchsorted(cum, (total - 1) // 2, side="right")])
+    b = float(vals[np.searchsorted(cum, total // 2, side="right")])
+    return float(round(1.0 / float(np.mean([a, b])), 6))
+
+
+def _f(t: pa.Table, c: str) -> np.ndarray:
+    col = t.column(c)
+    return (col.fill_null(np.nan) if col.null_count else col).to_numpy()
+
+
+def _conformed(t: pa.Table, schema: pa.Schema) -> pa.Table:
+    """``t`` with ``schema``'s columns in its order and types (a column it lacks: nulls)."""
+    if t.schema.equals(schema):
+        return t
+    have = dict(zip(t.column_names, t.columns))
+    cols = [pa.nulls(t.num_rows, f.type) if f.name not in have else
+            have[f.name] if have[f.name].type == f.type else have[f.name].cast(f.type) for f in schema]
+    return pa.Table.from_arrays(cols, schema=schema)
+
+
+def _in_order(parts: list[tuple]) -> dict[str, np.ndarray]:
+    """The boxes gathered for the objects' sizes, in frame order (rows for ``_sizes``)."""
+    pos, u, dl, dw, dh = (np.concatenate(c) for c in zip(*parts))
+    o = np.argsort(pos, kind="stable")
+    return {"uidx": u[o].astype(np.int64), "dl": dl[o], "dw": dw[o], "dh": dh[o]}
+
+
+def import_openlabel_to(inputs: list[Path], output: Path, *, map_source=None, options=None,
+                        overwrite: bool = False, min_rows: int | None = None):
+    """Import one OpenLABEL file and write the recording to ``output`` (atomically; states in
+    parts from ``min_rows`` boxes, default :data:`SPILL_MIN_ROWS`: bounded memory). Returns
+    ``(recording, states, on the map)``: the recording as written (its states not loaded when
+    they were written in parts)."""
+    from aveas_format.converters.openlabel.read import OpenLabelImportOptions, import_openlabel
+    from aveas_format.io.writer import check_target, write_recording
+
+    output = Path(output)
+    parent = check_target(output, overwrite)
+    with Parts(parent, SPILL_MIN_ROWS if min_rows is None else min_rows) as parts:
+        rec = import_openlabel(list(inputs), map_source=map_source,
+                               options=options or OpenLabelImportOptions(), parts=parts)
+        if parts.states_file is None:
+            rec.write(output, overwrite=overwrite)
+            n = rec.states.num_rows
+            return rec, n, n - rec.states.column("road_id").null_count
+        write_recording(rec, output, overwrite=overwrite, states_file=parts.states_file)
+        return rec, parts.states_file.rows, parts.on_road

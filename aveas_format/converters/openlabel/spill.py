@@ -1,0 +1,199 @@
+"""The boxes' rows of a large OpenLABEL import spilled to disk as they are read (bounded memory).
+
+:class:`RowSpill` takes the place of the in-memory column store of
+:class:`~aveas_format.converters.openlabel.frames._FrameRows` when an import writes its recording
+itself (:mod:`.parts`): each block's columns and extension members go to Arrow IPC files (lz4) in
+a hidden temporary directory next to the output; per box only its object and frame occurrence
+stay in memory (int32 each). A block whose values Arrow cannot give back exactly (texts mixed
+with numbers, an integer among floats, nested values) ends the spill: what was spilled is read
+back into memory (:meth:`RowSpill.load_into`) and the import goes on as without it.
+
+The extension members (``ext``: per column ``("f", values, present, null)`` or ``("o", objects)``,
+:func:`~aveas_format.converters.openlabel.columns.ext_rep`) are spilled as columns of their own:
+``__ef:``/``__ep:``/``__en:`` for floats, ``__eo:``/``__em:`` (the value; missing) for objects.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+from aveas_format.converters.openlabel.columns import _MISSING
+
+#: object columns are spilled only where Arrow gives back the same Python values
+_EXACT_TYPES = (pa.null(), pa.string(), pa.int64(), pa.bool_())
+_IPC = pa.ipc.IpcWriteOptions(compression="lz4")
+_KEYS = ("uidx", "occ")
+
+
+def _objects_arrow(a: np.ndarray) -> pa.Array | None:
+    """An object column as Arrow (None: not exactly)."""
+    try:
+        arr = pa.array(a, from_pandas=False)
+    except (pa.ArrowInvalid, pa.ArrowTypeError, TypeError, ValueError, OverflowError):
+        return None
+    return arr if arr.type in _EXACT_TYPES else None
+
+
+def _objects_numpy(arr: pa.Array | pa.ChunkedArray) -> np.ndarray:
+    out = np.empty(len(arr), object)
+    out[:] = arr.to_pylist()
+    return out
+
+
+def to_batch(ch: dict[str, np.ndarray], ext: dict[str, tuple]) -> pa.RecordBatch | None:
+    """A block's columns and extension members as one record batch (None: not exactly)."""
+    names, arrays = [], []
+    for c, a in ch.items():
+        if c in _KEYS:
+            continue
+        arr = _objects_arrow(a) if a.dtype == object else pa.array(a)
+        if arr is None:
+            return None
+        names.append(c)
+        arrays.append(arr)
+    for c, rep in ext.items():
+        if rep[0] == "f":
+            names += [f"__ef:{c}", f"__ep:{c}", f"__en:{c}"]
+            arrays += [pa.array(rep[1], pa.float64()), pa.array(rep[2]), pa.array(rep[3])]
+            continue
+        vals = rep[1]
+        missing = np.fromiter((v is _MISSING for v in vals), bool, len(vals))
+        given = vals.copy()
+        given[missing] = None
+        arr = _objects_arrow(given)
+        if arr is None:
+            return None
+        names += [f"__eo:{c}", f"__em:{c}"]
+        arrays += [arr, pa.array(missing)]
+    return pa.RecordBatch.from_arrays(arrays, names=names)
+
+
+def _floats(col: pa.Array | pa.ChunkedArray) -> np.ndarray:
+    return col.to_numpy(zero_copy_only=False) if col.null_count == 0 else \
+        col.fill_null(np.nan).to_numpy(zero_copy_only=False)
+
+
+def _bools(col: pa.Array | pa.ChunkedArray) -> np.ndarray:
+    if pa.types.is_null(col.type):
+        return np.zeros(len(col), bool)
+    return col.fill_null(False).to_numpy(zero_copy_only=False)
+
+
+def from_table(t: pa.Table | pa.RecordBatch) -> tuple[dict[str, np.ndarray], dict[str, tuple]]:
+    """:func:`to_batch` undone: ``(columns, extension members)`` (other ``__`` columns skipped;
+    a member's columns all null where a block had not got it: missing there)."""
+    ch: dict[str, np.ndarray] = {}
+    ext: dict[str, tuple] = {}
+    n = t.num_rows
+    for c in t.column_names:
+        col = t.column(c)
+        if c.startswith("__ef:"):
+            m = c[5:]
+            ext[m] = ("f", _floats(col), _bools(t.column(f"__ep:{m}")), _bools(t.column(f"__en:{m}")))
+        elif c.startswith("__eo:"):
+            m = c[5:]
+            vals = _objects_numpy(col)
+            missing = t.column(f"__em:{m}")
+            vals[_bools(missing) | (missing.is_null().to_numpy(zero_copy_only=False)
+                                    if missing.null_count else np.zeros(n, bool))] = _MISSING
+            ext[m] = ("o", vals)
+        elif c.startswith("__"):
+            continue
+        elif pa.types.is_floating(col.type):
+            ch[c] = _floats(col)
+        elif pa.types.is_boolean(col.type) and col.null_count == 0:
+            ch[c] = col.to_numpy(zero_copy_only=False)
+        elif pa.types.is_integer(col.type) and col.null_count == 0 and c in ("uidx", "rank"):
+            ch[c] = col.to_numpy(zero_copy_only=False)
+        else:
+            ch[c] = _objects_numpy(col)
+    return ch, ext
+
+
+class RowSpill:
+    """The blocks' rows in Arrow IPC files in a temporary directory in ``parent`` (a file per run
+    of blocks with one schema), their object and frame occurrence indices in memory."""
+
+    def __init__(self, parent: Path) -> None:
+        self.dir = Path(tempfile.mkdtemp(prefix=".openlabel-rows.", dir=parent))
+        self._owner = os.getpid()
+        self.files: list[Path] = []
+        self._writer: pa.ipc.RecordBatchStreamWriter | None = None
+        self.uidx: list[np.ndarray] = []
+        self.occ: list[np.ndarray] = []
+        self.n = 0
+        self.row_bytes = 0.0
+
+    def append(self, ch: dict[str, np.ndarray], ext: dict[str, tuple]) -> bool:
+        """One block (``ch`` with its ``uidx`` and ``occ``); False where it cannot be spilled
+        exactly (nothing written)."""
+        batch = to_batch(ch, ext)
+        if batch is None:
+            return False
+        if self._writer is None or batch.schema != self._writer_schema:
+            self._close_writer()
+            path = self.dir / f"r{len(self.files)}.arrow"
+            self._writer = pa.ipc.new_stream(str(path), batch.schema, options=_IPC)
+            self._writer_schema = batch.schema
+            self.files.append(path)
+        self._writer.write_batch(batch)
+        self.uidx.append(np.asarray(ch["uidx"], np.int32))
+        self.occ.append(np.asarray(ch["occ"], np.int32))
+        self.n += batch.num_rows
+        if not self.row_bytes and batch.num_rows:
+            self.row_bytes = batch.nbytes / batch.num_rows
+        return True
+
+    def _close_writer(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
+
+    def batches(self) -> Iterator[pa.RecordBatch]:
+        """The spilled batches, in the order they came."""
+        self._close_writer()
+        for path in self.files:
+            with pa.memory_map(str(path)) as f:
+                yield from pa.ipc.open_stream(f)
+
+    def schema(self) -> pa.Schema:
+        """One schema for every batch (a column a block lacks: null there)."""
+        self._close_writer()
+        schemas = []
+        for path in self.files:
+            with pa.memory_map(str(path)) as f:
+                schemas.append(pa.ipc.open_stream(f).schema)
+        return pa.unify_schemas(schemas, promote_options="permissive") if schemas else pa.schema([])
+
+    def keys(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per spilled row its object index and frame occurrence (int32, handed over)."""
+        uidx = np.concatenate(self.uidx) if self.uidx else np.zeros(0, np.int32)
+        occ = np.concatenate(self.occ) if self.occ else np.zeros(0, np.int32)
+        self.uidx, self.occ = [uidx], [occ]
+        return uidx, occ
+
+    def load_into(self, keep) -> None:
+        """Every spilled block given to ``keep(ch, ext)`` as it came (with its ``uidx`` and
+        ``occ``), in order; the files removed."""
+        uidx, occ = self.keys()
+        offset = 0
+        for batch in self.batches():
+            ch, ext = from_table(batch)
+            m = batch.num_rows
+            ch["uidx"], ch["occ"] = uidx[offset:offset + m].astype(np.int64), occ[offset:offset + m].astype(np.int64)
+            keep(ch, ext)
+            offset += m
+        self.close()
+
+    def close(self) -> None:
+        self._close_writer()
+        if self._owner == os.getpid():
+            self._owner = None
+            shutil.rmtree(self.dir, ignore_errors=True)

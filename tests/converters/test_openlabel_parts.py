@@ -1,0 +1,259 @@
+"""The OpenLABEL import that writes its recording itself (``convert_to``, the CLI's ``convert``):
+the boxes spilled as they are read, bucketed by participant and written as the states in parts
+give the in-memory import's recording — our own export (the extension's exact values, float and
+object members) and foreign files (KITTI as VCD writes it, objects that are no road users,
+sentinel sizes, states repeated at one time, a frame key given twice) with the same findings,
+whatever the buckets; where a step needs the rows in memory (the boxes' own timestamps, a block
+Arrow cannot hold exactly) they are read back and the result is the same. Nothing is left next
+to the output, on success or failure."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import aveas_format
+from aveas_format.converters import convert, get_converter
+from aveas_format.converters.openlabel import parts, spill
+from aveas_format.converters.registry import convert_to
+from aveas_format.errors import FormatError, RecordingExistsError
+from aveas_format.sample import highway_scene
+
+from helpers_common import DATA, REALDATA, STRAIGHT_MAP, shared
+from helpers_converters import kitti_box, kitti_doc
+
+KITTI_EXCERPT = DATA / "third_party" / "vcd__openlabel100_kitti_tracking_0016_excerpt.json"
+
+
+@pytest.fixture
+def small_buckets(monkeypatch):
+    """Buckets of a few dozen boxes."""
+    monkeypatch.setattr(parts, "BUCKET_BYTES", 5_000)
+
+
+def _both(src: Path, tmp_path: Path, name: str = "out.aveas", map_source=STRAIGHT_MAP, **options):
+    """``(the in-memory import, the recording written in parts, its warnings, the in-memory
+    import's warnings, the parts' return)``."""
+    with warnings.catch_warnings(record=True) as w_mem:
+        warnings.simplefilter("always")
+        mem = convert("openlabel", [src], map_source=map_source, options=options)
+    with warnings.catch_warnings(record=True) as w_parts:
+        warnings.simplefilter("always")
+        got = parts.import_openlabel_to([src], tmp_path / name, map_source=map_source,
+                                        options=get_converter("openlabel").parse_options(options),
+                                        min_rows=0)
+    return mem, aveas_format.open(tmp_path / name), [str(w.message) for w in w_parts], \
+        [str(w.message) for w in w_mem], got
+
+
+def _same(mem, disk, location_exact: bool = True) -> None:
+    assert sorted(disk.tables()) == sorted(mem.tables())
+    for name, table in mem.tables().items():
+        assert disk.table(name).equals(table), name
+    a, b = disk.meta.model_dump(), mem.meta.model_dump()
+    for m in (a, b):
+        m.pop("tables"), m.pop("recording_id")
+    if not location_exact:  # (the mean summed per bucket: the last bits may differ)
+        la, lb = a.pop("location"), b.pop("location")
+        for k in ("lon", "lat"):
+            assert la[k] == pytest.approx(lb[k], rel=1e-13, abs=1e-12)
+        assert {k: v for k, v in la.items() if k not in ("lon", "lat")} == \
+            {k: v for k, v in lb.items() if k not in ("lon", "lat")}
+    assert a == b
+
+
+def test_own_export_same_recording(tmp_path, small_buckets):
+    rec = highway_scene(n_vehicles=30, duration_s=12.0, seed=5)
+    src = tmp_path / "rec.json"
+    get_converter("openlabel", "export")(rec, src)
+    mem, disk, said, said_mem, (returned, n, on_road) = _both(src, tmp_path, map_source=None)
+    assert returned.states is None  # (written in parts, not loaded)
+    assert n == disk.states.num_rows == rec.states.num_rows and on_road == n
+    _same(mem, disk)
+    assert said == said_mem
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_zip_form_same_recording(tmp_path, small_buckets):
+    rec = highway_scene(n_vehicles=10, duration_s=6.0, seed=2)
+    src = tmp_path / "rec.json"
+    get_converter("openlabel", "export")(rec, src)
+    mem, disk, _, _, (returned, _, _) = _both(src, tmp_path, "out.aveas.zip", map_source=None)
+    assert returned.states is None
+    _same(mem, disk)  # (opened with its tables' SHA-256 checked)
+
+
+def _defects(tmp_path: Path) -> Path:
+    """KITTI-like boxes (no static cuboid: the columnar path) with every defect the import drops
+    per box or per state: a DontCare with sentinel sizes, a car with sentinel sizes only (left
+    without boxes), a car whose boxes are cut short in one frame, two frames at one timestamp
+    (repeated states), and a frame key given twice (the last one counts); the frames shuffled."""
+    doc = kitti_doc(n=40, stamps=[1_600_000_000.0 + 0.1 * k for k in range(40)])
+    del doc["objects"]["-2"]
+    doc["objects"]["7"] = {"name": "Car7", "type": "Car"}
+    doc["objects"]["8"] = {"name": "Tram8", "type": "Tram"}
+    for k in range(40):
+        fr = doc["frames"][str(k)]
+        fr["objects"]["7"] = {"object_data": {"cuboid": [
+            {"name": "box3D", "coordinate_system": "CAM_LEFT", "val": [1, 1, 30, 0, 0, 0, -1, -1, -1]}]}}
+        fr["objects"]["8"] = {"object_data": {"cuboid": [kitti_box(30.0 + k, 3.5, 0.0, -1.5, 9.0, 3.0, 2.5)]}}
+    doc["frames"]["2"]["objects"]["1"]["object_data"]["cuboid"][0]["val"][6:9] = [0.0, 1.5, 1.7]
+    doc["frames"]["6"]["frame_properties"]["timestamp"] = doc["frames"]["5"]["frame_properties"]["timestamp"]
+    keys = list(doc["frames"])  # (the frames in the file in another order than their keys')
+    np.random.default_rng(3).shuffle(keys)
+    doc["frames"] = {k: doc["frames"][k] for k in keys}
+    text = json.dumps({"openlabel": doc})
+    again = json.dumps({"objects": {"1": doc["frames"]["9"]["objects"]["1"]},
+                        "frame_properties": doc["frames"]["9"]["frame_properties"]})
+    text = text.replace('"frames": {', '"frames": {"9": ' + again + ", ", 1)  # (then "9" again)
+    p = tmp_path / "defects.json"
+    p.write_text(text)
+    return p
+
+
+def test_foreign_defects_same_recording_and_findings(tmp_path, small_buckets):
+    src = _defects(tmp_path)
+    mem, disk, said, said_mem, (returned, n, _) = _both(src, tmp_path)
+    assert returned.states is None
+    _same(mem, disk, location_exact=False)
+    assert said == said_mem
+    assert any("dropped 41 boxes with a sentinel or impossible size" in m for m in said), said
+    assert any("repeat a (participant, time)" in m for m in said), said
+    assert any("skipped 1 objects: 1 DontCare" in m for m in said), said
+
+
+@pytest.mark.parametrize("src", [KITTI_EXCERPT], ids=["kitti_0016_excerpt"])
+def test_kitti_as_vcd_writes_it(src, tmp_path, small_buckets):
+    mem, disk, said, said_mem, (returned, _, _) = _both(src, tmp_path)
+    assert returned.states is None
+    _same(mem, disk, location_exact=False)
+    assert said == said_mem
+
+
+@REALDATA
+def test_kitti_tracking_real(tmp_path, small_buckets):
+    src = shared("data", "real", "vcd", "openlabel100_kitti_tracking_0003.json")
+    mem, disk, said, said_mem, (returned, _, _) = _both(src, tmp_path)
+    assert returned.states is None
+    _same(mem, disk, location_exact=False)
+    assert said == said_mem
+
+
+def test_box_timestamps_need_the_rows_in_memory(tmp_path, small_buckets):
+    """A foreign file whose boxes carry their own timestamps (resolved over all boxes at once):
+    the rows are read back into memory, the recording the same."""
+    doc = kitti_doc(n=12)
+    del doc["objects"]["-2"], doc["objects"]["-1"]
+    for k in range(12):
+        objs = doc["frames"][str(k)]["objects"]
+        del objs["-1"]
+        for u in ("0", "1"):
+            objs[u]["object_data"]["cuboid"][0]["attributes"] = {
+                "num": [{"name": "timestamp", "val": 1_600_000_000.0 + 0.1 * k + 0.01 * int(u)}]}
+    src = tmp_path / "stamped.json"
+    src.write_text(json.dumps({"openlabel": doc}))
+    mem, disk, said, said_mem, (returned, _, _) = _both(src, tmp_path)
+    assert returned.states is not None  # (in memory after all)
+    _same(mem, disk)
+    assert said == said_mem
+
+
+def test_a_block_arrow_cannot_hold_is_read_back(tmp_path, small_buckets, monkeypatch):
+    """Values Arrow would not give back exactly (here: no text allowed) end the spill: the rows
+    are read back into memory and the import goes on; the same recording, nothing left."""
+    rec = highway_scene(n_vehicles=8, duration_s=5.0, seed=1)
+    src = tmp_path / "rec.json"
+    get_converter("openlabel", "export")(rec, src)
+    loaded = []
+    real = spill.RowSpill.load_into
+    monkeypatch.setattr(spill.RowSpill, "load_into", lambda self, keep: (loaded.append(self.n), real(self, keep)))
+    calls = {"n": 0}
+    real_to_batch = spill.to_batch
+
+    def second_fails(ch, ext):  # the first block spills, the second cannot
+        calls["n"] += 1
+        return None if calls["n"] == 2 else real_to_batch(ch, ext)
+
+    monkeypatch.setattr(spill, "to_batch", second_fails)
+    from aveas_format.converters.openlabel import stream
+    monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", 1 << 14)  # (many blocks)
+    mem, disk, said, said_mem, (returned, _, _) = _both(src, tmp_path, map_source=None)
+    assert returned.states is not None
+    _same(mem, disk)
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_spill_round_trip_is_exact():
+    """A block's columns and extension members through Arrow and back: the same values (texts,
+    integers, booleans and None in object columns; a member missing vs null)."""
+    from aveas_format.converters.openlabel.columns import _MISSING
+
+    obj = np.empty(4, object)
+    obj[:] = ["a", None, "b", "c"]
+    lanes = np.empty(4, object)
+    lanes[:] = [-1, 2, None, -3]
+    flags = np.empty(4, object)
+    flags[:] = [True, _MISSING, None, False]
+    ch = {"px": np.array([1.0, np.nan, 3.0, 4.0]), "hv": np.array([True, False, True, True]),
+          "road_id": obj, "lane_id": lanes, "uidx": np.arange(4), "occ": np.arange(4)}
+    ext = {"vx": ("f", np.array([1.0, 2.0, np.nan, 0.0]), np.array([True, True, False, True]),
+                  np.array([False, False, False, True])), "interpolated": ("o", flags)}
+    back, back_ext = spill.from_table(spill.to_batch(ch, ext))
+    for c in ("px", "hv"):
+        np.testing.assert_array_equal(back[c], ch[c])
+    assert back["road_id"].tolist() == obj.tolist() and back["lane_id"].tolist() == lanes.tolist()
+    for a, b in zip(back_ext["vx"], ext["vx"]):
+        np.testing.assert_array_equal(a, b)
+    assert [v is _MISSING for v in back_ext["interpolated"][1]] == [False, True, False, False]
+    assert back_ext["interpolated"][1][[0, 2, 3]].tolist() == [True, None, False]
+    mixed = np.empty(2, object)
+    mixed[:] = [1, 2.5]  # (an integer among floats: Arrow would make it 1.0)
+    assert spill.to_batch({"lane_id": mixed}, {}) is None
+
+
+def test_cli_convert_writes_in_parts(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from aveas_format.cli.app import app
+
+    rec = highway_scene(n_vehicles=12, duration_s=6.0, seed=4)
+    src = tmp_path / "rec.json"
+    get_converter("openlabel", "export")(rec, src)
+    monkeypatch.setattr(parts, "SPILL_MIN_ROWS", 0)
+    monkeypatch.setattr(parts, "BUCKET_BYTES", 20_000)
+    wrote = []
+    real = parts._Buckets._write
+    monkeypatch.setattr(parts._Buckets, "_write", lambda self, s: (wrote.append(len(s)), real(self, s))[1])
+    out = tmp_path / "cli.aveas"
+    r = CliRunner().invoke(app, ["convert", "--from", "openlabel", str(src), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert wrote and wrote[0] > 1  # (in parts: more than one bucket)
+    assert f"{rec.states.num_rows:,} states, 100.0% on the map" in r.output
+    _same(convert("openlabel", [src]), aveas_format.open(out))
+    r = CliRunner().invoke(app, ["convert", "--from", "openlabel", str(src), "-o", str(out)])
+    assert r.exit_code == 2 and "exists" in r.output
+
+
+def test_existing_output_refused_before_reading(tmp_path):
+    (tmp_path / "out.aveas").mkdir()
+    with pytest.raises(RecordingExistsError):
+        convert_to("openlabel", [KITTI_EXCERPT], tmp_path / "out.aveas", map_source=STRAIGHT_MAP)
+
+
+def test_broken_file_leaves_nothing(tmp_path, small_buckets):
+    rec = highway_scene(n_vehicles=8, duration_s=5.0, seed=1)
+    src = tmp_path / "rec.json"
+    get_converter("openlabel", "export")(rec, src)
+    text = src.read_bytes()
+    cut = tmp_path / "cut.json"
+    cut.write_bytes(text[: len(text) * 2 // 3])
+    out = tmp_path / "out"
+    out.mkdir()
+    with pytest.raises(FormatError):
+        parts.import_openlabel_to([cut], out / "rec.aveas",
+                                  options=get_converter("openlabel").parse_options({}), min_rows=0)
+    assert list(out.iterdir()) == []
