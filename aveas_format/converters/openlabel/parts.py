@@ -142,6 +142,10 @@ class _Buckets:
         kept_occ = np.flatnonzero(rank_of >= 0)
         per_rank[rank_of[kept_occ]] = np.bincount(occ, minlength=len(rank_of))[kept_occ]
         frame_start = np.cumsum(per_rank) - per_rank
+        first_row = np.zeros(len(rank_of), np.int64)  # (of each frame occurrence)
+        runs = np.flatnonzero(np.r_[True, occ[1:] != occ[:-1]]) if len(occ) else np.zeros(0, np.int64)
+        first_row[occ[runs]] = runs
+        del runs
         keep_uid, report_skipped = R._object_filter(fd, objects, self.uids, options, path) \
             if ext is None else (None, None)
         # buckets of consecutive participants (the ids as the objects give them now: their order
@@ -150,8 +154,9 @@ class _Buckets:
         self._buckets(np.asarray([pid0.get(u, 0) for u in names], np.int64),
                       np.bincount(uidx[valid], minlength=len(names)), int(valid.sum()))
         del valid
-        p = self._pass(uidx, occ, rank_of, frame_start, keep_uid)
-        del uidx, occ
+        self._step2 = (uidx, occ, rank_of, frame_start, first_row, keep_uid)
+        p = self._pass()
+        del uidx, occ, self._step2
         if not p["kept"] or (ext is None and p["cts_all"]):
             return None  # (no box: the import's errors; the boxes' timestamps: over all at once)
         uids = self.uids
@@ -189,33 +194,68 @@ class _Buckets:
         self.bucket_of_idx = bucket_of_pid.reshape(-1)[inv.reshape(-1)] if len(inv) else np.zeros(0, np.int64)
         self.n_buckets = int(bucket_of_pid.max()) + 1 if len(bucket_of_pid) else 0
 
-    def _pass(self, uidx: np.ndarray, occ: np.ndarray, rank_of: np.ndarray, frame_start: np.ndarray,
-              keep_uid: dict | None) -> dict[str, Any]:
+    def _pass(self) -> dict[str, Any]:
+        """The spilled boxes into the buckets' files (:meth:`_pass_part`: consecutive batches in
+        each worker process where there are cores; forked, they inherit this object) and what was
+        gathered on the way, merged."""
+        from aveas_format.parallel import map_ordered
+
+        global _WORK
+        index = self.spill.index
+        workers = self.ctx.options.workers
+        if workers is None or workers == 0:
+            from aveas_format.parallel import default_workers
+
+            workers = default_workers()
+        n_parts = max(1, min(int(workers), len(index)))
+        ends = np.cumsum([r for _, _, _, r in index]) if index else np.zeros(0)
+        cuts = [0, *np.searchsorted(ends, ends[-1] * np.arange(1, n_parts) / n_parts).tolist(),
+                len(index)] if index else [0, 0]
+        parts = [(w, lo, hi) for w, (lo, hi) in enumerate(zip(cuts[:-1], cuts[1:])) if hi > lo]
+        _WORK = self
+        try:
+            got = [r for _, r in map_ordered(_pass_of_work, parts, workers=min(len(parts), int(workers)))]
+        finally:
+            _WORK = None
+        p = got[0] if got else _gathered()
+        for q in got[1:]:
+            p["kept"] += q["kept"]
+            p["hv_all"] &= q["hv_all"]
+            p["acc_all"] &= q["acc_all"]
+            p["cts_all"] &= q["cts_all"]
+            p["hr_any"] |= q["hr_any"]
+            for key in ("roots", "had", "left"):
+                p[key] |= q[key]
+            p["sizes"] += q["sizes"]
+            p["bad"][0] += q["bad"][0]
+            p["bad"][1] |= q["bad"][1]
+            if q["bad"][2] is not None and (p["bad"][2] is None or q["bad"][2] < p["bad"][2]):
+                p["bad"][2:] = q["bad"][2:]
+        return p
+
+    def _pass_part(self, part: tuple[int, int, int]) -> dict[str, Any]:
+        """Batches ``lo`` to ``hi`` of the spill into bucket files ``b{k}.{w}.arrow``: the boxes
+        kept (frame key given once, objects imported, plausible sizes) with their object, frame
+        rank and place in frame order; and what the import decides over all boxes, gathered."""
         from aveas_format.converters.openlabel import read as R
 
+        w, lo, hi = part
+        uidx, occ, rank_of, frame_start, first_row, keep_uid = self._step2
         fd = self.fd
         names = fd.uid_names
         need_size = np.fromiter(map(fd.needs_size, names), bool, len(names))
-        p: dict[str, Any] = {"kept": 0, "hv_all": True, "hr_any": False, "acc_all": True,
-                             "cts_all": True, "roots": set(), "had": set(), "left": set(),
-                             "sizes": [], "bad": [0, set(), None, None, None]}
+        p = _gathered()
         writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
-        offset = carried = 0
+        offset = self.spill.index[lo][2]
         try:
-            for batch in self.spill.batches():
+            for batch in self.spill.batches(lo, hi):
                 m = batch.num_rows
                 t = _conformed(pa.Table.from_batches([batch]), self.schema)
                 u, oc = uidx[offset:offset + m], occ[offset:offset + m]
                 rk = rank_of[oc]
                 v = rk >= 0
-                # (the box's place in its frame: a frame's boxes may begin in the last batch)
-                run = np.r_[True, oc[1:] != oc[:-1]]
-                run_start = np.flatnonzero(run)
-                within = np.arange(m) - np.repeat(run_start, np.diff(np.r_[run_start, m]))
-                if offset and oc[0] == occ[offset - 1]:
-                    within[:np.diff(np.r_[run_start, m])[0]] += carried
-                carried = int(within[-1]) + 1
-                ps = np.where(v, frame_start[np.maximum(rk, 0)] + within, -1)
+                # the box's place in frame order: where its frame starts, plus its place in it
+                ps = np.where(v, frame_start[np.maximum(rk, 0)] + np.arange(offset, offset + m) - first_row[oc], -1)
                 offset += m
                 hv, hr = (t.column(c).to_numpy(zero_copy_only=False) for c in ("hv", "hr"))
                 p["hv_all"] &= bool(hv[v].all())
@@ -236,12 +276,10 @@ class _Buckets:
                         if bad[2] is None or ps[i] < bad[2]:
                             bad[2:] = [int(ps[i]), fd.fkeys[int(rk[i])], names[int(u[i])]]
                     p["had"] |= set(np.unique(u[v]).tolist())
-                    p["left"] |= set(np.unique(u[keep]).tolist())
                 idx = np.flatnonzero(keep)
                 if not len(idx):
                     continue
-                if keep_uid is None:
-                    p["left"] |= set(np.unique(u[idx]).tolist())
+                p["left"] |= set(np.unique(u[idx]).tolist())
                 p["kept"] += len(idx)
                 p["acc_all"] &= bool(np.isfinite(_f(t, "au")[idx]).all() and np.isfinite(_f(t, "av")[idx]).all())
                 p["cts_all"] &= bool(np.isfinite(_f(t, "cub_ts")[idx]).all())
@@ -254,16 +292,16 @@ class _Buckets:
                            .append_column("rank", pa.array(rk[idx].astype(np.int64))) \
                            .append_column("__pos", pa.array(ps[idx]))
                 cuts = np.r_[0, np.flatnonzero(sb[1:] != sb[:-1]) + 1, len(sb)]
-                for lo, hi in zip(cuts[:-1].tolist(), cuts[1:].tolist()):
-                    k = int(sb[lo])
-                    w = writers.get(k)
-                    if w is None:
-                        w = writers[k] = pa.ipc.new_stream(str(self.dir / f"b{k}.arrow"), kept.schema,
-                                                           options=_IPC)
-                    w.write_table(kept.slice(lo, hi - lo))
+                for a, b in zip(cuts[:-1].tolist(), cuts[1:].tolist()):
+                    k = int(sb[a])
+                    wr = writers.get(k)
+                    if wr is None:
+                        wr = writers[k] = pa.ipc.new_stream(str(self.dir / f"b{k}.{w}.arrow"), kept.schema,
+                                                            options=_IPC)
+                    wr.write_table(kept.slice(a, b - a))
         finally:
-            for w in writers.values():
-                w.close()
+            for wr in writers.values():
+                wr.close()
         pa.default_memory_pool().release_unused()
         return p
 
@@ -289,7 +327,7 @@ class _Buckets:
 
         global _WORK
         self._step3 = (pid_idx, time_arr, p, use_file)
-        ks = [k for k in range(self.n_buckets) if (self.dir / f"b{k}.arrow").exists()]
+        ks = sorted({int(f.name.split(".")[0][1:]) for f in self.dir.glob("b*.arrow")})
         workers = self.ctx.options.workers if len(ks) > 1 else 1
         out: dict[str, Any] = {"repeats": [], "schemas": []}
         acc_after, roots_after = True, set()
@@ -317,9 +355,13 @@ class _Buckets:
 
         pid_idx, time_arr, p, use_file = self._step3
         fd, ctx = self.fd, self.ctx
-        f = self.dir / f"b{k}.arrow"
-        with pa.memory_map(str(f)) as mm:
-            t = pa.ipc.open_stream(mm).read_all()
+        files = sorted(self.dir.glob(f"b{k}.*.arrow"))
+        tables = []
+        for f in files:
+            with pa.memory_map(str(f)) as mm:
+                tables.append(pa.ipc.open_stream(mm).read_all())
+        t = pa.concat_tables(tables)
+        del tables
         t = t.take(pc.sort_indices(t.column("__pos")))
         pos = t.column("__pos").to_numpy()
         rows, bext = from_table(t)
@@ -349,7 +391,8 @@ class _Buckets:
                         None if use_file else ctx.net)
         with pa.ipc.new_stream(str(self.dir / f"s{k}.arrow"), s.schema, options=_IPC) as w:
             w.write_table(s)
-        f.unlink()
+        for f in files:
+            f.unlink()
         r["schema"] = s.schema
         return r
 
@@ -417,6 +460,16 @@ _WORK: _Buckets | None = None
 
 def _bucket_of_work(k: int) -> dict[str, Any]:
     return _WORK._bucket(k)
+
+
+def _pass_of_work(part: tuple[int, int, int]) -> dict[str, Any]:
+    return _WORK._pass_part(part)
+
+
+def _gathered() -> dict[str, Any]:
+    """What the pass gathers over the boxes kept (:meth:`_Buckets._pass_part`), before any."""
+    return {"kept": 0, "hv_all": True, "hr_any": False, "acc_all": True, "cts_all": True, "roots": set(),
+            "had": set(), "left": set(), "sizes": [], "bad": [0, set(), None, None, None]}
 
 
 class _Hashing:

@@ -125,7 +125,9 @@ class RowSpill:
         self.dir = Path(tempfile.mkdtemp(prefix=".openlabel-rows.", dir=parent))
         self._owner = os.getpid()
         self.files: list[Path] = []
-        self._writer: pa.ipc.RecordBatchStreamWriter | None = None
+        #: per spilled batch: (file, its batch in the file, first row, rows)
+        self.index: list[tuple[int, int, int, int]] = []
+        self._writer: pa.ipc.RecordBatchFileWriter | None = None
         self.uidx: list[np.ndarray] = []
         self.occ: list[np.ndarray] = []
         self.n = 0
@@ -140,10 +142,13 @@ class RowSpill:
         if self._writer is None or batch.schema != self._writer_schema:
             self._close_writer()
             path = self.dir / f"r{len(self.files)}.arrow"
-            self._writer = pa.ipc.new_stream(str(path), batch.schema, options=_IPC)
+            self._writer = pa.ipc.new_file(str(path), batch.schema, options=_IPC)
             self._writer_schema = batch.schema
             self.files.append(path)
+            self._in_file = 0
         self._writer.write_batch(batch)
+        self.index.append((len(self.files) - 1, self._in_file, self.n, batch.num_rows))
+        self._in_file += 1
         self.uidx.append(np.asarray(ch["uidx"], np.int32))
         self.occ.append(np.asarray(ch["occ"], np.int32))
         self.n += batch.num_rows
@@ -156,12 +161,14 @@ class RowSpill:
             self._writer.close()
             self._writer = None
 
-    def batches(self) -> Iterator[pa.RecordBatch]:
-        """The spilled batches, in the order they came."""
+    def batches(self, lo: int = 0, hi: int | None = None) -> Iterator[pa.RecordBatch]:
+        """The spilled batches (``lo`` to ``hi`` of :attr:`index`), in the order they came."""
         self._close_writer()
-        for path in self.files:
-            with pa.memory_map(str(path)) as f:
-                yield from pa.ipc.open_stream(f)
+        readers: dict[int, pa.ipc.RecordBatchFileReader] = {}
+        for f, b, _, _ in self.index[lo:hi]:
+            if f not in readers:
+                readers[f] = pa.ipc.open_file(pa.memory_map(str(self.files[f])))
+            yield readers[f].get_batch(b)
 
     def schema(self) -> pa.Schema:
         """One schema for every batch (a column a block lacks: null there)."""
@@ -169,7 +176,7 @@ class RowSpill:
         schemas = []
         for path in self.files:
             with pa.memory_map(str(path)) as f:
-                schemas.append(pa.ipc.open_stream(f).schema)
+                schemas.append(pa.ipc.open_file(f).schema)
         return pa.unify_schemas(schemas, promote_options="permissive") if schemas else pa.schema([])
 
     def keys(self) -> tuple[np.ndarray, np.ndarray]:
