@@ -257,3 +257,35 @@ def test_broken_file_leaves_nothing(tmp_path, small_buckets):
         parts.import_openlabel_to([cut], out / "rec.aveas",
                                   options=get_converter("openlabel").parse_options({}), min_rows=0)
     assert list(out.iterdir()) == []
+
+
+def _report(src: Path, monkeypatch, min_rows: int) -> dict:
+    from typer.testing import CliRunner
+
+    from aveas_format.cli.app import app
+
+    monkeypatch.setattr(parts, "SPILL_MIN_ROWS", min_rows)
+    r = CliRunner().invoke(app, ["validate", str(src), "--map", str(STRAIGHT_MAP), "--format", "json"])
+    assert r.exit_code in (0, 1), r.output
+    report = json.loads(r.stdout)
+
+    def strip(d):
+        if isinstance(d, dict):
+            return {k: strip(v) for k, v in d.items() if k not in ("seconds", "streamed")}
+        return [strip(x) for x in d] if isinstance(d, list) else d
+    return strip(report)
+
+
+def test_validate_submission_through_the_written_recording(tmp_path, small_buckets, monkeypatch):
+    """``validate FILE`` of a large file validates the recording written in parts (a temporary
+    directory, removed after): the same report, the import's findings located in the file."""
+    src = _defects(tmp_path)
+    written = []
+    real = parts._Buckets._write
+    monkeypatch.setattr(parts._Buckets, "_write", lambda self, s: (written.append(self.dir), real(self, s))[1])
+    on_disk = _report(src, monkeypatch, 0)
+    assert written and not written[0].exists()  # (in parts, in a temporary directory since removed)
+    in_memory = _report(src, monkeypatch, 10**9)
+    assert on_disk == in_memory
+    codes = {r["code"] for r in on_disk["results"] if r.get("count")}
+    assert {"source.openlabel.bad_size", "source.openlabel.duplicate_state"} <= codes, codes

@@ -43,7 +43,7 @@ import pyarrow.parquet as pq
 from aveas_format.converters.openlabel.spill import RowSpill, from_table
 from aveas_format.io.arrow import conform
 from aveas_format.io.writer import ROW_GROUP_ROWS, StatesFile, parquet_options, prepare_table
-from aveas_format.numeric import same_participant
+from aveas_format.numeric import release_free_memory, same_participant
 from aveas_format.schema.tables import TABLES
 
 #: from this many boxes (expected from the first block and the file's size) the rows are spilled
@@ -195,43 +195,10 @@ class _Buckets:
         self.n_buckets = int(bucket_of_pid.max()) + 1 if len(bucket_of_pid) else 0
 
     def _pass(self) -> dict[str, Any]:
-        """The spilled boxes into the buckets' files (:meth:`_pass_part`: consecutive batches in
-        each worker process where there are cores; forked, they inherit this object) and what was
-        gathered on the way, merged."""
-        from aveas_format.parallel import map_ordered
-
-        global _WORK
-        index = self.spill.index
-        workers = self.ctx.options.workers
-        if workers is None or workers == 0:
-            from aveas_format.parallel import default_workers
-
-            workers = default_workers()
-        n_parts = max(1, min(int(workers), len(index)))
-        ends = np.cumsum([r for _, _, _, r in index]) if index else np.zeros(0)
-        cuts = [0, *np.searchsorted(ends, ends[-1] * np.arange(1, n_parts) / n_parts).tolist(),
-                len(index)] if index else [0, 0]
-        parts = [(w, lo, hi) for w, (lo, hi) in enumerate(zip(cuts[:-1], cuts[1:])) if hi > lo]
-        _WORK = self
-        try:
-            got = [r for _, r in map_ordered(_pass_of_work, parts, workers=min(len(parts), int(workers)))]
-        finally:
-            _WORK = None
-        p = got[0] if got else _gathered()
-        for q in got[1:]:
-            p["kept"] += q["kept"]
-            p["hv_all"] &= q["hv_all"]
-            p["acc_all"] &= q["acc_all"]
-            p["cts_all"] &= q["cts_all"]
-            p["hr_any"] |= q["hr_any"]
-            for key in ("roots", "had", "left"):
-                p[key] |= q[key]
-            p["sizes"] += q["sizes"]
-            p["bad"][0] += q["bad"][0]
-            p["bad"][1] |= q["bad"][1]
-            if q["bad"][2] is not None and (p["bad"][2] is None or q["bad"][2] < p["bad"][2]):
-                p["bad"][2:] = q["bad"][2:]
-        return p
+        """The spilled boxes into the buckets' files, in this process: worker processes forked
+        from it would copy its pages as their allocator reuses them (measured: ~700 MB each at
+        9.2 M states, for 1.5 s less)."""
+        return self._pass_part((0, 0, len(self.spill.index)))
 
     def _pass_part(self, part: tuple[int, int, int]) -> dict[str, Any]:
         """Batches ``lo`` to ``hi`` of the spill into bucket files ``b{k}.{w}.arrow``: the boxes
@@ -331,6 +298,9 @@ class _Buckets:
         workers = self.ctx.options.workers if len(ks) > 1 else 1
         out: dict[str, Any] = {"repeats": [], "schemas": []}
         acc_after, roots_after = True, set()
+        if workers != 1:  # (the pass's freed memory back to the system before the fork: the
+            release_free_memory()  # workers would otherwise copy those pages as they reuse them)
+            pa.default_memory_pool().release_unused()
         _WORK = self
         try:
             for k, r in map_ordered(_bucket_of_work, ks, workers=workers):
@@ -358,7 +328,7 @@ class _Buckets:
         files = sorted(self.dir.glob(f"b{k}.*.arrow"))
         tables = []
         for f in files:
-            with pa.memory_map(str(f)) as mm:
+            with pa.OSFile(str(f)) as mm:
                 tables.append(pa.ipc.open_stream(mm).read_all())
         t = pa.concat_tables(tables)
         del tables
@@ -423,7 +393,7 @@ class _Buckets:
             sink = _Hashing(raw, h)
             with pq.ParquetWriter(sink, wschema, **options) as pw:
                 for k, _ in schemas:
-                    with pa.memory_map(str(self.dir / f"s{k}.arrow")) as mm:
+                    with pa.OSFile(str(self.dir / f"s{k}.arrow")) as mm:
                         s = pa.ipc.open_stream(mm).read_all()
                     os.unlink(self.dir / f"s{k}.arrow")
                     s = _conformed(s, schema).replace_schema_metadata(wschema.metadata)
@@ -460,10 +430,6 @@ _WORK: _Buckets | None = None
 
 def _bucket_of_work(k: int) -> dict[str, Any]:
     return _WORK._bucket(k)
-
-
-def _pass_of_work(part: tuple[int, int, int]) -> dict[str, Any]:
-    return _WORK._pass_part(part)
 
 
 def _gathered() -> dict[str, Any]:

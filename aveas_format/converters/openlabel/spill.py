@@ -167,7 +167,7 @@ class RowSpill:
         readers: dict[int, pa.ipc.RecordBatchFileReader] = {}
         for f, b, _, _ in self.index[lo:hi]:
             if f not in readers:
-                readers[f] = pa.ipc.open_file(pa.memory_map(str(self.files[f])))
+                readers[f] = pa.ipc.open_file(pa.OSFile(str(self.files[f])))  # (read, not mapped: no file pages counted as ours)
             yield readers[f].get_batch(b)
 
     def schema(self) -> pa.Schema:
@@ -175,7 +175,7 @@ class RowSpill:
         self._close_writer()
         schemas = []
         for path in self.files:
-            with pa.memory_map(str(path)) as f:
+            with pa.OSFile(str(path)) as f:
                 schemas.append(pa.ipc.open_file(f).schema)
         return pa.unify_schemas(schemas, promote_options="permissive") if schemas else pa.schema([])
 
