@@ -202,9 +202,13 @@ def test_spill_round_trip_is_exact():
           "road_id": obj, "lane_id": lanes, "uidx": np.arange(4), "occ": np.arange(4)}
     ext = {"vx": ("f", np.array([1.0, 2.0, np.nan, 0.0]), np.array([True, True, False, True]),
                   np.array([False, False, False, True])), "interpolated": ("o", flags)}
+    bools = np.empty(4, object)
+    bools[:] = [True, False, True, True]  # (an object column of booleans stays one)
+    ch["bools"] = bools
     back, back_ext = spill.from_table(spill.to_batch(ch, ext))
-    for c in ("px", "hv"):
+    for c in ("px", "hv", "bools"):
         np.testing.assert_array_equal(back[c], ch[c])
+        assert back[c].dtype == ch[c].dtype, c
     assert back["road_id"].tolist() == obj.tolist() and back["lane_id"].tolist() == lanes.tolist()
     for a, b in zip(back_ext["vx"], ext["vx"]):
         np.testing.assert_array_equal(a, b)

@@ -30,6 +30,8 @@ from aveas_format.converters.openlabel.columns import _MISSING
 _EXACT_TYPES = (pa.null(), pa.string(), pa.int64(), pa.bool_())
 _IPC = pa.ipc.IpcWriteOptions(compression="lz4")
 _KEYS = ("uidx", "occ")
+#: the field metadata of a column that was an object column (given back as one)
+_OBJECTS = {b"aveas_objects": b"1"}
 
 
 def _objects_arrow(a: np.ndarray) -> pa.Array | None:
@@ -49,19 +51,19 @@ def _objects_numpy(arr: pa.Array | pa.ChunkedArray) -> np.ndarray:
 
 def to_batch(ch: dict[str, np.ndarray], ext: dict[str, tuple]) -> pa.RecordBatch | None:
     """A block's columns and extension members as one record batch (None: not exactly)."""
-    names, arrays = [], []
+    fields, arrays = [], []
     for c, a in ch.items():
         if c in _KEYS:
             continue
         arr = _objects_arrow(a) if a.dtype == object else pa.array(a)
         if arr is None:
             return None
-        names.append(c)
+        fields.append(pa.field(c, arr.type, metadata=_OBJECTS if a.dtype == object else None))
         arrays.append(arr)
     for c, rep in ext.items():
         if rep[0] == "f":
-            names += [f"__ef:{c}", f"__ep:{c}", f"__en:{c}"]
             arrays += [pa.array(rep[1], pa.float64()), pa.array(rep[2]), pa.array(rep[3])]
+            fields += [pa.field(f"__e{k}:{c}", a.type) for k, a in zip("fpn", arrays[-3:])]
             continue
         vals = rep[1]
         missing = np.fromiter((v is _MISSING for v in vals), bool, len(vals))
@@ -70,9 +72,9 @@ def to_batch(ch: dict[str, np.ndarray], ext: dict[str, tuple]) -> pa.RecordBatch
         arr = _objects_arrow(given)
         if arr is None:
             return None
-        names += [f"__eo:{c}", f"__em:{c}"]
         arrays += [arr, pa.array(missing)]
-    return pa.RecordBatch.from_arrays(arrays, names=names)
+        fields += [pa.field(f"__eo:{c}", arr.type), pa.field(f"__em:{c}", pa.bool_())]
+    return pa.RecordBatch.from_arrays(arrays, schema=pa.schema(fields))
 
 
 def _floats(col: pa.Array | pa.ChunkedArray) -> np.ndarray:
@@ -92,7 +94,8 @@ def from_table(t: pa.Table | pa.RecordBatch) -> tuple[dict[str, np.ndarray], dic
     ch: dict[str, np.ndarray] = {}
     ext: dict[str, tuple] = {}
     n = t.num_rows
-    for c in t.column_names:
+    for fld in t.schema:
+        c = fld.name
         col = t.column(c)
         if c.startswith("__ef:"):
             m = c[5:]
@@ -106,14 +109,14 @@ def from_table(t: pa.Table | pa.RecordBatch) -> tuple[dict[str, np.ndarray], dic
             ext[m] = ("o", vals)
         elif c.startswith("__"):
             continue
+        elif fld.metadata == _OBJECTS or pa.types.is_null(col.type):
+            ch[c] = _objects_numpy(col)  # (an object column: the same Python values)
         elif pa.types.is_floating(col.type):
             ch[c] = _floats(col)
-        elif pa.types.is_boolean(col.type) and col.null_count == 0:
-            ch[c] = col.to_numpy(zero_copy_only=False)
-        elif pa.types.is_integer(col.type) and col.null_count == 0 and c in ("uidx", "rank"):
-            ch[c] = col.to_numpy(zero_copy_only=False)
-        else:
+        elif col.null_count:  # (no block had it: none)
             ch[c] = _objects_numpy(col)
+        else:  # (numbers and booleans of numpy columns, the keys the pass adds)
+            ch[c] = col.to_numpy(zero_copy_only=False)
     return ch, ext
 
 
