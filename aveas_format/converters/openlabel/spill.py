@@ -66,7 +66,7 @@ def to_batch(ch: dict[str, np.ndarray], ext: dict[str, tuple]) -> pa.RecordBatch
             fields += [pa.field(f"__e{k}:{c}", a.type) for k, a in zip("fpn", arrays[-3:])]
             continue
         vals = rep[1]
-        missing = np.fromiter((v is _MISSING for v in vals), bool, len(vals))
+        missing = np.asarray(vals == _MISSING, bool)  # (elementwise; the marker equals only itself)
         given = vals.copy()
         given[missing] = None
         arr = _objects_arrow(given)
