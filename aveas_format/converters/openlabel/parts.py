@@ -332,8 +332,10 @@ class _Buckets:
                 tables.append(pa.ipc.open_stream(mm).read_all())
         t = pa.concat_tables(tables)
         del tables
-        t = t.take(pc.sort_indices(t.column("__pos")))
         pos = t.column("__pos").to_numpy()
+        if len(pos) > 1 and not (pos[1:] > pos[:-1]).all():  # (frames in the file out of key order)
+            order = np.argsort(pos, kind="stable")
+            t, pos = t.take(pa.array(order)), pos[order]
         rows, bext = from_table(t)
         del t
         bfd = _FrameData(**{**fd.__dict__, "rows": rows, "ext": bext})
