@@ -231,7 +231,7 @@ def test_cli_convert_writes_in_parts(tmp_path, monkeypatch):
     monkeypatch.setattr(parts, "BUCKET_BYTES", 20_000)
     wrote = []
     real = parts._Buckets._write
-    monkeypatch.setattr(parts._Buckets, "_write", lambda self, s: (wrote.append(len(s)), real(self, s))[1])
+    monkeypatch.setattr(parts._Buckets, "_write", lambda self, *a: (wrote.append(len(a[0])), real(self, *a))[1])
     out = tmp_path / "cli.aveas"
     r = CliRunner().invoke(app, ["convert", "--from", "openlabel", str(src), "-o", str(out)])
     assert r.exit_code == 0, r.output
@@ -286,10 +286,23 @@ def test_validate_submission_through_the_written_recording(tmp_path, small_bucke
     src = _defects(tmp_path)
     written = []
     real = parts._Buckets._write
-    monkeypatch.setattr(parts._Buckets, "_write", lambda self, s: (written.append(self.dir), real(self, s))[1])
+    monkeypatch.setattr(parts._Buckets, "_write", lambda self, *a: (written.append(self.dir), real(self, *a))[1])
     on_disk = _report(src, monkeypatch, 0)
     assert written and not written[0].exists()  # (in parts, in a temporary directory since removed)
     in_memory = _report(src, monkeypatch, 10**9)
     assert on_disk == in_memory
     codes = {r["code"] for r in on_disk["results"] if r.get("count")}
     assert {"source.openlabel.bad_size", "source.openlabel.duplicate_state"} <= codes, codes
+
+
+def test_one_schema_over_the_buckets():
+    """The buckets' states make one schema: the format's columns in its order, others by name, a
+    type that holds every bucket's values (a column all null in one bucket takes the others'
+    type); types that do not go together: None (the import then runs in memory)."""
+    import pyarrow as pa
+
+    one = parts._one_schema([pa.schema([("zz", pa.null()), ("time", pa.float64())]),
+                             pa.schema([("participant_id", pa.int64()), ("aa", pa.string()), ("zz", pa.bool_())])])
+    assert one.names == ["participant_id", "time", "aa", "zz"]
+    assert one.field("zz").type == pa.bool_()
+    assert parts._one_schema([pa.schema([("x", pa.string())]), pa.schema([("x", pa.int64())])]) is None

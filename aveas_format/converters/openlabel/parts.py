@@ -172,9 +172,10 @@ class _Buckets:
             return None
         use_file = options.road_coordinates == "file" or (options.road_coordinates == "auto" and p["hr_any"])
         b = self._states(pid_idx, np.asarray([time_of[k] for k in fd.fkeys], float), p, use_file)
-        if b is None:
+        schema = None if b is None else _one_schema([sc for _, sc in b["schemas"]])
+        if schema is None:
             return None
-        n, meta_kw, empty = self._write(b["schemas"])
+        n, meta_kw, empty = self._write([k for k, _ in b["schemas"]], schema)
         if report_skipped is not None:  # the findings, in the in-memory import's order
             report_skipped()
         if p["bad"][0]:
@@ -369,20 +370,9 @@ class _Buckets:
         return r
 
     # ---- step 4 -----------------------------------------------------------------------------
-    def _write(self, schemas: list[tuple[int, pa.Schema]]) -> tuple[int, dict, pa.Table]:
+    def _write(self, buckets: list[int], schema: pa.Schema) -> tuple[int, dict, pa.Table]:
         """The buckets' states into one ``states.parquet`` (the recording's row groups, one
         schema); ``(rows, the recording's duration, rate and location, an empty table)``."""
-        declared = [c.name for c in _SPEC.columns]
-        fields: dict[str, pa.Field] = {}
-        for _, sc in schemas:
-            for fld in sc:
-                if fld.name in fields and fields[fld.name].type != fld.type:
-                    fields[fld.name] = pa.unify_schemas([pa.schema([fields[fld.name]]), pa.schema([fld])],
-                                                        promote_options="permissive").field(0)
-                else:
-                    fields.setdefault(fld.name, fld)
-        order = [c for c in declared if c in fields] + sorted(c for c in fields if c not in _SPEC)
-        schema = pa.schema([fields[c] for c in order])
         wschema, options = parquet_options(schema, _SPEC)
         target = self.dir.parent / "states.parquet"
         h = hashlib.sha256()
@@ -394,7 +384,7 @@ class _Buckets:
         with open(target, "wb") as raw:
             sink = _Hashing(raw, h)
             with pq.ParquetWriter(sink, wschema, **options) as pw:
-                for k, _ in schemas:
+                for k in buckets:
                     with pa.OSFile(str(self.dir / f"s{k}.arrow")) as mm:
                         s = pa.ipc.open_stream(mm).read_all()
                     os.unlink(self.dir / f"s{k}.arrow")
@@ -458,6 +448,26 @@ class _Hashing:
 
     def tell(self) -> int:
         return self.f.tell()
+
+
+def _one_schema(schemas: list[pa.Schema]) -> pa.Schema | None:
+    """The buckets' states' schema: every column any has (the format's in its order, others by
+    name, as the import in memory orders them), a type that holds each bucket's values; None where
+    the buckets' types of a column do not go together (the import then runs in memory)."""
+    fields: dict[str, pa.Field] = {}
+    try:
+        for sc in schemas:
+            for fld in sc:
+                if fld.name in fields and fields[fld.name].type != fld.type:
+                    fields[fld.name] = pa.unify_schemas([pa.schema([fields[fld.name]]), pa.schema([fld])],
+                                                        promote_options="permissive").field(0)
+                else:
+                    fields.setdefault(fld.name, fld)
+    except (pa.ArrowInvalid, pa.ArrowTypeError, pa.ArrowNotImplementedError):
+        return None
+    declared = [c.name for c in _SPEC.columns]
+    return pa.schema([fields[c] for c in [c for c in declared if c in fields]
+                      + sorted(c for c in fields if c not in _SPEC)])
 
 
 def _median_rate(dts: dict[float, int]) -> float:
