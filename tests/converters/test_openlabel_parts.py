@@ -306,3 +306,31 @@ def test_one_schema_over_the_buckets():
     assert one.names == ["participant_id", "time", "aa", "zz"]
     assert one.field("zz").type == pa.bool_()
     assert parts._one_schema([pa.schema([("x", pa.string())]), pa.schema([("x", pa.int64())])]) is None
+
+
+@pytest.mark.parametrize("seed", range(5))
+@pytest.mark.parametrize("group", [7, 1 << 20])
+def test_objects_first_seen_in_frame_key_order(seed, group, monkeypatch):
+    """The objects in order of their first appearance over the frames kept, in key order (what
+    numbers the objects a file's ``objects`` lacks): the same as a sort of all boxes, for frames
+    in parts of any size, empty frames and frame keys given twice (rank -1)."""
+    from aveas_format.converters.openlabel import frames as fr
+    from aveas_format.converters.openlabel.frames import _Frames, _FrameRows
+
+    monkeypatch.setattr(fr, "_SEEN_GROUP", group)  # (7: many groups)
+    rng = np.random.default_rng(seed)
+    acc = _FrameRows({}, _Frames(None), None)
+    n_frames, n_objects = 300, 40
+    lens = rng.integers(0, 6, n_frames)
+    frames = [rng.choice(n_objects, int(k), replace=False).astype(np.int32) for k in lens]
+    acc.uid_index = {str(i): i for i in range(n_objects)}
+    acc.frame_len = lens.tolist()
+    cuts = np.sort(rng.choice(np.arange(1, n_frames), 20, replace=False))
+    acc.uid_parts = [np.concatenate(frames[a:b]) if b > a else np.zeros(0, np.int32)
+                     for a, b in zip([0, *cuts], [*cuts, n_frames])]
+    rank_of = rng.permutation(n_frames).astype(np.int64)
+    rank_of[rng.choice(n_frames, 30, replace=False)] = -1  # (occurrences of a key given again)
+    flat = np.concatenate([frames[j] for j in np.argsort(np.where(rank_of < 0, n_frames + 1, rank_of))
+                           if rank_of[j] >= 0])
+    uniq, first = np.unique(flat, return_index=True)
+    assert acc._first_seen(rank_of).tolist() == uniq[np.argsort(first)].tolist()

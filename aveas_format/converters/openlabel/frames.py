@@ -280,6 +280,10 @@ class _ColumnStore:
         return np.concatenate(self.chunks.pop(c))
 
 
+#: about this many boxes at a time in :meth:`_FrameRows._first_seen`
+_SEEN_GROUP = 1 << 20
+
+
 class _FrameRows:
     """The frames of an OpenLABEL file, one ``(key, frame)`` at a time in any order: per box the
     values of one state in column chunks (numpy), per frame its key, timestamp and object ids.
@@ -517,7 +521,7 @@ class _FrameRows:
         for i, part in enumerate(self.uid_parts):
             group.append(part)
             size += len(part)
-            if size < 1 << 20 and i < len(self.uid_parts) - 1:
+            if size < _SEEN_GROUP and i < len(self.uid_parts) - 1:
                 continue
             idx = np.concatenate(group)
             frame = np.searchsorted(ends, np.arange(e0, e0 + size), side="right")
