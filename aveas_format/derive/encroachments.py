@@ -72,7 +72,7 @@ def _axis_interval(nx, ny, pmin, pmax, cx, cy, c, s, L, W, vx, vy):
     r = 0.5 * L * np.abs(nx * c + ny * s) + 0.5 * W * np.abs(-nx * s + ny * c)
     d0 = nx * cx + ny * cy
     dv = nx * vx + ny * vy
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # (a speed ~0 on the axis: +-inf)
         a = (pmin - r - d0) / dv
         b = (pmax + r - d0) / dv
     lo = np.where(dv > 0, a, b)
