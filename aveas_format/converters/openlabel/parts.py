@@ -40,7 +40,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from aveas_format.converters.openlabel.spill import RowSpill, from_table
+from aveas_format.converters.openlabel.spill import RowSpill, from_table, write_by_bucket
 from aveas_format.io.arrow import conform
 from aveas_format.io.writer import ROW_GROUP_ROWS, StatesFile, parquet_options, prepare_table
 from aveas_format.numeric import release_free_memory, same_participant
@@ -154,9 +154,8 @@ class _Buckets:
         self._buckets(np.asarray([pid0.get(u, 0) for u in names], np.int64),
                       np.bincount(uidx[valid], minlength=len(names)), int(valid.sum()))
         del valid
-        self._step2 = (uidx, occ, rank_of, frame_start, first_row, keep_uid)
-        p = self._pass()
-        del uidx, occ, self._step2
+        p = self._pass(uidx, occ, rank_of, frame_start, first_row, keep_uid)
+        del uidx, occ
         if not p["kept"] or (ext is None and p["cts_all"]):
             return None  # (no box: the import's errors; the boxes' timestamps: over all at once)
         uids = self.uids
@@ -195,28 +194,25 @@ class _Buckets:
         self.bucket_of_idx = bucket_of_pid.reshape(-1)[inv.reshape(-1)] if len(inv) else np.zeros(0, np.int64)
         self.n_buckets = int(bucket_of_pid.max()) + 1 if len(bucket_of_pid) else 0
 
-    def _pass(self) -> dict[str, Any]:
-        """The spilled boxes into the buckets' files, in this process: worker processes forked
-        from it would copy its pages as their allocator reuses them (measured: ~700 MB each at
-        9.2 M states, for 1.5 s less)."""
-        return self._pass_part((0, 0, len(self.spill.index)))
-
-    def _pass_part(self, part: tuple[int, int, int]) -> dict[str, Any]:
-        """Batches ``lo`` to ``hi`` of the spill into bucket files ``b{k}.{w}.arrow``: the boxes
-        kept (frame key given once, objects imported, plausible sizes) with their object, frame
-        rank and place in frame order; and what the import decides over all boxes, gathered."""
+    def _pass(self, uidx: np.ndarray, occ: np.ndarray, rank_of: np.ndarray, frame_start: np.ndarray,
+              first_row: np.ndarray, keep_uid: dict | None) -> dict[str, Any]:
+        """The spilled boxes into bucket files ``b{k}.arrow``: those kept (frame key given once,
+        objects imported, plausible sizes) with their object, frame rank and place in frame
+        order; and what the import decides over all boxes, gathered. In this process: worker
+        processes forked from it would copy its pages as their allocator reuses them (measured:
+        ~700 MB each at 9.2 M states, for 1.5 s less)."""
         from aveas_format.converters.openlabel import read as R
 
-        w, lo, hi = part
-        uidx, occ, rank_of, frame_start, first_row, keep_uid = self._step2
         fd = self.fd
         names = fd.uid_names
         need_size = np.fromiter(map(fd.needs_size, names), bool, len(names))
-        p = _gathered()
+        p: dict[str, Any] = {"kept": 0, "hv_all": True, "hr_any": False, "acc_all": True, "cts_all": True,
+                             "roots": set(), "had": set(), "left": set(), "sizes": [],
+                             "bad": [0, set(), None, None, None]}
         writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
-        offset = self.spill.index[lo][2]
+        offset = 0
         try:
-            for batch in self.spill.batches(lo, hi):
+            for batch in self.spill.batches():
                 m = batch.num_rows
                 t = _conformed(pa.Table.from_batches([batch]), self.schema)
                 u, oc = uidx[offset:offset + m], occ[offset:offset + m]
@@ -259,14 +255,7 @@ class _Buckets:
                 kept = kept.append_column("uidx", pa.array(u[idx].astype(np.int64))) \
                            .append_column("rank", pa.array(rk[idx].astype(np.int64))) \
                            .append_column("__pos", pa.array(ps[idx]))
-                cuts = np.r_[0, np.flatnonzero(sb[1:] != sb[:-1]) + 1, len(sb)]
-                for a, b in zip(cuts[:-1].tolist(), cuts[1:].tolist()):
-                    k = int(sb[a])
-                    wr = writers.get(k)
-                    if wr is None:
-                        wr = writers[k] = pa.ipc.new_stream(str(self.dir / f"b{k}.{w}.arrow"), kept.schema,
-                                                            options=_IPC)
-                    wr.write_table(kept.slice(a, b - a))
+                write_by_bucket(writers, kept, sb, lambda k: self.dir / f"b{k}.arrow")
         finally:
             for wr in writers.values():
                 wr.close()
@@ -295,7 +284,7 @@ class _Buckets:
 
         global _WORK
         self._step3 = (pid_idx, time_arr, p, use_file)
-        ks = sorted({int(f.name.split(".")[0][1:]) for f in self.dir.glob("b*.arrow")})
+        ks = [k for k in range(self.n_buckets) if (self.dir / f"b{k}.arrow").exists()]
         workers = self.ctx.options.workers if len(ks) > 1 else 1
         out: dict[str, Any] = {"repeats": [], "schemas": []}
         acc_after, roots_after = True, set()
@@ -326,13 +315,9 @@ class _Buckets:
 
         pid_idx, time_arr, p, use_file = self._step3
         fd, ctx = self.fd, self.ctx
-        files = sorted(self.dir.glob(f"b{k}.*.arrow"))
-        tables = []
-        for f in files:
-            with pa.OSFile(str(f)) as mm:
-                tables.append(pa.ipc.open_stream(mm).read_all())
-        t = pa.concat_tables(tables)
-        del tables
+        f = self.dir / f"b{k}.arrow"
+        with pa.OSFile(str(f)) as mm:
+            t = pa.ipc.open_stream(mm).read_all()
         pos = t.column("__pos").to_numpy()
         if len(pos) > 1 and not (pos[1:] > pos[:-1]).all():  # (frames in the file out of key order)
             order = np.argsort(pos, kind="stable")
@@ -364,8 +349,7 @@ class _Buckets:
                         None if use_file else ctx.net)
         with pa.ipc.new_stream(str(self.dir / f"s{k}.arrow"), s.schema, options=_IPC) as w:
             w.write_table(s)
-        for f in files:
-            f.unlink()
+        f.unlink()
         r["schema"] = s.schema
         return r
 
@@ -422,12 +406,6 @@ _WORK: _Buckets | None = None
 
 def _bucket_of_work(k: int) -> dict[str, Any]:
     return _WORK._bucket(k)
-
-
-def _gathered() -> dict[str, Any]:
-    """What the pass gathers over the boxes kept (:meth:`_Buckets._pass_part`), before any."""
-    return {"kept": 0, "hv_all": True, "hr_any": False, "acc_all": True, "cts_all": True, "roots": set(),
-            "had": set(), "left": set(), "sizes": [], "bad": [0, set(), None, None, None]}
 
 
 class _Hashing:

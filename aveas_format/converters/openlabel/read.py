@@ -17,6 +17,7 @@ import math
 import warnings
 from collections import defaultdict
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Literal
 
 import numpy as np
@@ -200,7 +201,8 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     fnum, time_of, start_time, resolved = _frame_times(fd.fkeys, fd.stamps, ext, md, options, path)
     uids = list(objects)
     uids += fd.seen_in_frames
-    ctx = _Context(ol=ol, ext=ext, objects=objects, options=options, path=path, local=local, net=net)
+    # (what the states are made with besides the boxes)
+    ctx = SimpleNamespace(ol=ol, ext=ext, objects=objects, options=options, path=path, local=local, net=net)
     got = None
     if fd.rows is None:  # (spilled: the states written in parts, or None: read back into memory)
         got = parts.write_states(fd, uids, time_of, start_time, ctx)
@@ -233,15 +235,8 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     return rec
 
 
-class _Context:
-    """What the states of an import are made with, besides the boxes."""
-
-    def __init__(self, **kw: Any) -> None:
-        self.__dict__.update(kw)
-
-
 def _states_in_memory(fd: _FrameData, uids: list[str], time_of: dict, start_time: str,
-                      resolved: dict[str, str], ctx: _Context) -> tuple:
+                      resolved: dict[str, str], ctx: SimpleNamespace) -> tuple:
     """``(uids, obj_ext, pid_of, states columns, n, start_time, use_file, {})``: the boxes of all
     frames (``fd.rows``) into the states' columns at once."""
     objects, ext, options, path = ctx.objects, ctx.ext, ctx.options, ctx.path

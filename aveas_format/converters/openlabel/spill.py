@@ -120,6 +120,19 @@ def from_table(t: pa.Table | pa.RecordBatch) -> tuple[dict[str, np.ndarray], dic
     return ch, ext
 
 
+def write_by_bucket(writers: dict, table: pa.Table, buckets: np.ndarray, path_of, options=_IPC) -> None:
+    """The rows of ``table`` appended to their buckets' Arrow IPC streams (``buckets``: each
+    row's bucket, sorted; ``writers``: the streams open so far by bucket, a new one at
+    ``path_of(bucket)``) — the spills' transpose, one home for the export's and the import's."""
+    cuts = np.r_[0, np.flatnonzero(buckets[1:] != buckets[:-1]) + 1, len(buckets)]
+    for lo, hi in zip(cuts[:-1].tolist(), cuts[1:].tolist()):
+        k = int(buckets[lo])
+        w = writers.get(k)
+        if w is None:
+            w = writers[k] = pa.ipc.new_stream(str(path_of(k)), table.schema, options=options)
+        w.write_table(table.slice(lo, hi - lo))
+
+
 class RowSpill:
     """The blocks' rows in Arrow IPC files in a temporary directory in ``parent`` (a file per run
     of blocks with one schema), their object and frame occurrence indices in memory."""
@@ -164,11 +177,11 @@ class RowSpill:
             self._writer.close()
             self._writer = None
 
-    def batches(self, lo: int = 0, hi: int | None = None) -> Iterator[pa.RecordBatch]:
-        """The spilled batches (``lo`` to ``hi`` of :attr:`index`), in the order they came."""
+    def batches(self) -> Iterator[pa.RecordBatch]:
+        """The spilled batches, in the order they came."""
         self._close_writer()
         readers: dict[int, pa.ipc.RecordBatchFileReader] = {}
-        for f, b, _, _ in self.index[lo:hi]:
+        for f, b, _, _ in self.index:
             if f not in readers:
                 readers[f] = pa.ipc.open_file(pa.OSFile(str(self.files[f])))  # (read, not mapped: no file pages counted as ours)
             yield readers[f].get_batch(b)

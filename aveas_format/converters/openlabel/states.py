@@ -31,6 +31,7 @@ import numpy as np
 import pyarrow as pa
 
 from aveas_format.converters.openlabel.encode import chunk_bounds
+from aveas_format.converters.openlabel.spill import write_by_bucket
 from aveas_format.io.arrow import column_numpy
 
 #: about this many bytes of states per bucket of the spill (one bucket is held at a time)
@@ -198,14 +199,7 @@ class SpilledStates:
                 order = np.argsort(b, kind="stable")  # (the rows' order kept within a bucket)
                 sb = b[order]
                 taken = batch.take(pa.array(order))
-                cuts = np.r_[0, np.flatnonzero(sb[1:] != sb[:-1]) + 1, n]
-                for lo, hi in zip(cuts[:-1].tolist(), cuts[1:].tolist()):
-                    k = int(sb[lo])
-                    w = writers.get(k)
-                    if w is None:
-                        w = writers[k] = pa.ipc.new_stream(str(self.dir / f"b{k}.arrow"), taken.schema,
-                                                           options=options)
-                    w.write_table(taken.slice(lo, hi - lo))
+                write_by_bucket(writers, taken, sb, lambda k: self.dir / f"b{k}.arrow", options)
                 offset += n
         finally:
             for w in writers.values():
