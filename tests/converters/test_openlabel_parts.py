@@ -10,6 +10,7 @@ to the output, on success or failure."""
 from __future__ import annotations
 
 import json
+import os
 import warnings
 from pathlib import Path
 
@@ -76,6 +77,33 @@ def test_own_export_same_recording(tmp_path, small_buckets):
     _same(mem, disk)
     assert said == said_mem
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_pass_in_two_halves_same_recording(tmp_path, small_buckets, monkeypatch):
+    """The spill of many blocks is put into buckets by two worker processes, half of the spill
+    each (their bucket files read in file order): the same recording."""
+    from aveas_format.converters.openlabel import stream
+
+    monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", 1 << 16)
+    rec = highway_scene(n_vehicles=30, duration_s=12.0, seed=5)
+    src = tmp_path / "rec.json"
+    get_converter("openlabel", "export")(rec, src)
+    real = parts._Buckets._pass_part
+    marks = tmp_path / "marks"
+    marks.mkdir()
+
+    def marked(self, part):  # (in the worker processes: a file each, with its process id)
+        (marks / f"{part[0]}.{part[1]}.{part[2]}").write_text(str(os.getpid()))
+        return real(self, part)
+
+    monkeypatch.setattr(parts._Buckets, "_pass_part", marked)
+    mem, disk, said, said_mem, (returned, n, _) = _both(src, tmp_path, map_source=None, workers=2)
+    assert returned.states is None and n == rec.states.num_rows
+    _same(mem, disk)
+    assert said == said_mem
+    halves = sorted(tuple(map(int, f.name.split("."))) for f in marks.iterdir())
+    assert [h[0] for h in halves] == [0, 1] and halves[0][2] == halves[1][1] > 0  # (adjacent halves)
+    assert os.getpid() not in {int(f.read_text()) for f in marks.iterdir()}
 
 
 def test_zip_form_same_recording(tmp_path, small_buckets):
@@ -205,11 +233,19 @@ def test_spill_round_trip_is_exact():
     bools = np.empty(4, object)
     bools[:] = [True, False, True, True]  # (an object column of booleans stays one)
     ch["bools"] = bools
-    back, back_ext = spill.from_table(spill.to_batch(ch, ext))
-    for c in ("px", "hv", "bools"):
-        np.testing.assert_array_equal(back[c], ch[c])
-        assert back[c].dtype == ch[c].dtype, c
-    assert back["road_id"].tolist() == obj.tolist() and back["lane_id"].tolist() == lanes.tolist()
+    ch["csroot"] = np.full(4, None, object)
+    batch = spill.to_batch(ch, ext)
+    import pyarrow as pa
+
+    typed = lambda a: [(type(v), v) for v in a.tolist()]  # noqa: E731  (1 == 1.0 == True: the types too)
+    for back, back_ext in (spill.from_table(batch), spill.from_table(pa.Table.from_batches([batch.slice(0, 1),
+                                                                                          batch.slice(1)]))):
+        for c in ("px", "hv", "bools"):
+            np.testing.assert_array_equal(back[c], ch[c])
+            assert back[c].dtype == ch[c].dtype, c
+        for c in ("road_id", "lane_id", "bools", "csroot"):
+            assert back[c].dtype == object and typed(back[c]) == typed(ch[c]), c
+        assert typed(back_ext["interpolated"][1][[0, 2, 3]]) == typed(flags[[0, 2, 3]])
     for a, b in zip(back_ext["vx"], ext["vx"]):
         np.testing.assert_array_equal(a, b)
     assert [v is _MISSING for v in back_ext["interpolated"][1]] == [False, True, False, False]
@@ -230,12 +266,12 @@ def test_cli_convert_writes_in_parts(tmp_path, monkeypatch):
     monkeypatch.setattr(parts, "SPILL_MIN_ROWS", 0)
     monkeypatch.setattr(parts, "BUCKET_BYTES", 20_000)
     wrote = []
-    real = parts._Buckets._write
-    monkeypatch.setattr(parts._Buckets, "_write", lambda self, *a: (wrote.append(len(a[0])), real(self, *a))[1])
+    real = parts._StatesWriter.add
+    monkeypatch.setattr(parts._StatesWriter, "add", lambda self, s: (wrote.append(s.num_rows), real(self, s))[1])
     out = tmp_path / "cli.aveas"
     r = CliRunner().invoke(app, ["convert", "--from", "openlabel", str(src), "-o", str(out)])
     assert r.exit_code == 0, r.output
-    assert wrote and wrote[0] > 1  # (in parts: more than one bucket)
+    assert len(wrote) > 1 and sum(wrote) == rec.states.num_rows  # (in parts: more than one bucket)
     assert f"{rec.states.num_rows:,} states, 100.0% on the map" in r.output
     _same(convert("openlabel", [src]), aveas_format.open(out))
     r = CliRunner().invoke(app, ["convert", "--from", "openlabel", str(src), "-o", str(out)])
@@ -285,14 +321,45 @@ def test_validate_submission_through_the_written_recording(tmp_path, small_bucke
     directory, removed after): the same report, the import's findings located in the file."""
     src = _defects(tmp_path)
     written = []
-    real = parts._Buckets._write
-    monkeypatch.setattr(parts._Buckets, "_write", lambda self, *a: (written.append(self.dir), real(self, *a))[1])
+    real = parts._Buckets._written
+    monkeypatch.setattr(parts._Buckets, "_written", lambda self, *a: (written.append(self.dir), real(self, *a))[1])
     on_disk = _report(src, monkeypatch, 0)
     assert written and not written[0].exists()  # (in parts, in a temporary directory since removed)
     in_memory = _report(src, monkeypatch, 10**9)
     assert on_disk == in_memory
     codes = {r["code"] for r in on_disk["results"] if r.get("count")}
     assert {"source.openlabel.bad_size", "source.openlabel.duplicate_state"} <= codes, codes
+
+
+def test_buckets_with_other_columns_written_in_one_schema(tmp_path, small_buckets, monkeypatch):
+    """The buckets' states are written as they come while the workers go on; where a later
+    bucket has a column the first has not (a light only the last participant shows), that
+    write is given up and the buckets are written after all of them, in one schema: the same
+    recording as in memory."""
+    rec = highway_scene(n_vehicles=12, duration_s=6.0, seed=4)
+    src = tmp_path / "rec.json"
+    get_converter("openlabel", "export")(rec, src, options={"extension": False})
+    doc = json.loads(src.read_text())
+    last = max(doc["openlabel"]["objects"], key=int)
+    shown = 0
+    for fr in doc["openlabel"]["frames"].values():
+        box = fr["objects"].get(last)
+        if box is not None:
+            box["object_data"].setdefault("num", []).append({"name": "lights/brake", "val": 0.75})
+            shown += 1
+    assert shown
+    src.write_text(json.dumps(doc))
+    given_up, streamed = [], []
+    abort, add = parts._StatesWriter.abort, parts._StatesWriter.add
+    monkeypatch.setattr(parts._StatesWriter, "abort", lambda self: (given_up.append(1), abort(self))[1])
+    monkeypatch.setattr(parts._StatesWriter, "add", lambda self, s: (streamed.append(s.num_rows), add(self, s))[1])
+    mem, disk, said, said_mem, (returned, n, _) = _both(src, tmp_path, map_source=None)
+    assert returned.states is None and given_up == [1]
+    assert sum(streamed) > n  # (the buckets before the last streamed, then all written again)
+    assert disk.states.column("light_brake_p").null_count == n - shown
+    _same(mem, disk, location_exact=False)
+    assert said == said_mem
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
 def test_one_schema_over_the_buckets():
