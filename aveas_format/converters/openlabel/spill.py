@@ -36,6 +36,8 @@ _OBJECTS = {b"aveas_objects": b"1"}
 
 def _objects_arrow(a: np.ndarray) -> pa.Array | None:
     """An object column as Arrow (None: not exactly)."""
+    if len(a) and a[0] is None and (a == None).all():  # noqa: E711 - elementwise (Arrow's inference of
+        return pa.nulls(len(a))  # all None: ~1 ms per block, this ~0.05 ms)
     try:
         arr = pa.array(a, from_pandas=False)
     except (pa.ArrowInvalid, pa.ArrowTypeError, TypeError, ValueError, OverflowError):
