@@ -106,6 +106,42 @@ def test_pass_in_two_halves_same_recording(tmp_path, small_buckets, monkeypatch)
     assert os.getpid() not in {int(f.read_text()) for f in marks.iterdir()}
 
 
+def test_file_read_frame_by_frame_spilled_once_its_rows_are_many(tmp_path, small_buckets, monkeypatch):
+    """Boxes the block readers do not take (rolled a little: placed one at a time, the file read
+    frame by frame, its rows not estimated before the frames) are held in memory until their
+    rows reach the spill's threshold, then those rows and the rest are spilled: the same
+    recording."""
+    from aveas_format.converters.openlabel import frames
+
+    rec = highway_scene(n_vehicles=30, duration_s=12.0, seed=5)
+    src = tmp_path / "rec.json"
+    get_converter("openlabel", "export")(rec, src)
+    doc = json.loads(src.read_text())
+    for fr in doc["openlabel"]["frames"].values():
+        for box in fr["objects"].values():
+            box["object_data"]["cuboid"][0]["val"][3] = 0.001  # (a roll: not the blocks' layout)
+    src.write_text(json.dumps(doc, separators=(",", ":")))
+    monkeypatch.setattr(frames, "_CHUNK", 500)  # (the boxes converted 500 at a time)
+    kept = []
+    real = frames._FrameRows._keep
+
+    def keep(self, ch, ext, found, js, us, uidx=None):
+        kept.append((len(us), self.spill is not None))
+        return real(self, ch, ext, found, js, us, uidx)
+
+    monkeypatch.setattr(frames._FrameRows, "_keep", keep)
+    threshold = rec.states.num_rows // 3
+    mem = convert("openlabel", [src])
+    got, n, _ = parts.import_openlabel_to([src], tmp_path / "out.aveas", options=get_converter(
+        "openlabel").parse_options({}), min_rows=threshold)
+    assert got.states is None and n == rec.states.num_rows  # (written in parts)
+    assert len(kept) > 6 and not any(spilling for _, spilling in kept[:len(kept) // 2])  # (in memory)
+    ours = kept[len(kept) // 2:]
+    assert ours[0][1] is False and ours[-1][1] is True  # (held, then spilled)
+    _same(mem, aveas_format.open(tmp_path / "out.aveas"))
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
 def test_zip_form_same_recording(tmp_path, small_buckets):
     rec = highway_scene(n_vehicles=10, duration_s=6.0, seed=2)
     src = tmp_path / "rec.json"

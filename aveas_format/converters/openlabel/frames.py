@@ -323,7 +323,7 @@ class _FrameRows:
         #: decide at the first block whether the rows are spilled (:class:`.spill.RowSpill`)
         self.parts = None
         self.spill = None
-        self._spill_decided = False
+        self._spill_off = False  # (a block the spill could not hold: in memory from there on)
 
     def _needs_size(self, u: str) -> bool:
         need = self._need_size.get(u)
@@ -442,20 +442,39 @@ class _FrameRows:
         ch["uidx"] = uidx if uidx is not None else np.fromiter(map(ui.__getitem__, us), np.int32, len(us))
         ch["occ"] = np.asarray(js, np.int64)
         self._check_block(found, js, us)
-        if not self._spill_decided:
-            self._spill_decided = True
-            if self.parts is not None and self.parts.spills(max(self.columns.hint, len(us))):
-                self.spill = self.parts.row_spill()
-        if self.spill is not None:
+        if self.spill is None and self.parts is not None and not self._spill_off \
+                and self.parts.spills(max(self.columns.hint, self.columns.n + len(us))):
+            self._spill_held()  # (at the first block where the file's size says many rows, else
+        if self.spill is not None:  # once those held reach the spill's threshold)
             if self.spill.append(ch, ext):
                 return
             self._unspill()  # (a block Arrow cannot hold exactly: all in memory from here)
         self.columns.append(ch)
         self.ext_chunks.append((len(us), ext))
 
+    def _spill_held(self) -> None:
+        """A spill begun, the rows held in memory so far moved into it block by block (a file
+        read frame by frame: its rows are not estimated before the frames)."""
+        held, chunks = self.columns, self.ext_chunks
+        cols = {c: held.pop(c) for c in held.names()}
+        self.columns, self.ext_chunks = _ColumnStore(), []
+        self.columns.expect(held.hint)
+        self.spill = self.parts.row_spill()
+        off = 0
+        for m, ext in chunks:
+            ch = {c: a[off:off + m] for c, a in cols.items()}
+            off += m
+            if self.spill is not None:
+                if self.spill.append(ch, ext):
+                    continue
+                self._unspill()
+            self.columns.append(ch)
+            self.ext_chunks.append((m, ext))
+
     def _unspill(self) -> None:
         """The spilled rows back into memory (and no spill from here on)."""
         spill, self.spill = self.spill, None
+        self._spill_off = True
 
         def keep(ch: dict[str, np.ndarray], ext: dict[str, tuple]) -> None:
             self.columns.append(ch)
