@@ -53,9 +53,9 @@ BUCKET_BYTES = 24 << 20
 #: at most this many buckets (their files are open at once)
 MAX_BUCKETS = 256
 _SPEC = TABLES["states"]
-#: up to this many bytes of boxes the pass writes its bucket files uncompressed (read back soon
-#: from the page cache; 2 M boxes: the pass 1.3 -> 0.8 s); above, lz4 (9.2 M: the kernel's
-#: writeback of 3.3 GB uncompressed cost as much time as the compression saved)
+#: up to this many bytes of boxes the buckets' files (their boxes, their states) are written
+#: uncompressed (read back soon from the page cache; 2 M boxes: the pass 1.3 -> 0.8 s); above,
+#: lz4 (9.2 M: the kernel's writeback of 3.3 GB uncompressed cost as much time as it saved)
 PLAIN_BUCKETS_BYTES = 1 << 30
 _IPC = pa.ipc.IpcWriteOptions(compression="lz4")
 _PLAIN = pa.ipc.IpcWriteOptions()
@@ -203,6 +203,10 @@ class _Buckets:
         self.bucket_of_idx = bucket_of_pid.reshape(-1)[inv.reshape(-1)] if len(inv) else np.zeros(0, np.int64)
         self.n_buckets = int(bucket_of_pid.max()) + 1 if len(bucket_of_pid) else 0
 
+    def _ipc_options(self) -> pa.ipc.IpcWriteOptions:
+        """The buckets' files uncompressed up to :data:`PLAIN_BUCKETS_BYTES` of boxes, else lz4."""
+        return _PLAIN if self.spill.n * self.spill.row_bytes <= PLAIN_BUCKETS_BYTES else _IPC
+
     def _pass(self, arrays: tuple) -> dict[str, Any]:
         """The spilled boxes into bucket files (:meth:`_pass_part`), in two halves of the spill
         by two worker processes where there are cores (forked after the freed memory is handed
@@ -240,7 +244,7 @@ class _Buckets:
         need_size = np.fromiter(map(fd.needs_size, names), bool, len(names))
         p = _gathered()
         writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
-        options = _PLAIN if self.spill.n * self.spill.row_bytes <= PLAIN_BUCKETS_BYTES else _IPC
+        options = self._ipc_options()
         offset = self.spill.index[lo][2] if lo < len(self.spill.index) else self.spill.n
         try:
             for batch in self.spill.batches(lo, hi):
@@ -399,7 +403,7 @@ class _Buckets:
             states["lon"], states["lat"] = pa.array(lon), pa.array(lat)
         s = fill_states(prepare_table(conform(pa.table(states), _SPEC), _SPEC), ctx.local,
                         None if use_file else ctx.net)
-        with pa.ipc.new_stream(str(self.dir / f"s{k}.arrow"), s.schema, options=_IPC) as w:
+        with pa.ipc.new_stream(str(self.dir / f"s{k}.arrow"), s.schema, options=self._ipc_options()) as w:
             w.write_table(s)
         for f in files:
             f.unlink()
