@@ -289,6 +289,8 @@ def test_spill_round_trip_is_exact():
     mixed = np.empty(2, object)
     mixed[:] = [1, 2.5]  # (an integer among floats: Arrow would make it 1.0)
     assert spill.to_batch({"lane_id": mixed}, {}) is None
+    mixed[:] = ["1", 2]  # (a number among texts)
+    assert spill.to_batch({"road_id": mixed}, {}) is None
 
 
 def test_cli_convert_writes_in_parts(tmp_path, monkeypatch):
