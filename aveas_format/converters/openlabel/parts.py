@@ -5,10 +5,12 @@ states participant-major. Imported into memory, a one-hour file holds every box'
 (~570 B per state). :func:`import_openlabel_to` (the CLI's ``convert`` of one file) instead:
 
 1. reads the frames as the import does, the boxes' columns spilled block by block
-   (:class:`.spill.RowSpill`) from :data:`SPILL_MIN_ROWS` expected boxes on;
-2. after the frames (their keys, times and objects known): one pass over the spill writes each
-   kept box to the file of its *bucket* — consecutive participants, about :data:`BUCKET_BYTES`
-   of boxes each — dropping what the import drops per box (frames whose key repeats, objects that
+   (:class:`.spill.RowSpill`) from :data:`SPILL_MIN_ROWS` expected boxes on (boxes read frame by
+   frame: once that many are held, they are moved into the spill);
+2. after the frames (their keys, times and objects known): a pass over the spill (two worker
+   processes, half of the spill each, where there are cores) writes each kept box to the file of
+   its *bucket* — consecutive participants, about :data:`BUCKET_BYTES` of boxes each;
+   uncompressed up to :data:`PLAIN_BUCKETS_BYTES` of boxes — dropping what the import drops per box (frames whose key repeats, objects that
    are no road users, boxes with an impossible size) and gathering what the import decides over
    all boxes (has every box a velocity, an acceleration, road coordinates; the root coordinate
    systems);
@@ -17,8 +19,9 @@ states participant-major. Imported into memory, a one-hour file holds every box'
    file's road coordinates, the extension's exact values, :func:`~aveas_format.mapref.build.fill_states`)
    -> the states of those participants, spilled again;
 4. the buckets' states written to ``states.parquet`` in the recording's row groups (one schema
-   over all buckets), hashed as written, and moved into the recording
-   (:class:`~aveas_format.io.writer.StatesFile`).
+   over all buckets), hashed as written, as each bucket comes while the workers go on (where a
+   later bucket has a column the first has not: after the last, in the schema of all), and
+   moved into the recording (:class:`~aveas_format.io.writer.StatesFile`).
 
 The result is the in-memory import's recording (tests/converters/test_openlabel_parts.py: the
 same tables, the location's mean summed per bucket). Where a step needs all boxes at once (the
