@@ -50,6 +50,16 @@ def default_workers() -> int:
     return max(1, (os.cpu_count() or 1))
 
 
+def processes(workers: int | None) -> int:
+    """How many processes ``workers`` means for :func:`map_ordered`: 0/None one per core, but 1
+    in a worker process (no pool inside a pool's worker)."""
+    if workers:
+        return workers
+    import multiprocessing
+
+    return 1 if multiprocessing.parent_process() is not None else default_workers()
+
+
 def background(fn: Callable[..., Any], *args: Any, name: str = "background") -> Future:
     """``fn(*args)`` started in a thread of its own; its Future (``result()`` waits, and raises
     what ``fn`` raised). For work that releases the GIL (hashing, PROJ, numpy, Arrow) overlapped
@@ -194,10 +204,7 @@ def map_ordered(fn: Callable[[Any], Any], items: Iterable[Any], *, workers: int 
     An exception in ``fn`` is raised here at that item's position (the remaining items are
     dropped). Where a worker process dies (crash, out of memory), that item and the ones after it
     run in this process. Closing the generator early cancels what is still in flight."""
-    if not workers:
-        import multiprocessing
-
-        workers = 1 if multiprocessing.parent_process() is not None else default_workers()
+    workers = processes(workers)
     if workers <= 1:
         for item in items:
             yield item, fn(item)

@@ -10,10 +10,10 @@ states participant-major. Imported into memory, a one-hour file holds every box'
 2. after the frames (their keys, times and objects known): a pass over the spill (two worker
    processes, half of the spill each, where there are cores) writes each kept box to the file of
    its *bucket* — consecutive participants, about :data:`BUCKET_BYTES` of boxes each;
-   uncompressed up to :data:`PLAIN_BUCKETS_BYTES` of boxes — dropping what the import drops per box (frames whose key repeats, objects that
-   are no road users, boxes with an impossible size) and gathering what the import decides over
-   all boxes (has every box a velocity, an acceleration, road coordinates; the root coordinate
-   systems);
+   uncompressed up to :data:`PLAIN_BUCKETS_BYTES` of boxes — dropping what the import drops per
+   box (frames whose key repeats, objects that are no road users, boxes with an impossible size)
+   and gathering what the import decides over all boxes (has every box a velocity, an
+   acceleration, road coordinates; the root coordinate systems);
 3. per bucket, in participant order: its boxes in frame order, then exactly the in-memory
    import's steps (repeated states dropped, world -> map frame, vehicle -> world frame, the
    file's road coordinates, the extension's exact values, :func:`~aveas_format.mapref.build.fill_states`)
@@ -215,11 +215,11 @@ class _Buckets:
         by two worker processes where there are cores (forked after the freed memory is handed
         back: they would otherwise copy the pages their allocator reuses), what each gathered
         merged in file order."""
-        from aveas_format.parallel import default_workers, map_ordered
+        from aveas_format.parallel import map_ordered, processes
 
         global _WORK
         n = len(self.spill.index)
-        halves = 2 if (self.ctx.options.workers or default_workers()) > 1 and n > 1 else 1
+        halves = 2 if processes(self.ctx.options.workers) > 1 and n > 1 else 1
         cuts = [0, n // 2, n] if halves == 2 else [0, n]
         parts = [(w, cuts[w], cuts[w + 1]) for w in range(halves)]
         self._step2 = arrays
@@ -341,14 +341,14 @@ class _Buckets:
                     out["repeats"].append(r["repeats"])
                 acc_after &= r["acc"]
                 roots_after |= r["roots"]
-                if writer is None and len(out["schemas"]) == 1:
-                    writer = _StatesWriter(self.dir.parent / "states.parquet", _one_schema([r["schema"]]))
-                if writer is not None:
-                    if r["schema"].equals(out["schemas"][0][1]):
-                        writer.add(self._bucket_states(k, keep=True))
-                    else:
-                        writer.abort()
-                        writer = None
+                first = out["schemas"][0][1]
+                if writer is None and len(out["schemas"]) == 1:  # (the first bucket's schema)
+                    writer = _StatesWriter(self.dir.parent / "states.parquet", _one_schema([first]))
+                if writer is not None and r["schema"].equals(first):  # (its file kept: if a later
+                    writer.add(self._bucket_states(k, keep=True))     # bucket differs, _write)
+                elif writer is not None:
+                    writer.abort()
+                    writer = None
             if writer is not None:
                 out["written"] = self._written(writer, ks)
                 writer = None
