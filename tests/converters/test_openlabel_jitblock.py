@@ -61,8 +61,8 @@ def _same(a, b) -> None:
         x, y = a.cols[k], b.cols[k]
         if x.dtype.kind == "f":
             assert np.array_equal(x, y, equal_nan=True), k
-        else:
-            assert x.tolist() == y.tolist(), k
+        else:  # (object columns: the Python types too, 1 == 1.0 == True)
+            assert [(type(v), v) for v in x.tolist()] == [(type(v), v) for v in y.tolist()], k
     assert a.ext.keys() == b.ext.keys()
     for k in a.ext:
         assert _rep(a.ext[k]) == _rep(b.ext[k]), k

@@ -38,7 +38,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from aveas_format.converters.openlabel.columns import as_obj, block_findings, vector_columns
+from aveas_format.converters.openlabel.columns import block_findings, vector_columns
 from aveas_format.converters.openlabel.profile import EXT, LIGHTS, _enum_value
 
 try:
@@ -609,14 +609,15 @@ def _attribute_columns(at: ArrowAttributes, cols: dict[str, np.ndarray]) -> dict
     road_id[on] = road[on]
     cols["road_id"] = road_id
     lane_id = np.full(n, None, object)
-    if "open_drive/lane_id" in at.code_of:
-        lanes = at.texts("open_drive/lane_id")
-        ok = ~np.equal(lanes, None) & has_road
-        if ok.any():
-            uniq, inv = np.unique(lanes[ok].astype(str), return_inverse=True)
-            conv = np.empty(len(uniq), object)
-            conv[:] = [_lane_int(v) for v in uniq.tolist()]
-            lane_id[ok] = conv[inv]
+    got = at.values("open_drive/lane_id") if "open_drive/lane_id" in at.code_of else None
+    if got is not None:  # (each distinct text converted once: Arrow's dictionary of them)
+        boxes, vals = got
+        enc = vals.dictionary_encode()
+        conv = np.empty(len(enc.dictionary) + 1, object)  # (the last: a null text)
+        conv[:-1] = [_lane_int(v) for v in enc.dictionary.to_pylist()]
+        codes = enc.indices.fill_null(-1).to_numpy()
+        ok = (codes >= 0) & has_road[boxes]
+        lane_id[boxes[ok]] = conv[codes[ok]]
     cols["lane_id"] = lane_id
     cols["hv"], cols["hr"] = hv, on
     return cols
@@ -688,14 +689,16 @@ def _ext_columns(ext: np.ndarray, n: int, nums: np.ndarray, ntext: pa.Array, nam
             out[key] = ("f", vals, present, np.zeros(n, bool))
             continue
         vals = np.full(n, _MISSING, object)
-        for k, get in ((jb.E_TRUE, lambda r: [True] * len(r)), (jb.E_FALSE, lambda r: [False] * len(r)),
-                       (jb.E_STR, lambda r: strs.take(pa.array(r)).to_pylist()),
-                       (jb.E_FLOAT, lambda r: nums[r].tolist()),
+        # (numpy arrays of scalars into the object array: Python bools, strs, floats and ints,
+        # as a JSON parser gives them)
+        for k, get in ((jb.E_TRUE, lambda r: True), (jb.E_FALSE, lambda r: False),
+                       (jb.E_STR, lambda r: strs.take(pa.array(r)).to_numpy(zero_copy_only=False)),
+                       (jb.E_FLOAT, lambda r: nums[r]),
                        # (an integer beyond int64: ArrowInvalid, the generic path)
-                       (jb.E_INT, lambda r: pc.cast(ntext.take(pa.array(r)), pa.int64()).to_pylist())):
+                       (jb.E_INT, lambda r: pc.cast(ntext.take(pa.array(r)), pa.int64()).to_numpy())):
             m = kind == k
             if m.any():
-                vals[bx[m]] = as_obj(get(ref[m]))
+                vals[bx[m]] = get(ref[m])
         out[key] = ("o", vals)
     return out
 
