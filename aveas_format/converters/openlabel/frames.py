@@ -320,7 +320,8 @@ class _FrameRows:
         #: [first frame key, first object uid, count]
         self.found: dict[tuple[str, str], list] = {}
         #: the import's parts (:class:`.parts.Parts`: an import that writes its recording itself)
-        #: decide at the first block whether the rows are spilled (:class:`.spill.RowSpill`)
+        #: spill the rows (:class:`.spill.RowSpill`) from the first block where the file's size
+        #: says many, or once the rows held reach that many (a file read frame by frame)
         self.parts = None
         self.spill = None
         self._spill_off = False  # (a block the spill could not hold: in memory from there on)
@@ -442,10 +443,12 @@ class _FrameRows:
         ch["uidx"] = uidx if uidx is not None else np.fromiter(map(ui.__getitem__, us), np.int32, len(us))
         ch["occ"] = np.asarray(js, np.int64)
         self._check_block(found, js, us)
+        # a spill begins where the file's size says many rows (the columnar blocks: at the first),
+        # else once the rows held reach the threshold (those moved into it)
         if self.spill is None and self.parts is not None and not self._spill_off \
                 and self.parts.spills(max(self.columns.hint, self.columns.n + len(us))):
-            self._spill_held()  # (at the first block where the file's size says many rows, else
-        if self.spill is not None:  # once those held reach the spill's threshold)
+            self._spill_held()
+        if self.spill is not None:
             if self.spill.append(ch, ext):
                 return
             self._unspill()  # (a block Arrow cannot hold exactly: all in memory from here)

@@ -54,7 +54,8 @@ def _objects_arrow(a: np.ndarray) -> pa.Array | None:
 def _objects_numpy(arr: pa.Array | pa.ChunkedArray) -> np.ndarray:
     """An object column back as the Python values it held (None for a null), by type: texts as
     Arrow gives them to numpy, numbers and booleans through their numpy array (3-40x faster than
-    a Python list of every value; the same values and types: tests/converters/test_openlabel_parts.py)."""
+    a Python list of every value; the same values and types:
+    tests/converters/test_openlabel_parts.py)."""
     if isinstance(arr, pa.ChunkedArray):
         arr = arr.combine_chunks() if arr.num_chunks != 1 else arr.chunk(0)
     t = arr.type
@@ -65,7 +66,8 @@ def _objects_numpy(arr: pa.Array | pa.ChunkedArray) -> np.ndarray:
     if pa.types.is_integer(t) or pa.types.is_boolean(t):
         if not arr.null_count:
             return arr.to_numpy(zero_copy_only=False).astype(object)
-        out = arr.fill_null(False if pa.types.is_boolean(t) else 0).to_numpy(zero_copy_only=False).astype(object)
+        filled = arr.fill_null(False if pa.types.is_boolean(t) else 0)
+        out = filled.to_numpy(zero_copy_only=False).astype(object)
         out[arr.is_null().to_numpy(zero_copy_only=False)] = None
         return out
     out = np.empty(len(arr), object)
