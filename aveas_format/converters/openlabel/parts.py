@@ -43,7 +43,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from aveas_format.converters.openlabel.spill import RowSpill, from_table, write_by_bucket
+from aveas_format.converters.openlabel.spill import LZ4, PLAIN, RowSpill, from_table, write_by_bucket
 from aveas_format.io.arrow import conform
 from aveas_format.io.writer import ROW_GROUP_ROWS, StatesFile, parquet_options, prepare_table
 from aveas_format.numeric import release_free_memory, same_participant
@@ -60,8 +60,6 @@ _SPEC = TABLES["states"]
 #: uncompressed (read back soon from the page cache; 2 M boxes: the pass 1.3 -> 0.8 s); above,
 #: lz4 (9.2 M: the kernel's writeback of 3.3 GB uncompressed cost as much time as it saved)
 PLAIN_BUCKETS_BYTES = 1 << 30
-_IPC = pa.ipc.IpcWriteOptions(compression="lz4")
-_PLAIN = pa.ipc.IpcWriteOptions()
 
 
 class Parts:
@@ -208,7 +206,7 @@ class _Buckets:
 
     def _ipc_options(self) -> pa.ipc.IpcWriteOptions:
         """The buckets' files uncompressed up to :data:`PLAIN_BUCKETS_BYTES` of boxes, else lz4."""
-        return _PLAIN if self.spill.n * self.spill.row_bytes <= PLAIN_BUCKETS_BYTES else _IPC
+        return PLAIN if self.spill.n * self.spill.row_bytes <= PLAIN_BUCKETS_BYTES else LZ4
 
     def _pass(self, arrays: tuple) -> dict[str, Any]:
         """The spilled boxes into bucket files (:meth:`_pass_part`), in two halves of the spill

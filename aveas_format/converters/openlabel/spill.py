@@ -28,7 +28,9 @@ from aveas_format.converters.openlabel.columns import _MISSING
 
 #: object columns are spilled only where Arrow gives back the same Python values
 _EXACT_TYPES = (pa.null(), pa.string(), pa.int64(), pa.bool_())
-_IPC = pa.ipc.IpcWriteOptions(compression="lz4")
+#: the spills' Arrow IPC options (one home: the export's and the import's spills): lz4, or none
+LZ4 = pa.ipc.IpcWriteOptions(compression="lz4")
+PLAIN = pa.ipc.IpcWriteOptions()
 _KEYS = ("uidx", "occ")
 #: the field metadata of a column that was an object column (given back as one)
 _OBJECTS = {b"aveas_objects": b"1"}
@@ -146,7 +148,7 @@ def from_table(t: pa.Table | pa.RecordBatch) -> tuple[dict[str, np.ndarray], dic
     return ch, ext
 
 
-def write_by_bucket(writers: dict, table: pa.Table, buckets: np.ndarray, path_of, options=_IPC) -> None:
+def write_by_bucket(writers: dict, table: pa.Table, buckets: np.ndarray, path_of, options=LZ4) -> None:
     """The rows of ``table`` appended to their buckets' Arrow IPC streams (``buckets``: each
     row's bucket, sorted; ``writers``: the streams open so far by bucket, a new one at
     ``path_of(bucket)``) — the spills' transpose, one home for the export's and the import's."""
@@ -184,7 +186,7 @@ class RowSpill:
         if self._writer is None or batch.schema != self._writer_schema:
             self._close_writer()
             path = self.dir / f"r{len(self.files)}.arrow"
-            self._writer = pa.ipc.new_file(str(path), batch.schema, options=_IPC)
+            self._writer = pa.ipc.new_file(str(path), batch.schema, options=LZ4)
             self._writer_schema = batch.schema
             self.files.append(path)
             self._in_file = 0

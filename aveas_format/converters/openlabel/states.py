@@ -31,7 +31,7 @@ import numpy as np
 import pyarrow as pa
 
 from aveas_format.converters.openlabel.encode import chunk_bounds
-from aveas_format.converters.openlabel.spill import write_by_bucket
+from aveas_format.converters.openlabel.spill import LZ4, write_by_bucket
 from aveas_format.io.arrow import column_numpy
 
 #: about this many bytes of states per bucket of the spill (one bucket is held at a time)
@@ -170,7 +170,6 @@ class SpilledStates:
         kin = None if _has_acceleration(self.column_names) else _kinematics(rec.derived, self.num_rows)
         need_acc = not _has_acceleration(self.column_names)
         writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
-        options = pa.ipc.IpcWriteOptions(compression="lz4")
         held: pa.Table | None = None
         offset = 0
         try:
@@ -199,7 +198,7 @@ class SpilledStates:
                 order = np.argsort(b, kind="stable")  # (the rows' order kept within a bucket)
                 sb = b[order]
                 taken = batch.take(pa.array(order))
-                write_by_bucket(writers, taken, sb, lambda k: self.dir / f"b{k}.arrow", options)
+                write_by_bucket(writers, taken, sb, lambda k: self.dir / f"b{k}.arrow", LZ4)
                 offset += n
         finally:
             for w in writers.values():
