@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 import warnings
 from pathlib import Path
 
@@ -104,6 +105,78 @@ def test_pass_in_two_halves_same_recording(tmp_path, small_buckets, monkeypatch)
     halves = sorted(tuple(map(int, f.name.split("."))) for f in marks.iterdir())
     assert [h[0] for h in halves] == [0, 1] and halves[0][2] == halves[1][1] > 0  # (adjacent halves)
     assert os.getpid() not in {int(f.read_text()) for f in marks.iterdir()}
+
+
+def _marked(monkeypatch, marks: Path, module, name: str) -> None:
+    """``module.name`` leaves a file named after the calling process (forked workers too)."""
+    real = getattr(module, name)
+
+    def marked(*args, **kw):
+        (marks / f"{name}.{os.getpid()}.{time.monotonic_ns()}").touch()
+        return real(*args, **kw)
+
+    monkeypatch.setattr(module, name, marked)
+
+
+def _pids(marks: Path, name: str) -> set[int]:
+    return {int(f.name.split(".")[1]) for f in marks.iterdir() if f.name.startswith(name + ".")}
+
+
+def test_blocks_spilled_by_the_workers_that_read_them(tmp_path, small_buckets, monkeypatch):
+    """Once the spill has begun, each block's columns are written into it by the worker process
+    that read the block (not sent back) and adopted by the spill: the same recording."""
+    from aveas_format.converters.openlabel import stream
+
+    monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", 1 << 16)
+    rec = highway_scene(n_vehicles=30, duration_s=12.0, seed=5)
+    src = tmp_path / "rec.json"
+    get_converter("openlabel", "export")(rec, src)
+    marks = tmp_path / "marks"
+    marks.mkdir()
+    _marked(monkeypatch, marks, spill, "write_rows")
+    adopted = []
+    real = spill.RowSpill.adopt
+    monkeypatch.setattr(spill.RowSpill, "adopt", lambda self, *a: (adopted.append(a[0][1]), real(self, *a))[1])
+    mem, disk, said, said_mem, (returned, n, _) = _both(src, tmp_path, map_source=None, workers=2)
+    assert returned.states is None and n == rec.states.num_rows
+    _same(mem, disk)
+    assert said == said_mem
+    workers = _pids(marks, "write_rows")
+    assert workers and os.getpid() not in workers
+    assert len(adopted) > 10 and sum(adopted) < n  # (the first blocks, sent before the spill began: here)
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_blocks_spilled_by_workers_after_the_spill_ended_are_read_back(tmp_path, small_buckets, monkeypatch):
+    """A block the spill cannot hold (here: the second one spilled here) ends it while later
+    blocks, sent while it was on, are written into it by the workers: those are read back into
+    memory as they come; the same recording, nothing left."""
+    from aveas_format.converters.openlabel import stream
+
+    monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", 1 << 16)
+    rec = highway_scene(n_vehicles=30, duration_s=12.0, seed=5)
+    src = tmp_path / "rec.json"
+    get_converter("openlabel", "export")(rec, src)
+    here, calls = os.getpid(), {"n": 0}
+    real_to_batch = spill.to_batch
+
+    def second_here_fails(ch, ext):
+        if os.getpid() == here:
+            calls["n"] += 1
+            if calls["n"] == 2:
+                return None
+        return real_to_batch(ch, ext)
+
+    monkeypatch.setattr(spill, "to_batch", second_here_fails)
+    back = []
+    real_read = spill.read_rows
+    from aveas_format.converters.openlabel import frames
+    monkeypatch.setattr(frames, "read_rows", lambda path: (back.append(path), real_read(path))[1])
+    mem, disk, said, said_mem, (returned, _, _) = _both(src, tmp_path, map_source=None, workers=2)
+    assert returned.states is not None  # (in memory)
+    _same(mem, disk)
+    assert back and not any(os.path.exists(p) for p in back)
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
 def test_file_read_frame_by_frame_spilled_once_its_rows_are_many(tmp_path, small_buckets, monkeypatch):
@@ -322,7 +395,13 @@ def test_existing_output_refused_before_reading(tmp_path):
         convert_to("openlabel", [KITTI_EXCERPT], tmp_path / "out.aveas", map_source=STRAIGHT_MAP)
 
 
-def test_broken_file_leaves_nothing(tmp_path, small_buckets):
+@pytest.mark.parametrize("workers", [1, 2])
+def test_broken_file_leaves_nothing(tmp_path, small_buckets, monkeypatch, workers):
+    """A file cut short: refused, nothing next to the output (with workers: they are done before
+    the spill is removed, none writes into it after)."""
+    from aveas_format.converters.openlabel import stream
+
+    monkeypatch.setattr(stream, "_COLUMNAR_BLOCK", 1 << 14)  # (many blocks)
     rec = highway_scene(n_vehicles=8, duration_s=5.0, seed=1)
     src = tmp_path / "rec.json"
     get_converter("openlabel", "export")(rec, src)
@@ -333,7 +412,8 @@ def test_broken_file_leaves_nothing(tmp_path, small_buckets):
     out.mkdir()
     with pytest.raises(FormatError):
         parts.import_openlabel_to([cut], out / "rec.aveas",
-                                  options=get_converter("openlabel").parse_options({}), min_rows=0)
+                                  options=get_converter("openlabel").parse_options({"workers": workers}),
+                                  min_rows=0)
     assert list(out.iterdir()) == []
 
 

@@ -32,6 +32,7 @@ path (:mod:`.columns`), which gives the same columns and the exact error where t
 from __future__ import annotations
 
 import threading
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -160,6 +161,18 @@ class FastBlock:
         self.depth = depth
         #: the block's size in bytes (:func:`read_block`; for the reader's estimate of the rows)
         self.nbytes = 0
+        #: where the worker that read it spilled its columns (:func:`.spill.write_rows`; ``cols``
+        #: and ``ext`` then empty), else None
+        self.spilled: tuple[str, int, int] | None = None
+
+    def spill_to(self, path: Path) -> None:
+        """The columns and extension members written to ``path`` (:func:`.spill.write_rows`) and
+        dropped here, where they can be spilled exactly."""
+        from aveas_format.converters.openlabel.spill import write_rows
+
+        got = write_rows(path, self.cols, self.ext)
+        if got is not None:
+            self.spilled, self.cols, self.ext = got, {}, {}
 
 
 def read_block(buf: bytes | np.ndarray, threads: bool = True, compiled: bool = True) -> FastBlock | None:

@@ -29,6 +29,7 @@ from aveas_format.converters.openlabel.columns import (_MISSING, as_obj, block_c
                                                        ext_chunk, split_boxes)
 from aveas_format.converters.openlabel.profile import (LIGHTS, _LONGITUDINAL, _attrs,
                                                        _first)
+from aveas_format.converters.openlabel.spill import read_rows
 from aveas_format.errors import FormatError
 from aveas_format.numeric import release_free_memory
 
@@ -436,9 +437,11 @@ class _FrameRows:
 
     def _keep(self, ch: dict[str, np.ndarray], ext: dict[str, tuple],
               found: list[tuple[str, str, int, int]], js: Any, us: list[str],
-              uidx: np.ndarray | None = None) -> None:
+              uidx: np.ndarray | None = None, spilled: tuple | None = None) -> None:
         """A block's columns (boxes of frames ``js``, objects ``us``: their indices ``uidx`` where
-        the caller has them) and what its checks found (:func:`block_findings`), kept."""
+        the caller has them) and what its checks found (:func:`block_findings`), kept;
+        ``spilled``: the columns written into the spill by the worker that read the block
+        (:meth:`.fastblock.FastBlock.spill_to`: ``ch`` empty; only while there is a spill)."""
         ui = self.uid_index
         ch["uidx"] = uidx if uidx is not None else np.fromiter(map(ui.__getitem__, us), np.int32, len(us))
         ch["occ"] = np.asarray(js, np.int64)
@@ -448,12 +451,20 @@ class _FrameRows:
         if self.spill is None and self.parts is not None and not self._spill_off \
                 and self.parts.spills(max(self.columns.hint, self.columns.n + len(us))):
             self._spill_held()
+        if spilled is not None:
+            self.spill.adopt(spilled, ch["uidx"], ch["occ"])
+            return
         if self.spill is not None:
             if self.spill.append(ch, ext):
                 return
             self._unspill()  # (a block Arrow cannot hold exactly: all in memory from here)
         self.columns.append(ch)
         self.ext_chunks.append((len(us), ext))
+
+    def spill_target(self) -> str | None:
+        """Where the worker reading the next block writes its columns (:func:`.stream._read_blocks`'
+        ``spill_to``): the spill's directory while there is a spill, else None (sent back)."""
+        return str(self.spill.dir) if self.spill is not None else None
 
     def _spill_held(self) -> None:
         """A spill begun, the rows held in memory so far moved into it block by block (a file
@@ -514,7 +525,10 @@ class _FrameRows:
         self.keys.extend(k for k, _ in blk.frames)
         self.stamps.extend(_frame_timestamp(fr) for _, fr in blk.frames)
         us = list(chain.from_iterable(objs))
-        if not self.columns.cap and blk.nbytes and self.path is not None:  # (the rows to expect)
+        if blk.spilled is not None and self.spill is None:  # (spilled by its worker, the spill
+            blk.cols, blk.ext = read_rows(blk.spilled[0])  # ended since: back into memory)
+            blk.spilled = None
+        if not self.columns.cap and not self.columns.hint and blk.nbytes and self.path is not None:  # (the rows to expect)
             try:
                 self.columns.expect(int(os.stat(self.path).st_size / blk.nbytes * len(us) * 1.2) + len(us))
             except OSError:
@@ -527,7 +541,8 @@ class _FrameRows:
         self.uid_parts.append(idx)
         self.frame_len.extend(lens.tolist())
         if us:
-            self._keep(blk.cols, blk.ext, blk.found, np.repeat(np.arange(j0, j0 + len(objs)), lens), us, idx)
+            self._keep(blk.cols, blk.ext, blk.found, np.repeat(np.arange(j0, j0 + len(objs)), lens), us, idx,
+                       blk.spilled)
 
     def _first_seen(self, rank_of: np.ndarray) -> np.ndarray:
         """The objects of the frames kept (``rank_of`` >= 0), in order of their first appearance

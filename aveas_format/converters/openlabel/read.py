@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections import defaultdict
+from contextlib import closing
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, Literal
@@ -184,13 +185,16 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
         for k, fr in (ol.get("frames") or {}).items():
             acc.add(k, fr)
     else:  # blocks of frames in columns (the profile's layout) or one frame at a time
-        for k, fr in frames(columnar=not acc.static_cuboids, workers=options.workers):
-            if path is not None and not acc.keys:  # (the input's digest in a thread from here on:
-                prefetch_sha256(path)              # the worker processes are forked by now)
-            if k is COLUMNAR:
-                acc.add_columns(fr)
-            else:
-                acc.add(k, fr)
+        # (closed before an error leaves: the workers done, none writing into the spill then)
+        with closing(frames(columnar=not acc.static_cuboids, workers=options.workers,
+                            spill_to=acc.spill_target)) as got:
+            for k, fr in got:
+                if path is not None and not acc.keys:  # (the input's digest in a thread from here
+                    prefetch_sha256(path)              # on: the worker processes are forked by now)
+                if k is COLUMNAR:
+                    acc.add_columns(fr)
+                else:
+                    acc.add(k, fr)
         if "objects" not in ol or ol["objects"] is not objects:  # read after the frames (no pre-scan)
             objects = ol.get("objects") or {}
             if _static_cuboids(objects):  # (their boxes come from the frames' transforms)

@@ -218,10 +218,10 @@ def _stream_doc(path: Path, prescan: bool = True):
     if span is None:
         return ol, None
 
-    def frames(columnar: bool = False, workers: int | None = 1):
+    def frames(columnar: bool = False, workers: int | None = 1, spill_to=None):
         start = span[0]
         if orjson is not None:
-            start = yield from _fast_frames(path, span, columnar, workers)
+            start = yield from _fast_frames(path, span, columnar, workers, spill_to)
             if start is None:
                 return
         with _open(path) as fr:
@@ -259,12 +259,12 @@ def _frames_without_prescan(path: Path):
         if "frames" not in ol or ol["frames"] != {}:
             return None
 
-    def frames(columnar: bool = False, workers: int | None = 1):
+    def frames(columnar: bool = False, workers: int | None = 1, spill_to=None):
         from aveas_format.converters.openlabel.fastblock import block_depth
 
         generic = "objects" in ol
         tail: list[bytes] = []
-        with _open(path) as f, _read_blocks(f, (start, None), columnar, workers, tail) as blocks:
+        with _open(path) as f, _read_blocks(f, (start, None), columnar, workers, tail, spill_to) as blocks:
             f.seek(start + 1)
             for (_, cut), fast in blocks:
                 if cut is None:  # no frame head in 4 blocks, no end of the frames
@@ -330,7 +330,8 @@ COLUMNAR = object()
 _FRAME_HEAD = re.compile(rb'\s*"(?:[^"\\]|\\.)*"\s*:\s*\{\s*$')
 
 
-def _fast_frames(path: Path, span: tuple[int, int], columnar: bool = False, workers: int | None = 1):
+def _fast_frames(path: Path, span: tuple[int, int], columnar: bool = False, workers: int | None = 1,
+                 spill_to=None):
     """The frames cut into blocks of whole frames where a frame starts with ``"key":{
     "frame_properties"`` (this library's exports, and files laid out like them) and each block
     parsed with orjson; a generator returning None when it took all frames, else the file offset
@@ -338,15 +339,15 @@ def _fast_frames(path: Path, span: tuple[int, int], columnar: bool = False, work
     cut or parse (another layout, NaN, numbers orjson refuses: the exact error comes from ijson).
     ``columnar``: a block that :func:`.fastblock.read_block` takes is yielded whole as
     ``(COLUMNAR, FastBlock)`` (bigger blocks), read by ``workers`` processes (1: here; 0/None: one
-    per core; :func:`aveas_format.parallel.map_ordered`: in file order, a few blocks in flight);
-    the others as frames, parsed here."""
+    per core; :func:`aveas_format.parallel.map_ordered`: in file order, a few blocks in flight;
+    ``spill_to``: :func:`_read_blocks`); the others as frames, parsed here."""
     if not columnar or span[1] - span[0] <= 2 * _COLUMNAR_BLOCK:  # (a small file: no processes)
         workers = 1
     with _open(path) as f:
         f.seek(span[0])
         if f.read(1) != b"{":
             return span[0]
-        with _read_blocks(f, span, columnar, workers) as blocks:
+        with _read_blocks(f, span, columnar, workers, spill_to=spill_to) as blocks:
             for (pos, cut), fast in blocks:
                 if cut is None:  # no frame head in 4 blocks: another layout
                     return pos
@@ -364,15 +365,17 @@ def _fast_frames(path: Path, span: tuple[int, int], columnar: bool = False, work
 
 
 def _read_blocks(f, span: tuple[int, int | None], columnar: bool, workers: int | None,
-                 tail: list | None = None):
+                 tail: list | None = None, spill_to=None):
     """``((offset, bytes), FastBlock or None)`` of each block of :func:`_cut_blocks`, in file
     order; with ``columnar`` the blocks read into columns by ``workers`` processes
     (:func:`aveas_format.parallel.map_ordered`; in worker processes Arrow's reader runs on one
     thread: the processes are the parallelism), else None each. With workers and a plain file
     the workers read their blocks' bytes themselves (the cuts found in a window before each:
     :func:`_cut_blocks`' ``lazy``; the bytes are read here only for a block the fast path
-    refuses). A context manager (closing it cancels the blocks in flight)."""
-    from aveas_format.parallel import map_ordered
+    refuses). ``spill_to``: asked as each block is sent, a directory where the worker writes the
+    block's columns (:meth:`.fastblock.FastBlock.spill_to`: they are not sent back), or None.
+    A context manager (closing it cancels the blocks in flight)."""
+    from aveas_format.parallel import map_ordered, processes
 
     size = _COLUMNAR_BLOCK if columnar else _BLOCK
     lazy = columnar and workers != 1 and isinstance(f, io.BufferedReader) and hasattr(os, "pread")
@@ -383,8 +386,32 @@ def _read_blocks(f, span: tuple[int, int | None], columnar: bool, workers: int |
         from aveas_format.converters.openlabel.fastblock import compiled_parser
 
         compiled_parser()  # (compiled or loaded here, once: forked workers inherit it)
-    blocks = map_ordered(read, _cut_blocks(f, span, size, tail, lazy=lazy), workers=workers)
+    cuts = _cut_blocks(f, span, size, tail, lazy=lazy)
+    if columnar and spill_to is not None and processes(workers) > 1:
+        blocks = _cuts_only(map_ordered(partial(_read_cut_to, read=read), ((c, spill_to()) for c in cuts),
+                                        workers=workers))
+    else:
+        blocks = map_ordered(read, cuts, workers=workers)
     return closing(_bytes_here(blocks, f) if lazy else blocks)
+
+
+def _read_cut_to(item: tuple, read):
+    """``read`` of a cut block (``item``: the cut and a directory or None) in a worker, its
+    columns written into the directory where there is one (as ``b<offset>.arrow``)."""
+    cut, directory = item
+    blk = read(cut)
+    if blk is not None and directory is not None:
+        blk.spill_to(Path(directory) / f"b{cut[0]}.arrow")
+    return blk
+
+
+def _cuts_only(blocks):
+    """The ``(cut, block)`` of :func:`_read_cut_to`'s results (closing it closes ``blocks``)."""
+    try:
+        for (cut, _), blk in blocks:
+            yield cut, blk
+    finally:
+        blocks.close()
 
 
 #: the file size from which the compiled block reader is used (loading numba and the reader from
