@@ -73,6 +73,27 @@ def background(fn: Callable[..., Any], *args: Any, name: str = "background") -> 
         pool.shutdown(wait=False)
 
 
+def read_ahead(fn: Callable[[Any], Any], items: Iterable[Any]) -> Iterator[Any]:
+    """``fn(item)`` for each item, in order, the next one's made in a thread (:func:`background`)
+    while the caller works on this one: for reading that releases the GIL (Parquet row groups,
+    Arrow IPC) overlapped with what is done with what was read. An exception of ``fn`` is raised
+    at its item; closed early, the read in flight is waited for (no thread left behind)."""
+    pending: list[Future] = []
+    try:
+        for item in items:
+            pending.append(background(fn, item, name="read-ahead"))
+            if len(pending) > 1:
+                yield pending.pop(0).result()
+        while pending:
+            yield pending.pop(0).result()
+    finally:
+        for fut in pending:  # (the caller stopped, or an item failed: the read in flight finished)
+            try:
+                fut.result()
+            except BaseException:  # noqa: BLE001 - not the caller's error: it never asked for it
+                pass
+
+
 def run_tasks(fn: Callable[[Any], Any], items: Iterable[Any], *, workers: int | None = 1,
               scheduler: str | None = None, progress: bool = False, description: str = "tasks"
               ) -> Iterator[TaskResult]:

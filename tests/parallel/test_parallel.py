@@ -69,3 +69,40 @@ def test_background_runs_in_a_thread_of_its_own_and_hands_back_the_result_or_the
     assert value == 5 and name.startswith("sum") and name != threading.current_thread().name
     with pytest.raises(ZeroDivisionError):
         background(lambda: 1 / 0).result(timeout=10)
+
+
+def test_read_ahead_reads_the_next_item_while_this_one_is_used():
+    """In order; item k + 1 is being read (in another thread) while the caller holds item k; an
+    error is raised at its own item, after the items before it; closed early, the read in
+    flight is done before the generator returns."""
+    import threading
+    import time
+
+    from aveas_format.parallel import read_ahead
+
+    started: list[tuple[int, str]] = []
+    done: list[int] = []
+
+    def read(k):
+        started.append((k, threading.current_thread().name))
+        if k == 4:
+            raise ValueError("item 4 is broken")
+        time.sleep(0.01)
+        done.append(k)
+        return k * 10
+
+    got = []
+    with pytest.raises(ValueError, match="item 4"):
+        for v in read_ahead(read, range(6)):
+            got.append(v)
+            if v == 0:  # (item 1 asked for before item 0 was handed over)
+                assert [k for k, _ in started] == [0, 1]
+    assert got == [0, 10, 20, 30]
+    assert all(name != threading.current_thread().name for _, name in started)
+    started.clear()
+    done.clear()
+    it = read_ahead(read, range(3))
+    assert next(it) == 0
+    it.close()  # (item 1 in flight: waited for)
+    assert done == [0, 1]
+    assert list(read_ahead(read, [])) == []

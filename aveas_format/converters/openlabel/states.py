@@ -32,6 +32,7 @@ import pyarrow as pa
 
 from aveas_format.converters.openlabel.encode import chunk_bounds
 from aveas_format.converters.openlabel.spill import LZ4, write_by_bucket
+from aveas_format.parallel import read_ahead
 from aveas_format.io.arrow import column_numpy
 
 #: about this many bytes of states per bucket of the spill (one bucket is held at a time)
@@ -172,9 +173,8 @@ class SpilledStates:
         writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
         held: pa.Table | None = None
         offset = 0
-        try:
-            for g in range(parts.num_row_groups):
-                rg = parts.read(g)
+        try:  # (the next row group read while this one is spilled)
+            for g, rg in enumerate(read_ahead(parts.read, range(parts.num_row_groups))):
                 if g == 0:
                     self._buckets(chunk_rows, rg.nbytes / max(rg.num_rows, 1))
                 if need_acc:  # whole tracks: the last participant's rows wait for the next group
