@@ -76,18 +76,23 @@ def background(fn: Callable[..., Any], *args: Any, name: str = "background") -> 
 def read_ahead(fn: Callable[[Any], Any], items: Iterable[Any]) -> Iterator[Any]:
     """``fn(item)`` for each item, in order, the next one's made in a thread (:func:`background`)
     while the caller works on this one: for reading that releases the GIL (Parquet row groups,
-    Arrow IPC) overlapped with what is done with what was read. An exception of ``fn`` is raised
-    at its item; closed early, the read in flight is waited for (no thread left behind)."""
-    pending: list[Future] = []
+    Arrow IPC) overlapped with what is done with what was read. One ``fn`` runs at a time (a
+    reader need not be thread-safe, only usable from another thread). An exception of ``fn`` is
+    raised at its item; closed early, the read in flight is waited for (no thread left behind)."""
+    it = iter(items)
+    fut: Future | None = None
     try:
-        for item in items:
-            pending.append(background(fn, item, name="read-ahead"))
-            if len(pending) > 1:
-                yield pending.pop(0).result()
-        while pending:
-            yield pending.pop(0).result()
+        for item in it:
+            got = fut.result() if fut is not None else None  # (one read at a time: the one before
+            first = fut is None                              # done before the next begins)
+            fut = background(fn, item, name="read-ahead")
+            if not first:
+                yield got
+        if fut is not None:
+            got, fut = fut.result(), None
+            yield got
     finally:
-        for fut in pending:  # (the caller stopped, or an item failed: the read in flight finished)
+        if fut is not None:  # (the caller stopped, or an item failed: the read in flight finished)
             try:
                 fut.result()
             except BaseException:  # noqa: BLE001 - not the caller's error: it never asked for it

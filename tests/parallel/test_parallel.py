@@ -82,22 +82,35 @@ def test_read_ahead_reads_the_next_item_while_this_one_is_used():
 
     started: list[tuple[int, str]] = []
     done: list[int] = []
+    running, most = [0], [0]
+    lock = threading.Lock()
 
     def read(k):
+        with lock:
+            running[0] += 1
+            most[0] = max(most[0], running[0])
         started.append((k, threading.current_thread().name))
-        if k == 4:
-            raise ValueError("item 4 is broken")
-        time.sleep(0.01)
-        done.append(k)
-        return k * 10
+        try:
+            if k == 4:
+                raise ValueError("item 4 is broken")
+            time.sleep(0.01)
+            done.append(k)
+            return k * 10
+        finally:
+            with lock:
+                running[0] -= 1
 
     got = []
     with pytest.raises(ValueError, match="item 4"):
         for v in read_ahead(read, range(6)):
             got.append(v)
-            if v == 0:  # (item 1 asked for before item 0 was handed over)
+            if v == 0:  # (item 1 being read while the caller holds item 0)
+                deadline = time.monotonic() + 10
+                while len(started) < 2 and time.monotonic() < deadline:
+                    time.sleep(0.001)
                 assert [k for k, _ in started] == [0, 1]
-    assert got == [0, 10, 20, 30]
+    assert got == [0, 10, 20, 30] and most[0] == 1  # (one read at a time)
+    assert [k for k, _ in started] == [0, 1, 2, 3, 4]  # (none after the failing one)
     assert all(name != threading.current_thread().name for _, name in started)
     started.clear()
     done.clear()
