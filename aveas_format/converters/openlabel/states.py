@@ -32,8 +32,8 @@ import pyarrow as pa
 
 from aveas_format.converters.openlabel.encode import chunk_bounds
 from aveas_format.converters.openlabel.spill import LZ4, write_by_bucket
-from aveas_format.parallel import read_ahead
 from aveas_format.io.arrow import column_numpy
+from aveas_format.parallel import read_ahead
 
 #: about this many bytes of states per bucket of the spill (one bucket is held at a time)
 BUCKET_BYTES = 32 << 20
