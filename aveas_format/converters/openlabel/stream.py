@@ -396,12 +396,13 @@ def _read_blocks(f, span: tuple[int, int | None], columnar: bool, workers: int |
 
 
 def _read_cut_to(item: tuple, read):
-    """``read`` of a cut block (``item``: the cut and a directory or None) in a worker, its
-    columns written into the directory where there is one (as ``b<offset>.arrow``)."""
-    cut, directory = item
-    blk = read(cut)
+    """``read`` of a cut block in a worker (``item``: the block's ``(offset, cut)`` of
+    :func:`_cut_blocks` and a directory or None), its columns written into the directory where
+    there is one (as ``b<offset>.arrow``)."""
+    block, directory = item
+    blk = read(block)
     if blk is not None and directory is not None:
-        blk.spill_to(Path(directory) / f"b{cut[0]}.arrow")
+        blk.spill_to(Path(directory) / f"b{block[0]}.arrow")
     return blk
 
 
