@@ -453,13 +453,22 @@ class _FrameRows:
             self._spill_held()
         if spilled is not None:
             self.spill.adopt(spilled, ch["uidx"], ch["occ"])
-            return
+        else:
+            self._store(ch, ext)
+
+    def _store(self, ch: dict[str, np.ndarray], ext: dict[str, tuple]) -> None:
+        """A block's rows (with their ``uidx``) into the spill while there is one, else into
+        memory (:meth:`_hold`; a block Arrow cannot hold exactly ends the spill: all in memory
+        from here)."""
         if self.spill is not None:
             if self.spill.append(ch, ext):
                 return
-            self._unspill()  # (a block Arrow cannot hold exactly: all in memory from here)
+            self._unspill()
+        self._hold(ch, ext)
+
+    def _hold(self, ch: dict[str, np.ndarray], ext: dict[str, tuple]) -> None:
         self.columns.append(ch)
-        self.ext_chunks.append((len(us), ext))
+        self.ext_chunks.append((len(ch["uidx"]), ext))
 
     def spill_target(self) -> str | None:
         """Where the worker reading the next block writes its columns (:func:`.stream._read_blocks`'
@@ -476,25 +485,14 @@ class _FrameRows:
         self.spill = self.parts.row_spill()
         off = 0
         for m, ext in chunks:
-            ch = {c: a[off:off + m] for c, a in cols.items()}
+            self._store({c: a[off:off + m] for c, a in cols.items()}, ext)
             off += m
-            if self.spill is not None:
-                if self.spill.append(ch, ext):
-                    continue
-                self._unspill()
-            self.columns.append(ch)
-            self.ext_chunks.append((m, ext))
 
     def _unspill(self) -> None:
         """The spilled rows back into memory (and no spill from here on)."""
         spill, self.spill = self.spill, None
         self._spill_off = True
-
-        def keep(ch: dict[str, np.ndarray], ext: dict[str, tuple]) -> None:
-            self.columns.append(ch)
-            self.ext_chunks.append((len(ch["uidx"]), ext))
-
-        spill.load_into(keep)
+        spill.load_into(self._hold)
 
     def _sizes(self, rows: dict[str, np.ndarray], names: list[str]) -> dict[str, list]:
         """Per object without a static size (``objects`` known by now: a file may have them after
