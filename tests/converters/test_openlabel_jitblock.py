@@ -205,6 +205,52 @@ def test_attribute_items_are_taken_by_name_as_the_profile_reads_them():
         "source.openlabel.pmf_sum"]
 
 
+#: the items of the first box: the name after "acceleration" in the parser's table is "velocity"
+_FIRST = '{"name":"acceleration","val":[0.5,0.25]},{"name":"velocity","val":[1,2,0,0,0,0.5]}'
+
+
+@pytest.mark.parametrize("items", [
+    '{"name":"velocity/ustddev","val":[0.2]}',  # begins as the name expected
+    '{"name":"velocit","val":[1]},{"name":"velocityy","val":[2]},{"name":"velocity","val":[5]}',
+    '{"name":"velocity","val":[3,4,0,0,0,0]},{"name":"acceleration","val":[1,1]}',
+    '{"n\\u0061me":"velocity","val":[1]}',  # a key with an escape: not "name"
+    '{"name":"velocit\\u0079","val":[1]}',  # the name expected, escaped
+    '{"name":"velocity","v\\u0061l":[1]}',
+    '{"val":[2],"name":"velocity"},{"name":"velocity/ustddev","val":[0.3]}'])
+def test_names_read_the_short_way_are_read_as_json_reads_them(items):
+    """The parser takes an item's name by comparing the bytes with the name it expects (the one
+    after the item before in its table), a member's key with the word it expects: a name that only
+    begins or ends like it, or one written with an escape, reads as Arrow's reader reads it, or
+    is refused (the other paths read it)."""
+    first = _items_box('"vec":[%s]' % _FIRST)
+    second = _items_box('"vec":[{"name":"acceleration","val":[0,0]},%s]' % items)
+    buf = ('{"0":{"frame_properties":{"timestamp":0.0},"objects":{"1":%s,"2":%s,"3":%s}}}'
+           % (first, second, first)).encode()
+    got = _jit(buf)
+    if "\\u" in items:
+        assert got is None
+        return
+    assert got is not None
+    _same(got, fb._read_block(buf))
+
+
+@pytest.mark.parametrize("box", [
+    _box().replace('"vx":12.5,"interpolated"', '"vx":12.5,"vxx":1.5,"interpolated"'),
+    _box().replace('"vx":12.5,"interpolated":false', '"vx":12.5,"interpolatedx":true,"interpolated":false'),
+    _box().replace('"object_data":{"cuboid"', '"object_dat\\u0061":{"cuboid"'),
+    _box().replace('"vec":[', '"ve\\u0063":['),
+    _box().replace('"name":"bounding_box"', '"name":"bounding_bo\\u0078"')])
+def test_keys_read_the_short_way_are_read_as_json_reads_them(box):
+    """The same for the extension item's keys and the layout's words."""
+    buf = ('{"0":{"frame_properties":{"timestamp":0.0},"objects":{"1":%s,"2":%s}}}' % (_box(), box)).encode()
+    got = _jit(buf)
+    if "\\u" in box:
+        assert got is None
+        return
+    assert got is not None
+    _same(got, fb._read_block(buf))
+
+
 @pytest.mark.parametrize("extra", ['"num":[{"name":"velocity","val":1}]',
                                    '"text":[{"name":"acceleration","val":"x"}]',
                                    '"num":[{"name":"lights/high_beam","val":0.5}]'])

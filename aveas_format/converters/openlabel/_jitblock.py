@@ -14,6 +14,12 @@ with orjson), each box ``{"object_data":{"cuboid":[...],"boolean":[...],"num":[.
 - the numbers as their JSON text, packed (the caller converts them in one Arrow cast: correctly
   rounded, as a JSON parser reads them), the texts packed the same way, each distinct name once.
 
+A key of the layout is read by comparing its bytes with the word expected, an item's name with the
+name expected (the one after the item before in the table of names: the items come in the same
+order box after box) — a string ends at its first quote, so the bytes and a quote after them are
+that string; where they differ, the long way (scanned, escapes checked, the name looked up). At
+2M states: 19.2 -> 15.7 ms per 8 MiB block.
+
 Anything outside the profile's layout — a member the layout does not have, a repeated member, a
 ``null``, a string with an escape in a box, a rotated or second cuboid, a value of another type —
 and any syntax error stops it with status 1: the caller falls back to the Arrow or the generic
@@ -62,6 +68,8 @@ _NULL = _word(b"null")
 
 @_jit
 def _ws(b, i):
+    if b[i] > 32:
+        return i
     while b[i] == 32 or b[i] == 10 or b[i] == 13 or b[i] == 9:
         i += 1
     return i
@@ -79,6 +87,34 @@ def _eq(b, s, e, w):
 
 
 @_jit
+def _key(b, i, w):
+    """Past the string at ``i`` (``b[i]`` a quote) where it is the plain word ``w``, else -1
+    (the caller reads it the long way then)."""
+    m = w.size
+    if i + m + 1 >= b.size or b[i + m + 1] != 34:
+        return -1
+    for k in range(m):
+        if b[i + 1 + k] != w[k]:
+            return -1
+    return i + m + 2
+
+
+@_jit
+def _known(b, i, tbuf, toff, c, nt):
+    """Past the string at ``i`` where it is the name ``c`` of the table, else -1."""
+    if c < 0 or c >= nt:
+        return -1
+    o = toff[c]
+    m = toff[c + 1] - o
+    if i + m + 1 >= b.size or b[i + m + 1] != 34:
+        return -1
+    for k in range(m):
+        if b[i + 1 + k] != tbuf[o + k]:
+            return -1
+    return i + m + 2
+
+
+@_jit
 def _hex(c):
     return (48 <= c <= 57) or (65 <= c <= 70) or (97 <= c <= 102)
 
@@ -91,6 +127,9 @@ def _string(b, i, n):
     esc = False
     while i < n:
         c = b[i]
+        if c > 92 or (c > 34 and c < 92):
+            i += 1
+            continue
         if c == 34:
             return i + 1, esc
         if c == 92:
@@ -389,9 +428,8 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                                 i = _ws(b, i + 1)
                                 if b[i] != 34:
                                     return fail
-                                ks = i
-                                i, esc = _string(b, i, n)
-                                if i < 0 or esc or not _eq(b, ks + 1, i - 1, _OBJECT_DATA):
+                                i = _key(b, i, _OBJECT_DATA)
+                                if i < 0:
                                     return fail
                                 i = _colon(b, i)
                                 if i < 0:
@@ -407,22 +445,23 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                                 while True:  # object_data's members: the kinds
                                     if b[i] != 34:
                                         return fail
-                                    ks = i
-                                    i, esc = _string(b, i, n)
-                                    if i < 0 or esc:
-                                        return fail
-                                    if _eq(b, ks + 1, i - 1, _KIND_VEC):
-                                        kind = K_VEC
-                                    elif _eq(b, ks + 1, i - 1, _KIND_NUM):
+                                    kind = K_VEC
+                                    e = _key(b, i, _KIND_VEC)
+                                    if e < 0:
                                         kind = K_NUM
-                                    elif _eq(b, ks + 1, i - 1, _KIND_TEXT):
+                                        e = _key(b, i, _KIND_NUM)
+                                    if e < 0:
                                         kind = K_TEXT
-                                    elif _eq(b, ks + 1, i - 1, _KIND_BOOLEAN):
+                                        e = _key(b, i, _KIND_TEXT)
+                                    if e < 0:
                                         kind = K_BOOLEAN
-                                    elif _eq(b, ks + 1, i - 1, _KIND_CUBOID):
+                                        e = _key(b, i, _KIND_BOOLEAN)
+                                    if e < 0:
                                         kind = K_CUBOID
-                                    else:
+                                        e = _key(b, i, _KIND_CUBOID)
+                                    if e < 0:
                                         return fail
+                                    i = e
                                     if seen & (1 << kind):
                                         return fail
                                     seen |= 1 << kind
@@ -450,30 +489,42 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                                             while True:  # the item's members
                                                 if b[i] != 34:
                                                     return fail
-                                                ks = i
-                                                i, esc = _string(b, i, n)
+                                                member = 2
+                                                e = _key(b, i, _NAME)
+                                                if e < 0:
+                                                    member = 3
+                                                    e = _key(b, i, _VAL)
+                                                if e < 0:
+                                                    ks = i
+                                                    e, esc = _string(b, i, n)
+                                                    if e < 0:
+                                                        return fail
+                                                    member = 1 if not esc and _eq(b, ks + 1, e - 1, _EXT) else 0
+                                                i = _colon(b, e)
                                                 if i < 0:
                                                     return fail
-                                                ke = i - 1
-                                                i = _colon(b, i)
-                                                if i < 0:
-                                                    return fail
-                                                if not esc and _eq(b, ks + 1, ke, _NAME):
+                                                if member == 2:
                                                     if name >= 0 or b[i] != 34:
                                                         return fail
-                                                    s = i
-                                                    i, esc = _string(b, i, n)
-                                                    if i < 0 or esc:
-                                                        return fail
                                                     if kind == K_CUBOID:
-                                                        if not _eq(b, s + 1, i - 1, _BOUNDING_BOX):
+                                                        i = _key(b, i, _BOUNDING_BOX)
+                                                        if i < 0:
                                                             return fail
                                                         name = 0
                                                     else:
-                                                        name, tbuf, toff, nt = _intern(b, s + 1, i - 1, tbuf, toff,
-                                                                                       nt, hint + 1)
-                                                        hint = name
-                                                elif not esc and _eq(b, ks + 1, ke, _VAL):
+                                                        e = _known(b, i, tbuf, toff, hint + 1, nt)
+                                                        if e >= 0:
+                                                            name = hint = hint + 1
+                                                            i = e
+                                                        else:
+                                                            s = i
+                                                            i, esc = _string(b, i, n)
+                                                            if i < 0 or esc:
+                                                                return fail
+                                                            name, tbuf, toff, nt = _intern(b, s + 1, i - 1, tbuf, toff,
+                                                                                           nt, hint + 1)
+                                                            hint = name
+                                                elif member == 3:
                                                     if has_val:
                                                         return fail
                                                     has_val = True
@@ -526,7 +577,7 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                                                             return fail
                                                         i = e
                                                 elif kind == K_CUBOID:
-                                                    if esc or not _eq(b, ks + 1, ke, _EXT) or b[i] != 123:
+                                                    if member != 1 or b[i] != 123:
                                                         return fail  # (coordinate_system, attributes...)
                                                     deepest = max(deepest, 8)
                                                     i = _ws(b, i + 1)
@@ -536,14 +587,19 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff):
                                                         while True:  # the extension item: "key": scalar
                                                             if b[i] != 34:
                                                                 return fail
-                                                            s = i
-                                                            i, esc = _string(b, i, n)
-                                                            if i < 0 or esc:
-                                                                return fail
                                                             ext = _grow(ext, ne + 1)
                                                             ext[ne, 0] = nb
-                                                            code, tbuf, toff, nt = _intern(b, s + 1, i - 1, tbuf, toff,
-                                                                                           nt, hint + 1)
+                                                            e = _known(b, i, tbuf, toff, hint + 1, nt)
+                                                            if e >= 0:
+                                                                code = hint + 1
+                                                                i = e
+                                                            else:
+                                                                s = i
+                                                                i, esc = _string(b, i, n)
+                                                                if i < 0 or esc:
+                                                                    return fail
+                                                                code, tbuf, toff, nt = _intern(b, s + 1, i - 1, tbuf,
+                                                                                               toff, nt, hint + 1)
                                                             ext[ne, 1] = hint = code
                                                             i = _colon(b, i)
                                                             if i < 0:
