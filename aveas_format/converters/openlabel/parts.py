@@ -43,7 +43,8 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from aveas_format.converters.openlabel.spill import LZ4, PLAIN, RowSpill, from_table, write_by_bucket
+from aveas_format.converters.openlabel.spill import (LZ4, PLAIN, READ, IpcWriter, RowSpill, from_table,
+                                                     write_by_bucket)
 from aveas_format.io.arrow import conform
 from aveas_format.io.writer import ROW_GROUP_ROWS, StatesFile, parquet_options, prepare_table
 from aveas_format.numeric import release_free_memory, same_participant
@@ -244,7 +245,7 @@ class _Buckets:
         names = fd.uid_names
         need_size = np.fromiter(map(fd.needs_size, names), bool, len(names))
         p = _gathered()
-        writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
+        writers: dict[int, IpcWriter] = {}
         options = self._ipc_options()
         offset = self.spill.index[lo][2] if lo < len(self.spill.index) else self.spill.n
         try:
@@ -372,7 +373,7 @@ class _Buckets:
         tables = []
         for f in files:
             with pa.OSFile(str(f)) as mm:
-                tables.append(pa.ipc.open_stream(mm).read_all())
+                tables.append(pa.ipc.open_stream(mm, options=READ).read_all())
         t = pa.concat_tables(tables) if len(tables) > 1 else tables[0]
         del tables
         pos = t.column("__pos").to_numpy()
@@ -404,7 +405,7 @@ class _Buckets:
             states["lon"], states["lat"] = pa.array(lon), pa.array(lat)
         s = fill_states(prepare_table(conform(pa.table(states), _SPEC), _SPEC), ctx.local,
                         None if use_file else ctx.net)
-        with pa.ipc.new_stream(str(self.dir / f"s{k}.arrow"), s.schema, options=self._ipc_options()) as w:
+        with IpcWriter(self.dir / f"s{k}.arrow", s.schema, self._ipc_options()) as w:
             w.write_table(s)
         for f in files:
             f.unlink()
@@ -416,7 +417,7 @@ class _Buckets:
         """Bucket ``k``'s states as :meth:`_bucket` spilled them (the file removed unless ``keep``)."""
         f = self.dir / f"s{k}.arrow"
         with pa.OSFile(str(f)) as mm:
-            s = pa.ipc.open_stream(mm).read_all()
+            s = pa.ipc.open_stream(mm, options=READ).read_all()
         if not keep:
             os.unlink(f)
         return s

@@ -31,7 +31,7 @@ import numpy as np
 import pyarrow as pa
 
 from aveas_format.converters.openlabel.encode import chunk_bounds
-from aveas_format.converters.openlabel.spill import LZ4, write_by_bucket
+from aveas_format.converters.openlabel.spill import LZ4, READ, IpcWriter, write_by_bucket
 from aveas_format.io.arrow import column_numpy
 from aveas_format.parallel import read_ahead
 
@@ -170,7 +170,7 @@ class SpilledStates:
         parts = self.parts
         kin = None if _has_acceleration(self.column_names) else _kinematics(rec.derived, self.num_rows)
         need_acc = not _has_acceleration(self.column_names)
-        writers: dict[int, pa.ipc.RecordBatchStreamWriter] = {}
+        writers: dict[int, IpcWriter] = {}
         held: pa.Table | None = None
         offset = 0
         try:  # (the next row group read while this one is spilled)
@@ -215,7 +215,7 @@ class SpilledStates:
         if b != self._bucket:
             self._table = None  # (the last bucket freed before the next is read)
             with pa.memory_map(str(self.dir / f"b{b}.arrow")) as f:
-                table = pa.ipc.open_stream(f).read_all()
+                table = pa.ipc.open_stream(f, options=READ).read_all()
             self._rows = table.column(_ROW).to_numpy()  # (ascending: the file's order kept)
             self._table = table.drop_columns([_ROW])
             self._bucket = b
