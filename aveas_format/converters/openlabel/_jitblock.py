@@ -25,7 +25,8 @@ Anything outside the profile's layout — a member the layout does not have, a r
 and any syntax error stops it with status 1: the caller falls back to the Arrow or the generic
 path, which reads the block or names the error. Imported only where numba is installed
 (:func:`aveas_format.numeric.kernel_backend` decides); the first call in an environment compiles
-it (seconds) and caches the machine code next to this module.
+it (~30 s: the helpers are inlined into one large function, which runs ~1.5x faster
+than calls to them would) and caches the machine code next to this module.
 """
 
 from __future__ import annotations
