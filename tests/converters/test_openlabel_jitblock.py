@@ -356,7 +356,7 @@ def test_the_compiled_skeleton_is_the_python_one(blocks):
         boxes = state[2]
         assert len(boxes) >= 1
         want = fb._skeleton_bytes(buf, boxes[:, 0].tolist(), boxes[:, 1].tolist())
-        assert jb.skeleton(np.frombuffer(buf, np.uint8), boxes).tobytes() == want
+        assert jb.skeleton(fb.padded(buf)[:-1], boxes).tobytes() == want
 
 
 def test_files_from_a_size_on_go_through_the_compiled_reader(tmp_path, monkeypatch):
@@ -423,3 +423,56 @@ def test_a_damaged_block_is_refused_or_read_as_json_reads_it(ops):
     if want is not None:
         want.ext = got.ext
         _same(got, want)
+
+
+def test_one_compiled_reader_for_every_caller(blocks, tmp_path):
+    """The reader's functions are compiled for one argument type (numba compiles, ~30 s, once per
+    type): in a fresh process, the warm-up of :func:`.fastblock.compiled_parser`, a block given as
+    bytes and a block read into a worker's buffer (``stream._read_cut``) use the same one."""
+    import subprocess
+    import sys
+
+    inner = blocks[1][1:-1]
+    (tmp_path / "frames").write_bytes(inner)
+    (tmp_path / "block").write_bytes(blocks[0])
+    code = f"""
+import json
+from pathlib import Path
+from aveas_format.converters.openlabel import fastblock as fb, _jitblock as jb, stream
+fb.compiled_parser()
+assert fb.padded(b"{{}}").flags.writeable
+assert fb.read_block(Path({str(tmp_path / "block")!r}).read_bytes()) is not None
+assert stream._read_cut((0, (0, {len(inner)})), threads=False, path={str(tmp_path / "frames")!r}) is not None
+print(json.dumps([len(f.signatures) for f in (jb.parse_block, jb.skeleton, jb.first_items)]))
+"""
+    env = {**os.environ, "AVEAS_FORMAT_KERNEL": "numba"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout) == [1, 1, 1]
+
+
+_FIRST_USE = r"""
+import json, sys, time
+t = time.time()
+from aveas_format.converters.openlabel import fastblock as fb, _jitblock as jb
+fb.compiled_parser()
+s = jb.parse_block.stats
+print(json.dumps({"misses": sum(s.cache_misses.values()), "hits": sum(s.cache_hits.values()),
+                  "s": time.time() - t}))
+"""
+
+
+@pytest.mark.slow
+def test_processes_starting_together_compile_the_reader_once(tmp_path):
+    """Two processes that need the reader at once on a fresh install (an empty numba cache): one
+    compiles it and caches it, the other waits and loads it (instead of two compiles at once,
+    ~900 MB each)."""
+    import subprocess
+    import sys
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "AVEAS_FORMAT_KERNEL": "numba"}
+    procs = [subprocess.Popen([sys.executable, "-c", _FIRST_USE], env=env, stdout=subprocess.PIPE, text=True)
+             for _ in range(2)]
+    got = [json.loads(p.communicate(timeout=600)[0]) for p in procs]
+    assert all(p.returncode == 0 for p in procs)
+    assert sorted((g["misses"], g["hits"]) for g in got) == [(0, 1), (1, 0)], got

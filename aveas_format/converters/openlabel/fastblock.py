@@ -31,6 +31,7 @@ path (:mod:`.columns`), which gives the same columns and the exact error where t
 
 from __future__ import annotations
 
+import os
 import threading
 from pathlib import Path
 from typing import Any
@@ -199,8 +200,13 @@ def read_block(buf: bytes | np.ndarray, threads: bool = True, compiled: bool = T
 
 
 def padded(buf: bytes) -> np.ndarray:
-    """``buf`` as the compiled reader takes it: uint8, one NUL byte after it."""
-    return np.frombuffer(buf + b"\0", np.uint8)
+    """``buf`` as the compiled reader takes it: uint8, one NUL byte after it; writable, as the
+    worker processes' block buffer is (numba compiles a reader per argument type: one type, one
+    compile)."""
+    out = np.empty(len(buf) + 1, np.uint8)
+    out[:-1] = np.frombuffer(buf, np.uint8)
+    out[-1] = 0
+    return out
 
 
 _LOCAL = threading.local()
@@ -220,6 +226,8 @@ def compiled_parser():
         return None
     from aveas_format.converters.openlabel import _jitblock as jb
 
+    _compiled_once(jb)
+
     def parse(b: np.ndarray) -> tuple:
         sc = getattr(_LOCAL, "scratch", None) or jb.scratch(len(b))
         r = jb.parse_block(b, *sc)
@@ -230,6 +238,50 @@ def compiled_parser():
                 sbuf[:soff[ns]], soff[:ns + 1], tbuf[:toff[nt]], toff[:nt + 1])
 
     return parse
+
+
+#: a block of one box: what :func:`_compiled_once` reads to compile the reader's functions
+_SMALL = (b'{"0":{"frame_properties":{"timestamp":0.0},"objects":{"1":{"object_data":{"cuboid":'
+          b'[{"name":"bounding_box","val":[0,0,0,0,0,0,1,1,1],"aveas_format":{"vx":1.0}}],'
+          b'"vec":[{"name":"velocity","val":[1.0,0,0,0,0,0]}]}}}}}')
+_READY = False
+
+
+def _compiled_once(jb) -> None:
+    """The compiled reader's functions compiled, or loaded from numba's cache, once per process
+    and by one process at a time (an exclusive lock on a file in the temporary directory, where
+    ``fcntl`` is there): the worker processes of a first import on a fresh install would
+    otherwise each compile them at once (~30 s and ~900 MB each); the first compiles and caches
+    them, the others wait and load them (~0.2 s)."""
+    global _READY
+    if _READY:
+        return
+    import tempfile
+
+    def compile_() -> None:
+        b = padded(_SMALL)
+        r = jb.parse_block(b, *jb.scratch(len(b)))
+        if r[0] == 0:  # (the skeleton's and the attributes' functions too)
+            jb.skeleton(b[:-1], r[8][:r[2]])
+            jb.first_items(r[9][:r[3]], np.zeros(8, np.int64), np.zeros(1, np.int64), int(r[2]))
+
+    try:
+        import fcntl
+    except ImportError:
+        fcntl = None
+    lock = Path(tempfile.gettempdir()) / f"aveas-format-jitblock-{getattr(os, 'getuid', lambda: 0)()}.lock"
+    try:
+        f = open(lock, "a") if fcntl is not None else None
+    except OSError:
+        f = None
+    try:
+        if f is not None:
+            fcntl.flock(f, fcntl.LOCK_EX)
+        compile_()
+    finally:
+        if f is not None:
+            f.close()  # (the lock goes with the file)
+    _READY = True
 
 
 def block_depth(buf: bytes) -> int | None:
