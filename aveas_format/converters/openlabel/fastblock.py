@@ -249,10 +249,12 @@ _READY = False
 
 def _compiled_once(jb) -> None:
     """The compiled reader's functions compiled, or loaded from numba's cache, once per process
-    and by one process at a time (an exclusive lock on a file in the temporary directory, where
-    ``fcntl`` is there): the worker processes of a first import on a fresh install would
-    otherwise each compile them at once (~30 s and ~900 MB each); the first compiles and caches
-    them, the others wait and load them (~0.2 s)."""
+    (called before the import forks its workers, :func:`.stream._read_blocks`: they inherit
+    them; before, only the module was loaded there and each worker compiled on its first block,
+    ~30 s and ~900 MB each at once on a fresh install) and by one process at a time (an
+    exclusive lock on a file in the temporary directory, where ``fcntl`` is there: processes
+    starting together — two imports, spawned workers — the first compiles and caches them, the
+    others wait and load them, ~0.2 s)."""
     global _READY
     if _READY:
         return
