@@ -58,6 +58,11 @@ def write_chunks_atomic(path: str | Path, chunks: Iterable[bytes]) -> Path:
 SYNC_EVERY = 256 << 20
 
 
+#: bytes copied by one ``copy_file_range`` call of a :class:`FileSegment` (the syncs of the
+#: writing thread come between two of them)
+COPY_STEP = 64 << 20
+
+
 class FileSegment:
     """A chunk of :func:`write_chunks_atomic` given as a file (written by another process): its
     bytes are copied into the output by the kernel (``os.copy_file_range``) and the file removed."""
@@ -65,29 +70,88 @@ class FileSegment:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
 
-    def copy_into(self, f) -> int:
-        """Append the file to the open output ``f`` (flushed first); the number of bytes."""
+    def copy_into(self, f, wrote=None) -> int:
+        """Append the file to the open output ``f`` (flushed first); the number of bytes.
+        ``wrote(n)`` is told each step's bytes (the writer's syncs)."""
         f.flush()
-        with open(self.path, "rb") as src:
-            size = os.fstat(src.fileno()).st_size
-            done = 0
-            try:
-                while done < size:
-                    n = os.copy_file_range(src.fileno(), f.fileno(), size - done)
-                    if n == 0:
-                        break
-                    done += n
-            except (AttributeError, OSError):  # (no copy_file_range here: through Python)
-                src.seek(done)
-                import shutil
-
-                shutil.copyfileobj(src, f, 1 << 20)
-                done = size
-        self.discard()
+        try:
+            with open(self.path, "rb") as src:
+                size = os.fstat(src.fileno()).st_size
+                _copy_range(src.fileno(), f, 0, size, wrote, self.path)
+        finally:
+            self.discard()
         return size
 
     def discard(self) -> None:
         self.path.unlink(missing_ok=True)
+
+
+class GrowingSegment(FileSegment):
+    """A :class:`FileSegment` whose file another process is still appending to: copied as it
+    grows (the copying overlaps that process's work instead of following it). The producer calls
+    :meth:`finish` when the process is done: ``ok`` -> the rest copied; not ``ok`` -> what was
+    copied of it is cut off the output again (truncated back to where the segment began), so
+    that the producer can put the same bytes there another way. The file is removed either way."""
+
+    #: seconds between two looks at the file while nothing new has come
+    POLL = 0.01
+
+    def __init__(self, path: str | Path) -> None:
+        import threading
+
+        super().__init__(path)
+        self._done = threading.Event()
+        self._ok = False
+
+    def finish(self, ok: bool) -> None:
+        """The writing process is done; ``ok``: the file is whole."""
+        self._ok = ok
+        self._done.set()
+
+    def copy_into(self, f, wrote=None) -> int:
+        f.flush()
+        start = f.tell()
+        done = 0
+        try:
+            with open(self.path, "rb") as src:
+                while True:
+                    finished = self._done.is_set()  # (before the size: all is in once it is set)
+                    if finished and not self._ok:
+                        f.truncate(start)
+                        f.seek(start)
+                        return 0
+                    size = os.fstat(src.fileno()).st_size  # (bytes below it are written for good)
+                    if size > done:
+                        _copy_range(src.fileno(), f, done, size - done, wrote, self.path)
+                        done = size
+                    elif finished:
+                        return done
+                    else:
+                        self._done.wait(self.POLL)
+        finally:
+            self.discard()
+
+
+def _copy_range(src: int, f, offset: int, count: int, wrote=None, name: Path | None = None) -> None:
+    """Append ``count`` bytes of the open file descriptor ``src`` (the file ``name``) from
+    ``offset`` to the open (flushed) output ``f``: by the kernel where it can
+    (``os.copy_file_range``), else read and written here."""
+    end = offset + count
+    while offset < end:
+        n = 0
+        try:
+            n = os.copy_file_range(src, f.fileno(), min(end - offset, COPY_STEP), offset)
+        except (AttributeError, OSError):  # (no copy_file_range here, or not between these files)
+            pass
+        if n == 0:  # (through Python: an error of the output is then raised as it is)
+            data = os.pread(src, min(end - offset, 8 << 20), offset)
+            if not data:
+                raise RecordingIOError(f"the file ended {end - offset} bytes early", path=name)
+            n = f.write(data)
+            f.flush()
+        offset += n
+        if wrote is not None:
+            wrote(n)
 
 
 def _write_behind(f, chunks: Iterable[bytes]) -> None:
@@ -104,19 +168,27 @@ def _write_behind(f, chunks: Iterable[bytes]) -> None:
     q: queue.Queue = queue.Queue(maxsize=4)
     failed: list[BaseException] = []
 
+    pending = 0
+
+    def wrote(n: int) -> None:
+        nonlocal pending
+        pending += n
+        if pending >= SYNC_EVERY:
+            f.flush()
+            getattr(os, "fdatasync", os.fsync)(f.fileno())
+            pending = 0
+
     def run() -> None:
-        pending = 0
         while (data := q.get()) is not None:
             if failed:
                 if isinstance(data, FileSegment):
                     data.discard()
                 continue  # (drain until the end marker)
             try:
-                pending += data.copy_into(f) if isinstance(data, FileSegment) else f.write(data)
-                if pending >= SYNC_EVERY:
-                    f.flush()
-                    getattr(os, "fdatasync", os.fsync)(f.fileno())
-                    pending = 0
+                if isinstance(data, FileSegment):
+                    data.copy_into(f, wrote)
+                else:
+                    wrote(f.write(data))
             except BaseException as e:  # noqa: BLE001 - raised in the caller's thread
                 failed.append(e)
                 if isinstance(data, FileSegment):

@@ -307,6 +307,46 @@ def test_frames_encoded_in_forked_parts_give_the_same_file(tmp_path, monkeypatch
     assert got == one and sorted(p.name for p in out.iterdir()) == ["again.json", "rec.json"]
 
 
+def test_a_part_whose_process_dies_half_way_is_cut_off_and_encoded_here(tmp_path, monkeypatch):
+    """The writer copies a forked part's file while it grows: a process that dies after writing
+    some of its frames (copied already, or not yet) leaves no trace of them in the output."""
+    import os
+    import threading
+
+    from aveas_format.converters.openlabel import encode
+    from aveas_format.converters.openlabel.write import openlabel_chunks
+    from aveas_format.safeio import atomic, write_chunks_atomic
+    from aveas_format.sample import highway_scene
+
+    rec = highway_scene(n_vehicles=12, duration_s=20.0, seed=4)
+    monkeypatch.setattr(encode, "PARTS_MIN_ROWS", 0)
+    one = write_chunks_atomic(tmp_path / "one.json", openlabel_chunks(rec, chunk_rows=300)).read_bytes()
+    copying = threading.Event()  # (the writer has copied some of the part before it dies)
+    real_copy = atomic._copy_range
+    monkeypatch.setattr(atomic, "_copy_range", lambda *a: (real_copy(*a), copying.set()))
+
+    def dies_half_way(frame_of_row, times, prepare, summary, chunk_rows, part, spill, conn):
+        with open(spill, "wb") as f:
+            for i, data in enumerate(encode.frame_chunks(frame_of_row, times, prepare,
+                                                         chunk_rows=chunk_rows, part=part)):
+                f.write(data)
+                f.flush()
+                if i == 1:
+                    break
+        import time
+
+        time.sleep(0.5)  # (time for the writer to copy what is there)
+        os._exit(3)
+
+    monkeypatch.setattr(encode, "_encode_part", dies_half_way)
+    out = tmp_path / "parts"
+    out.mkdir()
+    got = write_chunks_atomic(out / "rec.json", openlabel_chunks(rec, chunk_rows=300, workers=2,
+                                                                  spill_dir=out)).read_bytes()
+    assert copying.is_set()
+    assert got == one and [p.name for p in out.iterdir()] == ["rec.json"]
+
+
 def test_the_export_takes_workers_and_writes_the_same_file(tmp_path, monkeypatch):
     from aveas_format.converters import get_converter
     from aveas_format.converters.openlabel import encode
@@ -320,8 +360,8 @@ def test_the_export_takes_workers_and_writes_the_same_file(tmp_path, monkeypatch
     from aveas_format.safeio import atomic
 
     copied = []  # (the parts copied in from the forked processes' files)
-    real = atomic.FileSegment.copy_into
-    monkeypatch.setattr(atomic.FileSegment, "copy_into", lambda seg, f: copied.append(1) or real(seg, f))
+    real = atomic.GrowingSegment.copy_into
+    monkeypatch.setattr(atomic.GrowingSegment, "copy_into", lambda seg, *a: copied.append(1) or real(seg, *a))
     ex = get_converter("openlabel", "export")
     opts = {"write_map": False, "map_file": "m.xodr"}
     a = ex(rec, tmp_path / "a.json", options={**opts, "workers": 1})[0].read_bytes()

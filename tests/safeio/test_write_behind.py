@@ -88,7 +88,48 @@ def test_file_segments_not_written_are_removed_on_an_error(tmp_path, monkeypatch
         yield FileSegment(seg)
         yield b"more"
 
-    monkeypatch.setattr(FileSegment, "copy_into", lambda self, f: (_ for _ in ()).throw(OSError(28, "full")))
+    monkeypatch.setattr(FileSegment, "copy_into", lambda self, f, wrote: (_ for _ in ()).throw(OSError(28, "full")))
     with pytest.raises(OSError, match="full"):
         write_chunks_atomic(tmp_path / "out.bin", chunks())
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("ok", [True, False])
+def test_a_growing_segment_is_copied_as_it_grows_or_cut_off_again(tmp_path, monkeypatch, ok):
+    """A part file another process still appends to: copied piece by piece before it is done;
+    when that process fails, what was copied of it is cut off and the next chunks land where
+    the part began."""
+    import threading
+    import time
+
+    from aveas_format.safeio.atomic import GrowingSegment
+
+    part = tmp_path / "part"
+    part.write_bytes(b"")
+    steps = []
+    real = atomic._copy_range
+    monkeypatch.setattr(atomic, "_copy_range", lambda *a: (steps.append(a[3]), real(*a)))
+    seg = GrowingSegment(part)
+
+    def append() -> None:
+        with open(part, "ab") as f:
+            for i in range(20):
+                f.write(bytes([97 + i]) * 1000)
+                f.flush()
+                for _ in range(500):  # (the first piece copied before the next comes)
+                    if steps:
+                        break
+                    time.sleep(0.01)
+        seg.finish(ok)
+
+    def chunks():
+        yield b"head"
+        threading.Thread(target=append).start()
+        yield seg
+        yield b"tail"
+
+    out = write_chunks_atomic(tmp_path / "out.bin", chunks())
+    whole = b"".join(bytes([97 + i]) * 1000 for i in range(20))
+    assert out.read_bytes() == b"head" + (whole if ok else b"") + b"tail"
+    assert len(steps) >= (2 if ok else 1) and sum(steps) <= 20_000  # (in pieces, each byte once)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.bin"]

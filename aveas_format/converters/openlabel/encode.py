@@ -305,7 +305,8 @@ class FrameParts:
     first encoded here and streamed (:meth:`frames`), each other one by a process forked when this
     object is made (it inherits the recording; made before any thread of the writer starts, and
     before ``prepare`` has run, so that its extremes start empty) into a file in ``spill_dir``,
-    handed on as a FileSegment, its participants' extremes merged into ``summary`` (``state()`` /
+    handed on as a GrowingSegment once this process's part is done (the writer copies the file
+    as it grows), its participants' extremes merged into ``summary`` (``state()`` /
     ``merge(state)``: the export's ``_Summary``). Where fork is not available, the rows are few,
     or a process fails, the parts are encoded here (an error then raised as it would be in one
     process). :meth:`close` stops what still runs and removes its files."""
@@ -343,21 +344,26 @@ class FrameParts:
             raise
 
     def frames(self) -> Iterator[Any]:
-        from aveas_format.safeio.atomic import FileSegment
+        from aveas_format.safeio.atomic import GrowingSegment
 
         yield from frame_chunks(*self.args, chunk_rows=self.chunk_rows, part=self.parts[0])
         while self.running:
-            part, spill, proc, rd = self.running.pop(0)
+            part, spill, proc, rd = self.running[0]
+            seg, ok = GrowingSegment(spill), False
             try:
-                state = rd.recv()
-            except EOFError:  # (the process died)
-                state = None
-            proc.join()
-            if state is not None and proc.exitcode == 0:
+                yield seg  # (copied while the process still writes it)
+                try:
+                    state = rd.recv()
+                except EOFError:  # (the process died)
+                    state = None
+                proc.join()
+                ok = state is not None and proc.exitcode == 0
+            finally:
+                seg.finish(ok)  # (the writer cuts off what it copied of a failed part)
+            self.running.pop(0)
+            if ok:
                 self.summary.merge(state)
-                yield FileSegment(spill)
             else:  # here, with the real error if there is one
-                spill.unlink(missing_ok=True)
                 yield from frame_chunks(*self.args, chunk_rows=self.chunk_rows, part=part)
 
     def close(self) -> None:
