@@ -280,52 +280,81 @@ def test_nan_and_infinity_as_json_loads_reads_them(tmp_path):
     assert_identical(convert("openlabel", [p], map_source=STRAIGHT), _dict_path(p, STRAIGHT))
 
 
+def _parts_export(rec, path, **kw):
+    from aveas_format.converters.openlabel.write import openlabel_chunks
+    from aveas_format.safeio import write_chunks_atomic
+
+    return write_chunks_atomic(path, openlabel_chunks(rec, chunk_rows=300, **kw)).read_bytes()
+
+
 @pytest.mark.parametrize("workers", [2, 3])
-def test_frames_encoded_in_forked_parts_give_the_same_file(tmp_path, monkeypatch, workers):
-    """The frames of a large export in parts, all but the first encoded by forked processes into
-    files next to the output and copied in by the kernel: the same bytes as in one process, no
-    part file left; a part whose process fails is encoded here instead."""
+@pytest.mark.parametrize("part_rows", [200_000, 1_000])
+def test_frames_encoded_in_forked_parts_give_the_same_file(tmp_path, monkeypatch, workers, part_rows):
+    """The frames of a large export in parts (one round, or many: parts of ~1,000 rows dealt in
+    turn), those of the forked processes encoded into files next to the output and copied in by
+    the kernel: the same bytes as in one process, no part file left. A process that fails at
+    once, or after its first part, has its parts (the rest) encoded here instead."""
     import os
 
     from aveas_format.converters.openlabel import encode
-    from aveas_format.converters.openlabel.write import openlabel_chunks
-    from aveas_format.safeio import write_chunks_atomic
     from aveas_format.sample import highway_scene
 
     rec = highway_scene(n_vehicles=12, duration_s=20.0, seed=4)
     monkeypatch.setattr(encode, "PARTS_MIN_ROWS", 0)
-    one = write_chunks_atomic(tmp_path / "one.json", openlabel_chunks(rec, chunk_rows=300)).read_bytes()
+    monkeypatch.setattr(encode, "PART_ROWS", part_rows)
+    one = _parts_export(rec, tmp_path / "one.json")
     out = tmp_path / "parts"
     out.mkdir()
-    got = write_chunks_atomic(out / "rec.json", openlabel_chunks(rec, chunk_rows=300, workers=workers,
-                                                                  spill_dir=out)).read_bytes()
-    assert got == one and [p.name for p in out.iterdir()] == ["rec.json"]
-    real = encode._encode_part
-    monkeypatch.setattr(encode, "_encode_part", lambda *a: os._exit(3) if a[5][0] > 0 else real(*a))
-    got = write_chunks_atomic(out / "again.json", openlabel_chunks(rec, chunk_rows=300, workers=workers,
-                                                                    spill_dir=out)).read_bytes()
-    assert got == one and sorted(p.name for p in out.iterdir()) == ["again.json", "rec.json"]
+    assert _parts_export(rec, out / "rec.json", workers=workers, spill_dir=out) == one
+    assert [p.name for p in out.iterdir()] == ["rec.json"]
+    real = encode._encode_parts
+    for i, fails in enumerate([lambda *a: os._exit(3),  # (at once)
+                               lambda *a: real(*a[:5], a[5][:1], a[6]) or os._exit(3)]):  # (after a part)
+        monkeypatch.setattr(encode, "_encode_parts", fails)
+        assert _parts_export(rec, out / f"again{i}.json", workers=workers, spill_dir=out) == one
+        assert sorted(p.name for p in out.iterdir()) == sorted(["rec.json", *(f"again{k}.json" for k in range(i + 1))])
+
+
+def test_the_parts_are_dealt_in_rounds_of_about_equal_rows():
+    from aveas_format.converters.openlabel import encode
+
+    bounds = list(range(0, 2_000_001, 10_000))  # 200 chunks of 10,000 rows
+    parts = encode.deal_parts(bounds, 2)
+    assert [o for _, _, o in parts] == [0, 1] * 5 + [0]  # 2M / (200k x 2) rounds, the last part here
+    assert parts[0][0] == 0 and parts[-1][1] == 200
+    assert all(a[1] == b[0] for a, b in zip(parts, parts[1:]))  # contiguous, every chunk once
+    rows = [bounds[b] - bounds[a] for a, b, _ in parts]
+    assert max(rows) - min(rows) <= 10_000  # about equal: a chunk at most
+    parts3 = encode.deal_parts(bounds, 3)
+    assert [o for _, _, o in parts3][:6] == [0, 1, 2, 0, 1, 2] and parts3[-1][2] == 0
+    assert encode.deal_parts(bounds[:4], 2) == [(0, 3, 0)]  # too few chunks to share
+    assert encode.deal_parts(bounds, 1) == [(0, 200, 0)]
+    assert [o for _, _, o in encode.deal_parts(bounds[:21], 2)] == [0, 1, 0]  # 200k rows: one round
 
 
 def test_a_part_whose_process_dies_half_way_is_cut_off_and_encoded_here(tmp_path, monkeypatch):
     """The writer copies a forked part's file while it grows: a process that dies after writing
-    some of its frames (copied already, or not yet) leaves no trace of them in the output."""
+    some of a part's frames (copied already, or not yet) leaves no trace of them in the output;
+    its earlier, whole part stays as it was copied."""
     import os
     import threading
 
     from aveas_format.converters.openlabel import encode
-    from aveas_format.converters.openlabel.write import openlabel_chunks
-    from aveas_format.safeio import atomic, write_chunks_atomic
+    from aveas_format.safeio import atomic
     from aveas_format.sample import highway_scene
 
     rec = highway_scene(n_vehicles=12, duration_s=20.0, seed=4)
     monkeypatch.setattr(encode, "PARTS_MIN_ROWS", 0)
-    one = write_chunks_atomic(tmp_path / "one.json", openlabel_chunks(rec, chunk_rows=300)).read_bytes()
+    monkeypatch.setattr(encode, "PART_ROWS", 1_000)  # (several parts each)
+    one = _parts_export(rec, tmp_path / "one.json")
     copying = threading.Event()  # (the writer has copied some of the part before it dies)
     real_copy = atomic._copy_range
     monkeypatch.setattr(atomic, "_copy_range", lambda *a: (real_copy(*a), copying.set()))
+    real = encode._encode_parts
 
-    def dies_half_way(frame_of_row, times, prepare, summary, chunk_rows, part, spill, conn):
+    def dies_half_way(frame_of_row, times, prepare, summary, chunk_rows, parts, conn):
+        real(frame_of_row, times, prepare, summary, chunk_rows, parts[:1], conn)  # (one whole part)
+        _, part, spill = parts[1]
         with open(spill, "wb") as f:
             for i, data in enumerate(encode.frame_chunks(frame_of_row, times, prepare,
                                                          chunk_rows=chunk_rows, part=part)):
@@ -338,11 +367,10 @@ def test_a_part_whose_process_dies_half_way_is_cut_off_and_encoded_here(tmp_path
         time.sleep(0.5)  # (time for the writer to copy what is there)
         os._exit(3)
 
-    monkeypatch.setattr(encode, "_encode_part", dies_half_way)
+    monkeypatch.setattr(encode, "_encode_parts", dies_half_way)
     out = tmp_path / "parts"
     out.mkdir()
-    got = write_chunks_atomic(out / "rec.json", openlabel_chunks(rec, chunk_rows=300, workers=2,
-                                                                  spill_dir=out)).read_bytes()
+    got = _parts_export(rec, out / "rec.json", workers=2, spill_dir=out)
     assert copying.is_set()
     assert got == one and [p.name for p in out.iterdir()] == ["rec.json"]
 

@@ -299,17 +299,36 @@ def chunk_bounds(fs: np.ndarray, chunk_rows: int = CHUNK_ROWS) -> list[int]:
 #: copy cost more than they save)
 PARTS_MIN_ROWS = 200_000
 
+#: rows of one part (about 230 MB of JSON): small enough that a part's file is copied into the
+#: output and removed before the kernel writes it back to the disk, large enough that the
+#: processes seldom wait for each other
+PART_ROWS = 200_000
+
+#: the rows of this process's parts against another process's (it also writes the output and
+#: copies the other parts in)
+MAIN_SHARE = 1.0
+
+#: a forked part handed on before this process settles the oldest one (the writer's queue holds
+#: more: the producer never waits on a full queue while the writer waits for it)
+MAX_PENDING = 2
+
 
 class FrameParts:
-    """The frames' chunks of :func:`frame_chunks` in ``workers`` parts of about equal rows: the
-    first encoded here and streamed (:meth:`frames`), each other one by a process forked when this
-    object is made (it inherits the recording; made before any thread of the writer starts, and
-    before ``prepare`` has run, so that its extremes start empty) into a file in ``spill_dir``,
-    handed on as a GrowingSegment once this process's part is done (the writer copies the file
-    as it grows), its participants' extremes merged into ``summary`` (``state()`` /
-    ``merge(state)``: the export's ``_Summary``). Where fork is not available, the rows are few,
-    or a process fails, the parts are encoded here (an error then raised as it would be in one
-    process). :meth:`close` stops what still runs and removes its files."""
+    """The frames' chunks of :func:`frame_chunks` in parts of about :data:`PART_ROWS` rows, dealt
+    round by round to this process and ``workers - 1`` processes forked when this object is made
+    (they inherit the recording; made before any thread of the writer starts, and before
+    ``prepare`` has run, so that their extremes start empty); the last part is this process's.
+
+    :meth:`frames` streams this process's parts and hands each forked part on as a
+    :class:`~aveas_format.safeio.atomic.GrowingSegment` of the file its process writes in
+    ``spill_dir`` (the writer copies it as it grows, while this process encodes its next part;
+    a part's file is removed once copied, so the files never add up to the output's size). Before
+    the first chunk of its next part this process *settles* the forked parts handed on: waits for
+    their processes' word that each is whole (or that the process died: the part is then cut off
+    the output and encoded here, and so are that process's later parts). Each word carries the
+    process's participants' extremes so far (``state()``), merged into ``summary`` at the end
+    (``merge(state)``: the export's ``_Summary``). Where fork is not available or the rows are few,
+    everything is encoded here. :meth:`close` stops what still runs and removes its files."""
 
     def __init__(self, frame_of_row: np.ndarray, times: np.ndarray, prepare, summary: Any,
                  chunk_rows: int, workers: int, spill_dir: Path) -> None:
@@ -318,74 +337,132 @@ class FrameParts:
 
         self.args = (frame_of_row, times, prepare)
         self.summary, self.chunk_rows = summary, chunk_rows
-        self.running: list = []
+        self.procs: dict[int, Any] = {}  # owner -> (process, its end of the pipe)
+        self.files: dict[int, Path] = {}  # part -> the file its process writes
+        self.states: dict[int, Any] = {}  # owner -> its last word's extremes
+        self.done: dict[int, int] = {}  # owner -> the parts it has reported whole
+        self.failed: set[int] = set()
         bounds = chunk_bounds(np.sort(frame_of_row), chunk_rows)
-        k = len(bounds) - 1
-        if (len(frame_of_row) < PARTS_MIN_ROWS or k < 2 * workers
+        self.parts = deal_parts(bounds, workers)
+        if (len(frame_of_row) < PARTS_MIN_ROWS or len(self.parts) < 2
                 or "fork" not in multiprocessing.get_all_start_methods()):
-            self.parts = [(0, k)]
+            self.parts = [(0, len(bounds) - 1, 0)]
             return
-        # the chunks where each part starts: about equal rows
-        cuts = [0, *np.searchsorted(bounds, [bounds[-1] * j / workers for j in range(1, workers)]).tolist(), k]
-        self.parts = [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
         ctx = multiprocessing.get_context("fork")
         try:
-            for part in self.parts[1:]:
-                fd, spill = tempfile.mkstemp(prefix=".openlabel-frames.", suffix=".tmp", dir=spill_dir)
-                os.close(fd)
+            for owner in range(1, workers):
+                mine = [j for j, (_, _, o) in enumerate(self.parts) if o == owner]
+                for j in mine:
+                    fd, name = tempfile.mkstemp(prefix=".openlabel-frames.", suffix=".tmp", dir=spill_dir)
+                    os.close(fd)
+                    self.files[j] = Path(name)
                 rd, wr = ctx.Pipe(duplex=False)
-                proc = ctx.Process(target=_encode_part, daemon=True,
-                                   args=(*self.args, summary, chunk_rows, part, spill, wr))
+                proc = ctx.Process(target=_encode_parts, daemon=True,
+                                   args=(*self.args, summary, chunk_rows,
+                                         [(j, self.parts[j][:2], str(self.files[j])) for j in mine], wr))
                 proc.start()
                 wr.close()
-                self.running.append((part, Path(spill), proc, rd))
+                self.procs[owner] = (proc, rd)
+                self.done[owner] = -1
         except BaseException:
             self.close()
             raise
 
+    def _here(self, j: int) -> Iterator[bytes]:
+        c0, c1, _ = self.parts[j]
+        return frame_chunks(*self.args, chunk_rows=self.chunk_rows, part=(c0, c1))
+
+    def _whole(self, owner: int, j: int) -> bool:
+        """Whether the process ``owner`` wrote its part ``j`` whole (waits for its word)."""
+        proc, rd = self.procs[owner]
+        while owner not in self.failed and self.done[owner] < j:
+            try:
+                self.done[owner], self.states[owner] = rd.recv()
+            except EOFError:  # (the process died)
+                proc.join()
+                self.failed.add(owner)
+        return self.done[owner] >= j
+
+    def _settle(self, pending: list) -> Iterator[bytes]:
+        """The forked parts handed on, settled in order: finished, or cut off and encoded here."""
+        while pending:
+            seg, j = pending[0]
+            ok = False
+            try:
+                ok = self._whole(self.parts[j][2], j)
+            finally:
+                seg.finish(ok)  # (the writer cuts off what it copied of a part not whole)
+                pending.pop(0)
+            if not ok:  # here, with the real error if there is one
+                yield from self._here(j)
+
     def frames(self) -> Iterator[Any]:
         from aveas_format.safeio.atomic import GrowingSegment
 
-        yield from frame_chunks(*self.args, chunk_rows=self.chunk_rows, part=self.parts[0])
-        while self.running:
-            part, spill, proc, rd = self.running[0]
-            seg, ok = GrowingSegment(spill), False
-            try:
-                yield seg  # (copied while the process still writes it)
-                try:
-                    state = rd.recv()
-                except EOFError:  # (the process died)
-                    state = None
-                proc.join()
-                ok = state is not None and proc.exitcode == 0
-            finally:
-                seg.finish(ok)  # (the writer cuts off what it copied of a failed part)
-            self.running.pop(0)
-            if ok:
-                self.summary.merge(state)
-            else:  # here, with the real error if there is one
-                yield from frame_chunks(*self.args, chunk_rows=self.chunk_rows, part=part)
+        pending: list = []  # (segment, part) handed on, not yet settled
+        try:
+            for j, (_, _, owner) in enumerate(self.parts):
+                if owner and owner not in self.failed:
+                    if len(pending) >= MAX_PENDING:
+                        yield from self._settle(pending[:1])
+                        pending.pop(0)
+                    pending.append((GrowingSegment(self.files.pop(j)), j))
+                    yield pending[-1][0]  # (copied while its process still writes it)
+                    continue
+                for chunk in self._here(j):
+                    yield from self._settle(pending)  # (before this part's first chunk)
+                    yield chunk
+            yield from self._settle(pending)
+        finally:
+            for seg, _ in pending:  # (stopped early: the writer must not wait for them)
+                seg.finish(False)
+        for owner, (proc, _) in self.procs.items():
+            proc.join()
+            if owner in self.states:
+                self.summary.merge(self.states[owner])
+        self.procs = {}
 
     def close(self) -> None:
-        for _, spill, proc, _ in self.running:
+        for proc, rd in self.procs.values():
             proc.kill()
             proc.join()
+            rd.close()
+        for spill in self.files.values():
             spill.unlink(missing_ok=True)
-        self.running = []
+        self.procs, self.files = {}, {}
 
 
-def _encode_part(frame_of_row, times, prepare, summary: Any, chunk_rows: int, part: tuple[int, int],
-                 spill: str, conn) -> None:
-    """A forked process of :class:`FrameParts`: the chunks ``part`` into the file ``spill``,
-    then its participants' extremes sent back (nothing sent: it failed)."""
+def deal_parts(bounds: list[int], workers: int) -> list[tuple[int, int, int]]:
+    """The parts ``(first chunk, end chunk, owner)`` of :class:`FrameParts` for the chunks'
+    row offsets ``bounds`` (:func:`chunk_bounds`): rounds of one part per process (owner 0:
+    this process, :data:`MAIN_SHARE` times the rows of another's part), then a last part of
+    this process's; about :data:`PART_ROWS` rows each. Empty parts are left out; one part
+    (owner 0) where the chunks are too few to share."""
+    k, rows = len(bounds) - 1, bounds[-1]
+    if workers < 2 or k < 2 * workers:
+        return [(0, k, 0)]
+    rounds = max(1, min(round(rows / (PART_ROWS * workers)), (k - 1) // workers))
+    owners = [*(j % workers for j in range(rounds * workers)), 0]
+    weights = np.array([MAIN_SHARE if o == 0 else 1.0 for o in owners])
+    at = np.cumsum(weights)[:-1] / weights.sum() * rows
+    cuts = [0, *np.searchsorted(bounds, at).tolist(), k]
+    return [(a, b, o) for a, b, o in zip(cuts[:-1], cuts[1:], owners) if b > a]
+
+
+def _encode_parts(frame_of_row, times, prepare, summary: Any, chunk_rows: int, parts: list,
+                  conn) -> None:
+    """A forked process of :class:`FrameParts`: each of its ``parts`` (index, chunks, file) into
+    its file, then its word sent — the index and the participants' extremes so far (nothing more
+    sent: it failed)."""
     import gc
 
     gc.disable()  # (as the export's own encoding: millions of acyclic small objects)
     try:
-        with open(spill, "wb") as f:
-            for data in frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows, part=part):
-                f.write(data)
-        conn.send(summary.state())
+        for j, part, spill in parts:
+            with open(spill, "wb") as f:
+                for data in frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows, part=part):
+                    f.write(data)
+            conn.send((j, summary.state()))
     finally:
         conn.close()
 
