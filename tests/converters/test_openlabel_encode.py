@@ -105,3 +105,14 @@ def test_layout_templates_keep_bits_and_optional_items():
                             (item, [b'"b%":', lay.floats(np.full((3, 2), 0.25))])], b"}", empty=b"")]
     got = lay.rows(segs).tolist()
     assert got == [b'[0.0,7]{"a":1.5,"b%":0.25,0.25}', b'[-0.0,7]{"a":null}', b'[0.0,7]{"a":2.0,"b%":0.25,0.25}']
+
+
+def test_layout_of_rows_with_no_varying_value_keeps_a_percent_sign():
+    """A chunk whose values are the same in every row (one row, say) is written as its text, not
+    as a template: a ``%`` in a name (an extension column's) stays one ``%`` (it came out doubled
+    before)."""
+    import numpy as np
+
+    lay = encode._Layout(1)
+    segs = [b'{"a%b":', lay.floats(np.array([1.5])), b',"c":', lay.ints(np.array([7])), b"}"]
+    assert lay.rows(segs).tolist() == [b'{"a%b":1.5,"c":7}']

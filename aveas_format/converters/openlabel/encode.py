@@ -208,8 +208,8 @@ class _Layout:
             tmpl = b"".join(p.replace(b"%", b"%%") if isinstance(p, bytes) else b"%s" for p in parts)
             whole = len(idx) == m  # one layout for all rows: in order, no gather
             cols = [p if whole else p[idx] for p in parts if not isinstance(p, bytes)]
-            if not cols:
-                out[idx] = [tmpl] * len(idx)
+            if not cols:  # (no value varies: the text itself, not a template)
+                out[idx] = [b"".join(p if isinstance(p, bytes) else b"" for p in parts)] * len(idx)
             else:
                 out[idx] = list(map(tmpl.__mod__, zip(*cols)))
         return out
