@@ -116,3 +116,145 @@ def test_layout_of_rows_with_no_varying_value_keeps_a_percent_sign():
     lay = encode._Layout(1)
     segs = [b'{"a%b":', lay.floats(np.array([1.5])), b',"c":', lay.ints(np.array([7])), b"}"]
     assert lay.rows(segs).tolist() == [b'{"a%b":1.5,"c":7}']
+
+
+# --- the compiled assembler of the rows (numba, the jit extra): the same bytes as the % path ----
+
+def _both_paths(rec, monkeypatch, **kw) -> tuple[bytes, bytes, int]:
+    """The document by the Python path and by the compiled one, and how often the compiled
+    assembler ran."""
+    from aveas_format.converters.openlabel import _jitrows
+
+    calls = []
+    real = _jitrows.assemble
+    monkeypatch.setattr(_jitrows, "assemble", lambda *a: calls.append(1) or real(*a))
+    monkeypatch.setattr(encode, "COMPILED_MIN_ROWS", 10**12)
+    py = b"".join(write.openlabel_chunks(rec, **kw))
+    monkeypatch.setattr(encode, "COMPILED_MIN_ROWS", 0)
+    compiled = b"".join(write.openlabel_chunks(rec, **kw))
+    return py, compiled, len(calls)
+
+
+@pytest.mark.parametrize("chunk_rows", [7, 300, None])
+@pytest.mark.parametrize("extension", [True, False])
+def test_compiled_rows_write_the_same_bytes(rich, demo, monkeypatch, chunk_rows, extension):
+    """The rich recording (lights, interior signals, impact attributes, uncertainty, z, float32
+    extension columns, a trailer) and the demo scene, in chunks of a few rows to whole frames."""
+    pytest.importorskip("numba", reason="numba is not installed (the jit extra)")
+    from aveas_format.converters.openlabel import _jitrows
+
+    for rec in (rich, demo):
+        py, compiled, calls = _both_paths(rec, monkeypatch, chunk_rows=chunk_rows, extension=extension)
+        assert calls > 0 and compiled == py
+    # (one argument type each: numba compiles once per type, ~2 s)
+    assert len(_jitrows.number_spans.signatures) == 1
+    monkeypatch.undo()
+    assert len(_jitrows.assemble.signatures) == 1
+
+
+def test_compiled_rows_with_extension_columns_of_every_type(monkeypatch):
+    """States columns the profile lacks, of each Arrow type the extension block writes: strings
+    (with quotes, commas, brackets, a percent sign, non-ASCII), booleans, integers beyond
+    2**53, float32, lists, nulls; numbers NaN, infinite, -0.0, subnormal, huge."""
+    pytest.importorskip("numba", reason="numba is not installed (the jit extra)")
+    import numpy as np
+    import pyarrow as pa
+
+    from aveas_format.io.writer import prepare_table
+    from aveas_format.schema.tables import TABLES
+
+    rec = highway_scene(n_vehicles=5, duration_s=3.0, seed=2)
+    s = rec.states
+    n = s.num_rows
+    rng = np.random.default_rng(0)
+    odd = np.array([np.nan, np.inf, -np.inf, -0.0, 5e-324, 1.7976931348623157e308, 0.1, -3.0])
+    s = s.append_column("note", pa.array([None if i % 5 == 0 else f'a"b,{i}]}}%s ü' for i in range(n)]))
+    s = s.append_column("flag", pa.array([None if i % 4 == 0 else bool(i % 3) for i in range(n)]))
+    s = s.append_column("count", pa.array([2**62 + i if i % 6 else None for i in range(n)], pa.int64()))
+    s = s.append_column("gain", pa.array(rng.normal(size=n).astype(np.float32)))
+    s = s.append_column("odd", pa.array(odd[np.arange(n) % len(odd)]))
+    s = s.append_column("tags", pa.array([[i, i + 1] if i % 2 else [] for i in range(n)], pa.list_(pa.int32())))
+    rec.replace_tables({"states": prepare_table(s, TABLES["states"])})
+    py, compiled, calls = _both_paths(rec, monkeypatch, chunk_rows=50)
+    assert calls > 0 and compiled == py
+    frames = json.loads(compiled)["openlabel"]["frames"]
+    ext = [o["object_data"]["cuboid"][0].get("aveas_format", {}) for f in frames.values()
+           for o in f["objects"].values()]
+    assert any("note" in e and "," in e["note"] for e in ext) and any(e.get("count", 0) > 2**62 for e in ext)
+
+
+def _layout_case(draw_values, m: int, comma) -> tuple:
+    """A layout of ``m`` rows from drawn values (see the hypothesis test)."""
+    import numpy as np
+
+    lay = encode._Layout(m)
+    segs: list = [b"{"]
+    items = []
+    for kind, data, mask in draw_values:
+        if kind == "f":
+            tok = lay.floats(np.array(data, dtype=np.float64).reshape(m, -1) if data and isinstance(data[0], list)
+                             else np.array(data, dtype=np.float64))
+        elif kind == "i":
+            tok = lay.ints(np.array(data, dtype=np.int64))
+        elif kind == "t":
+            tok = lay.text([bytes(x) for x in data])
+        elif kind == "c":
+            tok = lay.coded(np.array([b"false", b"true", b'"x%s,y"'], dtype=object), np.array(data) % 3)
+        else:
+            tok = lay.floats(data)  # (a scalar: the same in every row)
+        items.append((lay.mask(None if mask is None else np.array(mask, dtype=bool)), [b'"k%":', tok]))
+    segs.append(lay.join(b"[", items, b"]", empty=b"E"))
+    segs.append(lay.join(b",(", items[::-1], b")"))
+    segs.append(b"}")
+    return lay, segs
+
+
+def test_compiled_layout_equals_the_python_layout():
+    """Any values, masks and row counts: the compiled assembler's buffer and offsets are the %
+    path's, byte for byte (numbers of every kind, vectors, fragments with commas and brackets,
+    items present in some rows, lists empty in some)."""
+    pytest.importorskip("numba", reason="numba is not installed (the jit extra)")
+    import numpy as np
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    floats = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([-0.0, 0.0, 5e-324, 1e22]))
+    ints = st.integers(-(2**63), 2**63 - 1)
+
+    @st.composite
+    def cases(draw):
+        m = draw(st.integers(0, 12))
+        values = []
+        for _ in range(draw(st.integers(0, 6))):
+            kind = draw(st.sampled_from("fivtcs"))
+            mask = draw(st.one_of(st.none(), st.lists(st.booleans(), min_size=m, max_size=m)))
+            if kind == "f":
+                data = draw(st.lists(floats, min_size=m, max_size=m))
+            elif kind == "v":
+                w = draw(st.integers(1, 4))
+                data = [draw(st.lists(floats, min_size=w, max_size=w)) for _ in range(m)]
+                kind = "f"
+            elif kind == "i":
+                small = draw(st.booleans())
+                data = draw(st.lists(st.integers(-5, 70000) if small else ints, min_size=m, max_size=m))
+            elif kind == "t":
+                data = draw(st.lists(st.binary(max_size=6), min_size=m, max_size=m))
+            elif kind == "c":
+                data = draw(st.lists(st.integers(0, 2), min_size=m, max_size=m))
+            else:
+                data = draw(floats)
+            values.append((kind, data, mask))
+        comma = draw(st.lists(st.booleans(), min_size=m, max_size=m))
+        return m, values, np.array(comma, dtype=bool)
+
+    @settings(max_examples=300, deadline=None)
+    @given(cases())
+    def check(case):
+        m, values, comma = case
+        lay, segs = _layout_case(values, m, comma)
+        want, want_off = lay.packed(segs, comma, False)
+        lay, segs = _layout_case(values, m, comma)
+        got, got_off = lay.packed(segs, comma, True)
+        assert bytes(got) == want and got_off.tolist() == want_off.tolist()
+
+    check()

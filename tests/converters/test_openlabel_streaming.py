@@ -287,13 +287,14 @@ def _parts_export(rec, path, **kw):
     return write_chunks_atomic(path, openlabel_chunks(rec, chunk_rows=300, **kw)).read_bytes()
 
 
-@pytest.mark.parametrize("workers", [2, 3])
-@pytest.mark.parametrize("part_rows", [200_000, 1_000])
-def test_frames_encoded_in_forked_parts_give_the_same_file(tmp_path, monkeypatch, workers, part_rows):
+@pytest.mark.parametrize("workers,part_rows,compiled", [(2, 200_000, False), (3, 200_000, False),
+                                                        (2, 1_000, False), (3, 1_000, True)])
+def test_frames_encoded_in_forked_parts_give_the_same_file(tmp_path, monkeypatch, workers, part_rows, compiled):
     """The frames of a large export in parts (one round, or many: parts of ~1,000 rows dealt in
     turn), those of the forked processes encoded into files next to the output and copied in by
     the kernel: the same bytes as in one process, no part file left. A process that fails at
-    once, or after its first part, has its parts (the rest) encoded here instead."""
+    once, or after its first part, has its parts (the rest) encoded here instead. ``compiled``:
+    the parts' rows put together by the compiled assembler (where numba is installed)."""
     import os
 
     from aveas_format.converters.openlabel import encode
@@ -303,6 +304,9 @@ def test_frames_encoded_in_forked_parts_give_the_same_file(tmp_path, monkeypatch
     monkeypatch.setattr(encode, "PARTS_MIN_ROWS", 0)
     monkeypatch.setattr(encode, "PART_ROWS", part_rows)
     one = _parts_export(rec, tmp_path / "one.json")
+    if compiled:
+        pytest.importorskip("numba", reason="numba is not installed (the jit extra)")
+        monkeypatch.setattr(encode, "COMPILED_MIN_ROWS", 0)
     out = tmp_path / "parts"
     out.mkdir()
     assert _parts_export(rec, out / "rec.json", workers=workers, spill_dir=out) == one

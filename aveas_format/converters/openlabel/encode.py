@@ -4,7 +4,10 @@ No dict per state: each part of an object's data (the box, the velocity, the lig
 facts, the extension's values...) is one column of JSON fragments, built for a chunk of rows at
 once — numbers are formatted by one ``orjson.dumps`` of a numpy array (split per row), strings
 through a cache of their distinct values, optional parts are empty fragments — and the fragments
-are concatenated element-wise (numpy object arrays). Only what is irregular by nature (interior
+are put together row by row: one ``template % values`` per row, or, where numba is installed
+(the ``jit`` extra) and the export is large (:data:`COMPILED_MIN_ROWS`), copied from spans of
+one buffer by a compiled loop (:mod:`._jitrows`: no Python object per value; the same bytes, 1.65x
+less CPU per row at 2M states). Only what is irregular by nature (interior
 signals, ``impact`` attributes, extension columns of nested types) goes through a Python value per
 row, and only in the rows that have it.
 
@@ -81,46 +84,40 @@ _TRUE_FALSE = np.array([b"false", b"true"], dtype=object)
 
 
 class _Layout:
-    """The JSON text of ``m`` rows of one layout, built with one ``%`` format per row.
+    """The JSON text of ``m`` rows of one layout.
 
     A row is a sequence of segments: constant bytes, *values* (a column of JSON fragments, one
-    per row: :meth:`floats`, :meth:`ints`, :meth:`text`), *joined lists* (:meth:`join`: items
-    separated by commas, each item present where its mask is true). Rows with the same items
-    present share a template (constants and columns constant over the rows inlined, one ``%s``
-    per varying value), so the text of a row is one ``template % values``: no Python step per
-    value. Numbers are formatted by one call per kind (float, int) over all of the rows'
-    numeric columns."""
+    per row: :meth:`floats`, :meth:`ints`, :meth:`text`, :meth:`booleans`), *joined lists*
+    (:meth:`join`: items separated by commas, each item present where its mask is true). Rows
+    with the same items present share a template (constants and columns constant over the rows
+    inlined). Numbers are formatted by one call per kind (float, int) over all of the rows'
+    numeric columns. Two paths write the same bytes: :meth:`rows`, one ``template % values``
+    per row (no Python step per value), and :meth:`packed` with ``compiled``, the rows copied
+    from spans of one buffer by :func:`._jitrows.assemble` (no Python object per value)."""
 
     def __init__(self, m: int) -> None:
         self.m = m
-        self._floats: list[np.ndarray] = []
-        self._ints: list[np.ndarray] = []
-        #: value token -> ("f"|"i", column index) before formatting; bytes or an object array after
+        #: value token -> bytes (the same in every row) or a column: ("n", float64 or int64 array,
+        #: 1-D, or 2-D: a vector's components), ("c", table of fragments, each row's index into
+        #: it) or ("t", an object array of fragments)
         self._vals: list[Any] = []
         self._masks: list[np.ndarray] = []
         self._mask_ids: dict[bytes, int] = {}
 
     # ---- values ---------------------------------------------------------------------------
     def _number(self, a: Any, ints: bool) -> int:
+        dtype = np.int64 if ints else np.float64
         if np.isscalar(a):
-            self._vals.append(numbers(np.array([a], dtype=np.int64 if ints else np.float64))[0])
+            self._vals.append(numbers(np.array([a], dtype=dtype))[0])
             return len(self._vals) - 1
-        a = np.asarray(a, dtype=np.int64 if ints else np.float64)
-        if a.ndim == 2:  # a vector's components: one fragment "a,b,c" per row
-            if len(a) and (a.view(np.int64) == a[:1].view(np.int64)).all():
-                self._vals.append(numbers(a[:1])[0])
-            else:
-                self._vals.append(np.array(numbers(a), dtype=object))
-            return len(self._vals) - 1
+        a = np.asarray(a, dtype=dtype)
         first = a[:1]
         # the same bits in every row (-0.0 is not 0.0: the round trip keeps the sign)
         if len(a) and ((a.view(np.int64) == first.view(np.int64)).all()
-                       or (not ints and np.isnan(a).all())):
+                       or (a.ndim == 1 and not ints and np.isnan(a).all())):
             self._vals.append(numbers(first)[0])  # constant over the rows: in the template
         else:
-            store = self._ints if ints else self._floats
-            store.append(a)
-            self._vals.append(("i" if ints else "f", len(store) - 1))
+            self._vals.append(("n", a))
         return len(self._vals) - 1
 
     def floats(self, a: Any) -> int:
@@ -133,11 +130,16 @@ class _Layout:
 
     def text(self, values: Any) -> int:
         """A column of ready JSON fragments (bytes, one per row), or one bytes for every row."""
-        self._vals.append(values if isinstance(values, bytes) else np.asarray(values, dtype=object))
+        self._vals.append(values if isinstance(values, bytes) else ("t", np.asarray(values, dtype=object)))
+        return len(self._vals) - 1
+
+    def coded(self, table: np.ndarray, codes: np.ndarray) -> int:
+        """A column of fragments given as each row's index into ``table`` (an object array of bytes)."""
+        self._vals.append(("c", table, np.asarray(codes, dtype=np.int64)))
         return len(self._vals) - 1
 
     def booleans(self, a: np.ndarray) -> int:
-        return self.text(_TRUE_FALSE[np.asarray(a, dtype=bool).astype(np.int8)])
+        return self.coded(_TRUE_FALSE, np.asarray(a, dtype=bool))
 
     # ---- structure ------------------------------------------------------------------------
     def mask(self, mask: np.ndarray | None) -> Any:
@@ -161,42 +163,53 @@ class _Layout:
         return ("join", head, [(p, segs) for p, segs in items if p is not False], tail, empty)
 
     # ---- text ---------------------------------------------------------------------------------
-    def _format_numbers(self) -> None:
-        for kind, store in (("f", self._floats), ("i", self._ints)):
-            if not store:
+    def _groups(self) -> tuple[list[list[bool]], np.ndarray]:
+        """The rows' groups: which masks each group's rows have, and each row's group."""
+        m = self.m
+        if not self._masks:
+            return [[]], np.zeros(m, dtype=np.int64)
+        bits = np.column_stack(self._masks)
+        if bits.shape[1] < 63:
+            code = bits.astype(np.int64) @ (np.int64(1) << np.arange(bits.shape[1], dtype=np.int64))
+            shapes, inverse = np.unique(code, return_inverse=True)
+            present = [[bool(c >> b & 1) for b in range(bits.shape[1])] for c in shapes.tolist()]
+        else:
+            shapes, inverse = np.unique(bits, axis=0, return_inverse=True)
+            present = shapes.tolist()
+        return present, inverse.reshape(-1).astype(np.int64)
+
+    def _format_python(self) -> list[Any]:
+        """Each value as bytes (constant) or an object array of the rows' fragments."""
+        vals = list(self._vals)
+        for kind, want in (("f", "f"), ("i", "iu")):
+            cols = [k for k, v in enumerate(vals)
+                    if isinstance(v, tuple) and v[0] == "n" and v[1].ndim == 1 and v[1].dtype.kind in want]
+            if not cols:
                 continue
-            mat = np.column_stack(store)  # rows x columns, one formatting call
+            mat = np.column_stack([vals[k][1] for k in cols])  # rows x columns, one formatting call
             lo, hi = (int(mat.min()), int(mat.max())) if kind == "i" and mat.size else (0, 1 << 62)
             if hi - lo < 65536:  # ids, counts, frames of a chunk: each distinct value's text once
                 table = np.array(numbers(np.arange(lo, hi + 1, dtype=np.int64)), dtype=object)
-                vals = table[mat - lo]
+                text = table[mat - lo]
             else:
-                vals = np.array(numbers(mat.reshape(-1)), dtype=object).reshape(mat.shape)
-            for k, v in enumerate(self._vals):
-                if isinstance(v, tuple) and v[0] == kind:
-                    self._vals[k] = vals[:, v[1]]
-            store.clear()
+                text = np.array(numbers(mat.reshape(-1)), dtype=object).reshape(mat.shape)
+            for j, k in enumerate(cols):
+                vals[k] = text[:, j]
+        for k, v in enumerate(vals):
+            if isinstance(v, tuple):
+                vals[k] = (np.array(numbers(v[1]), dtype=object) if v[0] == "n"  # (a vector's rows)
+                           else v[1][v[2]] if v[0] == "c" else v[1])
+        return vals
 
     def rows(self, segments: list) -> np.ndarray:
         """The text of each row (an object array of bytes) of the segments (bytes, value tokens
         (ints), :meth:`join` tuples)."""
         m = self.m
-        self._format_numbers()
+        vals = self._format_python()
         out = np.empty(m, dtype=object)
         if m == 0:
             return out
-        if self._masks:
-            bits = np.column_stack(self._masks)
-            if bits.shape[1] < 63:
-                code = bits.astype(np.int64) @ (np.int64(1) << np.arange(bits.shape[1], dtype=np.int64))
-                shapes, inverse = np.unique(code, return_inverse=True)
-                present = [[bool(c >> b & 1) for b in range(bits.shape[1])] for c in shapes.tolist()]
-            else:
-                shapes, inverse = np.unique(bits, axis=0, return_inverse=True)
-                present = shapes.tolist()
-            inverse = inverse.reshape(-1)
-        else:
-            present, inverse = [[]], np.zeros(m, dtype=np.int64)
+        present, inverse = self._groups()
         order = np.argsort(inverse, kind="stable")
         cuts = np.r_[0, np.cumsum(np.bincount(inverse, minlength=len(present)))]
         for g, on in enumerate(present):
@@ -205,22 +218,104 @@ class _Layout:
                 continue
             parts: list = []
             self._template(segments, on, parts)
+            parts = [vals[p] if isinstance(p, int) else p for p in parts]
             tmpl = b"".join(p.replace(b"%", b"%%") if isinstance(p, bytes) else b"%s" for p in parts)
             whole = len(idx) == m  # one layout for all rows: in order, no gather
             cols = [p if whole else p[idx] for p in parts if not isinstance(p, bytes)]
             if not cols:  # (no value varies: the text itself, not a template)
-                out[idx] = [b"".join(p if isinstance(p, bytes) else b"" for p in parts)] * len(idx)
+                out[idx] = [b"".join(parts)] * len(idx)
             else:
                 out[idx] = list(map(tmpl.__mod__, zip(*cols)))
         return out
 
+    def packed(self, segments: list, comma: np.ndarray, compiled: bool) -> tuple[Any, np.ndarray]:
+        """The rows' text in one bytes-like buffer and the offset of each row (``m + 1``), a comma
+        before each row where ``comma``: by :func:`._jitrows.assemble` where ``compiled``, else
+        from :meth:`rows` (the same bytes)."""
+        m = self.m
+        if not compiled:
+            text = self.rows(segments)
+            pieces = np.empty(2 * m, dtype=object)
+            pieces[0::2] = np.where(comma, b",", b"")
+            pieces[1::2] = text
+            lens = np.fromiter(map(len, text), np.int64, m) + comma
+            return b"".join(pieces.tolist()), np.r_[0, np.cumsum(lens)]
+        from aveas_format.converters.openlabel._jitrows import assemble
+
+        g, const, start, end, col_of = self._spans()
+        present, group = self._groups()
+        prog: list[int] = []
+        prog_off = [0]
+        for on in present:
+            parts: list = []
+            self._template(segments, on, parts)
+            text = b""
+            for p in parts:  # (neighbouring constants as one)
+                if isinstance(p, int) and p in col_of:
+                    if text:
+                        prog.append(-1 - const.setdefault(text, len(const)))
+                        text = b""
+                    prog.append(col_of[p])
+                else:
+                    text += p if isinstance(p, bytes) else self._vals[p]
+            if text:
+                prog.append(-1 - const.setdefault(text, len(const)))
+            prog_off.append(len(prog))
+        cbytes = list(const)  # (insertion order: the constants' indices)
+        clen = np.fromiter(map(len, cbytes), np.int64, len(cbytes))
+        cstart = len(g) + np.cumsum(clen) - clen
+        buf = np.frombuffer(g + b"".join(cbytes), np.uint8)
+        out, off = assemble(buf, cstart, cstart + clen, np.array(prog, np.int64), np.array(prog_off, np.int64),
+                            group, start, end, np.asarray(comma, dtype=np.bool_))
+        return out, off
+
+    def _spans(self) -> tuple[bytes, dict[bytes, int], np.ndarray, np.ndarray, dict[int, int]]:
+        """The values that vary over the rows as spans of one buffer: ``(buffer, {}, start,
+        end, column of each such token)`` (``start``/``end``: rows x columns, into the buffer;
+        the dict is for the constants, filled by the caller)."""
+        from aveas_format.converters.openlabel._jitrows import number_spans
+
+        m = self.m
+        cols = [k for k, v in enumerate(self._vals) if isinstance(v, tuple)]
+        col_of = {k: j for j, k in enumerate(cols)}
+        start = np.empty((m, len(cols)), np.int64)
+        end = np.empty((m, len(cols)), np.int64)
+        pieces: list[bytes] = []
+        at = 0
+        for kind, want in (("f", "f"), ("i", "iu")):  # every number of a kind in one call
+            ks = [k for k in cols if self._vals[k][0] == "n" and self._vals[k][1].dtype.kind in want]
+            if not ks:
+                continue
+            arrays = [self._vals[k][1] for k in ks]
+            b = _dump_array(np.concatenate([a.reshape(-1) for a in arrays]))
+            number_spans(np.frombuffer(b, np.uint8), at,
+                         np.array([1 if a.ndim == 1 else a.shape[1] for a in arrays], np.int64),
+                         np.array([col_of[k] for k in ks], np.int64), start, end)
+            pieces.append(b)
+            at += len(b)
+        for k in cols:
+            v = self._vals[k]
+            if v[0] == "n":
+                continue
+            frags = v[1].tolist()
+            lens = np.fromiter(map(len, frags), np.int64, len(frags))
+            ends = at + np.cumsum(lens)
+            if v[0] == "c":  # (the table once, each row's span by its index)
+                start[:, col_of[k]], end[:, col_of[k]] = (ends - lens)[v[2]], ends[v[2]]
+            else:
+                start[:, col_of[k]], end[:, col_of[k]] = ends - lens, ends
+            pieces.append(b"".join(frags))
+            at += int(lens.sum())
+        return b"".join(pieces), {}, start, end, col_of
+
     def _template(self, segments: list, on: list[bool], parts: list) -> None:
+        """The segments of a group of rows (``on``: which masks they have) as bytes and value
+        tokens (ints), the joined lists resolved."""
         for seg in segments:
             if isinstance(seg, bytes):
                 parts.append(seg)
             elif isinstance(seg, (int, np.integer)):
-                v = self._vals[int(seg)]
-                parts.append(v)
+                parts.append(int(seg))
             else:
                 _, head, items, tail, empty = seg
                 chosen = [segs for p, segs in items if p is True or on[p]]
@@ -263,24 +358,50 @@ def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
     fs = frame_of_row[order]
     ts = numbers(times)
     bounds = chunk_bounds(fs, chunk_rows)
+    compiled = compiled_rows(len(order))
     c0, c1 = part if part is not None else (0, len(bounds) - 1)
     for c in range(c0, c1):
         start, stop = bounds[c], bounds[c + 1]
         rows = order[start:stop]
-        objs = _objects_text(prepare(rows), np.arange(len(rows)))
         f = fs[start:stop]
         m = len(f)
         lo = np.flatnonzero(np.r_[True, f[1:] != f[:-1]])  # the first row of each frame
-        # one list of pieces joined once: before each row its frame's head (first row) or a
-        # comma, after the last row of a frame "}}"
-        pieces = np.full(2 * m + len(lo), b",", dtype=object)
-        at = np.arange(m) * 2 + np.searchsorted(lo, np.arange(m), side="right") - 1
-        pieces[at + 1] = objs
-        pieces[at[lo]] = [b'%s"%d":{"frame_properties":{"timestamp":%s},"objects":{'
-                          % (b"" if c == 0 and j == 0 else b",", k, ts[k])
-                          for j, k in enumerate(f[lo].tolist())]
-        pieces[np.r_[at[lo[1:]] - 1, len(pieces) - 1]] = b"}}"
-        yield b"".join(pieces.tolist())
+        comma = np.ones(m, dtype=np.bool_)  # (before each row but a frame's first)
+        comma[lo] = False
+        text, off = _objects_packed(prepare(rows), np.arange(m), comma, compiled)
+        text = memoryview(text)
+        at = off[np.r_[lo, m]].tolist()
+        pieces = []
+        for j, k in enumerate(f[lo].tolist()):  # each frame: its head, its objects, "}}"
+            pieces += (b'%s"%d":{"frame_properties":{"timestamp":%s},"objects":{'
+                       % (b"" if c == 0 and j == 0 else b",", k, ts[k]), text[at[j]:at[j + 1]], b"}}")
+        yield b"".join(pieces)
+
+
+#: rows of an export from which its objects' text is put together by the compiled assembler
+#: (where numba is installed; below, loading numba costs more than it saves)
+COMPILED_MIN_ROWS = 200_000
+
+
+def compiled_rows(rows: int) -> bool:
+    """Whether the objects of an export of ``rows`` state rows are put together by
+    :func:`._jitrows.assemble` (numba installed and picked, :func:`~aveas_format.numeric.kernel_backend`;
+    ``rows`` >= :data:`COMPILED_MIN_ROWS`); it is compiled or loaded here (a forked encoder
+    inherits it; ~0.7 s once in a process: not overlapped with the export's pass over the
+    states in a thread, which it slows by more, both holding the GIL)."""
+    from aveas_format.numeric import kernel_backend
+
+    if rows < COMPILED_MIN_ROWS:
+        return False
+    try:
+        if kernel_backend() != "numba":
+            return False
+    except (ValueError, ImportError):  # (a kernel asked for that is not there: the Python path)
+        return False
+    from aveas_format.converters.openlabel import _jitrows
+
+    _jitrows.warm()
+    return True
 
 
 def chunk_bounds(fs: np.ndarray, chunk_rows: int = CHUNK_ROWS) -> list[int]:
@@ -348,6 +469,7 @@ class FrameParts:
                 or "fork" not in multiprocessing.get_all_start_methods()):
             self.parts = [(0, len(bounds) - 1, 0)]
             return
+        compiled_rows(len(frame_of_row))  # (compiled or loaded once, before the encoders fork)
         ctx = multiprocessing.get_context("fork")
         try:
             for owner in range(1, workers):
@@ -467,8 +589,10 @@ def _encode_parts(frame_of_row, times, prepare, summary: Any, chunk_rows: int, p
         conn.close()
 
 
-def _objects_text(r: dict[str, Any], idx: np.ndarray) -> np.ndarray:
-    """``"uid":{"object_data":{...}}`` for the rows ``idx`` (an object array of bytes)."""
+def _objects_packed(r: dict[str, Any], idx: np.ndarray, comma: np.ndarray, compiled: bool
+                    ) -> tuple[Any, np.ndarray]:
+    """``"uid":{"object_data":{...}}`` for the rows ``idx``, a comma before each where ``comma``:
+    one bytes-like buffer and each row's offset in it (:meth:`_Layout.packed`)."""
     m = len(idx)
     lay = _Layout(m)
     pid = r["pid"][idx]
@@ -487,7 +611,7 @@ def _objects_text(r: dict[str, Any], idx: np.ndarray) -> np.ndarray:
     if on.any():
         p_on = lay.mask(on)
         words = np.array([*texts(r["road_words"]), b""], dtype=object)
-        text.append((p_on, _named("used_road_link", [lay.text(words[r["road_code"][idx]])])))
+        text.append((p_on, _named("used_road_link", [lay.coded(words, r["road_code"][idx])])))
         if r["lane_id"] is not None:
             lid = r["lane_id"][idx]
             ok = on & np.isfinite(lid)
@@ -516,7 +640,7 @@ def _objects_text(r: dict[str, Any], idx: np.ndarray) -> np.ndarray:
                 *_vector(lay, r["box"], idx), b"]", *_extension(r, idx, lay), b"}],",
                 lay.join(b'"vec":[', vec, b"]"), b",", lay.join(b'"boolean":[', boolean, b"]"), b",",
                 lay.join(b'"num":[', num, b"]"), b",", lay.join(b'"text":[', text, b"]"), b"}}"]
-    return lay.rows(segments)
+    return lay.packed(segments, comma, compiled)
 
 
 def _irregular(r: dict[str, Any], idx: np.ndarray, pid: np.ndarray, lay: _Layout, vec: list,
