@@ -11,6 +11,7 @@ import importlib.util
 import math
 import os
 from numbers import Real
+from typing import Any
 
 import numpy as np
 
@@ -52,8 +53,8 @@ def same_participant(pid: np.ndarray) -> np.ndarray:
 
 
 def central_differences(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray,
-                        x_std: np.ndarray | None = None, y_std: np.ndarray | None = None
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                        x_std: np.ndarray | None = None, y_std: np.ndarray | None = None, *,
+                        std: bool = True) -> tuple[np.ndarray, np.ndarray, Any, Any]:
     """Time derivatives of (x, y) within each participant and their 1-sigma, vectorised.
 
     Inner samples use the second-order scheme on uneven spacing (numpy.gradient's): with the
@@ -63,17 +64,16 @@ def central_differences(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.nda
     ``(x[i+1]-x[i-1]) / (t[i+1]-t[i-1])`` are not); on even sampling all three agree. Track ends
     (and samples next to a repeated time) take the one-sided difference; a participant with one
     sample gets 0 with std NaN. The std propagates independent errors of ``x_std``/``y_std``
-    (absent: 0) through the scheme's weights. Rows must be sorted by (participant, time).
+    (absent: 0) through the scheme's weights (``std=False``: not computed, None; the
+    derivatives alone in ~60 % of the time). Rows must be sorted by (participant, time).
     """
     t = np.asarray(t, np.float64)
     x = np.asarray(x, np.float64)
     y = np.asarray(y, np.float64)
     n = len(t)
-    sx = np.zeros(n) if x_std is None else np.nan_to_num(np.asarray(x_std, np.float64))
-    sy = np.zeros(n) if y_std is None else np.nan_to_num(np.asarray(y_std, np.float64))
     if n == 0:
         z = np.zeros(0)
-        return z, z, z, z
+        return (z, z, z, z) if std else (z, z, None, None)
     idx = np.arange(n)
     step = np.diff(t)
     prev = np.r_[False, same_participant(pid) & (step > 0)]  # row i has a usable predecessor
@@ -89,6 +89,10 @@ def central_differences(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.nda
     ok = prev | nxt
     vx = w_hi * x[hi] + w_mid * x + w_lo * x[lo]
     vy = w_hi * y[hi] + w_mid * y + w_lo * y[lo]
+    if not std:
+        return vx, vy, None, None
+    sx = np.zeros(n) if x_std is None else np.nan_to_num(np.asarray(x_std, np.float64))
+    sy = np.zeros(n) if y_std is None else np.nan_to_num(np.asarray(y_std, np.float64))
     vx_std = np.where(ok, np.sqrt((w_hi * sx[hi]) ** 2 + (w_mid * sx) ** 2 + (w_lo * sx[lo]) ** 2),
                       np.nan)
     vy_std = np.where(ok, np.sqrt((w_hi * sy[hi]) ** 2 + (w_mid * sy) ** 2 + (w_lo * sy[lo]) ** 2),

@@ -401,7 +401,7 @@ def _lane_motion(net, pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarr
     else:
         from aveas_format.numeric import central_differences
 
-        v_lat = central_differences(pid, t, lat, np.zeros(n))[0]
+        v_lat = central_differences(pid, t, lat, np.zeros(n), std=False)[0]
         v_lat = np.where(has_lat, speed_lat, np.nan_to_num(v_lat))
         source = "from the positions' motion across the lane"
     out_heading = heading.copy()

@@ -101,7 +101,7 @@ def velocity_from_positions(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np
     """Velocity from positions within each participant (:func:`aveas_format.numeric.central_differences`:
     second order on uneven sampling, one-sided at track ends). A participant with one sample gets
     velocity 0. Rows must be sorted by (participant, time)."""
-    vx, vy, _, _ = central_differences(pid, t, x, y)
+    vx, vy, _, _ = central_differences(pid, t, x, y, std=False)
     return np.nan_to_num(vx), np.nan_to_num(vy)
 
 

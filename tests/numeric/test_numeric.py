@@ -63,6 +63,19 @@ def test_equals_numpy_gradient_per_participant(tracks, seed):
             np.testing.assert_allclose(vx[m], np.gradient(x[m], t[m]), rtol=1e-9, atol=1e-9)
 
 
+@settings(max_examples=50)
+@given(tracks=uneven_tracks(), seed=st.integers(0, 2**31))
+def test_without_std_the_same_derivatives(tracks, seed):
+    """``std=False`` (the export's accelerations): the same derivatives, bit for bit, no std."""
+    pid, t = tracks
+    rng = np.random.default_rng(seed)
+    x, y, sx = rng.normal(size=(3, len(t)))
+    vx, vy, _, _ = central_differences(pid, t, x, y, abs(sx), abs(sx))
+    wx, wy, a, b = central_differences(pid, t, x, y, abs(sx), abs(sx), std=False)
+    assert a is None and b is None
+    assert np.array_equal(vx, wx, equal_nan=True) and np.array_equal(vy, wy, equal_nan=True)
+
+
 def test_std_propagates_independent_errors():
     """Monte Carlo over position noise agrees with the analytic std on uneven sampling."""
     rng = np.random.default_rng(3)
