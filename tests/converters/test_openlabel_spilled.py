@@ -59,9 +59,14 @@ def _kinematics(rec) -> pa.Table:
                      "ax": rng.normal(size=n), "ay": rng.normal(size=n)})
 
 
-@pytest.mark.parametrize("kind", ["estimated", "states", "kinematics"])
-@pytest.mark.parametrize("workers", [1, 2])
-def test_spilled_export_gives_the_loaded_exports_bytes(tmp_path, monkeypatch, small_spill, kind, workers):
+@pytest.mark.parametrize("kind,workers,plain", [(k, w, True) for k in ("estimated", "states", "kinematics")
+                                                for w in (1, 2)] + [("states", 2, False)])
+def test_spilled_export_gives_the_loaded_exports_bytes(tmp_path, monkeypatch, small_spill, kind, workers, plain):
+    """``plain``: the buckets' files uncompressed (few states), else lz4."""
+    from aveas_format.converters.openlabel import spill
+
+    if not plain:
+        monkeypatch.setattr(spill, "PLAIN_BUCKETS_BYTES", 0)
     rec = {"estimated": lambda: highway_scene(n_vehicles=10, duration_s=12.0, seed=4),
            "states": lambda: rich_recording(n_vehicles=6, duration_s=8.0),
            "kinematics": lambda: highway_scene(n_vehicles=10, duration_s=12.0, seed=4),
@@ -78,6 +83,7 @@ def test_spilled_export_gives_the_loaded_exports_bytes(tmp_path, monkeypatch, sm
     got = _export(lazy, tmp_path / "spilled", workers=workers)
     assert small_spill and small_spill[0] > 3  # (several buckets)
     assert got == want
+    assert spill.bucket_options(1) is (spill.PLAIN if plain else spill.LZ4)
 
 
 def test_a_few_states_are_read_whole(tmp_path, monkeypatch):

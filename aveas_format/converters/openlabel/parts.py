@@ -10,7 +10,7 @@ states participant-major. Imported into memory, a one-hour file holds every box'
 2. after the frames (their keys, times and objects known): a pass over the spill (two worker
    processes, half of the spill each, where there are cores) writes each kept box to the file of
    its *bucket* — consecutive participants, about :data:`BUCKET_BYTES` of boxes each;
-   uncompressed up to :data:`PLAIN_BUCKETS_BYTES` of boxes — dropping what the import drops per
+   uncompressed up to :data:`.spill.PLAIN_BUCKETS_BYTES` of boxes — dropping what the import drops per
    box (frames whose key repeats, objects that are no road users, boxes with an impossible size)
    and gathering what the import decides over all boxes (has every box a velocity, an
    acceleration, road coordinates; the root coordinate systems);
@@ -43,7 +43,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from aveas_format.converters.openlabel.spill import (LZ4, PLAIN, READ, IpcWriter, RowSpill, from_table,
+from aveas_format.converters.openlabel.spill import (READ, IpcWriter, RowSpill, bucket_options, from_table,
                                                      write_by_bucket)
 from aveas_format.io.arrow import conform
 from aveas_format.io.writer import ROW_GROUP_ROWS, StatesFile, parquet_options, prepare_table
@@ -57,10 +57,6 @@ BUCKET_BYTES = 24 << 20
 #: at most this many buckets (their files are open at once)
 MAX_BUCKETS = 256
 _SPEC = TABLES["states"]
-#: up to this many bytes of boxes the buckets' files (their boxes, their states) are written
-#: uncompressed (read back soon from the page cache; 2 M boxes: the pass 1.3 -> 0.8 s); above,
-#: lz4 (9.2 M: the kernel's writeback of 3.3 GB uncompressed cost as much time as it saved)
-PLAIN_BUCKETS_BYTES = 1 << 30
 
 
 class Parts:
@@ -206,8 +202,8 @@ class _Buckets:
         self.n_buckets = int(bucket_of_pid.max()) + 1 if len(bucket_of_pid) else 0
 
     def _ipc_options(self) -> pa.ipc.IpcWriteOptions:
-        """The buckets' files uncompressed up to :data:`PLAIN_BUCKETS_BYTES` of boxes, else lz4."""
-        return PLAIN if self.spill.n * self.spill.row_bytes <= PLAIN_BUCKETS_BYTES else LZ4
+        """The buckets' files uncompressed up to :data:`.spill.PLAIN_BUCKETS_BYTES` of boxes, else lz4."""
+        return bucket_options(self.spill.n * self.spill.row_bytes)
 
     def _pass(self, arrays: tuple) -> dict[str, Any]:
         """The spilled boxes into bucket files (:meth:`_pass_part`), in two halves of the spill

@@ -9,7 +9,8 @@ rows of one chunk of frames at a time (:func:`~.encode.frame_chunks`), in frame 
   (``open_recording(path, states=False)``; the CLI's ``export`` for an exporter that
   ``streams_states``): one pass over ``states.parquet`` row group by row group writes each row to
   the spill file of its *bucket* — consecutive whole chunks of frames, about
-  :data:`BUCKET_BYTES` of states each (Arrow IPC streams, lz4) — which is the transpose done out
+  :data:`BUCKET_BYTES` of states each (Arrow IPC streams; uncompressed up to
+  :data:`.spill.PLAIN_BUCKETS_BYTES` of states, else lz4) — which is the transpose done out
   of core; then the export holds one bucket at a time. Memory: one row group during the pass, one
   bucket and one chunk's text during the encoding, plus a few numbers per state (the frame of each
   row; docs/performance.md "Memory"), whatever the recording's length.
@@ -31,7 +32,7 @@ import numpy as np
 import pyarrow as pa
 
 from aveas_format.converters.openlabel.encode import chunk_bounds
-from aveas_format.converters.openlabel.spill import LZ4, READ, IpcWriter, write_by_bucket
+from aveas_format.converters.openlabel.spill import READ, IpcWriter, bucket_options, write_by_bucket
 from aveas_format.io.arrow import column_numpy
 from aveas_format.parallel import read_ahead
 
@@ -176,7 +177,9 @@ class SpilledStates:
         try:  # (the next row group read while this one is spilled)
             for g, rg in enumerate(read_ahead(parts.read, range(parts.num_row_groups))):
                 if g == 0:
-                    self._buckets(chunk_rows, rg.nbytes / max(rg.num_rows, 1))
+                    row_bytes = rg.nbytes / max(rg.num_rows, 1)
+                    self._buckets(chunk_rows, row_bytes)
+                    options = bucket_options(self.num_rows * row_bytes)
                 if need_acc:  # whole tracks: the last participant's rows wait for the next group
                     batch = rg if held is None else pa.concat_tables([held, rg])
                     if g < parts.num_row_groups - 1 and batch.num_rows:
@@ -198,7 +201,7 @@ class SpilledStates:
                 order = np.argsort(b, kind="stable")  # (the rows' order kept within a bucket)
                 sb = b[order]
                 taken = batch.take(pa.array(order))
-                write_by_bucket(writers, taken, sb, lambda k: self.dir / f"b{k}.arrow", LZ4)
+                write_by_bucket(writers, taken, sb, lambda k: self.dir / f"b{k}.arrow", options)
                 offset += n
         finally:
             for w in writers.values():
