@@ -5,8 +5,8 @@ object put together from spans of one buffer, no Python object per value.
 gathers the constants, the formatted numbers and the other fragments in one byte buffer ``g``;
 each row then is a *program* (the ops of its group of rows with the same items present): an op
 ``k >= 0`` is the row's value ``k`` (``g[start[i, k]:end[i, k]]``), an op ``< 0`` the constant
-``-op - 1`` (``g[cstart[c]:cend[c]]``). :func:`assemble` copies them into one output buffer, a
-comma before each row that asks for one, and gives back where each row starts. The Python path
+``-op - 1`` (``g[cstart[c]:cend[c]]``). :func:`assemble` copies them into one output buffer
+(the export's whole chunk: the frames' heads and ends are fragments of the rows). The Python path
 of the same layout (one ``template % values`` per row) writes the same bytes; the tests compare
 the two. :func:`number_spans` finds the formatted numbers' spans in orjson's text.
 
@@ -21,30 +21,24 @@ import numpy as np
 
 
 @numba.njit(cache=True, nogil=True)
-def assemble(g, cstart, cend, prog, prog_off, group, start, end, comma):  # pragma: no cover - compiled
-    """The rows' bytes in one buffer and the offset of each row (``m + 1``): row ``i`` runs its
-    group's program ``prog[prog_off[group[i]]:prog_off[group[i] + 1]]`` (see the module)."""
+def assemble(g, cstart, cend, prog, prog_off, group, start, end):  # pragma: no cover - compiled
+    """The rows' bytes one after the other in one buffer: row ``i`` runs its group's program
+    ``prog[prog_off[group[i]]:prog_off[group[i] + 1]]`` (see the module)."""
     m = len(group)
-    off = np.empty(m + 1, np.int64)
-    off[0] = 0
+    n = 0
     for i in range(m):
         gi = group[i]
-        n = 1 if comma[i] else 0
         for p in range(prog_off[gi], prog_off[gi + 1]):
             op = prog[p]
             if op < 0:
                 n += cend[-op - 1] - cstart[-op - 1]
             else:
                 n += end[i, op] - start[i, op]
-        off[i + 1] = off[i] + n
-    out = np.empty(off[m], np.uint8)
+    out = np.empty(n, np.uint8)
     # (unsigned indices: numba checks signed ones for a negative value, which keeps the copy
     # from being compiled into wide moves: 5x slower on the short pieces here)
+    o = numba.uint64(0)
     for i in range(m):
-        o = numba.uint64(off[i])
-        if comma[i]:
-            out[o] = 44  # ","
-            o += numba.uint64(1)
         gi = group[i]
         for p in range(prog_off[gi], prog_off[gi + 1]):
             op = prog[p]
@@ -56,7 +50,7 @@ def assemble(g, cstart, cend, prog, prog_off, group, start, end, comma):  # prag
                 out[o] = g[a]
                 o += numba.uint64(1)
                 a += numba.uint64(1)
-    return out, off
+    return out
 
 
 @numba.njit(cache=True, nogil=True)
@@ -85,7 +79,7 @@ def number_spans(b, at, widths, cols, start, end):  # pragma: no cover - compile
 #: the argument types of :func:`assemble` as the export passes them (one compile)
 _EXAMPLE = (np.frombuffer(b"[1]", np.uint8), np.zeros(1, np.int64), np.ones(1, np.int64),
             np.array([-1, 0], np.int64), np.array([0, 2], np.int64), np.zeros(1, np.int64),
-            np.ones((1, 1), np.int64), np.full((1, 1), 2, np.int64), np.zeros(1, np.bool_))
+            np.ones((1, 1), np.int64), np.full((1, 1), 2, np.int64))
 
 
 _WARM = False
@@ -96,8 +90,7 @@ def warm() -> None:
     export forks its encoders: they inherit it)."""
     global _WARM
     if not _WARM:
-        out, off = assemble(*_EXAMPLE)
-        assert bytes(out) == b"[1" and off[-1] == 2
+        assert bytes(assemble(*_EXAMPLE)) == b"[1"
         start, end = np.zeros((1, 2), np.int64), np.zeros((1, 2), np.int64)
         number_spans(np.frombuffer(b"[1,-2.5,null]", np.uint8), 0, np.array([1, 2], np.int64),
                      np.array([1, 0], np.int64), start, end)

@@ -228,18 +228,12 @@ class _Layout:
                 out[idx] = list(map(tmpl.__mod__, zip(*cols)))
         return out
 
-    def packed(self, segments: list, comma: np.ndarray, compiled: bool) -> tuple[Any, np.ndarray]:
-        """The rows' text in one bytes-like buffer and the offset of each row (``m + 1``), a comma
-        before each row where ``comma``: by :func:`._jitrows.assemble` where ``compiled``, else
-        from :meth:`rows` (the same bytes)."""
-        m = self.m
+    def packed(self, segments: list, compiled: bool) -> Any:
+        """The rows' text one after the other, as one bytes-like object: copied from spans of one
+        buffer by :func:`._jitrows.assemble` where ``compiled`` (a uint8 array), else joined
+        from :meth:`rows` (bytes; the same bytes)."""
         if not compiled:
-            text = self.rows(segments)
-            pieces = np.empty(2 * m, dtype=object)
-            pieces[0::2] = np.where(comma, b",", b"")
-            pieces[1::2] = text
-            lens = np.fromiter(map(len, text), np.int64, m) + comma
-            return b"".join(pieces.tolist()), np.r_[0, np.cumsum(lens)]
+            return b"".join(self.rows(segments).tolist())
         from aveas_format.converters.openlabel._jitrows import assemble
 
         g, const, start, end, col_of = self._spans()
@@ -265,9 +259,8 @@ class _Layout:
         clen = np.fromiter(map(len, cbytes), np.int64, len(cbytes))
         cstart = len(g) + np.cumsum(clen) - clen
         buf = np.frombuffer(g + b"".join(cbytes), np.uint8)
-        out, off = assemble(buf, cstart, cstart + clen, np.array(prog, np.int64), np.array(prog_off, np.int64),
-                            group, start, end, np.asarray(comma, dtype=np.bool_))
-        return out, off
+        return assemble(buf, cstart, cstart + clen, np.array(prog, np.int64), np.array(prog_off, np.int64),
+                        group, start, end)
 
     def _spans(self) -> tuple[bytes, dict[bytes, int], np.ndarray, np.ndarray, dict[int, int]]:
         """The values that vary over the rows as spans of one buffer: ``(buffer, {}, start,
@@ -345,13 +338,15 @@ def _named(name: str, val: list, *, vec: bool = False, quoted: bool = False) -> 
 
 
 def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
-                 chunk_rows: int = CHUNK_ROWS, part: tuple[int, int] | None = None) -> Iterator[bytes]:
+                 chunk_rows: int = CHUNK_ROWS, part: tuple[int, int] | None = None) -> Iterator[Any]:
     """The members ``"k":{frame}`` of the ``frames`` object, comma-separated, in chunks of about
     ``chunk_rows`` rows (whole frames): ``frame_of_row`` = each state row's frame (an index into
     ``times``), ``prepare(rows)`` = the per-row inputs of the state rows ``rows`` (in that order;
     :func:`aveas_format.converters.openlabel.write.openlabel_chunks`), asked for one chunk at a
     time. ``part``: only the chunks ``[first, last)`` of :func:`chunk_bounds` (their text is the
-    same as in the whole sequence: a comma before every chunk but the very first)."""
+    same as in the whole sequence: a comma before every chunk but the very first). A chunk is
+    bytes, or a uint8 array where the compiled assembler made it (:func:`compiled_rows`): a
+    bytes-like object either way (written, joined or compressed as it is)."""
     order = np.argsort(frame_of_row, kind="stable")  # in a frame: the objects in the states' order
     if len(order) < 2**31:
         order = order.astype(np.int32)  # (half the memory: one index per state)
@@ -366,16 +361,19 @@ def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
         f = fs[start:stop]
         m = len(f)
         lo = np.flatnonzero(np.r_[True, f[1:] != f[:-1]])  # the first row of each frame
-        comma = np.ones(m, dtype=np.bool_)  # (before each row but a frame's first)
-        comma[lo] = False
-        text, off = _objects_packed(prepare(rows), np.arange(m), comma, compiled)
-        text = memoryview(text)
-        at = off[np.r_[lo, m]].tolist()
-        pieces = []
-        for j, k in enumerate(f[lo].tolist()):  # each frame: its head, its objects, "}}"
-            pieces += (b'%s"%d":{"frame_properties":{"timestamp":%s},"objects":{'
-                       % (b"" if c == 0 and j == 0 else b",", k, ts[k]), text[at[j]:at[j + 1]], b"}}")
-        yield b"".join(pieces)
+        # before each row its frame's head (a frame's first row) or a comma, after a frame's
+        # last row "}}": fragments of the rows themselves (the chunk is written in one go)
+        heads = [b'%s"%d":{"frame_properties":{"timestamp":%s},"objects":{'
+                 % (b"" if c == 0 and j == 0 else b",", k, ts[k]) for j, k in enumerate(f[lo].tolist())]
+        before = np.zeros(m, np.int64)
+        before[lo] = np.arange(1, len(lo) + 1)
+        after = np.zeros(m, np.int64)
+        after[np.r_[lo[1:] - 1, m - 1]] = 1
+        yield _objects_packed(prepare(rows), np.arange(m), (np.array([b",", *heads], dtype=object), before),
+                              (_AFTER, after), compiled)
+
+
+_AFTER = np.array([b"", b"}}"], dtype=object)
 
 
 #: rows of an export from which its objects' text is put together by the compiled assembler
@@ -589,10 +587,10 @@ def _encode_parts(frame_of_row, times, prepare, summary: Any, chunk_rows: int, p
         conn.close()
 
 
-def _objects_packed(r: dict[str, Any], idx: np.ndarray, comma: np.ndarray, compiled: bool
-                    ) -> tuple[Any, np.ndarray]:
-    """``"uid":{"object_data":{...}}`` for the rows ``idx``, a comma before each where ``comma``:
-    one bytes-like buffer and each row's offset in it (:meth:`_Layout.packed`)."""
+def _objects_packed(r: dict[str, Any], idx: np.ndarray, before: tuple, after: tuple, compiled: bool) -> Any:
+    """``"uid":{"object_data":{...}}`` for the rows ``idx``, one after the other, each between
+    a fragment ``before`` and one ``after`` (``(table, each row's index into it)``): one
+    bytes-like object (:meth:`_Layout.packed`)."""
     m = len(idx)
     lay = _Layout(m)
     pid = r["pid"][idx]
@@ -636,11 +634,12 @@ def _objects_packed(r: dict[str, Any], idx: np.ndarray, comma: np.ndarray, compi
             a = a[idx]
             boolean.append((lay.mask(np.isfinite(a)), _named(name, [lay.booleans(a >= 0.5)])))
     _irregular(r, idx, pid, lay, vec, num, boolean)
-    segments = [b'"', lay.ints(pid), b'":{"object_data":{"cuboid":[{"name":"bounding_box","val":[',
+    segments = [lay.coded(*before), b'"', lay.ints(pid), b'":{"object_data":{"cuboid":[{"name":"bounding_box","val":[',
                 *_vector(lay, r["box"], idx), b"]", *_extension(r, idx, lay), b"}],",
                 lay.join(b'"vec":[', vec, b"]"), b",", lay.join(b'"boolean":[', boolean, b"]"), b",",
-                lay.join(b'"num":[', num, b"]"), b",", lay.join(b'"text":[', text, b"]"), b"}}"]
-    return lay.packed(segments, comma, compiled)
+                lay.join(b'"num":[', num, b"]"), b",", lay.join(b'"text":[', text, b"]"), b"}}",
+                lay.coded(*after)]
+    return lay.packed(segments, compiled)
 
 
 def _irregular(r: dict[str, Any], idx: np.ndarray, pid: np.ndarray, lay: _Layout, vec: list,
