@@ -644,6 +644,9 @@ def large_osi_mcap(target_states: int) -> list[dict]:
 
 
 if __name__ == "__main__":
+    from gauge import machine_gauge
+
+    print(machine_gauge(), "(at the start)")
     if len(sys.argv) > 2 and sys.argv[1] == "--osi-mcap-states":
         result = large_osi_mcap(int(sys.argv[2]))
     elif len(sys.argv) > 2 and sys.argv[1] == "--openlabel-states":
@@ -654,4 +657,4 @@ if __name__ == "__main__":
         result = main()
     for r in result:
         print(r)
-    print(_load(), "(at the end)")
+    print(_load(), "(at the end);", machine_gauge())

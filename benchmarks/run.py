@@ -36,6 +36,7 @@ def main() -> int:
 
     print(f"# aveas-format benchmarks — {platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} cores, Python {platform.python_version()}, {time.strftime('%Y-%m-%d')}")
+    print(f"# {_load('gauge').machine_gauge()}")
     for name in sorted(p.stem for p in HERE.glob("bench_*.py")):
         print(f"\n## {name}")
         t0 = time.perf_counter()
