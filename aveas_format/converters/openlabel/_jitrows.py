@@ -62,17 +62,18 @@ def number_spans(b, at, widths, cols, start, end):  # pragma: no cover - compile
     commas between them included) into column ``cols[v]`` of ``start``/``end``."""
     m = start.shape[0]
     q = numba.uint64(1)  # (after "[")
+    base = numba.uint64(at)  # (unsigned + unsigned: an int64 with a uint64 would be a float64)
     comma, close = numba.uint8(44), numba.uint8(93)
     for v in range(len(widths)):
         c = cols[v]
         for i in range(m):
-            start[i, c] = at + q
+            start[i, c] = base + q
             for k in range(widths[v]):
                 if k:
                     q += numba.uint64(1)  # (the comma between two components)
                 while b[q] != comma and b[q] != close:
                     q += numba.uint64(1)
-            end[i, c] = at + q
+            end[i, c] = base + q
             q += numba.uint64(1)  # (the comma after the span, or the closing bracket)
 
 

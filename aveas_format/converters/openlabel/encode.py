@@ -236,7 +236,8 @@ class _Layout:
             return b"".join(self.rows(segments).tolist())
         from aveas_format.converters.openlabel._jitrows import assemble
 
-        g, const, start, end, col_of = self._spans()
+        g, start, end, col_of = self._spans()
+        const: dict[bytes, int] = {}  # (the constants' text -> index, in the order met)
         present, group = self._groups()
         prog: list[int] = []
         prog_off = [0]
@@ -262,10 +263,9 @@ class _Layout:
         return assemble(buf, cstart, cstart + clen, np.array(prog, np.int64), np.array(prog_off, np.int64),
                         group, start, end)
 
-    def _spans(self) -> tuple[bytes, dict[bytes, int], np.ndarray, np.ndarray, dict[int, int]]:
-        """The values that vary over the rows as spans of one buffer: ``(buffer, {}, start,
-        end, column of each such token)`` (``start``/``end``: rows x columns, into the buffer;
-        the dict is for the constants, filled by the caller)."""
+    def _spans(self) -> tuple[bytes, np.ndarray, np.ndarray, dict[int, int]]:
+        """The values that vary over the rows as spans of one buffer: ``(buffer, start, end,
+        column of each such token)`` (``start``/``end``: rows x columns, into the buffer)."""
         from aveas_format.converters.openlabel._jitrows import number_spans
 
         m = self.m
@@ -299,7 +299,7 @@ class _Layout:
                 start[:, col_of[k]], end[:, col_of[k]] = ends - lens, ends
             pieces.append(b"".join(frags))
             at += int(lens.sum())
-        return b"".join(pieces), {}, start, end, col_of
+        return b"".join(pieces), start, end, col_of
 
     def _template(self, segments: list, on: list[bool], parts: list) -> None:
         """The segments of a group of rows (``on``: which masks they have) as bytes and value
