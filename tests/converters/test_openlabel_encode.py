@@ -258,3 +258,12 @@ def test_compiled_layout_equals_the_python_layout():
         assert bytes(lay.packed(segs, True)) == want
 
     check()
+
+
+def test_compiled_rows_without_orjson_write_the_same_bytes(rich, monkeypatch):
+    """The standard library's numbers (``1e-05``, ``NaN`` written as null) scanned by the
+    compiled path as orjson's are."""
+    pytest.importorskip("numba", reason="numba is not installed (the jit extra)")
+    monkeypatch.setattr(encode, "orjson", None)
+    py, compiled, calls = _both_paths(rich, monkeypatch, chunk_rows=50)
+    assert calls > 0 and compiled == py
