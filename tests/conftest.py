@@ -30,7 +30,8 @@ def pytest_runtest_setup(item):
 # helper's constant): Python's own file opens and directory listings under ../shared are audited
 # while a test runs, and an unmarked test that made one fails (files read by C libraries such as
 # pyarrow or libxml2 are not seen; the plain-clone run catches those).
-_SHARED_PREFIX = str(SHARED.resolve()) + os.sep
+# (the path as built and as resolved: ../shared may be a link to the data elsewhere)
+_SHARED_PREFIXES = tuple({str(SHARED.absolute()) + os.sep, str(SHARED.resolve()) + os.sep})
 _UNMARKED: dict[str, str] = {}
 
 
@@ -44,7 +45,7 @@ def _audit(event: str, args: tuple) -> None:
         path = os.path.abspath(os.fsdecode(args[0]))
     except (TypeError, ValueError):
         return
-    if path.startswith(_SHARED_PREFIX) and item.get_closest_marker("realdata") is None:
+    if path.startswith(_SHARED_PREFIXES) and item.get_closest_marker("realdata") is None:
         _UNMARKED[item.nodeid] = path
 
 
