@@ -178,12 +178,16 @@ class _Layout:
             present = shapes.tolist()
         return present, inverse.reshape(-1).astype(np.int64)
 
+    def _numbers_of(self, kind: str) -> list[int]:
+        """The tokens of the numeric columns of ``kind`` (``"f"``: floats, ``"i"``: ints)."""
+        return [k for k, v in enumerate(self._vals)
+                if isinstance(v, tuple) and v[0] == "n" and v[1].dtype.kind == kind]
+
     def _format_python(self) -> list[Any]:
         """Each value as bytes (constant) or an object array of the rows' fragments."""
         vals = list(self._vals)
-        for kind, want in (("f", "f"), ("i", "iu")):
-            cols = [k for k, v in enumerate(vals)
-                    if isinstance(v, tuple) and v[0] == "n" and v[1].ndim == 1 and v[1].dtype.kind in want]
+        for kind in ("f", "i"):
+            cols = [k for k in self._numbers_of(kind) if vals[k][1].ndim == 1]  # (vectors below)
             if not cols:
                 continue
             mat = np.column_stack([vals[k][1] for k in cols])  # rows x columns, one formatting call
@@ -275,8 +279,8 @@ class _Layout:
         end = np.empty((m, len(cols)), np.int64)
         pieces: list[bytes] = []
         at = 0
-        for kind, want in (("f", "f"), ("i", "iu")):  # every number of a kind in one call
-            ks = [k for k in cols if self._vals[k][0] == "n" and self._vals[k][1].dtype.kind in want]
+        for kind in ("f", "i"):  # every number of a kind in one call
+            ks = self._numbers_of(kind)
             if not ks:
                 continue
             arrays = [self._vals[k][1] for k in ks]
@@ -423,10 +427,6 @@ PARTS_MIN_ROWS = 200_000
 #: processes seldom wait for each other
 PART_ROWS = 200_000
 
-#: the rows of this process's parts against another process's (it also writes the output and
-#: copies the other parts in)
-MAIN_SHARE = 1.0
-
 #: a forked part handed on before this process settles the oldest one (the writer's queue holds
 #: more: the producer never waits on a full queue while the writer waits for it)
 MAX_PENDING = 2
@@ -555,16 +555,16 @@ class FrameParts:
 def deal_parts(bounds: list[int], workers: int) -> list[tuple[int, int, int]]:
     """The parts ``(first chunk, end chunk, owner)`` of :class:`FrameParts` for the chunks'
     row offsets ``bounds`` (:func:`chunk_bounds`): rounds of one part per process (owner 0:
-    this process, :data:`MAIN_SHARE` times the rows of another's part), then a last part of
-    this process's; about :data:`PART_ROWS` rows each. Empty parts are left out; one part
-    (owner 0) where the chunks are too few to share."""
+    this process), then a last part of this process's; about :data:`PART_ROWS` rows each, all
+    about equal (a smaller share for this process, which also writes the output, was slower:
+    docs/performance.md). Empty parts are left out; one part (owner 0) where the chunks are too
+    few to share."""
     k, rows = len(bounds) - 1, bounds[-1]
     if workers < 2 or k < 2 * workers:
         return [(0, k, 0)]
     rounds = max(1, min(round(rows / (PART_ROWS * workers)), (k - 1) // workers))
     owners = [*(j % workers for j in range(rounds * workers)), 0]
-    weights = np.array([MAIN_SHARE if o == 0 else 1.0 for o in owners])
-    at = np.cumsum(weights)[:-1] / weights.sum() * rows
+    at = np.arange(1, len(owners)) / len(owners) * rows
     cuts = [0, *np.searchsorted(bounds, at).tolist(), k]
     return [(a, b, o) for a, b, o in zip(cuts[:-1], cuts[1:], owners) if b > a]
 
