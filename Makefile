@@ -30,10 +30,10 @@ demo: $(DEMO_STAMP)
 	$(VENV)/bin/aveas-format demo --output demo-output --overwrite
 
 test: $(STAMP)
-	$(PY) -m pytest -q -m "not slow"
+	$(PY) -m pytest -q -m "not slow" -n auto
 
 test-all: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto
 
 # a longer, randomised fuzzing campaign of the readers (make test replays a fixed, short one)
 fuzz: $(STAMP)
