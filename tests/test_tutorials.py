@@ -1,17 +1,19 @@
-"""Every tutorial in docs/tutorials runs as written and produces the figures it shows."""
+"""Every tutorial in docs/tutorials runs as written and produces the figures it shows (one that says
+``<!-- slow: ... -->`` in `make test-all`)."""
 
 from __future__ import annotations
 
 import pytest
 
-from docgen import DOCS, run_tutorial, tutorial_missing, tutorial_paths
+from docgen import DOCS, run_tutorial, tutorial_missing, tutorial_paths, tutorial_slow
 
 
 def test_there_are_tutorials():
     assert len(tutorial_paths()) >= 4
 
 
-@pytest.mark.parametrize("path", tutorial_paths(), ids=lambda p: p.stem)
+@pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if tutorial_slow(p) else p
+                                  for p in tutorial_paths()], ids=lambda p: p.stem)
 def test_tutorial_runs(path, tmp_path):
     why = tutorial_missing(path)
     if why:

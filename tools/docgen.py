@@ -223,6 +223,12 @@ def tutorial_paths() -> list[Path]:
     return sorted(p for p in TUTORIALS.glob("[0-9]*.md"))
 
 
+def tutorial_slow(path: Path) -> bool:
+    """Whether the tutorial says it takes minutes (``<!-- slow: why -->``): its test is then marked
+    slow (``make test-all`` and ``make docs`` run it, ``make test`` does not)."""
+    return re.search(r"<!--\s*slow:", path.read_text(encoding="utf-8")) is not None
+
+
 def tutorial_missing(path: Path) -> str | None:
     """Why the tutorial cannot run here (``<!-- requires: sumo -->`` without SUMO), else None."""
     if "<!-- requires: sumo -->" in path.read_text(encoding="utf-8"):
