@@ -233,7 +233,7 @@ def compiled_parser():
         r = jb.parse_block(b, *sc)
         _LOCAL.scratch = r[8:]
         status, depth, nb, ni, ne, nn, ns, nt = r[:8]
-        boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff = r[8:]
+        boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff, _, _ = r[8:]
         return (status, depth, boxes[:nb], items[:ni], ext[:ne], nbuf[:noff[nn]], noff[:nn + 1],
                 sbuf[:soff[ns]], soff[:ns + 1], tbuf[:toff[nt]], toff[:nt + 1])
 
