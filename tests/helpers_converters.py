@@ -219,3 +219,20 @@ def kitti_doc(n=20, stamps=None, ego_step=1.0):
                                                "val": [-10, 499, -1, 0, -1, 0, -1000, -1000, -1000]}]}}}}
     return {"metadata": {"schema_version": "1.0.0"}, "coordinate_systems": CS, "objects": objects,
             "frames": frames}
+
+
+def openlabel_blocks(directory, *, n_vehicles: int, duration_s: float, seed: int, size: int) -> list[bytes]:
+    """The blocks of frames of a sample highway's OpenLABEL export written into ``directory``, as
+    the import cuts them (``size``: the bytes a block is cut at), each ``{...}``."""
+    from aveas_format.converters import get_converter
+    from aveas_format.converters.openlabel import stream
+    from aveas_format.safeio import scan_json_member
+    from aveas_format.sample import highway_scene
+
+    path = directory / "rec.json"
+    get_converter("openlabel", "export")(highway_scene(n_vehicles=n_vehicles, duration_s=duration_s, seed=seed),
+                                         path)
+    with open(path, "rb") as f:
+        _, span, _ = scan_json_member(f, "openlabel", "frames")
+        f.seek(span[0] + 1)
+        return [b"{" + cut + b"}" for _, cut in stream._cut_blocks(f, span, size)]

@@ -23,20 +23,16 @@ from aveas_format.converters.openlabel import _jitblock as jb  # noqa: E402
 from aveas_format.converters.openlabel import stream  # noqa: E402
 from aveas_format.converters.openlabel.columns import _MISSING, ext_chunk  # noqa: E402
 from aveas_format.sample import highway_scene  # noqa: E402
-from aveas_format.safeio import scan_json_member  # noqa: E402
 
 from helpers_common import kernel  # noqa: E402
+from helpers_converters import openlabel_blocks  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def blocks(tmp_path_factory):
     """The blocks of frames of a sample export, as the import cuts them (~50 frames each)."""
-    path = tmp_path_factory.mktemp("jitblock") / "rec.json"
-    get_converter("openlabel", "export")(highway_scene(n_vehicles=8, duration_s=6.0, seed=2), path)
-    with open(path, "rb") as f:
-        _, span, _ = scan_json_member(f, "openlabel", "frames")
-        f.seek(span[0] + 1)
-        return [b"{" + cut + b"}" for _, cut in stream._cut_blocks(f, span, 40_000)]
+    return openlabel_blocks(tmp_path_factory.mktemp("jitblock"), n_vehicles=8, duration_s=6.0, seed=2,
+                            size=40_000)
 
 
 @pytest.fixture(autouse=True)

@@ -5,8 +5,6 @@ later (refused the same: status 1)."""
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 from hypothesis import event, given, settings
@@ -16,22 +14,16 @@ pytest.importorskip("numba", reason="numba is not installed (the jit extra)")
 pytest.importorskip("orjson")
 
 import aveas_format.converters.openlabel.fastblock as fb  # noqa: E402
-from aveas_format.converters import get_converter  # noqa: E402
 from aveas_format.converters.openlabel import _jitblock as jb  # noqa: E402
-from aveas_format.converters.openlabel import stream  # noqa: E402
-from aveas_format.sample import highway_scene  # noqa: E402
-from aveas_format.safeio import scan_json_member  # noqa: E402
+
+from helpers_converters import openlabel_blocks  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def blocks(tmp_path_factory):
     """The blocks of frames of a sample export, as the import cuts them."""
-    path = tmp_path_factory.mktemp("jitblock_templates") / "rec.json"
-    get_converter("openlabel", "export")(highway_scene(n_vehicles=12, duration_s=8.0, seed=3), path)
-    with open(path, "rb") as f:
-        _, span, _ = scan_json_member(f, "openlabel", "frames")
-        f.seek(span[0] + 1)
-        return [b"{" + cut + b"}" for _, cut in stream._cut_blocks(f, span, 60_000)]
+    return openlabel_blocks(tmp_path_factory.mktemp("jitblock_templates"), n_vehicles=12, duration_s=8.0, seed=3,
+                            size=60_000)
 
 
 def _arrays(buf: bytes, by_template: bool) -> tuple:
