@@ -45,11 +45,13 @@ Anything outside the profile's layout — a member the layout does not have, a r
 and any syntax error stops it with status 1: the caller falls back to the Arrow or the generic
 path, which reads the block or names the error. Imported only where numba is installed
 (:func:`aveas_format.numeric.kernel_backend` decides); the first call in an environment compiles
-it (~30 s: the helpers are inlined into one large function, which runs ~1.5x faster
-than calls to them would) and caches the machine code next to this module. All of the reader is in
-this one file, longer than the house's ~800 lines for that reason: numba's cache is invalidated by
-a change to the file that defines a compiled function, not by one to the functions it inlines from
-other files (a helper in a module of its own, edited, would leave the parser's cached code stale).
+it (~30 s on the seventh session's VM before the templates; on the slow VM of 2026-12 103-110 s
+with them against 68 s without: the helpers are inlined into one large function, which runs
+~1.5x faster than calls to them would) and caches the machine code next to this module. All of
+the reader is in this one file, longer than the house's ~800 lines for that reason: numba's cache
+is invalidated by a change to the file that defines a compiled function, not by one to the
+functions it inlines from other files (a helper in a module of its own, edited, would leave the
+parser's cached code stale).
 """
 
 from __future__ import annotations
