@@ -305,15 +305,6 @@ def _gather(b, spans, k, data, offs):
     return data, offs
 
 
-@_jit
-def _floaty(b, s, e):
-    """Whether the number ``b[s:e]`` has a fraction or an exponent."""
-    for j in range(s, e):
-        if b[j] == 46 or b[j] == 101 or b[j] == 69:
-            return True
-    return False
-
-
 
 @_jit
 def _colon(b, i):
@@ -344,9 +335,9 @@ TEMPLATES = 8
 MAX_LITERAL, MAX_SLOTS, MAX_ITEMS, MAX_EXT = 4096, 512, 128, 64
 #: a slot's kind
 S_INT, S_FLOAT, S_STR = 0, 1, 2
-#: meta columns: slots, literal length, items, ext rows, numbers, strings, cuboid's first number
-#: (relative), the names' hint after the box
-M_SLOTS, M_LIT, M_ITEMS, M_EXT, M_NUMS, M_STRS, M_CUB, M_HINT = range(8)
+#: meta columns: slots, items, ext rows, numbers, strings, cuboid's first number (relative), the
+#: names' hint after the box (the literal's length: the end of the last segment)
+M_SLOTS, M_ITEMS, M_EXT, M_NUMS, M_STRS, M_CUB, M_HINT = range(7)
 
 
 @_jit_call
@@ -358,7 +349,7 @@ def templates():
     t = TEMPLATES
     return (np.empty((t, MAX_LITERAL), np.uint8), np.empty((t, MAX_SLOTS + 1), np.int64),
             np.empty((t, MAX_SLOTS), np.int8), np.empty((t, MAX_ITEMS, 5), np.int64),
-            np.empty((t, MAX_EXT, 4), np.int64), np.zeros((t, 8), np.int64), np.full(t, -1, np.int64),
+            np.empty((t, MAX_EXT, 4), np.int64), np.zeros((t, 7), np.int64), np.full(t, -1, np.int64),
             np.zeros((t, t), np.int64), np.zeros(MAX_SLOTS + 1, np.int64))
 
 
@@ -453,7 +444,7 @@ def build(b, s, e, nums0, nums1, nspan, strs0, strs1, sspan, items, i0, i1, ext,
         elif k == E_STR:
             te[r, 3] -= strs0
     m = meta[slot]
-    m[M_SLOTS], m[M_LIT], m[M_ITEMS], m[M_EXT] = n_slot, n_lit, i1 - i0, e1 - e0
+    m[M_SLOTS], m[M_ITEMS], m[M_EXT] = n_slot, i1 - i0, e1 - e0
     m[M_NUMS], m[M_STRS], m[M_CUB], m[M_HINT] = n_num, n_str, cub_first - nums0, hint
     for u in order:  # (the slots it begins with alike with each other template)
         if u < 0 or u == slot:
@@ -973,11 +964,11 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff, nspan,
                                                                     ext[ne, 2] = E_FALSE
                                                                     ext[ne, 3] = 0
                                                                 else:
-                                                                    e = _number(b, i)
+                                                                    e, fl = _number_kind(b, i)
                                                                     if e < 0:
                                                                         return fail  # (null, a list...)
                                                                     nspan = _span(i, e, nspan, nn)
-                                                                    ext[ne, 2] = E_FLOAT if _floaty(b, i, e) else E_INT
+                                                                    ext[ne, 2] = E_FLOAT if fl else E_INT
                                                                     ext[ne, 3] = nn
                                                                     nn += 1
                                                                     i = e
@@ -1028,7 +1019,9 @@ def parse_block(b, boxes, items, ext, nbuf, noff, sbuf, soff, tbuf, toff, nspan,
                                     if b[i] != 125 or ncub != 1:  # (another member of the box; no or 2 cuboids)
                                         return fail
                                     i += 1
-                                    if no_build > 0 or not use_templates:
+                                    if not use_templates:
+                                        pass
+                                    elif no_build > 0:
                                         no_build -= 1
                                     elif build(b, box_start, i, nn0, nn, nspan, ns0, ns, sspan, items, ni0, ni, ext,
                                                ne0, ne, cub_first, hint, lit, seg, tkind, titems, text, meta,
