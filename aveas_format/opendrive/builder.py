@@ -45,7 +45,7 @@ def _lanes(n: int, side: int, lane_width: float) -> list[Lane]:
     return out
 
 
-def _chain(geoms: list[Geometry], x0: float, y0: float, hdg: float) -> list[Geometry]:
+def chain_geometries(geoms: list[Geometry], x0: float, y0: float, hdg: float) -> list[Geometry]:
     """Set each geometry's start (s, x, y, hdg) to the exact end of the previous one."""
     s = 0.0
     x, y, h = x0, y0, hdg
@@ -78,7 +78,7 @@ def _road_xodr(
         raise ValueError("a highway needs at least one lane (lanes_right + lanes_left >= 1)")
     if lane_width <= 0:
         raise ValueError("lane_width must be positive")
-    geoms = _chain(geoms, x0, y0, hdg)
+    geoms = chain_geometries(geoms, x0, y0, hdg)
     length = float(sum(g.length for g in geoms))
     centre_mark = RoadMark(
         s_offset=0.0,

@@ -23,8 +23,8 @@ import numpy as np
 
 from aveas_format.errors import MapError
 from aveas_format.opendrive.model import Lane, LaneSection, Poly3Record, Road, RoadMark, RoadType
-from aveas_format.opendrive.roadfit.checks import _as_line
-from aveas_format.opendrive.roadfit.reference import ReferenceFit, _probe, fit_reference_line
+from aveas_format.opendrive.roadfit.checks import as_line
+from aveas_format.opendrive.roadfit.reference import ReferenceFit, probe_network, fit_reference_line
 
 
 def _signed_offsets(ref: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -120,7 +120,7 @@ class RoadFit:
 
     def network(self):
         """The fitted road as a :class:`~aveas_format.opendrive.network.RoadNetwork`."""
-        from aveas_format.opendrive import load_map
+        from aveas_format.opendrive.network import load_map
 
         return load_map(self.xodr)
 
@@ -184,7 +184,7 @@ def fit_road(
     n = len(lines)
     if n < (2 if borders_in else 1):
         raise MapError(f"{label}: need at least {2 if borders_in else 1} line(s), got {n}")
-    arrs = [_as_line(ln, f"{label}[{i}]") for i, ln in enumerate(lines)]
+    arrs = [as_line(ln, f"{label}[{i}]") for i, ln in enumerate(lines)]
     order = _lateral_order(arrs, ordered, label)
     z = _centre_border(driving, left_lanes, n - 1 if borders_in else n)
     reference, ref_pos = _reference_index(reference, order, z, borders_in, label)
@@ -299,7 +299,7 @@ def _project_lines(arrs: list[np.ndarray], ref: ReferenceFit, reference: int, la
             f"beyond its tightest curve radius ({1 / kmax:.1f} m); fit the road in parts or pick "
             "another reference"
         )
-    probe = _probe(geoms, reach)
+    probe = probe_network(geoms, reach)
     samples = []
     for i, a in enumerate(arrs):
         pr = probe.world_to_road(a[:, 0], a[:, 1])
