@@ -6,7 +6,7 @@ For maps annotated on an orthophoto, and for converters whose sources give lanes
     from aveas_format.opendrive.roadfit import fit_road, road_from_lane_markings
 
     fit = road_from_lane_markings([m0, m1, m2, m3], driving="right")   # (N, 2) arrays, left to right
-    fit.xodr                      # OpenDRIVE 1.6 text (XSD-valid)
+    fit.xodr                      # OpenDRIVE 1.8 text (XSD-valid)
     fit.network()                 # the RoadNetwork (load_map of the text)
     fit.rms, fit.max_error        # reference line vs. the polyline it was fitted to [m]
 
