@@ -1,4 +1,5 @@
-"""``aveas-format map``: OpenDRIVE maps — info, project (world -> road), plot, check."""
+"""``aveas-format map``: OpenDRIVE maps — info, project (world -> road), plot, check, convert
+(Lanelet2 -> OpenDRIVE), build (from trajectories)."""
 
 from __future__ import annotations
 
@@ -24,7 +25,8 @@ from aveas_format.cli.options import (
 
 map_app = typer.Typer(
     help="OpenDRIVE maps: `info` (summary), `project` (x, y -> road, lane, s, t), `plot` (PNG of "
-    "the lanes) and `check` (self-consistency).",
+    "the lanes), `check` (self-consistency), `convert` (a Lanelet2 map to OpenDRIVE) and `build` "
+    "(a map from recorded trajectories).",
     no_args_is_help=True,
     rich_markup_mode="markdown",
     context_settings={"help_option_names": ["-h", "--help"]},
@@ -369,4 +371,74 @@ def check(
         print(f"{verdict}: {summary['error']} errors, {summary['warning']} warnings, {summary['info']} info "
               f"({net.path or 'map'})")
     if summary["error"]:
+        raise typer.Exit(EXIT_FINDINGS)
+
+
+# ----------------------------------------------------------------------------------------------
+# convert (Lanelet2 -> OpenDRIVE)
+def _origin(text: str | None) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    try:
+        lat, lon = (float(v) for v in text.split(","))
+    except ValueError:
+        raise fail(f"--origin {text!r}: expected LAT,LON in degrees (e.g. 49.0,8.4)", EXIT_USAGE) from None
+    if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+        raise fail(f"--origin {text!r}: latitude or longitude out of range", EXIT_USAGE)
+    return lat, lon
+
+
+@map_app.command("convert")
+@handle_errors
+def convert(
+    source: Path = typer.Argument(None, metavar="MAP.osm", help="The Lanelet2 map (OSM XML)."),
+    output: Path = typer.Option(None, "--output", "-o", help="The OpenDRIVE map to write (.xodr)."),
+    origin: str = typer.Option(None, "--origin", metavar="LAT,LON", help="Origin of the local frame "
+                               "(default: the centre of the map's nodes)."),
+    projection: str = typer.Option("tmerc", "--projection", help="tmerc: a transverse Mercator at the "
+                                   "origin; utm: Lanelet2's UtmProjector (UTM minus the origin's UTM)."),
+    tolerance: float = typer.Option(0.02, "--tolerance", min=0.001, help="Metres the lane borders may "
+                                    "deviate from the lanelet bounds."),
+    overwrite: bool = overwrite_option(),
+    fmt: OutputFormat = format_option(),
+) -> None:
+    """Convert a Lanelet2 map to OpenDRIVE 1.8: lanelets -> lanes whose borders are their bounds,
+    successors -> lane links, intersections -> junctions with connecting roads, traffic lights,
+    stop lines, crosswalks and speed limits; the projection -> `<geoReference>`. Exit 1 when a
+    lanelet could not be converted (each is named)."""
+    if source is None:
+        raise fail("Missing argument 'MAP.osm'.", EXIT_USAGE)
+    if output is None:
+        raise fail("Missing option '--output' / '-o' (the .xodr to write).", EXIT_USAGE)
+    if projection not in ("tmerc", "utm"):
+        raise fail(f"--projection {projection!r}: use tmerc or utm", EXIT_USAGE)
+    check_output(output, overwrite)
+    from aveas_format.opendrive.lanelet2 import lanelet2_to_opendrive
+
+    conv = lanelet2_to_opendrive(source, origin=_origin(origin), projection_kind=projection, tol=tolerance)
+    conv.write(output)
+    lost = [w for w in conv.warnings if w.startswith("lanelet")]
+    summary = {"map": str(source), "output": str(output), "lanelets": conv.lanelets,
+               "converted_lanelets": len(conv.lanelet_lanes), "crosswalk_objects": len(conv.crosswalks),
+               "roads": conv.roads, "junctions": conv.junctions, "signals": conv.signals,
+               "areas_not_converted": conv.areas, "geo_reference": conv.geo_reference,
+               "offset": list(conv.offset) if conv.offset else None, "origin": list(conv.origin),
+               **conv.stats, "warnings": conv.warnings}
+    if fmt is OutputFormat.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        for w in conv.warnings:
+            err.print(f"warning: {w}")
+        print_table([
+            ("map", f"{source} -> {output}"),
+            ("lanelets", f"{conv.lanelets}: {len(conv.lanelet_lanes)} as lanes, {len(conv.crosswalks)} "
+             f"crosswalks as objects, {len(lost)} not converted"),
+            ("roads", f"{conv.roads} ({conv.stats['connecting_roads']} connecting roads in {conv.junctions} "
+             "junctions)"),
+            ("lanes", f"{conv.stats['lanes']} in {conv.stats['lane_sections']} lane sections"),
+            ("signals", str(conv.signals)),
+            ("areas", f"{conv.areas} multipolygon areas (not lanes) left out"),
+            ("frame", conv.geo_reference + (f" minus ({conv.offset[0]:.3f}, {conv.offset[1]:.3f})" if conv.offset else "")),
+        ])
+    if lost:
         raise typer.Exit(EXIT_FINDINGS)

@@ -23,8 +23,9 @@ to one; junctions where traffic branches, merges or crosses). Per road:
   (one ``<connection>`` per incoming road and connecting road).
 - **Regulatory elements**: traffic lights become dynamic ``<signal>``s (German catalogue type
   1000001, with ``<validity>`` for the lanes that reference them) at the stop line's s; stop lines
-  ``<object type="roadMark" subtype="stopLine">``; crosswalk lanelets ``<object type="crosswalk">``
-  with their outline on the road they cross.
+  ``<object type="roadMark" subtype="stopLine">``; crosswalk lanelets that cross a vehicle lane
+  ``<object type="crosswalk">`` with their outline on the road they cross (the others, roads with a
+  ``walking`` lane).
 
 Every lanelet is accounted for: converted (``Lanelet2Conversion.lanelet_lanes``, the
 ``crosswalks``) or named in ``warnings`` with the reason.
@@ -40,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from aveas_format.errors import MapError
 from aveas_format.opendrive.lanelet2.lanelets import Lanelet, mark_type, read_lanelets, topology
 from aveas_format.opendrive.lanelet2.osm import OsmMap, default_origin, projection, read_osm
 from aveas_format.opendrive.lanelet2.roads import (
@@ -136,6 +138,11 @@ def _sign_speed_kmh(subtype: str) -> float | None:
 def _speed_limits(osm: OsmMap, lanelets: dict[int, Lanelet], warnings: list[str]) -> dict[int, float]:
     """m/s per lanelet: its ``speed_limit`` tag, else a speed-limit regulatory element it references."""
     out: dict[int, float] = {}
+    referenced = {r for ll in lanelets.values() for r in ll.regulatory}
+    for rel in osm.relations.values():
+        if rel.tags.get("subtype") == "speed_limit" and rel.id not in referenced:
+            warnings.append(f"speed-limit regulatory element {rel.id} (line {rel.line}): no lanelet references "
+                            "it; left out")
     for ll in lanelets.values():
         if "speed_limit" in ll.tags:
             v = _speed_kmh(ll.tags["speed_limit"])
@@ -626,7 +633,7 @@ class _Conversion:
                 continue
             rid = self._road_crossed(line, polys)
             if rid is None:
-                self.warnings.append(f"stop line {w.id} (line {w.line}): on no converted road; left out")
+                self.warnings.append(f"stop line {w.id} (line {w.line}): crosses no converted lane; left out")
                 continue
             self._outline_object(rid, "roadMark", "stopLine", f"stop_line_{w.id}", self.xy[idx], closed=False)
             n += 1
@@ -664,6 +671,21 @@ class _Conversion:
         return out
 
 
+def _crossing_walks(lanelets: dict[int, Lanelet]) -> list[int]:
+    """The crosswalk lanelets that cross a vehicle lane (they become crosswalk objects on that
+    road; the others, walkways of their own, become roads with a walking lane)."""
+    import shapely
+
+    from aveas_format.opendrive.lanelet2.roads import VEHICLE_TYPES
+
+    walks = [ll for ll in lanelets.values() if ll.subtype == "crosswalk"]
+    vehicle = [ll.polygon() for ll in lanelets.values() if ll.lane_type in VEHICLE_TYPES]
+    if not walks or not vehicle:
+        return []
+    tree = shapely.STRtree(vehicle)
+    return sorted(w.id for w in walks if len(tree.query(w.polygon(), predicate="intersects")))
+
+
 def _part(ch: Chain, which: str) -> CrossSection:
     return ch.parts[0] if which == "start" else ch.parts[-1]
 
@@ -695,8 +717,8 @@ def lanelet2_to_opendrive(source: Any, *, origin: tuple[float, float] | None = N
     warnings = [f"lanelet {lid}: not converted: {why}" for lid, why in skipped]
     topo = topology(lanelets, xy)
     conv = _Conversion(osm, xy, lanelets, topo, tol, reference_tol, warnings)
-    crosswalk_ids = sorted(lid for lid, ll in lanelets.items() if ll.subtype == "crosswalk")
-    lane_lls = {lid: ll for lid, ll in lanelets.items() if ll.subtype != "crosswalk"}
+    crosswalk_ids = _crossing_walks(lanelets)
+    lane_lls = {lid: ll for lid, ll in lanelets.items() if lid not in crosswalk_ids}
     sections = cross_sections(lane_lls, topo)
     touch = contacts(sections, xy)
     classify(sections, touch)
@@ -714,6 +736,9 @@ def lanelet2_to_opendrive(source: Any, *, origin: tuple[float, float] | None = N
     areas = sum(1 for r in osm.relations.values() if r.tags.get("type") == "multipolygon")
     header_name = name or (osm.path.rsplit("/", 1)[-1] if osm.path else "lanelet2")
     roads = list(conv.roads.values())
+    if not roads:
+        raise MapError("no lanelet could be converted: " + ("; ".join(warnings[:5]) or "the file has none"),
+                       path=osm.path or "<osm>")
     xodr = roads_xodr(roads, junctions, name=header_name, geo_reference=proj.geo_reference, offset=proj.offset)
     return Lanelet2Conversion(
         xodr=xodr, warnings=warnings, lanelet_lanes=conv.lanelet_lanes, crosswalks=crosswalks,

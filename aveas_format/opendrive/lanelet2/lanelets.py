@@ -29,6 +29,7 @@ LANE_TYPES = {
     "road": "driving", "highway": "driving", "play_street": "driving", "emergency_lane": "shoulder",
     "bus_lane": "bus", "bicycle_lane": "biking", "walkway": "sidewalk", "shared_walkway": "sidewalk",
     "stairs": "sidewalk", "exit": "exit", "rail": "rail", "tram": "tram", "parking": "parking",
+    "crosswalk": "walking",
 }
 #: Lanelet2 line types (type, subtype) -> OpenDRIVE road mark type
 def mark_type(tags: dict[str, str]) -> str:
