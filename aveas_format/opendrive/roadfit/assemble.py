@@ -123,6 +123,11 @@ def _join(grids: list[tuple[np.ndarray, np.ndarray]], sections: list[SectionSpec
 
         for ba, bb in links:
             parent[find(("a", ba))] = find(("b", bb))
+        # a lane that ends (begins) there has no width: its two borders are one
+        for side, T, col in (("a", Ta, -1), ("b", Tb, 0)):
+            for j in range(len(T) - 1):
+                if abs(T[j, col] - T[j + 1, col]) < 1e-9:
+                    parent[find((side, j))] = find((side, j + 1))
         groups: dict[tuple[str, int], list[tuple[str, int]]] = {}
         for x in list(parent):
             groups.setdefault(find(x), []).append(x)
