@@ -115,3 +115,93 @@ def driven(x, y, px, py, radius: float = 1.0) -> np.ndarray:
 
     d, _ = cKDTree(np.column_stack([px, py])).query(np.column_stack([x, y]), distance_upper_bound=radius)
     return np.isfinite(d)
+
+
+# --- a highD-like recording ---------------------------------------------------------------------------
+#: lane centres (y, metres, y up) and highD's lane ids: the upper carriageway drives towards -x
+#: (lanes 2, 3, 4 from the top), the lower towards +x (6, 7, 8 from the median down)
+HIGHD_LANES = {2: 9.75, 3: 6.25, 4: 2.75, 6: -2.75, 7: -6.25, 8: -9.75}
+
+
+def highd_like(n_vehicles: int, *, length: float = 420.0, duration: float = 3600.0, rate: float = 25.0,
+               change_share: float = 0.3, noise: float = 0.05, seed: int = 0):
+    """States of a highD-like drone recording (vectorised): a straight motorway, three lanes each
+    way, vehicles entering at random times at their lane's speed, a share of them changing to a
+    neighbouring lane over 4 s (smoothstep), positions with ``noise`` m of noise. Returns a dict
+    of arrays: track, time, x, y, heading, lane (highD's lane id: the lane whose centre is
+    nearest, as highD assigns it by the markings)."""
+    rng = np.random.default_rng(seed)
+    ids = np.array(list(HIGHD_LANES))
+    lane0 = rng.choice(ids, n_vehicles)
+    upper = lane0 <= 4
+    speed = np.array([{2: 24, 3: 30, 4: 36, 6: 36, 7: 30, 8: 24}[k] for k in lane0]) * rng.normal(1, 0.05, n_vehicles)
+    n_steps = np.ceil(length / speed * rate).astype(np.int64) + 1
+    t0 = rng.uniform(0.0, duration - length / speed.min(), n_vehicles)
+    veh = np.repeat(np.arange(n_vehicles), n_steps)
+    k = np.arange(len(veh)) - np.repeat(np.cumsum(n_steps) - n_steps, n_steps)
+    t = t0[veh] + k / rate
+    along = speed[veh] * (k / rate)
+    x = np.where(upper[veh], length - along, along)
+    # lane changes: to the neighbouring lane (inwards or outwards), at a random point
+    change = rng.random(n_vehicles) < change_share
+    y0 = np.array([HIGHD_LANES[k] for k in lane0])
+    step = np.where(rng.random(n_vehicles) < 0.5, 3.5, -3.5)
+    y1 = y0 + step
+    valid = np.isin(np.round(y1, 2), np.round(list(HIGHD_LANES.values()), 2)) & (np.sign(y1) == np.sign(y0))
+    y1 = np.where(change & valid, y1, y0)
+    tc = rng.uniform(0.2, 0.7, n_vehicles) * (length / speed)
+    u = np.clip((k / rate - tc[veh]) / 4.0 + 0.5, 0.0, 1.0)
+    y = y0[veh] + (y1 - y0)[veh] * u * u * (3 - 2 * u)
+    heading = np.where(upper[veh], np.pi, 0.0)
+    x = x + rng.normal(0, noise, len(x))
+    y_noisy = y + rng.normal(0, noise, len(y))
+    centres = np.array(list(HIGHD_LANES.values()))
+    lane = ids[np.argmin(np.abs(y[:, None] - centres[None, :]), axis=1)]
+    return {"track": veh, "time": t, "x": x, "y": y_noisy, "heading": heading, "lane": lane}
+
+
+def lane_agreement(net, d) -> float:
+    """The share of states whose lane in ``net`` (referenced along their tracks) is the one the
+    source's lane id maps to: each built (road, lane) stands for the source lane most of its
+    states have."""
+    pr = net.world_to_road_track(d["x"], d["y"], d["heading"], d["time"], d["track"], drivable_only=True)
+    key = np.array([f"{r}|{l}" for r, l in zip(pr.road_id, pr.lane_id)])
+    uk, inv = np.unique(key, return_inverse=True)
+    us, sinv = np.unique(d["lane"], return_inverse=True)
+    counts = np.zeros((len(uk), len(us)), dtype=np.int64)
+    np.add.at(counts, (inv, sinv), 1)
+    best = counts.argmax(1)
+    ok = (best[inv] == sinv) & (pr.n_candidates > 0)
+    return float(ok.mean())
+
+
+def lane_counts(built, truth, px, py, step: float = 5.0) -> tuple[np.ndarray, np.ndarray]:
+    """At points every ``step`` m along the built map's lane centres where traffic drove: the
+    built road's lane count there and the truth's count of lanes of that direction that carry
+    traffic there (a lane centre within 1 m of a trajectory point)."""
+    from scipy.spatial import cKDTree
+
+    x, y, h, rid, lid = lane_centres(built, step=step)
+    m = driven(x, y, px, py)
+    x, y, h, rid = x[m], y[m], h[m], rid[m]
+    tree = cKDTree(np.column_stack([px, py]))
+    ours, theirs = [], []
+    pr = truth.world_to_road(x, y, h, drivable_only=True)
+    for i in np.flatnonzero(pr.n_candidates > 0):
+        road = built.roads[rid[i]]
+        s_b, _ = built.world_to_road(x[i:i + 1], y[i:i + 1]).s, None
+        sec = road.lane_sections[road.section_index(float(s_b[0]))]
+        ours.append(len(sec.right) + len(sec.left))
+        troad = truth.roads[pr.road_id[i]]
+        tsec = troad.lane_sections[troad.section_index(float(pr.s[i]))]
+        same_side = tsec.right if pr.lane_id[i] < 0 else tsec.left
+        n = 0
+        for lane in same_side:
+            if lane.type != "driving":
+                continue
+            inner, outer = truth.lane_borders(troad.id, [pr.s[i]], [lane.id])
+            cx, cy, _, _ = truth.road_to_world(troad.id, [pr.s[i]], [0.5 * (inner[0] + outer[0])])
+            if np.isfinite(tree.query([cx[0], cy[0]], distance_upper_bound=1.0)[0]):
+                n += 1
+        theirs.append(n)
+    return np.array(ours), np.array(theirs)

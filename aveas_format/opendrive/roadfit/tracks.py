@@ -308,7 +308,8 @@ def map_from_tracks(x, y, track, time, *, heading=None, vehicle=None, geo_refere
             continue
         road, specs = built
         roads.append(road)
-        cw[c] = {"road": road, "specs": specs, "frame": frame}
+        cw[c] = {"road": road, "specs": specs, "frame": frame,
+                 "fit": {"rms_m": round(ref.rms, 4), "max_m": round(ref.max_error, 4), "geometries": ref.kinds}}
     # junctions: movements through junction areas
     junctions, connecting = _junctions(flow, px, py, ph, pt, ptm, cw, o, new_id)
     roads += connecting
@@ -318,7 +319,8 @@ def map_from_tracks(x, y, track, time, *, heading=None, vehicle=None, geo_refere
     build = MapBuild(xodr, len(roads), len(junctions), len(connecting),
                      sum(len(s.left) + len(s.right) for r in roads for s in r.lane_sections))
     build.report = fit_report(build.network(), px, py, ph, seed=o.seed)
-    build.report["reference_lines"] = {c["road"].id: None for c in cw.values()}
+    # the reference lines against the walks they were fitted to
+    build.report["reference_lines"] = {c["road"].id: c["fit"] for c in cw.values()}
     build.report["options"] = {k: getattr(o, k) for k in o.__dataclass_fields__}
     build.report["points"] = {"given": int(len(x)), "moving_vehicles": int(keep.sum()), "used": int(len(idx))}
     return build
@@ -508,7 +510,7 @@ def fit_report(net, x, y, heading, *, sample: int = 300_000, seed: int = 0) -> d
     return {"points_checked": int(len(idx)), "on_lane_share": round(float(on.mean()), 4),
             "lateral_rms_m": round(float(np.sqrt(np.mean(all_off ** 2))), 4) if on.any() else None,
             "lateral_p95_m": round(float(np.percentile(all_off, 95)), 4) if on.any() else None,
-            "lanes": lanes}
+            "per_lane": lanes}
 
 
 __all__ = ["BuildOptions", "MapBuild", "fit_report", "lane_layout", "map_from_tracks", "motion", "reference_path"]
