@@ -53,6 +53,17 @@ def test_written_maps_pass_qc_opendrive(tmp_path, name):
     _qc(tmp_path, name, _maps()[name]())
 
 
+def test_maps_built_from_trajectories_pass_qc_opendrive(tmp_path):
+    from helpers_mapbuild import highd_like, sumo_scene
+
+    from aveas_format.opendrive.roadfit.tracks import map_from_tracks
+
+    d = highd_like(300, duration=300, seed=2)
+    _qc(tmp_path, "built_highd", map_from_tracks(d["x"], d["y"], d["track"], d["time"], heading=d["heading"]).xodr)
+    sc = sumo_scene(tmp_path / "sumo_scene" if (tmp_path / "sumo_scene").mkdir() is None else tmp_path)
+    _qc(tmp_path, "built_sumo", map_from_tracks(sc.x, sc.y, sc.track, sc.time, heading=sc.heading).xodr)
+
+
 @pytest.mark.realdata
 @pytest.mark.parametrize("osm,origin,kind", [("lanelet2__mapping_example.osm", (49.0, 8.4), "tmerc"),
                                              ("interaction__TestScenarioForScripts.osm", (0.0, 0.0), "utm")])

@@ -131,6 +131,9 @@ def reference_path(px, py, ph, step: float) -> np.ndarray:
     """The walk along a carriageway's points (see the module doc): an ordered polyline."""
     from scipy.spatial import cKDTree
 
+    if len(px) > 60_000:  # the walk takes medians: a sample does as well and keeps the queries small
+        keep = np.random.default_rng(0).choice(len(px), 60_000, replace=False)
+        px, py, ph = px[keep], py[keep], ph[keep]
     tree = cKDTree(np.column_stack([px, py]))
     # start in the densest part: the point with most neighbours among a few hundred
     probe = np.linspace(0, len(px) - 1, min(len(px), 300)).astype(np.int64)
