@@ -506,6 +506,8 @@ def build(
     lane_width: float = typer.Option(3.5, "--lane-width", min=1.0, help="Width of a road's only lane."),
     min_tracks: int = typer.Option(3, "--min-tracks", min=1, help="Tracks a turning movement needs to "
                                    "become a connecting road."),
+    figure: Path = typer.Option(None, "--figure", help="Draw the built lanes with the trajectories "
+                                "over them and the residuals per lane (.png, .svg, .pdf)."),
     overwrite: bool = overwrite_option(),
     fmt: OutputFormat = format_option(),
 ) -> None:
@@ -517,8 +519,12 @@ def build(
         raise fail("Missing argument 'REC_OR_TRACKS'.", EXIT_USAGE)
     if output is None:
         raise fail("Missing option '--output' / '-o' (the .xodr to write).", EXIT_USAGE)
-    outs = [output] + [p for p in (report, reference) if p is not None]
+    outs = [output] + [p for p in (report, reference, figure) if p is not None]
     check_output(outs, overwrite)
+    if figure is not None:
+        from aveas_format.errors import require
+
+        require("matplotlib", extra="plot", what="figures")
     if reference is not None and not _is_recording(source):
         raise fail("--reference needs a recording as the input (a tracks table has no recording to "
                    "reference)", EXIT_USAGE)
@@ -539,6 +545,13 @@ def build(
     if reference is not None and rec is not None:
         _rereference(rec, built.xodr.encode(), reference, overwrite)
         summary["referenced"] = str(reference)
+    if figure is not None:
+        from aveas_format.plot.mapbuild import save_build
+
+        keep = np.ones(len(x), dtype=bool) if vmask is None else np.asarray(vmask, dtype=bool)
+        save_build(built.network(), figure, np.asarray(x)[keep], np.asarray(y)[keep],
+                   None if heading is None else np.asarray(heading)[keep], title=f"built from {source.name}")
+        summary["figure"] = str(figure)
     if fmt is OutputFormat.json:
         print(json.dumps(summary, indent=2))
         return
