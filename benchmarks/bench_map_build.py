@@ -23,6 +23,35 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
 
 
+def bench_lanelet2() -> list[dict]:
+    """Lanelet2's Karlsruhe example map (../shared) -> OpenDRIVE; baseline: loading the same map
+    with Lanelet2 itself (PyPI lanelet2, its UtmProjector), in the same run."""
+    osm = HERE.parent.parent / "shared" / "data" / "real" / "lanelet2" / "lanelet2__mapping_example.osm"
+    if not osm.exists():
+        return []
+    from aveas_format.opendrive.lanelet2 import lanelet2_to_opendrive
+
+    t0 = time.perf_counter()
+    conv = lanelet2_to_opendrive(osm, origin=(49.0, 8.4))
+    t = time.perf_counter() - t0
+    base = None
+    try:
+        import lanelet2
+        from lanelet2.io import Origin
+        from lanelet2.projection import UtmProjector
+
+        t0 = time.perf_counter()
+        lanelet2.io.load(str(osm), UtmProjector(Origin(49.0, 8.4)))
+        base = time.perf_counter() - t0
+    except ImportError:
+        pass
+    return [{"benchmark": "lanelet2_to_opendrive_karlsruhe", "seconds": round(t, 2), "rows_per_s": conv.lanelets / t,
+             "baseline_s": None if base is None else round(base, 3),
+             "speedup_vs_baseline": None if base is None else round(base / t, 4),
+             "note": f"{conv.lanelets} lanelets -> {conv.roads} roads, {conv.junctions} junctions (rows = lanelets); "
+                     "baseline: lanelet2.io.load of the map (reading only)"}]
+
+
 def main(n_vehicles: int = 26_000) -> list[dict]:
     from helpers_mapbuild import highd_like, lane_agreement
 
@@ -46,7 +75,8 @@ def main(n_vehicles: int = 26_000) -> list[dict]:
             f"{100 * agree:.2f} % of states in the source's lane (every 20th track); baseline: world_to_road of "
             f"every state against the built map")
     return [{"benchmark": "map_build_highway_hour", "seconds": round(t_build, 2), "rows_per_s": n / t_build,
-             "baseline_s": round(t_ref, 2), "speedup_vs_baseline": round(t_ref / t_build, 2), "note": note}]
+             "baseline_s": round(t_ref, 2), "speedup_vs_baseline": round(t_ref / t_build, 2), "note": note}
+            ] + bench_lanelet2()
 
 
 if __name__ == "__main__":
