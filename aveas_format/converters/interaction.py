@@ -17,9 +17,10 @@ The dataset's conventions and what the converter does with them:
   (the validator checks them against the positions: in the dataset's own test file, track 2 drives
   towards -x with vx = +10, which ``validate`` reports). Pedestrian rows have no heading: it comes
   from the velocity where they move faster than 0.2 m/s, else from the last such state.
-- **Classes.** ``car`` -> car, ``truck``/``truck_bus`` -> truck / bus by length (>= 10 m: bus when
-  the label says bus), ``motorcycle``, ``bicycle``, ``pedestrian`` as named, the pedestrian files'
-  ``pedestrian/bicycle`` -> pedestrian with a PMF shared with bicycle (the label does not say which).
+- **Classes.** ``car`` -> car, ``truck`` and ``truck_bus`` (the dataset's one label for both) ->
+  truck, ``bus``, ``motorcycle``, ``bicycle``, ``pedestrian`` as named, the pedestrian files'
+  ``pedestrian/bicycle`` -> pedestrian with a PMF shared half and half with bicycle (the label
+  does not say which).
 - **Uncertainty.** The dataset states none for its tracks; the converter uses the options
   ``position_std`` (0.1 m), ``velocity_std`` (0.3 m/s), ``heading_std`` (0.05 rad) and
   ``size_std`` (0.1 m) and says so once (a ``source.other`` finding).
