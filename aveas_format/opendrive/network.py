@@ -18,16 +18,9 @@ from .projection import Projection, SpatialIndex, project, project_track
 
 
 class RoadNetwork(NetworkCore):
-    """An OpenDRIVE road network (see :func:`aveas_format.opendrive.load_map`).
-
-    Attributes: ``header`` (:class:`~.model.Header`), ``roads`` (dict road id -> :class:`~.model.Road`),
-    ``junctions`` (dict junction id -> :class:`~.model.Junction`), ``path`` (source file or None).
-
-    Coordinates are those of the file (its local x/y frame; the header ``<offset>`` is *not*
-    applied: ``aveas_format.mapref.crs`` maps them to the geoReference CRS). ``t`` is positive to the
-    left of the reference line; lane ids are positive left, negative right, 0 the centre lane.
-    Every method is vectorised over its array arguments.
-    """
+    """An OpenDRIVE road network (see :func:`aveas_format.opendrive.load_map`): the attributes,
+    conventions and road-coordinate methods of :class:`~.core.NetworkCore`, plus world -> road,
+    lane polygons, the bounds and the self-check."""
 
     # -- world -> road -------------------------------------------------------------------------------
     @cached_property

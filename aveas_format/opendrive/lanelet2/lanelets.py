@@ -83,11 +83,12 @@ class Lanelet:
 
     @property
     def length(self) -> float:
-        mid = 0.5 * (_resample(self.left, 32) + _resample(self.right, 32))
+        mid = 0.5 * (by_share(self.left, 32) + by_share(self.right, 32))
         return float(np.hypot(*np.diff(mid, axis=0).T).sum())
 
 
-def _resample(pts: np.ndarray, n: int) -> np.ndarray:
+def by_share(pts: np.ndarray, n: int) -> np.ndarray:
+    """``n`` points along a polyline at equal shares of its length (its ends included)."""
     cum = np.r_[0.0, np.cumsum(np.hypot(*np.diff(pts, axis=0).T))]
     if cum[-1] <= 0:
         return np.repeat(pts[:1], n, 0)
@@ -190,4 +191,4 @@ def topology(lanelets: dict[int, Lanelet], xy: np.ndarray, tol: float = 1e-3) ->
     return Topology(dict(succ), dict(pred), dict(users))
 
 
-__all__ = ["LANE_TYPES", "Lanelet", "Topology", "mark_type", "read_lanelets", "topology"]
+__all__ = ["LANE_TYPES", "Lanelet", "Topology", "by_share", "mark_type", "read_lanelets", "topology"]

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from aveas_format.opendrive.lanelet2.lanelets import Lanelet, Topology
+from aveas_format.opendrive.lanelet2.lanelets import Lanelet, Topology, by_share
 
 VEHICLE_TYPES = frozenset({"driving", "bidirectional", "bus", "exit", "shoulder"})
 
@@ -88,7 +88,7 @@ class CrossSection:
         la = float(np.hypot(*np.diff(a, axis=0).T).sum())
         lb = float(np.hypot(*np.diff(b, axis=0).T).sum())
         n = max(2, int(np.ceil(max(la, lb) / step)) + 1)
-        return 0.5 * (_by_share(a, n) + _by_share(b, n))
+        return 0.5 * (by_share(a, n) + by_share(b, n))
 
     @property
     def centre(self) -> int:
@@ -107,14 +107,6 @@ class CrossSection:
     @property
     def vehicle(self) -> bool:
         return any(m.lanelet.lane_type in VEHICLE_TYPES for m in self.members)
-
-
-def _by_share(pts: np.ndarray, n: int) -> np.ndarray:
-    cum = np.r_[0.0, np.cumsum(np.hypot(*np.diff(pts, axis=0).T))]
-    if cum[-1] <= 0:
-        return np.repeat(pts[:1], n, 0)
-    u = np.linspace(0.0, cum[-1], n)
-    return np.column_stack([np.interp(u, cum, pts[:, 0]), np.interp(u, cum, pts[:, 1])])
 
 
 def cross_sections(lanelets: dict[int, Lanelet], topo: Topology) -> list[CrossSection]:
