@@ -83,8 +83,16 @@ def env(tmp_path_factory):
     (d / "fcd.xml").write_text(FCD)
     bare = re.sub(r"<geoReference>.*?</geoReference>", "", STRAIGHT_MAP.read_text(), flags=re.S)
     (d / "bare.xodr").write_text(bare)  # a map without geoReference: the CRS must be given
+    from helpers_lanelet2 import crossroads
+    from helpers_mapbuild import highd_like
+
+    (d / "site.osm").write_text(crossroads()[0])  # a Lanelet2 map (map convert)
+    t = highd_like(60, duration=120, seed=1)  # tracks (map build)
+    (d / "tracks.csv").write_text("track_id,time,x,y\n" + "".join(
+        f"{a},{b:.3f},{c:.3f},{e:.3f}\n" for a, b, c, e in zip(t["track"], t["time"], t["x"], t["y"])))
     return {"REC": rec, "MAP": STRAIGHT_MAP, "PTS": d / "points.csv", "FCD": d / "fcd.xml",
-            "BARE": d / "bare.xodr", "DERIVED": derived}
+            "BARE": d / "bare.xodr", "DERIVED": derived, "OSM": d / "site.osm", "TRACKS": d / "tracks.csv",
+            "XODR_OUT": d / "out.xodr"}
 
 
 def fill(args, env, **extra) -> list[str]:
@@ -178,6 +186,8 @@ OUTPUT_RUNS: dict[tuple[str, ...], tuple[tuple[str, ...], str]] = {
     ("demo",): (("demo", "-o", "OUT", "--vehicles", "3", "--duration", "2"), "dir/"),
     ("derive",): (("derive", "REC", "-o", "OUT"), "out.aveas"),
     ("export",): (("export", "--to", "openlabel", "REC", "-o", "OUT"), "out.json"),
+    ("map", "build"): (("map", "build", "TRACKS", "-o", "OUT"), "out.xodr"),
+    ("map", "convert"): (("map", "convert", "OSM", "-o", "OUT"), "out.xodr"),
     ("map", "plot"): (("map", "plot", "MAP", "-o", "OUT"), "out.png"),
     ("map", "project"): (("map", "project", "MAP", "-p", "PTS", "-o", "OUT"), "out.csv"),
     ("plot",): (("plot", "REC", "-o", "OUT"), "dir/"),
@@ -234,7 +244,9 @@ JSON_RUNS: dict[tuple[str, ...], tuple[str, ...]] = {
     ("export",): ("export", "--list"),
     ("find",): ("find", "DERIVED"),
     ("info",): ("info", "REC"),
+    ("map", "build"): ("map", "build", "TRACKS", "-o", "XODR_OUT", "--overwrite"),
     ("map", "check"): ("map", "check", "MAP"),
+    ("map", "convert"): ("map", "convert", "OSM", "--origin", "49,8.4", "-o", "XODR_OUT", "--overwrite"),
     ("map", "info"): ("map", "info", "MAP"),
     ("validate",): ("validate", "REC"),
 }

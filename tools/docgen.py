@@ -323,10 +323,12 @@ def main() -> int:
     if "--figures" in sys.argv[1:]:
         import derive_figures
         import layers
+        import map_figures
         import report_figures
 
         for path in [*derive_figures.main(DOCS / "figures"),
                      *report_figures.main(DOCS / "figures"),
+                     *map_figures.main(DOCS / "figures"),
                      layers.figure(DOCS / "figures" / "architecture_layers.png")]:
             print(f"wrote {path}", file=sys.stderr)
         return 0

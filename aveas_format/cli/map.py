@@ -1,4 +1,5 @@
-"""``aveas-format map``: OpenDRIVE maps — info, project (world -> road), plot, check."""
+"""``aveas-format map``: OpenDRIVE maps — info, project (world -> road), plot, check, convert
+(Lanelet2 -> OpenDRIVE), build (from trajectories)."""
 
 from __future__ import annotations
 
@@ -24,7 +25,8 @@ from aveas_format.cli.options import (
 
 map_app = typer.Typer(
     help="OpenDRIVE maps: `info` (summary), `project` (x, y -> road, lane, s, t), `plot` (PNG of "
-    "the lanes) and `check` (self-consistency).",
+    "the lanes), `check` (self-consistency), `convert` (a Lanelet2 map to OpenDRIVE) and `build` "
+    "(a map from recorded trajectories).",
     no_args_is_help=True,
     rich_markup_mode="markdown",
     context_settings={"help_option_names": ["-h", "--help"]},
@@ -370,3 +372,216 @@ def check(
               f"({net.path or 'map'})")
     if summary["error"]:
         raise typer.Exit(EXIT_FINDINGS)
+
+
+# ----------------------------------------------------------------------------------------------
+# convert (Lanelet2 -> OpenDRIVE)
+def _origin(text: str | None) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    try:
+        lat, lon = (float(v) for v in text.split(","))
+    except ValueError:
+        raise fail(f"--origin {text!r}: expected LAT,LON in degrees (e.g. 49.0,8.4)", EXIT_USAGE) from None
+    if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+        raise fail(f"--origin {text!r}: latitude or longitude out of range", EXIT_USAGE)
+    return lat, lon
+
+
+@map_app.command("convert")
+@handle_errors
+def convert(
+    source: Path = typer.Argument(None, metavar="MAP.osm", help="The Lanelet2 map (OSM XML)."),
+    output: Path = typer.Option(None, "--output", "-o", help="The OpenDRIVE map to write (.xodr)."),
+    origin: str = typer.Option(None, "--origin", metavar="LAT,LON", help="Origin of the local frame "
+                               "(default: the centre of the map's nodes)."),
+    projection: str = typer.Option("tmerc", "--projection", help="tmerc: a transverse Mercator at the "
+                                   "origin; utm: Lanelet2's UtmProjector (UTM minus the origin's UTM)."),
+    tolerance: float = typer.Option(0.02, "--tolerance", min=0.001, help="Metres the lane borders may "
+                                    "deviate from the lanelet bounds."),
+    overwrite: bool = overwrite_option(),
+    fmt: OutputFormat = format_option(),
+) -> None:
+    """Convert a Lanelet2 map to OpenDRIVE 1.8: lanelets -> lanes whose borders are their bounds,
+    successors -> lane links, intersections -> junctions with connecting roads, traffic lights,
+    stop lines, crosswalks and speed limits; the projection -> `<geoReference>`. Exit 1 when a
+    lanelet could not be converted (each is named)."""
+    if source is None:
+        raise fail("Missing argument 'MAP.osm'.", EXIT_USAGE)
+    if output is None:
+        raise fail("Missing option '--output' / '-o' (the .xodr to write).", EXIT_USAGE)
+    if projection not in ("tmerc", "utm"):
+        raise fail(f"--projection {projection!r}: use tmerc or utm", EXIT_USAGE)
+    check_output(output, overwrite)
+    from aveas_format.opendrive.lanelet2 import lanelet2_to_opendrive
+
+    conv = lanelet2_to_opendrive(source, origin=_origin(origin), projection_kind=projection, tol=tolerance)
+    conv.write(output)
+    lost = [w for w in conv.warnings if w.startswith("lanelet")]
+    summary = {"map": str(source), "output": str(output), "lanelets": conv.lanelets,
+               "converted_lanelets": len(conv.lanelet_lanes), "crosswalk_objects": len(conv.crosswalks),
+               "roads": conv.roads, "junctions": conv.junctions, "signals": conv.signals,
+               "areas_not_converted": conv.areas, "geo_reference": conv.geo_reference,
+               "offset": list(conv.offset) if conv.offset else None, "origin": list(conv.origin),
+               **conv.stats, "warnings": conv.warnings}
+    if fmt is OutputFormat.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        for w in conv.warnings:
+            err.print(f"warning: {w}")
+        print_table([
+            ("map", f"{source} -> {output}"),
+            ("lanelets", f"{conv.lanelets}: {len(conv.lanelet_lanes)} as lanes, {len(conv.crosswalks)} "
+             f"crosswalks as objects, {len(lost)} not converted"),
+            ("roads", f"{conv.roads} ({conv.stats['connecting_roads']} connecting roads in {conv.junctions} "
+             "junctions)"),
+            ("lanes", f"{conv.stats['lanes']} in {conv.stats['lane_sections']} lane sections"),
+            ("signals", str(conv.signals)),
+            ("areas", f"{conv.areas} multipolygon areas (not lanes) left out"),
+            ("frame", conv.geo_reference + (f" minus ({conv.offset[0]:.3f}, {conv.offset[1]:.3f})" if conv.offset else "")),
+        ])
+    if lost:
+        raise typer.Exit(EXIT_FINDINGS)
+
+
+# ----------------------------------------------------------------------------------------------
+# build (a map from trajectories)
+_VEHICLES = ("car", "van", "truck", "bus", "trailer", "motorcycle")
+
+
+def _is_recording(path: Path) -> bool:
+    return (path.is_dir() and (path / "recording.json").exists()) or path.name.endswith((".aveas", ".aveas.zip"))
+
+
+def _tracks_of(path: Path):
+    """x, y, track, time, heading (or None), vehicle mask, CRS and the opened recording (or None)
+    of a recording or a tracks table (CSV/Parquet: track_id or participant_id, time, x, y[, heading,
+    class])."""
+    import pyarrow as pa
+
+    from aveas_format.errors import FormatError
+
+    if _is_recording(path):
+        import aveas_format
+
+        rec = aveas_format.open(path)
+        s, p = rec.states, rec.participants
+        pid = s.column("participant_id").to_numpy()
+        cls = dict(zip(p.column("participant_id").to_pylist(), p.column("class").to_pylist()))
+        vehicle = np.isin(np.array([cls.get(int(i), "car") for i in np.unique(pid)], dtype=object), _VEHICLES)
+        vmask = vehicle[np.searchsorted(np.unique(pid), pid)]
+        crs = rec.meta.crs or (rec.map.header.geo_reference if rec.map_source else None)
+        return (s.column("x").to_numpy(), s.column("y").to_numpy(), pid, s.column("time").to_numpy(),
+                s.column("heading").to_numpy(), vmask, crs, rec)
+    table = read_points(path)
+    names = table.column_names
+    tcol = next((c for c in ("track_id", "participant_id", "id") if c in names), None)
+    if tcol is None or "time" not in names:
+        raise FormatError(f"a tracks table needs a track column (track_id, participant_id or id) and time; "
+                          f"columns: {', '.join(names)}", path=path)
+    track = table.column(tcol).cast(pa.string()).to_numpy(zero_copy_only=False)
+    heading = table.column("heading").to_numpy(zero_copy_only=False).astype(float) if "heading" in names else None
+    vmask = None
+    for c in ("class", "agent_type"):
+        if c in names:
+            vmask = np.isin(np.array([str(v).lower() for v in table.column(c).to_pylist()], dtype=object), _VEHICLES)
+    return (table.column("x").to_numpy(zero_copy_only=False).astype(float),
+            table.column("y").to_numpy(zero_copy_only=False).astype(float), track,
+            table.column("time").to_numpy(zero_copy_only=False).astype(float), heading, vmask, None, None)
+
+
+@map_app.command("build")
+@handle_errors
+def build(
+    source: Path = typer.Argument(None, metavar="REC_OR_TRACKS", help="A recording, or a tracks table "
+                                  "(CSV/Parquet: track_id, time, x, y[, heading, class])."),
+    output: Path = typer.Option(None, "--output", "-o", help="The OpenDRIVE map to write (.xodr)."),
+    report: Path = typer.Option(None, "--report", help="Write the fit report (JSON) here."),
+    reference: Path = typer.Option(None, "--reference", help="Also write the recording referenced "
+                                   "against the built map here (a recording given as the input)."),
+    geo_reference: str = typer.Option(None, "--geo-reference", help="The map's <geoReference> (default: "
+                                      "the recording's CRS)."),
+    tolerance: float = typer.Option(0.05, "--tolerance", min=0.001, help="Metres the lane borders may "
+                                    "deviate from where the trajectories put them."),
+    lane_width: float = typer.Option(3.5, "--lane-width", min=1.0, help="Width of a road's only lane."),
+    min_tracks: int = typer.Option(3, "--min-tracks", min=1, help="Tracks a turning movement needs to "
+                                   "become a connecting road."),
+    figure: Path = typer.Option(None, "--figure", help="Draw the built lanes with the trajectories "
+                                "over them and the residuals per lane (.png, .svg, .pdf)."),
+    overwrite: bool = overwrite_option(),
+    fmt: OutputFormat = format_option(),
+) -> None:
+    """Build an OpenDRIVE 1.8 map from the paths participants drive: carriageways and junctions
+    from the flow of traffic, lanes per direction with their widths, lane sections where the lane
+    count changes, one connecting road per driven turning movement; prints how well it fits (the
+    lateral residuals of the trajectories per lane)."""
+    if source is None:
+        raise fail("Missing argument 'REC_OR_TRACKS'.", EXIT_USAGE)
+    if output is None:
+        raise fail("Missing option '--output' / '-o' (the .xodr to write).", EXIT_USAGE)
+    outs = [output] + [p for p in (report, reference, figure) if p is not None]
+    check_output(outs, overwrite)
+    if figure is not None:
+        from aveas_format.errors import require
+
+        require("matplotlib", extra="plot", what="figures")
+    if reference is not None and not _is_recording(source):
+        raise fail("--reference needs a recording as the input (a tracks table has no recording to "
+                   "reference)", EXIT_USAGE)
+    from aveas_format.opendrive.roadfit.tracks import BuildOptions, map_from_tracks
+
+    x, y, track, time, heading, vmask, crs, rec = _tracks_of(source)
+    opts = BuildOptions(tol=tolerance, lane_width=lane_width, min_tracks=min_tracks)
+    built = map_from_tracks(x, y, track, time, heading=heading, vehicle=vmask,
+                            geo_reference=geo_reference or crs, options=opts,
+                            name=f"built from {source.name}")
+    built.write(output)
+    summary = {"source": str(source), "output": str(output), "roads": built.roads, "junctions": built.junctions,
+               "connecting_roads": built.connecting_roads, "lanes": built.lanes, **built.report}
+    if report is not None:
+        from aveas_format.safeio import write_text_atomic
+
+        write_text_atomic(report, json.dumps(summary, indent=2))
+    if reference is not None and rec is not None:
+        _rereference(rec, built.xodr.encode(), reference, overwrite)
+        summary["referenced"] = str(reference)
+    if figure is not None:
+        from aveas_format.plot.mapbuild import save_build
+
+        keep = np.ones(len(x), dtype=bool) if vmask is None else np.asarray(vmask, dtype=bool)
+        save_build(built.network(), figure, np.asarray(x)[keep], np.asarray(y)[keep],
+                   None if heading is None else np.asarray(heading)[keep], title=f"built from {source.name}")
+        summary["figure"] = str(figure)
+    if fmt is OutputFormat.json:
+        print(json.dumps(summary, indent=2))
+        return
+    print_table([
+        ("map", f"{source} -> {output}"),
+        ("roads", f"{built.roads} ({built.connecting_roads} connecting roads in {built.junctions} junctions)"),
+        ("lanes", str(built.lanes)),
+        ("points", f"{built.report['points']['used']:,} of {built.report['points']['given']:,} (moving vehicles)"),
+        ("on a lane", f"{100 * built.report['on_lane_share']:.2f} %"),
+        ("lateral", f"RMS {built.report['lateral_rms_m']} m, p95 {built.report['lateral_p95_m']} m from the "
+                    "lane centres"),
+    ] + [(f"road {ln['road_id']} lane {ln['lane_id']}", f"{ln['points']:,} points, RMS {ln['rms_m']} m, "
+          f"p95 {ln['p95_m']} m") for ln in built.report["per_lane"]])
+
+
+def _rereference(rec, xodr: bytes, path: Path, overwrite: bool) -> None:
+    """Write ``rec`` with the built map and its states' road coordinates against it."""
+    from aveas_format.mapref.roads import road_coordinates
+    from aveas_format.opendrive import load_map
+
+    s = rec.states
+    net = load_map(xodr)
+    cols = road_coordinates(net, s.column("participant_id").to_numpy(), s.column("time").to_numpy(),
+                            s.column("x").to_numpy(), s.column("y").to_numpy(), s.column("heading").to_numpy())
+    for name, arr in cols.items():
+        if name in s.column_names:
+            s = s.set_column(s.column_names.index(name), name, arr)
+        else:
+            s = s.append_column(name, arr)
+    rec.replace_tables({"states": s})
+    rec.map_source = xodr
+    rec._map = None
+    rec.write(path, overwrite=overwrite)

@@ -10,8 +10,6 @@ See ``docs/opendrive.md`` for the conventions and limits.
 
 from __future__ import annotations
 
-from typing import Any
-
 from .model import (
     Connection,
     Geometry,
@@ -27,21 +25,9 @@ from .model import (
     RoadObject,
     RoadType,
 )
-from .roadfit import RoadFit, fit_reference_line, fit_road, road_from_lane_markings
-from .network import RoadNetwork
+from .network import RoadNetwork, load_map
 from .projection import Projection
-
-
-def load_map(source: Any) -> RoadNetwork:
-    """Read an OpenDRIVE map: a path, bytes, or XML text (a str starting with ``<``).
-
-    Raises :class:`~aveas_format.errors.MapError` (a ValueError) naming the path and XML line for
-    malformed maps, and :class:`~aveas_format.errors.RecordingIOError` for unreadable files.
-    """
-    from .reader import parse
-
-    header, roads, junctions, path = parse(source)
-    return RoadNetwork(header, roads, junctions, path)
+from .roadfit import RoadFit, fit_reference_line, fit_road, road_from_lane_markings
 
 
 __all__ = [

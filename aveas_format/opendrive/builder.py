@@ -1,4 +1,4 @@
-"""Generate OpenDRIVE 1.6 maps of multi-lane highways (for demos, tests and the SUMO runner).
+"""Generate OpenDRIVE 1.8 maps of multi-lane highways (for demos, tests and the SUMO runner).
 
 >>> from aveas_format.opendrive.builder import straight_highway
 >>> xodr = straight_highway(length=500.0, lanes_right=2)
@@ -45,7 +45,7 @@ def _lanes(n: int, side: int, lane_width: float) -> list[Lane]:
     return out
 
 
-def _chain(geoms: list[Geometry], x0: float, y0: float, hdg: float) -> list[Geometry]:
+def chain_geometries(geoms: list[Geometry], x0: float, y0: float, hdg: float) -> list[Geometry]:
     """Set each geometry's start (s, x, y, hdg) to the exact end of the previous one."""
     s = 0.0
     x, y, h = x0, y0, hdg
@@ -78,7 +78,7 @@ def _road_xodr(
         raise ValueError("a highway needs at least one lane (lanes_right + lanes_left >= 1)")
     if lane_width <= 0:
         raise ValueError("lane_width must be positive")
-    geoms = _chain(geoms, x0, y0, hdg)
+    geoms = chain_geometries(geoms, x0, y0, hdg)
     length = float(sum(g.length for g in geoms))
     centre_mark = RoadMark(
         s_offset=0.0,
@@ -116,7 +116,7 @@ def _road_xodr(
     ys = np.concatenate([y + t * np.cos(h) for t in half])
     header = Header(
         rev_major=1,
-        rev_minor=6,
+        rev_minor=8,
         name=name,
         vendor="aveas_format",
         north=float(ys.max()),
@@ -145,7 +145,7 @@ def straight_highway(
     """A straight road of ``length`` m starting at (x0, y0) with heading ``hdg`` (rad).
 
     Right lanes (ids -1..-lanes_right) drive along +s under right-hand traffic; left lanes
-    (1..lanes_left) the other way. ``speed_limit`` is in m/s. Returns OpenDRIVE 1.6 XML text.
+    (1..lanes_left) the other way. ``speed_limit`` is in m/s. Returns OpenDRIVE 1.8 XML text.
     """
     if length <= 0:
         raise ValueError("length must be positive")
@@ -174,7 +174,7 @@ def curved_highway(
 ) -> str:
     """A highway of total ``length`` m: ``straight`` m of line, ``spiral`` m of clothoid from
     curvature 0 to ``1/radius``, then an arc of ``radius`` (positive: turning left, negative:
-    right) for the rest. Returns OpenDRIVE 1.6 XML text."""
+    right) for the rest. Returns OpenDRIVE 1.8 XML text."""
     if radius == 0:
         raise ValueError("radius must be non-zero")
     arc_len = length - straight - spiral
@@ -214,7 +214,7 @@ def roads_xodr(
     name: str = "",
     geo_reference: str | None = None,
     offset: tuple[float, float, float, float] | None = None,
-    rev_minor: int = 6,
+    rev_minor: int = 8,
 ) -> str:
     """OpenDRIVE 1.``rev_minor`` text of hand-made or fitted roads (:mod:`.model` dataclasses).
 

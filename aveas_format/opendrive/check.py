@@ -38,7 +38,7 @@ import numpy as np
 from .polygons import section_samples
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .network import RoadNetwork
+    from .core import NetworkCore
 
 GAP_TOL = 1e-3
 HEADING_TOL = 1e-3
@@ -58,14 +58,14 @@ class Finding:
     value: float | None = None
 
 
-def _geometry(net: RoadNetwork) -> list[Finding]:
+def _geometry(net: NetworkCore) -> list[Finding]:
     out = []
     pv = net.plan
     xe, ye, he = pv.end_points()
     for i in range(len(pv.road) - 1):
         if pv.road[i] != pv.road[i + 1]:
             continue
-        rid = net._road_ids[pv.road[i]]
+        rid = net.road_ids[pv.road[i]]
         gap = float(np.hypot(xe[i] - pv.x0[i + 1], ye[i] - pv.y0[i + 1]))
         if gap > GAP_TOL:
             out.append(
@@ -102,7 +102,7 @@ def _geometry(net: RoadNetwork) -> list[Finding]:
                     ds,
                 )
             )
-    for road in net._road_list:
+    for road in net.road_list:
         last = road.geometries[-1]
         d = last.s + last.length - road.length
         if abs(d) > GAP_TOL:
@@ -119,12 +119,12 @@ def _geometry(net: RoadNetwork) -> list[Finding]:
     return out
 
 
-def _lanes(net: RoadNetwork, step: float = 2.0) -> list[Finding]:
+def _lanes(net: NetworkCore, step: float = 2.0) -> list[Finding]:
     out = []
     lanes = net.lanes
     for gsec in range(len(lanes.section_road)):
         ri = int(lanes.section_road[gsec])
-        road = net._road_list[ri]
+        road = net.road_list[ri]
         sec = road.lane_sections[int(lanes.section_local[gsec])]
         s = section_samples(net, gsec, step)
         # evaluate just inside each piece's end as well
@@ -183,10 +183,10 @@ def _section_lane_ids(road, at_start: bool) -> set[int]:
     return {ln.id for ln in sec.left + sec.right}
 
 
-def _links(net: RoadNetwork) -> list[Finding]:
+def _links(net: NetworkCore) -> list[Finding]:
     out = []
     roads, junctions = net.roads, net.junctions
-    for road in net._road_list:
+    for road in net.road_list:
         for kind, link in (("predecessor", road.predecessor), ("successor", road.successor)):
             if link is None:
                 continue
@@ -280,7 +280,7 @@ def _links(net: RoadNetwork) -> list[Finding]:
     return out
 
 
-def _georef(net: RoadNetwork) -> list[Finding]:
+def _georef(net: NetworkCore) -> list[Finding]:
     geo = net.header.geo_reference
     line = net.header.line
     if not geo:
@@ -316,7 +316,7 @@ def _georef(net: RoadNetwork) -> list[Finding]:
     return out
 
 
-def check_network(net: RoadNetwork) -> list[Finding]:
+def check_network(net: NetworkCore) -> list[Finding]:
     """All findings for ``net``: geometry continuity, lanes, links, geoReference."""
     return _geometry(net) + _lanes(net) + _links(net) + _georef(net)
 

@@ -25,7 +25,7 @@ class Header:
     """``<header>``: revision, name, bounding box, ``<geoReference>`` and ``<offset>``."""
 
     rev_major: int = 1
-    rev_minor: int = 6
+    rev_minor: int = 8
     name: str = ""
     date: str = ""
     vendor: str = ""
@@ -40,7 +40,7 @@ class Header:
 
     @property
     def version(self) -> str:
-        """``"revMajor.revMinor"``, e.g. ``"1.6"``."""
+        """``"revMajor.revMinor"``, e.g. ``"1.8"``."""
         return f"{self.rev_major}.{self.rev_minor}"
 
 

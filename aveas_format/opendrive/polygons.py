@@ -8,10 +8,10 @@ import numpy as np
 import shapely
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .network import RoadNetwork
+    from .core import NetworkCore
 
 
-def section_samples(net: RoadNetwork, gsec: int, step: float) -> np.ndarray:
+def section_samples(net: NetworkCore, gsec: int, step: float) -> np.ndarray:
     """Sample positions s along lane section ``gsec``: every ``step`` m plus its pieces' starts."""
     lanes = net.lanes
     a, b = lanes.section_start[gsec], lanes.section_end[gsec]
@@ -20,7 +20,7 @@ def section_samples(net: RoadNetwork, gsec: int, step: float) -> np.ndarray:
     return np.unique(np.concatenate([np.linspace(a, b, n), lanes.piece_start[first : first + cnt]]))
 
 
-def lane_polygons(net: RoadNetwork, step: float = 1.0, drivable_only: bool = False) -> list[tuple[str, int, int, Any]]:
+def lane_polygons(net: NetworkCore, step: float = 1.0, drivable_only: bool = False) -> list[tuple[str, int, int, Any]]:
     """``[(road_id, section_index, lane_id, Polygon)]`` for every lane with a non-zero width.
 
     Each polygon runs along the inner border from the section's start to its end and back along
@@ -38,14 +38,14 @@ def lane_polygons(net: RoadNetwork, step: float = 1.0, drivable_only: bool = Fal
         b = lanes.borders(piece, s)
         nx, ny = -np.sin(h), np.cos(h)
         p0 = piece[0]
-        road_id = net._road_ids[ri]
+        road_id = net.road_ids[ri]
         for outers, ids, types in ((b.left, lanes.lid[p0], lanes.ltype[p0]), (b.right, lanes.rid[p0], lanes.rtype[p0])):
             inners = np.concatenate([b.center[:, None], outers[:, :-1]], axis=1)
             for k in range(outers.shape[1]):
                 lid = int(ids[k])
                 if lid == 0:
                     continue
-                if drivable_only and not (types[k] >= 0 and net._drivable_code[types[k]]):
+                if drivable_only and not (types[k] >= 0 and net.drivable_code[types[k]]):
                     continue
                 ti, to = inners[:, k], outers[:, k]
                 if np.max(np.abs(to - ti)) < 1e-9:

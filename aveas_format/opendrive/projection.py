@@ -38,7 +38,7 @@ from aveas_format.numeric import wrap_angle
 from .geometry import ARC, LINE, POLY3, PPOLY3, SPIRAL
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .network import RoadNetwork
+    from .core import NetworkCore
 
 _S_TOL = 1e-7  # metres a foot point may lie outside its geometry's s range
 #: second pass for points that found no road: foot points up to this far beyond a geometry's
@@ -92,7 +92,7 @@ def _py(v: Any) -> Any:
 class SpatialIndex:
     """Chunks of all roads in an STRtree (see the module doc)."""
 
-    def __init__(self, net: RoadNetwork, chunk_length: float = 10.0, margin: float = 0.25, cell: float = 8.0) -> None:
+    def __init__(self, net: NetworkCore, chunk_length: float = 10.0, margin: float = 0.25, cell: float = 8.0) -> None:
         pv = net.plan
         lanes = net.lanes
         L = pv.length
@@ -115,7 +115,7 @@ class SpatialIndex:
         x, y, h, _, _ = pv.evaluate(gg, dsf)
         s_abs = pv.s0[gg] + dsf
         rr = pv.road[gg]
-        piece = lanes.find_piece(rr, np.clip(s_abs, 0, net._road_length[rr]))
+        piece = lanes.find_piece(rr, np.clip(s_abs, 0, net.road_length[rr]))
         bd = lanes.borders(piece, s_abs)
         tl, tr = lanes.extent(bd)
         tl = tl.reshape(-1, m).max(1)
@@ -225,7 +225,7 @@ class SpatialIndex:
 
 
 # ----------------------------------------------------------------------------------------------
-def _solve_chunks(net: RoadNetwork, idx: SpatialIndex, px: np.ndarray, py: np.ndarray, chunk: np.ndarray):
+def _solve_chunks(net: NetworkCore, idx: SpatialIndex, px: np.ndarray, py: np.ndarray, chunk: np.ndarray):
     """Foot point (local ds on the chunk's geometry) for each (point, chunk) pair.
 
     Returns ``(ds, rows, ds_extra)``: ``rows`` index pairs that have a second foot point
@@ -351,7 +351,7 @@ def _newton_p(pv, idx, g, c, qx, qy, iters: int = 12):
 
 
 # ----------------------------------------------------------------------------------------------
-def _project_batch(net: RoadNetwork, x, y, heading, drivable_only: bool, s_tol: float = _S_TOL):
+def _project_batch(net: NetworkCore, x, y, heading, drivable_only: bool, s_tol: float = _S_TOL):
     idx = net.spatial_index
     pv = net.plan
     lanes = net.lanes
@@ -368,7 +368,7 @@ def _project_batch(net: RoadNetwork, x, y, heading, drivable_only: bool, s_tol: 
     ok &= (ds >= -s_tol) & (ds <= L + s_tol)
     road = pv.road[g]
     s = pv.s0[g] + np.clip(ds, 0.0, L)
-    ok &= (s >= -_S_TOL) & (s <= net._road_length[road] + _S_TOL)
+    ok &= (s >= -_S_TOL) & (s <= net.road_length[road] + _S_TOL)
     sel = np.flatnonzero(ok)
     pt, g, ds, road, s, qx, qy, ch = pt[sel], g[sel], ds[sel], road[sel], s[sel], qx[sel], qy[sel], ch[sel]
     ds = np.clip(ds, 0.0, pv.length[g])
@@ -378,20 +378,20 @@ def _project_batch(net: RoadNetwork, x, y, heading, drivable_only: bool, s_tol: 
     # cheap rejection by the chunk's lateral extent before evaluating lane borders
     sel = np.flatnonzero((t <= idx.tl[ch] + 0.1) & (t >= idx.tr[ch] - 0.1))
     pt, road, s, t, rh, kap, speed = pt[sel], road[sel], s[sel], t[sel], rh[sel], kap[sel], speed[sel]
-    s = np.clip(s, 0.0, net._road_length[road])
+    s = np.clip(s, 0.0, net.road_length[road])
     piece = lanes.find_piece(road, s)
     bd = lanes.borders(piece, s)
     lane_id, lane_off, inner, outer, ltype = lanes.locate(bd, t)
     keep = lane_id != 0
     if drivable_only:
-        keep &= net._drivable_code[np.maximum(ltype, 0)] & (ltype >= 0)
+        keep &= net.drivable_code[np.maximum(ltype, 0)] & (ltype >= 0)
     sel = np.flatnonzero(keep)
     pt, road, s, t, rh, kap, speed = pt[sel], road[sel], s[sel], t[sel], rh[sel], kap[sel], speed[sel]
     lane_id, lane_off, ltype = lane_id[sel], lane_off[sel], ltype[sel]
     width = np.abs(outer[sel] - inner[sel])
     fold = (speed - t * kap) <= 0
     # merge duplicates: same point, same road, same s (a foot point on a chunk boundary)
-    nroad = len(net._road_list)
+    nroad = len(net.road_list)
     order = np.argsort(pt * nroad + road, kind="stable")
     pt, road, s, t, rh, lane_id, lane_off, ltype, width, fold = (
         a[order] for a in (pt, road, s, t, rh, lane_id, lane_off, ltype, width, fold)
@@ -408,14 +408,14 @@ def _project_batch(net: RoadNetwork, x, y, heading, drivable_only: bool, s_tol: 
     if heading is not None:
         hq = heading[pt]
         rel = wrap_angle(hq - rh)
-        rht = net._road_rht[road]
+        rht = net.road_rht[road]
         with_flow = np.where((lane_id < 0) == rht, rel, wrap_angle(rel - np.pi))
         cost = np.abs(with_flow)
     else:
         rel = np.full(len(pt), np.nan)
         cost = np.zeros(len(pt))
-    cost = cost + 0.5 * net._road_in_junction[road]
-    cost = cost + 0.25 * ~(net._drivable_code[np.maximum(ltype, 0)] & (ltype >= 0))
+    cost = cost + 0.5 * net.road_in_junction[road]
+    cost = cost + 0.25 * ~(net.drivable_code[np.maximum(ltype, 0)] & (ltype >= 0))
     cost = cost + 0.1 * np.abs(lane_off) / np.maximum(width, 0.01) + 2.0 * fold
     order = np.argsort(pt * 16.0 + np.minimum(cost, 15.0), kind="stable")
     cols = dict(
@@ -448,7 +448,7 @@ def _project_batch(net: RoadNetwork, x, y, heading, drivable_only: bool, s_tol: 
 
 
 def project(
-    net: RoadNetwork, x, y, heading=None, *, drivable_only: bool = False, batch: int = 65536, threads: int | None = None
+    net: NetworkCore, x, y, heading=None, *, drivable_only: bool = False, batch: int = 65536, threads: int | None = None
 ) -> Projection:
     """Vectorised world -> road for the points ``(x, y)`` (see the module doc)."""
     x = np.ascontiguousarray(x, dtype=np.float64).ravel()
@@ -476,7 +476,7 @@ def project(
     return _assemble(net, n, table)
 
 
-def _assemble(net: RoadNetwork, n: int, table: dict[str, np.ndarray]) -> Projection:
+def _assemble(net: NetworkCore, n: int, table: dict[str, np.ndarray]) -> Projection:
     pt = table["point"]
     counts = np.bincount(pt, minlength=n) if len(pt) else np.zeros(n, dtype=np.int64)
     first = np.ones(len(pt), dtype=bool)
@@ -492,7 +492,7 @@ def _assemble(net: RoadNetwork, n: int, table: dict[str, np.ndarray]) -> Project
         out[prim] = table[name][fi]
         return out
 
-    ids = net._road_id_array
+    ids = net.road_id_array
     out_table = {
         "point": pt,
         "road_id": ids[table["road"]] if len(pt) else np.zeros(0, dtype=object),
@@ -519,7 +519,7 @@ def _assemble(net: RoadNetwork, n: int, table: dict[str, np.ndarray]) -> Project
 
 
 # ----------------------------------------------------------------------------------------------
-def project_track(net: RoadNetwork, x, y, heading=None, time=None, track_id=None, **kw) -> Projection:
+def project_track(net: NetworkCore, x, y, heading=None, time=None, track_id=None, **kw) -> Projection:
     """World -> road along trajectories, choosing among candidates by continuity.
 
     Points are ordered by ``(track_id, time)`` (input order where not given). For a point on
@@ -543,7 +543,7 @@ def project_track(net: RoadNetwork, x, y, heading=None, time=None, track_id=None
     tab = proj.table
     pt = tab["point"]
     if len(pt):
-        road = net._road_index_of(tab["road_id"])
+        road = net.road_index_of(tab["road_id"])
         ncand = proj.n_candidates
         # road of the primary candidate where unambiguous, -1 elsewhere
         fixed = np.full(n, -1, dtype=np.int64)
@@ -555,10 +555,10 @@ def project_track(net: RoadNetwork, x, y, heading=None, time=None, track_id=None
         nxt = _fill(fixed, tidx, forward=False)
         p_prev, p_next = prev[pt], nxt[pt]
         score = 2.0 * (road == p_prev) + 2.0 * (road == p_next)
-        score += 1.0 * net._linked(road, p_prev) + 1.0 * net._linked(road, p_next)
+        score += 1.0 * net.linked(road, p_prev) + 1.0 * net.linked(road, p_next)
         if hd is not None:
             rel = tab["rel_heading"]
-            rht = net._road_rht[road]
+            rht = net.road_rht[road]
             with_flow = np.where((tab["lane_id"] < 0) == rht, rel, wrap_angle(rel - np.pi))
             score -= np.abs(with_flow) / np.pi
         rank = np.lexsort((-score, pt))

@@ -1,7 +1,11 @@
-"""Serialise a road network to ASAM OpenDRIVE 1.6 XML text.
+"""Serialise a road network to ASAM OpenDRIVE 1.8 XML text (or an older revision on request).
 
 :func:`write_xodr` takes a :class:`~.network.RoadNetwork` (or the ``(header, roads, junctions)``
-of :mod:`.model`) and writes every element the model holds, in the element order of the 1.6 schema.
+of :mod:`.model`) and writes every element the model holds, in the element order of the schema
+(the same from 1.6 to 1.8). What only newer revisions have is written only to them: a lane's
+``direction`` and a link's ``elementS``/``elementDir`` from 1.7 on, a lane link's ``overlapZone``
+from 1.8 on. Every map the package writes (builders, fits, converted and built maps) is 1.8 and
+passes ASAM qc-opendrive 1.0.0 with 0 issues (tests/opendrive/test_odr_qc.py).
 Floats are written with 17 significant digits so that reading the text back gives the same
 numbers. Objects and signals are written back from the XML they were read from.
 """
@@ -83,8 +87,9 @@ def _records(parent: Any, tag: str, recs: Iterable[Poly3Record]) -> None:
         _sub(parent, tag, {"s": float(r.s), "a": float(r.a), "b": float(r.b), "c": float(r.c), "d": float(r.d)})
 
 
-def _lane(parent: Any, lane: Lane) -> None:
-    el = _sub(parent, "lane", {"id": lane.id, "type": lane.type, "level": "true" if lane.level else "false"})
+def _lane(parent: Any, lane: Lane, rev_minor: int) -> None:
+    el = _sub(parent, "lane", {"id": lane.id, "type": lane.type, "level": "true" if lane.level else "false",
+                               "direction": lane.direction if rev_minor >= 7 else None})
     if lane.predecessors or lane.successors:
         link = _sub(el, "link")
         for p in lane.predecessors:
@@ -130,21 +135,21 @@ def _lane(parent: Any, lane: Lane) -> None:
             _sub(el, "height", {"sOffset": float(s_off), "inner": float(inner), "outer": float(outer)})
 
 
-def _section(parent: Any, sec: LaneSection) -> None:
+def _section(parent: Any, sec: LaneSection, rev_minor: int) -> None:
     el = _sub(parent, "laneSection", {"s": float(sec.s), "singleSide": "true" if sec.single_side else None})
     if sec.left:
         left = _sub(el, "left")
         for lane in sorted(sec.left, key=lambda ln: -ln.id):
-            _lane(left, lane)
+            _lane(left, lane, rev_minor)
     center = _sub(el, "center")
-    _lane(center, sec.center if sec.center is not None else Lane(id=0, type="none"))
+    _lane(center, sec.center if sec.center is not None else Lane(id=0, type="none"), rev_minor)
     if sec.right:
         right = _sub(el, "right")
         for lane in sorted(sec.right, key=lambda ln: -ln.id):
-            _lane(right, lane)
+            _lane(right, lane, rev_minor)
 
 
-def _road(root: Any, road: Road) -> None:
+def _road(root: Any, road: Road, rev_minor: int) -> None:
     el = _sub(
         root,
         "road",
@@ -163,7 +168,9 @@ def _road(root: Any, road: Road) -> None:
                 _sub(
                     link,
                     tag,
-                    {"elementType": lk.element_type, "elementId": lk.element_id, "contactPoint": lk.contact_point},
+                    {"elementType": lk.element_type, "elementId": lk.element_id, "contactPoint": lk.contact_point,
+                     "elementS": lk.element_s if rev_minor >= 7 else None,
+                     "elementDir": lk.element_dir if rev_minor >= 7 else None},
                 )
     for rt in road.types:
         t = _sub(el, "type", {"s": float(rt.s), "type": rt.type, "country": rt.country})
@@ -177,7 +184,7 @@ def _road(root: Any, road: Road) -> None:
     lanes = _sub(el, "lanes")
     _records(lanes, "laneOffset", road.lane_offset)
     for sec in road.lane_sections:
-        _section(lanes, sec)
+        _section(lanes, sec, rev_minor)
     for tag, items in (("objects", road.objects), ("signals", road.signals)):
         if items:
             box = _sub(el, tag)
@@ -216,8 +223,8 @@ def _junction(root: Any, j: Junction, rev_minor: int) -> None:
         _sub(el, tag, attrs)
 
 
-def write_xodr(network: Any, rev_minor: int = 6) -> str:
-    """OpenDRIVE XML text (revision 1.``rev_minor``, default 1.6) of ``network``.
+def write_xodr(network: Any, rev_minor: int = 8) -> str:
+    """OpenDRIVE XML text (revision 1.``rev_minor``, default 1.8) of ``network``.
 
     ``network`` is a :class:`~.network.RoadNetwork`, or a tuple ``(header, roads, junctions)``
     with ``roads``/``junctions`` as dicts or lists of the :mod:`.model` dataclasses.
@@ -231,7 +238,7 @@ def write_xodr(network: Any, rev_minor: int = 6) -> str:
     root = etree.Element("OpenDRIVE")
     _header(root, header, rev_minor)
     for road in roads:
-        _road(root, road)
+        _road(root, road, rev_minor)
     for j in junctions:
         _junction(root, j, rev_minor)
     body = etree.tostring(root, pretty_print=True, encoding="unicode")

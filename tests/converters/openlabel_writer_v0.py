@@ -238,16 +238,16 @@ def _road_facts(net, road_id: list, s: np.ndarray, lane_id: np.ndarray, lane_off
             width = np.abs(outer - inner)
             with np.errstate(invalid="ignore", divide="ignore"):
                 out["lane_position"][m] = np.clip(lane_offset[m] / width, -0.5, 0.5)
-            ri = net._road_index_of(r)
+            ri = net.road_index_of(r)
             ri = np.broadcast_to(np.asarray(ri), ss.shape)
-            sc = np.clip(ss, 0.0, net._road_length[ri])
+            sc = np.clip(ss, 0.0, net.road_length[ri])
             piece = lanes.find_piece(ri, sc)
             b = lanes.borders(piece, sc)
             for side, outers, ids, types in (("left", b.left, lanes.lid[piece], lanes.ltype[piece]),
                                              ("right", b.right, lanes.rid[piece], lanes.rtype[piece])):
                 inners = np.concatenate([b.center[:, None], outers[:, :-1]], axis=1)
                 present = (ids != 0) & (np.abs(outers - inners) > 0.01)
-                drivable = present & (types >= 0) & net._drivable_code[np.where(types >= 0, types, 0)]
+                drivable = present & (types >= 0) & net.drivable_code[np.where(types >= 0, types, 0)]
                 out[f"{side}_phys"][m] = present.sum(1)
                 out[f"{side}_legal"][m] = drivable.sum(1)
             _, _, _, kappa = net.reference_line(r, sc)

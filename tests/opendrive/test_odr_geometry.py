@@ -67,7 +67,7 @@ def test_spiral_paths_agree(geom_net):
 
 def test_degenerate_spirals_use_quadrature(geom_net):
     pv = geom_net.plan
-    idx = {r: i for i, r in enumerate(geom_net._road_ids)}
+    idx = {r: i for i, r in enumerate(geom_net.road_ids)}
     assert not pv.use_fresnel[idx["spiral_flat"]] and not pv.use_fresnel[idx["spiral_tiny"]]
 
 

@@ -45,5 +45,5 @@ def test_real_map_polygons_drivable_only():
 def test_spatial_index_geometry_query(geom_net):
     idx = geom_net.spatial_index
     _, chunks = idx.query_geometry(shapely.box(40.0, -2.0, 41.0, -1.0))
-    roads = {geom_net._road_ids[r] for r in idx.road[chunks]}
+    roads = {geom_net.road_ids[r] for r in idx.road[chunks]}
     assert roads == {"line"}

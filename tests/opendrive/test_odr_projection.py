@@ -286,7 +286,7 @@ def test_property_fixture_roads(road, a, b):
     L = net.roads[road].length
     s = np.array([a * L])
     # a point across the whole road surface at s
-    pieces = net.lanes.find_piece(np.array([net._road_index[road]]), s)
+    pieces = net.lanes.find_piece(np.array([net.road_index[road]]), s)
     tl, tr = net.lanes.extent(net.lanes.borders(pieces, s))
     t = tr + b * (tl - tr)
     x, y, _, _ = net.road_to_world(road, s, t)

@@ -6,8 +6,7 @@ from functools import lru_cache
 
 import numpy as np
 import pytest
-from helpers_opendrive import xsd_16
-from lxml import etree
+from helpers_opendrive import xsd_18_errors
 
 from aveas_format.errors import MapError
 from aveas_format.opendrive import load_map
@@ -75,7 +74,7 @@ def test_centre_lines_give_lanes_where_they_should():
     # given in a shuffled order: they are sorted across the road
     fit = fit_road([centres[2], centres[0], centres[1]], kind="centres", driving="right")
     assert fit.order == [1, 2, 0] and fit.reference == 2
-    assert xsd_16().validate(etree.fromstring(fit.xodr.encode()))
+    assert xsd_18_errors(fit.xodr) == []
     assert fit.line_lane == [-3, -1, -2] and fit.lane_ids == [-1, -2, -3]
     net = fit.network()
     for t, lid in ((-1.75, -1), (-5.25, -2), (-8.75, -3)):
@@ -101,10 +100,9 @@ def test_lane_markings_both_directions_validate_and_load():
         marks.append(np.c_[x, y] + np.random.default_rng(i).normal(0, 0.03, (len(s), 2)))
     fit = road_from_lane_markings(marks, driving="both", geo_reference="+proj=tmerc +lat_0=49 +lon_0=8")
     assert fit.reference == 2 and fit.lane_ids == [2, 1, -1, -2]
-    xsd = xsd_16()
-    assert xsd.validate(etree.fromstring(fit.xodr.encode())), xsd.error_log
+    assert xsd_18_errors(fit.xodr) == []
     net = load_map(fit.xodr)
-    assert net.header.version == "1.6" and net.header.geo_reference.startswith("+proj=tmerc")
+    assert net.header.version == "1.8" and net.header.geo_reference.startswith("+proj=tmerc")
     assert [f for f in net.check() if f.severity == "error"] == []
     road = net.roads["1"]
     assert road.lane_offset == []  # the reference line is the centre marking
@@ -132,7 +130,7 @@ def test_two_point_markings_make_a_straight_road():
     np.testing.assert_array_equal(pr.lane_id, [-1, -2, -3])
     np.testing.assert_allclose(pr.lane_offset, 0.0, atol=1e-9)
     assert road.types[0].speed_max_ms == pytest.approx(130 / 3.6)
-    assert xsd_16().validate(etree.fromstring(fit.xodr.encode()))
+    assert xsd_18_errors(fit.xodr) == []
 
 
 def test_sparse_vertices_and_a_single_centre_line(tmp_path):

@@ -1,4 +1,4 @@
-"""Writer and builders: valid OpenDRIVE 1.6, exact round trips through the text."""
+"""Writer and builders: valid OpenDRIVE 1.8 (and older revisions on request), exact round trips."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from lxml import etree
-from helpers_opendrive import fixture_map, xsd_16
+from helpers_opendrive import fixture_map, xsd_16, xsd_18_errors
 
 from aveas_format.opendrive import load_map
 from aveas_format.opendrive.builder import curved_highway, straight_highway
@@ -25,7 +25,7 @@ def test_straight_highway():
         geo_reference="+proj=utm +zone=32 +ellps=WGS84",
     )
     net = load_map(text)
-    assert net.header.version == "1.6"
+    assert net.header.version == "1.8"
     assert net.header.geo_reference == "+proj=utm +zone=32 +ellps=WGS84"
     road = net.roads["1"]
     assert road.length == 1000.0
@@ -65,14 +65,36 @@ def test_curved_rejects_fold():
 
 
 def test_generated_maps_validate_against_the_official_xsd():
-    xsd = xsd_16()
     for text in (
         straight_highway(geo_reference="+proj=tmerc +lat_0=49 +lon_0=8"),
         curved_highway(radius=300.0, spiral=40.0, straight=10.0, lanes_left=2),
         write_xodr(fixture_map("geometry_types.xodr")),
     ):
-        doc = etree.fromstring(text.encode())
-        assert xsd.validate(doc), xsd.error_log
+        assert 'revMinor="8"' in text
+        assert xsd_18_errors(text) == []
+
+
+def test_older_revisions_on_request_validate_against_their_xsd():
+    """rev_minor=6 leaves out what only 1.7+/1.8 have (lane direction, overlapZone, elementS)."""
+    xsd = xsd_16()
+    net = fixture_map("geometry_types.xodr")
+    text = write_xodr(net, rev_minor=6)
+    assert 'revMinor="6"' in text
+    assert xsd.validate(etree.fromstring(text.encode())), xsd.error_log
+    assert load_map(text).header.version == "1.6"
+
+
+def test_1_7_attributes_are_written_to_1_8_and_read_back():
+    from aveas_format.opendrive.model import RoadLink
+
+    net = load_map(straight_highway(lanes_left=1))
+    road = net.roads["1"]
+    road.lane_sections[0].left[0].direction = "reversed"
+    road.successor = RoadLink("road", "1", "start", element_s=0.0, element_dir="+")
+    back = load_map(write_xodr(net))
+    assert back.roads["1"].lane_sections[0].left[0].direction == "reversed"
+    assert (back.roads["1"].successor.element_s, back.roads["1"].successor.element_dir) == (0.0, "+")
+    assert "direction=" not in write_xodr(net, rev_minor=6)
 
 
 def test_write_read_round_trip(real_net):

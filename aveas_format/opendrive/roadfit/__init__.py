@@ -6,7 +6,7 @@ For maps annotated on an orthophoto, and for converters whose sources give lanes
     from aveas_format.opendrive.roadfit import fit_road, road_from_lane_markings
 
     fit = road_from_lane_markings([m0, m1, m2, m3], driving="right")   # (N, 2) arrays, left to right
-    fit.xodr                      # OpenDRIVE 1.6 text (XSD-valid)
+    fit.xodr                      # OpenDRIVE 1.8 text (XSD-valid)
     fit.network()                 # the RoadNetwork (load_map of the text)
     fit.rms, fit.max_error        # reference line vs. the polyline it was fitted to [m]
 
@@ -16,10 +16,10 @@ For maps annotated on an orthophoto, and for converters whose sources give lanes
 fitter.) What lives where, from the bottom up; each module's docstring describes its part of the
 method:
 
-- ``checks``: the input checks (``_as_line``, ``_check_simple``): malformed polylines raise
+- ``checks``: the input checks (``as_line``, ``check_simple``): malformed polylines raise
   :class:`~aveas_format.errors.MapError` (a ValueError) naming the line and where.
 - ``spline``: the clothoid spline (curvature piecewise linear in s) and its Levenberg-Marquardt
-  least-squares problems (``_Spline``, ``_Problem``, ``_KnotProblem``).
+  least-squares problems (``Spline``, ``Problem``, ``KnotProblem``).
 - ``reference``: the reference line, a G2 line/arc/spiral chain fitted to one polyline
   (:func:`fit_reference_line`, :class:`ReferenceFit`: start values, knot refinement, snapping to
   lines and arcs, the exact chained geometries).

@@ -17,7 +17,7 @@ import numpy as np
 from aveas_format.errors import MapError
 
 
-def _as_line(obj: Any, label: str) -> np.ndarray:
+def as_line(obj: Any, label: str) -> np.ndarray:
     """An (N, 2) float array of distinct consecutive points, checked (see the module doc)."""
     try:
         a = np.asarray(obj, dtype=np.float64)
@@ -49,11 +49,11 @@ def _as_line(obj: Any, label: str) -> np.ndarray:
                 f"{ang:.0f} deg at point {int(orig[i])} ({a[i, 0]:.3f}, {a[i, 1]:.3f})"
             )
     if len(a) > 3:
-        _check_simple(a, label)
+        check_simple(a, label)
     return a
 
 
-def _check_simple(a: np.ndarray, label: str) -> None:
+def check_simple(a: np.ndarray, label: str) -> None:
     import shapely
 
     if shapely.LineString(a).is_simple:

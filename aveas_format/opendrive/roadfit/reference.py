@@ -27,8 +27,8 @@ import numpy as np
 
 from aveas_format.errors import MapError
 from aveas_format.opendrive.model import Geometry, Header, Lane, LaneSection, Road
-from aveas_format.opendrive.roadfit.checks import _as_line
-from aveas_format.opendrive.roadfit.spline import _KnotProblem, _Problem, _Spline
+from aveas_format.opendrive.roadfit.checks import as_line
+from aveas_format.opendrive.roadfit.spline import KnotProblem, Problem, Spline
 
 
 @dataclass
@@ -114,14 +114,14 @@ def _ties(k: np.ndarray, eps: float) -> tuple[np.ndarray, list[str]]:
     return A, kinds
 
 
-def _piece_rms(sp: _Spline, s: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _piece_rms(sp: Spline, s: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     i = sp.piece(s)[0]
     cnt = np.bincount(i, minlength=sp.K)
     ss = np.bincount(i, weights=e * e, minlength=sp.K)
     return np.sqrt(ss / np.maximum(cnt, 1)), cnt
 
 
-def _initial(pts: np.ndarray, sp: _Spline, margin: float, smoothing: float, ridge: float):
+def _initial(pts: np.ndarray, sp: Spline, margin: float, smoothing: float, ridge: float):
     """Start values from a linear fit of the polyline's segment headings."""
     seg = np.diff(pts, axis=0)
     ln = np.hypot(seg[:, 0], seg[:, 1])
@@ -146,9 +146,9 @@ def _initial(pts: np.ndarray, sp: _Spline, margin: float, smoothing: float, ridg
     return anchor, th0, k, margin + c
 
 
-def _geometries(sp: _Spline, st: dict, kinds: list[str], sa: float, sb: float) -> list[Geometry]:
+def _geometries(sp: Spline, st: dict, kinds: list[str], sa: float, sb: float) -> list[Geometry]:
     """The spline restricted to [sa, sb] as line/arc/spiral records (starts set by chaining)."""
-    from aveas_format.opendrive.builder import _chain
+    from aveas_format.opendrive.builder import chain_geometries
 
     k = st["k"]
     cuts = [sa] + [float(u) for u in sp.knots[1:-1] if sa < u < sb] + [sb]
@@ -198,10 +198,10 @@ def _geometries(sp: _Spline, st: dict, kinds: list[str], sa: float, sb: float) -
         else:
             geoms.append(Geometry(0.0, 0.0, 0.0, 0.0, u1 - u0, "spiral", {"curv_start": k0, "curv_end": k1}))
     r, th, _ = sp.at(st, np.array([sa]))
-    return _chain(geoms, float(r[0, 0]), float(r[0, 1]), float(th[0]))
+    return chain_geometries(geoms, float(r[0, 0]), float(r[0, 1]), float(th[0]))
 
 
-def _probe_road(geoms: list[Geometry], width: float, road_id: str = "fit") -> Road:
+def probe_road(geoms: list[Geometry], width: float, road_id: str = "fit") -> Road:
     """A road along ``geoms`` with one lane of ``width`` on each side (for projections)."""
     length = float(sum(g.length for g in geoms))
     w = np.array([[0.0, width, 0.0, 0.0, 0.0]])
@@ -210,11 +210,11 @@ def _probe_road(geoms: list[Geometry], width: float, road_id: str = "fit") -> Ro
     return Road(id=road_id, length=length, geometries=geoms, lane_sections=[sec])
 
 
-def _probe(geoms: list[Geometry], width: float):
+def probe_network(geoms: list[Geometry], width: float):
     """A network of that one road: world -> road projections onto the fitted reference line."""
     from aveas_format.opendrive.network import RoadNetwork
 
-    road = _probe_road(geoms, width)
+    road = probe_road(geoms, width)
     return RoadNetwork(Header(), {road.id: road}, {})
 
 
@@ -255,7 +255,7 @@ def fit_reference_line(
     of the penalty on the curvature's kinks at the knots. ``snap``: tie near-straight and
     near-constant-curvature pieces to ``line``/``arc`` records where that keeps the error.
     """
-    pts = _as_line(points, label)
+    pts = as_line(points, label)
     if knot_spacing <= 0 or tolerance <= 0:
         raise ValueError("knot_spacing and tolerance must be positive")
     seg = np.hypot(*np.diff(pts, axis=0).T)
@@ -268,7 +268,7 @@ def fit_reference_line(
     L = total + 2 * margin
     K = max(1, int(np.ceil(L / knot_spacing)))
     step = max(1.0, L / 2000.0)
-    sp = _Spline(np.linspace(0.0, L, K + 1), step)
+    sp = Spline(np.linspace(0.0, L, K + 1), step)
     ridge = 1e-4
     anchor, th0, k, s = _initial(pts, sp, margin, smoothing, ridge)
     x = np.r_[0.0, th0, k]
@@ -293,7 +293,7 @@ def fit_reference_line(
         raise MapError(f"{label}: the fitted line has no length (are the points ordered?)")
     geoms = _geometries(sp, st, kinds, sa, sb)
     # errors on the exact, chained geometry
-    net = _probe(geoms, 2.0 + float(np.max(np.abs(e))))
+    net = probe_network(geoms, 2.0 + float(np.max(np.abs(e))))
     pr = net.world_to_road(pts[:, 0], pts[:, 1])
     t = pr.t[np.isfinite(pr.t)]
     rms = float(np.sqrt(np.mean(t * t))) if len(t) else float("nan")
@@ -304,12 +304,12 @@ def fit_reference_line(
     return ReferenceFit(geoms, float(sum(g.length for g in geoms)), rms, mx, snapped, counts, noise)
 
 
-def _refine(pts: np.ndarray, sp: _Spline, anchor: np.ndarray, x: np.ndarray, s: np.ndarray,
+def _refine(pts: np.ndarray, sp: Spline, anchor: np.ndarray, x: np.ndarray, s: np.ndarray,
             step: float, smoothing: float, ridge: float, limit: float, min_piece: float):
     """Fit the free spline and halve the knot intervals whose points' RMS distance exceeds
     ``limit`` (down to ``min_piece``), at most 8 times: (spline, problem, x, residuals, feet)."""
     for _ in range(8):  # refine where the curve cannot follow the points
-        prob = _Problem(sp, pts, anchor, np.eye(sp.K + 1), smoothing, ridge)
+        prob = Problem(sp, pts, anchor, np.eye(sp.K + 1), smoothing, ridge)
         x, e, s = prob.solve(x, s)
         rms_p, cnt = _piece_rms(sp, s, e)
         valid = cnt >= 3
@@ -318,12 +318,12 @@ def _refine(pts: np.ndarray, sp: _Spline, anchor: np.ndarray, x: np.ndarray, s: 
             break
         knots = np.union1d(sp.knots, 0.5 * (sp.knots[:-1] + sp.knots[1:])[bad])
         k = sp.kappa(knots, x[2:])  # the same curve on the finer knots
-        sp = _Spline(knots, step)
+        sp = Spline(knots, step)
         x = np.r_[x[:2], k]
     return sp, prob, x, e, s
 
 
-def _snap(pts: np.ndarray, sp: _Spline, free: tuple, step: float, noise: float,
+def _snap(pts: np.ndarray, sp: Spline, free: tuple, step: float, noise: float,
           snap_tolerance: float, knot_spacing: float):
     """Simplify the free fit's curvature profile (fewer knots), tie lines and arcs and refit with
     the knots free; accept when the error grows no more than the removed parameters explain with
@@ -338,12 +338,12 @@ def _snap(pts: np.ndarray, sp: _Spline, free: tuple, step: float, noise: float,
         idx = _simplify(sp.knots, k, eps)
         if len(idx) - 1 > max(8, sp.K // 3):
             break  # not much simpler than the free fit: keep that
-        sp_c = _Spline(sp.knots[idx], step)
+        sp_c = Spline(sp.knots[idx], step)
         A, kinds_c = _ties(k[idx], eps)
         # start: the heading profile closest to the free fit's (positions follow closely)
         M = np.concatenate([np.ones((len(sp.nodes), 1)), sp_c.phi(sp.nodes) @ A], 1)
         sol = np.linalg.lstsq(M, sp.Pn @ k, rcond=None)[0]
-        prob_c = _KnotProblem(sp_c, pts, prob.anchor, A, step)
+        prob_c = KnotProblem(sp_c, pts, prob.anchor, A, step)
         xc, ec, sc = prob_c.solve(np.r_[a, th0 + sol[0], sol[1:], sp_c.knots[1:-1]], s)
         sp_c = prob_c.spline(xc)
         allowed = 3.0 * max(0, sp.K + 1 - A.shape[1] - (sp_c.K - 1)) / n * noise**2 + 1e-6

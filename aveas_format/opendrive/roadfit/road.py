@@ -23,8 +23,8 @@ import numpy as np
 
 from aveas_format.errors import MapError
 from aveas_format.opendrive.model import Lane, LaneSection, Poly3Record, Road, RoadMark, RoadType
-from aveas_format.opendrive.roadfit.checks import _as_line
-from aveas_format.opendrive.roadfit.reference import ReferenceFit, _probe, fit_reference_line
+from aveas_format.opendrive.roadfit.checks import as_line
+from aveas_format.opendrive.roadfit.reference import ReferenceFit, probe_network, fit_reference_line
 
 
 def _signed_offsets(ref: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -69,25 +69,20 @@ def _pieces(knots: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return x[keep], pp.c[::-1, keep].T  # rows (a, b, c, d)
 
 
-def _records(brk: np.ndarray, coef: np.ndarray, length: float, tol: float = 1e-9) -> np.ndarray:
-    """Rows (start, a, b, c, d) of a piecewise cubic, with coefficients that move it by less than
-    ``tol`` m over their interval set to 0 and intervals that continue the previous cubic merged."""
-    from aveas_format.opendrive.lanes import shift_poly
+#: m: how far the written records may be from the fitted splines (they join the splines' pieces
+#: that differ by less, which ASAM qc-opendrive would report as redundant records)
+RECORD_TOL = 2e-4
 
-    ends = np.r_[brk[1:], length]
-    span = np.maximum(ends - brk, 1e-12)
-    coef = coef.copy()
-    for p in (1, 2, 3):
-        coef[np.abs(coef[:, p]) * span**p < tol, p] = 0.0
-    rows = [[float(brk[0]), *coef[0]]]
-    for j in range(1, len(brk)):
-        prev = np.array(rows[-1][1:])
-        cont = shift_poly(prev, brk[j] - rows[-1][0])
-        u = np.linspace(0.0, span[j], 5)
-        if np.max(np.abs(np.polyval(cont[::-1], u) - np.polyval(coef[j][::-1], u))) < tol:
-            continue
-        rows.append([float(brk[j]), *coef[j]])
-    return np.array(rows)
+
+def _records(brk: np.ndarray, coef: np.ndarray, length: float) -> np.ndarray:
+    """Rows (start, a, b, c, d) of the piecewise cubic with breakpoints ``brk`` and coefficients
+    ``coef``, as few as stay within :data:`RECORD_TOL` of it (exact at both ends)."""
+    from aveas_format.opendrive.roadfit.records import evaluate_records, interpolating_cubics
+
+    rows = np.column_stack([brk, coef])
+    s = np.unique(np.r_[np.linspace(0.0, length, max(3, int(length / 0.25) + 1)), brk, length])
+    s = s[(s >= brk[0]) & (s <= length)]
+    return interpolating_cubics(s, evaluate_records(rows, s), RECORD_TOL)
 
 
 @dataclass
@@ -120,7 +115,7 @@ class RoadFit:
 
     def network(self):
         """The fitted road as a :class:`~aveas_format.opendrive.network.RoadNetwork`."""
-        from aveas_format.opendrive import load_map
+        from aveas_format.opendrive.network import load_map
 
         return load_map(self.xodr)
 
@@ -184,7 +179,7 @@ def fit_road(
     n = len(lines)
     if n < (2 if borders_in else 1):
         raise MapError(f"{label}: need at least {2 if borders_in else 1} line(s), got {n}")
-    arrs = [_as_line(ln, f"{label}[{i}]") for i, ln in enumerate(lines)]
+    arrs = [as_line(ln, f"{label}[{i}]") for i, ln in enumerate(lines)]
     order = _lateral_order(arrs, ordered, label)
     z = _centre_border(driving, left_lanes, n - 1 if borders_in else n)
     reference, ref_pos = _reference_index(reference, order, z, borders_in, label)
@@ -299,7 +294,7 @@ def _project_lines(arrs: list[np.ndarray], ref: ReferenceFit, reference: int, la
             f"beyond its tightest curve radius ({1 / kmax:.1f} m); fit the road in parts or pick "
             "another reference"
         )
-    probe = _probe(geoms, reach)
+    probe = probe_network(geoms, reach)
     samples = []
     for i, a in enumerate(arrs):
         pr = probe.world_to_road(a[:, 0], a[:, 1])

@@ -1,11 +1,11 @@
 """The clothoid spline and its least-squares problems, the model behind the reference-line fit
 (:mod:`.reference`).
 
-``_Spline``: curvature piecewise linear in s between knots, heading and position by integration
+``Spline``: curvature piecewise linear in s between knots, heading and position by integration
 from a free start point and heading (Simpson's rule), with the derivatives by the knot curvatures.
-``_Problem``: the orthogonal distances of polyline points to the curve, plus penalties on the
+``Problem``: the orthogonal distances of polyline points to the curve, plus penalties on the
 curvature's kinks, minimised by Levenberg-Marquardt (analytic Jacobian, foot points re-found at
-every evaluation) with knot curvatures tied as ``k = A q``. ``_KnotProblem``: the tied problem
+every evaluation) with knot curvatures tied as ``k = A q``. ``KnotProblem``: the tied problem
 with the inner knots' positions free as well.
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 
-class _Spline:
+class Spline:
     """Curvature linear between knots ``s_0 = 0 < s_1 < ... < s_K = L``; heading and position by
     integration from a free start point and heading.
 
@@ -113,11 +113,11 @@ class _Spline:
         return s
 
 
-class _Problem:
+class Problem:
     """Least squares of the point-to-curve distances with knot ties ``k = A q`` (Levenberg-Marquardt
     on the normal equations; the foot points are re-found at every evaluation)."""
 
-    def __init__(self, sp: _Spline, pts: np.ndarray, anchor: np.ndarray, A: np.ndarray,
+    def __init__(self, sp: Spline, pts: np.ndarray, anchor: np.ndarray, A: np.ndarray,
                  smoothing: float, ridge: float) -> None:
         self.sp, self.pts, self.anchor, self.A = sp, pts, anchor, A
         K, D = sp.K, sp.D
@@ -204,19 +204,19 @@ class _Problem:
         return x, r[: len(self.pts)], s
 
 
-class _KnotProblem(_Problem):
+class KnotProblem(Problem):
     """The tied problem with the inner knots' positions free as well (no penalties): parameters
     ``(a, th0, q, inner knots)``; the knots' columns of the Jacobian by forward differences."""
 
-    def __init__(self, sp: _Spline, pts: np.ndarray, anchor: np.ndarray, A: np.ndarray, step: float) -> None:
+    def __init__(self, sp: Spline, pts: np.ndarray, anchor: np.ndarray, A: np.ndarray, step: float) -> None:
         super().__init__(sp, pts, anchor, A, 0.0, 0.0)
         self.P = np.zeros((0, A.shape[1]))
         self.nq = A.shape[1]
         self.step = step
         self.min_gap = 0.5
-        self._cache: dict[bytes, _Spline] = {sp.knots.tobytes(): sp}
+        self._cache: dict[bytes, Spline] = {sp.knots.tobytes(): sp}
 
-    def spline(self, x: np.ndarray) -> _Spline | None:
+    def spline(self, x: np.ndarray) -> Spline | None:
         knots = np.r_[0.0, x[2 + self.nq:], self.sp.L]
         if np.any(np.diff(knots) < self.min_gap):
             return None
@@ -224,7 +224,7 @@ class _KnotProblem(_Problem):
         if key not in self._cache:
             if len(self._cache) > 8:
                 self._cache.clear()
-            self._cache[key] = _Spline(knots, self.step)
+            self._cache[key] = Spline(knots, self.step)
         return self._cache[key]
 
     def unpack(self, x: np.ndarray) -> tuple[float, float, np.ndarray]:
@@ -247,7 +247,7 @@ class _KnotProblem(_Problem):
             return np.full(len(self.pts), np.inf), None, s
         base, self.sp = self.sp, sp
         try:
-            res, J, s_new = _Problem.evaluate(self, x[: 2 + self.nq], s, jac)
+            res, J, s_new = Problem.evaluate(self, x[: 2 + self.nq], s, jac)
             if jac:
                 cols = []
                 for j in range(2 + self.nq, len(x)):
@@ -260,7 +260,7 @@ class _KnotProblem(_Problem):
                         h = -h
                         sph = self.spline(xh)
                     self.sp = sph
-                    rh = _Problem.evaluate(self, xh[: 2 + self.nq], s_new, False)[0]
+                    rh = Problem.evaluate(self, xh[: 2 + self.nq], s_new, False)[0]
                     cols.append((rh - res) / h)
                     self.sp = sp
                 if cols:
