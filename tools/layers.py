@@ -40,6 +40,8 @@ SIDEWAYS: dict[tuple[str, str], str] = {
     ("validate", "derive"): "metadata.derived_stale compares derived tables with their inputs",
     ("fit", "sim"): "the fitter simulates through the SUMO runner",
     ("dataset", "converters"): "convert many sources at once",
+    ("validate", "converters"): "a submitted file of any importable format is imported to be "
+                                "validated (validate/submission.py)",
 }
 
 #: module -> unit imports that break the order, each with its reason (docs/architecture.md)

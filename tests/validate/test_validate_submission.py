@@ -310,7 +310,7 @@ def test_an_unimportable_submission_exits_3_located(capsys, tmp_path):
 def test_ambiguous_extension_needs_from_unless_the_content_tells(capsys, tmp_path):
     """.json is OpenLABEL or an infrastructure-lidar track list: an OpenLABEL document says so in
     its first bytes; another JSON needs --from."""
-    from aveas_format.cli.validate import _candidates
+    from aveas_format.converters.registry import importers_for as _candidates
 
     assert _candidates(openlabel_submission(tmp_path)) == ["openlabel"]
     other = tmp_path / "tracks.json"

@@ -25,8 +25,9 @@ import numpy as np
 import pyarrow as pa
 from pydantic import Field
 
-from aveas_format.converters.common import (TIMESTAMP_UNITS, load_map_bytes, resolve_timestamps,
-                                            prefetch_sha256, source_block)
+from aveas_format.converters.common.provenance import prefetch_sha256, source_block
+from aveas_format.converters.common.timestamps import TIMESTAMP_UNITS, resolve_timestamps
+from aveas_format.mapref.build import load_map_bytes
 from aveas_format.converters.labels import LabelFilter, implausible_size, label_kind
 from aveas_format.converters.openlabel.findings import (_check_objects, _claims_profile, _jpath,
                                                         _report_frame_findings)
@@ -104,7 +105,8 @@ def _find_map(path: Path, ol: dict[str, Any], map_source, options) -> bytes:
 
 @converter("openlabel", description="ASAM OpenLABEL 1.0 JSON (AVEAS profile and generic cuboids)",
            patterns=("*.json", "*.json.gz", "*.json.zst"), method=None, options=OpenLabelImportOptions,
-           needs_map=False, provides=("partner", "start_time", "license"), writes=import_openlabel_to)
+           needs_map=False, provides=("partner", "start_time", "license"), writes=import_openlabel_to,
+           sniff=(b'"openlabel"',))
 def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImportOptions, parts=None):
     """``parts``: an import that writes its recording itself (:func:`.parts.import_openlabel_to`)."""
     if len(inputs) != 1:

@@ -14,9 +14,11 @@ import numpy as np
 from lxml import etree
 from pydantic import Field
 
-from aveas_format.converters.common import load_map_bytes, wrap_recording
+from aveas_format.converters.common.assemble import to_recording
+from aveas_format.converters.common.boxes import Boxes, Rows, Sensor
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError, report_source
+from aveas_format.mapref.build import load_map_bytes
 from aveas_format.numeric import fmt_num
 from aveas_format.safeio import xml_parser
 
@@ -189,7 +191,7 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
     replay.catalogs = catalogs
     ents = replay.run()
 
-    rows: dict[str, list] = {k: [] for k in ("participant_id", "time", "x", "y", "z", "heading")}
+    rows: dict[str, list] = {k: [] for k in ("code", "time", "x", "y", "z", "heading")}
     part: dict[str, list] = {k: [] for k in ("participant_id", "source_id", "class", "length",
                                              "width", "height", "role")}
     dropped: list[tuple[str, float]] = []
@@ -225,7 +227,7 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
         for tt, x, y, z, h in sorted(first.values()):
             hh = h if np.isfinite(h) else 0.0
             # the entity's reference point -> the footprint centre (the bounding box centre)
-            rows["participant_id"].append(pid)
+            rows["code"].append(len(part["participant_id"]))
             rows["time"].append(tt)
             rows["x"].append(x + d["cx"] * math.cos(hh) - d["cy"] * math.sin(hh))
             rows["y"].append(y + d["cx"] * math.sin(hh) + d["cy"] * math.cos(hh))
@@ -272,24 +274,21 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
                           f"{'replayed' if what == 'action' else 'evaluated (they never hold)'}: "
                           f"{kind} ({n})",
                           count=n, file=str(path), line=replay.ignored_lines.get(kind))
-    states = {k: np.asarray(v, np.int64 if k == "participant_id" else np.float64)
-              for k, v in rows.items()}
-    if np.isnan(states["heading"]).any():
-        del states["heading"]  # from the direction of motion
-    order = np.lexsort((states["time"], states["participant_id"]))
-    states = {k: v[order] for k, v in states.items()}
+    heading = np.asarray(rows["heading"], np.float64)
+    boxes = Boxes(rows["code"], rows["time"], rows["x"], rows["y"], source_ids=part["source_id"],
+                  rows=Rows([path]), z=np.asarray(rows["z"], np.float64),
+                  heading=None if np.isnan(heading).any() else heading)  # (else from the motion)
     participants = {k: np.asarray(v, dtype=object if k in ("source_id", "class", "role") else
                                   np.int64 if k == "participant_id" else np.float64)
                     for k, v in part.items()}
     hdr = root.find("FileHeader")
     title = options.title or (hdr.get("description") if hdr is not None else None)
     partner = (hdr.get("author") if hdr is not None else None) or "unknown"
-    return wrap_recording(
-        "openscenario", [path], options, map_bytes=map_bytes, participants=participants,
-        states=states, method=options.method, provenance=options.provenance, partner=partner,
-        acquisition={"platform": f"OpenSCENARIO {path.name}",
-                     "sensors": [{"id": "scenario", "kind": "simulator"}]},
-        extras={"openscenario": {"replay_rate_hz": options.rate_hz,
-                                 "duration_s": replay.t, "catalog_files": [f.name for f in catalogs.files],
-                                 "not_converted": problems, **notes}},
-        **({"title": title} if title else {}))
+    sensor = Sensor(
+        method=options.method, provenance=options.provenance, partner=partner, title=title,
+        platform=f"OpenSCENARIO {path.name}", sensors=[{"id": "scenario", "kind": "simulator"}],
+        extras={"openscenario": {"replay_rate_hz": options.rate_hz, "duration_s": replay.t,
+                                 "catalog_files": [f.name for f in catalogs.files],
+                                 "not_converted": problems, **notes}})
+    return to_recording(boxes, sensor, converter="openscenario", inputs=[path], options=options,
+                        map_bytes=map_bytes, participants=participants)
