@@ -35,18 +35,22 @@ def channels(path: Path) -> dict[str, str]:
         raise FormatError(f"not a readable MCAP file: {why(e)}", path=path) from None
 
 
+class DecoderError(Exception):
+    """No decoder reads a schema (its encoding, or a definition mcap-ros2-support's parser
+    refuses): ``str`` is the reason."""
+
+
 def decode_errors() -> tuple[type[BaseException], ...]:
-    """What the decoders raise on a message definition they cannot read or on message bytes that
-    do not decode as their schema says: rosbags' TypesysError and SerdeError (which wraps its
-    deserialisers' errors), mcap-ros2-support's McapError, its definition parser's TypeError and
-    ValueError, its CDR reader's RuntimeError, NotImplementedError for types it does not read,
-    and the struct/index errors of truncated bytes."""
-    from mcap.exceptions import McapError
+    """What the decoders raise on message bytes that do not decode as their schema says:
+    rosbags' SerdeError (which wraps its deserialisers' errors) and TypesysError (a type of the
+    definition it cannot deserialise), mcap-ros2-support's CDR reader's ValueError and
+    RuntimeError (NotImplementedError for types it does not read), and the struct/index errors
+    of truncated bytes."""
     from rosbags.serde import SerdeError
     from rosbags.typesys.base import TypesysError
 
-    return (ValueError, TypeError, struct.error, IndexError, KeyError, EOFError, OverflowError,
-            RuntimeError, McapError, SerdeError, TypesysError)
+    return (ValueError, struct.error, IndexError, EOFError, OverflowError, RuntimeError,
+            SerdeError, TypesysError)
 
 
 class Decoders:
@@ -71,7 +75,7 @@ class Decoders:
 
     def _make(self, schema, encoding: str, path: Path):
         if encoding != "cdr":
-            raise ValueError(f"unsupported message encoding {encoding!r}")
+            raise DecoderError(f"ValueError: unsupported message encoding {encoding!r}")
         what = f"{path.name}: messages of {schema.name}"
         if schema.encoding != "ros2msg":
             log.info("%s: decoded by mcap-ros2-support (schema encoding %s)", what, schema.encoding)
@@ -80,9 +84,16 @@ class Decoders:
                        ("mcap-ros2-support", lambda: self._generic_decoder(schema, encoding, path)))
 
     def _generic_decoder(self, schema, encoding: str, path: Path):
-        decode = self._generic.decoder_for(encoding, schema)
+        """mcap-ros2-support's decoder; :class:`DecoderError` where its parser refuses the
+        definition (ValueError, TypeError, NotImplementedError, McapError)."""
+        from mcap.exceptions import McapError
+
+        try:
+            decode = self._generic.decoder_for(encoding, schema)
+        except (ValueError, TypeError, NotImplementedError, McapError) as e:
+            raise DecoderError(f"{type(e).__name__}: {e}") from None
         if decode is None:
-            raise ValueError(f"unsupported schema encoding {schema.encoding!r}")
+            raise DecoderError(f"ValueError: unsupported schema encoding {schema.encoding!r}")
         return decode
 
     @staticmethod

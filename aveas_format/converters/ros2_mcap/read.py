@@ -7,7 +7,7 @@ import warnings
 from pathlib import Path
 
 from aveas_format.converters.common.mcap import mcap_errors, why
-from aveas_format.converters.ros2_mcap.decode import Decoders, channels, decode_errors
+from aveas_format.converters.ros2_mcap.decode import DecoderError, Decoders, channels, decode_errors
 from aveas_format.converters.ros2_mcap.messages import (
     OBJECT_READERS,
     ObjectRows,
@@ -123,7 +123,11 @@ def read_topics(paths: list[Path], opts: Ros2McapOptions):
                 counters[topic] = mi + 1
                 where = f"topic {topic} message {mi}"
                 try:
-                    msg = factory.decoder(schema, ch.message_encoding, path)(m.data)
+                    decode = factory.decoder(schema, ch.message_encoding, path)
+                except DecoderError as e:
+                    raise FormatError(f"{where}: cannot decode: {e}", path=path) from None
+                try:
+                    msg = decode(m.data)
                 except decode_errors() as e:
                     raise FormatError(f"{where}: cannot decode: {type(e).__name__}: {e}",
                                       path=path) from None
