@@ -250,10 +250,15 @@ def build_map_from_lines(roads: dict[str, dict[str, tuple[str, np.ndarray]]], ge
 _CASE_FILES = ("participants.csv", "dynamics.csv", "roads.csv", "case.csv")
 
 
+def _is_case_file(path: Path, head: bytes) -> bool:
+    """One of a case's tables by its name (participants, dynamics, roads, case)."""
+    return path.name.lower() in _CASE_FILES
+
+
 @converter("accident", description="Accident reconstruction (GIDAS Pre-Crash-Matrix style tables); "
            "builds its map from the road lines", patterns=_CASE_FILES,
            method="accident_reconstruction", options=AccidentOptions, needs_map=False,
-           sniff=lambda path, head: path.name.lower() in _CASE_FILES)
+           sniff=_is_case_file)
 def convert_accident(inputs: list[Path], *, map_source, options: AccidentOptions):
     o = options
     f = _files(inputs)

@@ -91,6 +91,7 @@ def _strings(t: pa.Table, name: str) -> np.ndarray:
 
 
 def _is_simulator_log(path: Path, head: bytes) -> bool:
+    """A header with ``time, id, x, y, heading`` and ``vx, vy`` or ``speed``."""
     names = header_names(path, head)
     return {"time", "id", "x", "y", "heading"} <= names and ({"vx", "vy"} <= names or "speed" in names)
 

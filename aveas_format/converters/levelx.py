@@ -339,6 +339,8 @@ _HIGHD_META = ("id", "width", "height", "class", "drivingDirection")
 
 
 def _is_highd(path: Path, head: bytes) -> bool:
+    """A header of highD's tracks (``frame, id, xVelocity``), tracksMeta (``drivingDirection``)
+    or recordingMeta (``upperLaneMarkings``)."""
     names = header_names(path, head)
     return ({"frame", "id", "xVelocity"} <= names or {"id", "drivingDirection"} <= names
             or "upperLaneMarkings" in names)
@@ -352,6 +354,9 @@ def _is_centre(exid: bool):
         if {"trackId", "xCenter", "yCenter"} <= names:
             return ("laneletId" in names) == exid
         return {"trackId", "class", "numFrames"} <= names or "xUtmOrigin" in names
+    sniff.__doc__ = ("A header of box-centre tracks (``trackId, xCenter, yCenter``" +
+                     (", with ``laneletId``)" if exid else ", without ``laneletId``)") +
+                     " or of the tracksMeta/recordingMeta tables of the levelX centre layout.")
     return sniff
 
 
@@ -491,7 +496,7 @@ def shifted_crs(crs: str, dx: float, dy: float) -> str:
     ``(dx, dy)``: the frame of the levelX tracks."""
     import pyproj
 
-    from aveas_format.mapref.crs import parse_crs
+    from aveas_format.crs import parse_crs
 
     import warnings
 

@@ -228,7 +228,7 @@ def _to_map_frame(boxes: Boxes, proj, header, options: OsiOptions) -> str | None
     ``proj_string`` differs from the map's geoReference, positions go through the projected CRS
     into the map's frame (directions turned by the grid convergence and the frame offset's yaw).
     Without a geoReference the trace's ``proj_string`` (with its offset) is the recording's CRS."""
-    from aveas_format.mapref.crs import LocalFrame, crs_equal
+    from aveas_format.crs import LocalFrame, crs_equal
 
     if proj is None:
         return None

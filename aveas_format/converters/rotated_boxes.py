@@ -219,7 +219,7 @@ def _check_crs(crs: str, source: Path | None) -> None:
     .prj / .aux.xml it came from; none for the crs option)."""
     from pyproj.exceptions import CRSError
 
-    from aveas_format.mapref.crs import parse_crs
+    from aveas_format.crs import parse_crs
 
     try:
         parse_crs(crs)

@@ -326,7 +326,7 @@ def _to_map_frame(boxes: Boxes, net, geo: bool, options: SumoFcdOptions) -> None
     geoReference) into the map's frame."""
     x, y = boxes["x"], boxes["y"]
     if geo:
-        from aveas_format.mapref.crs import LocalFrame
+        from aveas_format.crs import LocalFrame
 
         if not net.header.geo_reference:
             raise FormatError("geo FCD needs a map with a <geoReference> to project lon/lat")

@@ -150,15 +150,16 @@ def validate(source: str | Path | Recording | list[str | Path], *, select: list[
     ``recording`` rules run once at the end (docs/validate.md, "Streaming").
     """
     if not isinstance(source, Recording) and source_findings is None:
-        from aveas_format.validate.submission import submitted_files, validate_submission
+        from aveas_format.validate.submission import imported, submitted_files
 
         files = submitted_files(list(source) if isinstance(source, (list, tuple)) else [source],
                                 converter)
         if files:
             select_rules(select, ignore)  # a usage error before the import's work
-            return validate_submission(files, converter=converter, map_source=map_source,
-                                       options=options, crs=crs, select=select, ignore=ignore,
-                                       config=config, max_sample=max_sample, name=name)
+            with imported(files, converter, map_source, options, crs) as (rec, found):
+                return validate(rec, select=select, ignore=ignore, config=config,
+                                max_sample=max_sample, source_findings=found,
+                                name=name or " ".join(str(p) for p in files))
     rules = select_rules(select, ignore)
     t0 = time.perf_counter()
     ctx = Context(source, config=config)

@@ -1,7 +1,8 @@
-"""A submitted file of any importable format, validated as a recording.
+"""A submitted file of any importable format, imported to be validated as a recording.
 
-``aveas_format.validate("submission.json")`` and ``aveas-format validate submission.json`` take a
-foreign file the same way (the CLI calls these functions):
+``aveas_format.validate("submission.json")`` (:func:`aveas_format.validate.runner.validate`) and
+``aveas-format validate submission.json`` take a foreign file the same way, through these
+functions:
 
 1. the importer: ``converter`` (``--from``), else the one the registry names for the file
    (:func:`aveas_format.converters.registry.importers_for`: its file patterns, and where several
@@ -116,17 +117,3 @@ def imported(inputs: Sequence[Path], converter: str | None = None,
     (a large file's recording is written there)."""
     with tempfile.TemporaryDirectory(prefix="aveas-validate-") as work:
         yield import_submission(inputs, converter, map_source, options, crs, Path(work))
-
-
-def validate_submission(inputs: Sequence[str | Path], *, converter: str | None = None,
-                        map_source: str | Path | bytes | None = None,
-                        options: dict[str, Any] | None = None, crs: str | None = None, **kw: Any):
-    """The report of a submitted file (the module doc): ``kw`` as
-    :func:`aveas_format.validate.runner.validate` takes them (select, ignore, config,
-    max_sample)."""
-    from aveas_format.validate.runner import validate
-
-    inputs = [Path(p) for p in inputs]
-    name = kw.pop("name", None) or " ".join(str(p) for p in inputs)
-    with imported(inputs, converter, map_source, options, crs) as (rec, found):
-        return validate(rec, source_findings=found, name=name, **kw)

@@ -281,7 +281,7 @@ def test_relative_velocity(scene_mcap, road_map):
 def test_navsatfix_ego_and_tf_static(road_map, tmp_path):
     """No odometry: the ego from NavSatFix (heading from motion); vision_msgs detections in a lidar
     frame 1 m ahead of base_link (/tf_static); velocity from positions."""
-    from aveas_format.mapref.crs import LocalFrame
+    from aveas_format.crs import LocalFrame
 
     frame = LocalFrame(GEO)
     msgs = [("/tf_static", "tf2_msgs/msg/TFMessage", {"transforms": [{

@@ -98,7 +98,7 @@ def projected_to_local(x: np.ndarray, y: np.ndarray, source_crs: str, map_crs: s
     it (:func:`rotate`). It holds the header offset's ``hdg`` and, where the two CRSs differ, the
     local grid convergence between them (measured by projecting a point 1 m east of each point).
     """
-    from aveas_format.mapref.crs import LocalFrame, crs_equal, parse_crs
+    from aveas_format.crs import LocalFrame, crs_equal, parse_crs
 
     frame = LocalFrame(map_crs, map_offset, warn=False)
     hdg = frame.offset[3]

@@ -165,7 +165,7 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     that writes its recording itself (:class:`.parts.Parts`; the states are then not in the
     recording returned, but in ``parts.states_file``)."""
     from aveas_format.mapref.build import build_recording
-    from aveas_format.mapref.crs import LocalFrame
+    from aveas_format.crs import LocalFrame
     from aveas_format.opendrive import load_map
 
     options = options or OpenLabelImportOptions()
@@ -283,7 +283,7 @@ def _states_in_memory(fd: _FrameData, uids: list[str], time_of: dict, start_time
 
 def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], path: Path | None) -> str:
     """The CRS: the map's ``<geoReference>``, else the recording's, else ``projection_string``."""
-    from aveas_format.mapref.crs import parse_crs
+    from aveas_format.crs import parse_crs
 
     crs = net.header.geo_reference or rmeta.get("crs")
     if not crs:
@@ -528,7 +528,7 @@ def _to_local(rows: dict[str, np.ndarray], ol: dict[str, Any], local, root_crs: 
     """Box centres and yaw in the map's local frame: through WGS84 where the root coordinate system
     has a CRS (``world_crs``, or a UTM root's name), else the root is the map frame. ``roots``:
     the root coordinate systems of all boxes (default: of ``rows``)."""
-    from aveas_format.mapref.crs import parse_crs
+    from aveas_format.crs import parse_crs
     from aveas_format.numeric import wrap_angle
 
     n = len(rows["time"])

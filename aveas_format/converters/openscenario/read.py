@@ -125,7 +125,7 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
     only when none can.
     """
     from aveas_format.converters.openscenario.replay import Replay
-    from aveas_format.mapref.crs import LocalFrame
+    from aveas_format.crs import LocalFrame
     from aveas_format.opendrive import load_map
 
     if len(inputs) != 1:

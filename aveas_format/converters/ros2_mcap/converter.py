@@ -107,7 +107,7 @@ def _ego_from_navsatfix(ego_fix: dict[str, list], fix: str, tree: TransformTree,
     """The ego track in the map frame from NavSatFix lon/lat (projected through the map's CRS;
     heading and velocity from the motion); map -> base_frame joins the transform tree unless the
     tree already reaches base_frame."""
-    from aveas_format.mapref.crs import LocalFrame
+    from aveas_format.crs import LocalFrame
     from aveas_format.opendrive import load_map
 
     net = load_map(map_bytes)
