@@ -99,22 +99,29 @@ def _module_name(path: Path, package: Path = PACKAGE) -> str:
     return ".".join(parts)
 
 
+def _package_of(path: Path, mod: str) -> str:
+    """The package a module's relative imports are relative to."""
+    pkg = mod.rsplit(".", 1)[0] if path.name != "__init__.py" else mod
+    return "aveas_format" if pkg == "aveas_format.__init__" else pkg
+
+
+def _from_target(node: ast.ImportFrom, pkg: str) -> str:
+    """The module named by ``from ... import`` (relative imports resolved against ``pkg``)."""
+    if node.level:
+        base = pkg.split(".")[: len(pkg.split(".")) - (node.level - 1)]
+        return ".".join(base + ([node.module] if node.module else []))
+    return node.module or ""
+
+
 def imports(package: Path = PACKAGE) -> list[Edge]:
     """Every import of a package module by a package module (module level and inside functions)."""
     out: list[Edge] = []
     for path in sorted(package.rglob("*.py")):
         mod = _module_name(path)
-        pkg = mod.rsplit(".", 1)[0] if path.name != "__init__.py" else mod
-        if pkg == "aveas_format.__init__":
-            pkg = "aveas_format"
-        tree = _tree(path)
-        for node in ast.walk(tree):
+        pkg = _package_of(path, mod)
+        for node in ast.walk(_tree(path)):
             if isinstance(node, ast.ImportFrom):
-                if node.level:
-                    base = pkg.split(".")[: len(pkg.split(".")) - (node.level - 1)]
-                    target = ".".join(base + ([node.module] if node.module else []))
-                else:
-                    target = node.module or ""
+                target = _from_target(node, pkg)
                 if not target.startswith("aveas_format"):
                     continue
                 names = [target] if node.module else [f"{target}.{a.name}" for a in node.names]
@@ -267,9 +274,7 @@ def runtime_imports(package: Path = PACKAGE) -> list[Edge]:
     for path in sorted(package.rglob("*.py")):
         mod = _module_name(path, package)
         src = "aveas_format" if mod == "aveas_format.__init__" else mod
-        pkg = mod.rsplit(".", 1)[0] if path.name != "__init__.py" else mod
-        if pkg == "aveas_format.__init__":
-            pkg = "aveas_format"
+        pkg = _package_of(path, mod)
         tree = _tree(path)
         typing_only = {id(n) for node in ast.walk(tree) if isinstance(node, ast.If)
                        and getattr(node.test, "id", getattr(node.test, "attr", None)) == "TYPE_CHECKING"
@@ -278,11 +283,7 @@ def runtime_imports(package: Path = PACKAGE) -> list[Edge]:
             if id(node) in typing_only:
                 continue
             if isinstance(node, ast.ImportFrom):
-                if node.level:
-                    base = pkg.split(".")[: len(pkg.split(".")) - (node.level - 1)]
-                    target = ".".join(base + ([node.module] if node.module else []))
-                else:
-                    target = node.module or ""
+                target = _from_target(node, pkg)
                 if not target.startswith("aveas_format"):
                     continue
                 for a in node.names:
@@ -359,16 +360,12 @@ def private_uses(package: Path = PACKAGE) -> list[PrivateUse]:
     out: list[PrivateUse] = []
     for path in sorted(package.rglob("*.py")):
         mod = _module_name(path, package)
-        pkg = mod.rsplit(".", 1)[0] if path.name != "__init__.py" else mod
+        pkg = _package_of(path, mod)
         tree = _tree(path)
         aliases: dict[str, str] = {}  # local name -> package module
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom):
-                if node.level:
-                    base = pkg.split(".")[: len(pkg.split(".")) - (node.level - 1)]
-                    target = ".".join(base + ([node.module] if node.module else []))
-                else:
-                    target = node.module or ""
+                target = _from_target(node, pkg)
                 if not target.startswith("aveas_format"):
                     continue
                 for a in node.names:

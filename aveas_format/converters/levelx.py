@@ -401,15 +401,8 @@ def convert_highd(inputs: list[Path], *, map_source=None, options: HighDOptions)
         top, bottom = -float(upper[0]) + options.shoulder_width, -float(lower[-1]) - options.shoulder_width
         coverage = Footprint(f"POLYGON (({x0} {bottom}, {x1} {bottom}, {x1} {top}, {x0} {top}, "
                              f"{x0} {bottom}))", "drone_camera")
-    loc = rec.get("locationId")
-    sensor = Sensor(
-        method="aerial", partner=PARTNER, nominal_rate_hz=rate, coverage=coverage,
-        platform=f"drone, 4K camera, {rate:g} fps, GSD {gsd:g} m (levelX highD)",
-        sensors=[{"id": "drone_camera", "kind": "rgb_camera", "rate_hz": rate}],
-        not_observable=NOT_OBSERVABLE,
-        site={"name": f"highD location {loc if loc is None else int(loc)}", "country": "DE",
-              "road_type": "motorway"},
-        extras={"levelx": {"dataset": "highD", **_jsonable(rec)}})
+    sensor = _drone(rec, rate, "highD", "motorway", f", GSD {gsd:g} m (levelX highD)",
+                    coverage=coverage)
     return to_recording(boxes, sensor, converter="highd", inputs=[tracks_p, meta_p, rec_p],
                         options=options, map_bytes=map_bytes, participants=participants,
                         events=_lane_changes(boxes, changes, "highD laneId"))
@@ -561,18 +554,26 @@ def _convert_centre(name: str, inputs: list[Path], map_source, options: LevelXCe
         "length_std": size_std, "width_std": size_std,
         "attributes": [json.dumps(a) for a in attrs],
     }
+    sensor = _drone(rec, rate, dataset, road_type, f" (levelX {dataset})", crs=crs, utm_crs=utm)
+    return to_recording(boxes, sensor, converter=name, inputs=[tracks_p, meta_p, rec_p],
+                        options=options, map_bytes=map_bytes, participants=participants,
+                        events=_lane_changes(boxes, changes, f"{dataset} laneChange"))
+
+
+def _drone(rec: dict[str, Any], rate: float, dataset: str, road_type: str, camera: str, *,
+           coverage: Footprint | None = None, crs: str | None = None, **extras: Any) -> Sensor:
+    """The sensor of a levelX recording: a drone's 4K camera at ``rate`` fps (``camera``: the
+    rest of the platform text), the site from recordingMeta, its row kept in ``extras.levelx``
+    after ``extras``."""
     loc = rec.get("locationId")
-    sensor = Sensor(
-        method="aerial", partner=PARTNER, nominal_rate_hz=rate, crs=crs,
-        platform=f"drone, 4K camera, {rate:g} fps (levelX {dataset})",
+    return Sensor(
+        method="aerial", partner=PARTNER, nominal_rate_hz=rate, coverage=coverage, crs=crs,
+        platform=f"drone, 4K camera, {rate:g} fps{camera}",
         sensors=[{"id": "drone_camera", "kind": "rgb_camera", "rate_hz": rate}],
         not_observable=NOT_OBSERVABLE,
         site={"name": f"{dataset} location {loc if loc is None else int(loc)}", "country": "DE",
               "road_type": road_type},
-        extras={"levelx": {"dataset": dataset, "utm_crs": utm, **_jsonable(rec)}})
-    return to_recording(boxes, sensor, converter=name, inputs=[tracks_p, meta_p, rec_p],
-                        options=options, map_bytes=map_bytes, participants=participants,
-                        events=_lane_changes(boxes, changes, f"{dataset} laneChange"))
+        extras={"levelx": {"dataset": dataset, **extras, **_jsonable(rec)}})
 
 
 def _utm_of(rec: dict[str, Any], path: Path) -> str:

@@ -19,8 +19,7 @@ Modules, one concern each:
   description :class:`Sensor` with its coverage (:class:`Footprint`, :class:`Range`) and size
   aggregation (:class:`Sizes`).
 - ``assemble``: the step itself, :func:`to_recording` (velocities, per-participant aggregation,
-  nulls, coverage, recording.json, the hand-off to map-referencing), and ``hand_over`` for an
-  importer that writes its states itself.
+  nulls, coverage, recording.json, the hand-off to map-referencing).
 - ``tables``: reading CSV/Parquet with located errors; source ids -> participant codes.
 - ``timestamps``: timestamps whose unit and epoch a format leaves open; ISO 8601; UTC text.
 - ``geometry``: reference points, angle conventions, quaternions and 2D rotations, covariances,

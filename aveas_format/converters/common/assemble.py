@@ -131,9 +131,9 @@ def participant_columns(boxes: Boxes, sizes: Sizes, given: Mapping[str, Any] | N
 def hand_over(converter: str, inputs: Sequence[Path], options: Any, *, map_bytes: bytes,
               participants: Mapping[str, Any], states: Mapping[str, Any], sensor: Sensor,
               resolved: Mapping[str, Any] | None = None, version: str = "1", **meta: Any):
-    """recording.json's values (the sensor's, the common import options over them, the ``source``
-    block) and the map-referencing hand-off (:func:`~aveas_format.mapref.build.build_recording`).
-    Also the last step of an importer that writes its states itself."""
+    """The last step of :func:`to_recording`: recording.json's values (the sensor's, the common
+    import options over them, the ``source`` block) and the map-referencing hand-off
+    (:func:`~aveas_format.mapref.build.build_recording`) of the assembled tables."""
     o = options
     partner = getattr(o, "partner", None) or sensor.partner
     md: dict[str, Any] = {
