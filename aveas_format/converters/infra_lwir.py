@@ -400,7 +400,6 @@ def _ground_boxes(track_paths: list[Path], H: np.ndarray, cov_h: np.ndarray, w_s
     moved to the footprint centre (``ground_point``), velocities by central differences, the
     heading from the motion."""
     from aveas_format.mapref.build import heading_from_velocity
-    from aveas_format.numeric import central_differences
 
     parts = [_read_tracks(p, o) for p in track_paths]
     time = np.concatenate([p[0] for p in parts])
