@@ -356,13 +356,14 @@ def _osi_mcap_rows(rec, tmp: Path) -> list[dict]:
     dt = _timed(lambda: osi(rec, tmp / "rec_osi.mcap"))
     rows.append(_row("export_osi_mcap", n, dt, f"{(tmp / 'rec_osi.mcap').stat().st_size / 1e6:.1f} MB"))
     import aveas_format.converters.osi as osi_mod
+    from aveas_format.converters.common.fastpath import FastPathUnsupported
 
     dt = _best(lambda: convert("osi", [tmp / "rec.osi"], map_source=tmp / "rec.xodr"))
     dt_cols = _best(lambda: osi_mod._decode_columns([tmp / "rec.osi"], osi_mod.OsiOptions()))
     columns = osi_mod._decode_columns
 
     def columns_off(*a, **k):
-        raise osi_mod.pw.Unsupported("the betterosi path, for comparison")
+        raise FastPathUnsupported("the betterosi path, for comparison")
 
     osi_mod._decode_columns = columns_off
     try:
@@ -528,9 +529,10 @@ if name in ("osi-import", "osi-import-betterosi"):  # the trace of an earlier ch
 
     if name == "osi-import-betterosi":  # the import decoding with betterosi (before brief 22f)
         import aveas_format.converters.osi as osi_mod
+        from aveas_format.converters.common.fastpath import FastPathUnsupported
 
         def _columns_off(*a, **k):
-            raise osi_mod.pw.Unsupported("the betterosi path, for comparison")
+            raise FastPathUnsupported("the betterosi path, for comparison")
 
         osi_mod._decode_columns = _columns_off
     base = hwm_mb()

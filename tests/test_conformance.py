@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 import aveas_format
-from aveas_format.mapref import LocalFrame
+from aveas_format.crs import LocalFrame
 
 
 def test_conformance_recording_reads(conformance_path):

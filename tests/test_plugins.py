@@ -186,6 +186,23 @@ def test_partner_plugin_registers_a_converter_a_rule_and_a_derivation(install, h
     assert report.failures == [] and not any(c.startswith("structure.") for c in report.codes)
 
 
+def test_a_partner_converter_takes_part_in_sniffing(install, highway, tmp_path):
+    """The partner's ``sniff`` (its CSV header) picks it among every importer of ``*.csv``, so
+    that ``aveas_format.validate(FILE)`` and ``aveas-format validate FILE`` take its files as
+    they take the built-in formats; a CSV of another layout is not claimed by it."""
+    from aveas_format.converters.registry import importers_for
+
+    install("aveas-partner-plugin", PARTNER)
+    one = partner_csv(tmp_path / "one.csv", 1)
+    assert importers_for(one) == ["partner-csv"]
+    other = tmp_path / "log.csv"
+    other.write_text("time,id,x,y,heading,speed\n0,ego,20,-1.75,0,20\n")
+    assert importers_for(other) == ["driving-simulator"]
+    report = validate(one, map_source=highway, select=["partner"])
+    assert report.recording == str(one)
+    assert report.flatten(("code",)) == [["partner.single_participant"]]
+
+
 def test_a_plugin_that_cannot_be_imported_is_one_clear_error(install):
     install("aveas-broken-plugin", {"aveas_format.rules": {"broken": "aveas_broken_plugin"}})
     with pytest.raises(PluginError) as e:
@@ -234,6 +251,9 @@ def test_cli_finds_the_partner_plugin(tmp_path, highway):
     report = json.loads(res.stdout)
     assert report["rules_run"] == ["partner.single_participant"]
     assert [r["code"] for r in report["results"]] == ["partner.single_participant"]
+    res = cli(site, "validate", tmp_path / "one.csv", "--map", highway, "--format", "json",
+              "--select", "partner")  # a partner file, its importer sniffed
+    assert [r["code"] for r in json.loads(res.stdout)["results"]] == ["partner.single_participant"]
     res = cli(site, "derive", out, "--only", "partner_speed", "--in-place")
     assert res.returncode == 0, res.stderr
     assert json.loads(res.stdout)["tables"] == {"derived/partner_speed": 41}

@@ -124,6 +124,19 @@ def _command_markdown(name: str, cmd, level: str = "##") -> list[str]:
     return lines
 
 
+def _sniff_text(sniff) -> str:
+    """How an importer recognises its files, for the converters table: its byte signatures, or
+    the first sentence of its sniff function's docstring."""
+    import inspect
+
+    if sniff is None:
+        return ""
+    if not callable(sniff):
+        return " or ".join(f"`{s.decode('ascii', 'replace')}`" for s in sniff)
+    doc = inspect.cleandoc(sniff.__doc__ or "")
+    return " ".join(doc.split(". ")[0].split()).rstrip(".").replace("``", "`").replace("|", "\\|")
+
+
 def converters_markdown() -> str:
     import inspect
 
@@ -148,14 +161,17 @@ def converters_markdown() -> str:
         "than writing a stand-in the validator flags. The result is validated unless "
         "`--no-validate`. Malformed input gives one error line naming the file and line/row/column. "
         "A converter whose source needs an optional stack names its extra (*needs*; `pip install "
-        "\"aveas-format[ros2]\"`). Adding a converter: [extending.md](extending.md#a-converter).",
+        "\"aveas-format[ros2]\"`). `aveas-format validate FILE` (and `aveas_format.validate(FILE)`) "
+        "imports a submitted file with the importer whose *inputs* patterns match its name and, "
+        "where several do, whose *content* check recognises its first bytes (`--from NAME` "
+        "otherwise). Adding a converter: [extending.md](extending.md#a-converter).",
         "",
-        "| name | direction | acquisition method | inputs | source states | needs | description |",
-        "|---|---|---|---|---|---|---|",
+        "| name | direction | acquisition method | inputs | content | source states | needs | description |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for c in convs:
         lines.append(f"| [`{c.name}`](#{c.name}) | {c.direction} | {c.method or ''} | "
-                     f"{' '.join(f'`{p}`' for p in c.patterns)} | "
+                     f"{' '.join(f'`{p}`' for p in c.patterns)} | {_sniff_text(c.sniff)} | "
                      f"{', '.join(c.provides) if c.direction == 'import' else ''} | "
                      f"{f'`[{c.extra}]`' if c.extra else ''} | {c.description} |")
     lines.append("")

@@ -18,6 +18,7 @@ from aveas_format.cli.options import (
     converter_workers,
     crs_option,
     format_option,
+    log_verbose,
     map_option,
     option_pairs_option,
     options_file_option,
@@ -27,6 +28,7 @@ from aveas_format.cli.options import (
     scheduler_option,
     validate_option,
     validate_written,
+    verbose_option,
     workers_option,
 )
 
@@ -75,6 +77,7 @@ def convert(
     scheduler: str = scheduler_option(scope="With --each",
                                       help="address of a Dask scheduler (tcp://HOST:PORT)."),
     validate_: bool = validate_option(),
+    verbose: bool = verbose_option(),
 ) -> None:
     """Convert source data into a recording: `aveas-format convert --from sumo-fcd fcd.xml --map
     net.xodr -o run.aveas`."""
@@ -83,6 +86,7 @@ def convert(
     if list_:
         list_converters(None, fmt)
         return
+    log_verbose(verbose)
     if not source or not inputs or not output:
         raise fail("--from NAME, INPUT... and --output are required (or --list)", EXIT_USAGE)
     conv = get_converter(source)

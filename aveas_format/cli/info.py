@@ -23,7 +23,7 @@ def coverage_lonlat(rec: Any, wkt: str | None) -> list[float] | None:
     import shapely
 
     from aveas_format.errors import AveasError
-    from aveas_format.mapref.crs import LocalFrame
+    from aveas_format.crs import LocalFrame
 
     try:
         xy = shapely.get_coordinates(shapely.segmentize(shapely.from_wkt(wkt), 10.0))

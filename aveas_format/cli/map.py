@@ -49,7 +49,7 @@ def _load(path: Path | None):
 def map_summary(net) -> dict[str, Any]:
     """The summary printed by ``map info`` (also its ``--json``)."""
     from aveas_format.errors import FormatError
-    from aveas_format.mapref.crs import parse_crs
+    from aveas_format.crs import parse_crs
 
     roads = list(net.roads.values())
     lane_types: Counter[str] = Counter()

@@ -349,3 +349,24 @@ def scheduler_option(*, scope: str = "", help: str = "address of a Dask schedule
     """``--scheduler ADDRESS``: run on a Dask cluster instead of local processes."""
     return typer.Option(None, "--scheduler", help=_scoped(scope, help))
 
+
+def verbose_option() -> Any:
+    return typer.Option(False, "--verbose", help="Say how each input was read on stderr: which "
+                        "decoder read it (a fast one, or the library's where the fast one does not "
+                        "take it, and why).")
+
+
+def log_verbose(verbose: bool) -> None:
+    """With ``--verbose``: the INFO messages of aveas_format's loggers (which path read a file,
+    converters/common/fastpath.py) on stderr, one plain line each; without: none."""
+    import logging
+    import sys
+
+    class Stderr(logging.Handler):  # the stderr of the moment (a test's captured one too)
+        def emit(self, record: logging.LogRecord) -> None:
+            print(f"aveas-format: {record.getMessage()}", file=sys.stderr)
+
+    logger = logging.getLogger("aveas_format")
+    if not any(type(h).__name__ == "Stderr" for h in logger.handlers):
+        logger.addHandler(Stderr())
+    logger.setLevel(logging.INFO if verbose else logging.WARNING)

@@ -1,21 +1,18 @@
 """``aveas-format validate REC``: check a recording against the format; ``validate FILE``: a
 submitted file of any importable format (OpenLABEL, OSI, OpenSCENARIO...), imported on the fly.
 
-A submission is imported by its converter (``--from NAME``, else the one whose file patterns
-match; ``.json`` / ``.mcap``, which several converters read, are told apart by their first bytes)
-with :func:`aveas_format.errors.collect_source_findings` active, and validated as a recording: the
-import's findings about the file become the ``source.*`` rules' findings, located in the source's
-own terms, next to the format's rules. Memory: a converter that writes the recording itself
-(``Converter.writes``: OpenLABEL) writes a large file's into a temporary directory, its states in
-parts, and the recording is validated from there, streamed (1.7 GB for 9.2 M states); others
-hold the imported recording's columns (about 0.3 kB per state), as ``convert`` holds them.
+A submission is imported and validated as :mod:`aveas_format.validate.submission` does it for
+``aveas_format.validate(FILE)`` (the importer from ``--from`` or the registry's patterns and
+sniffing; the import's findings about the file as the ``source.*`` rules' findings). Memory: an
+importer that writes the recording itself (OpenLABEL) writes a large file's into a temporary
+directory, its states in parts, and the recording is validated from there, streamed (1.7 GB for
+9.2 M states); others hold the imported recording's columns (about 0.3 kB per state).
 """
 
 from __future__ import annotations
 
 import functools
 import json
-import tempfile
 from enum import Enum
 from pathlib import Path
 from typing import NoReturn
@@ -36,6 +33,7 @@ from aveas_format.cli.options import (
     discover_dataset,
     format_option,
     ignore_option,
+    log_verbose,
     map_option,
     option_pairs_option,
     options_file_option,
@@ -45,6 +43,7 @@ from aveas_format.cli.options import (
     scheduler_option,
     select_option,
     single_recording,
+    verbose_option,
     workers_option,
 )
 
@@ -107,6 +106,7 @@ def validate(
     crs: str = crs_option(),
     option: list[str] = option_pairs_option("A submitted file: converter"),
     options_file: Path = options_file_option("A submitted file: converter"),
+    verbose: bool = verbose_option(),
 ) -> None:
     """Validate a recording, or a submitted file of any importable format (`validate
     submission.json`, `validate --from osi trace.osi --map map.xodr`): imported on the fly, its
@@ -115,6 +115,7 @@ def validate(
     from aveas_format.validate.config import ValidationConfig, config_toml
     from aveas_format.validate.report import report_json_schema
 
+    log_verbose(verbose)
     if report_schema:
         _print_and_exit(json.dumps(report_json_schema(), indent=2))
     if print_config:
@@ -136,7 +137,9 @@ def validate(
     except FormatError as e:
         raise fail(str(e), EXIT_USAGE) from None
     only, skip = comma_list(select), comma_list(ignore)
-    submission = _submission(recordings, source)
+    from aveas_format.validate.submission import imported, importer_of, submitted_files
+
+    submission = submitted_files(recordings, source)
     recording = None if submission else single_recording(recordings)
     if recording is None and not submission:
         if out_dir is not None and reports_dir is None:  # -o DIR/ of a dataset: its reports dir
@@ -151,10 +154,12 @@ def validate(
         check_output(targets, overwrite)
     if submission:
         check_rules(only, skip)  # a usage error before the import's work
-        model = _options_model(submission, source)
-        with tempfile.TemporaryDirectory(prefix="aveas-validate-") as work:  # (a large file's recording)
-            rec, found = import_submission(submission, source, map_file, converter_workers(
-                converter_options(options_file, option, model), model, workers), crs, Path(work))
+        from aveas_format.converters.registry import get_converter
+
+        name = importer_of(submission, source)
+        model = get_converter(name).options
+        opts = converter_workers(converter_options(options_file, option, model), model, workers)
+        with imported(submission, name, map_file, opts, crs) as (rec, found):
             report = run(rec, select=only, ignore=skip, config=cfg, max_sample=max_sample,
                          source_findings=found, name=" ".join(str(p) for p in submission))
             _finish(report, rec, out_dir, output, fmt, fail_on, docs_url)
@@ -253,110 +258,3 @@ def _open_for_figures(path, report=None):
         return open_for_figures(path, report)
     except Exception:  # noqa: BLE001 — a broken recording still gets its report, without figures
         return None
-
-
-# --- a submitted file ---------------------------------------------------------------------------
-
-#: the first bytes that tell converters sharing an extension apart (``.json``: OpenLABEL or an
-#: infrastructure-lidar track list; ``.mcap``: OSI or ROS 2)
-_SNIFF = {"openlabel": (b'"openlabel"',), "osi": (b"osi3.", b"net.asam.osi")}
-_SNIFF_BYTES = 1 << 16
-
-
-def _submission(specs: list[str] | None, source: str | None) -> list[Path]:
-    """The files of a submission when the arguments name one: ``--from`` (then every argument is
-    an input of that converter), or one existing file that is not a recording ZIP."""
-    if not specs:
-        return []
-    if source:
-        return [Path(s) for s in specs]
-    p = Path(specs[0])
-    if len(specs) == 1 and p.is_file() and not p.name.lower().endswith(".zip"):
-        return [p]
-    return []
-
-
-def _candidates(path: Path) -> list[str]:
-    """Import converters whose file patterns match ``path``; where several do, those whose
-    signature (:data:`_SNIFF`) is in the file's first bytes, if that leaves one."""
-    import fnmatch
-
-    from aveas_format.converters.registry import load_converters
-
-    name = path.name.lower()
-    hits = sorted(c.name for c in load_converters().values() if c.direction == "import"
-                  and any(fnmatch.fnmatch(name, pat.lower()) for pat in c.patterns))
-    if len(hits) > 1:
-        try:
-            with open(path, "rb") as f:
-                head = f.read(_SNIFF_BYTES)
-        except OSError:
-            return hits
-        sniffed = [h for h in hits if any(sig in head for sig in _SNIFF.get(h, ()))]
-        if len(sniffed) == 1:
-            return sniffed
-    return hits
-
-
-def _converter_name(inputs: list[Path], source: str | None) -> str:
-    from aveas_format.errors import RecordingIOError, UsageError
-
-    if source:
-        return source
-    hits = _candidates(inputs[0])
-    if len(hits) == 1:
-        return hits[0]
-    if hits:
-        raise UsageError(f"{inputs[0]}: several converters read {inputs[0].suffix or 'it'} "
-                         f"({', '.join(hits)}): pass --from NAME")
-    raise RecordingIOError("not a recording, and no converter reads files like it (pass --from "
-                           "NAME; `aveas-format convert --list` lists them)", path=inputs[0])
-
-
-def _options_model(inputs: list[Path], source: str | None) -> type:
-    from aveas_format.converters.registry import get_converter
-
-    return get_converter(_converter_name(inputs, source)).options
-
-
-def import_submission(inputs: list[Path], source: str | None = None, map_file: Path | None = None,
-                      options: dict | None = None, crs: str | None = None, workdir: Path | None = None):
-    """Import a submitted file and collect what the import finds about it: ``(recording,
-    [SourceFinding])``; with ``workdir``, a converter that writes the recording itself writes it
-    there (a large file's states in parts) and the recording is its path where its states were
-    not loaded. Findings without a file name the (first) input; a warning of a converter that
-    does not report located findings yet becomes a ``source.other`` finding, so that nothing it
-    says is lost. An unimportable file raises the converter's (located) error."""
-    import dataclasses
-    import warnings
-
-    from aveas_format.converters.registry import convert, convert_to, get_converter
-    from aveas_format.errors import MissingCrsError, SourceFinding, collect_source_findings
-
-    name = _converter_name(inputs, source)
-    to_disk = workdir is not None and get_converter(name).writes is not None
-    with collect_source_findings() as found, warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        warnings.simplefilter("ignore", DeprecationWarning)
-        warnings.simplefilter("ignore", PendingDeprecationWarning)
-        try:
-            if to_disk:
-                rec, _, _ = convert_to(name, inputs, workdir / "submission.aveas", map_source=map_file,
-                                       options=options, crs=crs)
-                rec = rec if rec.states is not None else rec.path
-            else:
-                rec = convert(name, inputs, map_source=map_file, options=options, crs=crs)
-        except MissingCrsError as e:  # its message shows the convert command: show this one
-            raise MissingCrsError(e.message.replace("aveas-format convert ", "aveas-format "
-                                                    "validate ").replace(" -o OUT.aveas", ""),
-                                  path=e.path) from None
-    file = str(inputs[0])
-    out = [f if "file" in f.location else
-           dataclasses.replace(f, location={"file": file, **f.location}) for f in found]
-    seen: set[str] = set()
-    for w in caught:
-        msg = str(w.message)
-        if msg not in seen:
-            seen.add(msg)
-            out.append(SourceFinding("source.other", msg, {"file": file}))
-    return rec, out

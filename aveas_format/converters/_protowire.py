@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from aveas_format.converters.common.fastpath import FastPathUnsupported
+
 VARINT, I64, LEN, I32 = 0, 1, 2, 5
 
 
@@ -285,19 +287,14 @@ class Fields:
 
     def select(self, number: int, wire: int, *, singular: bool = True) -> np.ndarray:
         """Rows of field ``number``; another wire type for it, or (``singular``) a span with it
-        twice, is :class:`Unsupported` (a decoder that merges or converts would be needed)."""
+        twice, is :class:`FastPathUnsupported` (a decoder that merges or converts would be needed)."""
         rows = np.flatnonzero(self.number == number)
         if rows.size and (self.wire[rows] != wire).any():
-            raise Unsupported(f"field {number} with wire type "
+            raise FastPathUnsupported(f"field {number} with wire type "
                               f"{int(self.wire[rows][self.wire[rows] != wire][0])}")
         if singular and rows.size and np.bincount(self.span[rows]).max() > 1:
-            raise Unsupported(f"singular field {number} repeated in a message")
+            raise FastPathUnsupported(f"singular field {number} repeated in a message")
         return rows
-
-
-class Unsupported(Exception):
-    """Valid wire format that the columnar decoder does not take (the caller falls back to a full
-    decoder)."""
 
 
 def walk(buf: np.ndarray, start: np.ndarray, end: np.ndarray) -> Fields:

@@ -43,18 +43,16 @@ from __future__ import annotations
 import json
 import warnings
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import pyarrow as pa
 
-from aveas_format.converters.common import (
-    class_of,
-    factorize,
-    footprint_corners,
-    read_numeric_table,
-    wrap_recording,
-)
+from aveas_format.converters.common.assemble import to_recording
+from aveas_format.converters.common.boxes import Boxes, Rows, Sensor
+from aveas_format.converters.common.geometry import footprint_corners
+from aveas_format.converters.common.tables import factorize, read_table
+from aveas_format.converters.labels import class_of
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError
 from aveas_format.io.arrow import column_numpy
@@ -249,102 +247,145 @@ def build_map_from_lines(roads: dict[str, dict[str, tuple[str, np.ndarray]]], ge
 
 # --- the converter ---------------------------------------------------------------------------------
 
+_CASE_FILES = ("participants.csv", "dynamics.csv", "roads.csv", "case.csv")
+
+
+def _is_case_file(path: Path, head: bytes) -> bool:
+    """One of a case's tables by its name (participants, dynamics, roads, case)."""
+    return path.name.lower() in _CASE_FILES
+
+
 @converter("accident", description="Accident reconstruction (GIDAS Pre-Crash-Matrix style tables); "
-           "builds its map from the road lines", patterns=("participants.csv", "dynamics.csv",
-                                                           "roads.csv", "case.csv"),
-           method="accident_reconstruction", options=AccidentOptions, needs_map=False)
+           "builds its map from the road lines", patterns=_CASE_FILES,
+           method="accident_reconstruction", options=AccidentOptions, needs_map=False,
+           sniff=_is_case_file)
 def convert_accident(inputs: list[Path], *, map_source, options: AccidentOptions):
     o = options
     f = _files(inputs)
-    case: dict[str, object] = {}
-    if "case" in f:
-        ct = read_numeric_table(f["case"], numeric=("collision_step", "collision_time", "position_tol_m",
-                                                    "velocity_tol_m_s", "yaw_tol_deg", "accel_tol_m_s2",
-                                                    "rate_hz"))
-        if ct.num_rows != 1:
-            raise FormatError(f"case table has {ct.num_rows} rows; one case per directory", path=f["case"])
-        case = {k: v[0] for k, v in ct.to_pydict().items()}
+    case = _case(f.get("case"))
     rate = float(case.get("rate_hz") or o.rate_hz)
 
     def tol(key: str, default: float) -> float:
         v = case.get(key)
         return float(v) if v is not None and np.isfinite(v) else default
 
-    pos_std = tol("position_tol_m", o.position_tol_m) / Z95
-    vel_std = tol("velocity_tol_m_s", o.velocity_tol_m_s) / Z95
-    yaw_std = np.radians(tol("yaw_tol_deg", o.yaw_tol_deg)) / Z95
-    acc_std = tol("accel_tol_m_s2", o.accel_tol_m_s2) / Z95
+    stds = {"position": tol("position_tol_m", o.position_tol_m) / Z95,
+            "velocity": tol("velocity_tol_m_s", o.velocity_tol_m_s) / Z95,
+            "yaw": np.radians(tol("yaw_tol_deg", o.yaw_tol_deg)) / Z95,
+            "accel": tol("accel_tol_m_s2", o.accel_tol_m_s2) / Z95}
+    parts = _participants(f["participants"], o)
+    boxes, t_min = _dynamics(f["dynamics"], parts, rate, stds, o)
+    xodr = _road_map(f["roads"], o)
+    events = _collision(case, boxes, parts, rate, t_min, f)
+    m = len(parts["source_id"])
+    pmf = np.zeros((m, len(CLASSES)), np.float32)
+    pmf[np.arange(m), [CLASSES.index(c) for c in parts["class"]]] = 1.0
+    dim_std = o.dimension_tol_m / Z95
+    participants = {
+        "class": parts["class"], "class_pmf": pmf, "length": parts["length"],
+        "width": parts["width"], "height": parts["height"], "length_std": np.full(m, dim_std),
+        "width_std": np.full(m, dim_std), "attributes": parts["attributes"],
+    }
+    case_id = str(case.get("case_id", "")) if case else ""
+    sensor = Sensor(
+        method="accident_reconstruction", partner="accident database", nominal_rate_hz=rate,
+        title=f"accident case {case_id}" if case_id else None,
+        platform="accident reconstruction (pre-crash matrix)",
+        sensors=[{"id": "reconstruction", "kind": "manual",
+                  "description": "reconstructed from the accident scene"}],
+        not_observable=["light_", "interior", "lane_offset"])
+    return to_recording(boxes, sensor, converter="accident", inputs=list(f.values()),
+                        options=options, map_bytes=xodr.encode(), participants=participants,
+                        events=events)
 
-    # participants
-    pp = f["participants"]
-    pt = read_numeric_table(pp, required=("participant_id", "type", "length", "width"),
-                            numeric=("length", "width", "height"))
+
+def _case(path: Path | None) -> dict[str, object]:
+    """The one row of case.csv ({} without the file)."""
+    if path is None:
+        return {}
+    ct = read_table(path, numeric=("collision_step", "collision_time", "position_tol_m",
+                                   "velocity_tol_m_s", "yaw_tol_deg", "accel_tol_m_s2", "rate_hz"))
+    if ct.num_rows != 1:
+        raise FormatError(f"case table has {ct.num_rows} rows; one case per directory", path=path)
+    return {k: v[0] for k, v in ct.to_pydict().items()}
+
+
+def _participants(pp: Path, o: AccidentOptions) -> dict[str, Any]:
+    """participants.csv: source ids (in the file's order: the participant codes), classes,
+    sizes, the further columns as attributes, and the code of each source id (``index``)."""
+    pt = read_table(pp, required=("participant_id", "type", "length", "width"),
+                    numeric=("length", "width", "height"))
     _check_finite(pt, ("length", "width"), pp, positive=("length", "width"))
     p_src = pt.column("participant_id").cast(pa.string()).to_pylist()
     if len(set(p_src)) != len(p_src):
         raise FormatError("participant_id values repeat", path=pp)
     types = pt.column("type").cast(pa.string()).to_pylist()
-    classes = [class_of(ty, o.class_map) for ty in types]
     extra = [c for c in pt.column_names if c not in ("participant_id", "type", "length", "width",
                                                       "height")]
-    attrs = [json.dumps({"type": ty, **{c: pt.column(c)[i].as_py() for c in extra}}, default=str)
-             for i, ty in enumerate(types)]
-    index = {s: i for i, s in enumerate(p_src)}
+    return {
+        "path": pp, "source_id": p_src, "index": {s: i for i, s in enumerate(p_src)},
+        "class": [class_of(ty, o.class_map) for ty in types],
+        "length": column_numpy(pt, "length"), "width": column_numpy(pt, "width"),
+        "height": column_numpy(pt, "height", missing=np.nan),
+        "attributes": [json.dumps({"type": ty, **{c: pt.column(c)[i].as_py() for c in extra}},
+                                  default=str) for i, ty in enumerate(types)],
+    }
 
-    # dynamics
-    dp = f["dynamics"]
-    dt_ = read_numeric_table(dp, required=("participant_id", "x", "y", "vx", "vy"),
-                             numeric=("step", "time", "x", "y", "vx", "vy", "ax", "ay", "yaw",
-                                      "ref_offset"))
+
+def _dynamics(dp: Path, parts: dict[str, Any], rate: float, stds: dict[str, float],
+              o: AccidentOptions) -> tuple[Boxes, float]:
+    """dynamics.csv as (sorted) boxes with the stated tolerances as std, and the earliest time
+    before it was moved to 0 (where it was negative)."""
+    dt_ = read_table(dp, required=("participant_id", "x", "y", "vx", "vy"),
+                     numeric=("step", "time", "x", "y", "vx", "vy", "ax", "ay", "yaw", "ref_offset"))
     names = set(dt_.column_names)
     if "step" not in names and "time" not in names:
         raise FormatError(f"dynamics needs a column 'step' or 'time'; found {dt_.column_names}", path=dp)
     tcol = "step" if "step" in names else "time"
     _check_finite(dt_, (tcol, "x", "y", "vx", "vy", "yaw", "ax", "ay"), dp)
     d_src = dt_.column("participant_id").cast(pa.string()).to_pylist()
+    index = parts["index"]
     unknown = [i for i, s in enumerate(d_src) if s not in index]
+    csv = dp.suffix.lower() != ".parquet"
     if unknown:
         i = unknown[0]
-        raise FormatError(f"participant_id {d_src[i]!r} is not in {pp.name}", path=dp,
-                          line=i + 2 if dp.suffix.lower() != ".parquet" else None)
+        raise FormatError(f"participant_id {d_src[i]!r} is not in {parts['path'].name}", path=dp,
+                          line=i + 2 if csv else None)
     if not d_src:
         raise FormatError("dynamics has no rows", path=dp)
-    pid = np.fromiter((index[s] for s in d_src), np.int64, len(d_src))
+    n = len(d_src)
     tv = column_numpy(dt_, tcol)
     time = tv / rate if tcol == "step" else tv
-    x, y = column_numpy(dt_, "x"), column_numpy(dt_, "y")
-    vx, vy = column_numpy(dt_, "vx"), column_numpy(dt_, "vy")
+    t_min = float(time.min())
+    acc = {c: column_numpy(dt_, c) for c in ("ax", "ay") if c in names}
+    boxes = Boxes(
+        np.fromiter((index[s] for s in d_src), np.int64, n), time - t_min if t_min < 0 else time,
+        column_numpy(dt_, "x"), column_numpy(dt_, "y"), source_ids=parts["source_id"],
+        rows=Rows([dp], place=np.arange(n) + 2 if csv else None, unit="line" if csv else "row"),
+        vx=column_numpy(dt_, "vx"), vy=column_numpy(dt_, "vy"),
+        x_std=np.full(n, stds["position"]), y_std=np.full(n, stds["position"]),
+        heading_std=np.full(n, stds["yaw"]), vx_std=np.full(n, stds["velocity"]),
+        vy_std=np.full(n, stds["velocity"]), **acc,
+        **{f"{c}_std": np.full(n, stds["accel"]) for c in acc}).sort()
     if "yaw" in names:
-        yaw = column_numpy(dt_, "yaw")
+        yaw = column_numpy(dt_, "yaw")[boxes.order]
         heading = np.radians(yaw) if o.yaw_unit == "deg" else yaw
     else:
         from aveas_format.mapref.build import heading_from_velocity
 
-        heading = heading_from_velocity(pid, vx, vy)
-    if "ref_offset" in names:
-        off = np.nan_to_num(column_numpy(dt_, "ref_offset"))
-        x, y = x - off * np.cos(heading), y - off * np.sin(heading)
-    t_min = float(time.min())
-    time = time - t_min if t_min < 0 else time
-    order = np.lexsort((time, pid))
-    dup = np.r_[False, (pid[order][1:] == pid[order][:-1]) & (time[order][1:] == time[order][:-1])]
-    if dup.any():
-        i = int(order[np.flatnonzero(dup)[0]])
-        raise FormatError(f"participant {d_src[i]!r} has two samples at {tcol} {tv[i]:g}", path=dp,
-                          line=i + 2 if dp.suffix.lower() != ".parquet" else None)
-    n = len(time)
-    states = {"participant_id": pid, "time": time, "x": x, "y": y, "heading": heading,
-              "vx": vx, "vy": vy, "x_std": np.full(n, pos_std), "y_std": np.full(n, pos_std),
-              "heading_std": np.full(n, yaw_std), "vx_std": np.full(n, vel_std),
-              "vy_std": np.full(n, vel_std)}
-    for c in ("ax", "ay"):
-        if c in names:
-            states[c] = column_numpy(dt_, c)
-            states[f"{c}_std"] = np.full(n, acc_std)
+        heading = heading_from_velocity(boxes.pid, boxes["vx"], boxes["vy"])
+    boxes["heading"] = heading
+    if "ref_offset" in names:  # the given point lies ahead of the footprint centre
+        off = np.nan_to_num(column_numpy(dt_, "ref_offset"))[boxes.order]
+        boxes["x"] = boxes["x"] - off * np.cos(heading)
+        boxes["y"] = boxes["y"] - off * np.sin(heading)
+    return boxes, t_min
 
-    # map
-    rp = f["roads"]
-    rt = read_numeric_table(rp, required=("line_id", "kind", "seq", "x", "y"), numeric=("seq", "x", "y"))
+
+def _road_map(rp: Path, o: AccidentOptions) -> str:
+    """The OpenDRIVE text of the case's road lines (roads.csv), its geoReference a transverse
+    Mercator at ``site_lonlat``."""
+    rt = read_table(rp, required=("line_id", "kind", "seq", "x", "y"), numeric=("seq", "x", "y"))
     _check_finite(rt, ("seq", "x", "y"), rp)
     rid = (rt.column("road_id").cast(pa.string()).to_pylist() if "road_id" in rt.column_names
            else ["1"] * rt.num_rows)
@@ -363,10 +404,15 @@ def convert_accident(inputs: list[Path], *, map_source, options: AccidentOptions
     lon, lat = o.site_lonlat
     geo = (f"+proj=tmerc +lat_0={lat} +lon_0={lon} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m "
            "+no_defs")
-    xodr = build_map_from_lines(roads, geo, o.lane_width, o.map_step_m, rp)
+    return build_map_from_lines(roads, geo, o.lane_width, o.map_step_m, rp)
 
-    # collision event
-    events = None
+
+def _collision(case: dict[str, object], boxes: Boxes, parts: dict[str, Any], rate: float,
+               t_min: float, f: dict[str, Path]) -> dict[str, Any] | None:
+    """The ``accident`` event: the case table's step and participants (origin ``annotated``),
+    else the first time two footprints overlap (origin ``derived``); None (with a warning)
+    without either."""
+    index = parts["index"]
     cstep = case.get("collision_step")
     ctime = case.get("collision_time")
     if cstep is not None and np.isfinite(cstep):
@@ -376,49 +422,27 @@ def convert_accident(inputs: list[Path], *, map_source, options: AccidentOptions
         ids = [s.strip() for s in cp.replace(",", ";").split(";") if s.strip()]
         for s in ids:
             if s not in index:
-                raise FormatError(f"collision participant {s!r} is not in {pp.name}", path=f["case"])
+                raise FormatError(f"collision participant {s!r} is not in {parts['path'].name}",
+                                  path=f["case"])
         if not ids:
-            ids = p_src[:2]
-        events = {"event_id": [0], "kind": ["accident"], "time_start": [float(ctime)],
-                  "time_end": [float(ctime)], "participant_ids": [[index[s] for s in ids]],
-                  "roles": [["collision_partner"] * len(ids)], "confidence": [1.0],
-                  "origin": ["annotated"],
-                  "attributes": [json.dumps({"case_id": str(case.get("case_id", "")),
-                                             "source": "case table"})]}
-    else:
-        hit = _first_contact(pid, time, x, y, heading, column_numpy(pt, "length"), column_numpy(pt, "width"))
-        if hit is None:
-            warnings.warn("no collision step given and no footprint overlap found: no accident "
-                          "event", stacklevel=2)
-        else:
-            tc, a, b = hit
-            events = {"event_id": [0], "kind": ["accident"], "time_start": [tc], "time_end": [tc],
-                      "participant_ids": [[a, b]], "roles": [["collision_partner"] * 2],
-                      "confidence": [1.0], "origin": ["derived"],
-                      "attributes": [json.dumps({"method": "first footprint overlap"})]}
-
-    m = len(p_src)
-    height = column_numpy(pt, "height", missing=np.nan)
-    pmf = np.zeros((m, len(CLASSES)), np.float32)
-    pmf[np.arange(m), [CLASSES.index(c) for c in classes]] = 1.0
-    dim_std = o.dimension_tol_m / Z95
-    participants = {
-        "participant_id": np.arange(m, dtype=np.int64), "source_id": p_src, "class": classes,
-        "class_pmf": pmf, "length": column_numpy(pt, "length"), "width": column_numpy(pt, "width"),
-        "height": pa.array(height, from_pandas=True), "length_std": np.full(m, dim_std),
-        "width_std": np.full(m, dim_std), "attributes": attrs,
-    }
-    case_id = str(case.get("case_id", "")) if case else ""
-    return wrap_recording(
-        "accident", [p for p in f.values()], options, map_bytes=xodr.encode(),
-        participants=participants, states=states, events=events, method="accident_reconstruction",
-        provenance="natural", partner="accident database", nominal_rate_hz=rate,
-        title=getattr(o, "title", None) or (f"accident case {case_id}" if case_id else None),
-        acquisition={"platform": "accident reconstruction (pre-crash matrix)",
-                     "sensors": [{"id": "reconstruction", "kind": "manual",
-                                  "description": "reconstructed from the accident scene"}],
-                     "not_observable": ["light_", "interior", "lane_offset"]},
-    )
+            ids = parts["source_id"][:2]
+        return {"event_id": [0], "kind": ["accident"], "time_start": [float(ctime)],
+                "time_end": [float(ctime)], "participant_ids": [[index[s] for s in ids]],
+                "roles": [["collision_partner"] * len(ids)], "confidence": [1.0],
+                "origin": ["annotated"],
+                "attributes": [json.dumps({"case_id": str(case.get("case_id", "")),
+                                           "source": "case table"})]}
+    hit = _first_contact(boxes.pid, boxes.time, boxes["x"], boxes["y"], boxes["heading"],
+                         parts["length"], parts["width"])
+    if hit is None:
+        warnings.warn("no collision step given and no footprint overlap found: no accident "
+                      "event", stacklevel=3)
+        return None
+    tc, a, b = hit
+    return {"event_id": [0], "kind": ["accident"], "time_start": [tc], "time_end": [tc],
+            "participant_ids": [[a, b]], "roles": [["collision_partner"] * 2],
+            "confidence": [1.0], "origin": ["derived"],
+            "attributes": [json.dumps({"method": "first footprint overlap"})]}
 
 
 def _first_contact(pid, time, x, y, heading, length, width):

@@ -45,18 +45,14 @@ from typing import Any, Literal
 import numpy as np
 import pyarrow as pa
 
-from aveas_format.converters.common import (
-    factorize,
-    load_map_bytes,
-    move_along_heading,
-    read_numeric_table,
-    sort_states,
-    wrap_recording,
-)
+from aveas_format.converters.common.assemble import to_recording
+from aveas_format.converters.common.boxes import Boxes, Rows, Sensor
+from aveas_format.converters.common.geometry import move_along_heading
+from aveas_format.converters.common.tables import factorize, header_names, read_table
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError
 from aveas_format.io.arrow import column_numpy
-from aveas_format.numeric import fmt_num
+from aveas_format.mapref.build import load_map_bytes
 from aveas_format.schema.taxonomy import CLASSES, DRIVER_FOCUS
 
 DEFAULT_SIZE = {"car": (4.5, 1.8, 1.5), "van": (5.5, 2.0, 2.2), "truck": (12.0, 2.5, 3.5),
@@ -94,157 +90,174 @@ def _strings(t: pa.Table, name: str) -> np.ndarray:
     return np.asarray(t.column(name).cast(pa.string()).to_pylist(), dtype=object)
 
 
+def _is_simulator_log(path: Path, head: bytes) -> bool:
+    """A header with ``time, id, x, y, heading`` and ``vx, vy`` or ``speed``."""
+    names = header_names(path, head)
+    return {"time", "id", "x", "y", "heading"} <= names and ({"vx", "vy"} <= names or "speed" in names)
+
+
 @converter("driving-simulator", description="Driving-simulator log: subject vehicle with interior "
            "columns + surrounding traffic (CSV/Parquet)", patterns=("*.csv", "*.parquet"),
-           method="driving_simulator", options=DrivingSimulatorOptions)
+           method="driving_simulator", options=DrivingSimulatorOptions, sniff=_is_simulator_log)
 def convert_driving_simulator(inputs: list[Path], *, map_source, options: DrivingSimulatorOptions):
-    parts = []
-    for p in inputs:
-        t = read_numeric_table(p, required=("time", "id", "x", "y", "heading"))
-        numeric = [c for c in t.column_names if c not in ("id", "class", "driver_focus")]
-        t = read_numeric_table(p, numeric=numeric)
-        for c in ("time", "x", "y", "heading"):
-            bad = np.flatnonzero(~np.isfinite(column_numpy(t, c)))
-            if len(bad):
-                raise FormatError(f"column {c!r} is empty", path=p, line=int(bad[0]) + 2)
-        if not ({"vx", "vy"} <= set(t.column_names) or "speed" in t.column_names):
-            raise FormatError("the log needs 'vx' and 'vy' or 'speed'", path=p)
-        parts.append((p, t))
-    n_rows = [t.num_rows for _, t in parts]
-    files = np.repeat(np.arange(len(parts)), n_rows)
-    lines = np.concatenate([np.arange(n) + 2 for n in n_rows])
-    names = set.intersection(*(set(t.column_names) for _, t in parts))
-
-    def num(name: str, default: float = np.nan) -> np.ndarray:
-        if name not in names:
-            return np.full(len(lines), default)
-        return np.concatenate([column_numpy(t, name) for _, t in parts])
-
-    def text(name: str) -> np.ndarray | None:
-        if name not in names:
-            return None
-        return np.concatenate([_strings(t, name) for _, t in parts])
-
-    ids = text("id")
-    assert ids is not None
-    if (ids == None).any():  # noqa: E711 - object array
-        i = int(np.flatnonzero(ids == None)[0])  # noqa: E711
-        raise FormatError("column 'id' is empty", path=parts[files[i]][0], line=int(lines[i]))
-    ids = ids.astype(str)
+    log = _Log(inputs)
     # the subject first, then traffic in order of appearance
+    ids = log.text("id").astype(str)
     is_subj = ids == options.subject_id
     if not is_subj.any():
         raise FormatError(f"no rows of the subject vehicle {options.subject_id!r} (option "
-                          "subject_id)", path=parts[0][0])
+                          "subject_id)", path=log.parts[0][0])
     codes, uniq = factorize(np.where(is_subj, "\x00subject", ids))
     subj_code = int(codes[np.flatnonzero(is_subj)[0]])
     remap = np.empty(len(uniq), np.int64)
     others = [k for k in range(len(uniq)) if k != subj_code]
     remap[subj_code] = 0
     remap[others] = np.arange(1, len(uniq))
-    pid = remap[codes]
     source_ids = np.empty(len(uniq), dtype=object)
     source_ids[0] = options.subject_id
     source_ids[remap[others]] = uniq[others]
-
-    t = num("time")
-    order = np.lexsort((t, pid))
-    ps, ts = pid[order], t[order]
-    dup = np.flatnonzero((ps[1:] == ps[:-1]) & (ts[1:] == ts[:-1]))
-    if len(dup):
-        i = order[dup[0] + 1]
-        raise FormatError(f"object {str(ids[i])!r} logged twice at time {fmt_num(t[i])}",
-                          path=parts[files[i]][0], line=int(lines[i]))
-    sort_states(pid, t)
-
-    deg = options.angle_unit == "deg"
-    heading = num("heading")
-    heading = np.radians(heading) if deg else heading
-    if options.heading_convention == "navigation":
-        heading = np.pi / 2 - heading
-    x, y = num("x"), num("y")
-    if "vx" in names and "vy" in names:
-        vx, vy = num("vx"), num("vy")
-    else:
-        speed = num("speed")
-        vx, vy = speed * np.cos(heading), speed * np.sin(heading)
-    if options.reference_offset:
-        x, y = move_along_heading(x, y, heading, -options.reference_offset)
-
-    # participants: class and size of each object's first row
-    first = np.unique(pid, return_index=True)[1]
-    m = len(first)
-    cls_rows = text("class")
-    classes = np.full(m, "car", dtype=object) if cls_rows is None else cls_rows[first].astype(object)
-    for k, c in enumerate(classes):
-        c = "car" if c is None or c == "" else str(c).strip().lower()
-        if c not in CLASSES:
-            i = first[k]
-            raise FormatError(f"column 'class': {c!r} is not one of {list(CLASSES)}",
-                              path=parts[files[i]][0], line=int(lines[i]))
-        classes[k] = c
-    size = np.array([DEFAULT_SIZE[c] for c in classes])
-    for j, name in enumerate(("length", "width", "height")):
-        v = num(name)[first]
-        size[:, j] = np.where(np.isfinite(v) & (v > 0), v, size[:, j])
-    subj_prov = options.subject_provenance
-    provenance = np.array([subj_prov] + ["simulated"] * (m - 1), dtype=object)
+    t = log.num("time")
+    boxes = Boxes(remap[codes], t, log.num("x"), log.num("y"), source_ids=source_ids.astype(str),
+                  rows=Rows([p for p, _ in log.parts], file=log.files, place=log.lines)).sort()
+    for k, v in _state_columns(log, options).items():
+        boxes[k] = v[boxes.order]
+    if options.reference_offset:  # the logged point -> the footprint centre
+        boxes["x"], boxes["y"] = move_along_heading(boxes["x"], boxes["y"], boxes["heading"],
+                                                    -options.reference_offset)
+    m = boxes.m
+    classes, size = _classes_and_sizes(log, boxes)
+    provenance = np.array([options.subject_provenance] + ["simulated"] * (m - 1), dtype=object)
     roles = np.array([options.subject_role] + ["simulated_agent"] * (m - 1), dtype=object)
     participants = {
-        "participant_id": np.arange(m, dtype=np.int64), "source_id": source_ids.astype(str),
         "class": classes, "length": size[:, 0], "width": size[:, 1], "height": size[:, 2],
         "length_std": np.zeros(m), "width_std": np.zeros(m), "height_std": np.zeros(m),
         "role": roles, "provenance": provenance,
         "attributes": [json.dumps({"subject": True})] + ["{}"] * (m - 1),
     }
+    rate_dt = np.diff(np.unique(t[is_subj]))
+    rate = float(round(1.0 / np.median(rate_dt), 6)) if len(rate_dt) else None
+    subj_prov = options.subject_provenance
+    sensor = Sensor(
+        method="driving_simulator", partner="driving simulator experiment", nominal_rate_hz=rate,
+        provenance=subj_prov if subj_prov == "simulated" or m == 1 else "mixed",
+        platform=options.simulator,
+        sensors=[{"id": "simulator", "kind": "simulator", **({"rate_hz": rate} if rate else {})}])
+    return to_recording(boxes, sensor, converter="driving-simulator",
+                        inputs=[p for p, _ in log.parts], options=options,
+                        map_bytes=load_map_bytes(map_source), participants=participants,
+                        interior=_interior(log, is_subj, t, options.angle_unit == "deg"))
 
-    n = len(t)
-    states: dict[str, Any] = {
-        "participant_id": pid, "time": t, "x": x, "y": y, "heading": heading, "vx": vx, "vy": vy,
-        **{f"{c}_std": np.zeros(n) for c in ("x", "y", "heading", "vx", "vy")},
-    }
+
+class _Log:
+    """The log's tables (one per input file, checked), their rows as one: each row's file and
+    line, the columns all files have (``names``), numbers (``num``) and texts (``text``)."""
+
+    def __init__(self, inputs: list[Path]) -> None:
+        self.parts = []
+        for p in inputs:
+            t = read_table(p, required=("time", "id", "x", "y", "heading"))
+            numeric = [c for c in t.column_names if c not in ("id", "class", "driver_focus")]
+            t = read_table(p, numeric=numeric)
+            for c in ("time", "x", "y", "heading"):
+                bad = np.flatnonzero(~np.isfinite(column_numpy(t, c)))
+                if len(bad):
+                    raise FormatError(f"column {c!r} is empty", path=p, line=int(bad[0]) + 2)
+            if not ({"vx", "vy"} <= set(t.column_names) or "speed" in t.column_names):
+                raise FormatError("the log needs 'vx' and 'vy' or 'speed'", path=p)
+            self.parts.append((p, t))
+        n_rows = [t.num_rows for _, t in self.parts]
+        self.files = np.repeat(np.arange(len(self.parts)), n_rows)
+        self.lines = np.concatenate([np.arange(n) + 2 for n in n_rows])
+        self.names = set.intersection(*(set(t.column_names) for _, t in self.parts))
+        ids = self.text("id")
+        if (ids == None).any():  # noqa: E711 - object array
+            i = int(np.flatnonzero(ids == None)[0])  # noqa: E711
+            raise FormatError("column 'id' is empty", path=self.parts[self.files[i]][0],
+                              line=int(self.lines[i]))
+
+    def num(self, name: str, default: float = np.nan) -> np.ndarray:
+        if name not in self.names:
+            return np.full(len(self.lines), default)
+        return np.concatenate([column_numpy(t, name) for _, t in self.parts])
+
+    def text(self, name: str) -> np.ndarray | None:
+        if name not in self.names:
+            return None
+        return np.concatenate([_strings(t, name) for _, t in self.parts])
+
+    def where(self, i: int) -> dict[str, Any]:
+        return {"path": self.parts[self.files[i]][0], "line": int(self.lines[i])}
+
+
+def _state_columns(log: _Log, options: DrivingSimulatorOptions) -> dict[str, Any]:
+    """The states columns of the log's rows: angles to radians and the format's convention,
+    velocity from ``speed`` along the heading where there is no vx/vy, positions moved to the
+    footprint centre, lights as probabilities; the simulator's state is exact (std 0)."""
+    names = log.names
+    deg = options.angle_unit == "deg"
+    heading = log.num("heading")
+    heading = np.radians(heading) if deg else heading
+    if options.heading_convention == "navigation":
+        heading = np.pi / 2 - heading
+    if "vx" in names and "vy" in names:
+        vx, vy = log.num("vx"), log.num("vy")
+    else:
+        speed = log.num("speed")
+        vx, vy = speed * np.cos(heading), speed * np.sin(heading)
+    n = len(heading)
+    out: dict[str, Any] = {"heading": heading, "vx": vx, "vy": vy,
+                           **{f"{c}_std": np.zeros(n) for c in ("x", "y", "heading", "vx", "vy")}}
     if "z" in names:
-        states["z"], states["z_std"] = num("z"), np.zeros(n)
+        out["z"], out["z_std"] = log.num("z"), np.zeros(n)
     for c in ("ax", "ay"):
         if c in names:
-            states[c] = num(c)
+            out[c] = log.num(c)
     if "yaw_rate" in names:
-        yr = num("yaw_rate")
-        states["yaw_rate"] = np.radians(yr) if deg else yr
+        yr = log.num("yaw_rate")
+        out["yaw_rate"] = np.radians(yr) if deg else yr
         if options.heading_convention == "navigation":
-            states["yaw_rate"] = -states["yaw_rate"]
+            out["yaw_rate"] = -out["yaw_rate"]
     for c in LIGHTS:
         for name in (c, f"{c}_p"):
             if name in names:
-                v = num(name)
-                _check_prob(v, name, parts, files, lines)
-                states[f"{c}_p"] = v.astype(np.float32)
-    states = {k: v[order] for k, v in states.items()}
-
-    interior = _interior(names, num, text, is_subj, t, deg, parts, files, lines)
-    rate_dt = np.diff(np.unique(t[is_subj]))
-    rate = float(round(1.0 / np.median(rate_dt), 6)) if len(rate_dt) else None
-    prov = subj_prov if subj_prov == "simulated" or m == 1 else "mixed"
-    map_bytes = load_map_bytes(map_source)
-    return wrap_recording(
-        "driving-simulator", [p for p, _ in parts], options, map_bytes=map_bytes,
-        participants=participants, states=states, interior=interior, method="driving_simulator",
-        provenance=prov, partner="driving simulator experiment", nominal_rate_hz=rate,
-        acquisition={"platform": options.simulator,
-                     "sensors": [{"id": "simulator", "kind": "simulator",
-                                  **({"rate_hz": rate} if rate else {})}]},
-    )
+                v = log.num(name)
+                _check_prob(v, name, log, np.arange(n))
+                out[f"{c}_p"] = v.astype(np.float32)
+    return out
 
 
-def _check_prob(v: np.ndarray, name: str, parts, files, lines) -> None:
+def _classes_and_sizes(log: _Log, boxes: Boxes) -> tuple[np.ndarray, np.ndarray]:
+    """Class and size (length, width, height) of each object: its first row's, the class's
+    defaults where the row has none."""
+    first = boxes.order[boxes.first_rows()]
+    cls_rows = log.text("class")
+    classes = (np.full(boxes.m, "car", dtype=object) if cls_rows is None
+               else cls_rows[first].astype(object))
+    for k, c in enumerate(classes):
+        c = "car" if c is None or c == "" else str(c).strip().lower()
+        if c not in CLASSES:
+            raise FormatError(f"column 'class': {c!r} is not one of {list(CLASSES)}",
+                              **log.where(first[k]))
+        classes[k] = c
+    size = np.array([DEFAULT_SIZE[c] for c in classes])
+    for j, name in enumerate(("length", "width", "height")):
+        v = log.num(name)[first]
+        size[:, j] = np.where(np.isfinite(v) & (v > 0), v, size[:, j])
+    return classes, size
+
+
+def _check_prob(v: np.ndarray, name: str, log: _Log, rows: np.ndarray) -> None:
+    """Values (of the log's ``rows``) outside [0, 1]: an error naming the first's file and line."""
     bad = np.flatnonzero(np.isfinite(v) & ((v < 0) | (v > 1)))
     if len(bad):
         i = bad[0]
         raise FormatError(f"column {name!r}: {v[i]:g} is not a probability in [0, 1]",
-                          path=parts[files[i]][0], line=int(lines[i]))
+                          **log.where(int(rows[i])))
 
 
-def _interior(names, num, text, is_subj, t, deg, parts, files, lines) -> dict[str, Any] | None:
+def _interior(log: _Log, is_subj: np.ndarray, t: np.ndarray, deg: bool) -> dict[str, Any] | None:
+    """The interior table: the subject's rows (sorted by time) of the interior columns."""
+    names, num = log.names, log.num
     rows = np.flatnonzero(is_subj)
     rows = rows[np.argsort(t[rows], kind="stable")]
     cols: dict[str, Any] = {}
@@ -253,7 +266,7 @@ def _interior(names, num, text, is_subj, t, deg, parts, files, lines) -> dict[st
             v = num(c)
             scale = math.pi / 180 if deg and c in INTERIOR_ANGLES else 1.0
             if c in ("accelerator_pedal", "brake_pedal"):
-                _check_prob(v[rows], c, parts, files[rows], lines[rows])
+                _check_prob(v[rows], c, log, rows)
             cols[c] = v[rows] * scale
             std = f"{c}_std"
             cols[std] = num(std, 0.0)[rows] * scale
@@ -261,12 +274,12 @@ def _interior(names, num, text, is_subj, t, deg, parts, files, lines) -> dict[st
         for name in (c, f"{c}_p"):
             if name in names:
                 v = num(name)[rows]
-                _check_prob(v, name, parts, files[rows], lines[rows])
+                _check_prob(v, name, log, rows)
                 cols[f"{c}_p"] = v.astype(np.float32)
     if "gear" in names:
         g = num("gear")[rows]
         cols["gear"] = pa.array(np.nan_to_num(g).astype(np.int8), mask=~np.isfinite(g))
-    focus = text("driver_focus")
+    focus = log.text("driver_focus")
     if focus is not None:
         f = focus[rows]
         codes, uniq = factorize(np.where(f == None, "", f).astype(str))  # noqa: E711
@@ -278,8 +291,7 @@ def _interior(names, num, text, is_subj, t, deg, parts, files, lines) -> dict[st
             if lab not in DRIVER_FOCUS:
                 i = rows[int(np.flatnonzero(codes == k)[0])]
                 raise FormatError(f"column 'driver_focus': {lab!r} is not one of "
-                                  f"{list(DRIVER_FOCUS)}", path=parts[files[i]][0],
-                                  line=int(lines[i]))
+                                  f"{list(DRIVER_FOCUS)}", **log.where(int(i)))
             index[k] = DRIVER_FOCUS.index(lab)
         idx = index[codes]
         pm = np.zeros((len(rows), len(DRIVER_FOCUS)), np.float32)

@@ -72,35 +72,18 @@ from typing import Any, Literal
 import numpy as np
 import pyarrow as pa
 
-from aveas_format.converters.common import (
-    TIMESTAMP_UNITS,
-    class_of,
-    coverage_regions,
-    unobserved_table,
-    covariance_std_corr,
-    factorize,
-    group_mean,
-    group_std,
-    load_map_bytes,
-    map_area,
-    matrix_yaw,
-    nullable,
-    occlusion_shadows,
-    quaternion_matrix,
-    read_numeric_table,
-    read_table,
-    resolve_timestamps,
-    rotate_covariance_2d,
-    sector_polygon,
-    timestamp_value,
-    utc_iso_from_ns,
-    wrap_recording,
-)
-from aveas_format.converters.labels import LabelFilter, implausible_size
+from aveas_format.converters.common.assemble import is_moving, to_recording
+from aveas_format.converters.common.boxes import Boxes, Range, Rows, Sensor, Sizes
+from aveas_format.converters.common.geometry import (covariance_std_corr, matrix_yaw, quaternion_matrix,
+                                                     rotate_covariance_2d)
+from aveas_format.converters.common.tables import factorize, header_names, read_table
+from aveas_format.converters.common.timestamps import (TIMESTAMP_UNITS, resolve_timestamps,
+                                                       timestamp_value, utc_iso_from_ns)
+from aveas_format.converters.labels import LabelFilter, class_of, implausible_size
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.io.arrow import column_numpy
-from aveas_format.numeric import central_differences
+from aveas_format.mapref.build import load_map_bytes
 from aveas_format.safeio import MAX_BULK_JSON_BYTES, load_json
 from aveas_format.schema.taxonomy import CLASSES
 
@@ -356,7 +339,7 @@ def _read_tracks(path: Path, opts: InfraLidarOptions, rows: dict[str, list],
     num = [c for c in (tcol, "x", "y", "z", "yaw", lc, wc, hc, "num_points", "score") if c]
     for c in ("x", "y", "yaw"):
         pick(c)
-    t = read_numeric_table(path, numeric=num)
+    t = read_table(path, numeric=num)
     n = t.num_rows
     tv = column_numpy(t, tcol)
     time = tv / opts.rate_hz if tcol.startswith("frame") else tv
@@ -405,11 +388,69 @@ def _class_pmf(types: np.ndarray, score: np.ndarray, class_map: dict[str, str]) 
     return out
 
 
+def _is_lidar_input(path: Path, head: bytes) -> bool:
+    """A sensor pose JSON, or a tracks table of 3D boxes with a yaw (an OpenLABEL file is the
+    ``openlabel`` importer's by default: pass ``--from infra-lidar``)."""
+    if path.suffix.lower() == ".json":
+        return b'"openlabel"' not in head and (b"transformation_matrix" in head
+                                                or b'"matrix4x4"' in head)
+    names = header_names(path, head)
+    return ({"x", "y", "yaw"} <= names and bool(names & {"track_id", "id", "object_id"})
+            and ({"length", "width", "height"} <= names or {"l", "w", "h"} <= names))
+
+
 @converter("infra-lidar", description="Infrastructure LiDAR: OpenLABEL cuboids (TUM Traffic/A9 style) "
            "or a tracks table + sensor pose", patterns=("*.json", "*.csv", "*.parquet"),
-           method="infrastructure_lidar", options=InfraLidarOptions, provides=("start_time",))
+           method="infrastructure_lidar", options=InfraLidarOptions, provides=("start_time",),
+           sniff=_is_lidar_input)
 def convert_infra_lidar(inputs: list[Path], *, map_source, options: InfraLidarOptions):
     o = options
+    rows, systems, labels, tables, o = _read_inputs(inputs, o)
+    t_abs, resolved, start_ns = _times(rows, labels, o)
+    notes = _keep_road_users(rows, o, t_abs)
+    if not rows["time"]:
+        raise FormatError("no road user among the cuboids: " + "; ".join(notes), path=inputs[0])
+    for note in notes:
+        warnings.warn(f"infra-lidar: {note}", stacklevel=2)
+    map_bytes = load_map_bytes(map_source)
+    t0 = float(np.min(rows["time"]))
+    boxes, mats = _boxes_in_map(rows, systems, o, t0, [p for p, _ in labels] + tables)
+    pose = boxes["sensor_pose"]
+    moving = is_moving(pose)
+    rot0 = mats[boxes.order[0], :3, :3]  # the sensor's pose in the first frame
+    from scipy.spatial.transform import Rotation
+
+    _, pitch, roll = Rotation.from_matrix(rot0).as_euler("ZYX")
+    if start_ns is not None:  # exact: the first timestamp's digits, moved to the first kept box
+        start = utc_iso_from_ns(start_ns + int(round((t0 - start_ns / 1e9) * 1e9)))
+    else:
+        start = utc_iso_from_ns(int(round(t0 * 1e9))) if t0 > 1e8 else "1970-01-01T00:00:00Z"
+    types = np.asarray(rows["type"], dtype=object)[boxes.order]
+    sensor = Sensor(
+        method="infrastructure_lidar", start_time=start,
+        platform="pole-mounted LiDAR" if not moving else "LiDAR on a moving platform",
+        sensors=[{"id": o.sensor_id, "kind": "lidar",
+                  "pose": {"x": float(pose[0, 0]), "y": float(pose[0, 1]), "z": float(pose[0, 2]),
+                           "yaw": float(matrix_yaw(rot0[None])[0]), "pitch": float(pitch),
+                           "roll": float(roll), "frame": "local"},
+                  "description": f"range {o.range_m} m, FOV {o.fov_deg} deg"
+                                 + ("; moving: pose of the first frame, unobserved regions "
+                                    "per frame" if moving else "")}],
+        not_observable=["light_", "interior"],
+        coverage=Range(o.sensor_id, o.range_m, 1.0 / o.rate_hz, fov=np.radians(o.fov_deg),
+                       occlusion=o.occlusion),
+        sizes=Sizes(floor=o.dimension_std_m))
+    return to_recording(boxes, sensor, converter="infra-lidar", inputs=inputs, options=options,
+                        map_bytes=map_bytes, resolved=resolved, participants={
+                            "attributes": [json.dumps({"source_class": str(types[i])})
+                                           for i in boxes.first_rows()]})
+
+
+def _read_inputs(inputs: list[Path], o: InfraLidarOptions
+                 ) -> tuple[dict[str, list], dict[str, np.ndarray], list, list[Path], InfraLidarOptions]:
+    """The rows of every OpenLABEL file and tracks table (``_ROWS``), the sensor -> base
+    transform of each coordinate system (``rows["cs"]``), the OpenLABEL inputs (path, document),
+    the tracks tables, and the options with a sensor pose input as ``sensor_pose``."""
     rows: dict[str, list] = {k: [] for k in _ROWS}
     systems: dict[str, np.ndarray] = {}
     labels, tables, poses = [], [], []
@@ -430,158 +471,48 @@ def convert_infra_lidar(inputs: list[Path], *, map_source, options: InfraLidarOp
         _read_tracks(p, o, rows, systems, len(labels) + j)
     if not rows["time"]:
         raise FormatError("no cuboids or track rows found", path=inputs[0])
-    t_abs, resolved, start_ns = _times(rows, labels, o)
-    notes = _keep_road_users(rows, o, t_abs)
-    if not rows["time"]:
-        raise FormatError("no road user among the cuboids: " + "; ".join(notes), path=inputs[0])
-    t_abs = np.asarray(rows["time"], np.float64)
-    for note in notes:
-        warnings.warn(f"infra-lidar: {note}", stacklevel=2)
+    return rows, systems, labels, tables, o
 
-    map_bytes = load_map_bytes(map_source)
-    n = len(rows["time"])
-    cs_codes, cs_names = factorize(rows["cs"])
-    c = np.c_[rows["cx"], rows["cy"], rows["cz"]].astype(np.float64)
-    q = np.c_[rows["qx"], rows["qy"], rows["qz"], rows["qw"]].astype(np.float64)
+
+def _boxes_in_map(rows: dict[str, list], systems: dict[str, np.ndarray], o: InfraLidarOptions,
+                  t0: float, files: list[Path]) -> tuple[Boxes, np.ndarray]:
+    """The boxes (sorted, repeated timestamps of a track dropped) in the map's frame with the
+    uncertainty model of the module doc, and each row's sensor -> map transform (4x4): the
+    cuboid's centre projected to the ground, its heading the yaw of its x axis. ``files``: the
+    inputs in the order of ``rows["src"]``."""
     ox, oy, oyaw = o.frame_offset
     off = np.eye(4)
     off[:2, :2] = [[np.cos(oyaw), -np.sin(oyaw)], [np.sin(oyaw), np.cos(oyaw)]]
     off[:2, 3] = ox, oy
-    mats = np.stack([off @ systems[str(k)] for k in cs_names])       # sensor -> local, per system
-    m = mats[cs_codes]
+    cs_codes, cs_names = factorize(rows["cs"])
+    m = np.stack([off @ systems[str(k)] for k in cs_names])[cs_codes]  # sensor -> local, per row
+    c = np.c_[rows["cx"], rows["cy"], rows["cz"]].astype(np.float64)
+    q = np.c_[rows["qx"], rows["qy"], rows["qz"], rows["qw"]].astype(np.float64)
     pos = np.einsum("nij,nj->ni", m[:, :3, :3], c) + m[:, :3, 3]
-    rot = np.einsum("nij,njk->nik", m[:, :3, :3], quaternion_matrix(q))
-    heading = matrix_yaw(rot)
-    length = np.asarray(rows["l"], np.float64)
-    width = np.asarray(rows["w"], np.float64)
+    heading = matrix_yaw(np.einsum("nij,njk->nik", m[:, :3, :3], quaternion_matrix(q)))
     height = np.asarray(rows["h"], np.float64)
-    ground = pos[:, 2] - np.nan_to_num(height) / 2
     sensor = m[:, :3, 3]                                             # sensor origin, local frame
-    # uncertainty model
     d = pos[:, :2] - sensor[:, :2]
     r = np.hypot(d[:, 0], d[:, 1])
-    bearing = np.arctan2(d[:, 1], d[:, 0])
     npts = np.asarray(rows["points"], np.float64)
     f = np.sqrt(np.maximum(1.0, o.reference_points / np.where(npts > 0, npts, o.reference_points)))
-    sr = (o.sigma0_m + o.range_coeff * r) * f
-    st = (o.sigma0_m + o.angular_std_rad * r) * f
-    cov = np.zeros((n, 2, 2))
-    cov[:, 0, 0], cov[:, 1, 1] = sr ** 2, st ** 2
-    sx, sy, rho = covariance_std_corr(rotate_covariance_2d(cov, bearing))
-
-    # participants and ordering
+    cov = np.zeros((len(r), 2, 2))
+    cov[:, 0, 0] = ((o.sigma0_m + o.range_coeff * r) * f) ** 2        # along the line of sight
+    cov[:, 1, 1] = ((o.sigma0_m + o.angular_std_rad * r) * f) ** 2     # across it
+    sx, sy, rho = covariance_std_corr(rotate_covariance_2d(cov, np.arctan2(d[:, 1], d[:, 0])))
     pid, uniq = factorize(rows["track"])
-    t0 = float(t_abs.min())
+    yaw = matrix_yaw(m[:, :3, :3]) + np.radians(o.fov_yaw_deg)
     # relative times at microsecond resolution (epoch seconds as float64 carry ~0.2 us of noise)
-    t_rel = np.round(t_abs - t0, 6)
-    order = np.lexsort((t_rel, pid))
-    pid, t_rel = pid[order], t_rel[order]
-    dup = np.r_[False, (pid[1:] == pid[:-1]) & (t_rel[1:] == t_rel[:-1])]
-    if dup.any():
-        warnings.warn(f"{int(dup.sum())} boxes repeat a track's timestamp (e.g. track "
-                      f"{uniq[pid[np.flatnonzero(dup)[0]]]!r}); the first is kept", stacklevel=2)
-    sel = order[~dup]
-    pid, time = pid[~dup], t_rel[~dup]
-    x, y = pos[sel, 0], pos[sel, 1]
-    sx, sy, rho = sx[sel], sy[sel], rho[sel]
-    vx, vy, vxs, vys = central_differences(pid, time, x, y, sx, sy)
-    mp = len(uniq)
-    types = np.asarray(rows["type"], dtype=object)[sel]
-    pmf = group_mean(pid, _class_pmf(types, np.asarray(rows["score"], np.float64)[sel], o.class_map), mp)
-    pmf = (pmf / pmf.sum(axis=1, keepdims=True)).astype(np.float32)
-    dims = np.c_[length, width, height][sel]
-    mean_dims = group_mean(pid, dims, mp)
-    std_dims = np.stack([np.fmax(np.nan_to_num(group_std(pid, dims[:, k], mp), nan=0.0),
-                                 o.dimension_std_m) for k in range(3)], -1)
-    std_dims[np.isnan(mean_dims)] = np.nan
-    first = np.unique(pid, return_index=True)[1]
-    states = {
-        "participant_id": pid, "time": time, "x": x, "y": y, "z": ground[sel],
-        "heading": heading[sel], "vx": vx, "vy": vy,
-        "x_std": sx, "y_std": sy, "xy_corr": nullable(rho),
-        "heading_std": o.heading_std_rad * f[sel], "vx_std": nullable(vxs), "vy_std": nullable(vys),
-    }
-    participants = {
-        "participant_id": np.arange(mp, dtype=np.int64), "source_id": [str(u) for u in uniq],
-        "class": np.asarray(CLASSES, dtype=object)[np.argmax(pmf, axis=1)], "class_pmf": pmf,
-        "length": mean_dims[:, 0], "width": mean_dims[:, 1], "height": nullable(mean_dims[:, 2]),
-        "length_std": std_dims[:, 0], "width_std": std_dims[:, 1],
-        "height_std": nullable(std_dims[:, 2]),
-        "attributes": [json.dumps({"source_class": str(types[i])}) for i in first],
-    }
-
-    # unobserved regions: per frame where the sensor moves, else once
-    period = 1.0 / o.rate_hz
-    frame_times = np.unique(time)
-    nxt = np.r_[frame_times[1:], frame_times[-1] + period]
-    duration = float(nxt[-1])
-    area = map_area(map_bytes)
-    yaw_row = matrix_yaw(m[sel, :3, :3]) + np.radians(o.fov_yaw_deg)
-    sensor = sensor[sel]
-    moving = bool(np.ptp(sensor, axis=0).max() > 1e-3 or np.ptp(np.unwrap(yaw_row)) > 1e-4)
-    fi = np.searchsorted(frame_times, time)
-    at = np.unique(fi, return_index=True)[1] if moving else np.array([0])
-    import shapely
-
-    unob: list[dict[str, Any]] = []
-    views = []
-    for k, i in enumerate(at):
-        t_start = float(frame_times[fi[i]]) if moving else 0.0
-        t_end = float(nxt[fi[i]]) if moving else duration
-        sxy = (float(sensor[i, 0]), float(sensor[i, 1]))
-        unob += coverage_regions(o.sensor_id, sxy, o.range_m, float(yaw_row[i]),
-                                 np.radians(o.fov_deg), area, t_start, t_end)
-        views.append(shapely.intersection(sector_polygon(*sxy, o.range_m, float(yaw_row[i]),
-                                                         np.radians(o.fov_deg)), area))
-    view = shapely.union_all(views)
-    coverage = shapely.to_wkt(view, rounding_precision=3) if not view.is_empty else None
-    if o.occlusion:
-        shadows: list = [None] * len(x)
-        if moving:  # the rows of each frame, seen from the sensor's pose in that frame
-            by_frame = np.argsort(fi, kind="stable")
-            groups = np.split(by_frame, np.flatnonzero(np.diff(fi[by_frame])) + 1)
-        else:
-            groups = [np.arange(len(x))]
-        h_all = np.where(np.isfinite(height[sel]), height[sel], 1.5)
-        for g in groups:
-            s_ = sensor[g[0]]
-            for i, geom in zip(g, occlusion_shadows((float(s_[0]), float(s_[1]), float(s_[2])), x[g],
-                                                    y[g], heading[sel][g], length[sel][g],
-                                                    width[sel][g], h_all[g], o.range_m)):
-                shadows[i] = geom
-        keep = np.flatnonzero(np.asarray([g is not None for g in shadows]))
-        ends = nxt[fi[keep]]
-        for i, te in zip(keep, ends):
-            unob.append({"time_start": float(time[i]), "time_end": float(te), "kind": "occlusion",
-                         "geometry": shadows[i], "sensor_id": o.sensor_id, "occluder_id": int(pid[i])})
-    unobserved = unobserved_table(unob)
-    s0 = sensor[0]
-    rot0 = m[sel[0], :3, :3]
-    yaw_s = float(matrix_yaw(rot0[None])[0])
-    from scipy.spatial.transform import Rotation
-
-    _, pitch, roll = Rotation.from_matrix(rot0).as_euler("ZYX")
-    if start_ns is not None:  # exact: the first timestamp's digits, moved to the first kept box
-        start = utc_iso_from_ns(start_ns + int(round((t0 - start_ns / 1e9) * 1e9)))
-    else:
-        start = utc_iso_from_ns(int(round(t0 * 1e9))) if t0 > 1e8 else "1970-01-01T00:00:00Z"
-    return wrap_recording(
-        "infra-lidar", inputs, options, map_bytes=map_bytes, participants=participants,
-        states=states, method="infrastructure_lidar", provenance="natural", start_time=start,
-        unobserved=unobserved, duration_s=duration, resolved=resolved,
-        acquisition={
-            "platform": "pole-mounted LiDAR" if not moving else "LiDAR on a moving platform",
-            "sensors": [{"id": o.sensor_id, "kind": "lidar",
-                         "pose": {"x": float(s0[0]), "y": float(s0[1]), "z": float(s0[2]),
-                                  "yaw": yaw_s, "pitch": float(pitch), "roll": float(roll),
-                                  "frame": "local"},
-                         "description": f"range {o.range_m} m, FOV {o.fov_deg} deg"
-                                        + ("; moving: pose of the first frame, unobserved regions "
-                                           "per frame" if moving else "")}],
-            "not_observable": ["light_", "interior"],
-        },
-        coverage=coverage,
-    )
+    boxes = Boxes(
+        pid, np.round(np.asarray(rows["time"], np.float64) - t0, 6), pos[:, 0], pos[:, 1],
+        source_ids=[str(u) for u in uniq], rows=Rows(files, file=np.asarray(rows["src"])),
+        duplicates="first", z=pos[:, 2] - np.nan_to_num(height) / 2, heading=heading,
+        x_std=sx, y_std=sy, xy_corr=rho, heading_std=o.heading_std_rad * f,
+        length=np.asarray(rows["l"], np.float64), width=np.asarray(rows["w"], np.float64),
+        height=height, class_pmf=_class_pmf(np.asarray(rows["type"], dtype=object),
+                                            np.asarray(rows["score"], np.float64), o.class_map),
+        sensor_pose=np.c_[sensor, yaw])
+    return boxes.sort(), m
 
 
 def _times(rows: dict[str, list], labels: list, o: InfraLidarOptions

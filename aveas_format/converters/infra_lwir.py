@@ -52,24 +52,16 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 
-from aveas_format.converters.common import (
-    class_of,
-    coverage_regions,
-    unobserved_table,
-    covariance_std_corr,
-    factorize,
-    is_float,
-    load_map_bytes,
-    map_area,
-    nullable,
-    read_numeric_table,
-    reject_non_utf8,
-    wrap_recording,
-)
-from aveas_format.converters.labels import MOT_CLASS_IDS, LabelFilter
+from aveas_format.converters.common.assemble import to_recording
+from aveas_format.converters.common.boxes import Boxes, Range, Rows, Sensor
+from aveas_format.converters.common.geometry import covariance_std_corr
+from aveas_format.converters.common.tables import (factorize, header_names, is_float, read_table,
+                                                   reject_non_utf8)
+from aveas_format.converters.labels import MOT_CLASS_IDS, LabelFilter, class_of
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.io.arrow import column_numpy
+from aveas_format.mapref.build import load_map_bytes
 from aveas_format.numeric import central_differences
 from aveas_format.schema.taxonomy import CLASSES
 
@@ -217,7 +209,7 @@ def _is_landmarks(path: Path) -> bool:
 
 
 def _read_landmarks(path: Path):
-    t = read_numeric_table(path, required=("u", "v", "x", "y"), numeric=("u", "v", "x", "y"))
+    t = read_table(path, required=("u", "v", "x", "y"), numeric=("u", "v", "x", "y"))
     uv = np.c_[column_numpy(t, "u"), column_numpy(t, "v")]
     xy = np.c_[column_numpy(t, "x"), column_numpy(t, "y")]
     bad = ~np.isfinite(np.c_[uv, xy]).all(axis=1)
@@ -271,7 +263,7 @@ def _read_tracks(path: Path, opts: InfraLwirOptions):
         head = f.readline()
     has_header = any(c.isalpha() for c in head.split(",")[0])
     if path.suffix.lower() == ".parquet" or has_header:
-        t0 = read_numeric_table(path)
+        t0 = read_table(path)
         names = set(t0.column_names)
 
         def pick(*cands):
@@ -285,7 +277,7 @@ def _read_tracks(path: Path, opts: InfraLwirOptions):
         idc = pick("id", "track_id")
         lc, tpc = pick("bb_left", "left"), pick("bb_top", "top")
         wc, hc = pick("bb_width", "width", "w"), pick("bb_height", "height", "h")
-        t = read_numeric_table(path, numeric=(tc, lc, tpc, wc, hc))
+        t = read_table(path, numeric=(tc, lc, tpc, wc, hc))
         cls = (t.column("class").cast(pa.string()).to_pylist() if "class" in names
                else [opts.default_class] * t.num_rows)
         frame_based = tc == "frame"
@@ -327,9 +319,19 @@ def _road_users(ids: list, cls_names: list, o: InfraLwirOptions) -> tuple[np.nda
 
 # --- the converter ---------------------------------------------------------------------------------
 
+def _is_lwir_input(path: Path, head: bytes) -> bool:
+    """A MOTChallenge text file (no header: at least 6 numbers a line), a tracks CSV of pixel
+    boxes, or a landmark table (u, v, x, y)."""
+    names = header_names(path, head)
+    if {"u", "v", "x", "y"} <= names or (names & {"bb_left", "left"} and names & {"bb_top", "top"}):
+        return True
+    fields = head.split(b"\n", 1)[0].strip().split(b",")
+    return len(fields) >= 6 and all(is_float(v.decode("ascii", "replace")) for v in fields[:6])
+
+
 @converter("infra-lwir", description="Infrastructure LWIR thermal camera: MOT-style pixel tracks + "
            "landmark table -> ground-plane homography", patterns=("*.txt", "*.csv"),
-           method="infrastructure_lwir", options=InfraLwirOptions)
+           method="infrastructure_lwir", options=InfraLwirOptions, sniff=_is_lwir_input)
 def convert_infra_lwir(inputs: list[Path], *, map_source, options: InfraLwirOptions):
     o = options
     if o.class_map:  # MOTChallenge class ids as keys: their documented names
@@ -338,6 +340,42 @@ def convert_infra_lwir(inputs: list[Path], *, map_source, options: InfraLwirOpti
             for k, v in o.class_map.items()}})
     if o.default_class not in CLASSES:
         raise FormatError(f"default_class {o.default_class!r} is not one of {list(CLASSES)}")
+    lm_path, track_paths = _split_inputs(inputs, o)
+    uv_l, xy_l = _read_landmarks(lm_path)
+    H, cov_h, rms = estimate_homography(uv_l, xy_l, o.landmark_pixel_std, o.landmark_map_std, lm_path)
+    w_side = _apply(H, np.array([o.image_size[0] / 2.0]), np.array([float(o.image_size[1])]))[2][0]
+    boxes, classes = _ground_boxes(track_paths, H, cov_h, w_side, o)
+    size = np.asarray([CLASS_SIZE[c] for c in classes])
+    m = len(classes)
+    pmf = np.zeros((m, len(CLASSES)), np.float32)
+    pmf[np.arange(m), [CLS[c] for c in classes]] = 1.0
+    participants = {
+        "class": classes, "class_pmf": pmf,
+        "length": size[:, 0], "width": size[:, 1], "height": size[:, 2],
+        "length_std": 0.15 * size[:, 0], "width_std": 0.15 * size[:, 1],
+        "height_std": 0.15 * size[:, 2],
+        "attributes": [json.dumps({"size": "class default"})] * m,
+    }
+    observed, bottom = _ground_footprint(H, w_side, o)
+    sensor = Sensor(
+        method="infrastructure_lwir", platform="infrastructure LWIR thermal camera",
+        sensors=[{"id": o.sensor_id, "kind": "lwir_camera", "rate_hz": o.rate_hz,
+                  "description": f"{o.image_size[0]}x{o.image_size[1]} px; ground homography from "
+                                 f"{len(uv_l)} landmarks, RMS residual {rms:.3f} m"}],
+        not_observable=["light_", "interior", "z"],
+        coverage=Range(o.sensor_id, o.range_m, 1.0 / o.rate_hz, pose=(*bottom, 0.0, 0.0),
+                       observed=observed),
+        extras={"ground_homography": H.ravel().tolist(),
+                "ground_homography_cov_diag": np.diag(cov_h).tolist()})
+    return to_recording(boxes, sensor, converter="infra-lwir",
+                        inputs=inputs + ([lm_path] if lm_path not in inputs else []),
+                        options=options, map_bytes=load_map_bytes(map_source),
+                        participants=participants)
+
+
+def _split_inputs(inputs: list[Path], o: InfraLwirOptions) -> tuple[Path, list[Path]]:
+    """The landmark table (option ``landmarks``, or the input with columns u, v, x, y) and the
+    pixel track files."""
     lm_path = o.landmarks
     track_paths = []
     for p in inputs:
@@ -352,9 +390,16 @@ def convert_infra_lwir(inputs: list[Path], *, map_source, options: InfraLwirOpti
         raise RecordingIOError("landmark table not found", path=lm_path)
     if not track_paths:
         raise FormatError("no pixel track file among the inputs", path=inputs[0])
-    uv_l, xy_l = _read_landmarks(Path(lm_path))
-    H, cov_h, rms = estimate_homography(uv_l, xy_l, o.landmark_pixel_std, o.landmark_map_std,
-                                        Path(lm_path))
+    return Path(lm_path), track_paths
+
+
+def _ground_boxes(track_paths: list[Path], H: np.ndarray, cov_h: np.ndarray, w_side: float,
+                  o: InfraLwirOptions) -> tuple[Boxes, list[str]]:
+    """The boxes (sorted) on the ground and each participant's class: the bottom centre of each
+    pixel box through the homography (its covariance from the box edges' and the homography's),
+    moved to the footprint centre (``ground_point``), velocities by central differences, the
+    heading from the motion."""
+    from aveas_format.mapref.build import heading_from_velocity
 
     parts = [_read_tracks(p, o) for p in track_paths]
     time = np.concatenate([p[0] for p in parts])
@@ -364,19 +409,17 @@ def convert_infra_lwir(inputs: list[Path], *, map_source, options: InfraLwirOpti
     v = np.concatenate([p[4] for p in parts])
     lines = np.concatenate([p[5] for p in parts])
     files = np.concatenate([np.full(len(p[0]), k) for k, p in enumerate(parts)])
-    w_side = _apply(H, np.array([o.image_size[0] / 2.0]), np.array([float(o.image_size[1])]))[2][0]
     on_ground = np.sign(_apply(H, u, v)[2]) == np.sign(w_side)
     if not on_ground.all():
         i = int(np.flatnonzero(~on_ground)[0])
         raise FormatError(f"box of track {ids[i]!r} at time {time[i]:.3f} s has its bottom above the "
                           "horizon of the ground homography", path=track_paths[int(files[i])],
                           line=int(lines[i]))
-
     keep, note = _road_users(ids, cls_names, o)
     if note:
         import warnings
 
-        warnings.warn(f"infra-lwir: {note}", stacklevel=2)
+        warnings.warn(f"infra-lwir: {note}", stacklevel=3)
     if not keep.all():
         if not keep.any():
             raise FormatError(f"no road user among the tracks ({note})", path=track_paths[0])
@@ -385,70 +428,50 @@ def convert_infra_lwir(inputs: list[Path], *, map_source, options: InfraLwirOpti
         ids = [ids[i] for i in idx]
         cls_names = [cls_names[i] for i in idx]
     pid, uniq = factorize(ids)
-    order = np.lexsort((time, pid))
-    pid, time, u, v, lines, files = (pid[order], time[order], u[order], v[order], lines[order],
-                                     files[order])
-    cls_arr = np.asarray(cls_names, dtype=object)[order]
-    dup = np.r_[False, (pid[1:] == pid[:-1]) & (time[1:] == time[:-1])]
-    if dup.any():
-        i = int(np.flatnonzero(dup)[0])
-        raise FormatError(f"track {uniq[pid[i]]!r} has two boxes in one frame (time {time[i]:.3f} s)",
-                          path=track_paths[int(files[i])], line=int(lines[i]))
     X, Y, jp, jh = _jacobians(H, u, v)
     cpx = np.diag([o.pixel_std ** 2 / 2.0, o.pixel_std ** 2])
-    cov = (np.einsum("nij,jk,nlk->nil", jp, cpx, jp)
-           + np.einsum("nij,jk,nlk->nil", jh, cov_h, jh))
-    m = len(uniq)
-    first = np.unique(pid, return_index=True)[1]
-    p_cls = [class_of(c, o.class_map) for c in cls_arr[first]]
-    size = np.asarray([CLASS_SIZE[c] for c in p_cls])
-    sx, sy, _ = covariance_std_corr(cov)
+    sx, sy, rho = covariance_std_corr(np.einsum("nij,jk,nlk->nil", jp, cpx, jp)
+                                      + np.einsum("nij,jk,nlk->nil", jh, cov_h, jh))
+    # (the policy: a track with two boxes in one frame is an error)
+    boxes = Boxes(pid, time, X, Y, source_ids=[str(s) for s in uniq],
+                  rows=Rows(track_paths, file=files, place=lines), x_std=sx, y_std=sy,
+                  xy_corr=rho).sort()
+    u, v = u[boxes.order], v[boxes.order]
+    classes = [class_of(c, o.class_map)
+               for c in np.asarray(cls_names, dtype=object)[boxes.order][boxes.first_rows()]]
+    pid, t, X, Y = boxes.pid, boxes.time, boxes["x"], boxes["y"]
 
     def kinematics(x, y):
-        from aveas_format.mapref.build import heading_from_velocity
+        vx, vy, vxs, vys = central_differences(pid, t, x, y, boxes["x_std"], boxes["y_std"])
+        return vx, vy, vxs, vys, heading_from_velocity(pid, vx, vy)
 
-        vx, vy, vxs, vys = central_differences(pid, time, x, y, sx, sy)
-        hd = heading_from_velocity(pid, vx, vy)
-        return vx, vy, vxs, vys, hd
-
-    x, y = X, Y
-    vx, vy, vxs, vys, hd = kinematics(x, y)
+    vx, vy, vxs, vys, hd = kinematics(X, Y)
     if o.ground_point == "footprint_centre":
         # away from the camera: the ground direction of the image's up axis at the contact point
         X2, Y2, _ = _apply(H, u, v - 1.0)
         a = np.c_[X2 - X, Y2 - Y]
         a /= np.linalg.norm(a, axis=1, keepdims=True)
         phi = np.arctan2(a[:, 1], a[:, 0])
+        size = np.asarray([CLASS_SIZE[c] for c in classes])
         L, W = size[pid, 0], size[pid, 1]
         ext = L / 2 * np.abs(np.cos(hd - phi)) + W / 2 * np.abs(np.sin(hd - phi))
-        x, y = X + ext * a[:, 0], Y + ext * a[:, 1]
-        vx, vy, vxs, vys, hd = kinematics(x, y)
+        boxes["x"], boxes["y"] = X + ext * a[:, 0], Y + ext * a[:, 1]
+        vx, vy, vxs, vys, hd = kinematics(boxes["x"], boxes["y"])
     speed = np.hypot(vx, vy)
     with np.errstate(divide="ignore", invalid="ignore"):
-        hstd = np.where(speed >= 0.5, np.hypot(vxs, vys) / speed, np.nan)
-    hstd = np.minimum(hstd, np.pi)
-    _, _, rho = covariance_std_corr(cov)
-    states = {
-        "participant_id": pid, "time": time - time.min() if time.min() < 0 else time,
-        "x": x, "y": y, "heading": hd, "vx": vx, "vy": vy,
-        "x_std": sx, "y_std": sy, "xy_corr": nullable(rho), "heading_std": nullable(hstd),
-        "vx_std": nullable(vxs), "vy_std": nullable(vys),
-    }
-    pmf = np.zeros((m, len(CLASSES)), np.float32)
-    pmf[np.arange(m), [CLS[c] for c in p_cls]] = 1.0
-    participants = {
-        "participant_id": np.arange(m, dtype=np.int64), "source_id": [str(s) for s in uniq],
-        "class": p_cls, "class_pmf": pmf,
-        "length": size[:, 0], "width": size[:, 1], "height": size[:, 2],
-        "length_std": 0.15 * size[:, 0], "width_std": 0.15 * size[:, 1],
-        "height_std": 0.15 * size[:, 2],
-        "attributes": [json.dumps({"size": "class default"})] * m,
-    }
+        hstd = np.minimum(np.where(speed >= 0.5, np.hypot(vxs, vys) / speed, np.nan), np.pi)
+    boxes["heading"], boxes["heading_std"] = hd, hstd
+    boxes["vx"], boxes["vy"], boxes["vx_std"], boxes["vy_std"] = vx, vy, vxs, vys
+    if t.min() < 0:
+        boxes.time = t - t.min()
+    return boxes, classes
 
-    # field of view: the image's ground footprint up to range_m
+
+def _ground_footprint(H: np.ndarray, w_side: float, o: InfraLwirOptions):
+    """The image's ground footprint (a shapely polygon) up to the row where the ground lies
+    ``range_m`` from the image bottom centre's ground point, and that point."""
     import shapely
 
-    map_bytes = load_map_bytes(map_source)
     iw, ih = o.image_size
     bx, by, _ = _apply(H, np.array([iw / 2.0]), np.array([float(ih)]))
     vs = np.linspace(ih, 0.0, 4 * ih + 1)
@@ -463,23 +486,4 @@ def convert_infra_lwir(inputs: list[Path], *, map_source, options: InfraLwirOpti
     border_v = np.r_[np.full(50, ih), np.linspace(ih, top_row, 50), np.full(50, top_row),
                      np.linspace(top_row, ih, 50)]
     fx, fy, _ = _apply(H, border_u, border_v)
-    observed = shapely.make_valid(shapely.Polygon(np.c_[fx, fy]))
-    duration = float(states["time"].max()) + 1.0 / o.rate_hz
-    unob = coverage_regions(o.sensor_id, (float(bx[0]), float(by[0])), o.range_m, 0.0, 2 * np.pi,
-                            map_area(map_bytes), 0.0, duration, observed=observed)
-    unobserved = unobserved_table(unob)
-    return wrap_recording(
-        "infra-lwir", inputs + ([Path(lm_path)] if Path(lm_path) not in inputs else []), options,
-        map_bytes=map_bytes, participants=participants, states=states,
-        method="infrastructure_lwir", provenance="natural", unobserved=unobserved,
-        duration_s=duration, coverage=shapely.to_wkt(observed, rounding_precision=3),
-        acquisition={
-            "platform": "infrastructure LWIR thermal camera",
-            "sensors": [{"id": o.sensor_id, "kind": "lwir_camera", "rate_hz": o.rate_hz,
-                         "description": f"{iw}x{ih} px; ground homography from {len(uv_l)} "
-                                        f"landmarks, RMS residual {rms:.3f} m"}],
-            "not_observable": ["light_", "interior", "z"],
-        },
-        extras={"ground_homography": H.ravel().tolist(),
-                "ground_homography_cov_diag": np.diag(cov_h).tolist()},
-    )
+    return shapely.make_valid(shapely.Polygon(np.c_[fx, fy])), (float(bx[0]), float(by[0]))

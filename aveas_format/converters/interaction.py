@@ -40,17 +40,14 @@ import numpy as np
 import pyarrow as pa
 from pydantic import Field
 
-from aveas_format.converters.common import (
-    class_pmf,
-    load_map_bytes,
-    outside_coverage,
-    read_numeric_table,
-    sort_states,
-    wrap_recording,
-)
+from aveas_format.converters.common.assemble import to_recording
+from aveas_format.converters.common.boxes import Boxes, Footprint, Rows, Sensor
+from aveas_format.converters.common.tables import read_table
+from aveas_format.converters.labels import class_pmf
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, UsageError, report_source
 from aveas_format.io.arrow import column_numpy
+from aveas_format.mapref.build import load_map_bytes
 
 VEHICLE_COLUMNS = ("track_id", "frame_id", "timestamp_ms", "agent_type", "x", "y", "vx", "vy", "psi_rad",
                    "length", "width")
@@ -92,7 +89,7 @@ def _read(path: Path) -> tuple[str, pa.Table]:
     required = VEHICLE_COLUMNS if "psi_rad" in cols or path.name.lower().startswith("vehicle") \
         else PEDESTRIAN_COLUMNS
     numeric = tuple(c for c in NUMERIC if c in required)
-    table = read_numeric_table(path, required=required, numeric=numeric)
+    table = read_table(path, required=required, numeric=numeric)
     for c in numeric:
         col = table.column(c)
         if col.null_count:
@@ -172,35 +169,34 @@ def convert_interaction(inputs: list[Path], *, map_source, options: InteractionO
         raise FormatError(f"agent_type {unknown[0]!r} is none of {sorted(CLASSES)}", path=parts[file_idx[i]][0],
                           line=int(line_no[i]))
     uniq, pid = np.unique(key, return_inverse=True)
-    pid = pid.astype(np.int64)
     t = (arr["ms"] - arr["ms"].min()) / 1000.0
-    order = sort_states(pid, t, parts[0][0] if len(parts) == 1 else None, line_no, ids=uniq)
-    pid, t = pid[order], t[order]
-    x, y, vx, vy, psi = (arr[k][order] for k in ("x", "y", "vx", "vy", "psi"))
+    o = options
+    boxes = Boxes(pid, t, arr["x"], arr["y"], source_ids=uniq,
+                  rows=Rows([p for p, _, _ in parts], file_idx, line_no),
+                  vx=arr["vx"], vy=arr["vy"], source_frame=arr["frame"].astype(np.int64),
+                  length=arr["length"], width=arr["width"]).sort()
+    pid, n = boxes.pid, len(boxes)
+    psi, vx, vy = arr["psi"][boxes.order], boxes["vx"], boxes["vy"]
     heading = np.where(np.isfinite(psi), psi, np.nan)
     if np.isnan(heading).any():
-        from_v = _heading_from_velocity(pid, vx, vy)
-        heading = np.where(np.isfinite(heading), heading, from_v)
-    n = len(pid)
-    o = options
-    states = {
-        "participant_id": pid, "time": t, "x": x, "y": y, "heading": heading, "vx": vx, "vy": vy,
-        "x_std": np.full(n, o.position_std), "y_std": np.full(n, o.position_std),
-        "heading_std": np.full(n, o.heading_std), "vx_std": np.full(n, o.velocity_std),
-        "vy_std": np.full(n, o.velocity_std), "source_frame": arr["frame"][order].astype(np.int64),
-    }
+        heading = np.where(np.isfinite(heading), heading, _heading_from_velocity(pid, vx, vy))
+    boxes["heading"] = heading
+    for name, std in (("x_std", o.position_std), ("y_std", o.position_std),
+                      ("heading_std", o.heading_std), ("vx_std", o.velocity_std),
+                      ("vy_std", o.velocity_std)):
+        boxes[name] = np.full(n, std)
     report_source("source.other", "the INTERACTION dataset states no uncertainty for its tracks: "
                   f"x/y std {o.position_std:g} m, velocity std {o.velocity_std:g} m/s, heading std "
                   f"{o.heading_std:g} rad, size std {o.size_std:g} m assumed (options position_std, "
                   "velocity_std, heading_std, size_std)", file=str(parts[0][0]))
-    # per participant: class, size (median of the track's rows)
+    # per participant: class, size (median of the track's rows; a class default where none)
     m = len(uniq)
-    first = np.unique(pid, return_index=True)[1]
-    p_agent = agent[order][first]
+    first = boxes.first_rows()
+    p_agent = agent[boxes.order][first]
     classes = np.array([CLASSES[a] for a in p_agent], dtype=object)
     length = np.full(m, np.nan)
     width = np.full(m, np.nan)
-    L, W = arr["length"][order], arr["width"][order]
+    L, W = boxes["length"], boxes["width"]
     bounds = np.r_[first, n]
     for k in range(m):
         seg = slice(bounds[k], bounds[k + 1])
@@ -217,7 +213,6 @@ def convert_interaction(inputs: list[Path], *, map_source, options: InteractionO
         pmf[shared] = (0.5 * one_hot(np.array(["pedestrian"] * int(shared.sum()), dtype=object), "class")
                        + 0.5 * one_hot(np.array(["bicycle"] * int(shared.sum()), dtype=object), "class"))
     participants = {
-        "participant_id": np.arange(m, dtype=np.int64), "source_id": [str(u) for u in uniq],
         "class": classes, "class_pmf": pmf, "length": length, "width": width,
         "length_std": np.where(assumed, 0.3, o.size_std), "width_std": np.where(assumed, 0.3, o.size_std),
         "attributes": [json.dumps({"interaction_agent_type": str(a), **({"size_assumed": True} if s else {})})
@@ -230,16 +225,15 @@ def convert_interaction(inputs: list[Path], *, map_source, options: InteractionO
     x0, y0, x1, y1 = load_map(map_bytes).bounds
     coverage = f"POLYGON (({x0} {y0}, {x1} {y0}, {x1} {y1}, {x0} {y1}, {x0} {y0}))"
     site = Path(str(map_source)).stem if not isinstance(map_source, (bytes, bytearray)) else "INTERACTION site"
-    return wrap_recording(
-        "interaction", [p for p, _, _ in parts], options, map_bytes=map_bytes, participants=participants,
-        states=states, method="aerial", provenance="natural", partner="INTERACTION dataset",
-        nominal_rate_hz=o.rate_hz, coverage=coverage,
-        unobserved=outside_coverage(map_bytes, coverage, 0.0, float(np.max(t)), "camera"),
-        acquisition={"platform": "drone or fixed camera (INTERACTION dataset)",
-                     "sensors": [{"id": "camera", "kind": "rgb_camera", "rate_hz": o.rate_hz}],
-                     "not_observable": ["light_", "interior"], "site": {"name": site}},
-        extras={"interaction": {"files": [p.name for p, _, _ in parts], "origin": list(o.origin)}},
-    )
+    sensor = Sensor(method="aerial", platform="drone or fixed camera (INTERACTION dataset)",
+                    sensors=[{"id": "camera", "kind": "rgb_camera", "rate_hz": o.rate_hz}],
+                    partner="INTERACTION dataset", not_observable=["light_", "interior"],
+                    site={"name": site}, coverage=Footprint(coverage, "camera"),
+                    nominal_rate_hz=o.rate_hz,
+                    extras={"interaction": {"files": [p.name for p, _, _ in parts],
+                                            "origin": list(o.origin)}})
+    return to_recording(boxes, sensor, converter="interaction", inputs=[p for p, _, _ in parts],
+                        options=options, map_bytes=map_bytes, participants=participants)
 
 
 __all__ = ["InteractionOptions", "convert_interaction"]

@@ -35,6 +35,7 @@ values (KITTI's -1000) whatever the label says.
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -134,6 +135,24 @@ def label_kind(name: object, extra: dict[str, str] | None = None) -> tuple[str, 
     if len(parts) > 1 and parts[0] in ("human", "animal"):  # nuScenes human.pedestrian.*
         return ("pedestrian" if parts[0] == "human" else "animal"), ROAD_USER
     return "other", ROAD_USER
+
+
+def class_of(name: str, extra: dict[str, str] | None = None) -> str:
+    """One of the 13 classes for a class name of a source (case- and separator-insensitive);
+    ``extra`` maps source names first; unknown names become ``other``. Whether the label is a road
+    user at all: :func:`label_kind`."""
+    return label_kind(name, extra)[0]
+
+
+def class_pmf(labels: Sequence[str] | np.ndarray, confidence: float = 1.0) -> np.ndarray:
+    """(n, 13) PMF matrix for hard class labels: ``confidence`` on the label, the rest spread evenly
+    over the other 12 classes (``confidence`` = 1: one-hot)."""
+    from aveas_format.schema.pmf import one_hot
+
+    oh = one_hot(np.asarray(labels, dtype=object), "class").astype(np.float64)
+    k = oh.shape[1]
+    pm = oh * confidence + (1.0 - oh) * (1.0 - confidence) / (k - 1)
+    return pm.astype(np.float32)
 
 
 class LabelFilter:

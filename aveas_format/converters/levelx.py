@@ -84,20 +84,15 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from aveas_format.converters.common import (
-    class_pmf,
-    is_float,
-    load_map_bytes,
-    outside_coverage,
-    projected_to_local,
-    read_numeric_table,
-    rotate,
-    sort_states,
-    wrap_recording,
-)
+from aveas_format.converters.common.assemble import to_recording
+from aveas_format.converters.common.boxes import Boxes, Footprint, Rows, Sensor
+from aveas_format.converters.common.geometry import projected_to_local, rotate
+from aveas_format.converters.common.tables import header_names, is_float, read_table
+from aveas_format.converters.labels import class_pmf
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.io.arrow import column_numpy
+from aveas_format.mapref.build import load_map_bytes
 
 HIGHD_GSD = 0.10106  # m per video pixel (the highD tools' scale factor)
 DEFAULT_GSD = 0.10
@@ -185,15 +180,20 @@ def find_recording_files(inputs: list[Path]) -> tuple[Path, Path, Path]:
     return out  # type: ignore[return-value]
 
 
-def _meta_row(path: Path, required: tuple[str, ...], numeric: tuple[str, ...]) -> dict[str, Any]:
-    t = read_numeric_table(path, required=required, numeric=numeric)
+def _recording_meta(path: Path, required: tuple[str, ...], numeric: tuple[str, ...]
+                    ) -> tuple[dict[str, Any], float]:
+    """The one row of recordingMeta.csv and its frame rate."""
+    t = read_table(path, required=required, numeric=numeric)
     if t.num_rows < 1:
         raise FormatError("recordingMeta has no data row", path=path)
     row = {k: v[0] for k, v in t.slice(0, 1).to_pydict().items()}
     for k in required:
         if row.get(k) is None or (isinstance(row[k], float) and math.isnan(row[k])):
             raise FormatError(f"column {k!r} is empty", path=path, line=2)
-    return row
+    rate = float(row["frameRate"])
+    if not rate > 0:
+        raise FormatError(f"column 'frameRate': {rate!r} is not a positive number", path=path, line=2)
+    return row, rate
 
 
 def _markings(value: Any, name: str, path: Path) -> np.ndarray:
@@ -237,15 +237,16 @@ def _track_index(track_ids: np.ndarray, meta_ids: np.ndarray, tracks_path: Path)
     return order[pos]
 
 
-def _events(pid: np.ndarray, t: np.ndarray, mask: np.ndarray, source: str) -> dict[str, Any] | None:
-    idx = np.flatnonzero(mask)
+def _lane_changes(boxes: Boxes, mask: np.ndarray | None, source: str) -> dict[str, Any] | None:
+    """``lane_change`` events (origin ``derived``) at the sorted boxes where ``mask`` holds."""
+    idx = np.flatnonzero(mask) if mask is not None else []
     if not len(idx):
         return None
     n = len(idx)
     return {
         "event_id": np.arange(n, dtype=np.int64), "kind": ["lane_change"] * n,
-        "time_start": t[idx], "time_end": t[idx],
-        "participant_ids": pa.array([[int(p)] for p in pid[idx]], pa.list_(pa.int64())),
+        "time_start": boxes.time[idx], "time_end": boxes.time[idx],
+        "participant_ids": pa.array([[int(p)] for p in boxes.pid[idx]], pa.list_(pa.int64())),
         "roles": pa.array([["actor"]] * n, pa.list_(pa.string())), "origin": ["derived"] * n,
         "attributes": [json.dumps({"source": source})] * n,
     }
@@ -337,140 +338,137 @@ _HIGHD_TRACKS = ("frame", "id", "x", "y", "width", "height", "xVelocity", "yVelo
 _HIGHD_META = ("id", "width", "height", "class", "drivingDirection")
 
 
+def _is_highd(path: Path, head: bytes) -> bool:
+    """A header of highD's tracks (``frame, id, xVelocity``), tracksMeta (``drivingDirection``)
+    or recordingMeta (``upperLaneMarkings``)."""
+    names = header_names(path, head)
+    return ({"frame", "id", "xVelocity"} <= names or {"id", "drivingDirection"} <= names
+            or "upperLaneMarkings" in names)
+
+
+def _is_centre(exid: bool):
+    """The sniff of inD/rounD/uniD (``exid`` False) or exiD: tracks with box centres (exiD's with
+    lanelet lists), or the meta tables the two share."""
+    def sniff(path: Path, head: bytes) -> bool:
+        names = header_names(path, head)
+        if {"trackId", "xCenter", "yCenter"} <= names:
+            return ("laneletId" in names) == exid
+        return {"trackId", "class", "numFrames"} <= names or "xUtmOrigin" in names
+    sniff.__doc__ = ("A header of box-centre tracks (``trackId, xCenter, yCenter``" +
+                     (", with ``laneletId``)" if exid else ", without ``laneletId``)") +
+                     " or of the tracksMeta/recordingMeta tables of the levelX centre layout.")
+    return sniff
+
+
 @converter("highd", description="levelX highD drone recordings (tracks, tracksMeta, recordingMeta "
            "CSV); builds the map from the lane markings",
            patterns=("*_tracks.csv", "*_tracksMeta.csv", "*_recordingMeta.csv"), method="aerial",
-           options=HighDOptions, needs_map=False, provides=("partner",))
+           options=HighDOptions, needs_map=False, provides=("partner",), sniff=_is_highd)
 def convert_highd(inputs: list[Path], *, map_source=None, options: HighDOptions):
     tracks_p, meta_p, rec_p = find_recording_files(inputs)
-    rec = _meta_row(rec_p, ("frameRate", "upperLaneMarkings", "lowerLaneMarkings"),
-                    ("frameRate", "speedLimit", "locationId"))
-    rate = float(rec["frameRate"])
-    if not rate > 0:
-        raise FormatError(f"column 'frameRate': {rate!r} is not a positive number", path=rec_p, line=2)
+    rec, rate = _recording_meta(rec_p, ("frameRate", "upperLaneMarkings", "lowerLaneMarkings"),
+                                ("frameRate", "speedLimit", "locationId"))
     upper = _markings(rec["upperLaneMarkings"], "upperLaneMarkings", rec_p)
     lower = _markings(rec["lowerLaneMarkings"], "lowerLaneMarkings", rec_p)
     if upper[-1] > lower[0]:
         raise FormatError("upperLaneMarkings must lie above (smaller y than) lowerLaneMarkings",
                           path=rec_p, line=2)
+    meta = _highd_tracks_meta(meta_p)
+    boxes, bw, p_meta, changes = _highd_boxes(tracks_p, meta, rate, options)
+    gsd = options.gsd if options.gsd is not None else HIGHD_GSD
+    size_std = math.sqrt(2.0) * options.pixel_std * gsd
+    m = boxes.m
+    classes = meta["class"][p_meta]
+    participants = {
+        "class": classes, "class_pmf": class_pmf(classes, options.class_confidence),
+        "length": meta["length"][p_meta], "width": meta["width"][p_meta],
+        "length_std": np.full(m, size_std), "width_std": np.full(m, size_std),
+        "attributes": [json.dumps({"levelx_class": str(c), "driving_direction": int(d)})
+                       for c, d in zip(meta["class_raw"][p_meta], meta["direction"][p_meta])],
+    }
+    coverage = None
+    if map_source is not None:
+        map_bytes = load_map_bytes(map_source)
+    else:  # the map built from the lane markings; the observed road is the recording's coverage
+        x = boxes["x"]
+        x0 = math.floor(float(np.min(x - bw / 2.0)) - options.road_margin)
+        x1 = math.ceil(float(np.max(x + bw / 2.0)) + options.road_margin)
+        limit = rec.get("speedLimit")
+        limit = float(limit) if limit is not None and float(limit) > 0 else None
+        map_bytes = highd_map(upper, lower, x0, x1, geo_reference=options.geo_reference,
+                              shoulder_width=options.shoulder_width, speed_limit=limit,
+                              name=f"highD location {rec.get('locationId', '')}".strip()).encode()
+        top, bottom = -float(upper[0]) + options.shoulder_width, -float(lower[-1]) - options.shoulder_width
+        coverage = Footprint(f"POLYGON (({x0} {bottom}, {x1} {bottom}, {x1} {top}, {x0} {top}, "
+                             f"{x0} {bottom}))", "drone_camera")
+    sensor = _drone(rec, rate, "highD", "motorway", f", GSD {gsd:g} m (levelX highD)",
+                    coverage=coverage)
+    return to_recording(boxes, sensor, converter="highd", inputs=[tracks_p, meta_p, rec_p],
+                        options=options, map_bytes=map_bytes, participants=participants,
+                        events=_lane_changes(boxes, changes, "highD laneId"))
 
-    meta = read_numeric_table(meta_p, required=_HIGHD_META,
-                      numeric=("id", "width", "height", "drivingDirection"))
+
+def _highd_tracks_meta(meta_p: Path) -> dict[str, np.ndarray]:
+    """tracksMeta.csv of highD: id, length (its ``width``: along x), width (``height``),
+    driving direction, class (the source's and the format's)."""
+    meta = read_table(meta_p, required=_HIGHD_META, numeric=("id", "width", "height", "drivingDirection"))
     _finite(meta, ("id", "width", "height", "drivingDirection"), meta_p)
-    m_id = column_numpy(meta, "id")
-    m_len, m_wid = column_numpy(meta, "width"), column_numpy(meta, "height")
-    _positive(m_len, "width", meta_p)
-    _positive(m_wid, "height", meta_p)
-    m_dir = column_numpy(meta, "drivingDirection")
-    bad = np.flatnonzero((m_dir != 1) & (m_dir != 2))
+    out = {"id": column_numpy(meta, "id"), "length": column_numpy(meta, "width"),
+           "width": column_numpy(meta, "height"), "direction": column_numpy(meta, "drivingDirection")}
+    _positive(out["length"], "width", meta_p)
+    _positive(out["width"], "height", meta_p)
+    bad = np.flatnonzero((out["direction"] != 1) & (out["direction"] != 2))
     if len(bad):
-        raise FormatError(f"column 'drivingDirection': {m_dir[bad[0]]:g} is neither 1 nor 2",
+        raise FormatError(f"column 'drivingDirection': {out['direction'][bad[0]]:g} is neither 1 nor 2",
                           path=meta_p, line=int(bad[0]) + 2)
-    m_cls_raw = np.asarray(meta.column("class").cast(pa.string()).to_pylist(), dtype=object)
-    m_cls = np.array([{"car": "car", "truck": "truck", "bus": "bus"}.get(str(c).strip().lower(),
-                                                                       "other") for c in m_cls_raw],
-                     dtype=object)
+    out["class_raw"] = np.asarray(meta.column("class").cast(pa.string()).to_pylist(), dtype=object)
+    out["class"] = np.array([{"car": "car", "truck": "truck", "bus": "bus"}.get(str(c).strip().lower(), "other")
+                             for c in out["class_raw"]], dtype=object)
+    return out
 
-    tr = read_numeric_table(tracks_p, required=_HIGHD_TRACKS,
+
+def _highd_boxes(tracks_p: Path, meta: dict[str, np.ndarray], rate: float, options: HighDOptions
+                 ) -> tuple[Boxes, np.ndarray, np.ndarray, np.ndarray | None]:
+    """The boxes of highD's tracks.csv (sorted), their extent along x (for the road's), each
+    participant's row of tracksMeta and where its ``laneId`` changes (None without): the upper-left
+    corner moved to the box centre and y flipped up, the heading from the velocity (the driving
+    direction while slow)."""
+    tr = read_table(tracks_p, required=_HIGHD_TRACKS,
                     numeric=_HIGHD_TRACKS + ("xAcceleration", "yAcceleration", "laneId"))
     _finite(tr, _HIGHD_TRACKS, tracks_p)
     if tr.num_rows == 0:
         raise FormatError("no track rows", path=tracks_p)
     frame = column_numpy(tr, "frame")
     tid = column_numpy(tr, "id")
-    mi = _track_index(tid, m_id, tracks_p)
+    mi = _track_index(tid, meta["id"], tracks_p)
     bw, bh = column_numpy(tr, "width"), column_numpy(tr, "height")
     _positive(bw, "width", tracks_p)
     _positive(bh, "height", tracks_p)
-
-    # participants in order of track id
-    uniq_ids, pid = np.unique(tid, return_inverse=True)
-    pid = pid.astype(np.int64)
-    first_row = np.unique(pid, return_index=True)[1]
-    p_meta = mi[first_row]
-    t = (frame - min(1.0, float(frame.min()))) / rate
-    lines = np.arange(tr.num_rows) + 2
-    order = sort_states(pid, t, tracks_p, lines)
-
-    x = column_numpy(tr, "x") + bw / 2.0
-    y = -(column_numpy(tr, "y") + bh / 2.0)
     vx = column_numpy(tr, "xVelocity")
     vy = -column_numpy(tr, "yVelocity")
-    ax = column_numpy(tr, "xAcceleration") if "xAcceleration" in tr.column_names else None
-    ay = -column_numpy(tr, "yAcceleration") if "yAcceleration" in tr.column_names else None
     speed = np.hypot(vx, vy)
-    dir_heading = np.where(m_dir[mi] == 1, math.pi, 0.0)
     moving = speed >= options.heading_min_speed
-    heading = np.where(moving, np.arctan2(vy, vx), dir_heading)
     with np.errstate(divide="ignore", invalid="ignore"):
         h_std = np.where(moving, np.minimum(options.velocity_std / speed, 0.1), 0.1)
-
-    gsd = options.gsd if options.gsd is not None else HIGHD_GSD
-    pos_std = options.pixel_std * gsd
+    pos_std = options.pixel_std * (options.gsd if options.gsd is not None else HIGHD_GSD)
     n = tr.num_rows
-    states: dict[str, Any] = {
-        "participant_id": pid, "time": t, "x": x, "y": y, "heading": heading, "vx": vx, "vy": vy,
-        "x_std": np.full(n, pos_std), "y_std": np.full(n, pos_std), "heading_std": h_std,
-        "vx_std": np.full(n, options.velocity_std), "vy_std": np.full(n, options.velocity_std),
-        "source_frame": frame.astype(np.int64),
-    }
-    if ax is not None and ay is not None:
-        states["ax"], states["ay"] = np.nan_to_num(ax), np.nan_to_num(ay)
-    states = {k: v[order] for k, v in states.items()}
-
-    events = None
-    if "laneId" in tr.column_names:
-        lane = column_numpy(tr, "laneId")[order]
-        ps = states["participant_id"]
-        change = np.r_[False, (ps[1:] == ps[:-1]) & (lane[1:] != lane[:-1])]
-        events = _events(ps, states["time"], change, "highD laneId")
-
-    m = len(uniq_ids)
-    size_std = math.sqrt(2.0) * pos_std
-    classes = m_cls[p_meta]
-    participants = {
-        "participant_id": np.arange(m, dtype=np.int64),
-        "source_id": [f"{v:g}" for v in uniq_ids],
-        "class": classes, "class_pmf": class_pmf(classes, options.class_confidence),
-        "length": m_len[p_meta], "width": m_wid[p_meta],
-        "length_std": np.full(m, size_std), "width_std": np.full(m, size_std),
-        "attributes": [json.dumps({"levelx_class": str(c), "driving_direction": int(d)})
-                       for c, d in zip(m_cls_raw[p_meta], m_dir[p_meta])],
-    }
-
-    if map_source is not None:
-        map_bytes = load_map_bytes(map_source)
-        x0 = x1 = None
-    else:
-        x_lo = float(np.min(x - bw / 2.0)) - options.road_margin
-        x_hi = float(np.max(x + bw / 2.0)) + options.road_margin
-        x0, x1 = math.floor(x_lo), math.ceil(x_hi)
-        limit = rec.get("speedLimit")
-        limit = float(limit) if limit is not None and float(limit) > 0 else None
-        map_bytes = highd_map(upper, lower, x0, x1, geo_reference=options.geo_reference,
-                              shoulder_width=options.shoulder_width, speed_limit=limit,
-                              name=f"highD location {rec.get('locationId', '')}".strip()).encode()
-    kw: dict[str, Any] = {}
-    if x0 is not None:
-        top, bottom = -float(upper[0]) + options.shoulder_width, -float(lower[-1]) - options.shoulder_width
-        kw["coverage"] = (f"POLYGON (({x0} {bottom}, {x1} {bottom}, {x1} {top}, {x0} {top}, "
-                          f"{x0} {bottom}))")
-        kw["unobserved"] = outside_coverage(map_bytes, kw["coverage"], 0.0,
-                                            float(np.max(states["time"])), "drone_camera")
-    loc = rec.get("locationId")
-    return wrap_recording(
-        "highd", [tracks_p, meta_p, rec_p], options, map_bytes=map_bytes, participants=participants,
-        states=states, events=events, method="aerial", provenance="natural", partner=PARTNER,
-        nominal_rate_hz=rate,
-        acquisition={
-            "platform": f"drone, 4K camera, {rate:g} fps, GSD {gsd:g} m (levelX highD)",
-            "sensors": [{"id": "drone_camera", "kind": "rgb_camera", "rate_hz": rate}],
-            "not_observable": NOT_OBSERVABLE,
-            "site": {"name": f"highD location {loc if loc is None else int(loc)}", "country": "DE",
-                     "road_type": "motorway"},
-        },
-        extras={"levelx": {"dataset": "highD", **_jsonable(rec)}}, **kw,
-    )
+    has_acc = "xAcceleration" in tr.column_names and "yAcceleration" in tr.column_names
+    uniq_ids, pid = np.unique(tid, return_inverse=True)
+    boxes = Boxes(
+        pid, (frame - min(1.0, float(frame.min()))) / rate, column_numpy(tr, "x") + bw / 2.0,
+        -(column_numpy(tr, "y") + bh / 2.0), source_ids=[f"{v:g}" for v in uniq_ids],
+        rows=Rows([tracks_p], place=np.arange(n) + 2),
+        heading=np.where(moving, np.arctan2(vy, vx), np.where(meta["direction"][mi] == 1, math.pi, 0.0)),
+        vx=vx, vy=vy, x_std=np.full(n, pos_std), y_std=np.full(n, pos_std), heading_std=h_std,
+        vx_std=np.full(n, options.velocity_std), vy_std=np.full(n, options.velocity_std),
+        source_frame=frame.astype(np.int64),
+        ax=np.nan_to_num(column_numpy(tr, "xAcceleration")) if has_acc else None,
+        ay=np.nan_to_num(-column_numpy(tr, "yAcceleration")) if has_acc else None).sort()
+    changes = None
+    if "laneId" in tr.column_names:  # a lane change: another laneId than the previous box's
+        lane, ps = column_numpy(tr, "laneId")[boxes.order], boxes.pid
+        changes = np.r_[False, (ps[1:] == ps[:-1]) & (lane[1:] != lane[:-1])]
+    return boxes, bw[boxes.order], mi[boxes.order][boxes.first_rows()], changes
 
 
 # --- inD / rounD / uniD / exiD ---------------------------------------------------------------------
@@ -491,7 +489,7 @@ def shifted_crs(crs: str, dx: float, dy: float) -> str:
     ``(dx, dy)``: the frame of the levelX tracks."""
     import pyproj
 
-    from aveas_format.mapref.crs import parse_crs
+    from aveas_format.crs import parse_crs
 
     import warnings
 
@@ -522,15 +520,74 @@ def _convert_centre(name: str, inputs: list[Path], map_source, options: LevelXCe
     from aveas_format.opendrive import load_map
 
     tracks_p, meta_p, rec_p = find_recording_files(inputs)
-    rec = _meta_row(rec_p, ("frameRate", "xUtmOrigin", "yUtmOrigin"),
-                    ("frameRate", "xUtmOrigin", "yUtmOrigin", "latLocation", "lonLocation",
-                     "orthoPxToMeter", "locationId", "speedLimit"))
-    rate = float(rec["frameRate"])
-    if not rate > 0:
-        raise FormatError(f"column 'frameRate': {rate!r} is not a positive number", path=rec_p, line=2)
-    x_utm0, y_utm0 = float(rec["xUtmOrigin"]), float(rec["yUtmOrigin"])
+    rec, rate = _recording_meta(rec_p, ("frameRate", "xUtmOrigin", "yUtmOrigin"),
+                                ("frameRate", "xUtmOrigin", "yUtmOrigin", "latLocation", "lonLocation",
+                                 "orthoPxToMeter", "locationId", "speedLimit"))
+    meta = _centre_tracks_meta(meta_p)
+    tr = read_table(tracks_p, required=_CENTRE_TRACKS,
+                    numeric=_CENTRE_TRACKS + ("xAcceleration", "yAcceleration", "laneChange"))
+    _finite(tr, ("trackId", "frame", "xCenter", "yCenter", "heading", "xVelocity", "yVelocity"),
+            tracks_p)
+    if tr.num_rows == 0:
+        raise FormatError("no track rows", path=tracks_p)
+    mi = _track_index(column_numpy(tr, "trackId"), meta["id"], tracks_p)
+    boxes = _centre_boxes(tr, tracks_p, rate, options)
+    p_meta = mi[boxes.order][boxes.first_rows()]
+    map_bytes = load_map_bytes(map_source)
+    utm = options.utm_crs or _utm_of(rec, rec_p)
+    crs = _to_map_frame(boxes, (float(rec["xUtmOrigin"]), float(rec["yUtmOrigin"])), utm,
+                        load_map(map_bytes).header)
+    assumed = meta["assumed"][p_meta]
+    attrs: list[dict[str, Any]] = [{"levelx_class": str(c)} for c in meta["class_raw"][p_meta]]
+    for k in np.flatnonzero(assumed):
+        attrs[k]["size_assumed"] = True
+    if "laneletId" in tr.column_names:
+        _lanelets(tr, np.unique(column_numpy(tr, "trackId"), return_inverse=True)[1], tracks_p, attrs)
+    changes = (np.nan_to_num(column_numpy(tr, "laneChange"))[boxes.order] > 0.5
+               if "laneChange" in tr.column_names else None)
+    pos_std = options.pixel_std * (options.gsd if options.gsd is not None else DEFAULT_GSD)
+    size_std = np.where(assumed, 0.3, math.sqrt(2.0) * pos_std)
+    classes = meta["class"][p_meta]
+    participants = {
+        "class": classes, "class_pmf": class_pmf(classes, options.class_confidence),
+        "length": meta["length"][p_meta], "width": meta["width"][p_meta],
+        "length_std": size_std, "width_std": size_std,
+        "attributes": [json.dumps(a) for a in attrs],
+    }
+    sensor = _drone(rec, rate, dataset, road_type, f" (levelX {dataset})", crs=crs, utm_crs=utm)
+    return to_recording(boxes, sensor, converter=name, inputs=[tracks_p, meta_p, rec_p],
+                        options=options, map_bytes=map_bytes, participants=participants,
+                        events=_lane_changes(boxes, changes, f"{dataset} laneChange"))
 
-    meta = read_numeric_table(meta_p, required=_CENTRE_META, numeric=("trackId", "width", "length"))
+
+def _drone(rec: dict[str, Any], rate: float, dataset: str, road_type: str, camera: str, *,
+           coverage: Footprint | None = None, crs: str | None = None, **extras: Any) -> Sensor:
+    """The sensor of a levelX recording: a drone's 4K camera at ``rate`` fps (``camera``: the
+    rest of the platform text), the site from recordingMeta, its row kept in ``extras.levelx``
+    after ``extras``."""
+    loc = rec.get("locationId")
+    return Sensor(
+        method="aerial", partner=PARTNER, nominal_rate_hz=rate, coverage=coverage, crs=crs,
+        platform=f"drone, 4K camera, {rate:g} fps{camera}",
+        sensors=[{"id": "drone_camera", "kind": "rgb_camera", "rate_hz": rate}],
+        not_observable=NOT_OBSERVABLE,
+        site={"name": f"{dataset} location {loc if loc is None else int(loc)}", "country": "DE",
+              "road_type": road_type},
+        extras={"levelx": {"dataset": dataset, **extras, **_jsonable(rec)}})
+
+
+def _utm_of(rec: dict[str, Any], path: Path) -> str:
+    lon, lat = rec.get("lonLocation"), rec.get("latLocation")
+    if lon is None or lat is None or not (np.isfinite(lon) and np.isfinite(lat)):
+        raise FormatError("recordingMeta has no lonLocation/latLocation to choose the UTM zone: "
+                          "pass the utm_crs option", path=path)
+    return utm_crs_for(float(lon), float(lat))
+
+
+def _centre_tracks_meta(meta_p: Path) -> dict[str, np.ndarray]:
+    """tracksMeta.csv of inD/rounD/uniD/exiD: id, length, width (class defaults for VRUs without
+    a size: ``assumed``), class (the source's and the format's)."""
+    meta = read_table(meta_p, required=_CENTRE_META, numeric=("trackId", "width", "length"))
     _finite(meta, ("trackId",), meta_p)
     m_id = column_numpy(meta, "trackId")
     m_wid, m_len = np.nan_to_num(column_numpy(meta, "width")), np.nan_to_num(column_numpy(meta, "length"))
@@ -543,101 +600,45 @@ def _convert_centre(name: str, inputs: list[Path], map_source, options: LevelXCe
             raise FormatError(f"track {m_id[i]:g} ({m_cls_raw[i]}) has no positive width/length",
                               path=meta_p, line=int(i) + 2)
         m_len[i], m_wid[i] = VRU_DEFAULT_SIZE[m_cls[i]]
+    return {"id": m_id, "length": m_len, "width": m_wid, "class_raw": m_cls_raw, "class": m_cls,
+            "assumed": assumed}
 
-    numeric = _CENTRE_TRACKS + ("xAcceleration", "yAcceleration", "laneChange")
-    tr = read_numeric_table(tracks_p, required=_CENTRE_TRACKS, numeric=numeric)
-    _finite(tr, ("trackId", "frame", "xCenter", "yCenter", "heading", "xVelocity", "yVelocity"),
-            tracks_p)
-    if tr.num_rows == 0:
-        raise FormatError("no track rows", path=tracks_p)
-    tid = column_numpy(tr, "trackId")
-    mi = _track_index(tid, m_id, tracks_p)
+
+def _centre_boxes(tr: pa.Table, path: Path, rate: float, options: LevelXCentreOptions) -> Boxes:
+    """The (sorted) boxes of the tracks, in the tracks' frame (metres from the UTM origin)."""
     frame = column_numpy(tr, "frame")
-    uniq_ids, pid = np.unique(tid, return_inverse=True)
-    pid = pid.astype(np.int64)
-    p_meta = mi[np.unique(pid, return_index=True)[1]]
-    t = (frame - min(0.0, float(frame.min()))) / rate
-    order = sort_states(pid, t, tracks_p, np.arange(tr.num_rows) + 2)
-
-    xc, yc = column_numpy(tr, "xCenter"), column_numpy(tr, "yCenter")
-    heading = np.radians(column_numpy(tr, "heading"))
-    vx, vy = column_numpy(tr, "xVelocity"), column_numpy(tr, "yVelocity")
     has_acc = "xAcceleration" in tr.column_names and "yAcceleration" in tr.column_names
-    ax = np.nan_to_num(column_numpy(tr, "xAcceleration")) if has_acc else None
-    ay = np.nan_to_num(column_numpy(tr, "yAcceleration")) if has_acc else None
-
-    map_bytes = load_map_bytes(map_source)
-    header = load_map(map_bytes).header
-    utm = options.utm_crs
-    if utm is None:
-        lon, lat = rec.get("lonLocation"), rec.get("latLocation")
-        if lon is None or lat is None or not (np.isfinite(lon) and np.isfinite(lat)):
-            raise FormatError("recordingMeta has no lonLocation/latLocation to choose the UTM zone: "
-                              "pass the utm_crs option", path=rec_p)
-        utm = utm_crs_for(float(lon), float(lat))
-    kw: dict[str, Any] = {}
-    if header.geo_reference:
-        x, y, rot = projected_to_local(xc + x_utm0, yc + y_utm0, utm, header.geo_reference,
-                                       header.offset)
-        heading = heading + rot
-        vx, vy = rotate(vx, vy, rot)
-        if has_acc:
-            ax, ay = rotate(ax, ay, rot)
-    else:
-        x, y = xc, yc
-        kw["crs"] = shifted_crs(utm, x_utm0, y_utm0)
-
-    gsd = options.gsd if options.gsd is not None else DEFAULT_GSD
-    pos_std = options.pixel_std * gsd
+    pos_std = options.pixel_std * (options.gsd if options.gsd is not None else DEFAULT_GSD)
     n = tr.num_rows
-    states: dict[str, Any] = {
-        "participant_id": pid, "time": t, "x": x, "y": y, "heading": heading, "vx": vx, "vy": vy,
-        "x_std": np.full(n, pos_std), "y_std": np.full(n, pos_std),
-        "heading_std": np.full(n, options.heading_std),
-        "vx_std": np.full(n, options.velocity_std), "vy_std": np.full(n, options.velocity_std),
-        "source_frame": frame.astype(np.int64),
-    }
-    if has_acc:
-        states["ax"], states["ay"] = ax, ay
-    states = {k: v[order] for k, v in states.items()}
+    uniq_ids, pid = np.unique(column_numpy(tr, "trackId"), return_inverse=True)
+    return Boxes(
+        pid, (frame - min(0.0, float(frame.min()))) / rate, column_numpy(tr, "xCenter"),
+        column_numpy(tr, "yCenter"), source_ids=[f"{v:g}" for v in uniq_ids],
+        rows=Rows([path], place=np.arange(n) + 2), heading=np.radians(column_numpy(tr, "heading")),
+        vx=column_numpy(tr, "xVelocity"), vy=column_numpy(tr, "yVelocity"),
+        x_std=np.full(n, pos_std), y_std=np.full(n, pos_std),
+        heading_std=np.full(n, options.heading_std), vx_std=np.full(n, options.velocity_std),
+        vy_std=np.full(n, options.velocity_std), source_frame=frame.astype(np.int64),
+        ax=np.nan_to_num(column_numpy(tr, "xAcceleration")) if has_acc else None,
+        ay=np.nan_to_num(column_numpy(tr, "yAcceleration")) if has_acc else None).sort()
 
-    attrs: list[dict[str, Any]] = [
-        {"levelx_class": str(c)} for c in m_cls_raw[p_meta]]
-    for k, i in enumerate(p_meta):
-        if assumed[i]:
-            attrs[k]["size_assumed"] = True
-    events = None
-    if "laneletId" in tr.column_names:
-        _lanelets(tr, pid, tracks_p, attrs)
-    if "laneChange" in tr.column_names:
-        lc = np.nan_to_num(column_numpy(tr, "laneChange"))[order]
-        events = _events(states["participant_id"], states["time"], lc > 0.5, f"{dataset} laneChange")
 
-    m = len(uniq_ids)
-    size_std = np.where(assumed[p_meta], 0.3, math.sqrt(2.0) * pos_std)
-    classes = m_cls[p_meta]
-    participants = {
-        "participant_id": np.arange(m, dtype=np.int64),
-        "source_id": [f"{v:g}" for v in uniq_ids],
-        "class": classes, "class_pmf": class_pmf(classes, options.class_confidence),
-        "length": m_len[p_meta], "width": m_wid[p_meta],
-        "length_std": size_std, "width_std": size_std,
-        "attributes": [json.dumps(a) for a in attrs],
-    }
-    loc = rec.get("locationId")
-    loc_name = f"{dataset} location {loc if loc is None else int(loc)}"
-    return wrap_recording(
-        name, [tracks_p, meta_p, rec_p], options, map_bytes=map_bytes, participants=participants,
-        states=states, events=events, method="aerial", provenance="natural", partner=PARTNER,
-        nominal_rate_hz=rate,
-        acquisition={
-            "platform": f"drone, 4K camera, {rate:g} fps (levelX {dataset})",
-            "sensors": [{"id": "drone_camera", "kind": "rgb_camera", "rate_hz": rate}],
-            "not_observable": NOT_OBSERVABLE,
-            "site": {"name": loc_name, "country": "DE", "road_type": road_type},
-        },
-        extras={"levelx": {"dataset": dataset, "utm_crs": utm, **_jsonable(rec)}}, **kw,
-    )
+def _to_map_frame(boxes: Boxes, utm0: tuple[float, float], utm: str, header) -> str | None:
+    """The boxes moved from the tracks' frame into the map's; the recording's CRS where the map
+    has none. With a geoReference the positions (relative to the UTM origin ``utm0`` of the zone
+    ``utm``) are projected into the map's frame, headings, velocities and accelerations turned
+    by the grid convergence; without one the map is in the tracks' frame, whose CRS is the UTM
+    zone shifted by the origin."""
+    if not header.geo_reference:
+        return shifted_crs(utm, *utm0)
+    x, y, rot = projected_to_local(boxes["x"] + utm0[0], boxes["y"] + utm0[1], utm,
+                                   header.geo_reference, header.offset)
+    boxes["x"], boxes["y"] = x, y
+    boxes["heading"] = boxes["heading"] + rot
+    boxes["vx"], boxes["vy"] = rotate(boxes["vx"], boxes["vy"], rot)
+    if "ax" in boxes:
+        boxes["ax"], boxes["ay"] = rotate(boxes["ax"], boxes["ay"], rot)
+    return None
 
 
 def _lanelets(tr: pa.Table, pid: np.ndarray, path: Path, attrs: list[dict[str, Any]]) -> None:
@@ -665,7 +666,7 @@ def _lanelets(tr: pa.Table, pid: np.ndarray, path: Path, attrs: list[dict[str, A
 @converter("ind", description="levelX inD / rounD / uniD drone recordings (tracks, tracksMeta, "
            "recordingMeta CSV) on an OpenDRIVE map of the site",
            patterns=("*_tracks.csv", "*_tracksMeta.csv", "*_recordingMeta.csv"), method="aerial",
-           options=InDOptions, provides=("partner",))
+           options=InDOptions, provides=("partner",), sniff=_is_centre(exid=False))
 def convert_ind(inputs: list[Path], *, map_source, options: InDOptions):
     dataset = options.dataset or "inD"
     road_type = "urban"
@@ -675,6 +676,6 @@ def convert_ind(inputs: list[Path], *, map_source, options: InDOptions):
 @converter("exid", description="levelX exiD drone recordings (tracks with lanelet lists, "
            "tracksMeta, recordingMeta CSV) on an OpenDRIVE map of the site",
            patterns=("*_tracks.csv", "*_tracksMeta.csv", "*_recordingMeta.csv"), method="aerial",
-           options=ExiDOptions, provides=("partner",))
+           options=ExiDOptions, provides=("partner",), sniff=_is_centre(exid=True))
 def convert_exid(inputs: list[Path], *, map_source, options: ExiDOptions):
     return _convert_centre("exid", inputs, map_source, options, "exiD", "motorway")

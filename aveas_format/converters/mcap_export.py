@@ -145,12 +145,19 @@ def _mcap_chunks(rec, options: McapExportOptions):
     _ts(ent.timestamp, t0)
     ent.frame_id = "map"
     ent.id = "map/lanes"
-    try:
-        polys = rec.map.lane_polygons(step=options.lane_step_m)
-        drivable = {(r, sec, lid) for r, sec, lid, _ in rec.map.lane_polygons(
-            step=options.lane_step_m * 10, drivable_only=True)}
-    except Exception:  # noqa: BLE001 — a map the engine cannot sample: boxes only
-        polys, drivable = [], set()
+    polys, drivable = [], set()
+    if rec.map_source is not None:
+        from shapely.errors import GEOSException
+
+        try:
+            polys = rec.map.lane_polygons(step=options.lane_step_m)
+            drivable = {(r, sec, lid) for r, sec, lid, _ in rec.map.lane_polygons(
+                step=options.lane_step_m * 10, drivable_only=True)}
+        except (ValueError, GEOSException) as e:  # a map the engine cannot read (MapError) or
+            # sample: the boxes without lanes, said (anything else propagates)
+            import warnings
+
+            warnings.warn(f"mcap export: the map's lanes are left out: {e}", stacklevel=2)
     for road, sec, lid, poly in polys:
         line = ent.lines.add()
         line.type = LinePrimitive.LINE_LOOP

@@ -63,18 +63,15 @@ import numpy as np
 from pydantic import Field
 
 from aveas_format.converters import _protowire as pw
-from aveas_format.converters.common import (
-    companion_map,
-    companion_map_path,
-    load_map_bytes,
-    projected_to_local,
-    rotate,
-    sort_states,
-    wrap_recording,
-)
+from aveas_format.converters.common.assemble import to_recording
+from aveas_format.converters.common.boxes import Boxes, Rows, Sensor
+from aveas_format.converters.common.companion import companion_map, companion_map_path
+from aveas_format.converters.common.fastpath import FastPathUnsupported, read_by
+from aveas_format.converters.common.geometry import projected_to_local, rotate
 from aveas_format.converters.registry import ConverterOptions, ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError, report_source
 from aveas_format.io.arrow import column_numpy
+from aveas_format.mapref.build import load_map_bytes
 from aveas_format.safeio import check_mcap
 
 VEHICLE_CLASS = {
@@ -143,33 +140,36 @@ def _messages(path: Path, options: OsiOptions):
 
 
 def _zero_time(path: Path) -> str | None:
+    """``zero_time`` of an MCAP trace's ``net.asam.osi.trace`` metadata (None without; an
+    unreadable metadata section is reported as a finding)."""
     if path.suffix.lower() != ".mcap":
         return None
-    try:
-        import betterosi
+    import betterosi
 
-        for md in betterosi.read_file_metadata(str(path)):
-            if md.get("name") == "net.asam.osi.trace":
-                return (md.get("data") or md.get("metadata") or {}).get("zero_time")
-    except Exception:  # noqa: BLE001 - metadata is optional
+    from aveas_format.converters.common.mcap import mcap_errors, why
+
+    try:
+        records = betterosi.read_file_metadata(str(path))
+    except mcap_errors() as e:
+        report_source("source.other", f"the MCAP metadata cannot be read "
+                      f"({why(e)}): no zero_time, no start time from the trace", file=str(path))
         return None
+    for md in records:
+        if md.get("name") == "net.asam.osi.trace":
+            return (md.get("data") or md.get("metadata") or {}).get("zero_time")
     return None
 
 
 @converter("osi", description="ASAM OSI trace (.osi length-prefixed binary or MCAP): GroundTruth "
            "moving objects", patterns=("*.osi", "*.mcap"), method="traffic_simulation",
-           options=OsiOptions, requires=("betterosi",), extra="osi")
+           options=OsiOptions, requires=("betterosi",), extra="osi", sniff=(b"osi3.", b"net.asam.osi"))
 def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
-    from aveas_format.mapref.crs import LocalFrame, crs_equal
     from aveas_format.opendrive import load_map
 
-    try:  # the columnar decoder (osi_columns); betterosi for what it does not take
-        f, ids, msgs, static, host_ids, proj, found = _decode_columns(inputs, options)
-    except (FormatError, RecordingIOError):
-        raise
-    except Exception:  # noqa: BLE001 - Unsupported, or bytes it trips on (a corrupt MCAP chunk,
-        # a proj_string not UTF-8...): the betterosi path decodes or reports them, located
-        f, ids, msgs, static, host_ids, proj, found = _decode_objects(inputs, options)
+    what = ", ".join(p.name for p in inputs)
+    f, ids, msgs, static, host_ids, proj, found = read_by(
+        what, ("the columnar decoder", lambda: _decode_columns(inputs, options)),
+        ("betterosi", lambda: _decode_objects(inputs, options)))
     sizeless = [oid for oid, d in static.items() if d["length"] is None]
     for oid in sizeless:
         found.add("source.osi.missing_dimension", oid, static[oid]["no_size_msg"],
@@ -183,79 +183,67 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     found.report(inputs[0] if len(inputs) == 1 else None)
     if not len(f):
         raise FormatError("no GroundTruth moving objects in the trace", path=inputs[0])
-
-    t = f[:, 0]
-    t0 = float(t.min())
-    t = t - t0
+    t0 = float(f[:, 0].min())
     uniq, pid = np.unique(np.asarray(ids, np.int64), return_inverse=True)
-    pid = pid.astype(np.int64)
     # a duplicate names the object id and the frame (0-based message index, the states'
     # source_frame) of its second sample
-    msgs = np.asarray(msgs, np.int64)
-    order = sort_states(pid, t, inputs[0] if len(inputs) == 1 else None, msgs,
-                        ids=uniq.tolist(), unit="frame")
-    # the samples in the states' order: one gather of whole rows (not one per column)
-    f, pid, t, msgs = f[order], pid[order], t[order], msgs[order]
-    cols = {k: f[:, j] for j, k in enumerate(_FLOAT_COLS)}
-
-    def arr(k: str) -> np.ndarray:
-        return np.asarray(cols[k], np.float64)
-
-    x, y, yaw = arr("x"), arr("y"), arr("yaw")
-    vx, vy, ax, ay = arr("vx"), arr("vy"), arr("ax"), arr("ay")
+    boxes = Boxes(pid, f[:, 0] - t0, f[:, 1], f[:, 2], source_ids=[str(int(u)) for u in uniq],
+                  rows=Rows(inputs if len(inputs) == 1 else [], place=msgs, unit="frame")).sort()
+    # the other columns in the boxes' order: one gather of whole rows (not one per column)
+    f = f[boxes.order]
+    for j, k in enumerate(_FLOAT_COLS):
+        if k not in ("t", "x", "y"):
+            boxes[_STATE_OF.get(k, k)] = (np.asarray(f[:, j], np.float32) if k in _LIGHTS
+                                          else np.asarray(f[:, j], np.float64))
+    n = len(boxes)
+    for c in ("x", "y", "heading", "vx", "vy"):
+        boxes[f"{c}_std"] = np.zeros(n)
+    boxes["source_frame"] = np.asarray(msgs, np.int64)[boxes.order]
     map_bytes = load_map_bytes(map_source)
-    header = load_map(map_bytes).header
-    kw: dict[str, Any] = {}
-    if proj is not None and not header.geo_reference and not options.crs:
-        # the map has no geoReference: the trace's proj_string (with its frame offset) is the frame
-        kw["crs"] = _offset_crs(proj[0], proj[1])
-    if proj is not None and header.geo_reference and not crs_equal(proj[0], header.geo_reference):
-        px, py = LocalFrame(proj[0], proj[1], warn=False).to_projected(x, y)
-        x, y, rot = projected_to_local(px, py, proj[0], header.geo_reference, header.offset)
-        rot = rot + proj[1][3]
-        yaw = yaw + rot
-        vx, vy = rotate(vx, vy, rot)
-        ax, ay = rotate(ax, ay, rot)
-    n = len(t)
-    states: dict[str, Any] = {
-        "participant_id": pid, "time": t, "x": x, "y": y, "z": arr("z"), "heading": yaw,
-        "vx": vx, "vy": vy, "ax": ax, "ay": ay, "yaw_rate": arr("yaw_rate"),
-        **{f"{c}_std": np.zeros(n) for c in ("x", "y", "heading", "vx", "vy")},
-        "light_brake_p": arr("brake").astype(np.float32),
-        "light_indicator_left_p": arr("ind_l").astype(np.float32),
-        "light_indicator_right_p": arr("ind_r").astype(np.float32),
-        "light_hazard_p": arr("hazard").astype(np.float32),
-        "source_frame": msgs,
-    }
-    import pyarrow as pa
-
-    for k in ("z", "ax", "ay", "yaw_rate", "light_brake_p", "light_indicator_left_p",
-              "light_indicator_right_p", "light_hazard_p"):
-        v = states[k]
-        states[k] = pa.array(v, mask=np.isnan(v))
+    crs = _to_map_frame(boxes, proj, load_map(map_bytes).header, options)
     m = len(uniq)
     info = [static[int(u)] for u in uniq]
-    roles = [options.host_role if int(u) in host_ids else "simulated_agent" for u in uniq]
     participants = {
-        "participant_id": np.arange(m, dtype=np.int64), "source_id": [str(int(u)) for u in uniq],
         "class": [d["class"] for d in info],
         "length": [d["length"] for d in info], "width": [d["width"] for d in info],
         "height": [d["height"] for d in info],
         "length_std": np.zeros(m), "width_std": np.zeros(m), "height_std": np.zeros(m),
-        "role": roles, "provenance": ["simulated"] * m,
+        "role": [options.host_role if int(u) in host_ids else "simulated_agent" for u in uniq],
+        "provenance": ["simulated"] * m,
         "attributes": [json.dumps({"osi_type": d["osi_type"], "osi_lanes": sorted(d["lanes"])})
                        for d in info],
     }
     zt = _zero_time(inputs[0])
-    if zt and not options.start_time:
-        kw["start_time"] = _shift_iso(zt, t0)
-    return wrap_recording(
-        "osi", inputs, options, map_bytes=map_bytes, participants=participants, states=states,
-        method=options.method, provenance="simulated", partner="ASAM OSI simulation",
-        acquisition={"platform": "ASAM OSI trace",
-                     "sensors": [{"id": "osi", "kind": "simulator"}]},
-        **kw,
-    )
+    sensor = Sensor(method=options.method, provenance="simulated", partner="ASAM OSI simulation",
+                    platform="ASAM OSI trace", sensors=[{"id": "osi", "kind": "simulator"}],
+                    crs=crs, **({"start_time": _shift_iso(zt, t0)} if zt and not options.start_time
+                                else {}))
+    return to_recording(boxes, sensor, converter="osi", inputs=inputs, options=options,
+                        map_bytes=map_bytes, participants=participants)
+
+
+def _to_map_frame(boxes: Boxes, proj, header, options: OsiOptions) -> str | None:
+    """The boxes moved from the OSI global frame into the map's (in place), and the
+    recording's CRS where the map has none. The OSI frame is the map's; where the trace's
+    ``proj_string`` differs from the map's geoReference, positions go through the projected CRS
+    into the map's frame (directions turned by the grid convergence and the frame offset's yaw).
+    Without a geoReference the trace's ``proj_string`` (with its offset) is the recording's CRS."""
+    from aveas_format.crs import LocalFrame, crs_equal
+
+    if proj is None:
+        return None
+    if not header.geo_reference:
+        return None if options.crs else _offset_crs(proj[0], proj[1])
+    if crs_equal(proj[0], header.geo_reference):
+        return None
+    px, py = LocalFrame(proj[0], proj[1], warn=False).to_projected(boxes["x"], boxes["y"])
+    boxes["x"], boxes["y"], rot = projected_to_local(px, py, proj[0], header.geo_reference,
+                                                     header.offset)
+    rot = rot + proj[1][3]
+    boxes["heading"] = boxes["heading"] + rot
+    boxes["vx"], boxes["vy"] = rotate(boxes["vx"], boxes["vy"], rot)
+    boxes["ax"], boxes["ay"] = rotate(boxes["ax"], boxes["ay"], rot)
+    return None
 
 
 def _decode_objects(inputs: list[Path], options: OsiOptions):
@@ -265,6 +253,8 @@ def _decode_objects(inputs: list[Path], options: OsiOptions):
     # the floats (_FLOAT_COLS) of each sample (a tuple each, turned into a float64 block every
     # _BLOCK samples: ~110 B per sample, not a Python float per value), its object id and message
     # index apart (typed arrays)
+    from aveas_format.converters.common.mcap import mcap_errors
+
     cols: dict[str, Any] = {"f": [], "id": array("q"), "msg": array("q")}
     blocks: list[np.ndarray] = []
     static: dict[int, dict[str, Any]] = {}
@@ -274,6 +264,9 @@ def _decode_objects(inputs: list[Path], options: OsiOptions):
     last_t = -math.inf
     found = _Findings()
     for path in inputs:
+        # what the bindings raise on bytes that are no message (ValueError, when a field is
+        # read), and for an MCAP trace what its reader raises on a damaged file
+        errors = (ValueError,) + (mcap_errors() if path.suffix.lower() == ".mcap" else ())
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", DeprecationWarning)
@@ -300,9 +293,9 @@ def _decode_objects(inputs: list[Path], options: OsiOptions):
                     if len(cols["f"]) >= _BLOCK:
                         blocks.append(np.asarray(cols["f"], np.float64))
                         cols["f"].clear()
-        except (FormatError, RecordingIOError):
-            raise
-        except Exception as e:  # noqa: BLE001 - decoder errors of any kind
+        except errors as e:
+            if isinstance(e, (FormatError, RecordingIOError)):  # located already
+                raise
             raise FormatError(f"cannot decode OSI message {n_msg}: {type(e).__name__}: {e}",
                               path=path) from None
     blocks.append(np.asarray(cols["f"], np.float64).reshape(-1, len(_FLOAT_COLS)))
@@ -314,8 +307,8 @@ def _decode_objects(inputs: list[Path], options: OsiOptions):
 
 def _decode_columns(inputs: list[Path], options: OsiOptions):
     """What :func:`_decode_objects` gives, from the columnar decoder
-    (:mod:`aveas_format.converters.osi_columns`); :class:`~._protowire.Unsupported` where it does
-    not take the trace (then betterosi decodes it)."""
+    (:mod:`aveas_format.converters.osi_columns`); :class:`~aveas_format.converters.common.fastpath.
+    FastPathUnsupported` where it does not take the trace (then betterosi decodes it)."""
     import betterosi as b
 
     from aveas_format.converters.osi_columns import decode_trace
@@ -336,7 +329,7 @@ def _decode_columns(inputs: list[Path], options: OsiOptions):
             t = ch["t"]
             if len(t):
                 if (t < np.maximum.accumulate(np.r_[last_t, t])[:-1]).any():
-                    raise pw.Unsupported("a timestamp going back (a finding)")
+                    raise FastPathUnsupported("a timestamp going back (a finding)")
                 last_t = max(last_t, float(t.max()))
             host_ids |= ch["hosts"]
             if proj is None:
@@ -352,7 +345,7 @@ def _decode_columns(inputs: list[Path], options: OsiOptions):
                 vtype = vtypes.get(vt, "UNKNOWN") if has_vc and otype == "VEHICLE" else None
                 cls, unknown = _classify(otype, vtype, has_vc)
                 if unknown or not (length > 0 and width > 0):
-                    raise pw.Unsupported("an unknown type or a missing size (a finding)")
+                    raise FastPathUnsupported("an unknown type or a missing size (a finding)")
                 static[o] = {"class": cls, "length": length, "width": width,
                              "height": height if height > 0 else None, "osi_type": otype,
                              "lanes": set(), "no_size_msg": 0, "no_size_n": 0}
@@ -403,6 +396,10 @@ _BLOCK = 65536
 #: the float columns of the samples (one tuple each), in order
 _FLOAT_COLS = ("t", "x", "y", "z", "yaw", "vx", "vy", "ax", "ay", "yaw_rate", "brake", "ind_l",
                "ind_r", "hazard")
+#: the states column of each of them (where the name differs) and the light probabilities
+_STATE_OF = {"yaw": "heading", "brake": "light_brake_p", "ind_l": "light_indicator_left_p",
+             "ind_r": "light_indicator_right_p", "hazard": "light_hazard_p"}
+_LIGHTS = ("brake", "ind_l", "ind_r", "hazard")
 
 
 def _get(obj: Any, *path: str, default: float = math.nan) -> float:

@@ -5,7 +5,7 @@ object per message or per moving object.
 It reads exactly what :func:`aveas_format.converters.osi._object` reads from betterosi's
 messages, with the same values where a field or a sub-message is absent (a scalar absent from a
 present sub-message is 0, as the bindings give it; an enum value outside the enum counts as its
-UNKNOWN) — and gives up (:class:`~aveas_format.converters._protowire.Unsupported`, the import then
+UNKNOWN) — and gives up (:class:`~aveas_format.converters.common.fastpath.FastPathUnsupported`, the import then
 decodes the trace with betterosi) on anything whose handling it would have to re-invent: invalid
 wire format (betterosi's error, located, is the one reported), a singular field twice or with
 another wire type, a moving object without id or base, a first sample of an object without a
@@ -25,7 +25,8 @@ from typing import Any
 import numpy as np
 
 from aveas_format.converters import _protowire as pw
-from aveas_format.converters._protowire import I64, LEN, VARINT, Unsupported
+from aveas_format.converters._protowire import I64, LEN, VARINT
+from aveas_format.converters.common.fastpath import FastPathUnsupported
 
 #: bytes of messages decoded at once (bounds the decoding's memory: the chunk and its field tables,
 #: 41 B per field occurrence)
@@ -43,10 +44,10 @@ def message_type(path: Path, option: str) -> str:
         with open(path, "rb") as f, warnings.catch_warnings():
             warnings.simplefilter("ignore")
             t = bio._resolve_osi_message_type(f, path, None, betterosi, probe=True)
-    except Exception as e:  # noqa: BLE001 - betterosi's path reports it
-        raise Unsupported(f"message type: {e}") from None
+    except OSError as e:  # betterosi's path reports it, located
+        raise FastPathUnsupported(f"message type: {e}") from None
     if t not in ("GroundTruth", "SensorView"):
-        raise Unsupported(f"message type {t}")
+        raise FastPathUnsupported(f"message type {t}")
     return t
 
 
@@ -105,7 +106,7 @@ def _idents(buf: np.ndarray, start: np.ndarray, end: np.ndarray) -> np.ndarray:
     """``value`` of Identifier messages (int64; beyond it: unsupported)."""
     v = _scalar(pw.walk(buf, start, end), buf, 1, VARINT, 0, np.int64)
     if (v < 0).any():
-        raise Unsupported("identifier beyond int64")
+        raise FastPathUnsupported("identifier beyond int64")
     return v
 
 
@@ -131,7 +132,7 @@ def decode_chunk(buf: np.ndarray, start: np.ndarray, end: np.ndarray, sensor_vie
     if sensor_view:  # SensorView.global_ground_truth
         span, start, end = _sub(pw.walk(buf, start, end), 7)
         if len(span) != len(start) or len(span) != (span.max(initial=-1) + 1):
-            raise Unsupported("a SensorView without global_ground_truth")
+            raise FastPathUnsupported("a SensorView without global_ground_truth")
     G = pw.walk(buf, start, end)
     m = len(start)
     span, s, e = _sub(G, 2)  # timestamp
@@ -148,7 +149,11 @@ def decode_chunk(buf: np.ndarray, start: np.ndarray, end: np.ndarray, sensor_vie
     r = r[G.length[r] > 0]
     if r.size:
         i = r[0]
-        text = buf[G.pos[i]:G.pos[i] + G.length[i]].tobytes().decode("utf-8", "strict")
+        try:
+            text = buf[G.pos[i]:G.pos[i] + G.length[i]].tobytes().decode("utf-8", "strict")
+        except UnicodeDecodeError:  # betterosi's path reports it, located
+            raise FastPathUnsupported(f"message {msg0 + int(G.span[i])}: proj_string is not "
+                                      "UTF-8 text") from None
         off = (0.0, 0.0, 0.0, 0.0)
         span20, s20, e20 = _sub(G, 20)  # proj_frame_offset of the same message
         k = np.flatnonzero(span20 == G.span[i])
@@ -167,7 +172,7 @@ def decode_chunk(buf: np.ndarray, start: np.ndarray, end: np.ndarray, sensor_vie
     id_span, id_s, id_e = _sub(M, 1)
     base_span, base_s, base_e = _sub(M, 2)
     if len(id_span) != n or len(base_span) != n:
-        raise Unsupported("a moving object without id or base")
+        raise FastPathUnsupported("a moving object without id or base")
     oid = np.empty(n, np.int64)
     oid[id_span] = _idents(buf, id_s, id_e)
     out["id"] = oid
@@ -212,31 +217,43 @@ def _decoded(raws: list[bytes], sensor_view: bool, msg0: int) -> dict[str, Any]:
     try:
         return decode_chunk(pw.padded(b"".join(raws)), ends - lengths, ends, sensor_view, msg0)
     except pw.WireError as e:
-        raise Unsupported(f"message {msg0 + e.span}: {e.reason}") from None
+        raise FastPathUnsupported(f"message {msg0 + e.span}: {e.reason}") from None
 
 
 def _mcap_chunks(path: Path):
     """The GroundTruth / SensorView messages of an MCAP trace, in chunks, as betterosi reads them
-    (its OSI topics, in log-time order); other message kinds and encodings: unsupported."""
+    (its OSI topics, in log-time order); other message kinds and encodings, and a file the MCAP
+    reader cannot read (betterosi's path reports it, located): unsupported."""
     from betterosi.mcap_reader import osi_type_name
     from mcap.reader import make_reader
 
+    from aveas_format.converters.common.mcap import mcap_errors, why
     from aveas_format.safeio import check_mcap
 
     check_mcap(path)
     kind, raws, size, msg0 = None, [], 0, 0
     with open(path, "rb") as f:
-        reader = make_reader(f)
-        summary = reader.get_summary()
-        topics = None
-        if summary is not None:
-            topics = [c.topic for c in summary.channels.values()
-                      if osi_type_name(summary.schemas.get(c.schema_id)) is not None] or None
-        for schema, channel, message in reader.iter_messages(topics=topics):
+        try:
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            topics = None
+            if summary is not None:
+                topics = [c.topic for c in summary.channels.values()
+                          if osi_type_name(summary.schemas.get(c.schema_id)) is not None] or None
+            messages = reader.iter_messages(topics=topics)
+        except mcap_errors() as e:
+            raise FastPathUnsupported(f"MCAP: {why(e)}") from None
+        while True:
+            try:
+                schema, channel, message = next(messages)
+            except StopIteration:
+                break
+            except mcap_errors() as e:
+                raise FastPathUnsupported(f"MCAP: {why(e)}") from None
             t = osi_type_name(schema)
             if (t not in ("GroundTruth", "SensorView") or channel.message_encoding != "protobuf"
                     or schema.encoding != "protobuf" or kind not in (None, t)):
-                raise Unsupported(f"MCAP channel {channel.topic}: {t} ({channel.message_encoding})")
+                raise FastPathUnsupported(f"MCAP channel {channel.topic}: {t} ({channel.message_encoding})")
             kind = t
             raws.append(message.data)
             size += len(message.data)
@@ -255,7 +272,7 @@ def decode_trace(path: Path, option: str):
         yield from _mcap_chunks(path)
         return
     if suffix != ".osi":
-        raise Unsupported("not a binary .osi or .mcap trace")
+        raise FastPathUnsupported("not a binary .osi or .mcap trace")
     sensor_view = message_type(path, option) == "SensorView"
     size = path.stat().st_size
     with open(path, "rb") as fh:
@@ -272,7 +289,7 @@ def decode_trace(path: Path, option: str):
                 pos += 4 + n
             if not starts:  # a message longer than a chunk, or a truncated trace
                 if size - off < 4 or off + 4 + struct.unpack_from("<I", block)[0] > size:
-                    raise Unsupported(f"message {msg} truncated (the framing check reports it)")
+                    raise FastPathUnsupported(f"message {msg} truncated (the framing check reports it)")
                 fh.seek(off)
                 block = fh.read(4 + struct.unpack_from("<I", block)[0])
                 starts, pos = [4], len(block)
@@ -281,6 +298,6 @@ def decode_trace(path: Path, option: str):
             try:
                 yield decode_chunk(pw.padded(block[:pos]), st, ends, sensor_view, msg)
             except pw.WireError as e:
-                raise Unsupported(f"message {msg + e.span}: {e.reason}") from None
+                raise FastPathUnsupported(f"message {msg + e.span}: {e.reason}") from None
             off += pos
             msg += len(starts)

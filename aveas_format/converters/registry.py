@@ -8,7 +8,7 @@ finds it here; ``aveas-format convert --list`` prints the table.
 Exporters (recording -> foreign format) register with ``direction="export"`` and have the signature
 ``(recording, output, *, options) -> list[Path]``. Its companion files count as outputs: the CLI
 refuses to replace any of them without ``--overwrite`` (:meth:`Converter.outputs`). The map next
-to the output (options ``write_map``/``map_file``, ``converters.common.companion_map_path``) is
+to the output (options ``write_map``/``map_file``, ``converters.common.companion.companion_map_path``) is
 counted by default; an exporter that writes other files next to its output declares them with
 ``outputs=``. An exporter that reads the states itself, part by part from the recording's file
 when given a recording opened without them (``open_recording(path, states=False)``), declares
@@ -22,6 +22,14 @@ partner, start time, licence) its source can carry, ``provides=("start_time",)``
 the CLI asks (``-O KEY=VALUE``) instead of writing a stand-in ("unknown", 1970-01-01,
 "unspecified") that the validator would then flag (:meth:`Converter.unstated`).
 
+An importer declares how to recognise its files: ``patterns`` (file name globs) and ``sniff``,
+either byte strings of which one occurs in the file's first :data:`SNIFF_BYTES` bytes, or a
+function ``(path, first bytes) -> bool`` (it may read the file's header, e.g. a Parquet schema, and
+returns False for what it cannot read). :func:`importers_for` gives the importers of a file: those
+whose patterns match its name and, where several do, those whose ``sniff`` recognises it (all of
+them where none does). ``aveas-format validate FILE`` and ``aveas_format.validate(FILE)`` take a
+submitted file this way (:mod:`aveas_format.validate.submission`), partner converters included.
+
 A converter whose source needs an optional stack declares it: ``requires=("mcap", ...)`` (modules)
 and ``extra="ros2"``; calling it without them is a one-line
 :class:`~aveas_format.errors.MissingDependencyError` naming the extra, and ``convert --list`` says
@@ -34,6 +42,7 @@ packages (entry-point group ``aveas_format.converters``) through :mod:`aveas_for
 
 from __future__ import annotations
 
+import fnmatch
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -78,6 +87,12 @@ class ImportOptions(ConverterOptions):
     the map's geoReference where there is one."""
 
 
+#: a declaration of how an importer recognises its files: byte strings of which one occurs in the
+#: file's first bytes, or a function of the path and those bytes
+Sniff = tuple[bytes, ...] | Callable[[Path, bytes], bool]
+#: bytes read from the start of a file to sniff it
+SNIFF_BYTES = 1 << 16
+
 #: recording.json values only a person can state (the import options of the same names)
 ASKED = ("partner", "start_time", "license")
 #: acquisition methods of simulations: their time zero has no calendar date, start_time is not asked
@@ -109,6 +124,22 @@ class Converter:
     #: overwrite) -> (the recording as written, its states, those on the map)`` (its states not
     #: loaded where they were written in parts)
     writes: Callable[..., Any] | None = None
+    #: how an importer recognises its files beyond ``patterns`` (see the module docstring)
+    sniff: Sniff | None = None
+
+    def matches(self, path: Path) -> bool:
+        """Whether ``path``'s name matches one of the file patterns."""
+        name = Path(path).name.lower()
+        return any(fnmatch.fnmatch(name, pat.lower()) for pat in self.patterns)
+
+    def recognises(self, path: Path, head: bytes) -> bool | None:
+        """Whether the file's first bytes ``head`` are of this importer's format (its ``sniff``);
+        None where it declares no ``sniff``."""
+        if self.sniff is None:
+            return None
+        if callable(self.sniff):
+            return bool(self.sniff(Path(path), head))
+        return any(sig in head for sig in self.sniff)
 
     def unstated(self, options: dict[str, Any] | None) -> list[str]:
         """The values of :data:`ASKED` that neither the source can carry nor ``options`` give: an
@@ -152,7 +183,7 @@ class Converter:
         opts = options if isinstance(options, ConverterOptions) else self.parse_options(options)
         if self.outputs_fn:
             return self.outputs_fn(Path(output), opts)
-        from aveas_format.converters.common import companion_map_path
+        from aveas_format.converters.common.companion import companion_map_path
 
         companion = companion_map_path(Path(output), opts)
         return [Path(output)] + ([companion] if companion is not None else [])
@@ -185,12 +216,13 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
               requires: tuple[str, ...] = (), extra: str | None = None,
               outputs: Callable[[Path, Any], list[Path]] | None = None,
               provides: tuple[str, ...] = (), streams_states: bool = False,
-              writes: Callable[..., Any] | None = None,
+              writes: Callable[..., Any] | None = None, sniff: Sniff | None = None,
               ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Register a converter function (decorator); ``requires``/``extra``: its optional
     dependencies, ``outputs``: an exporter's files, ``provides``: the :data:`ASKED` values its
     source carries, ``streams_states``: an exporter reads the states from the recording's file,
-    ``writes``: an importer writes the recording itself (see the module docstring)."""
+    ``writes``: an importer writes the recording itself, ``sniff``: how an importer recognises
+    its files (see the module docstring)."""
     if direction not in ("import", "export"):
         raise ValueError("direction must be 'import' or 'export'")
     key = name if direction == "import" else f"{name}:export"
@@ -203,7 +235,7 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
                                     patterns=patterns, method=method, options=options, fn=fn,
                                     needs_map=needs_map, version=version, requires=requires,
                                     extra=extra, outputs_fn=outputs, provides=provides,
-                                    streams_states=streams_states, writes=writes)
+                                    streams_states=streams_states, writes=writes, sniff=sniff)
         return fn
 
     return register
@@ -223,6 +255,25 @@ def get_converter(name: str, direction: str = "import") -> Converter:
         raise UsageError(f"no {direction} converter named {name!r}{did_you_mean(name, known)}; "
                          f"known: {', '.join(known)}")
     return reg[key]
+
+
+def importers_for(path: str | Path) -> list[str]:
+    """The importers that read files like ``path`` (sorted by name): those whose patterns match
+    its name; where several do, those whose ``sniff`` recognises its first bytes (all of them
+    where none does, or where the file cannot be read)."""
+    path = Path(path)
+    hits = sorted((c for c in load_converters().values() if c.direction == "import" and c.matches(path)),
+                  key=lambda c: c.name)
+    if len(hits) > 1:
+        try:
+            with open(path, "rb") as f:
+                head = f.read(SNIFF_BYTES)
+        except OSError:
+            return [c.name for c in hits]
+        known = [c for c in hits if c.recognises(path, head)]
+        if known:
+            return [c.name for c in known]
+    return [c.name for c in hits]
 
 
 def convert(name: str, inputs: list[str | Path], *, map_source: str | Path | bytes | None = None,

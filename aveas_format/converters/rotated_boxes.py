@@ -59,24 +59,20 @@ import math
 import re
 import warnings
 from pathlib import Path
-from typing import Any, ClassVar, Literal
+from typing import ClassVar, Literal
 
 import numpy as np
 import pyarrow as pa
 
-from aveas_format.converters.common import (
-    factorize,
-    load_map_bytes,
-    outside_coverage,
-    projected_to_local,
-    read_numeric_table,
-    sort_states,
-    wrap_recording,
-)
+from aveas_format.converters.common.assemble import to_recording
+from aveas_format.converters.common.boxes import Boxes, Footprint, Rows, Sensor, Sizes
+from aveas_format.converters.common.geometry import projected_to_local
+from aveas_format.converters.common.tables import factorize, header_names, read_table
 from aveas_format.converters.labels import NOT_ROAD_USER, LabelFilter, label_kind
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.io.arrow import column_numpy
+from aveas_format.mapref.build import load_map_bytes
 from aveas_format.safeio import xml_parser
 from aveas_format.schema.taxonomy import CLASSES
 
@@ -223,7 +219,7 @@ def _check_crs(crs: str, source: Path | None) -> None:
     .prj / .aux.xml it came from; none for the crs option)."""
     from pyproj.exceptions import CRSError
 
-    from aveas_format.mapref.crs import parse_crs
+    from aveas_format.crs import parse_crs
 
     try:
         parse_crs(crs)
@@ -397,13 +393,19 @@ def local_linear_velocity(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.n
     return vx, vy, g
 
 
+def _is_rotated_boxes(path: Path, head: bytes) -> bool:
+    """A track table of boxes in pixels (centre and angle, or four corners) or a GDAL .aux.xml."""
+    if path.name.lower().endswith(".aux.xml"):
+        return b"<PAMDataset" in head or b"<GeoTransform" in head
+    names = header_names(path, head)
+    return "track_id" in names and (set(_CENTRE) <= names or set(_CORNERS) <= names)
+
+
 @converter("rotated-boxes", description="Rotated-box tracks in image pixels (aircraft/drone "
            "detection + tracking) with a world file or GDAL geotransform",
            patterns=("*.csv", "*.parquet", "*.tfw", "*.pgw", "*.jgw", "*.wld", "*.prj", "*.aux.xml"),
-           method="aerial", options=RotatedBoxOptions)
+           method="aerial", options=RotatedBoxOptions, sniff=_is_rotated_boxes)
 def convert_rotated_boxes(inputs: list[Path], *, map_source, options: RotatedBoxOptions):
-    from aveas_format.mapref.build import heading_from_velocity
-    from aveas_format.numeric import wrap_angle
     from aveas_format.opendrive import load_map
 
     A, c, crs, tables, geo = _georeference(inputs, options)
@@ -411,14 +413,46 @@ def convert_rotated_boxes(inputs: list[Path], *, map_source, options: RotatedBox
         raise FormatError(f"expected one track table, got {len(tables)}: "
                           f"{', '.join(p.name for p in tables)}")
     path = tables[0]
+    tab, t = _read_tracks(path, options)
+    map_bytes = load_map_bytes(map_source)
+    header = load_map(map_bytes).header
+    boxes = _boxes_in_map(tab, t, path, options, A, c, crs, header)
+    gsd = math.sqrt(abs(np.linalg.det(A)))
+    coverage = None
+    if options.image_size is not None:
+        wpx, hpx = options.image_size
+        cu = np.array([0.0, wpx, wpx, 0.0, 0.0])
+        cv = np.array([0.0, 0.0, hpx, hpx, 0.0])
+        fx, fy = A[0, 0] * cu + A[0, 1] * cv + c[0], A[1, 0] * cu + A[1, 1] * cv + c[1]
+        if header.geo_reference:
+            fx, fy, _ = projected_to_local(fx, fy, crs, header.geo_reference, header.offset)
+        coverage = Footprint("POLYGON ((" + ", ".join(f"{float(a)!r} {float(b)!r}" for a, b in zip(fx, fy))
+                             + "))", "aerial_camera")
+    rate = options.frame_rate
+    sensor = Sensor(
+        method="aerial", platform=options.platform or f"aerial camera, GSD {gsd:.3g} m",
+        sensors=[{"id": "aerial_camera", "kind": "rgb_camera", **({"rate_hz": rate} if rate else {})}],
+        not_observable=["light_", "interior"], coverage=coverage,
+        crs=None if header.geo_reference else crs,
+        sizes=Sizes(statistic="median", floor=gsd * options.pixel_std),
+        extras={"georeference": {"crs": crs, "affine_corner": [*A.ravel().tolist(), *c.tolist()]}})
+    return to_recording(boxes, sensor, converter="rotated-boxes", inputs=[path, *geo],
+                        options=options, map_bytes=map_bytes,
+                        participants={"attributes": [json.dumps({"boxes": int(k)})
+                                                     for k in boxes.counts()]})
+
+
+def _read_tracks(path: Path, options: RotatedBoxOptions) -> tuple[pa.Table, np.ndarray]:
+    """The track table with its numeric columns as numbers, the tracks that are no road user
+    left out, and each row's time (s)."""
     numeric = ("time", "frame", "track_id", *_CENTRE, *_CORNERS, "score", "cx_std", "cy_std",
                "cxcy_corr")
-    probe = read_numeric_table(path)
+    probe = read_table(path)
     numeric = numeric + tuple(c_ for c_ in probe.column_names if c_.startswith("score_"))
     if "track_id" not in probe.column_names:
-        raise FormatError(f"required column_numpy(s) ['track_id'] missing; found {probe.column_names}",
+        raise FormatError(f"required column(s) ['track_id'] missing; found {probe.column_names}",
                           path=path)
-    tab = read_numeric_table(path, numeric=[c_ for c_ in numeric if c_ != "track_id"])
+    tab = read_table(path, numeric=[c_ for c_ in numeric if c_ != "track_id"])
     if tab.num_rows == 0:
         raise FormatError("no rows", path=path)
     tab = _road_users(tab, options, path)
@@ -438,29 +472,28 @@ def convert_rotated_boxes(inputs: list[Path], *, map_source, options: RotatedBox
     if tid_col.null_count:
         i = int(np.flatnonzero(tid_col.is_null().to_numpy(zero_copy_only=False))[0])
         raise FormatError("track_id is empty", path=path, line=i + 2)
-    pid, source_ids = factorize(tid_col.combine_chunks())
-    # participants in order of first appearance; rows sorted by (participant, time)
-    lines = np.arange(tab.num_rows) + 2
-    order = sort_states(pid, t, path, lines)
+    return tab, t
 
-    X, Y, axis_w, length, width = _boxes(tab, options, A, c, path)
+
+def _boxes_in_map(tab: pa.Table, t: np.ndarray, path: Path, options: RotatedBoxOptions, A: np.ndarray,
+                  c: np.ndarray, crs: str, header) -> Boxes:
+    """The boxes (sorted) in the map's frame: centres through the affine transform and into the
+    map's CRS, the pixel covariance propagated (J = R(rot) A), the velocity by local linear
+    regression, the heading the box axis that points along the motion."""
+    from aveas_format.mapref.build import heading_from_velocity
+    from aveas_format.numeric import wrap_angle
+
+    # participants in order of first appearance
+    pid, source_ids = factorize(tab.column("track_id").combine_chunks())
+    X, Y, axis, length, width = _boxes(tab, options, A, c, path)
     pmf_rows = _row_pmf(tab, options, path)
-    n = tab.num_rows
-    su, sv = (column_numpy(tab, c, nonfinite=options.pixel_std, missing=options.pixel_std)
-              for c in ("cx_std", "cy_std"))
+    su, sv = (column_numpy(tab, c_, nonfinite=options.pixel_std, missing=options.pixel_std)
+              for c_ in ("cx_std", "cy_std"))
     ruv = np.nan_to_num(column_numpy(tab, "cxcy_corr", missing=0.0))
-
-    map_bytes = load_map_bytes(map_source)
-    header = load_map(map_bytes).header
-    kw: dict[str, Any] = {}
     if header.geo_reference:
         x, y, rot = projected_to_local(X, Y, crs, header.geo_reference, header.offset)
     else:
-        x, y, rot = X, Y, np.zeros(n)
-        kw["crs"] = crs
-    axis = axis_w + rot
-
-    # pixel covariance -> local: J = R(rot) A
+        x, y, rot = X, Y, np.zeros(tab.num_rows)
     cr, sr = np.cos(rot), np.sin(rot)
     j00 = cr * A[0, 0] - sr * A[1, 0]
     j01 = cr * A[0, 1] - sr * A[1, 1]
@@ -472,83 +505,22 @@ def convert_rotated_boxes(inputs: list[Path], *, map_source, options: RotatedBox
     cxy = j00 * j10 * cuu + (j00 * j11 + j01 * j10) * cuv + j01 * j11 * cvv
     x_std, y_std = np.sqrt(cxx), np.sqrt(cyy)
     with np.errstate(divide="ignore", invalid="ignore"):
-        xy_corr = np.where(x_std * y_std > 0, cxy / (x_std * y_std), 0.0)
-
-    o = order
-    pid, t, x, y, axis = pid[o], t[o], x[o], y[o], axis[o]
-    x_std, y_std, xy_corr = x_std[o], y_std[o], np.clip(xy_corr[o], -1, 1)
-    length, width, pmf_rows = length[o], width[o], pmf_rows[o]
-    vx, vy, g = local_linear_velocity(pid, t, x, y, options.velocity_window)
-    ref = heading_from_velocity(pid, vx, vy, options.heading_min_speed)
-    flip = np.cos(axis - ref) < 0
-    heading = wrap_angle(np.where(flip, axis + np.pi, axis))
-    vx_std, vy_std = x_std * g, y_std * g
+        xy_corr = np.clip(np.where(x_std * y_std > 0, cxy / (x_std * y_std), 0.0), -1, 1)
+    boxes = Boxes(
+        pid, t, x, y, source_ids=[str(s) for s in source_ids],
+        rows=Rows([path], place=np.arange(tab.num_rows) + 2), heading=axis + rot,
+        x_std=x_std, y_std=y_std, xy_corr=xy_corr.astype(np.float32),
+        heading_std=np.full(tab.num_rows, math.radians(options.angle_std_deg)),
+        length=length, width=width, class_pmf=pmf_rows,
+        source_frame=(column_numpy(tab, "frame").astype(np.int64) if "frame" in tab.column_names
+                      else None)).sort()
+    vx, vy, g = local_linear_velocity(boxes.pid, boxes.time, boxes["x"], boxes["y"],
+                                      options.velocity_window)
+    axis = boxes["heading"]
+    ref = heading_from_velocity(boxes.pid, vx, vy, options.heading_min_speed)
+    boxes["heading"] = wrap_angle(np.where(np.cos(axis - ref) < 0, axis + np.pi, axis))
     nan = np.isnan(g)
-
-    states = {
-        "participant_id": pid, "time": t, "x": x, "y": y, "heading": heading, "vx": vx, "vy": vy,
-        "x_std": x_std, "y_std": y_std, "xy_corr": xy_corr.astype(np.float32),
-        "heading_std": np.full(n, math.radians(options.angle_std_deg)),
-        "vx_std": pa.array(vx_std, mask=nan), "vy_std": pa.array(vy_std, mask=nan),
-        "vxvy_corr": pa.array(xy_corr.astype(np.float32), mask=nan),
-    }
-    if "frame" in tab.column_names:
-        states["source_frame"] = column_numpy(tab, "frame")[o].astype(np.int64)
-
-    m = len(source_ids)
-    counts = np.bincount(pid, minlength=m)
-    pm = np.stack([np.bincount(pid, weights=pmf_rows[:, j], minlength=m) for j in range(len(CLASSES))],
-                  axis=1) / counts[:, None]
-    pm = (pm / pm.sum(axis=1, keepdims=True)).astype(np.float32)
-    gsd = math.sqrt(abs(np.linalg.det(A)))
-    starts = np.r_[0, np.cumsum(counts)[:-1]]
-    p_len, p_wid, p_len_std, p_wid_std = _per_participant_size(pid, length, width, starts, counts)
-    floor = gsd * options.pixel_std
-    participants = {
-        "participant_id": np.arange(m, dtype=np.int64),
-        "source_id": [str(s) for s in source_ids],
-        "class": np.asarray(CLASSES, dtype=object)[np.argmax(pm, axis=1)], "class_pmf": pm,
-        "length": p_len, "width": p_wid,
-        "length_std": np.maximum(p_len_std, floor), "width_std": np.maximum(p_wid_std, floor),
-        "attributes": [json.dumps({"boxes": int(k)}) for k in counts],
-    }
-    if options.image_size is not None:
-        wpx, hpx = options.image_size
-        cu = np.array([0.0, wpx, wpx, 0.0, 0.0])
-        cv = np.array([0.0, 0.0, hpx, hpx, 0.0])
-        fx, fy = A[0, 0] * cu + A[0, 1] * cv + c[0], A[1, 0] * cu + A[1, 1] * cv + c[1]
-        if header.geo_reference:
-            fx, fy, _ = projected_to_local(fx, fy, crs, header.geo_reference, header.offset)
-        kw["coverage"] = "POLYGON ((" + ", ".join(f"{float(a)!r} {float(b)!r}" for a, b in zip(fx, fy)) + "))"
-        kw["unobserved"] = outside_coverage(map_bytes, kw["coverage"], 0.0,
-                                            float(np.max(states["time"])), "aerial_camera")
-    rate = options.frame_rate
-    return wrap_recording(
-        "rotated-boxes", [path, *geo], options, map_bytes=map_bytes, participants=participants,
-        states=states, method="aerial", provenance="natural",
-        acquisition={
-            "platform": options.platform or f"aerial camera, GSD {gsd:.3g} m",
-            "sensors": [{"id": "aerial_camera", "kind": "rgb_camera",
-                         **({"rate_hz": rate} if rate else {})}],
-            "not_observable": ["light_", "interior"],
-        },
-        extras={"georeference": {"crs": crs, "affine_corner": [*A.ravel().tolist(), *c.tolist()]}},
-        **kw,
-    )
-
-
-def _per_participant_size(pid, length, width, starts, counts):
-    """Median and spread of the per-frame box sizes of each participant (rows grouped by pid)."""
-    m = len(counts)
-    # sort within participant to take medians without a Python loop over rows
-    out = []
-    for vals in (length, width):
-        o = np.lexsort((vals, pid))
-        sv = vals[o]
-        lo = starts + (counts - 1) // 2
-        hi = starts + counts // 2
-        med = (sv[lo] + sv[hi]) / 2.0
-        mean = np.bincount(pid, weights=vals, minlength=m) / counts
-        var = np.bincount(pid, weights=(vals - mean[pid]) ** 2, minlength=m) / counts
-        out += [med, np.sqrt(var)]
-    return out[0], out[2], out[1], out[3]
+    boxes["vx"], boxes["vy"] = vx, vy
+    boxes["vx_std"], boxes["vy_std"] = boxes["x_std"] * g, boxes["y_std"] * g
+    boxes["vxvy_corr"] = np.where(nan, np.nan, boxes["xy_corr"]).astype(np.float32)
+    return boxes

@@ -56,18 +56,14 @@ import pyarrow as pa
 from lxml import etree
 from pydantic import Field
 
-from aveas_format.converters.common import (
-    factorize,
-    load_map_bytes,
-    move_along_heading,
-    navigation_deg_to_heading,
-    read_table,
-    wrap_recording,
-)
+from aveas_format.converters.common.assemble import to_recording
+from aveas_format.converters.common.boxes import Boxes, Rows, Sensor
+from aveas_format.converters.common.geometry import move_along_heading, navigation_deg_to_heading
+from aveas_format.converters.common.tables import factorize, header_names, read_table
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.io.arrow import column_numpy
-from aveas_format.numeric import fmt_num
+from aveas_format.mapref.build import load_map_bytes
 from aveas_format.safeio import iterparse, xml_parser
 
 # SUMO's vType defaults per vClass: (length, width, height) in m
@@ -236,22 +232,17 @@ def _read_tabular(path: Path) -> dict[str, list]:
     }
 
 
-def _check_unique(pid: np.ndarray, t: np.ndarray, source_ids, lines: list, files: list[int],
-                  inputs: list[Path]) -> None:
-    """A vehicle sampled twice at one time (a repeated <timestep>, or an id twice in one) is an
-    error naming its second occurrence: the recording keys states by (participant, time)."""
-    order = np.lexsort((t, pid))
-    ps, ts = pid[order], t[order]
-    dup = np.flatnonzero((ps[1:] == ps[:-1]) & (ts[1:] == ts[:-1]))
-    if len(dup):
-        i = int(max(order[dup[0]], order[dup[0] + 1]))
-        raise FormatError(f"{str(source_ids[int(pid[i])])!r} sampled twice at time {fmt_num(t[i])}",
-                          path=inputs[files[i]], line=lines[i])
+def _is_fcd(path: Path, head: bytes) -> bool:
+    """SUMO's FCD output: ``<fcd-export`` (XML), its Parquet/CSV columns ``timestep_time`` or
+    ``vehicle_id``."""
+    if path.suffix.lower() in (".parquet", ".csv"):
+        return bool(header_names(path, head) & {"timestep_time", "vehicle_id"})
+    return b"<fcd-export" in head
 
 
 @converter("sumo-fcd", description="Eclipse SUMO floating-car data (XML, .xml.gz, Parquet/CSV)",
            patterns=("*.xml", "*.xml.gz", "*.fcd.xml", "*.parquet", "*.csv"),
-           method="traffic_simulation", options=SumoFcdOptions)
+           method="traffic_simulation", options=SumoFcdOptions, sniff=_is_fcd)
 def convert_sumo_fcd(inputs: list[Path], *, map_source, options: SumoFcdOptions):
     rows: dict[str, list] = {k: [] for k in _COLS}
     files: list[int] = []
@@ -267,59 +258,32 @@ def convert_sumo_fcd(inputs: list[Path], *, map_source, options: SumoFcdOptions)
         files += [fi] * len(part["time"])
     if not rows["time"]:
         raise FormatError("no <vehicle> or <person> samples found", path=inputs[0])
-    geo = geo_detected if options.geo is None else options.geo
     vtypes = {**{k: {"vClass": v} for k, v in DEFAULT_VTYPES.items()}, **_parse_vtypes(options.vtypes)}
-
-    t = np.asarray(rows["time"], np.float64)
     pid, source_ids = factorize(rows["id"])
-    _check_unique(pid, t, source_ids, rows["line"], files, inputs)
-    types = np.asarray(rows["type"], dtype=object)
-    # one type per participant (the first seen)
-    first = np.unique(pid, return_index=True)[1]
-    p_types = types[first]
-    sizes, classes = [], []
-    for ty in p_types:
-        d = vtypes.get(ty, {"vClass": options.default_vclass})
-        vclass = str(d.get("vClass", options.default_vclass))
-        base = VCLASS_SIZE.get(vclass, VCLASS_SIZE["passenger"])
-        sizes.append((float(d.get("length", base[0])), float(d.get("width", base[1])),
-                      float(d.get("height", base[2]))))
-        classes.append(VCLASS_TO_CLASS.get(vclass, "car" if vclass in VCLASS_SIZE else "other"))
-    size = np.asarray(sizes)
-
-    heading = navigation_deg_to_heading(np.asarray(rows["angle"], np.float64))
-    x = np.asarray(rows["x"], np.float64)
-    y = np.asarray(rows["y"], np.float64)
+    boxes = Boxes(pid, rows["time"], rows["x"], rows["y"], source_ids=source_ids,
+                  rows=Rows(inputs, file=np.asarray(files), place=np.asarray(rows["line"], dtype=object)),
+                  heading=navigation_deg_to_heading(np.asarray(rows["angle"], np.float64))).sort()
+    p_types = np.asarray(rows["type"], dtype=object)[boxes.order][boxes.first_rows()]
+    size, classes = _sizes_and_classes(p_types, vtypes, options)
     map_bytes = load_map_bytes(map_source)
     from aveas_format.opendrive import load_map
 
     net = load_map(map_bytes)
-    if geo:
-        from aveas_format.mapref.crs import LocalFrame
-
-        if not net.header.geo_reference:
-            raise FormatError("geo FCD needs a map with a <geoReference> to project lon/lat")
-        x, y = LocalFrame(net.header.geo_reference, net.header.offset).from_wgs84(x, y)
-    else:
-        dx, dy = _net_offset(options)
-        x, y = x - dx, y - dy
-    order = np.lexsort((t, pid))
-    t, pid, x, y, heading = t[order], pid[order], x[order], y[order], heading[order]
-    speed = np.nan_to_num(np.asarray(rows["speed"], np.float64)[order])
-    speed_lat = np.asarray(rows["speed_lat"], np.float64)[order]
+    _to_map_frame(boxes, net, geo_detected if options.geo is None else options.geo, options)
     # the footprint centre: half the length behind the front bumper, along the FCD angle
-    x, y = move_along_heading(x, y, heading, -size[pid, 0] / 2.0)
-    motion = _lane_motion(net, pid, t, x, y, heading, speed, speed_lat, options)
-    x, y, heading = motion["x"], motion["y"], motion["heading"]
-    n = len(t)
-    states = {
-        "participant_id": pid, "time": t, "x": x, "y": y, "heading": heading,
-        "vx": motion["vx"], "vy": motion["vy"],
-        **{f"{c}_std": np.zeros(n) for c in ("x", "y", "heading", "vx", "vy")},
-    }
-    m = len(source_ids)
-    recon = np.bincount(pid[1:][motion["jumps"]], minlength=m) if options.lane_change_duration else \
-        np.zeros(m, np.int64)
+    boxes["x"], boxes["y"] = move_along_heading(boxes["x"], boxes["y"], boxes["heading"],
+                                                -size[boxes.pid, 0] / 2.0)
+    speed = np.nan_to_num(np.asarray(rows["speed"], np.float64)[boxes.order])
+    speed_lat = np.asarray(rows["speed_lat"], np.float64)[boxes.order]
+    motion = _lane_motion(net, boxes.pid, boxes.time, boxes["x"], boxes["y"], boxes["heading"],
+                          speed, speed_lat, options)
+    n = len(boxes)
+    for k in ("x", "y", "heading", "vx", "vy"):
+        boxes[k] = motion[k]
+        boxes[f"{k}_std"] = np.zeros(n)
+    m = boxes.m
+    recon = np.bincount(boxes.pid[1:][motion["jumps"]], minlength=m) if options.lane_change_duration \
+        else np.zeros(m, np.int64)
     attrs = []
     for i, ty in enumerate(p_types):
         a = {"sumo_type": str(ty)}
@@ -328,8 +292,6 @@ def convert_sumo_fcd(inputs: list[Path], *, map_source, options: SumoFcdOptions)
             a["lane_change_duration_s"] = options.lane_change_duration
         attrs.append(json.dumps(a))
     participants = {
-        "participant_id": np.arange(m, dtype=np.int64),
-        "source_id": source_ids,
         "class": np.asarray(classes, dtype=object),
         "length": size[:, 0], "width": size[:, 1], "height": size[:, 2],
         "length_std": np.zeros(m), "width_std": np.zeros(m), "height_std": np.zeros(m),
@@ -338,12 +300,41 @@ def convert_sumo_fcd(inputs: list[Path], *, map_source, options: SumoFcdOptions)
     resolved = {"lateral_speed": motion["lateral_source"]}
     if options.lane_change_duration:
         resolved["lane_changes_reconstructed"] = int(recon.sum())
-    return wrap_recording(
-        "sumo-fcd", inputs, options, map_bytes=map_bytes, participants=participants, states=states,
-        method="traffic_simulation", provenance="simulated", partner="Eclipse SUMO simulation",
-        acquisition={"platform": "Eclipse SUMO", "sensors": [{"id": "sumo", "kind": "simulator"}]},
-        resolved=resolved,
-    )
+    sensor = Sensor(method="traffic_simulation", provenance="simulated",
+                    partner="Eclipse SUMO simulation", platform="Eclipse SUMO",
+                    sensors=[{"id": "sumo", "kind": "simulator"}])
+    return to_recording(boxes, sensor, converter="sumo-fcd", inputs=inputs, options=options,
+                        map_bytes=map_bytes, participants=participants, resolved=resolved)
+
+
+def _sizes_and_classes(p_types: np.ndarray, vtypes: dict[str, dict], options: SumoFcdOptions
+                       ) -> tuple[np.ndarray, list[str]]:
+    """(length, width, height) and class of each participant from its (first seen) type."""
+    sizes, classes = [], []
+    for ty in p_types:
+        d = vtypes.get(ty, {"vClass": options.default_vclass})
+        vclass = str(d.get("vClass", options.default_vclass))
+        base = VCLASS_SIZE.get(vclass, VCLASS_SIZE["passenger"])
+        sizes.append((float(d.get("length", base[0])), float(d.get("width", base[1])),
+                      float(d.get("height", base[2]))))
+        classes.append(VCLASS_TO_CLASS.get(vclass, "car" if vclass in VCLASS_SIZE else "other"))
+    return np.asarray(sizes), classes
+
+
+def _to_map_frame(boxes: Boxes, net, geo: bool, options: SumoFcdOptions) -> None:
+    """Positions from the network frame (minus its offset) or lon/lat (geo FCD, through the map's
+    geoReference) into the map's frame."""
+    x, y = boxes["x"], boxes["y"]
+    if geo:
+        from aveas_format.crs import LocalFrame
+
+        if not net.header.geo_reference:
+            raise FormatError("geo FCD needs a map with a <geoReference> to project lon/lat")
+        x, y = LocalFrame(net.header.geo_reference, net.header.offset).from_wgs84(x, y)
+    else:
+        dx, dy = _net_offset(options)
+        x, y = x - dx, y - dy
+    boxes["x"], boxes["y"] = x, y
 
 
 def _smoothstep(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -462,8 +462,7 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
     from aveas_format.errors import RecordingIOError
     from aveas_format.io.container import Container, sha256_of
     from aveas_format.io.reader import open_recording
-    from aveas_format.io.writer import (_fsync_dir, _replace, check_target, parquet_bytes,
-                                        prepare_table)
+    from aveas_format.io.writer import check_target, move_into_place, parquet_bytes, prepare_table
     from aveas_format.schema.metadata import DerivedEntry, TableEntry
     from aveas_format.schema.tables import TABLES
     from aveas_format.schema.versions import FORMAT_VERSION
@@ -529,8 +528,7 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
                         shutil.copyfileobj(f, g, 1 << 22)
             shutil.rmtree(tmp, ignore_errors=True)
             tmp = z
-        _replace(tmp, path, overwrite)
-        _fsync_dir(parent)
+        move_into_place(tmp, path, overwrite)
     except OSError as e:
         raise RecordingIOError(f"cannot write: {e.strerror or e}", path=path) from None
     finally:

@@ -88,14 +88,14 @@ class Recording:
         """The states as a ``geopandas.GeoDataFrame``: one Point per row in the recording's CRS
         (``crs`` of recording.json; x/y moved by the map header's offset), the states' columns
         (or ``columns``) and each participant's ``class``. Needs ``aveas-format[geo]``."""
-        from aveas_format.mapref.geodata import states_geodataframe
+        from aveas_format.io.geodata import states_geodataframe
 
         return states_geodataframe(self, columns, classes=classes)
 
     def unobserved_geodataframe(self):
         """The unobserved regions as a ``geopandas.GeoDataFrame`` of polygons in the recording's
         CRS (empty when there are none). Needs ``aveas-format[geo]``."""
-        from aveas_format.mapref.geodata import unobserved_geodataframe
+        from aveas_format.io.geodata import unobserved_geodataframe
 
         return unobserved_geodataframe(self)
 

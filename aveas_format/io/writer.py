@@ -229,8 +229,7 @@ def write_recording(rec, path: str | Path, *, overwrite: bool = False, form: str
                         shutil.copyfileobj(src, dst, 1 << 20)
             with open(tmp, "rb+") as f:
                 os.fsync(f.fileno())
-        _replace(tmp, path, overwrite)
-        _fsync_dir(parent)
+        move_into_place(tmp, path, overwrite)
     except OSError as e:
         _remove(tmp)
         raise RecordingIOError(f"cannot write: {e.strerror or e}", path=path) from None
@@ -269,6 +268,15 @@ def _exchange(a: Path, b: Path) -> bool:
             return False
         raise OSError(err, os.strerror(err), str(b))
     return True
+
+
+def move_into_place(tmp: Path, path: Path, overwrite: bool) -> None:
+    """A recording (directory or ZIP) written at ``tmp`` moved to ``path`` (:func:`_replace`:
+    atomically, an existing one replaced only with ``overwrite``), durably (its directory
+    synced). The last step of every writer of a whole recording (``write_recording``, the
+    derivations streamed into a recording)."""
+    _replace(tmp, path, overwrite)
+    _fsync_dir(path.parent)
 
 
 def _replace(tmp: Path, path: Path, overwrite: bool) -> None:

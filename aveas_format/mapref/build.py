@@ -3,7 +3,7 @@
 :func:`build_recording` takes participants and states as dicts of arrays (or pyarrow Tables) and a
 map, and fills what can be derived: source ids, roles and provenance from the recording's
 provenance; heading from the direction of motion and velocity from positions where missing; lon/lat
-through the CRS (:mod:`aveas_format.mapref.crs`); road coordinates through the map
+through the CRS (:mod:`aveas_format.crs`); road coordinates through the map
 (:mod:`aveas_format.mapref.roads`); duration, nominal
 rate, location and the ``tables``/``map`` entries of recording.json.
 """
@@ -27,7 +27,7 @@ from aveas_format.io.writer import opendrive_version, prepare_table
 from aveas_format.schema.enums import AcquisitionMethod, Provenance, RecordingProvenance, Role
 from aveas_format.schema.metadata import RecordingMeta
 from aveas_format.schema.tables import TABLES
-from aveas_format.mapref.crs import LocalFrame
+from aveas_format.crs import LocalFrame
 from aveas_format.mapref.roads import road_coordinates
 from aveas_format.numeric import central_differences, same_participant, wrap_angle
 from aveas_format.opendrive import load_map
@@ -80,7 +80,7 @@ def check_crs(crs: str | None, geo_reference: str | None) -> str:
     no geoReference, ``crs`` alone defines the frame). A ``crs`` that differs from the map's
     geoReference is an error (the map fixes the frame); neither raises
     :class:`~aveas_format.errors.MissingCrsError`."""
-    from aveas_format.mapref.crs import crs_equal, parse_crs
+    from aveas_format.crs import crs_equal, parse_crs
 
     if crs and geo_reference:
         if not crs_equal(crs, geo_reference):

@@ -2,7 +2,7 @@
 
 Converters produce positions in the local frame; this module adds what the format requires on top
 (FORMAT.md 5): ``road_id``, ``lane_id``, ``road_s``, ``road_t``, ``lane_offset`` through the map
-(``lon``/``lat`` come from :mod:`aveas_format.mapref.crs`). Where a point lies on several roads
+(``lon``/``lat`` come from :mod:`aveas_format.crs`). Where a point lies on several roads
 (junctions), the trajectory-aware projection chooses by continuity with the participant's previous
 sample and agreement with its heading.
 """

@@ -27,7 +27,7 @@ class NetworkCore:
     ``junctions`` (dict junction id -> :class:`~.model.Junction`), ``path`` (source file or None).
 
     Coordinates are those of the file (its local x/y frame; the header ``<offset>`` is *not*
-    applied: ``aveas_format.mapref.crs`` maps them to the geoReference CRS). ``t`` is positive to the
+    applied: ``aveas_format.crs`` maps them to the geoReference CRS). ``t`` is positive to the
     left of the reference line; lane ids are positive left, negative right, 0 the centre lane.
     Every method is vectorised over its array arguments.
     """

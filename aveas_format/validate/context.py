@@ -471,7 +471,7 @@ class Context:
         import warnings
 
         from aveas_format.errors import FormatError
-        from aveas_format.mapref.crs import LocalFrame
+        from aveas_format.crs import LocalFrame
 
         if self.meta is None:
             return None

@@ -124,11 +124,18 @@ class _Run:
                                                 traceback=traceback.format_exc()))
 
 
-def validate(source: str | Path | Recording, *, select: list[str] | None = None,
+def validate(source: str | Path | Recording | list[str | Path], *, select: list[str] | None = None,
              ignore: list[str] | None = None, config: Any = None,
              max_sample: int = DEFAULT_MAX_SAMPLE, source_findings: list[Any] | None = None,
-             name: str | None = None) -> Report:
-    """Validate a recording (a path to a directory/ZIP, or an in-memory Recording).
+             name: str | None = None, converter: str | None = None,
+             map_source: str | Path | bytes | None = None, options: dict[str, Any] | None = None,
+             crs: str | None = None) -> Report:
+    """Validate a recording (a path to a directory/ZIP, or an in-memory Recording), or a submitted
+    file of any importable format (a path to another file, or with ``converter`` a list of its
+    input files): imported on the fly as ``aveas-format validate FILE`` imports it
+    (:mod:`aveas_format.validate.submission`: the importer from the registry's patterns and
+    sniffing, or ``converter``; ``map_source``, ``options``, ``crs`` as ``convert`` takes them),
+    the import's findings about the file reported by the ``source.*`` rules.
 
     ``source_findings``: the :class:`~aveas_format.errors.SourceFinding` list an import collected
     (:func:`~aveas_format.errors.collect_source_findings`) when the recording was just imported from
@@ -142,6 +149,17 @@ def validate(source: str | Path | Recording, *, select: list[str] | None = None,
     batch, collectors gather what the ``recording`` rules need across participants, and the
     ``recording`` rules run once at the end (docs/validate.md, "Streaming").
     """
+    if not isinstance(source, Recording) and source_findings is None:
+        from aveas_format.validate.submission import imported, submitted_files
+
+        files = submitted_files(list(source) if isinstance(source, (list, tuple)) else [source],
+                                converter)
+        if files:
+            select_rules(select, ignore)  # a usage error before the import's work
+            with imported(files, converter, map_source, options, crs) as (rec, found):
+                return validate(rec, select=select, ignore=ignore, config=config,
+                                max_sample=max_sample, source_findings=found,
+                                name=name or " ".join(str(p) for p in files))
     rules = select_rules(select, ignore)
     t0 = time.perf_counter()
     ctx = Context(source, config=config)

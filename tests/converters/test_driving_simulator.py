@@ -145,7 +145,7 @@ def test_navigation_convention_and_vx_vy(tmp_path, road):
     ("time,id,x,y,heading,speed\n0,car1,1,2,0,3\n", r"run.csv: no rows of the subject vehicle 'ego'"),
     ("time,id,x,y,heading\n0,ego,1,2,0\n", r"run.csv: the log needs 'vx' and 'vy' or 'speed'"),
     ("time,id,x,y,heading,speed\n0,ego,1,2,0,3\n0,ego,1,2,0,3\n",
-     r"run.csv: line 3: object 'ego' logged twice"),
+     r"run.csv: line 3: participant 'ego' sampled twice at time 0.0$"),
     ("time,id,x,y,heading,speed,class\n0,ego,1,2,0,3,spaceship\n",
      r"run.csv: line 2: column 'class': 'spaceship' is not one of"),
     ("time,id,x,y,heading,speed,brake_pedal\n0,ego,1,2,0,3,0.5\n0.1,ego,1,2,0,3,7\n",

@@ -267,8 +267,8 @@ def test_highd_duplicate_sample_is_located(tmp_path):
     files = write_highd(tmp_path / "h")
     lines = files[0].read_text().splitlines()
     files[0].write_text("\n".join(lines + [lines[3]]) + "\n")
-    with pytest.raises(aveas_format.FormatError, match=rf"line {len(lines) + 1}: participant sampled "
-                                                       "twice"):
+    with pytest.raises(aveas_format.FormatError, match=rf"01_tracks.csv: line {len(lines) + 1}: "
+                                                       "participant '1' sampled twice at time"):
         convert("highd", [files[0]])
 
 

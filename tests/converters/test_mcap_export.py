@@ -160,3 +160,23 @@ def test_bulk_messages_write_the_file_add_message_writes(rich, tmp_path, monkeyp
     monkeypatch.setattr(mcap_export, "add_messages", one_by_one)
     get_converter("mcap", "export")(rich, tmp_path / "single.mcap")
     assert (tmp_path / "bulk.mcap").read_bytes() == (tmp_path / "single.mcap").read_bytes()
+
+
+def test_a_map_that_cannot_be_sampled_is_said_and_a_bug_propagates(rich, tmp_path, monkeypatch):
+    """The lanes are left out with a warning where the map engine refuses the map (a MapError,
+    a ValueError); anything else — a defect — propagates instead of silently dropping them."""
+    net = type(rich.map)
+
+    def refuses(self, *a, **k):
+        raise ValueError("road 7: geometry ends before its length")
+
+    monkeypatch.setattr(net, "lane_polygons", refuses)
+    with pytest.warns(UserWarning, match="the map's lanes are left out: road 7"):
+        get_converter("mcap", "export")(rich, tmp_path / "a.mcap")
+
+    def broken(self, *a, **k):
+        raise KeyError("a bug")
+
+    monkeypatch.setattr(net, "lane_polygons", broken)
+    with pytest.raises(KeyError, match="a bug"):
+        get_converter("mcap", "export")(rich, tmp_path / "b.mcap")

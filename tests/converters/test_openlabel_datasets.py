@@ -14,7 +14,7 @@ import pytest
 
 import aveas_format
 from aveas_format.converters import convert
-from aveas_format.converters.common import resolve_timestamps
+from aveas_format.converters.common.timestamps import resolve_timestamps
 from aveas_format.converters.labels import label_kind
 
 from helpers_common import STRAIGHT_MAP

@@ -388,7 +388,7 @@ def test_worker_processes_are_forked_before_the_digest_thread_starts(exported, m
     if not getattr(test_worker_processes_are_forked_before_the_digest_thread_starts, "hooked", False):
         os.register_at_fork(before=_at_fork)
         test_worker_processes_are_forked_before_the_digest_thread_starts.hooked = True
-    from aveas_format.converters import common
+    from aveas_format.converters.common import provenance as common
 
     sha256 = common._sha256
 

@@ -14,6 +14,7 @@ import pytest
 
 from aveas_format.converters import _protowire as pw
 from aveas_format.converters import convert, osi
+from aveas_format.converters.common.fastpath import FastPathUnsupported
 from aveas_format.errors import FormatError
 from aveas_format.opendrive.builder import straight_highway
 from helpers_realdata import real_files
@@ -33,7 +34,7 @@ def _write(path, raws):
 def _same_decoding(path, **opts):
     """Both decoders on one trace: everything they give is equal (NaN where NaN)."""
     options = osi.OsiOptions(**opts)
-    cols = osi._decode_columns([path], options)  # raises Unsupported if it does not take it
+    cols = osi._decode_columns([path], options)  # raises FastPathUnsupported if it does not take it
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         objs = osi._decode_objects([path], options)
@@ -50,7 +51,7 @@ def _same_decoding(path, **opts):
 
 def _betterosi_only(monkeypatch):
     def off(*a, **k):
-        raise pw.Unsupported("test: the betterosi path")
+        raise FastPathUnsupported("test: the betterosi path")
 
     monkeypatch.setattr(osi, "_decode_columns", off)
 
@@ -186,7 +187,7 @@ def test_what_it_does_not_take_goes_to_betterosi(tmp_path, monkeypatch):
     for extra in (twice, obj + _d(3, 2.0)):
         raws = [_msg(5, extra) + _msg(2, _v(1, 100 + i)) for i in range(3)]
         trace = _write(tmp_path / "d_gt_.osi", raws)
-        with pytest.raises(pw.Unsupported):
+        with pytest.raises(FastPathUnsupported):
             osi._decode_columns([trace], osi.OsiOptions())
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -202,7 +203,7 @@ def test_broken_bytes_give_betterosis_located_error(tmp_path, bad):
     of the betterosi path, naming the message."""
     good = _msg(5, _object(3, 1.0, shuffled=False)) + _msg(2, _v(1, 1))
     trace = _write(tmp_path / "b_gt_.osi", [good, good + bad])
-    with pytest.raises(pw.Unsupported):
+    with pytest.raises(FastPathUnsupported):
         osi._decode_columns([trace], osi.OsiOptions())
     with pytest.raises(FormatError, match="OSI message 1"):
         convert("osi", [trace], map_source=tmp_path / "none.xodr")
@@ -243,12 +244,48 @@ def test_mcap_traces_decode_the_same(tmp_path, sensor_view):
     assert len(cols[0]) == 36
 
 
-def test_bytes_it_trips_on_go_to_betterosi(tmp_path, monkeypatch):
-    """An error of any kind inside the columnar decoder is no traceback: the betterosi path takes
-    the trace (here: a proj_string that is not UTF-8, which betterosi reports, located)."""
+def test_bytes_it_knows_it_does_not_take_go_to_betterosi(tmp_path, caplog):
+    """A proj_string that is not UTF-8: the columnar decoder refuses it by name, the betterosi
+    path reads the trace and reports it, located; the log says which path read the file and
+    why."""
     good = _msg(5, _object(3, 1.0, shuffled=False)) + _msg(2, _v(1, 1))
     trace = _write(tmp_path / "u_gt_.osi", [good + _field(14, pw.LEN, b"\xff\xfe")])
-    with pytest.raises(UnicodeDecodeError):
+    with pytest.raises(FastPathUnsupported, match="message 0: proj_string is not UTF-8"):
         osi._decode_columns([trace], osi.OsiOptions())
-    with pytest.raises(FormatError, match="OSI message 0"):
+    with caplog.at_level("INFO", logger="aveas_format.converters"), \
+            pytest.raises(FormatError, match="OSI message 0"):
         convert("osi", [trace], map_source=tmp_path / "none.xodr")
+    assert ("u_gt_.osi: read by betterosi (the columnar decoder does not take it: message 0: "
+            "proj_string is not UTF-8 text)") in caplog.text
+
+
+def test_a_bug_in_the_columnar_decoder_propagates(tmp_path, monkeypatch):
+    """Anything but a declared refusal propagates from the fast path: a defect there is an
+    error, not a silent switch to the slower decoder."""
+    from aveas_format.converters import osi_columns
+
+    raws = [_msg(5, _object(3, 50.0, shuffled=False)) + _msg(2, _v(1, 100 + i)) for i in range(3)]
+    trace = _write(tmp_path / "g_gt_.osi", raws)
+    road = tmp_path / "road.xodr"
+    road.write_text(straight_highway(length=600.0, lanes_right=2, lanes_left=1, geo_reference=GEO))
+
+    def broken(*a, **k):
+        raise KeyError("a bug")
+
+    monkeypatch.setattr(osi_columns, "decode_chunk", broken)
+    called = []
+    monkeypatch.setattr(osi, "_decode_objects", lambda *a, **k: called.append(1))
+    with pytest.raises(KeyError, match="a bug"):
+        convert("osi", [trace], map_source=road)
+    assert called == []
+
+
+def test_the_log_names_the_path_that_read_the_trace(tmp_path, caplog):
+    raws = [_msg(5, _object(3, 50.0, shuffled=False)) + _msg(2, _v(1, 100 + i)) for i in range(3)]
+    trace = _write(tmp_path / "l_gt_.osi", raws)
+    road = tmp_path / "road.xodr"
+    road.write_text(straight_highway(length=600.0, lanes_right=2, lanes_left=1, geo_reference=GEO))
+    with caplog.at_level("INFO", logger="aveas_format.converters"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        convert("osi", [trace], map_source=road)
+    assert "l_gt_.osi: read by the columnar decoder" in caplog.text

@@ -281,7 +281,7 @@ def test_relative_velocity(scene_mcap, road_map):
 def test_navsatfix_ego_and_tf_static(road_map, tmp_path):
     """No odometry: the ego from NavSatFix (heading from motion); vision_msgs detections in a lidar
     frame 1 m ahead of base_link (/tf_static); velocity from positions."""
-    from aveas_format.mapref.crs import LocalFrame
+    from aveas_format.crs import LocalFrame
 
     frame = LocalFrame(GEO)
     msgs = [("/tf_static", "tf2_msgs/msg/TFMessage", {"transforms": [{
@@ -389,3 +389,53 @@ def test_barriers_and_signs_are_no_road_users(road_map, tmp_path):
     rec = convert("ros2-mcap", [path], map_source=road_map, options=_opts(keep_non_road_users=True))
     assert rec.participants.column("source_id").to_pylist() == ["ego", "7", "9"]
     assert rec.participants.column("class").to_pylist()[2] == "other"
+
+
+# --- which decoder reads a schema: rosbags, or mcap-ros2-support where rosbags refuses -------------
+
+def _short_separators(text: str) -> str:
+    """The definition with its separators written as ``===`` (mcap-ros2-support reads any run of
+    three or more; rosbags' parser does not take them)."""
+    return text.replace(SEP, "===")
+
+
+def test_a_definition_rosbags_refuses_is_read_by_the_generic_decoder(scene_mcap, road_map, tmp_path,
+                                                                     caplog):
+    """A real input the fast path knows it does not take: the same recording from the other
+    decoder, and the log says which read it and why."""
+    ty = "nav_msgs/msg/Odometry"
+    msgs = [("/localization/kinematic_state", ty, odometry(T0 + i * 100_000_000, i / RATE),
+             T0 + i * 100_000_000) for i in range(N)]
+    fast = write_mcap(tmp_path / "fast.mcap", msgs)
+    slow = write_mcap(tmp_path / "slow.mcap", msgs, {ty: _short_separators(msgdef(TYPES[ty]))})
+    a = convert("ros2-mcap", [fast], map_source=road_map, options=_opts())
+    with caplog.at_level("INFO", logger="aveas_format.converters"):
+        b = convert("ros2-mcap", [slow], map_source=road_map, options=_opts())
+    assert a.states.equals(b.states) and a.participants.equals(b.participants)
+    assert "slow.mcap: messages of nav_msgs/msg/Odometry: read by mcap-ros2-support (rosbags does " \
+           "not take it: rosbags cannot parse the definition" in caplog.text
+
+
+def test_a_bug_in_the_rosbags_path_propagates(scene_mcap, road_map, monkeypatch):
+    """Anything but the declared refusal propagates: no silent switch to the slower decoder."""
+    from aveas_format.converters.ros2_mcap import decode
+
+    def broken(schema):
+        raise KeyError("a bug")
+
+    monkeypatch.setattr(decode.Decoders, "_rosbags", staticmethod(broken))
+    monkeypatch.setattr(decode.Decoders, "_generic_decoder",
+                        lambda *a: pytest.fail("the generic decoder was used"))
+    with pytest.raises(KeyError, match="a bug"):
+        convert("ros2-mcap", [scene_mcap], map_source=road_map, options=_opts())
+
+
+def test_verbose_says_which_decoder_read_each_schema(scene_mcap, road_map, tmp_path):
+    res = subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "ros2-mcap",
+                          str(scene_mcap), "--map", str(road_map), "-O", "partner=test",
+                          "-O", f"frame_offset={list(OFFSET)}", "-O", "license=CC0-1.0",
+                          "-o", str(tmp_path / "v.aveas"), "--verbose"],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert ("aveas-format: scene.mcap: messages of nav_msgs/msg/Odometry: read by rosbags"
+            in res.stderr), res.stderr

@@ -298,7 +298,7 @@ def test_read_world_file_pixel_centre(tmp_path):
     ("bad_class", r"tracks.csv: line 3: column 'class': 'spaceship' is not a known class"),
     ("no_rate", r"tracks.csv: the table has 'frame' but no 'time'"),
     ("no_box", r"tracks.csv: the table needs box columns"),
-    ("dup", r"tracks.csv: line 4: participant sampled twice"),
+    ("dup", r"tracks.csv: line 4: participant '1' sampled twice"),
 ])
 def test_malformed_input_is_located(tmp_path, site_map, case, match):
     tracks = tmp_path / "tracks.csv"

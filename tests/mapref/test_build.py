@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import aveas_format
-from aveas_format.mapref import LocalFrame
+from aveas_format.crs import LocalFrame
 from aveas_format.mapref.build import heading_from_velocity, velocity_from_positions
 from aveas_format.numeric import wrap_angle
 

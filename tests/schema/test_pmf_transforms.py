@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 import aveas_format
 from aveas_format.converters import convert, get_converter
-from aveas_format.converters.common import class_pmf
+from aveas_format.converters.labels import class_pmf
 from aveas_format.io.arrow import pmf_array, pmf_matrix
 from aveas_format.schema import versions
 from aveas_format.schema.pmf import argmax, normalise, pmf_problems
@@ -80,7 +80,7 @@ def _with_pmf(pm: np.ndarray):
        confidence=st.floats(0.0, 1.0))
 def test_hard_labels_with_a_confidence_are_normalised(labels, confidence):
     pm = class_pmf(labels, confidence)
-    _assert_normalised(pm, "converters.common.class_pmf")
+    _assert_normalised(pm, "converters.labels.class_pmf")
     if confidence > 1.0 / K + 1e-6:
         assert argmax(pm, "class").tolist() == labels
 

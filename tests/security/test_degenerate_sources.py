@@ -528,15 +528,16 @@ def test_derive_on_degenerate_recording(tmp_path, name, case):
 
 
 @pytest.mark.parametrize("name,match", [
-    ("sumo-fcd", r"fcd\.xml: line 9: '1' sampled twice at time 1\.0$"),
-    ("infra-lwir", r"gt\.txt: line 13: track '2' has two boxes in one frame"),
+    ("sumo-fcd", r"fcd\.xml: line 9: participant '1' sampled twice at time 1\.0$"),
+    ("infra-lwir", r"gt\.txt: line 13: participant '2' sampled twice at time 0\.04$"),
     ("osi", r"run_gt\.osi: frame 1: participant '2' sampled twice at time 0\.05$"),
-    ("highd", r"01_tracks\.csv: line 14: participant sampled twice"),
+    ("highd", r"01_tracks\.csv: line 14: participant '2' sampled twice at time 0\.04$"),
 ])
 @pytest.mark.filterwarnings("ignore:.*earlier than the previous message:UserWarning")  # OSI: sorted first
 def test_repeated_time_names_track_and_place(tmp_path, name, match):
-    """A track sampled twice at one time: the error names the file, the line (or frame) of the
-    repeat and, where the format has no lines, the track."""
+    """A track sampled twice at one time: the error (the one duplicates policy of the shared step,
+    converters/common/boxes.py) names the file, the line (or frame) of the repeat, the track and
+    the time."""
     run, _, _ = SOURCES[name](tmp_path, "dup_time")
     with pytest.raises(aveas_format.FormatError, match=match):
         run()

@@ -91,7 +91,7 @@ def test_openscenario(tmp_path_factory, xosc, ops):
 @given(ops=OPS)
 def test_csv_source(tmp_path_factory, ops):
     """The shared CSV reader under every CSV converter: a driving-simulator-style table."""
-    from aveas_format.converters.common import read_table
+    from aveas_format.converters.common.tables import read_table
 
     d = tmp_path_factory.mktemp("c")
     src = d / "t.csv"

@@ -22,6 +22,7 @@ import pytest
 import aveas_format
 from aveas_format.cli.app import app
 from aveas_format.cli.common import run
+from aveas_format.converters.registry import convert
 from aveas_format.errors import SourceFinding, collect_source_findings, report_source
 from aveas_format.validate import REGISTRY, load_rules
 from aveas_format.validate.report import Report
@@ -220,7 +221,7 @@ def test_osi_submission_findings_name_message_and_object(capsys, tmp_path):
     assert all(f.location.file == str(p) for r in res.values() for f in r.sample)
     # the import itself: object 2 is not a participant, object 1 has the size of message 3
     with collect_source_findings():
-        rec = aveas_format.converters.registry.convert("osi", [p], map_source=STRAIGHT_MAP)
+        rec = convert("osi", [p], map_source=STRAIGHT_MAP)
     parts = {r["source_id"]: r for r in rec.participants.to_pylist()}
     assert set(parts) == {"1", "3"} and parts["1"]["length"] == 4.5
     assert parts["3"]["class"] == "other"
@@ -231,7 +232,7 @@ def test_osi_convert_still_warns_located(tmp_path):
     p = osi_trace(tmp_path / "trace.osi")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        aveas_format.converters.registry.convert("osi", [p], map_source=STRAIGHT_MAP)
+        convert("osi", [p], map_source=STRAIGHT_MAP)
     said = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
     assert f"{p}: message index 0, object id 2: moving object 2 has no positive base.dimension " \
            "(length, width) in any of its messages: not imported (20 times)" in said
@@ -310,9 +311,9 @@ def test_an_unimportable_submission_exits_3_located(capsys, tmp_path):
 def test_ambiguous_extension_needs_from_unless_the_content_tells(capsys, tmp_path):
     """.json is OpenLABEL or an infrastructure-lidar track list: an OpenLABEL document says so in
     its first bytes; another JSON needs --from."""
-    from aveas_format.cli.validate import _candidates
+    from aveas_format.converters.registry import importers_for
 
-    assert _candidates(openlabel_submission(tmp_path)) == ["openlabel"]
+    assert importers_for(openlabel_submission(tmp_path)) == ["openlabel"]
     other = tmp_path / "tracks.json"
     other.write_text(json.dumps({"tracks": []}))
     code, _, err = cli(capsys, "validate", other)
@@ -335,3 +336,80 @@ def test_openscenario_bounding_box_that_is_no_number_is_located(capsys, tmp_path
              source_results(Report.from_json(out))["source.openscenario.no_bounding_box"].sample}
     lines = bad.splitlines()
     assert ("Odd", next(i for i, t in enumerate(lines, 1) if 'length=":.5"' in t)) in found
+
+
+# --- the Python API takes a submitted file as the CLI does ----------------------------------------
+
+def _comparable(report_json: str) -> dict:
+    """A JSON report without what differs from run to run (timings)."""
+    def strip(v):
+        if isinstance(v, dict):
+            return {k: strip(x) for k, x in v.items() if k not in ("seconds", "created")}
+        if isinstance(v, list):
+            return [strip(x) for x in v]
+        return v
+    return strip(json.loads(report_json))
+
+
+@pytest.mark.parametrize("kind", ["osi", "openscenario"])
+def test_the_api_validates_a_foreign_file_as_the_cli_does(capsys, tmp_path, kind):
+    """``aveas_format.validate(FILE)`` imports the file as ``aveas-format validate FILE`` does
+    (the importer sniffed from the file, the import's located findings as source.* rules): the
+    same JSON report."""
+    from aveas_format.validate.render import render_json
+
+    if kind == "osi":
+        p = osi_trace(tmp_path / "trace.osi")
+        args, kw = ["--map", STRAIGHT_MAP], {"map_source": STRAIGHT_MAP}
+    else:
+        (tmp_path / "map.xodr").write_bytes(STRAIGHT_MAP.read_bytes())
+        p = tmp_path / "s.xosc"
+        p.write_text(XOSC)
+        args, kw = [], {}
+    code, out, err = cli(capsys, "validate", p, *args, "--format", "json")
+    api = aveas_format.validate(p, **kw)
+    assert code == api.exit_code("error") == 1, err
+    assert _comparable(render_json(api)) == _comparable(out)
+    assert api.recording == str(p) and any(r.code.startswith("source.") for r in api.results)
+
+
+def test_the_api_takes_the_converter_and_its_options(tmp_path):
+    """``converter=``/``options=`` as ``--from``/``-O``; a file no importer reads is the located
+    error the CLI exits 3 with."""
+    p = osi_trace(tmp_path / "trace.osi")
+    rep = aveas_format.validate([p], converter="osi", map_source=STRAIGHT_MAP,
+                                options={"host_role": "recording_vehicle"}, select=["source.osi"])
+    assert {r.code for r in rep.results} == {"source.osi.missing_dimension",
+                                             "source.osi.unknown_type",
+                                             "source.osi.time_not_increasing"}
+    q = tmp_path / "data.bin"
+    q.write_bytes(b"\0" * 10)
+    with pytest.raises(aveas_format.RecordingIOError, match="no converter reads files like it"):
+        aveas_format.validate(q)
+
+
+# --- sniffing: each importer declares how to recognise its files ----------------------------------
+
+@pytest.mark.parametrize("name,header,expected", [
+    ("log.csv", "time,id,x,y,heading,vx,vy\n0,ego,1,2,0,1,0\n", ["driving-simulator"]),
+    ("boxes.csv", "frame,track_id,cx,cy,w,h,angle,class\n0,1,1,1,3,1,0,car\n", ["rotated-boxes"]),
+    ("fcd.csv", "timestep_time;vehicle_id;vehicle_x;vehicle_y;vehicle_angle\n", ["sumo-fcd"]),
+    ("gt.txt", "1,1,100,200,30,60,1,-1,-1,-1\n", ["infra-lwir"]),
+    ("marks.csv", "u,v,x,y\n1,2,3,4\n", ["infra-lwir"]),
+    ("tracks.csv", "time,track_id,class,x,y,z,yaw,length,width,height\n", ["infra-lidar"]),
+    ("01_tracks.csv", "frame,id,x,y,width,height,xVelocity,yVelocity\n", ["highd"]),
+    ("07_tracks.csv", "recordingId,trackId,frame,xCenter,yCenter,heading\n", ["ind"]),
+    ("07_tracks.csv", "recordingId,trackId,frame,xCenter,yCenter,heading,laneletId\n", ["exid"]),
+    ("dynamics.csv", "participant_id,step,x,y,vx,vy\n", ["accident"]),
+    ("run.xml", '<?xml version="1.0"?>\n<fcd-export>\n<timestep time="0"/>\n', ["sumo-fcd"]),
+    ("other.csv", "a,b\n1,2\n", ["driving-simulator", "infra-lidar", "infra-lwir", "rotated-boxes",
+                                  "sumo-fcd"]),
+])
+def test_each_importer_recognises_its_files(tmp_path, name, header, expected):
+    """Where several importers' patterns match a file, their ``sniff`` of its first bytes tells
+    them apart; where none recognises it, every match is named (validate asks for --from)."""
+    from aveas_format.converters.registry import importers_for
+
+    p = tmp_path / name
+    p.write_text(header)
+    assert [n for n in importers_for(p) if n != "partner-csv"] == expected

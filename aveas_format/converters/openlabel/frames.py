@@ -647,7 +647,7 @@ class _FrameRows:
 def _frame_timestamp(fr: dict[str, Any]) -> Any:
     """``frame_properties.timestamp`` as written: a number (an integer text as an exact int), an
     ISO 8601 text; None where absent or unreadable. Its unit is resolved over all frames."""
-    from aveas_format.converters.common import timestamp_value
+    from aveas_format.converters.common.timestamps import timestamp_value
 
     fp = fr.get("frame_properties")
     return timestamp_value(fp.get("timestamp")) if isinstance(fp, dict) else None

@@ -25,8 +25,9 @@ import numpy as np
 import pyarrow as pa
 from pydantic import Field
 
-from aveas_format.converters.common import (TIMESTAMP_UNITS, load_map_bytes, resolve_timestamps,
-                                            prefetch_sha256, source_block)
+from aveas_format.converters.common.provenance import prefetch_sha256, source_block
+from aveas_format.converters.common.timestamps import TIMESTAMP_UNITS, resolve_timestamps
+from aveas_format.mapref.build import load_map_bytes
 from aveas_format.converters.labels import LabelFilter, implausible_size, label_kind
 from aveas_format.converters.openlabel.findings import (_check_objects, _claims_profile, _jpath,
                                                         _report_frame_findings)
@@ -104,7 +105,8 @@ def _find_map(path: Path, ol: dict[str, Any], map_source, options) -> bytes:
 
 @converter("openlabel", description="ASAM OpenLABEL 1.0 JSON (AVEAS profile and generic cuboids)",
            patterns=("*.json", "*.json.gz", "*.json.zst"), method=None, options=OpenLabelImportOptions,
-           needs_map=False, provides=("partner", "start_time", "license"), writes=import_openlabel_to)
+           needs_map=False, provides=("partner", "start_time", "license"), writes=import_openlabel_to,
+           sniff=(b'"openlabel"',))
 def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImportOptions, parts=None):
     """``parts``: an import that writes its recording itself (:func:`.parts.import_openlabel_to`)."""
     if len(inputs) != 1:
@@ -163,7 +165,7 @@ def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=Non
     that writes its recording itself (:class:`.parts.Parts`; the states are then not in the
     recording returned, but in ``parts.states_file``)."""
     from aveas_format.mapref.build import build_recording
-    from aveas_format.mapref.crs import LocalFrame
+    from aveas_format.crs import LocalFrame
     from aveas_format.opendrive import load_map
 
     options = options or OpenLabelImportOptions()
@@ -281,7 +283,7 @@ def _states_in_memory(fd: _FrameData, uids: list[str], time_of: dict, start_time
 
 def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], path: Path | None) -> str:
     """The CRS: the map's ``<geoReference>``, else the recording's, else ``projection_string``."""
-    from aveas_format.mapref.crs import parse_crs
+    from aveas_format.crs import parse_crs
 
     crs = net.header.geo_reference or rmeta.get("crs")
     if not crs:
@@ -526,7 +528,7 @@ def _to_local(rows: dict[str, np.ndarray], ol: dict[str, Any], local, root_crs: 
     """Box centres and yaw in the map's local frame: through WGS84 where the root coordinate system
     has a CRS (``world_crs``, or a UTM root's name), else the root is the map frame. ``roots``:
     the root coordinate systems of all boxes (default: of ``rows``)."""
-    from aveas_format.mapref.crs import parse_crs
+    from aveas_format.crs import parse_crs
     from aveas_format.numeric import wrap_angle
 
     n = len(rows["time"])

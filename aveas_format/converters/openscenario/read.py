@@ -14,9 +14,11 @@ import numpy as np
 from lxml import etree
 from pydantic import Field
 
-from aveas_format.converters.common import load_map_bytes, wrap_recording
+from aveas_format.converters.common.assemble import to_recording
+from aveas_format.converters.common.boxes import Boxes, Rows, Sensor
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError, report_source
+from aveas_format.mapref.build import load_map_bytes
 from aveas_format.numeric import fmt_num
 from aveas_format.safeio import xml_parser
 
@@ -122,15 +124,43 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
     ``convert``, a ``source.openscenario.*`` rule of ``validate FILE``) naming it and why; an error
     only when none can.
     """
-    from aveas_format.converters.openscenario.params import Catalogs, declare, resolve_tree
     from aveas_format.converters.openscenario.replay import Replay
-    from aveas_format.converters.openscenario.shapes import ShapeError, attr
-    from aveas_format.mapref.crs import LocalFrame
+    from aveas_format.crs import LocalFrame
     from aveas_format.opendrive import load_map
 
     if len(inputs) != 1:
         raise FormatError(f"openscenario: expected one input file, got {len(inputs)}")
     path = Path(inputs[0])
+    root, scope, catalogs = _scenario(path, options)
+    map_bytes = load_map_bytes(_map_of(root, path, map_source))
+    net = load_map(map_bytes)
+    crs = net.header.geo_reference or options.crs
+    info, problems, where = _entities(root, catalogs, path)
+    replay = Replay(root, net, {n: d["length"] for n, d in info.items()}, rate_hz=options.rate_hz,
+                    max_duration=options.max_duration,
+                    frame=LocalFrame(crs, net.header.offset, warn=False) if crs else None,
+                    params=scope)
+    replay.catalogs = catalogs
+    boxes, participants, dropped = _boxes(info, replay.run(), problems, where, path)
+    notes = _report(problems, where, replay, dropped, path)
+    hdr = root.find("FileHeader")
+    sensor = Sensor(
+        method=options.method, provenance=options.provenance,
+        partner=(hdr.get("author") if hdr is not None else None) or "unknown",
+        title=options.title or (hdr.get("description") if hdr is not None else None),
+        platform=f"OpenSCENARIO {path.name}", sensors=[{"id": "scenario", "kind": "simulator"}],
+        extras={"openscenario": {"replay_rate_hz": options.rate_hz, "duration_s": replay.t,
+                                 "catalog_files": [f.name for f in catalogs.files],
+                                 "not_converted": problems, **notes}})
+    return to_recording(boxes, sensor, converter="openscenario", inputs=[path], options=options,
+                        map_bytes=map_bytes, participants=participants)
+
+
+def _scenario(path: Path, options: OpenScenarioImportOptions):
+    """The scenario's XML with its parameters resolved (the options' values over the declared
+    defaults) and its maneuver catalog references inlined; the global parameters; the catalogs."""
+    from aveas_format.converters.openscenario.params import Catalogs, declare, resolve_tree
+
     root = _read(path)
     declared = {d.get("name") for d in root.iterfind("ParameterDeclarations/ParameterDeclaration")}
     unknown = sorted(set(options.parameter) - declared)
@@ -145,10 +175,14 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
     except FormatError as e:
         raise FormatError(e.message, path=e.path or path, **e.where) from None
     _inline_catalog_maneuvers(root, catalogs, path)
-    map_bytes = load_map_bytes(_map_of(root, path, map_source))
-    net = load_map(map_bytes)
-    crs = net.header.geo_reference or options.crs
-    frame = LocalFrame(crs, net.header.offset, warn=False) if crs else None
+    return root, scope, catalogs
+
+
+def _entities(root, catalogs, path: Path):
+    """Per entity that can be converted: class, bounding box (size and its centre's offset from
+    the reference point), the ids and role of this toolkit's export; and the others: why not
+    (``problems``) and the finding's code and XML line (``where``)."""
+    from aveas_format.converters.openscenario.shapes import ShapeError, attr
 
     problems: dict[str, str] = {}
     where: dict[str, tuple[str, int | None]] = {}  # entity -> code, XML line of its problem
@@ -184,12 +218,16 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
                       "participant_id": props.get("aveas:participant_id"),
                       "source_id": props.get("aveas:source_id") or name,
                       "role": props.get("aveas:role")}
-    replay = Replay(root, net, {n: d["length"] for n, d in info.items()}, rate_hz=options.rate_hz,
-                    max_duration=options.max_duration, frame=frame, params=scope)
-    replay.catalogs = catalogs
-    ents = replay.run()
+    return info, problems, where
 
-    rows: dict[str, list] = {k: [] for k in ("participant_id", "time", "x", "y", "z", "heading")}
+
+def _boxes(info: dict[str, dict[str, Any]], ents, problems: dict[str, str],
+           where: dict[str, tuple[str, int | None]], path: Path):
+    """The replayed entities' boxes (their reference points moved to the footprint centre; of
+    vertices repeating a time the first), their participants' columns, and the repeated times
+    with another position, per entity. An entity without rows joins ``problems``; none
+    converted is an error."""
+    rows: dict[str, list] = {k: [] for k in ("code", "time", "x", "y", "z", "heading")}
     part: dict[str, list] = {k: [] for k in ("participant_id", "source_id", "class", "length",
                                              "width", "height", "role")}
     dropped: list[tuple[str, float]] = []
@@ -225,7 +263,7 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
         for tt, x, y, z, h in sorted(first.values()):
             hh = h if np.isfinite(h) else 0.0
             # the entity's reference point -> the footprint centre (the bounding box centre)
-            rows["participant_id"].append(pid)
+            rows["code"].append(len(part["participant_id"]))
             rows["time"].append(tt)
             rows["x"].append(x + d["cx"] * math.cos(hh) - d["cy"] * math.sin(hh))
             rows["y"].append(y + d["cx"] * math.sin(hh) + d["cy"] * math.cos(hh))
@@ -242,6 +280,21 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
                                                                if where[n][1] else "")
                                               for n, w in problems.items())
                              if problems else " (the file has no ScenarioObject)"), path=path)
+    heading = np.asarray(rows["heading"], np.float64)
+    boxes = Boxes(rows["code"], rows["time"], rows["x"], rows["y"], source_ids=part["source_id"],
+                  rows=Rows([path]), z=np.asarray(rows["z"], np.float64),
+                  heading=None if np.isnan(heading).any() else heading)  # (else from the motion)
+    participants = {k: np.asarray(v, dtype=object if k in ("source_id", "class", "role") else
+                                  np.int64 if k == "participant_id" else np.float64)
+                    for k, v in part.items()}
+    return boxes, participants, dropped
+
+
+def _report(problems: dict[str, str], where: dict[str, tuple[str, int | None]], replay,
+            dropped: list[tuple[str, float]], path: Path) -> dict[str, Any]:
+    """The import's findings about the file (entities not converted, vertices after the end or
+    repeating a time with another position, what the kinematic replay does not carry out), and
+    the latter as notes for ``extras``."""
     for name, why in problems.items():
         report_source(where[name][0], f"entity {name!r} not converted: {why}", file=str(path),
                       entity=name, line=where[name][1])
@@ -259,7 +312,7 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
                       f"{fmt_num(times[0])} s) with another position and were dropped; the first "
                       "vertex of each time is kept", count=len(times), file=str(path),
                       entity=name, time=times[0])
-    notes = {}
+    notes: dict[str, Any] = {}
     if replay.ignored_actions:
         notes["actions_not_replayed"] = dict(sorted(replay.ignored_actions.items()))
     if replay.ignored_conditions:
@@ -272,24 +325,4 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
                           f"{'replayed' if what == 'action' else 'evaluated (they never hold)'}: "
                           f"{kind} ({n})",
                           count=n, file=str(path), line=replay.ignored_lines.get(kind))
-    states = {k: np.asarray(v, np.int64 if k == "participant_id" else np.float64)
-              for k, v in rows.items()}
-    if np.isnan(states["heading"]).any():
-        del states["heading"]  # from the direction of motion
-    order = np.lexsort((states["time"], states["participant_id"]))
-    states = {k: v[order] for k, v in states.items()}
-    participants = {k: np.asarray(v, dtype=object if k in ("source_id", "class", "role") else
-                                  np.int64 if k == "participant_id" else np.float64)
-                    for k, v in part.items()}
-    hdr = root.find("FileHeader")
-    title = options.title or (hdr.get("description") if hdr is not None else None)
-    partner = (hdr.get("author") if hdr is not None else None) or "unknown"
-    return wrap_recording(
-        "openscenario", [path], options, map_bytes=map_bytes, participants=participants,
-        states=states, method=options.method, provenance=options.provenance, partner=partner,
-        acquisition={"platform": f"OpenSCENARIO {path.name}",
-                     "sensors": [{"id": "scenario", "kind": "simulator"}]},
-        extras={"openscenario": {"replay_rate_hz": options.rate_hz,
-                                 "duration_s": replay.t, "catalog_files": [f.name for f in catalogs.files],
-                                 "not_converted": problems, **notes}},
-        **({"title": title} if title else {}))
+    return notes

@@ -31,10 +31,7 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
-from aveas_format.converters.common import (
-    companion_map,
-    companion_map_path,
-)
+from aveas_format.converters.common.companion import companion_map, companion_map_path
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.errors import FormatError
 

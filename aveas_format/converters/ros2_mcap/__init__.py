@@ -66,15 +66,15 @@ Modules (what lives where, from the bottom up):
 
 - ``options``: :class:`Ros2McapOptions` and the message-type tables (supported types, preferred
   topics, class labels).
-- ``decode``: opening the MCAP files and decoding their CDR messages (``_channels``; ``_Decoders``:
+- ``decode``: opening the MCAP files and decoding their CDR messages (``channels``; ``Decoders``:
   rosbags' generated deserialisers, mcap-ros2-support's decoder as the fallback; the errors a
   corrupt file raises).
-- ``tree``: the transform samples (``_Edges``) and the transform tree (``_Tree``: interpolated
+- ``tree``: the transform samples (``TransformSamples``) and the transform tree (``TransformTree``: interpolated
   lookups chained to the map frame, with the ego's pose covariance).
 - ``messages``: the per-message readers (object arrays, odometry, NavSatFix, tf) -> flat rows.
-- ``read``: which topics to read and the one pass over their messages (``_read``).
-- ``frames``: the frame and covariance maths (``_cov3``, ``_to_map``, ``_twist_to_map``,
-  ``_apply_offset``).
+- ``read``: which topics to read and the one pass over their messages (``read_topics``).
+- ``frames``: the frame and covariance maths (``cov3``, ``to_map``, ``twist_to_map``,
+  ``apply_offset``).
 - ``converter``: ``convert_ros2_mcap`` (registered as ``ros2-mcap``) and its steps: the ego track,
   the objects in the map frame, the states, the participants.
 

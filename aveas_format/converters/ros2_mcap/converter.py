@@ -11,41 +11,34 @@ from typing import Any
 
 import numpy as np
 
-from aveas_format.converters.common import (
-    covariance_std_corr,
-    factorize,
-    group_mean,
-    group_std,
-    load_map_bytes,
-    nullable,
-    utc_iso_from_ns,
-    wrap_recording,
-)
+from aveas_format.converters.common.assemble import group_mean, participant_columns, to_recording
+from aveas_format.converters.common.boxes import MEASURED, Boxes, Rows, Sensor, Sizes
+from aveas_format.converters.common.geometry import covariance_std_corr
+from aveas_format.converters.common.tables import factorize
+from aveas_format.converters.common.timestamps import utc_iso_from_ns
 from aveas_format.converters.registry import converter
-from aveas_format.converters.ros2_mcap.frames import _apply_offset, _cov3, _to_map, _twist_to_map
-from aveas_format.converters.ros2_mcap.messages import _Objects
+from aveas_format.converters.ros2_mcap.frames import apply_offset, cov3, to_map, twist_to_map
+from aveas_format.converters.ros2_mcap.messages import ObjectRows
 from aveas_format.converters.ros2_mcap.options import CLS, NCLS, Ros2McapOptions
-from aveas_format.converters.ros2_mcap.read import _read
-from aveas_format.converters.ros2_mcap.tree import _Tree
+from aveas_format.converters.ros2_mcap.read import read_topics
+from aveas_format.converters.ros2_mcap.tree import TransformTree
 from aveas_format.errors import FormatError
+from aveas_format.mapref.build import load_map_bytes
 from aveas_format.numeric import central_differences
 from aveas_format.schema.taxonomy import CLASSES
-
-#: the uncertainty columns of states, null where unknown
-_STD_COLUMNS = ("x_std", "y_std", "xy_corr", "heading_std", "vx_std", "vy_std", "vxvy_corr")
-
 
 @converter("ros2-mcap", description="ROS 2 MCAP of a road vehicle: Autoware/derived_object_msgs/"
            "vision_msgs objects + Odometry/NavSatFix ego + /tf",
            patterns=("*.mcap",), method="road_vehicle", options=Ros2McapOptions,
-           requires=("mcap", "mcap_ros2"), extra="ros2", provides=("start_time",))
+           requires=("mcap", "mcap_ros2"), extra="ros2", provides=("start_time",),
+           sniff=(b"ros2msg", b"ros2idl"))
 def convert_ros2_mcap(inputs: list[Path], *, map_source, options: Ros2McapOptions):
     o = options
     if o.ego_class not in CLASSES:
         raise FormatError(f"ego_class {o.ego_class!r} is not one of {list(CLASSES)}")
-    types, obj_topics, odom, fix, objs, edges, ego_odom, ego_fix = _read(inputs, o)
+    types, obj_topics, odom, fix, objs, edges, ego_odom, ego_fix = read_topics(inputs, o)
     map_bytes = load_map_bytes(map_source)
-    tree = _Tree(edges, o.map_frame, int(o.tf_tolerance_s * 1e9))
+    tree = TransformTree(edges, o.map_frame, int(o.tf_tolerance_s * 1e9))
     first = inputs[0]
 
     ego = None
@@ -55,25 +48,22 @@ def convert_ros2_mcap(inputs: list[Path], *, map_source, options: Ros2McapOption
         ego = _ego_from_navsatfix(ego_fix, fix, tree, o, map_bytes)
     rows = _objects_in_map(objs, obj_topics, tree, ego, o, first)
     t0 = _time_zero(rows, ego, first)
-
-    n_ego = int(ego is not None)
-    parts = [] if ego is None else [_ego_states(ego, o)]
-    p_extra: dict[str, Any] = {}
-    if rows and len(rows["t_ns"]):
-        obj_states, p_extra = _object_states(rows, t0, n_ego, o, first)
-        parts.append(obj_states)
-    states = {k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in parts[0]}
-    states["time"] = (states.pop("t_ns") - t0) / 1e9
-    for k in _STD_COLUMNS:
-        states[k] = nullable(states[k])
-
-    return wrap_recording(
-        "ros2-mcap", inputs, options, map_bytes=map_bytes,
-        participants=_participants(ego, p_extra, o), states=states, method="road_vehicle",
-        provenance="natural", start_time=utc_iso_from_ns(t0),
-        acquisition={"platform": "road vehicle (ROS 2)",
-                     "sensors": _sensors(ego, obj_topics, types, o)},
-    )
+    parts = []
+    if ego is not None:  # participant 0
+        e = _ego_states(ego, o)
+        parts.append(e | {"time": (e.pop("t_ns") - t0) / 1e9})
+    obj = _object_boxes(rows, t0, o, first) if rows and len(rows["t_ns"]) else None
+    if obj is not None:
+        parts.append({k: v for k, v in obj.columns.items() if k not in MEASURED}
+                     | {"participant_id": obj.pid + len(parts), "time": obj.time})
+    cols = {k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in parts[0]}
+    source_ids = (["ego"] if ego is not None else []) + ([] if obj is None else list(obj.source_ids))
+    boxes = Boxes(cols.pop("participant_id"), cols.pop("time"), cols.pop("x"), cols.pop("y"),
+                  source_ids=source_ids, rows=Rows([first]), **cols)
+    sensor = Sensor(method="road_vehicle", start_time=utc_iso_from_ns(t0),
+                    platform="road vehicle (ROS 2)", sensors=_sensors(ego, obj_topics, types, o))
+    return to_recording(boxes, sensor, converter="ros2-mcap", inputs=inputs, options=options,
+                        map_bytes=map_bytes, participants=_participants(ego, obj, o))
 
 
 # --- ego track -------------------------------------------------------------------------------------
@@ -88,15 +78,15 @@ def _sorted_unique(t_ns: list[int]) -> tuple[np.ndarray, np.ndarray]:
     return order, t[order]
 
 
-def _ego_from_odometry(ego_odom: dict[str, list], odom: str, tree: _Tree, o: Ros2McapOptions,
+def _ego_from_odometry(ego_odom: dict[str, list], odom: str, tree: TransformTree, o: Ros2McapOptions,
                        first: Path) -> dict[str, Any]:
     """The ego track in the map frame from the odometry; its frame joins the transform tree
     (with its pose covariance) unless /tf has it."""
     order, t = _sorted_unique(ego_odom["t"])
     pose = np.asarray(ego_odom["pose"], np.float64)[order]
-    pcov = _cov3(np.asarray(ego_odom["pcov"])[order])
+    pcov = cov3(np.asarray(ego_odom["pcov"])[order])
     twist = np.asarray(ego_odom["twist"], np.float64)[order]
-    tcov = _cov3(np.asarray(ego_odom["tcov"])[order])
+    tcov = cov3(np.asarray(ego_odom["tcov"])[order])
     parent, child = ego_odom["frame"][0], ego_odom["child"][0] or o.base_frame
     if child not in tree.e:
         tree.add(parent, child, t, pose[:, :3], pose[:, 3:], pcov.reshape(-1, 9), odom)
@@ -105,19 +95,19 @@ def _ego_from_odometry(ego_odom: dict[str, list], odom: str, tree: _Tree, o: Ros
         raise FormatError(f"odometry frame {parent!r} has no transform to {o.map_frame!r} "
                           f"(topic {odom}); set map_frame or record /tf", path=first)
     r_p, p_p, ok_p, _ = tree.lookup(parent, t)
-    pos, heading, cov, th = _to_map(r_p, p_p, None, pose, pcov)
-    v, vcov = _twist_to_map(heading, twist, tcov, cov[:, 2, 2])
+    pos, heading, cov, th = to_map(r_p, p_p, None, pose, pcov)
+    v, vcov = twist_to_map(heading, twist, tcov, cov[:, 2, 2])
     return {"t": t, "x": pos[:, 0], "y": pos[:, 1], "z": pos[:, 2], "heading": heading,
             "cov": cov, "v": v, "vcov": vcov, "yaw_rate": twist[:, 2],
             "yaw_rate_var": tcov[:, 2, 2], "source": odom, "frame": child}
 
 
-def _ego_from_navsatfix(ego_fix: dict[str, list], fix: str, tree: _Tree, o: Ros2McapOptions,
+def _ego_from_navsatfix(ego_fix: dict[str, list], fix: str, tree: TransformTree, o: Ros2McapOptions,
                         map_bytes: bytes) -> dict[str, Any]:
     """The ego track in the map frame from NavSatFix lon/lat (projected through the map's CRS;
     heading and velocity from the motion); map -> base_frame joins the transform tree unless the
     tree already reaches base_frame."""
-    from aveas_format.mapref.crs import LocalFrame
+    from aveas_format.crs import LocalFrame
     from aveas_format.opendrive import load_map
 
     net = load_map(map_bytes)
@@ -160,7 +150,7 @@ def _ego_from_navsatfix(ego_fix: dict[str, list], fix: str, tree: _Tree, o: Ros2
 
 # --- objects ---------------------------------------------------------------------------------------
 
-def _objects_in_map(objs: _Objects, obj_topics: list[str], tree: _Tree, ego: dict[str, Any] | None,
+def _objects_in_map(objs: ObjectRows, obj_topics: list[str], tree: TransformTree, ego: dict[str, Any] | None,
                     o: Ros2McapOptions, first: Path) -> dict[str, np.ndarray]:
     """Every object row in the map frame (positions, headings, velocities, covariances), frame by
     frame; rows outside the transforms' time spans are dropped with a warning. {} without rows."""
@@ -169,9 +159,9 @@ def _objects_in_map(objs: _Objects, obj_topics: list[str], tree: _Tree, ego: dic
         return {}
     t_ns = np.asarray(objs.t_ns, np.int64)
     pose = np.asarray(objs.pose, np.float64)
-    pcov = _cov3(objs.pcov)
+    pcov = cov3(objs.pcov)
     twist = np.asarray(objs.twist, np.float64)
-    tcov = _cov3(objs.tcov)
+    tcov = cov3(objs.tcov)
     kind = np.asarray(objs.twist_kind)
     topic = np.asarray(objs.topic)
     bad = ~np.isfinite(pose).all(axis=1)
@@ -203,7 +193,7 @@ def _objects_in_map(objs: _Objects, obj_topics: list[str], tree: _Tree, ego: dic
                 f"ego with base_frame={fr!r})", path=first)
         r_f, p_f, ok, cov_f = tree.lookup(frn, t_ns[sel])
         valid[sel] = ok
-        pos, hd, cv, th = _to_map(r_f, p_f, cov_f, pose[sel], pcov[sel])
+        pos, hd, cv, th = to_map(r_f, p_f, cov_f, pose[sel], pcov[sel])
         x[sel], y[sel], z[sel] = pos[:, 0], pos[:, 1], pos[:, 2]
         heading[sel] = hd
         cov[sel] = cv
@@ -212,12 +202,12 @@ def _objects_in_map(objs: _Objects, obj_topics: list[str], tree: _Tree, ego: dic
         hdr = kind[sel] == 1
         if body.any():
             b = sel[body]
-            v, vc = _twist_to_map(hd[body], twist[b], tcov[b], cv[body, 2, 2])
+            v, vc = twist_to_map(hd[body], twist[b], tcov[b], cv[body, 2, 2])
             vel[b], vcov[b] = v, vc
         if hdr.any():
             h = sel[hdr]
             var_th = cov_f[0][hdr, 2, 2] if cov_f is not None else np.zeros(hdr.sum())
-            v, vc = _twist_to_map(th[hdr], twist[h], tcov[h], var_th)
+            v, vc = twist_to_map(th[hdr], twist[h], tcov[h], var_th)
             if o.relative_velocity and ego is not None and frn != o.map_frame:
                 v, vc = _add_ego_motion(v, vc, t_ns[h], x[h], y[h], ego)
             vel[h], vcov[h] = v, vc
@@ -236,24 +226,21 @@ def _objects_in_map(objs: _Objects, obj_topics: list[str], tree: _Tree, ego: dic
     return rows
 
 
-def _road_users(r: dict[str, np.ndarray], codes: np.ndarray, uniq: np.ndarray, o: Ros2McapOptions):
-    """Drop the tracks whose classification is mostly a label that is no road user (unless
-    ``keep_non_road_users``), with a warning counting them by label; ``(rows, codes, uniq)``."""
-    if o.keep_non_road_users or not len(codes) or not (r["nru"] > 0.5).any():
-        return r, codes, uniq
-    skip = group_mean(codes, r["nru"], len(uniq)) > 0.5
+def _road_users(boxes: Boxes, nru: np.ndarray, nru_label: np.ndarray, o: Ros2McapOptions) -> Boxes:
+    """The boxes without the tracks whose classification is mostly a label that is no road user
+    (unless ``keep_non_road_users``), with a warning counting them by label."""
+    if o.keep_non_road_users or not len(boxes) or not (nru > 0.5).any():
+        return boxes
+    skip = group_mean(boxes.pid, nru, boxes.m) > 0.5
     if not skip.any():
-        return r, codes, uniq
+        return boxes
     from collections import Counter
 
-    first = np.unique(codes, return_index=True)[1]
-    names = Counter(str(r["nru_label"][i]) or "no road user" for i in first[skip])
+    first = boxes.first_rows()
+    names = Counter(str(nru_label[i]) or "no road user" for i in first[skip])
     warnings.warn(f"skipped {int(skip.sum())} tracks: " + ", ".join(f"{c} {n}" for n, c in sorted(names.items()))
                   + " (no road user); option keep_non_road_users=true imports them", stacklevel=4)
-    keep = ~skip[codes]
-    r = {k: v[keep] for k, v in r.items()}
-    codes, uniq = factorize(r["key"])
-    return r, codes, uniq
+    return boxes.drop_participants(skip)
 
 
 def _add_ego_motion(v: np.ndarray, vc: np.ndarray, t_ns: np.ndarray, x: np.ndarray, y: np.ndarray,
@@ -298,7 +285,7 @@ def _ego_states(ego: dict[str, Any], o: Ros2McapOptions) -> dict[str, np.ndarray
     j[:, 0, 0] = j[:, 1, 1] = 1.0
     j[:, 0, 2], j[:, 1, 2] = -d * hy, d * hx
     cxy = np.einsum("nij,njk,nlk->nil", j, ecov, j)
-    ex, ey, eh, cxy, evx, evy, evc = _apply_offset(o.frame_offset, ex, ey, ego["heading"], cxy,
+    ex, ey, eh, cxy, evx, evy, evc = apply_offset(o.frame_offset, ex, ey, ego["heading"], cxy,
                                                   ego["v"][:, 0], ego["v"][:, 1], ego["vcov"])
     sx, sy, rho = covariance_std_corr(cxy)
     vsx, vsy, vrho = covariance_std_corr(evc)
@@ -307,72 +294,58 @@ def _ego_states(ego: dict[str, Any], o: Ros2McapOptions) -> dict[str, np.ndarray
                 heading_std=np.sqrt(ecov[:, 2, 2]), vx_std=vsx, vy_std=vsy, vxvy_corr=vrho)
 
 
-def _object_states(rows: dict[str, np.ndarray], t0: int, n_ego: int, o: Ros2McapOptions,
-                   first: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """The objects' state rows (participants from ``n_ego`` on, one per track key, repeated
-    (track, stamp) samples dropped with a warning) and per participant its source id, mean PMF,
-    mean dimensions and their spread."""
+def _object_boxes(rows: dict[str, np.ndarray], t0: int, o: Ros2McapOptions, first: Path) -> Boxes:
+    """The objects' boxes (sorted; a repeated (track, stamp) keeps the first, with a warning;
+    tracks that are no road user dropped): velocities from positions where the source has none,
+    the heading from the motion where it is unavailable or only known up to its sign, everything
+    in the OpenDRIVE map's frame, with the per-box dimensions and class PMFs."""
+    from aveas_format.mapref.build import heading_from_velocity
+
     codes, uniq = factorize(rows["key"])
-    order = np.lexsort((rows["t_ns"], codes))
-    r = {k: v[order] for k, v in rows.items()}
-    codes = codes[order]
-    dup = np.r_[False, (codes[1:] == codes[:-1]) & (r["t_ns"][1:] == r["t_ns"][:-1])]
-    if dup.any():
-        k = int(np.flatnonzero(dup)[0])
-        warnings.warn(f"{first}: {int(dup.sum())} object sample(s) repeat a (track, stamp) and "
-                      f"were dropped, the first kept (e.g. track {uniq[codes[k]]!r} at stamp "
-                      f"{int(r['t_ns'][k])} ns)", stacklevel=3)
-    r = {k: v[~dup] for k, v in r.items()}
-    codes = codes[~dup]
-    r, codes, uniq = _road_users(r, codes, uniq, o)
-    m = len(uniq)
-    ts = (r["t_ns"] - t0) / 1e9
+    boxes = Boxes(codes, (rows["t_ns"] - t0) / 1e9, rows["x"], rows["y"], source_ids=list(uniq),
+                  rows=Rows([first]), duplicates="first", length=rows["dims"][:, 0],
+                  width=rows["dims"][:, 1], height=rows["dims"][:, 2], class_pmf=rows["pmf"]).sort()
+    r = {k: rows[k][boxes.order] for k in ("heading", "cov", "vel", "vcov", "orient", "nru", "nru_label")}
+    keep = _road_users(boxes, r["nru"], r["nru_label"], o)
+    if keep is not boxes:
+        sel = np.flatnonzero(np.isin(boxes.order, keep.order))
+        r = {k: v[sel] for k, v in r.items()}
+        boxes = keep
+    codes, ts = boxes.pid, boxes.time
     # velocities where the source has none: from positions
     psx = np.sqrt(np.clip(r["cov"][:, 0, 0], 0, None))
     psy = np.sqrt(np.clip(r["cov"][:, 1, 1], 0, None))
-    fvx, fvy, fvxs, fvys = central_differences(codes, ts, r["x"], r["y"], psx, psy)
+    fvx, fvy, fvxs, fvys = central_differences(codes, ts, boxes["x"], boxes["y"], psx, psy)
     nov = np.isnan(r["vel"]).any(axis=1)
     r["vel"][nov] = np.c_[fvx, fvy][nov]
     r["vcov"][nov] = 0.0
     r["vcov"][nov, 0, 0], r["vcov"][nov, 1, 1] = fvxs[nov] ** 2, fvys[nov] ** 2
     # heading where unavailable or only known up to its sign
-    from aveas_format.mapref.build import heading_from_velocity
-
     hv = heading_from_velocity(codes, r["vel"][:, 0], r["vel"][:, 1])
     moving = np.hypot(r["vel"][:, 0], r["vel"][:, 1]) >= 0.5
-    h = r["heading"]
-    h = np.where(r["orient"] == 0, hv, h)
-    flip = (r["orient"] == 1) & moving & (np.cos(h - hv) < 0)
-    h = np.where(flip, h + np.pi, h)
+    h = np.where(r["orient"] == 0, hv, r["heading"])
+    h = np.where((r["orient"] == 1) & moving & (np.cos(h - hv) < 0), h + np.pi, h)
     r["cov"][r["orient"] == 0, 2, 2] = np.nan
-    x, y, h, cxy, vx, vy, vc = _apply_offset(o.frame_offset, r["x"], r["y"], h,
-                                             r["cov"][:, :2, :2], r["vel"][:, 0],
-                                             r["vel"][:, 1], r["vcov"])
+    x, y, h, cxy, vx, vy, vc = apply_offset(o.frame_offset, boxes["x"], boxes["y"], h,
+                                            r["cov"][:, :2, :2], r["vel"][:, 0], r["vel"][:, 1],
+                                            r["vcov"])
     sx, sy, rho = covariance_std_corr(cxy)
     vsx, vsy, vrho = covariance_std_corr(vc)
-    states = dict(participant_id=codes + n_ego, t_ns=r["t_ns"], x=x, y=y, heading=h, vx=vx, vy=vy,
-                  x_std=sx, y_std=sy, xy_corr=rho, heading_std=np.sqrt(r["cov"][:, 2, 2]),
-                  vx_std=vsx, vy_std=vsy, vxvy_corr=vrho)
-    dims = r["dims"]
-    mean_dims = group_mean(codes, dims, m)
-    std_dims = np.stack([group_std(codes, dims[:, k], m) for k in range(3)], -1)
-    pmf = group_mean(codes, r["pmf"], m)
-    pmf = pmf / pmf.sum(axis=1, keepdims=True)
-    sizes = np.where(np.isfinite(mean_dims) & (mean_dims > 0), mean_dims, np.nan)
-    if np.isnan(sizes[:, :2]).any():
-        bad = int(np.flatnonzero(np.isnan(sizes[:, :2]).any(axis=1))[0])
-        raise FormatError(f"object {uniq[bad]!r} has no positive length/width in any message",
-                          path=first)
-    return states, {"source_id": list(uniq), "pmf": pmf, "sizes": sizes, "size_std": std_dims}
+    for k, v in dict(x=x, y=y, heading=h, vx=vx, vy=vy, x_std=sx, y_std=sy, xy_corr=rho,
+                     heading_std=np.sqrt(r["cov"][:, 2, 2]), vx_std=vsx, vy_std=vsy,
+                     vxvy_corr=vrho).items():
+        boxes[k] = v
+    return boxes
 
 
 # --- participants and sensors ----------------------------------------------------------------------
 
-def _participants(ego: dict[str, Any] | None, p_extra: dict[str, Any],
-                  o: Ros2McapOptions) -> dict[str, Any]:
-    """The participants table: the ego (from the options) first, then the objects."""
+def _participants(ego: dict[str, Any] | None, obj: Boxes | None, o: Ros2McapOptions
+                  ) -> dict[str, Any]:
+    """The participants' columns: the ego (from the options) first, then the objects (their
+    boxes' mean dimensions with their spread, mean class PMF)."""
     n_ego = int(ego is not None)
-    nobj = len(p_extra.get("source_id", []))
+    nobj = 0 if obj is None else obj.m
     mtot = n_ego + nobj
     pmf_all = np.zeros((mtot, NCLS), np.float32)
     length = np.empty(mtot)
@@ -386,16 +359,16 @@ def _participants(ego: dict[str, Any] | None, p_extra: dict[str, Any],
         length[0], width[0], height[0] = o.ego_length, o.ego_width, o.ego_height
         lstd[0] = wstd[0] = hstd[0] = 0.0
     if nobj:
-        pmf_all[n_ego:] = p_extra["pmf"]
-        length[n_ego:], width[n_ego:], height[n_ego:] = p_extra["sizes"].T
-        lstd[n_ego:], wstd[n_ego:], hstd[n_ego:] = p_extra["size_std"].T
+        p = participant_columns(obj, Sizes(), None)
+        pmf_all[n_ego:] = p["class_pmf"]
+        for a, k in ((length, "length"), (width, "width"), (height, "height"), (lstd, "length_std"),
+                     (wstd, "width_std"), (hstd, "height_std")):
+            a[n_ego:] = np.asarray(p[k].to_numpy(zero_copy_only=False) if hasattr(p[k], "to_numpy")
+                                   else p[k], np.float64)
     participants = {
-        "participant_id": np.arange(mtot, dtype=np.int64),
-        "source_id": (["ego"] if n_ego else []) + [str(s) for s in p_extra.get("source_id", [])],
         "class": np.asarray(CLASSES, dtype=object)[np.argmax(pmf_all, axis=1)],
-        "class_pmf": pmf_all,
-        "length": length, "width": width, "height": nullable(height),
-        "length_std": nullable(lstd), "width_std": nullable(wstd), "height_std": nullable(hstd),
+        "class_pmf": pmf_all, "length": length, "width": width, "height": height,
+        "length_std": lstd, "width_std": wstd, "height_std": hstd,
         "role": (["recording_vehicle"] if n_ego else []) + ["observed"] * nobj,
         "provenance": ["natural"] * mtot,
     }

@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from aveas_format.converters.common import matrix_yaw, quaternion_matrix, rotation_2d
+from aveas_format.converters.common.geometry import matrix_yaw, quaternion_matrix, rotation_2d
 
 
-def _cov3(flat: np.ndarray) -> np.ndarray:
+def cov3(flat: np.ndarray) -> np.ndarray:
     """Flat 3x3 blocks -> (n, 3, 3); all-zero or negative-variance blocks (unknown) -> nan."""
     c = np.asarray(flat, np.float64).reshape(-1, 3, 3)
     unknown = np.all(c == 0, axis=(1, 2)) | (c[:, 0, 0] < 0)  # all zero / -1: unknown (ROS custom)
@@ -18,7 +18,7 @@ def _cov3(flat: np.ndarray) -> np.ndarray:
     return c
 
 
-def _to_map(r_f: np.ndarray, p_f: np.ndarray, cov_f, pose: np.ndarray, pcov: np.ndarray):
+def to_map(r_f: np.ndarray, p_f: np.ndarray, cov_f, pose: np.ndarray, pcov: np.ndarray):
     """Object poses in a frame -> map: position, heading, (x, y, yaw) covariance (n,3,3)."""
     pos = np.einsum("nij,nj->ni", r_f, pose[:, :3]) + p_f
     r_obj = np.einsum("nij,njk->nik", r_f, quaternion_matrix(pose[:, 3:]))
@@ -43,7 +43,7 @@ def _to_map(r_f: np.ndarray, p_f: np.ndarray, cov_f, pose: np.ndarray, pcov: np.
     return pos, heading, cov, th
 
 
-def _twist_to_map(angle: np.ndarray, twist: np.ndarray, tcov: np.ndarray, var_angle: np.ndarray):
+def twist_to_map(angle: np.ndarray, twist: np.ndarray, tcov: np.ndarray, var_angle: np.ndarray):
     """Rotate (vx, vy) by ``angle``; covariance R V R^T + g var(angle) g^T."""
     r = rotation_2d(angle)
     v = np.einsum("nij,nj->ni", r, twist[:, :2])
@@ -53,7 +53,7 @@ def _twist_to_map(angle: np.ndarray, twist: np.ndarray, tcov: np.ndarray, var_an
     return v, cov
 
 
-def _apply_offset(offset, x, y, heading, cov_xy, vx, vy, cov_v):
+def apply_offset(offset, x, y, heading, cov_xy, vx, vy, cov_v):
     """Map-frame positions, headings, velocities and their covariances -> the OpenDRIVE map's
     local frame, in which the map frame has the pose ``offset`` = (x, y, yaw)."""
     ox, oy, oyaw = offset

@@ -20,13 +20,13 @@ from aveas_format.converters.ros2_mcap.options import (
     T_TRACKED,
     Ros2McapOptions,
 )
-from aveas_format.converters.ros2_mcap.tree import _Edges
+from aveas_format.converters.ros2_mcap.tree import TransformSamples
 
 # 3x3 sub-blocks (x, y, yaw) of a row-major 6x6 covariance and (vx, vy, wz) of a twist covariance
 _SUB = np.array([0, 1, 5, 6, 7, 11, 30, 31, 35])
 
 @dataclass
-class _Objects:
+class ObjectRows:
     """Flat per-object rows of every object topic (filled per message, then vectorised)."""
 
     t_ns: list[int] = field(default_factory=list)
@@ -46,7 +46,7 @@ class _Objects:
     where: list[tuple[int, int]] = field(default_factory=list)  # (message index, object index)
 
 
-def _stamp(header, log_time: int) -> tuple[int, bool]:
+def header_stamp(header, log_time: int) -> tuple[int, bool]:
     t = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
     return (t, True) if t != 0 else (int(log_time), False)
 
@@ -72,7 +72,7 @@ def _pmf_one(label: str, p: float = 1.0) -> np.ndarray:
     return out
 
 
-def _read_tracked(msg, objs: _Objects, t_ns: int, ti: int, mi: int, opts: Ros2McapOptions) -> None:
+def read_tracked(msg, objs: ObjectRows, t_ns: int, ti: int, mi: int, opts: Ros2McapOptions) -> None:
     frame = msg.header.frame_id
     for oi, o in enumerate(msg.objects):
         if o.existence_probability < opts.min_existence_probability:
@@ -115,7 +115,7 @@ def _read_tracked(msg, objs: _Objects, t_ns: int, ti: int, mi: int, opts: Ros2Mc
         objs.where.append((mi, oi))
 
 
-def _read_derived(msg, objs: _Objects, t_ns: int, ti: int, mi: int, opts: Ros2McapOptions) -> None:
+def read_derived(msg, objs: ObjectRows, t_ns: int, ti: int, mi: int, opts: Ros2McapOptions) -> None:
     for oi, o in enumerate(msg.objects):
         frame = o.header.frame_id or msg.header.frame_id
         dims_in = list(o.shape.dimensions)
@@ -148,7 +148,7 @@ def _read_derived(msg, objs: _Objects, t_ns: int, ti: int, mi: int, opts: Ros2Mc
         objs.where.append((mi, oi))
 
 
-def _read_det3d(msg, objs: _Objects, t_ns: int, ti: int, mi: int, opts: Ros2McapOptions) -> None:
+def read_det3d(msg, objs: ObjectRows, t_ns: int, ti: int, mi: int, opts: Ros2McapOptions) -> None:
     for oi, d in enumerate(msg.detections):
         frame = d.header.frame_id or msg.header.frame_id
         pmf = np.zeros(NCLS)
@@ -182,22 +182,22 @@ def _read_det3d(msg, objs: _Objects, t_ns: int, ti: int, mi: int, opts: Ros2Mcap
         objs.where.append((mi, oi))
 
 
-_READERS = {T_TRACKED: _read_tracked, T_DERIVED: _read_derived, T_DET3D: _read_det3d}
+OBJECT_READERS = {T_TRACKED: read_tracked, T_DERIVED: read_derived, T_DET3D: read_det3d}
 
 
 
-def _read_tf(msg, edges: _Edges, topic: str, log_time: int) -> None:
+def read_tf(msg, edges: TransformSamples, topic: str, log_time: int) -> None:
     """The transforms of a tf2_msgs/TFMessage (static on a topic named ``*tf_static``)."""
     static = topic.endswith("tf_static")
     for tr in msg.transforms:
-        t_ns, ok = _stamp(tr.header, log_time)
+        t_ns, ok = header_stamp(tr.header, log_time)
         q = tr.transform.rotation
         edges.add(tr.header.frame_id.lstrip("/"), tr.child_frame_id.lstrip("/"),
                   t_ns, _vec(tr.transform.translation), (q.x, q.y, q.z, q.w),
                   static, topic)
 
 
-def _read_odometry(msg, ego_odom: dict[str, list], t_ns: int) -> None:
+def read_odometry(msg, ego_odom: dict[str, list], t_ns: int) -> None:
     """One nav_msgs/Odometry sample of the ego."""
     ego_odom["t"].append(t_ns)
     ego_odom["pose"].append(_pose7(msg.pose.pose))
@@ -209,7 +209,7 @@ def _read_odometry(msg, ego_odom: dict[str, list], t_ns: int) -> None:
     ego_odom["child"].append(msg.child_frame_id.lstrip("/"))
 
 
-def _read_navsatfix(msg, ego_fix: dict[str, list], t_ns: int) -> None:
+def read_navsatfix(msg, ego_fix: dict[str, list], t_ns: int) -> None:
     """One sensor_msgs/NavSatFix sample of the ego (a fix; the caller skips status < 0)."""
     ego_fix["t"].append(t_ns)
     ego_fix["lonlat"].append((msg.longitude, msg.latitude))

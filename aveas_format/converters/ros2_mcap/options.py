@@ -28,7 +28,7 @@ PREFERRED_ODOM = ("/localization/kinematic_state", "/odom", "/odometry")
 PREFERRED_FIX = ("/sensing/gnss/ublox/nav_sat_fix", "/fix", "/gps/fix", "/gnss/fix")
 
 
-def _canon(type_name: str) -> str:
+def canonical_type(type_name: str) -> str:
     """``pkg/Type`` or ``pkg/msg/Type`` -> ``pkg/msg/Type``."""
     parts = type_name.split("/")
     return f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else type_name

@@ -1,19 +1,20 @@
 """Reading the MCAP files of one recording: which topics to read (``_select_topics``) and one
-pass over their messages (``_read``), each decoded and handed to its per-message reader."""
+pass over their messages (``read_topics``), each decoded and handed to its per-message reader."""
 
 from __future__ import annotations
 
 import warnings
 from pathlib import Path
 
-from aveas_format.converters.ros2_mcap.decode import _channels, _Decoders, _mcap_errors, _why
+from aveas_format.converters.common.mcap import mcap_errors, why
+from aveas_format.converters.ros2_mcap.decode import DecoderError, Decoders, channels, decode_errors
 from aveas_format.converters.ros2_mcap.messages import (
-    _READERS,
-    _Objects,
-    _read_navsatfix,
-    _read_odometry,
-    _read_tf,
-    _stamp,
+    OBJECT_READERS,
+    ObjectRows,
+    read_navsatfix,
+    read_odometry,
+    read_tf,
+    header_stamp,
 )
 from aveas_format.converters.ros2_mcap.options import (
     OBJECT_TYPES,
@@ -23,9 +24,9 @@ from aveas_format.converters.ros2_mcap.options import (
     T_ODOM,
     T_TF,
     Ros2McapOptions,
-    _canon,
+    canonical_type,
 )
-from aveas_format.converters.ros2_mcap.tree import _Edges
+from aveas_format.converters.ros2_mcap.tree import TransformSamples
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.safeio import check_mcap
 
@@ -62,7 +63,7 @@ def _select_topics(paths: list[Path], opts: Ros2McapOptions):
         if not p.is_file():
             raise RecordingIOError("input not found", path=p)
         check_mcap(p)  # bounded pre-scan: no record or chunk may claim more than the file holds
-        types.update(_channels(p))
+        types.update(channels(p))
     first = paths[0]
     if opts.object_topics is not None:
         for t in opts.object_topics:
@@ -84,7 +85,7 @@ def _select_topics(paths: list[Path], opts: Ros2McapOptions):
     return types, obj_topics, odom, fix, tf_topics
 
 
-def _read(paths: list[Path], opts: Ros2McapOptions):
+def read_topics(paths: list[Path], opts: Ros2McapOptions):
     """One pass over the wanted topics of every file: (types, object topics, odometry topic,
     NavSatFix topic, object rows, transform samples, odometry samples, NavSatFix samples)."""
     from mcap.reader import make_reader
@@ -93,57 +94,61 @@ def _read(paths: list[Path], opts: Ros2McapOptions):
     topic_index = {t: i for i, t in enumerate(obj_topics)}
     wanted = set(obj_topics) | set(tf_topics) | {t for t in (odom, fix) if t}
 
-    objs = _Objects()
-    edges = _Edges()
+    objs = ObjectRows()
+    edges = TransformSamples()
     ego_odom: dict[str, list] = {"t": [], "pose": [], "pcov": [], "twist": [], "tcov": [],
                                  "frame": [], "child": []}
     ego_fix: dict[str, list] = {"t": [], "lonlat": [], "cov": []}
     counters: dict[str, int] = {}
     zero_stamps = 0
     for path in paths:
-        factory = _Decoders()
+        factory = Decoders()
         try:
             f = open(path, "rb")
         except OSError as e:
             raise RecordingIOError(f"cannot read: {e.strerror}", path=path) from None
         with f:
             reader = make_reader(f)
-            it = reader.iter_messages(topics=sorted(wanted & set(_channels(path))))
+            it = reader.iter_messages(topics=sorted(wanted & set(channels(path))))
             while True:
                 try:
                     schema, ch, m = next(it)
                 except StopIteration:
                     break
-                except _mcap_errors() as e:
+                except mcap_errors() as e:
                     raise FormatError(f"corrupt MCAP after {sum(counters.values())} messages: "
-                                      f"{_why(e)}", path=path) from None
+                                      f"{why(e)}", path=path) from None
                 topic = ch.topic
                 mi = counters.get(topic, 0)
                 counters[topic] = mi + 1
                 where = f"topic {topic} message {mi}"
                 try:
-                    msg = factory.decoder(schema, ch.message_encoding)(m.data)
-                except Exception as e:  # noqa: BLE001 - the decoder raises many kinds
+                    decode = factory.decoder(schema, ch.message_encoding, path)
+                except DecoderError as e:
+                    raise FormatError(f"{where}: cannot decode: {e}", path=path) from None
+                try:
+                    msg = decode(m.data)
+                except decode_errors() as e:
                     raise FormatError(f"{where}: cannot decode: {type(e).__name__}: {e}",
                                       path=path) from None
-                ty = _canon(schema.name)
+                ty = canonical_type(schema.name)
                 try:
-                    if ty in _READERS and topic in topic_index:
-                        t_ns, ok = _stamp(msg.header, m.log_time)
+                    if ty in OBJECT_READERS and topic in topic_index:
+                        t_ns, ok = header_stamp(msg.header, m.log_time)
                         zero_stamps += not ok
-                        _READERS[ty](msg, objs, t_ns, topic_index[topic], mi, opts)
+                        OBJECT_READERS[ty](msg, objs, t_ns, topic_index[topic], mi, opts)
                     elif ty == T_TF:
-                        _read_tf(msg, edges, topic, m.log_time)
+                        read_tf(msg, edges, topic, m.log_time)
                     elif ty == T_ODOM and topic == odom:
-                        t_ns, ok = _stamp(msg.header, m.log_time)
+                        t_ns, ok = header_stamp(msg.header, m.log_time)
                         zero_stamps += not ok
-                        _read_odometry(msg, ego_odom, t_ns)
+                        read_odometry(msg, ego_odom, t_ns)
                     elif ty == T_FIX and topic == fix:
                         if int(msg.status.status) < 0:  # no fix
                             continue
-                        t_ns, ok = _stamp(msg.header, m.log_time)
+                        t_ns, ok = header_stamp(msg.header, m.log_time)
                         zero_stamps += not ok
-                        _read_navsatfix(msg, ego_fix, t_ns)
+                        read_navsatfix(msg, ego_fix, t_ns)
                 except (AttributeError, TypeError, ValueError, IndexError) as e:
                     raise FormatError(f"{where}: malformed {ty}: {e}", path=path) from None
     if zero_stamps:

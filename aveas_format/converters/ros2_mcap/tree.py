@@ -9,12 +9,12 @@ from typing import Any
 
 import numpy as np
 
-from aveas_format.converters.common import matrix_yaw, quaternion_matrix, rotation_2d
+from aveas_format.converters.common.geometry import matrix_yaw, quaternion_matrix, rotation_2d
 from aveas_format.errors import FormatError
 
 
 @dataclass
-class _Edges:
+class TransformSamples:
     """Transform samples: child -> (parent, t_ns, translation, quaternion, static, source)."""
 
     data: dict[str, dict[str, Any]] = field(default_factory=dict)
@@ -30,11 +30,11 @@ class _Edges:
         e["q"].append(q)
 
 
-class _Tree:
+class TransformTree:
     """The transforms by child frame: each frame's parent, sample times, translations and
     quaternions (static frames: one sample), and for the ego's frame its pose covariance."""
 
-    def __init__(self, edges: _Edges, map_frame: str, tol_ns: int):
+    def __init__(self, edges: TransformSamples, map_frame: str, tol_ns: int):
         self.map = map_frame
         self.tol = tol_ns
         self.e: dict[str, dict[str, Any]] = {}

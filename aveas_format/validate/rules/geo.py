@@ -8,7 +8,7 @@ import numpy as np
 import shapely
 
 from aveas_format.errors import FormatError
-from aveas_format.mapref.crs import crs_equal, parse_crs
+from aveas_format.crs import crs_equal, parse_crs
 from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hit, Hits, collector, rule
 
@@ -18,7 +18,7 @@ from aveas_format.validate.registry import Hit, Hits, collector, rule
       enforces="FORMAT.md 3: crs is the PROJ/EPSG string of the local frame")
 def crs_unparseable(ctx: Context) -> Iterator[Hit]:
     """recording.json ``crs`` is not a CRS that PROJ can read and transform to WGS 84 (known
-    malformed variants are read leniently, see ``aveas_format.mapref.crs``)."""
+    malformed variants are read leniently, see ``aveas_format.crs``)."""
     if ctx.meta is None:
         return
     try:

@@ -1,5 +1,8 @@
 """Partner CSV: one row per participant and time with columns ``id,time,x,y`` (seconds; metres in
-the map's local frame); every participant is a car of the length and width given as options."""
+the map's local frame); every participant is a car of the length and width given as options.
+
+A converter as a partner writes one (docs/extending.md): read and map the source into box
+columns, describe the sensor, hand both to the shared step."""
 
 from __future__ import annotations
 
@@ -7,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aveas_format.converters.common import read_numeric_table, sort_states, wrap_recording
+from aveas_format.converters.common import Boxes, Rows, Sensor, read_table, to_recording
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.io.arrow import column_numpy
 from aveas_format.mapref.build import load_map_bytes
@@ -22,21 +25,22 @@ class PartnerCsvOptions(ImportOptions):
     """Width of every participant (m)."""
 
 
+def _is_partner_csv(path: Path, head: bytes) -> bool:
+    """A CSV whose header is ``id,time,x,y``."""
+    return head.split(b"\n", 1)[0].strip().replace(b" ", b"") == b"id,time,x,y"
+
+
 @converter("partner-csv", description="Partner CSV trajectories (id,time,x,y)", patterns=("*.csv",),
-           method="aerial", options=PartnerCsvOptions)
+           method="aerial", options=PartnerCsvOptions, sniff=_is_partner_csv)
 def convert_partner_csv(inputs: list[Path], *, map_source, options: PartnerCsvOptions):
-    t = read_numeric_table(inputs[0], required=("id", "time", "x", "y"),
-                           numeric=("id", "time", "x", "y"))
-    ids, time = column_numpy(t, "id").astype(np.int64), column_numpy(t, "time")
-    order = sort_states(ids, time, inputs[0], np.arange(len(ids)) + 2)  # CSV line of each row
-    ids, time = ids[order], time[order]
-    uniq, pid = np.unique(ids, return_inverse=True)
+    t = read_table(inputs[0], required=("id", "time", "x", "y"), numeric=("id", "time", "x", "y"))
+    uniq, pid = np.unique(column_numpy(t, "id").astype(np.int64), return_inverse=True)
+    boxes = Boxes(pid, column_numpy(t, "time"), column_numpy(t, "x"), column_numpy(t, "y"),
+                  source_ids=[str(i) for i in uniq],
+                  rows=Rows(inputs, place=np.arange(t.num_rows) + 2))  # the CSV line of each row
     n = len(uniq)
-    participants = {"participant_id": np.arange(n, dtype=np.int64),
-                    "source_id": [str(i) for i in uniq], "class": ["car"] * n,
-                    "length": np.full(n, options.length), "width": np.full(n, options.width)}
-    states = {"participant_id": pid.astype(np.int64), "time": time,
-              "x": column_numpy(t, "x")[order], "y": column_numpy(t, "y")[order]}
-    return wrap_recording("partner-csv", inputs, options, map_bytes=load_map_bytes(map_source),
-                          participants=participants, states=states, partner="partner",
-                          method="aerial")
+    return to_recording(boxes, Sensor(method="aerial", platform="partner drone", partner="partner"),
+                        converter="partner-csv", inputs=inputs, options=options,
+                        map_bytes=load_map_bytes(map_source),
+                        participants={"class": ["car"] * n, "length": np.full(n, options.length),
+                                      "width": np.full(n, options.width)})

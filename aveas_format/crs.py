@@ -1,4 +1,7 @@
-"""Local frame <-> WGS 84, through the recording's CRS (pyproj, always_xy, vectorised).
+"""The recording's CRS, read leniently, and its local frame <-> projected <-> WGS 84 (pyproj,
+always_xy, vectorised). In the foundation (it imports nothing of the package but ``errors``), so
+that ``io`` (``Recording.to_geopandas``), map-referencing, the converters and the validator share
+one reading of a CRS string.
 
 The local frame of a recording is the OpenDRIVE inertial frame of its map. Where the map has a
 ``<geoReference>`` (a PROJ string) and a header ``<offset x y z hdg>``, a local point maps to the

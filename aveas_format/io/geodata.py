@@ -6,9 +6,10 @@
 
 Positions are stored in the recording's local frame: its ``crs`` (recording.json) shifted and
 rotated by the map header's ``<offset>`` (FORMAT.md 3). The geometries here are moved into the CRS
-itself (:meth:`~aveas_format.mapref.crs.LocalFrame.to_projected`), so that ``gdf.crs`` is a plain
+itself (:meth:`~aveas_format.crs.LocalFrame.to_projected`), so that ``gdf.crs`` is a plain
 CRS that any GIS understands; the local ``x``/``y`` stay as columns. ``Recording.to_geopandas`` and
-``Recording.unobserved_geodataframe`` call these functions.
+``Recording.unobserved_geodataframe`` call these functions (in ``io`` with the Recording: the
+CRS reading they need, :mod:`aveas_format.crs`, lies below it).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import numpy as np
 import pyarrow as pa
 
 from aveas_format.errors import require
-from aveas_format.mapref.crs import LocalFrame
+from aveas_format.crs import LocalFrame
 
 
 def _frame(rec) -> LocalFrame:

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from aveas_format.errors import FormatError
-from aveas_format.mapref.crs import GeoReferenceWarning, LocalFrame, crs_equal, parse_crs
+from aveas_format.crs import GeoReferenceWarning, LocalFrame, crs_equal, parse_crs
 
 TMERC = "+proj=tmerc +lat_0=49 +lon_0=8 +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m +no_defs"
 
