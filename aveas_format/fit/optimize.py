@@ -325,9 +325,32 @@ class FitResult:
         return {n: self.best[n] for n in self.config.names}
 
     @property
+    def optimiser_converged(self) -> bool:
+        """The best restart (the one the estimate starts from) converged by its optimiser's own
+        criterion (CMA-ES: its spread below ``xatol`` or its values within ``fatol``; Nelder-Mead:
+        SciPy's ``xatol`` and ``fatol``), not stopped at the evaluation cap."""
+        return bool(self.best.get("converged", False))
+
+    @property
+    def surface_converged(self) -> bool | None:
+        """The response surface is positive definite with its minimum inside its design (None
+        without ``refine``)."""
+        return bool(self.surface["converged"]) if self.surface else None
+
+    @property
     def converged(self) -> bool:
-        """The response surface converged (when refined), else the best restart did."""
-        return bool(self.surface["converged"] if self.surface else self.best.get("converged", False))
+        """The fit converged: the best restart converged by its optimiser's criterion and, when
+        refined, the response surface resolved its minimum. A fit whose best restart stopped at the
+        evaluation cap has not converged, whatever the surface says."""
+        return self.optimiser_converged and self.surface_converged is not False
+
+    @property
+    def stop(self) -> str:
+        """Why the fit stopped, in words that agree with :attr:`converged`."""
+        b = self.best
+        head = (f"the best restart ({b['restart']}) converged: {b.get('stop', '')}" if self.optimiser_converged
+                else f"the best restart ({b['restart']}) did not converge: {b.get('stop', '')}")
+        return f"{head}; {self.surface['stop']}" if self.surface else head
 
     def agreeing(self) -> int:
         """How many restarts ended within two standard errors of the estimate in every parameter
@@ -350,8 +373,9 @@ class FitResult:
         b = self.best
         est = self.best_params()
         out: dict = {**est, "fun": self.surface["fun"] if self.surface else b["fun"],
-                     "converged": self.converged,
-                     "stop": self.surface["stop"] if self.surface else b.get("stop", ""),
+                     "converged": self.converged, "stop": self.stop,
+                     "optimiser_converged": self.optimiser_converged,
+                     "surface_converged": self.surface_converged,
                      "estimate": "response surface" if self.surface else "best restart",
                      "method": self.config.method, "restarts": len(self.runs),
                      "restarts_converged": sum(bool(r.get("converged")) for r in self.runs),
