@@ -109,11 +109,12 @@ def test_restarts_on_a_dask_local_cluster(sumo, tmp_path):
     assert sorted(r["restart"] for r in res.runs) == [0, 1] and not res.failed
 
 
-def test_cli_fit_desired_speed(sumo, tmp_path):
+def test_cli_fit_desired_speed(sumo, tmp_path, capsys):
     from aveas_format.cli import main
 
     cfg, _ = cli_simulated_recording(tmp_path, 'duration = 120\nseed = 5\n[network]\nlength = 400\n'
                                                 'inflow = 100\n')
+    capsys.readouterr()
     with pytest.raises(SystemExit) as e:
         main(["fit", "desired-speed", str(tmp_path / "rec.aveas"), "-c", str(cfg), "-o",
               str(tmp_path / "fit"), "-r", "1", "--maxfev", "6", "--s-range", "100,500",
@@ -122,6 +123,22 @@ def test_cli_fit_desired_speed(sumo, tmp_path):
     assert e.value.code == 0
     best = json.loads((tmp_path / "fit" / "best.json").read_text())
     assert set(best) >= {"mu_car", "sigma_car", "mu_truck", "sigma_truck", "fun", "converged", "stop"}
+    # the verdict and the restart's own message agree (6 evaluations: the cap)
+    err = capsys.readouterr().err
+    assert best["converged"] is False and best["optimiser_converged"] is False
+    assert "the fit did not converge: the best restart (0) did not converge: evaluation cap (6)" in err
+    assert "restart 0 did not converge: evaluation cap (6)" in err and "converged: true" not in err
+    # without --config: the simulation the recording describes (its 120 s of demand, its section)
+    with pytest.raises(SystemExit) as e:
+        main(["fit", "desired-speed", str(tmp_path / "rec.aveas"), "-o", str(tmp_path / "fit-rec"),
+              "-r", "1", "--maxfev", "5", "--s-range", "100,500", "--no-refine", "--method",
+              "nelder-mead", "--bounds", json.dumps({k: list(v) for k, v in NARROW.items()})])
+    assert e.value.code == 0
+    err = capsys.readouterr().err
+    used = json.loads((tmp_path / "fit-rec" / "config.json").read_text())["scenario"]
+    assert "simulating what the recordings show:" in err and "a 400 m section" in err
+    assert 90 < used["duration"] <= 125 and used["network"]["length"] == 400.0
+    assert used["lane_change_duration"] == 0.0 and {c["name"] for c in used["classes"]} <= {"car", "truck"}
     with pytest.raises(SystemExit) as e:
         main(["fit", "desired-speed", str(tmp_path / "rec.aveas"), "-c", str(cfg), "-o",
               str(tmp_path / "fit2"), "--method", "powell"])
