@@ -79,7 +79,8 @@ def test_a_fit_stopped_at_the_cap_says_so(sumo, tmp_path):
     res = fit_desired_speed(recorded, cfg, outdir=tmp_path / "fit", figures=False)
     best = json.loads((tmp_path / "fit" / "best.json").read_text())
     assert not res.converged and best["converged"] is False
-    assert best["stop"].startswith("evaluation cap (6)") and best["estimate"] == "best restart"
+    assert best["stop"].startswith("the best restart (0) did not converge: evaluation cap (6)")
+    assert best["estimate"] == "best restart" and best["surface_converged"] is None
     assert best["restarts_at_cap"] == 1 and "se" not in best
 
 
