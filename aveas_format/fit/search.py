@@ -134,6 +134,8 @@ def _cma(f: Objective, x0: np.ndarray, *, maxfev: int, xatol: np.ndarray, fatol:
             "seed": int(seed) + 1, "verbose": -9, "maxfevals": np.inf}
     if popsize:
         opts["popsize"] = int(popsize)
+    if len(x0) == 1:  # pycma 4.x cannot rescale a one-dimensional search to its std limits
+        opts["maxstd"], opts["minstd"] = np.inf, 0.0  # ("not yet initialized"): none here
     es = cma.CMAEvolutionStrategy(np.clip((x0 - lo) / width, 1e-3, 1 - 1e-3), step, opts)
     while True:
         if np.all(es.sigma * np.sqrt(np.diag(es.C)) < tol):

@@ -258,3 +258,14 @@ def test_a_tolerance_per_parameter_in_its_own_unit():
                  xatol=cfg.tolerances(), fatol=1e-9, step=0.2, seed=3)
     assert r.converged and "spread < 0.5, 0.015 in every parameter" in r.stop, r.stop
     assert abs(r.x[1] - 0.9) < 0.03 and abs(r.x[0] - 131.0) < 1.5
+
+
+def test_cma_searches_one_parameter():
+    """One parameter (the tutorial's cc1 fit): pycma 4.x failed its first restart with "not yet
+    initialized (dimension needed)" while rescaling a one-dimensional search; it settles now."""
+    pytest.importorskip("cma")
+    bounds = np.array([[0.3, 1.8]])
+    for x0 in (0.9, 0.7):
+        r = minimise("cma", Objective(lambda x: float(((x[0] - 0.6) / 0.01) ** 2), bounds),
+                     np.array([x0]), maxfev=300, xatol=0.015, fatol=1e-9, step=0.2, seed=0)
+        assert r.converged and abs(r.x[0] - 0.6) < 0.02, r.stop
