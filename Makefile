@@ -1,6 +1,7 @@
 # aveas-format — every target sets up what it needs (a .venv with the package) on a fresh machine.
 # `make demo` installs the package with what the demo needs (the [demo] extra: MCAP and OSI
-# exports, figures); `make test` and the other targets install every extra and the test tools.
+# exports, figures, pandas for the README's and the tutorials' Python); `make test` and the other
+# targets install every extra and the test tools.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python

@@ -49,6 +49,12 @@ def __getattr__(name: str) -> Any:
     raise AttributeError(f"module 'aveas_format' has no attribute {name!r}")
 
 
+def __dir__() -> list[str]:
+    """The module's names with the lazily loaded ones (``open``, ``validate``, ``Recording``...),
+    which ``dir()`` and tab completion would otherwise miss until first use."""
+    return sorted(set(globals()) | set(_LAZY) | {"validate"})
+
+
 __all__ = [
     "AveasError", "ChecksumError", "FormatError", "FormatVersionError", "MapError",
     "MissingDependencyError", "ReadPlan", "Recording", "RecordingExistsError", "RecordingIOError",

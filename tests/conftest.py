@@ -64,11 +64,32 @@ def pytest_runtest_makereport(item, call):
                            "@pytest.mark.realdata or take the data from a realdata_fixture")
 
 
+def _fold_skips_by_reason(stats: dict) -> None:
+    """One line per distinct skip reason in pytest's short summary (``-ra``), with its count:
+    pytest folds skips by (file, line, reason), so one reason given by tests in 40 files (the
+    real-data tests on a plain clone) would print 40 lines. Skips of one reason from several
+    places are given their common folder as the place (``SKIPPED [212] tests: real data: ...``);
+    a reason from one place keeps it."""
+    by_reason: dict[str, list] = {}
+    for rep in stats.get("skipped", ()):
+        longrepr = getattr(rep, "longrepr", None)
+        if isinstance(longrepr, tuple) and len(longrepr) == 3:
+            by_reason.setdefault(str(longrepr[2]), []).append(rep)
+    for reason, reps in by_reason.items():
+        places = {(str(r.longrepr[0]), r.longrepr[1]) for r in reps}
+        if len(places) > 1:
+            common = os.path.commonpath([os.path.abspath(path) for path, _ in places])
+            for r in reps:
+                r.longrepr = (common, None, reason)
+
+
 def pytest_terminal_summary(terminalreporter):
     """Put the real-data tests into the closing line: how many ran (passed or failed), or, without
     ``../shared``, how many were skipped for it (a few marked tests do not need the data in every
-    case and run anyway: they are not counted as real-data runs then)."""
+    case and run anyway: they are not counted as real-data runs then); fold the skip summary by
+    reason (:func:`_fold_skips_by_reason`). pytest prints its short summary after this hook."""
     stats = terminalreporter.stats
+    _fold_skips_by_reason(stats)
     ran: dict[str, object] = {}
     skipped: dict[str, object] = {}
     for key in ("passed", "failed", "error", "skipped"):

@@ -392,3 +392,89 @@ def test_workers_mean_and_default_the_same_everywhere():
     assert len(seen) >= 6, seen
     assert len(set(seen.values())) == 1, seen
     assert next(iter(seen.values()))[:2] == (("--workers", "-j"), 0)
+
+
+# ---------------------------------------------------------------------------------------------
+# a user's second hour (issue 42): what the words say is what happens
+def test_fail_on_warning_does_not_say_valid_alone(capsys, env):
+    code, out, _ = cli(capsys, "validate", env["REC"], "--fail-on", "warning")
+    last = out.strip().splitlines()[-1]
+    n = int(re.search(r"(\d+) warnings, 0 info", last).group(1))
+    assert code == 1 and n > 0
+    assert f": VALID with {n} warnings, failing at --fail-on warning (exit 1) — 0 errors" in last, last
+    code, out, _ = cli(capsys, "validate", env["REC"])
+    assert code == 0 and f": VALID — 0 errors, {n} warnings" in out.strip().splitlines()[-1]
+
+
+@pytest.mark.parametrize("fmt", ["json", "html", "text"])
+def test_a_report_written_to_a_file_is_named_in_one_line(capsys, env, tmp_path, fmt):
+    out_file = tmp_path / f"report.{fmt}"
+    code, out, err = cli(capsys, "validate", env["REC"], "--format", fmt, "-o", out_file)
+    assert code == 0 and out == "" and out_file.stat().st_size
+    assert len(err.strip().splitlines()) == 1, err
+    assert err.strip().endswith(f"; wrote {out_file}") and ": VALID — 0 errors" in err
+
+
+def test_a_finding_names_its_place_once(capsys, tmp_path):
+    """A finding whose message starts with its file and row (``states.parquet: row 40: ...``) is
+    printed with its location once (text report and HTML table)."""
+    from helpers_common import small_recording
+
+    rec = small_recording()
+    xs = rec.states.column("x").to_numpy().copy()
+    xs[40] += 30.0  # a 30 m jump in 0.1 s: kinematics.speed
+    rec.states = rec.states.set_column(rec.states.column_names.index("x"), "x",
+                                       __import__("pyarrow").array(xs))
+    path = rec.write(tmp_path / "jump.aveas")
+    code, out, _ = cli(capsys, "validate", path, "--select", "kinematics.speed")
+    lines = [ln for ln in out.splitlines() if ln.startswith("ERROR   kinematics.speed ")]
+    assert code == 1 and lines, out
+    for ln in lines:
+        assert ln.count("states.parquet") == 1 and ln.count("row") == 1 and "table=" not in ln, ln
+        assert re.search(r"states\.parquet row=\d+ participant_id=\d+ time=[\d.]+ column=x,y: "
+                         r"participant \d+ \(car\) moves at", ln), ln
+    cli(capsys, "validate", path, "--select", "kinematics.speed", "--format", "html", "-o",
+        tmp_path / "r.html")
+    html_text = (tmp_path / "r.html").read_text()
+    assert "<td>states.parquet</td>" in html_text and "<td>states.parquet: row" not in html_text
+
+
+def test_messages_cite_the_format_doc_users_have(capsys, env, tmp_path):
+    from aveas_format.validate.registry import load_rules
+
+    cited = [r.enforces for r in load_rules().values() if r.enforces]
+    assert cited and not [c for c in cited if "FORMAT.md" in c]
+    assert sum(c.startswith("docs/format.md §") for c in cited) > 30
+    cli(capsys, "validate", env["REC"], "--format", "html", "-o", tmp_path / "r.html")
+    page = (tmp_path / "r.html").read_text()
+    assert "FORMAT.md" not in page and "docs/format.md §" in page
+
+
+def test_map_commands_take_a_recording_and_say_no_points(capsys, env, tmp_path):
+    code, out, err = cli(capsys, "map", "project", env["REC"], "--points", env["PTS"])
+    assert code == 0 and out.splitlines()[1].startswith("10,-1.75,\"1\",-1,10,"), (out, err)
+    zipped = env["REC"].parent / "rec.aveas.zip"
+    if not zipped.exists():
+        import aveas_format
+
+        aveas_format.open(env["REC"]).write(zipped)
+    code, out, _ = cli(capsys, "map", "info", zipped, "--format", "json")
+    assert code == 0 and json.loads(out)["path"] == f"{zipped}/map.xodr"
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    code, _, err = cli(capsys, "map", "check", empty)
+    assert code == 3 and "neither an OpenDRIVE map nor a recording" in one_error_line(err)
+    header_only = tmp_path / "h.csv"
+    header_only.write_text("x,y,heading\n")
+    code, _, err = cli(capsys, "map", "project", env["MAP"], "--points", header_only)
+    assert code == 3 and f"{header_only}: no points in the file" in one_error_line(err)
+
+
+def test_dir_lists_the_lazy_api():
+    import aveas_format
+
+    assert {"open", "validate", "Recording", "build_recording"} <= set(dir(aveas_format))
+    code = ("import sys, aveas_format; dir(aveas_format); "
+            "print('pyarrow' in sys.modules, 'aveas_format.io.reader' in sys.modules)")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert res.stdout.split() == ["False", "False"], res  # the lazy loading is kept

@@ -63,6 +63,10 @@ def _check(res: subprocess.CompletedProcess, parent: Path) -> str:
     assert "ran on real data" not in closing, closing
     reasons = {m.group(1) for m in re.finditer(r"SKIPPED \[\d+\] \S+: (real data: .*)", out)}
     assert reasons == {SHARED_ABSENT.replace(str(SHARED), str(parent / "shared"))}, reasons
+    # one line for the reason, with its count (not one per file and line: tests/conftest.py)
+    lines = [ln for ln in out.splitlines() if ln.startswith("SKIPPED [") and ": real data: " in ln]
+    assert len(lines) == 1 and re.match(r"SKIPPED \[(\d+)\] tests: ", lines[0]), lines[:5]
+    assert int(re.match(r"SKIPPED \[(\d+)\]", lines[0]).group(1)) > 50, lines[0]
     return closing
 
 

@@ -6,11 +6,14 @@
 ``tests/test_tutorials.py`` runs every tutorial's code.
 
 Tutorials are Markdown whose fenced ``sh`` and ``python`` blocks run in order in one working
-directory (Python blocks share one namespace; a block whose first line is ``# not run`` is only
-shown). A shell command runs line by line (``\\`` continues a line) and must exit 0 unless it
-ends with ``# -> exit N``. ``<!-- figure: FILE -> NAME.png -->`` copies FILE (in the working
-directory) to ``docs/figures/NAME.png``; ``<!-- requires: sumo -->`` skips a tutorial where SUMO
-is not installed.
+directory, in the environment ``make demo`` installs (the ``[demo]`` extra, plus the extras a
+``<!-- extras: fit -->`` line names): modules outside it cannot be imported
+(:mod:`tutorial_env`). Each Python block runs on its own (in one interpreter, a fresh namespace)
+unless its first line is a comment saying it continues the block above; a block whose first line
+is ``# not run`` is only shown. A shell command runs line by line (``\\`` continues a line) and
+must exit 0 unless it ends with ``# -> exit N``. ``<!-- figure: FILE -> NAME.png -->`` copies
+FILE (in the working directory) to ``docs/figures/NAME.png``; ``<!-- requires: sumo -->`` skips a
+tutorial where SUMO is not installed.
 """
 
 from __future__ import annotations
@@ -270,20 +273,30 @@ def _commands(block: str) -> list[str]:
     return lines
 
 
+_EXTRAS = re.compile(r"<!--\s*extras:\s*([\w, -]+?)\s*-->")
+
+
+def tutorial_extras(text: str) -> tuple[str, ...]:
+    """The extras a tutorial runs with: ``demo`` (what ``make demo`` installs) and those its
+    ``<!-- extras: fit -->`` line names."""
+    named = [e.strip() for m in _EXTRAS.finditer(text) for e in m.group(1).split(",") if e.strip()]
+    return ("demo", *named)
+
+
 def run_tutorial(path: Path, workdir: Path, *, timeout: float = 600) -> list[tuple[Path, Path]]:
-    """Run the tutorial's blocks in ``workdir``; return its figures as (produced file, docs file).
-    Raises :class:`TutorialError` naming the step that failed."""
-    import contextlib
-    import io
+    """Run the tutorial's blocks in ``workdir``, in the environment of its extras
+    (:func:`tutorial_extras`); return its figures as (produced file, docs file). Raises
+    :class:`TutorialError` naming the step that failed."""
     import os
     import subprocess
+
+    from tutorial_env import PythonRunner, blocked_modules, env_with_blocker
 
     text = path.read_text(encoding="utf-8")
     env = {**os.environ, "MPLBACKEND": "Agg", "COLUMNS": "100",
            "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
-    ns: dict = {"__name__": "__tutorial__"}
-    old = Path.cwd()
-    os.chdir(workdir)
+    env = env_with_blocker(env, blocked_modules(tutorial_extras(text)), workdir / ".tutorial-env")
+    python = PythonRunner(env, workdir, workdir / ".tutorial-env")
     try:
         for k, m in enumerate(_BLOCK.finditer(text), 1):
             kind, body = m.group(1), m.group(2)
@@ -291,12 +304,9 @@ def run_tutorial(path: Path, workdir: Path, *, timeout: float = 600) -> list[tup
                 continue
             where = f"{path.name}, block {k} (line {text[:m.start()].count(chr(10)) + 1})"
             if kind == "python":
-                buf = io.StringIO()
-                try:
-                    with contextlib.redirect_stdout(buf):
-                        exec(compile(body, where, "exec"), ns)  # noqa: S102 - our own docs
-                except Exception as e:
-                    raise TutorialError(f"{where}: {type(e).__name__}: {e}") from e
+                error = python.run(body, where)
+                if error:
+                    raise TutorialError(f"{where}: {error}")
                 continue
             for cmd in _commands(body):
                 em = _EXIT.search(cmd)
@@ -308,7 +318,7 @@ def run_tutorial(path: Path, workdir: Path, *, timeout: float = 600) -> list[tup
                     raise TutorialError(f"{where}: `{cmd}` exited {r.returncode}, the tutorial "
                                         f"says {want}:\n{tail}")
     finally:
-        os.chdir(old)
+        python.close()
     figs = [(workdir / a, DOCS / "figures" / b) for a, b in _FIGURE.findall(text)]
     missing = [str(a) for a, _ in figs if not a.exists()]
     if missing:

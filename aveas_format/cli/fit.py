@@ -27,18 +27,30 @@ def _range(text: str | None) -> tuple[float, float] | None:
 
 
 def _recorded(recordings: list[Path], metric: str, road: str | None, s_range: str | None,
-              options: dict[str, float]) -> dict[str, list[float]]:
+              options: dict[str, float], scenario: bool) -> tuple[dict[str, list[float]], object]:
+    """The recorded values per class and (``scenario``) the simulation the recordings describe
+    (:func:`aveas_format.fit.recorded.recorded_scenario`), else None."""
     import aveas_format
     from aveas_format.fit import METRICS
 
     classes = ("car", "truck")
     values: dict[str, list] = {c: [] for c in classes}
+    recs = []
     for p in recordings:
-        v = METRICS[metric].recorded(aveas_format.open(p), classes=classes, road_id=road,
-                                     s_range=_range(s_range), **options)
+        rec = aveas_format.open(p)
+        v = METRICS[metric].recorded(rec, classes=classes, road_id=road, s_range=_range(s_range),
+                                     **options)
         for c in classes:
             values[c].extend(v[c].tolist())
-    return values
+        if scenario:
+            recs.append(rec)
+    if not scenario:
+        return values, None
+    from aveas_format.fit.recorded import recorded_scenario
+
+    used = tuple(c for c in classes if values[c])
+    return values, recorded_scenario(recs, classes=used or classes, metric=metric, road_id=road,
+                                     s_range=_range(s_range))
 
 
 def _fit(recordings: list[Path], output: Path, config: Path | None, metric: str,
@@ -54,7 +66,7 @@ def _fit(recordings: list[Path], output: Path, config: Path | None, metric: str,
 
     if metric not in METRICS:
         raise fail(f"--metric {metric!r}: expected one of {', '.join(METRICS)}", EXIT_USAGE)
-    values = _recorded(recordings, metric, road, s_range, options)
+    values, described = _recorded(recordings, metric, road, s_range, options, scenario=config is None)
     used = [c for c in values if values[c]]
     if not used:
         raise fail(f"the recordings hold no cars or trucks with a {metric} value", EXIT_USAGE)
@@ -63,7 +75,14 @@ def _fit(recordings: list[Path], output: Path, config: Path | None, metric: str,
         parameters = [n for n in parameters if n.partition("_")[2] in used]
         if not parameters:
             raise fail("no parameter of a class with recorded values", EXIT_USAGE)
-    scenario = Scenario.from_toml(config) if config else Scenario()
+    if config:
+        scenario = Scenario.from_toml(config)
+    else:  # the simulation the recordings describe (their duration, demand, section, lanes)
+        scenario = described.scenario
+        for note in described.notes:
+            err.print(f"note: {note}")
+        err.print(described.describe() + (" (--duration overrides the duration)"
+                                          if search.get("duration") is not None else ""))
     duration = search.pop("duration", None)
     if duration is not None:
         scenario = scenario.model_copy(update={"duration": duration})
@@ -98,8 +117,9 @@ def _fit(recordings: list[Path], output: Path, config: Path | None, metric: str,
                           "restarts": s["restarts"], "restarts_converged": s["restarts_converged"],
                           "restarts_agreeing": s["restarts_agreeing"],
                           "evaluations": s["evaluations"]}, indent=2))
-    if not s["converged"]:
-        err.print(f"the fit did not converge: {s['stop']}")
+    # the verdict and the restarts' own words agree: the fit converged only where its best
+    # restart converged by the optimiser's criterion (and the response surface resolved a minimum)
+    err.print(f"the fit {'converged' if s['converged'] else 'did not converge'}: {s['stop']}")
     for r in res.runs:
         if not r.get("converged"):
             err.print(f"restart {r['restart']} did not converge: {r.get('stop', '')}")
@@ -109,12 +129,14 @@ def _fit(recordings: list[Path], output: Path, config: Path | None, metric: str,
 _RECORDINGS = typer.Argument(..., help="Recordings with the observed vehicles.")
 _OUTPUT = typer.Option(..., "--output", "-o", help="Output directory (runs.jsonl/.parquet, "
                        "best.json, figures); an existing one is resumed.")
-_CONFIG = typer.Option(None, "--config", "-c", help="Scenario TOML of the simulation (default: the "
-                       "paper's autobahn).")
+_CONFIG = typer.Option(None, "--config", "-c", help="Scenario TOML of the simulation (default: "
+                       "what the recordings show: their duration, demand and desired speeds per "
+                       "class, section length and lanes on the paper's autobahn; docs/fitting.md).")
 _SCHEDULER = scheduler_option(help="Dask scheduler address tcp://... (overrides --workers).")
-_MAXFEV = typer.Option(200, "--maxfev", help="Evaluations per restart at most.")
-_RESTARTS = typer.Option(4, "--restarts", "-r", min=1, help="Independent searches (the paper: 100 "
-                         "Nelder-Mead runs).")
+_MAXFEV = typer.Option(200, "--maxfev", help="Evaluations (simulations) per restart at most; the "
+                       "response surface and the bootstrap add theirs (--no-refine: none).")
+_RESTARTS = typer.Option(4, "--restarts", "-r", min=1, help="Independent searches of --method "
+                         "(CMA-ES by default; the paper: 100 Nelder-Mead runs).")
 _SEED = typer.Option(0, "--seed", help="Seed of the starting points.")
 _ROAD = typer.Option(None, "--road", help="Use only samples on this road id.")
 _METHOD = typer.Option("cma", "--method", help="Optimiser: cma (CMA-ES, default), nelder-mead (the "
@@ -135,7 +157,8 @@ _BIAS = typer.Option(False, "--bias-correction/--no-bias-correction", help="Subt
                      "bootstrap's bias from the response surface's minimum (with >= 20 bootstrap "
                      "recordings; see docs/fitting.md, recovery study).")
 _DURATION = typer.Option(None, "--duration", help="Override the simulated demand period (s) of "
-                         "each evaluation (default: the scenario's, 3,600 s).")
+                         "each evaluation (default: the recordings' duration, or the --config "
+                         "scenario's).")
 _S_RANGE = typer.Option(None, "--s-range", help="Use only samples with road_s in MIN,MAX.")
 
 

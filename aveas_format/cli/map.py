@@ -33,14 +33,29 @@ map_app = typer.Typer(
 )
 app.add_typer(map_app, name="map")
 
-_MAP_HELP = "The OpenDRIVE map (.xodr)."
+_MAP_HELP = "The OpenDRIVE map (.xodr), or a recording (directory or .aveas.zip): its map."
 
 
 def _load(path: Path | None):
+    """The map of ``path``: an OpenDRIVE file, or the map a recording (its directory or
+    .aveas.zip) carries."""
     if path is None:
         raise fail("Missing argument 'MAP'.", EXIT_USAGE)
     from aveas_format.opendrive import load_map
 
+    if path.is_dir() or path.name.lower().endswith(".zip"):
+        from aveas_format.errors import RecordingIOError
+        from aveas_format.io.reader import open_recording
+
+        if path.is_dir() and not (path / "recording.json").exists():
+            raise RecordingIOError("a directory, but neither an OpenDRIVE map nor a recording (no "
+                                   "recording.json)", path=path)
+        rec = open_recording(path, tables=["participants"])
+        if rec.map_source is None:
+            raise RecordingIOError("the recording has no map", path=path)
+        net = rec.map
+        net.path = f"{path}/{rec.meta.map.file}"
+        return net
     return load_map(path)
 
 
@@ -211,6 +226,8 @@ def read_points(path: Path):
     if missing:
         raise FormatError(f"no column {' or '.join(repr(c) for c in missing)} (columns: {', '.join(cols) or 'none'})",
                           path=path)
+    if table.num_rows == 0:
+        raise FormatError("no points in the file (its header has no rows after it)", path=path)
     for c in ("x", "y", "heading"):
         if c not in cols:
             continue

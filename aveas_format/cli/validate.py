@@ -185,9 +185,8 @@ def _finish(report, figures, out_dir: Path | None, output: Path | None, fmt, fai
         write_text_atomic(out_dir / "report.json", render_json(report))
         write_text_atomic(out_dir / "report.html", render_html(
             report, _open_for_figures(figures, report), docs_url=docs_url))
-        err.print(render_text(report).rstrip().rsplit("\n", 1)[-1], markup=False, highlight=False)
-        err.print(f"wrote {out_dir / 'report.json'}, {out_dir / 'report.html'}", markup=False,
-                  highlight=False)
+        err.print(f"{_summary_line(report, fail_on.value)}; wrote {out_dir / 'report.json'}, "
+                  f"{out_dir / 'report.html'}", markup=False, highlight=False)
         raise typer.Exit(report.exit_code(fail_on.value))
     if fmt is Format.json:
         text = render_json(report)
@@ -196,14 +195,24 @@ def _finish(report, figures, out_dir: Path | None, output: Path | None, fmt, fai
 
         text = render_html(report, _open_for_figures(figures, report), docs_url=docs_url)
     else:
-        text = render_text(report)
+        text = render_text(report, fail_on=fail_on.value)
     if output:
         from aveas_format.safeio import write_text_atomic
 
         write_text_atomic(output, text)
+        # the report went to a file: one line on stderr with its verdict and where it is
+        err.print(f"{_summary_line(report, fail_on.value)}; wrote {output}", markup=False,
+                  highlight=False)
     else:
         print(text, end="" if text.endswith("\n") else "\n")
     raise typer.Exit(report.exit_code(fail_on.value))
+
+
+def _summary_line(report, fail_on: str) -> str:
+    """The last line of the text report: the recording, the verdict at ``fail_on``, the counts."""
+    from aveas_format.validate.render import render_text
+
+    return render_text(report, fail_on=fail_on).rstrip().rsplit("\n", 1)[-1]
 
 
 

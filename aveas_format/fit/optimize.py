@@ -80,9 +80,12 @@ class FitConfig(BaseModel):
     seed: int = Field(0, description="seed of the starting points and of the optimiser")
     maxfev: int = Field(200, ge=5, description="evaluations per restart at most")
     xatol: float = Field(0.5, gt=0, description="a restart has converged when its search has "
-                         "settled to within this in every parameter (km/h; CMA-ES: the spread of "
-                         "its distribution). Finer than about half a standard error the "
-                         "objective's jumps decide, and the response surface takes over")
+                         "settled to within this in every desired-speed parameter (km/h; CMA-ES: "
+                         "the spread of its distribution). Finer than about half a standard error "
+                         "the objective's jumps decide, and the response surface takes over")
+    xatol_fraction: float = Field(0.01, gt=0, le=0.5, description="the same for every other "
+                                  "parameter (W99 cc0..cc9, in their own units): this fraction of "
+                                  "its bound width (cc1 bounded to 0.3-1.8 s: 0.015 s)")
     fatol: float = Field(0.05, gt=0, description="convergence tolerance in -ln L")
     simplex_fraction: float = Field(0.2, gt=0, le=1, description="initial step as a fraction of "
                                     "the bound widths (Nelder-Mead's simplex, CMA-ES's sigma0)")
@@ -141,6 +144,13 @@ class FitConfig(BaseModel):
         if self.parameters:
             return list(self.parameters)
         return [f"{p}_{c}" for c in self.classes for p in ("mu", "sigma")]
+
+    def tolerances(self) -> np.ndarray:
+        """Per parameter, how far a converged search may still move: ``xatol`` (km/h) for
+        mu/sigma, ``xatol_fraction`` x the bound width for the others."""
+        b = self.bounds_array()
+        speed = np.array([n.partition("_")[0] in ("mu", "sigma") for n in self.names])
+        return np.where(speed, self.xatol, self.xatol_fraction * (b[:, 1] - b[:, 0]))
 
     def bounds_array(self) -> np.ndarray:
         """(lower, upper) per parameter: ``bounds``, else the paper's W99 range for cc0..cc9."""
@@ -258,7 +268,7 @@ def run_restart(task: dict) -> dict:
     net = task.get("network")
     t0 = time.perf_counter()
     f = Objective(lambda x: evaluate(x, config, recorded, net)[0], b)
-    r = minimise(config.method, f, x0, maxfev=config.maxfev, xatol=config.xatol, fatol=config.fatol,
+    r = minimise(config.method, f, x0, maxfev=config.maxfev, xatol=config.tolerances(), fatol=config.fatol,
                  step=config.simplex_fraction, seed=config.seed * 1000 + int(task["restart"]),
                  popsize=config.popsize)
     out = {"restart": int(task["restart"]), "method": config.method, "fun": r.fun, "nfev": r.nfev,
@@ -325,13 +335,37 @@ class FitResult:
         return {n: self.best[n] for n in self.config.names}
 
     @property
+    def optimiser_converged(self) -> bool:
+        """The best restart (the one the estimate starts from) converged by its optimiser's own
+        criterion (CMA-ES: its spread below ``xatol`` or its values within ``fatol``; Nelder-Mead:
+        SciPy's ``xatol`` and ``fatol``), not stopped at the evaluation cap."""
+        return bool(self.best.get("converged", False))
+
+    @property
+    def surface_converged(self) -> bool | None:
+        """The response surface is positive definite with its minimum inside its design (None
+        without ``refine``)."""
+        return bool(self.surface["converged"]) if self.surface else None
+
+    @property
     def converged(self) -> bool:
-        """The response surface converged (when refined), else the best restart did."""
-        return bool(self.surface["converged"] if self.surface else self.best.get("converged", False))
+        """The fit converged: the best restart converged by its optimiser's criterion and, when
+        refined, the response surface resolved its minimum. A fit whose best restart stopped at the
+        evaluation cap has not converged, whatever the surface says."""
+        return self.optimiser_converged and self.surface_converged is not False
+
+    @property
+    def stop(self) -> str:
+        """Why the fit stopped, in words that agree with :attr:`converged`."""
+        b = self.best
+        head = (f"the best restart ({b['restart']}) converged: {b.get('stop', '')}" if self.optimiser_converged
+                else f"the best restart ({b['restart']}) did not converge: {b.get('stop', '')}")
+        return f"{head}; {self.surface['stop']}" if self.surface else head
 
     def agreeing(self) -> int:
         """How many restarts ended within two standard errors of the estimate in every parameter
-        (without standard errors: within 2 x xatol of the best restart's end) — the paper's
+        (without standard errors: within twice :meth:`FitConfig.tolerances` of the best
+        restart's end) — the paper's
         robustness check, the same minimum from different starts."""
         names = self.config.names
         est = self.best_params()
@@ -340,7 +374,7 @@ class FitResult:
             tol = dict(zip(names, 2.0 * np.asarray(se), strict=True))
         else:
             est = {n: self.best[n] for n in names}
-            tol = dict.fromkeys(names, 2.0 * self.config.xatol)
+            tol = dict(zip(names, 2.0 * self.config.tolerances(), strict=True))
         return sum(all(abs(r[n] - est[n]) <= tol[n] for n in names) for r in self.runs)
 
     def summary(self) -> dict:
@@ -350,8 +384,9 @@ class FitResult:
         b = self.best
         est = self.best_params()
         out: dict = {**est, "fun": self.surface["fun"] if self.surface else b["fun"],
-                     "converged": self.converged,
-                     "stop": self.surface["stop"] if self.surface else b.get("stop", ""),
+                     "converged": self.converged, "stop": self.stop,
+                     "optimiser_converged": self.optimiser_converged,
+                     "surface_converged": self.surface_converged,
                      "estimate": "response surface" if self.surface else "best restart",
                      "method": self.config.method, "restarts": len(self.runs),
                      "restarts_converged": sum(bool(r.get("converged")) for r in self.runs),

@@ -81,12 +81,15 @@ def initial_simplex(x0: np.ndarray, bounds: np.ndarray, fraction: float) -> np.n
     return np.array(sim)
 
 
-def minimise(method: str, f: Objective, x0: np.ndarray, *, maxfev: int, xatol: float, fatol: float,
+def minimise(method: str, f: Objective, x0: np.ndarray, *, maxfev: int, xatol, fatol: float,
              step: float, seed: int, popsize: int | None = None) -> SearchResult:
     """Run ``method`` on ``f`` from ``x0``; ``step``: the initial step as a fraction of the bound
-    widths (Nelder-Mead's simplex edges, CMA-ES's sigma0, the spread of the first Bayesian points)."""
+    widths (Nelder-Mead's simplex edges, CMA-ES's sigma0, the spread of the first Bayesian points);
+    ``xatol``: one tolerance or one per parameter (Nelder-Mead, whose SciPy criterion takes one,
+    uses the smallest)."""
+    xatol = np.broadcast_to(np.asarray(xatol, np.float64), np.shape(x0))
     if method == "nelder-mead":
-        return _nelder_mead(f, x0, maxfev=maxfev, xatol=xatol, fatol=fatol, step=step)
+        return _nelder_mead(f, x0, maxfev=maxfev, xatol=float(xatol.min()), fatol=fatol, step=step)
     if method == "cma":
         return _cma(f, x0, maxfev=maxfev, xatol=xatol, fatol=fatol, step=step, seed=seed,
                     popsize=popsize)
@@ -115,7 +118,12 @@ def _nelder_mead(f: Objective, x0: np.ndarray, *, maxfev: int, xatol: float, fat
 _CMA_SETTLED = ("tolx", "tolfun", "tolfunhist", "tolflatfitness", "tolstagnation")
 
 
-def _cma(f: Objective, x0: np.ndarray, *, maxfev: int, xatol: float, fatol: float, step: float,
+def _tol_text(xatol: np.ndarray) -> str:
+    """``0.5`` where every parameter has the same tolerance, else ``0.5, 0.5, 0.015``."""
+    return f"{xatol[0]:g}" if np.all(xatol == xatol[0]) else ", ".join(f"{v:.3g}" for v in xatol)
+
+
+def _cma(f: Objective, x0: np.ndarray, *, maxfev: int, xatol: np.ndarray, fatol: float, step: float,
          seed: int, popsize: int | None) -> SearchResult:
     import cma
 
@@ -126,10 +134,12 @@ def _cma(f: Objective, x0: np.ndarray, *, maxfev: int, xatol: float, fatol: floa
             "seed": int(seed) + 1, "verbose": -9, "maxfevals": np.inf}
     if popsize:
         opts["popsize"] = int(popsize)
+    if len(x0) == 1:  # pycma 4.x cannot rescale a one-dimensional search to its std limits
+        opts["maxstd"], opts["minstd"] = np.inf, 0.0  # ("not yet initialized"): none here
     es = cma.CMAEvolutionStrategy(np.clip((x0 - lo) / width, 1e-3, 1 - 1e-3), step, opts)
     while True:
         if np.all(es.sigma * np.sqrt(np.diag(es.C)) < tol):
-            converged, stop = True, f"xatol reached (spread < {xatol:g} in every parameter)"
+            converged, stop = True, f"xatol reached (spread < {_tol_text(xatol)} in every parameter)"
             break
         stops = es.stop()
         if stops:
@@ -150,7 +160,7 @@ def _cma(f: Objective, x0: np.ndarray, *, maxfev: int, xatol: float, fatol: floa
     return SearchResult(mean, fm, f.nfev, converged, stop, int(es.countiter), list(f.trace))
 
 
-def _bayes(f: Objective, x0: np.ndarray, *, maxfev: int, xatol: float, step: float, seed: int
+def _bayes(f: Objective, x0: np.ndarray, *, maxfev: int, xatol: np.ndarray, step: float, seed: int
            ) -> SearchResult:
     from skopt import gp_minimize
 

@@ -105,6 +105,7 @@ def run_replicate(task: dict) -> dict:
     fr = fit_parameters(recorded, fit_cfg, workers=1, figures=False)
     s = fr.summary()
     row: dict[str, Any] = {"seed": k, "size": size, "converged": s["converged"], "stop": s["stop"],
+                           "surface_converged": s["surface_converged"],
                            "evaluations": s["evaluations"], "fun": s["fun"],
                            "seconds": round(time.perf_counter() - t0, 2)}
     for c in fit.classes:
@@ -147,6 +148,9 @@ def summarise(rows: list[dict], cfg: StudyConfig) -> dict:
         if not rs:
             continue
         per: dict[str, Any] = {"replicates": len(rs), "converged": sum(bool(r["converged"]) for r in rs),
+                               # rows stored before the flag was split: the fit's converged was the surface's
+                               "surface_converged": sum(bool(r.get("surface_converged", r["converged"]))
+                                                        for r in rs),
                                "mean_evaluations": float(np.mean([r["evaluations"] for r in rs])),
                                "mean_seconds": float(np.mean([r["seconds"] for r in rs])),
                                "mean_n": {c: float(np.mean([r[f"n_{c}"] for r in rs]))

@@ -10,6 +10,11 @@ geometry.gap           warning   consecutive geometries: the end of one is > 1 m
 geometry.heading_jump  warning   consecutive geometries: heading differs by > 1 mrad
 geometry.s_mismatch    warning   a geometry's s differs from the previous s + length by > 1 mm
 road.length_mismatch   warning   the plan view's length differs from the road's length by > 1 mm
+geometry.zero_length   info      a ``<geometry>`` shorter than 1 mm (length 0 or rounding residue);
+                                 it is read, it just contributes (almost) nothing
+lane.section_length    warning   a lane section shorter than 1 mm: two ``<laneSection>`` at the same
+                                 s, one at or after the road's end, or a rounding residue; its lanes
+                                 apply nowhere (or over less than 1 mm): the next section's lanes do
 lane.negative_width    error     a lane's width is negative somewhere in its section, by more than
                                  ``WIDTH_TOL`` (1 cm)
 lane.width_noise       warning   ... by less than ``WIDTH_TOL``: numerical noise of the tool that wrote
@@ -41,6 +46,8 @@ if TYPE_CHECKING:  # pragma: no cover
     from .core import NetworkCore
 
 GAP_TOL = 1e-3
+#: m: lane sections and geometries shorter than this are reported (zero-length or rounding residue)
+SHORT_TOL = 1e-3
 HEADING_TOL = 1e-3
 #: m: a negative lane width smaller than this is numerical noise (a warning), larger an error
 WIDTH_TOL = 1e-2
@@ -102,6 +109,14 @@ def _geometry(net: NetworkCore) -> list[Finding]:
                     ds,
                 )
             )
+    short = np.flatnonzero(pv.length < SHORT_TOL)
+    for i in short:
+        rid = net.road_ids[pv.road[i]]
+        kind = net.roads[rid].geometries[i - int(pv.index.road_first[pv.road[i]])].kind
+        out.append(Finding(
+            "geometry.zero_length",
+            f"road {rid}: the <{kind}> geometry at s={pv.s0[i]:.6g} is {pv.length[i]:.3g} m long",
+            "info", rid, pv.line[i], float(pv.length[i])))
     for road in net.road_list:
         last = road.geometries[-1]
         d = last.s + last.length - road.length
@@ -119,6 +134,23 @@ def _geometry(net: NetworkCore) -> list[Finding]:
     return out
 
 
+def _section_length(road, si: int, length: float) -> Finding | None:
+    """A finding for lane section ``si`` of ``road`` when it is shorter than ``SHORT_TOL``."""
+    if length >= SHORT_TOL:
+        return None
+    sec = road.lane_sections[si]
+    where = f"road {road.id}: the lane section at s={sec.s:.6g}"
+    if sec.s >= road.length:
+        why = f"starts at or after the road's end (length {road.length:.6g}): its lanes apply nowhere"
+    elif length <= 0:
+        why = "starts where the next one does: it has zero length and its lanes apply nowhere"
+    else:
+        nxt = (f"the next one starts at s={road.lane_sections[si + 1].s:.9g}" if si + 1 < len(road.lane_sections)
+               else "as is the whole road" if sec.s <= 0 else f"the road ends at s={road.length:.9g}")
+        why = f"is {length:.3g} m long ({nxt})"
+    return Finding("lane.section_length", f"{where} {why}", "warning", road.id, sec.line, length)
+
+
 def _lanes(net: NetworkCore, step: float = 2.0) -> list[Finding]:
     out = []
     lanes = net.lanes
@@ -126,6 +158,10 @@ def _lanes(net: NetworkCore, step: float = 2.0) -> list[Finding]:
         ri = int(lanes.section_road[gsec])
         road = net.road_list[ri]
         sec = road.lane_sections[int(lanes.section_local[gsec])]
+        short = _section_length(road, int(lanes.section_local[gsec]),
+                                float(lanes.section_end[gsec] - lanes.section_start[gsec]))
+        if short is not None:
+            out.append(short)
         s = section_samples(net, gsec, step)
         # evaluate just inside each piece's end as well
         s = np.unique(np.concatenate([s, np.maximum(s - 1e-9, s[0])]))
@@ -179,7 +215,12 @@ def _lanes(net: NetworkCore, step: float = 2.0) -> list[Finding]:
 
 
 def _section_lane_ids(road, at_start: bool) -> set[int]:
-    sec = road.lane_sections[0] if at_start else road.lane_sections[-1]
+    """Lane ids of the road's first (or last) lane section that has a length (the one a link to
+    the road's start or end reaches; zero-length sections apply nowhere)."""
+    secs = road.lane_sections
+    ends = [sec.s for sec in secs[1:]] + [road.length]
+    used = [sec for sec, end in zip(secs, ends) if min(end, road.length) > sec.s] or secs
+    sec = used[0] if at_start else used[-1]
     return {ln.id for ln in sec.left + sec.right}
 
 

@@ -105,7 +105,12 @@ class LaneTable:
             nsec = len(road.lane_sections)
             for si, sec in enumerate(road.lane_sections):
                 s_a = sec.s
-                s_b = road.lane_sections[si + 1].s if si + 1 < nsec else max(road.length, sec.s)
+                # a section ends where the next one starts, at the latest at the road's end; a
+                # section that starts where the next one does (two <laneSection s="0">) or at/after
+                # the road's end has zero length: its pieces exist (check reports it), but the
+                # lookup of "the last piece starting at or before s" passes over it
+                s_next = road.lane_sections[si + 1].s if si + 1 < nsec else road.length
+                s_b = max(s_a, min(s_next, road.length))
                 cuts = {s_a}
                 for lane in sec.left + sec.right:
                     tab = lane.widths if len(lane.widths) else lane.borders
@@ -175,6 +180,13 @@ class LaneTable:
         self.section_end = np.array(sec_end)
         self.section_first_piece = np.array(sec_first_piece, dtype=np.int64)
         self.section_npieces = np.array(sec_npieces, dtype=np.int64)
+        # a lookup that lands on a piece of a zero-length section (one starting at the road's end)
+        # uses the last piece before it on the same road instead, where there is one
+        empty = (self.section_end <= self.section_start)[self.piece_section]
+        last_used = np.where(empty, -1, np.arange(len(empty)))
+        last_used = np.maximum.accumulate(last_used) if len(empty) else last_used
+        ok = (last_used >= 0) & (self.piece_road[np.maximum(last_used, 0)] == self.piece_road)
+        self._piece_used = np.where(empty & ok, last_used, np.arange(len(empty)))
 
     @staticmethod
     def _lane_record(lane: Lane, sec_s: float, s: float):
@@ -188,7 +200,9 @@ class LaneTable:
 
     # ------------------------------------------------------------------------------------------
     def find_piece(self, road: np.ndarray, s: np.ndarray) -> np.ndarray:
-        return self.index.find(road, s, self.road_offset)
+        """The piece in effect at (road, s): the last one starting at or before s, passing over
+        zero-length sections."""
+        return self._piece_used[self.index.find(road, s, self.road_offset)]
 
     def pieces_in_section(self, gsec: int, s: np.ndarray) -> np.ndarray:
         """Piece of section ``gsec`` for each s (clamped to the section's own pieces)."""

@@ -11,6 +11,10 @@ if TYPE_CHECKING:  # pragma: no cover
     from .core import NetworkCore
 
 
+#: m: lane sections shorter than this have no polygon (they cover no area)
+MIN_SECTION_LENGTH = 1e-6
+
+
 def section_samples(net: NetworkCore, gsec: int, step: float) -> np.ndarray:
     """Sample positions s along lane section ``gsec``: every ``step`` m plus its pieces' starts."""
     lanes = net.lanes
@@ -26,11 +30,15 @@ def lane_polygons(net: NetworkCore, step: float = 1.0, drivable_only: bool = Fal
     Each polygon runs along the inner border from the section's start to its end and back along
     the outer border, sampled every ``step`` m and at every change of width polynomial. Lanes
     that fold (wider than the curve radius) give self-intersecting polygons; they are returned as
-    they are (``shapely.make_valid`` repairs them if needed).
+    they are (``shapely.make_valid`` repairs them if needed). Sections shorter than
+    :data:`MIN_SECTION_LENGTH` (zero-length sections such as two ``<laneSection s="0">``) have no
+    area and give no polygon; ``map check`` reports them.
     """
     lanes = net.lanes
     out: list[tuple[str, int, int, Any]] = []
     for gsec in range(len(lanes.section_road)):
+        if lanes.section_end[gsec] - lanes.section_start[gsec] < MIN_SECTION_LENGTH:
+            continue
         ri = int(lanes.section_road[gsec])
         s = section_samples(net, gsec, step)
         piece = lanes.pieces_in_section(gsec, s)
@@ -56,4 +64,4 @@ def lane_polygons(net: NetworkCore, step: float = 1.0, drivable_only: bool = Fal
     return out
 
 
-__all__ = ["lane_polygons", "section_samples"]
+__all__ = ["MIN_SECTION_LENGTH", "lane_polygons", "section_samples"]

@@ -172,14 +172,38 @@ def _draw_regions(ax, rec, max_regions: int = 5000) -> list[Any]:
     return handles
 
 
-def _draw_trajectories(ax, st, cls: np.ndarray, max_points: int, max_arrows: int = 200) -> list[Any]:
-    """Trajectories coloured by class (subsampled to ``max_points``) with an arrow in the
-    direction of travel at the middle of each (up to ``max_arrows`` participants); legend handles."""
+def _trajectory_handles(st, cls: np.ndarray) -> list[Any]:
+    """Legend handles of :func:`_draw_trajectories`: each class with its number of participants,
+    the arrow and (where someone stands) the dot."""
     from matplotlib.lines import Line2D
 
     n = len(st["x"])
+    starts = np.r_[0, np.flatnonzero(np.diff(st["participant_id"]) != 0) + 1]
+    ends = np.r_[starts[1:], n]
+    seg_cls = cls[starts]
+    handles = [Line2D([], [], color=CLASS_COLORS.get(c, _UNKNOWN_CLASS), linewidth=2,
+                      label=f"{c} ({int((seg_cls == c).sum())})")
+               for c in sorted(set(seg_cls), key=lambda c: (c == "unknown", c))]
+    mid = (starts + ends) // 2
+    speed = np.hypot(st["vx"][mid], st["vy"][mid])
+    moving = np.isfinite(speed) & (speed > 0.5)
+    if moving.any():
+        handles.append(Line2D([], [], color="#333333", marker=">", linestyle="-", markersize=6,
+                              label="direction of travel"))
+    if (np.isfinite(st["x"][mid]) & np.isfinite(st["y"][mid]) & ~moving).any():
+        handles.append(Line2D([], [], color="#333333", marker="o", linestyle="none",
+                              markersize=4, label="standing (speed < 0.5 m/s)"))
+    return handles
+
+
+def _draw_trajectories(ax, st, cls: np.ndarray, max_points: int, max_arrows: int = 200) -> None:
+    """Trajectories coloured by class (subsampled to ``max_points``) with an arrow in the
+    direction of travel at the middle of each (up to ``max_arrows`` participants), a dot for a
+    participant standing there (legend: :func:`_trajectory_handles`)."""
+    n = len(st["x"])
+    if n == 0:
+        return
     step = max(1, n // max_points)
-    handles = []
     starts = np.r_[0, np.flatnonzero(np.diff(st["participant_id"]) != 0) + 1]
     ends = np.r_[starts[1:], n]
     seg_cls = cls[starts]
@@ -190,8 +214,6 @@ def _draw_trajectories(ax, st, cls: np.ndarray, max_points: int, max_arrows: int
         brk = np.flatnonzero(np.diff(pid) != 0) + 1
         ax.plot(np.insert(st["x"][idx], brk, np.nan), np.insert(st["y"][idx], brk, np.nan),
                 linewidth=0.7, color=color, alpha=0.75, zorder=2.5)
-        handles.append(Line2D([], [], color=color, linewidth=2,
-                              label=f"{c} ({int((seg_cls == c).sum())})"))
     # direction of travel: the velocity at the middle sample of each participant's trajectory
     every = max(1, len(starts) // max_arrows)
     mid = ((starts + ends) // 2)[::every]
@@ -204,17 +226,12 @@ def _draw_trajectories(ax, st, cls: np.ndarray, max_points: int, max_arrows: int
                   color=colors, angles="xy", scale_units="inches", scale=1 / 0.15,
                   width=0.0025, headwidth=4, headlength=4.5, headaxislength=4, zorder=4,
                   edgecolors="white", linewidths=0.3)
-        handles.append(Line2D([], [], color="#333333", marker=">", linestyle="-", markersize=6,
-                              label="direction of travel"))
     # a participant standing there has no arrow and a trajectory too short to see: a dot
     still = np.isfinite(st["x"][mid]) & np.isfinite(st["y"][mid]) & ~ok
     if still.any():
         colors = [CLASS_COLORS.get(c, _UNKNOWN_CLASS) for c in seg_cls[::every][still]]
         ax.scatter(st["x"][mid][still], st["y"][mid][still], c=colors, s=16, marker="o",
                    edgecolors="white", linewidths=0.4, zorder=4)
-        handles.append(Line2D([], [], color="#333333", marker="o", linestyle="none",
-                              markersize=4, label="standing (speed < 0.5 m/s)"))
-    return handles
 
 
 def _draw_findings(ax, pts: list[tuple[str, str, float, float]]) -> list[Any]:
@@ -240,44 +257,100 @@ def _draw_findings(ax, pts: list[tuple[str, str, float, float]]) -> list[Any]:
     return handles
 
 
+#: a map figure's data longer than this many times its width is drawn in strips (rows)
+STRIP_RATIO = 8.0
+#: at most this many strips; each strip is at most about ``STRIP_RATIO`` times as long as wide
+MAX_STRIPS = 8
+
+
+def strips(box: tuple[float, float, float, float]
+           ) -> tuple[int, list[tuple[float, float]], tuple[float, float]]:
+    """How the map figure shows the data box ``(xmin, ymin, xmax, ymax)`` at equal scale in x and
+    y: ``(axis, [(from, to) of each strip along it], (from, to) across)``. ``axis`` is 0 where the
+    data run along x, 1 along y. Data less than :data:`STRIP_RATIO` times as long as wide make
+    one strip; a 1.5 km motorway 15 m wide is cut into :data:`MAX_STRIPS` strips stacked like
+    lines of text (each a little longer than its share, so the strips overlap)."""
+    size = (box[2] - box[0], box[3] - box[1])
+    axis = 0 if size[0] >= size[1] else 1
+    along, across = size[axis], size[1 - axis]
+    lo_a, lo_c = box[axis], box[1 - axis]
+    pad_c = max(0.15 * across, 3.0)
+    ratio = (along + 2 * pad_c) / (across + 2 * pad_c)
+    if ratio < STRIP_RATIO:
+        pad = max(0.08 * max(along, across), 15.0)
+        return axis, [(lo_a - pad, lo_a + along + pad)], (lo_c - pad, lo_c + across + pad)
+    n = int(min(MAX_STRIPS, np.ceil(ratio / STRIP_RATIO)))
+    pad_a = 0.01 * along + pad_c
+    seg = (along + 2 * pad_a) / n
+    overlap = 0.03 * seg
+    parts = [(lo_a - pad_a + k * seg - overlap, lo_a - pad_a + (k + 1) * seg + overlap)
+             for k in range(n)]
+    return axis, parts, (lo_c - pad_c, lo_c + across + pad_c)
+
+
 def map_figure(rec, findings: Iterable[Any] = (), max_points: int = 200_000) -> Figure:
     """The map underneath (:func:`~aveas_format.plot.map.plot_map`, lanes by type in the light
     ``BACKGROUND_LANE_COLORS``), the coverage (dashed) and unobserved regions (hatched), the
     trajectories coloured by class (subsampled) with arrows in the direction of travel, and the
     findings with a position (x/y, or the state row they name), one marker shape per rule and
-    coloured by severity. Titled with the recording's name (:func:`recording_name`)."""
-    fig = _figure((12, 6))
-    ax = fig.subplots()
-    try:
-        plot_map(rec.map, ax, step=2.0, lane_colors=BACKGROUND_LANE_COLORS,
-                 lane_edges=("#b0b0b0", 0.3), reference_lines=False, junctions=False, legend=False,
-                 title="")
-    except Exception:  # noqa: BLE001 — a figure without the map is still useful
-        ax.text(0.01, 0.99, "map not available", transform=ax.transAxes, va="top")
-    handles = _draw_regions(ax, rec)
+    coloured by severity. Titled with the recording's name (:func:`recording_name`).
+
+    The axes frame the data (positions, findings, coverage), not the whole map, always at equal
+    scale in x and y (a 0.1 m jitter looks like 0.1 m); data much longer than wide (a motorway
+    stretch) are drawn in strips stacked like lines of text (:func:`strips`), one axes each."""
     st = _states(rec)
-    if st is not None:
-        handles = _draw_trajectories(ax, st, _classes(rec, st["participant_id"]), max_points) + \
-            handles
     pts = _finding_points(rec, findings)
-    finding_handles = _draw_findings(ax, pts)
-    ax.autoscale_view()
-    x0, x1 = ax.get_xlim()
-    y0, y1 = ax.get_ylim()
-    # the data, not the whole map: a crossing recorded on a city map stays readable
+    cls = _classes(rec, st["participant_id"]) if st is not None else None
     box = _data_bounds(rec, st, pts)
-    if box is not None:
-        pad = max(0.08 * max(box[2] - box[0], box[3] - box[1]), 15.0)
-        x0, x1 = max(x0, box[0] - pad), min(x1, box[2] + pad)
-        y0, y1 = max(y0, box[1] - pad), min(y1, box[3] + pad)
-        ax.set_xlim(x0, x1)
-        ax.set_ylim(y0, y1)
-    # equal axes (plot_map's), unless a long straight road would become a thin strip
-    ratio = max(x1 - x0, 1e-9) / max(y1 - y0, 1e-9)
-    ax.set_aspect("equal" if ratio < 8 else "auto", adjustable="datalim")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.set_title(recording_name(rec), fontsize=11)
+    if box is None:
+        try:
+            box = rec.map.bounds
+        except Exception:  # noqa: BLE001 — no map and no data: an empty frame
+            box = (0.0, 0.0, 100.0, 100.0)
+    axis, parts, across = strips(box)
+    plot_w = 8.8  # inches beside the legends
+    strip_h = plot_w * (across[1] - across[0]) / (parts[0][1] - parts[0][0])
+    if len(parts) == 1:
+        fig = _figure((12, float(np.clip(strip_h + 1.2, 3.5, 9.0))))
+        axes = [fig.subplots()]
+    elif axis == 0:
+        fig = _figure((12, float(np.clip(len(parts) * (strip_h + 0.45) + 0.9, 3.5, 14.0))))
+        axes = list(fig.subplots(len(parts), 1, squeeze=False)[:, 0])
+    else:
+        fig = _figure((12, 8.0))
+        axes = list(fig.subplots(1, len(parts), squeeze=False)[0])
+    handles: list[Any] = []
+    finding_handles: list[Any] = []
+    for k, (ax, (a, b)) in enumerate(zip(axes, parts, strict=True)):
+        try:
+            plot_map(rec.map, ax, step=2.0, lane_colors=BACKGROUND_LANE_COLORS,
+                     lane_edges=("#b0b0b0", 0.3), reference_lines=False, labels=False,
+                     junctions=False, legend=False, title="")
+        except Exception:  # noqa: BLE001 — a figure without the map is still useful
+            ax.text(0.01, 0.99, "map not available", transform=ax.transAxes, va="top")
+        region_handles = _draw_regions(ax, rec)
+        if st is not None:
+            keep = np.ones(len(st["x"]), dtype=bool)
+            if len(parts) > 1:  # the samples of this strip (and a little around it)
+                v = st["xy"[axis]]
+                keep = (v >= a - 0.05 * (b - a)) & (v <= b + 0.05 * (b - a))
+            _draw_trajectories(ax, {c: st[c][keep] for c in st}, cls[keep],
+                               max_points // len(parts))
+        fh = _draw_findings(ax, pts)
+        if k == 0:
+            handles = (_trajectory_handles(st, cls) if st is not None else []) + region_handles
+            finding_handles = fh
+        lim_along, lim_across = (ax.set_xlim, ax.set_ylim) if axis == 0 else (ax.set_ylim, ax.set_xlim)
+        lim_along(a, b)
+        lim_across(*across)
+        ax.set_aspect("equal", adjustable="datalim" if len(parts) == 1 else "box")
+        ax.tick_params(labelsize=8)
+        ax.set_xlabel("x [m]" if len(parts) == 1 or axis == 1 or k == len(parts) - 1 else "")
+        ax.set_ylabel("y [m]" if len(parts) == 1 or axis == 0 or k == 0 else "")
+    title = recording_name(rec)
+    if len(parts) > 1:
+        title += f" — {len(parts)} strips along {'xy'[axis]}, equal scale"
+    axes[0].set_title(title, fontsize=11)
     if handles:
         fig.legend(handles=handles, title="class (participants), regions", loc="outside right upper",
                    fontsize=8, title_fontsize=8, frameon=False, alignment="left")
@@ -354,11 +427,23 @@ def robust_range(values: np.ndarray, lower: float = 0.5, upper: float = 99.5,
 
 
 def _per_class_hist(ax, values: np.ndarray, cls: np.ndarray, xlabel: str, unit: str, *,
-                    include: float | None = None, bins: int = 60) -> None:
+                    include: float | None = None, bins: int = 60, nice: float | None = None,
+                    floor: float | None = None) -> None:
     """Density histograms per class over the robust range of ``values``, the count of values
-    outside it written in the corner; ``unit`` of the values (the density is per ``unit``)."""
+    outside it written in the corner; ``unit`` of the values (the density is per ``unit``).
+    ``nice``: the range widened by 5 % and out to multiples of ``nice`` (not below ``floor``), so
+    that the tails just beyond the percentiles stay in the plot instead of piling up in the end
+    bins."""
     ok = np.isfinite(values)
-    lo, hi, outside = robust_range(values, include=include)
+    lo, hi, _ = robust_range(values, include=include)
+    if nice:
+        span = hi - lo
+        lo = np.floor((lo - 0.05 * span) / nice) * nice
+        hi = np.ceil((hi + 0.05 * span) / nice) * nice
+        if floor is not None:
+            lo = max(lo, floor)
+    v = values[ok]
+    outside = int(((v < lo) | (v > hi)).sum())
     edges = np.linspace(lo, hi, bins + 1)
     for c in sorted(set(cls[ok]), key=lambda c: (c == "unknown", c)):
         sel = ok & (cls == c)
@@ -371,8 +456,8 @@ def _per_class_hist(ax, values: np.ndarray, cls: np.ndarray, xlabel: str, unit: 
         _no_data(ax, f"no {xlabel.split(' [')[0]}: no finite value")
     else:
         ax.legend(fontsize=8)
-        note = (f"{outside:,} of {int(ok.sum()):,} values outside [{lo:.3g}, {hi:.3g}] "
-                "(0.5-99.5 %), in the end bins" if outside else f"all {int(ok.sum()):,} values")
+        note = (f"{outside:,} of {int(ok.sum()):,} values outside [{lo:.3g}, {hi:.3g}], "
+                "in the end bins" if outside else f"all {int(ok.sum()):,} values")
         xlabel = f"{xlabel}\n{note}"
     ax.set_xlabel(xlabel, fontsize=9)
 
@@ -386,14 +471,16 @@ def _no_data(ax, text: str) -> None:
 
 
 def speed_histogram(rec) -> Figure:
-    """Distribution of speed over ground (from vx, vy) per class, over its robust range."""
+    """Distribution of speed over ground (from vx, vy) per class in km/h (what traffic engineers
+    read), over the robust range of the speeds themselves: a motorway's 80-160 km/h fill the
+    axis instead of its right half."""
     fig = _figure((6, 4))
     ax = fig.subplots()
     st = _states(rec)
     if st is not None:
-        v = np.hypot(st["vx"], st["vy"])
-        _per_class_hist(ax, v, _classes(rec, st["participant_id"]), "speed [m/s]", "m/s",
-                        include=0.0)
+        v = np.hypot(st["vx"], st["vy"]) * 3.6
+        _per_class_hist(ax, v, _classes(rec, st["participant_id"]), "speed [km/h]", "km/h",
+                        nice=5.0, floor=0.0)
     else:
         _no_data(ax, "no states with x, y, vx, vy")
     ax.set_title("Speed per class")

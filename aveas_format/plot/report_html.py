@@ -7,7 +7,7 @@ per class, duration, rates, map, CRS, coverage, provenance, acquisition, rights)
 per severity; the extra sections a caller passes (``sections``: the place of a criticality
 summary); the **rules with findings** (each code's doc as a tooltip, a link to its section below
 and, with ``docs_url``, to its entry in docs/rules.md); tool failures; the **figures**; then one
-expandable section per rule with its doc (reStructuredText rendered), the FORMAT.md sentence it
+expandable section per rule with its doc (reStructuredText rendered), the docs/format.md sentence it
 enforces, its count and its sampled findings.
 """
 
@@ -21,7 +21,7 @@ from typing import Any
 from aveas_format.plot.recording import figures as recording_figures
 from aveas_format.plot.recording import png_bytes, recording_name
 from aveas_format.validate.registry import load_rules
-from aveas_format.validate.render import inline_markup, rule_anchor
+from aveas_format.validate.render import inline_markup, message_text, rule_anchor
 from aveas_format.validate.report import Report, Severity
 
 _CSS = """
@@ -296,7 +296,7 @@ def render_html(report: Report, rec: Any = None, figures: dict[str, bytes] | Non
         out.append("<table><tr>" + "".join(f"<th>{k}</th>" for k in cols) + "<th>message</th></tr>")
         for f in r.sample:
             out.append("<tr>" + "".join(f"<td>{_e(getattr(f.location, k))}</td>" for k in cols) +
-                       f"<td>{_e(f.message)}</td></tr>")
+                       f"<td>{_e(message_text(f))}</td></tr>")
         out.append("</table></details>")
     out.append(f"<p class='muted'>aveas-format {_e(report.tool_version)}. Rule documentation: "
                + (f"<a href='{_e(docs_url.rstrip('/'))}/rules.md'>rules.md</a>" if docs_url

@@ -1,7 +1,7 @@
 """The rule registry: one declaration per rule, found by its code (STYLE.md 1, 6).
 
 A rule is a generator function decorated with :func:`rule`, which declares its stable code
-``<family>.<snake_case>``, severity, title, message template, doc and the FORMAT.md sentence it
+``<family>.<snake_case>``, severity, title, message template, doc and the docs/format.md sentence it
 enforces. It yields :class:`Hit` (one finding) or :class:`Hits` (a vectorised batch: the true total
 and arrays of location fields, of which the runner keeps a bounded sample). Rules never raise on
 bad data; an exception is a tool failure.
@@ -70,7 +70,7 @@ class Rule:
     message: str
     doc: str
     fn: RuleFn
-    enforces: str | None = None  # the FORMAT.md sentence behind an error / warning
+    enforces: str | None = None  # the docs/format.md sentence behind an error / warning
     #: "recording": runs once on the whole recording; "rows": looks only within the rows of a table
     #: (and within one participant's trajectory), so it runs on each batch of a streamed table
     scope: str = "recording"
@@ -99,7 +99,7 @@ def rule(code: str, severity: str, title: str, message: str, enforces: str | Non
          scope: str = "recording", needs: tuple[str, ...] = ()) -> Callable[[RuleFn], RuleFn]:
     """Register a rule (decorator). The function's docstring is the rule's doc. The registry
     enforces its own docs (STYLE.md 6), for built-in and plugin rules alike: a unique code, a
-    title, a message, a doc, and for an error the FORMAT.md sentence it enforces.
+    title, a message, a doc, and for an error the docs/format.md sentence it enforces.
 
     ``scope="rows"`` declares that the rule only looks within the rows it is given: per row, or
     within one participant's trajectory (the runner hands it every participant's samples in one

@@ -11,6 +11,7 @@ import re
 
 from rich.console import Console
 from rich.table import Table
+from rich.text import Text
 
 from aveas_format.validate.report import Report, Severity
 
@@ -55,17 +56,58 @@ def render_json(report: Report) -> str:
     return report.to_json()
 
 
-def render_text(report: Report, *, color: bool = False, width: int = 120) -> str:
-    """One greppable line per sampled finding (``SEVERITY code location: message``), a line per
-    truncated rule, then a summary table by rule and the totals."""
+#: a message's own location prefix: ``states.parquet: row 2400: `` (or ``recording.json: ``)
+_MESSAGE_PLACE = re.compile(r"^(?P<file>[\w./-]+\.(?:parquet|json|xodr)): (?:row (?P<row>\d+): )?")
+
+
+def message_text(finding) -> str:
+    """A finding's message without the location it starts with where its :class:`Location`
+    already says it (``states.parquet: row 2400: participant 3 ...`` beside file states.parquet,
+    row 2400 -> ``participant 3 ...``): a rendered finding names its place once."""
+    m = _MESSAGE_PLACE.match(finding.message)
+    if m is None:
+        return finding.message
+    loc = finding.location
+    files = {loc.file, f"{loc.table}.parquet" if loc.table else None}
+    same_row = m.group("row") is None or (loc.row is not None and int(m.group("row")) == loc.row)
+    if m.group("file") in files and same_row:
+        return finding.message[m.end():]
+    return finding.message
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}" if n == 1 else f"{n} {word}s"
+
+
+def verdict(report: Report, fail_on: str = "error") -> str:
+    """The verdict as a user reads it, true also at another ``--fail-on``: ``VALID``,
+    ``INVALID``, ``VALID with 1 warning, failing at --fail-on warning (exit 1)``, ``INVALID, not
+    failing at --fail-on never (exit 0)``, ``FAILED (tool failure)``."""
+    c = report.counts
+    if report.failures:
+        return "FAILED (tool failure)"
+    status = "INVALID" if c["error"] else "VALID"
+    code, default = report.exit_code(fail_on), report.exit_code("error")
+    if code == default:
+        return status
+    if code:
+        kept = [_plural(c[k], k) for k in ("warning", "info") if c[k] and Severity(k).rank >= Severity(fail_on).rank]
+        return f"{status} with {' and '.join(kept)}, failing at --fail-on {fail_on} (exit {code})"
+    return f"{status}, not failing at --fail-on {fail_on} (exit {code})"
+
+
+def render_text(report: Report, *, color: bool = False, width: int = 120, fail_on: str = "error") -> str:
+    """One greppable line per sampled finding (``SEVERITY code location: message``, the place
+    named once), a line per truncated rule, then a summary table by rule and the totals with the
+    verdict at ``fail_on`` (:func:`verdict`)."""
     buf = io.StringIO()
     con = Console(file=buf, force_terminal=color, no_color=not color, width=width, highlight=False,
                   soft_wrap=True)
     for r in report.results:
         for f in r.sample:
             loc = f.location.text()
-            con.print(f"[{_STYLE[f.severity]}]{f.severity.value.upper():7}[/] {f.code} "
-                      f"{loc + ': ' if loc else ''}{f.message}", markup=True)
+            con.print(Text.assemble((f"{f.severity.value.upper():7}", _STYLE[f.severity]),
+                                    f" {f.code} {loc + ': ' if loc else ''}{message_text(f)}"))
         if r.truncated:
             con.print(f"        {r.code}: … {r.count - len(r.sample)} more (total {r.count})")
     for fail in report.failures:
@@ -80,7 +122,7 @@ def render_text(report: Report, *, color: bool = False, width: int = 120) -> str
             t.add_row(r.code, r.severity.value, str(r.count), r.title)
         con.print(t)
     c = report.counts
-    status = "FAILED (tool failure)" if report.failures else ("INVALID" if c["error"] else "VALID")
-    con.print(f"{report.recording}: {status} — {c['error']} errors, {c['warning']} warnings, "
-              f"{c['info']} info ({len(report.rules_run)} rules, {report.seconds:.2f} s)")
+    con.print(f"{report.recording}: {verdict(report, fail_on)} — {c['error']} errors, {c['warning']} "
+              f"warnings, {c['info']} info ({len(report.rules_run)} rules, {report.seconds:.2f} s)",
+              markup=False)
     return buf.getvalue()

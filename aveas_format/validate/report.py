@@ -79,6 +79,8 @@ class Location(BaseModel):
             parts.append(f"line={self.line}")
         for name in TEXT_FIELDS:
             v = getattr(self, name)
+            if name == "table" and self.file is not None and self.file == f"{v}.parquet":
+                continue  # the file says it
             if v is not None:
                 parts.append(f"{name}={fmt_num(v)}")
         if self.x is not None and self.y is not None:

@@ -43,6 +43,13 @@ def test_fast_parameter_recovery(sumo, tmp_path):
     _check(best, tol_mu=4.0, tol_sigma=5.0)
     assert best["estimate"] == "response surface" and best["method"] == "cma"
     assert isinstance(best["converged"], bool) and best["stop"]
+    # converged only where the best restart converged by its optimiser's own criterion (at most
+    # 30 evaluations: CMA-ES stops at the cap here) and the surface resolved its minimum
+    b = best["best_restart"]
+    assert best["optimiser_converged"] == b["converged"]
+    assert best["converged"] == (b["converged"] and best["surface_converged"])
+    assert best["stop"].startswith(f"the best restart ({b['restart']}) "
+                                   + ("converged" if b["converged"] else "did not converge: evaluation cap (30)"))
     assert best["evaluations"] == sum(r["nfev"] for r in res.runs) + 75
     assert all(0 < best["se"][n] < 10 for n in cfg.names), best["se"]
     rs = best["response_surface"]
@@ -72,7 +79,8 @@ def test_a_fit_stopped_at_the_cap_says_so(sumo, tmp_path):
     res = fit_desired_speed(recorded, cfg, outdir=tmp_path / "fit", figures=False)
     best = json.loads((tmp_path / "fit" / "best.json").read_text())
     assert not res.converged and best["converged"] is False
-    assert best["stop"].startswith("evaluation cap (6)") and best["estimate"] == "best restart"
+    assert best["stop"].startswith("the best restart (0) did not converge: evaluation cap (6)")
+    assert best["estimate"] == "best restart" and best["surface_converged"] is None
     assert best["restarts_at_cap"] == 1 and "se" not in best
 
 
@@ -102,11 +110,12 @@ def test_restarts_on_a_dask_local_cluster(sumo, tmp_path):
     assert sorted(r["restart"] for r in res.runs) == [0, 1] and not res.failed
 
 
-def test_cli_fit_desired_speed(sumo, tmp_path):
+def test_cli_fit_desired_speed(sumo, tmp_path, capsys):
     from aveas_format.cli import main
 
     cfg, _ = cli_simulated_recording(tmp_path, 'duration = 120\nseed = 5\n[network]\nlength = 400\n'
                                                 'inflow = 100\n')
+    capsys.readouterr()
     with pytest.raises(SystemExit) as e:
         main(["fit", "desired-speed", str(tmp_path / "rec.aveas"), "-c", str(cfg), "-o",
               str(tmp_path / "fit"), "-r", "1", "--maxfev", "6", "--s-range", "100,500",
@@ -115,6 +124,22 @@ def test_cli_fit_desired_speed(sumo, tmp_path):
     assert e.value.code == 0
     best = json.loads((tmp_path / "fit" / "best.json").read_text())
     assert set(best) >= {"mu_car", "sigma_car", "mu_truck", "sigma_truck", "fun", "converged", "stop"}
+    # the verdict and the restart's own message agree (6 evaluations: the cap)
+    err = capsys.readouterr().err
+    assert best["converged"] is False and best["optimiser_converged"] is False
+    assert "the fit did not converge: the best restart (0) did not converge: evaluation cap (6)" in err
+    assert "restart 0 did not converge: evaluation cap (6)" in err and "converged: true" not in err
+    # without --config: the simulation the recording describes (its 120 s of demand, its section)
+    with pytest.raises(SystemExit) as e:
+        main(["fit", "desired-speed", str(tmp_path / "rec.aveas"), "-o", str(tmp_path / "fit-rec"),
+              "-r", "1", "--maxfev", "5", "--s-range", "100,500", "--no-refine", "--method",
+              "nelder-mead", "--bounds", json.dumps({k: list(v) for k, v in NARROW.items()})])
+    assert e.value.code == 0
+    err = capsys.readouterr().err
+    used = json.loads((tmp_path / "fit-rec" / "config.json").read_text())["scenario"]
+    assert "simulating what the recordings show:" in err and "a 400 m section" in err
+    assert 90 < used["duration"] <= 125 and used["network"]["length"] == 400.0
+    assert used["lane_change_duration"] == 0.0 and {c["name"] for c in used["classes"]} <= {"car", "truck"}
     with pytest.raises(SystemExit) as e:
         main(["fit", "desired-speed", str(tmp_path / "rec.aveas"), "-c", str(cfg), "-o",
               str(tmp_path / "fit2"), "--method", "powell"])
@@ -137,7 +162,13 @@ def test_full_parameter_recovery(sumo, tmp_path):
     res = fit_desired_speed(recorded, cfg, workers=None, outdir=tmp_path / "fit")
     assert not res.failed
     best = json.loads((tmp_path / "fit" / "best.json").read_text())
-    assert best["converged"], best["stop"]
+    assert best["surface_converged"], best["stop"]
+    # the flag and the restarts agree: converged only where the best restart converged by its
+    # optimiser's criterion (not at the cap of 200 evaluations)
+    b = best["best_restart"]
+    assert best["converged"] == (b["converged"] and best["surface_converged"]), best["stop"]
+    assert best["stop"].startswith(f"the best restart ({b['restart']}) "
+                                   + ("converged" if b["converged"] else "did not converge"))
     for c in ("car", "truck"):
         for k, truth in zip(("mu", "sigma"), PAPER[c], strict=True):
             n = f"{k}_{c}"

@@ -77,15 +77,16 @@ def test_full_recovery_study(sumo, tmp_path):
     the 15 min. Thresholds as measured (docs/fitting.md, "Recovery over seeds"; the seeds are
     fixed, so a re-run gives the same numbers): |bias| <= 1 km/h on both means; RMSE within 1.5x
     the sampling floor for every parameter but sigma_car, which the mean speeds inform least
-    (measured 1.57x at the paper's size, 1.74x with every vehicle; held to 1.8x); every fit
-    converged; the 95 % intervals cover the truth in at least 7 of 10 replicates (measured 80-100 %).
+    (measured 1.57x at the paper's size, 1.74x with every vehicle; held to 1.8x); every fit's
+    surface resolved its minimum (``surface_converged``; a replicate's one restart of 100
+    evaluations may stop at its cap, so ``converged`` may be false); the 95 % intervals cover the truth in at least 7 of 10 replicates (measured 80-100 %).
     About 5,800 simulations, 2,380 s of CPU measured: some 20 min on 2 idle cores."""
     rows, summary = recovery_study(StudyConfig(seeds=10), workers=None, outdir=tmp_path / "study")
     assert len(rows) == 20 and not summary["failed"]
     report = json.dumps(summary, indent=1)
     assert summary["targets"]["|bias| <= 1 km/h on the means"], report
     for per in summary["sizes"].values():
-        assert per["converged"] == per["replicates"], report
+        assert per["surface_converged"] == per["replicates"], report
         for n, p in per["parameters"].items():
             assert p["rmse_ratio"] <= (1.8 if n == "sigma_car" else 1.5), (n, report)
             assert p["coverage95"] >= 0.7, (n, report)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import matplotlib
 import numpy as np
 import pytest
@@ -15,6 +17,7 @@ from aveas_format.plot.recording import (
     acceleration_histogram,
     longitudinal_acceleration,
     map_figure,
+    png_bytes,
     recording_name,
     robust_range,
     speed_histogram,
@@ -35,20 +38,25 @@ def broken():
     return rec, aveas_format.validate(rec)
 
 
+def _in_all(fig, kind: str) -> list:
+    """The collections of type ``kind`` of every axes of the figure (a strip each)."""
+    return [c for ax in fig.axes for c in ax.collections if type(c).__name__ == kind]
+
+
 def test_map_figure_by_class_direction_regions_and_one_marker_per_rule(broken):
     rec, report = broken
     fig = map_figure(rec, report.findings())
     ax = fig.axes[0]
-    assert ax.get_title() == "clean recording for the rule tests"  # the title, not the id
+    assert ax.get_title().startswith("clean recording for the rule tests")  # the title, not the id
     texts = _legend_texts(fig)
     assert {"car (2)", "truck (1)", "van (1)", "direction of travel", "coverage"} <= set(texts)
     assert "unobserved: occlusion (1, 5.96 s)" in texts
     # trajectories in their class colours
-    colours = {matplotlib.colors.to_hex(line.get_color()) for line in ax.get_lines()}
+    colours = {matplotlib.colors.to_hex(line.get_color()) for a in fig.axes for line in a.get_lines()}
     assert {CLASS_COLORS["car"], CLASS_COLORS["truck"], CLASS_COLORS["van"]} <= colours
-    # one arrow per participant, pointing along +x (all drive in +x)
-    (quiver,) = [c for c in ax.collections if type(c).__name__ == "Quiver"]
-    assert quiver.N == 4 and np.all(quiver.U > 0.99)
+    # arrows in the direction of travel, along +x (all drive in +x): at least one per participant
+    quivers = _in_all(fig, "Quiver")
+    assert sum(q.N for q in quivers) >= 4 and all(np.all(q.U > 0.99) for q in quivers)
     # located findings: one marker shape per rule, its legend entry names the rule
     located = {c: n for c, n in ((t.rsplit(" (", 1)[0], t) for t in texts) if "." in c}
     assert set(located) == {"kinematics.position_jump", "kinematics.acceleration",
@@ -57,8 +65,28 @@ def test_map_figure_by_class_direction_regions_and_one_marker_per_rule(broken):
                if h.get_label() in located.values()]
     assert len(set(markers)) == len(markers) == 3
     # the unobserved region and the coverage are drawn
-    polys = [c for c in ax.collections if type(c) is PolyCollection]
+    polys = [c for a in fig.axes for c in a.collections if type(c) is PolyCollection]
     assert any(np.allclose(p.get_paths()[0].vertices.min(0), [900.0, -10.5]) for p in polys)
+
+
+def test_map_figure_keeps_x_and_y_at_one_scale_and_no_road_label(broken):
+    """Issue 42: the map is drawn at equal scale (0.1 m of noise must not look like hair): a
+    1 km stretch 14 m wide is cut into strips stacked like lines of text, each at aspect 1, that
+    together cover the data; no road id is written over the data."""
+    rec, report = broken
+    fig = map_figure(rec, report.findings())
+    assert len(fig.axes) > 1 and "strips along x, equal scale" in fig.axes[0].get_title()
+    assert all(ax.get_aspect() == 1.0 for ax in fig.axes)
+    lims = np.array([ax.get_xlim() for ax in fig.axes])
+    x = rec.states.column("x").to_numpy()
+    assert lims[:, 0].min() <= x.min() and lims[:, 1].max() >= x.max()
+    assert np.all(lims[1:, 0] < lims[:-1, 1])  # consecutive strips overlap: nothing falls between
+    png_bytes(fig)  # drawn: the axes boxes take their aspect
+    for ax in fig.axes:  # the height drawn is the width drawn / the data's ratio: equal scale
+        bb = ax.get_window_extent()
+        (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+        assert (bb.height / bb.width) == pytest.approx((y1 - y0) / (x1 - x0), rel=0.05)
+        assert not [t for t in ax.texts if t.get_text() in rec.map.roads]  # no road label
 
 
 def _short_scene(steps: int):
@@ -77,15 +105,14 @@ def test_map_figure_shows_the_data_not_the_whole_map_and_a_dot_for_who_stands():
     """A few seconds on a long road: the axes hold the trajectories (with a margin), not the
     1000 m of map; the standing truck (no arrow, a trajectory of zero length) is a dot."""
     fig = map_figure(vf.build(_short_scene(50)))
-    ax = fig.axes[0]
-    x0, x1 = ax.get_xlim()
+    lims = np.array([ax.get_xlim() for ax in fig.axes])
+    x0, x1 = lims[:, 0].min(), lims[:, 1].max()
     assert -30 < x0 < 20 and 190 < x1 < 320  # data: x 20..~200 m; the map: 0..1000 m
-    dots = [c for c in ax.collections if type(c).__name__ == "PathCollection"]
-    assert len(dots) == 1 and np.allclose(dots[0].get_offsets(), [[20.0, -1.75]])
+    dots = _in_all(fig, "PathCollection")
+    assert dots and all(np.allclose(d.get_offsets(), [[20.0, -1.75]]) for d in dots)
     assert matplotlib.colors.to_hex(dots[0].get_facecolors()[0]) == CLASS_COLORS["truck"]
     assert "standing (speed < 0.5 m/s)" in _legend_texts(fig)
-    (quiver,) = [c for c in ax.collections if type(c).__name__ == "Quiver"]
-    assert quiver.N == 3
+    assert sum(q.N for q in _in_all(fig, "Quiver")) >= 3
 
 
 def test_empty_histograms_say_why():
@@ -118,9 +145,18 @@ def test_speed_histogram_is_clipped_and_says_how_many_values_are_outside():
     sc = vf.fresh()
     sc["tracks"][1]["vx"][10:12] = 300.0  # two wild velocities
     ax = speed_histogram(vf.build(sc)).axes[0]
-    assert ax.get_ylabel() == "density [1/(m/s)]"
-    assert ax.get_xlim()[1] < 40  # not stretched to 300 m/s
-    assert "2 of 600 values outside [0, 33]" in ax.get_xlabel()
+    assert ax.get_ylabel() == "density [1/(km/h)]"  # km/h: what traffic people read
+    assert ax.get_xlim()[1] < 150  # not stretched to 1,080 km/h
+    assert re.search(r"^speed \[km/h\]\n2 of 600 values outside \[\d+, \d+\]", ax.get_xlabel())
+
+
+def test_speed_histogram_spans_the_speeds_not_zero_to_them():
+    """Issue 42: motorway speeds (79-119 km/h here) fill the axis, in whole 5 km/h, instead of a
+    range from 0 that leaves its left half empty; every value is inside it."""
+    ax = speed_histogram(vf.build(vf.fresh())).axes[0]
+    lo, hi = ax.get_xlim()
+    assert 60 <= lo <= 79 and 119 <= hi <= 140 and lo % 5 == 0 and hi % 5 == 0
+    assert "all 600 values" in ax.get_xlabel()
 
 
 def test_longitudinal_acceleration_is_signed():

@@ -96,3 +96,31 @@ def test_parampoly3_agrees_with_an_independent_arc_length(path):
         pr = net.world_to_road(xr, yr)
         on = pr.road_id.astype(str) == rid
         assert np.max(np.abs(pr.s[on] - (g.s + s_local[on])), initial=0.0) < 1e-6
+
+
+@pytest.mark.parametrize("path", MAPS)
+def test_map_commands_end_without_an_internal_error(path, tmp_path, capsys):
+    """``map info``, ``map check`` and ``map plot`` on every real map: a summary, a report and an
+    image, never an internal error. The CARLA towns hold the degenerate classes of
+    tests/opendrive/test_odr_degenerate.py: roads and lane sections of 2e-7 to 3e-4 m, which
+    ``map check`` reports (``lane.section_length``) and the plot passes over."""
+    import json
+
+    from aveas_format.cli.app import app
+    from aveas_format.cli.common import run
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert run(app, ["map", "info", str(path), "--format", "json"]) == 0
+        info = json.loads(capsys.readouterr().out)
+        rc = run(app, ["map", "check", str(path), "--format", "json"])
+        report = json.loads(capsys.readouterr().out)
+        assert rc == (1 if path.name in DEFECTIVE else 0)
+        out = tmp_path / "map.png"
+        assert run(app, ["map", "plot", str(path), "-o", str(out), "--step", "2"]) == 0
+    assert "internal error" not in capsys.readouterr().err
+    assert info["roads"] == len(_load(path).roads) and out.stat().st_size > 10_000
+    short = [f for f in report["findings"] if f["code"] == "lane.section_length"]
+    assert all(f["line"] and f["value"] < 1e-3 for f in short)
+    if path.name.startswith("opendrive-test-files__Town"):
+        assert short  # CARLA writes sub-millimetre connecting roads

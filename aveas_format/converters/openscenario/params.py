@@ -30,7 +30,7 @@ from typing import Any
 
 from lxml import etree
 
-from aveas_format.errors import FormatError
+from aveas_format.errors import FormatError, did_you_mean
 
 _BIN = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul,
         ast.Div: operator.truediv, ast.Mod: math.fmod}
@@ -39,7 +39,15 @@ _CMP = {ast.Lt: operator.lt, ast.LtE: operator.le, ast.Gt: operator.gt, ast.GtE:
 _FUN = {"round": lambda v: float(math.floor(v + 0.5)), "floor": math.floor, "ceil": math.ceil,
         "sqrt": math.sqrt, "pow": math.pow, "sin": math.sin, "cos": math.cos, "tan": math.tan,
         "asin": math.asin, "acos": math.acos, "atan": math.atan, "abs": abs, "min": min, "max": max}
+#: the number of arguments of each function: (at least, at most)
+_ARITY = {name: (1, 1) for name in _FUN} | {"pow": (2, 2), "min": (1, 99), "max": (1, 99)}
 _CONST = {"pi": math.pi, "true": 1.0, "false": 0.0}
+#: operators the expressions do not have, by how a user writes them (``**``: the standard has pow)
+_OP_TEXT = {ast.Pow: "**", ast.FloorDiv: "//", ast.MatMult: "@", ast.BitAnd: "&", ast.BitOr: "|",
+            ast.BitXor: "^", ast.LShift: "<<", ast.RShift: ">>", ast.Invert: "~", ast.Is: "is",
+            ast.IsNot: "is not", ast.In: "in", ast.NotIn: "not in"}
+_ALLOWED = ("numbers, $parameters, + - * / %, unary -, comparisons, and/or/not (&& || !), "
+            "parentheses, the constants pi, true, false and the functions " + ", ".join(sorted(_FUN)))
 _REF = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
 _MAX_EXPR = 1000
 
@@ -55,46 +63,112 @@ def _num(v: Any) -> float:
     return float(s)
 
 
+def _piece(n: ast.AST) -> str:
+    """The part of the expression ``n`` stands for, as text (never the syntax tree's repr)."""
+    try:
+        return ast.unparse(n)
+    except (ValueError, TypeError, AttributeError, RecursionError):  # pragma: no cover - unparse of a parsed tree
+        return "part of the expression"
+
+
 def evaluate(expr: str, scope: dict[str, str], line: int | None = None) -> float:
-    """The value of an OpenSCENARIO expression (the text inside ``${...}``)."""
+    """The value of an OpenSCENARIO expression (the text inside ``${...}``).
+
+    Every rejected expression is a :class:`~aveas_format.errors.FormatError` naming the XML
+    ``line`` and what is wrong in the user's words: an unknown function or name (with the closest
+    allowed one and the list of what is allowed), an operator the standard does not have (``**``:
+    use ``pow``), text that does not parse, a division by zero, a function outside its domain.
+    """
+    def fail(what: str) -> FormatError:
+        return FormatError(f"expression ${{{expr}}}: {what}", line=line)
+
     if len(expr) > _MAX_EXPR:
         raise FormatError(f"expression longer than {_MAX_EXPR} characters", line=line)
 
     def ref(m: re.Match) -> str:
         name = m.group(1)
         if name not in scope:
-            raise FormatError(f"expression ${{{expr}}}: parameter ${name} is not declared", line=line)
+            raise fail(f"parameter ${name} is not declared")
         try:
-            return repr(_num(scope[name]))
+            value = _num(scope[name])
         except ValueError:
-            raise FormatError(f"expression ${{{expr}}}: parameter ${name} = {scope[name]!r} is not "
-                              "a number", line=line) from None
+            raise fail(f"parameter ${name} = {scope[name]!r} is not a number") from None
+        if not math.isfinite(value):
+            raise fail(f"parameter ${name} = {scope[name]!r} is not a finite number")
+        return f"({value!r})"
 
     text = _REF.sub(ref, expr).replace("&&", " and ").replace("||", " or ").replace("!=", "≠")
     text = text.replace("!", " not ").replace("≠", "!=")
+    if not text.strip():
+        raise fail("the expression is empty")
     try:
         tree = ast.parse(text.strip(), mode="eval")
-    except SyntaxError:
-        raise FormatError(f"expression ${{{expr}}} cannot be parsed", line=line) from None
+    except SyntaxError as e:
+        raise fail(f"cannot be parsed ({e.msg}); allowed: {_ALLOWED}") from None
+    except (ValueError, RecursionError):  # null bytes, absurd nesting
+        raise fail(f"cannot be parsed; allowed: {_ALLOWED}") from None
+
+    def call(n: ast.Call) -> float:
+        if not isinstance(n.func, ast.Name):
+            raise fail(f"{_piece(n.func)!r} is not a function; allowed: {', '.join(sorted(_FUN))}")
+        name = n.func.id
+        if name not in _FUN:
+            raise fail(f"unknown function {name!r}{did_you_mean(name, _FUN)}; allowed: "
+                       f"{', '.join(sorted(_FUN))}")
+        if n.keywords or any(isinstance(a, ast.Starred) for a in n.args):
+            raise fail(f"{name}() takes plain arguments, not {_piece(n)!r}")
+        lo, hi = _ARITY[name]
+        if not lo <= len(n.args) <= hi:
+            want = f"{lo}" if lo == hi else f"at least {lo}"
+            raise fail(f"{name}() takes {want} argument{'s' if hi > 1 else ''}, not {len(n.args)}")
+        args = [ev(a) for a in n.args]
+        try:
+            return float(_FUN[name](*args))
+        except ValueError:
+            shown = ", ".join(_fmt(a) for a in args)
+            raise fail(f"{name}({shown}) is undefined (outside the function's domain)") from None
+        except OverflowError:
+            raise fail(f"{name}() overflows (the result is too large)") from None
 
     def ev(n: ast.AST) -> float:
         if isinstance(n, ast.Expression):
             return ev(n.body)
-        if isinstance(n, ast.Constant) and isinstance(n.value, (int, float)) and not isinstance(n.value, bool):
-            return float(n.value)
-        if isinstance(n, ast.Name) and n.id.lower() in _CONST:
-            return _CONST[n.id.lower()]
-        if isinstance(n, ast.BinOp) and type(n.op) in _BIN:
-            return float(_BIN[type(n.op)](ev(n.left), ev(n.right)))
-        if isinstance(n, ast.UnaryOp) and isinstance(n.op, (ast.USub, ast.UAdd)):
-            v = ev(n.operand)
-            return -v if isinstance(n.op, ast.USub) else v
-        if isinstance(n, ast.UnaryOp) and isinstance(n.op, ast.Not):
-            return 0.0 if ev(n.operand) else 1.0
+        if isinstance(n, ast.Constant):
+            if isinstance(n.value, (int, float)) and not isinstance(n.value, bool):
+                return float(n.value)
+            raise fail(f"{_piece(n)} is not a number")
+        if isinstance(n, ast.Name):
+            if n.id.lower() in _CONST:
+                return _CONST[n.id.lower()]
+            known = list(_CONST) + list(scope)
+            raise fail(f"unknown name {n.id!r}{did_you_mean(n.id, known)} (a parameter is written "
+                       f"${n.id}; constants: pi, true, false)")
+        if isinstance(n, ast.BinOp):
+            if type(n.op) not in _BIN:
+                hint = " (use pow(x, y))" if isinstance(n.op, ast.Pow) else ""
+                raise fail(f"operator {_OP_TEXT.get(type(n.op), '?')!r} is not allowed{hint}; allowed: {_ALLOWED}")
+            left, right = ev(n.left), ev(n.right)
+            if right == 0 and isinstance(n.op, (ast.Div, ast.Mod)):
+                values = " (the parameters replaced by their values)" if "$" in expr else ""
+                raise fail(f"division by zero in {_piece(n)!r}{values}")
+            try:
+                return float(_BIN[type(n.op)](left, right))
+            except OverflowError:
+                raise fail(f"{_piece(n)!r} overflows (the result is too large)") from None
+        if isinstance(n, ast.UnaryOp):
+            if isinstance(n.op, (ast.USub, ast.UAdd)):
+                v = ev(n.operand)
+                return -v if isinstance(n.op, ast.USub) else v
+            if isinstance(n.op, ast.Not):
+                return 0.0 if ev(n.operand) else 1.0
+            raise fail(f"operator {_OP_TEXT.get(type(n.op), '?')!r} is not allowed; allowed: {_ALLOWED}")
         if isinstance(n, ast.BoolOp):
             vals = [bool(ev(v)) for v in n.values]
             return float(all(vals) if isinstance(n.op, ast.And) else any(vals))
-        if isinstance(n, ast.Compare) and all(type(o) in _CMP for o in n.ops):
+        if isinstance(n, ast.Compare):
+            bad = [o for o in n.ops if type(o) not in _CMP]
+            if bad:
+                raise fail(f"operator {_OP_TEXT.get(type(bad[0]), '?')!r} is not allowed; allowed: {_ALLOWED}")
             left = ev(n.left)
             for op, right in zip(n.ops, n.comparators):
                 r = ev(right)
@@ -102,17 +176,17 @@ def evaluate(expr: str, scope: dict[str, str], line: int | None = None) -> float
                     return 0.0
                 left = r
             return 1.0
-        if (isinstance(n, ast.Call) and isinstance(n.func, ast.Name) and n.func.id in _FUN
-                and not n.keywords):
-            return float(_FUN[n.func.id](*[ev(a) for a in n.args]))
-        raise FormatError(f"expression ${{{expr}}}: {ast.dump(n)[:60]} is not allowed", line=line)
+        if isinstance(n, ast.Call):
+            return call(n)
+        raise fail(f"{_piece(n)!r} is not allowed; allowed: {_ALLOWED}")
 
     try:
-        return ev(tree)
-    except FormatError:
-        raise
-    except (ArithmeticError, ValueError, TypeError, RecursionError) as e:
-        raise FormatError(f"expression ${{{expr}}}: {type(e).__name__}: {e}", line=line) from None
+        value = ev(tree)
+    except RecursionError:
+        raise fail("nested too deeply") from None
+    if not math.isfinite(value):
+        raise fail(f"the result {value} is not a finite number")
+    return value
 
 
 def _fmt(v: float) -> str:

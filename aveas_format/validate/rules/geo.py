@@ -15,7 +15,7 @@ from aveas_format.validate.registry import Hit, Hits, collector, rule
 
 @rule("geo.crs_unparseable", "error", "recording.json crs cannot be read",
       "recording.json: crs {value!r} cannot be read: {error}",
-      enforces="FORMAT.md 3: crs is the PROJ/EPSG string of the local frame")
+      enforces="docs/format.md §3: crs is the PROJ/EPSG string of the local frame")
 def crs_unparseable(ctx: Context) -> Iterator[Hit]:
     """recording.json ``crs`` is not a CRS that PROJ can read and transform to WGS 84 (known
     malformed variants are read leniently, see ``aveas_format.crs``)."""
@@ -29,7 +29,7 @@ def crs_unparseable(ctx: Context) -> Iterator[Hit]:
 
 @rule("geo.crs_mismatch", "error", "crs differs from the map's geoReference",
       "recording.json: crs {value!r} differs from the map's geoReference {expected!r}",
-      enforces="FORMAT.md 3: crs is equal to the map's geoReference where the map has one")
+      enforces="docs/format.md §3: crs is equal to the map's geoReference where the map has one")
 def crs_mismatch(ctx: Context) -> Iterator[Hit]:
     """The map has a ``<geoReference>`` and recording.json ``crs`` describes another CRS (a
     documented lenient reading of a malformed geoReference counts as equal)."""
@@ -49,7 +49,7 @@ def crs_mismatch(ctx: Context) -> Iterator[Hit]:
 @rule("geo.lonlat_mismatch", "error", "lon/lat disagree with x/y",
       "states.parquet: row {row}: lon/lat lie {value} m from x/y through crs (tolerance "
       "{tolerance} m)",
-      enforces="FORMAT.md 5: lon, lat are the same point in WGS 84, consistent with x, y through "
+      enforces="docs/format.md §5: lon, lat are the same point in WGS 84, consistent with x, y through "
                "crs", scope="rows")
 def lonlat_mismatch(ctx: Context) -> Iterator[Hits]:
     """A state's lon/lat, projected into the local frame (crs + the map's header offset), lies more
@@ -117,7 +117,7 @@ def _states_bbox(ctx: Context) -> np.ndarray | None:
 
 @rule("geo.location_outside_coverage", "error", "location is not inside the covered area",
       "recording.json: location (lon {lon}, lat {lat}) lies {value} m outside {area}",
-      enforces="FORMAT.md 3: location is the WGS 84 centroid of the covered area",
+      enforces="docs/format.md §3: location is the WGS 84 centroid of the covered area",
       needs=("geo.states_bbox",))
 def location_outside_coverage(ctx: Context) -> Iterator[Hit]:
     """recording.json ``location``, projected into the local frame, lies outside the coverage
@@ -148,7 +148,7 @@ def location_outside_coverage(ctx: Context) -> Iterator[Hit]:
 @rule("geo.state_outside_coverage", "warning", "State outside the covered area",
       "states.parquet: row {row}: participant {participant_id} at x,y = {x},{y} lies outside "
       "recording.json coverage ({n_samples} samples of this participant)", scope="rows",
-      enforces=("FORMAT.md 3: coverage is the area observed at any time, so observed states "
+      enforces=("docs/format.md §3: coverage is the area observed at any time, so observed states "
                 "SHOULD lie inside it"))
 def state_outside_coverage(ctx: Context) -> Iterator[Hits]:
     """A state lies more than ``[geo] coverage_margin_m`` outside the coverage polygon, which by

@@ -72,7 +72,7 @@ def _limit(ctx: Context, sv: StatesView, attr: str) -> np.ndarray:
 @rule("kinematics.speed", "error", "Speed impossible for the class",
       "states.parquet: row {row}: participant {participant_id} ({class_}) moves at {value} m/s "
       "(from positions; {n_samples} samples), above the {limit} m/s plausible for its class",
-      enforces="FORMAT.md 5: x, y are the participant's real positions; beyond the class's physical "
+      enforces="docs/format.md §5: x, y are the participant's real positions; beyond the class's physical "
                "limit (configurable, by more than z sigma) they are a data error", scope="rows")
 def speed(ctx: Context) -> Iterator[Hits]:
     """The speed over ground, estimated from positions over ``window_s``, exceeds the class's
@@ -150,7 +150,7 @@ def _exceeds(ctx: Context, value: np.ndarray, sig: np.ndarray, lim: np.ndarray) 
 @rule("kinematics.acceleration", "error", "Acceleration impossible for the class",
       "states.parquet: row {row}: participant {participant_id} ({class_}) accelerates at {value} "
       "m/s² (from vx, vy; {n_samples} samples), above the {limit} m/s² plausible for its class",
-      enforces="FORMAT.md 5: vx, vy are the participant's real velocity; accelerations beyond the "
+      enforces="docs/format.md §5: vx, vy are the participant's real velocity; accelerations beyond the "
                "class's physical limit (configurable, by more than z sigma) are a data error", scope="rows")
 def acceleration(ctx: Context) -> Iterator[Hits]:
     """The magnitude of the planar acceleration, estimated from the velocity columns over
@@ -313,7 +313,7 @@ def instant_lane_change_steps(ctx: Context) -> np.ndarray | None:
       "(SUMO's default); remedies: simulate with --lanechange.duration (e.g. 3) or the sublane "
       "model (--lateral-resolution 0.8), or convert with -O lane_change_duration=3 (sumo-fcd) to "
       "reconstruct a smooth manoeuvre",
-      enforces="FORMAT.md 5: x, y are the participant's real positions and vx, vy its velocity: a "
+      enforces="docs/format.md §5: x, y are the participant's real positions and vx, vy its velocity: a "
                "vehicle crosses into the adjacent lane by moving across it, not in one time step",
       scope="rows")
 def instant_lane_change(ctx: Context) -> Iterator[Hits]:
@@ -339,7 +339,7 @@ def instant_lane_change(ctx: Context) -> Iterator[Hits]:
       "states.parquet: row {row}: participant {participant_id} moves {step} m in {dt} s, but its "
       "velocity integrates to {expected} m: off by {value} m ({along} m along its motion, {across} m "
       "across; tolerance {tolerance} m)",
-      enforces="FORMAT.md 5: vx, vy are the velocity of the reference point x, y in the local frame", scope="rows")
+      enforces="docs/format.md §5: vx, vy are the velocity of the reference point x, y in the local frame", scope="rows")
 def position_jump(ctx: Context) -> Iterator[Hits]:
     """Between two consecutive samples of a participant, the displacement differs from the
     velocity integrated over the step (trapezoid rule) by more than ``jump_tolerance_m`` + ``jump_z``

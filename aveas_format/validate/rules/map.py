@@ -23,7 +23,7 @@ _F = {"file": "states.parquet", "table": "states"}
 
 @rule("map.unreadable", "error", "map.xodr cannot be parsed",
       "{file}:{line}: not a readable OpenDRIVE map: {error}",
-      enforces="FORMAT.md 1-2: map.xodr is the ASAM OpenDRIVE map every position refers to")
+      enforces="docs/format.md §1-2: map.xodr is the ASAM OpenDRIVE map every position refers to")
 def unreadable(ctx: Context) -> Iterator[Hit]:
     """map.xodr is present but is not well-formed OpenDRIVE (broken XML, missing header, unknown
     geometry); nothing that refers to the map can be checked."""
@@ -48,7 +48,7 @@ def _check_hits(ctx: Context, severity: str) -> Iterator[Hit]:
 
 @rule("map.opendrive_error", "error", "Map self-check: error",
       "{file}:{line}: {check}: {detail}",
-      enforces="FORMAT.md 2: map.xodr is a consistent ASAM OpenDRIVE map (links, lane widths, "
+      enforces="docs/format.md §2: map.xodr is a consistent ASAM OpenDRIVE map (links, lane widths, "
                "geoReference) that positions can refer to")
 def opendrive_error(ctx: Context) -> Iterator[Hit]:
     """The OpenDRIVE engine's self-check (``RoadNetwork.check()``) finds an error: a link to a road,
@@ -129,7 +129,7 @@ def _pos_tol(ctx: Context, sv: StatesView) -> np.ndarray:
 
 @rule("map.incomplete_road_coordinates", "error", "Road coordinates partly null",
       "states.parquet: row {row}: participant {participant_id}: {present} set but {missing} null",
-      enforces="FORMAT.md 5: road_id, lane_id, road_s, road_t are null together, where off-map", scope="rows")
+      enforces="docs/format.md §5: road_id, lane_id, road_s, road_t are null together, where off-map", scope="rows")
 def incomplete_road_coordinates(ctx: Context) -> Iterator[Hits]:
     """A state has some of road_id, lane_id, road_s, road_t but not all: either it is on the map
     (all set) or off it (all null)."""
@@ -158,7 +158,7 @@ def incomplete_road_coordinates(ctx: Context) -> Iterator[Hits]:
 
 @rule("map.unknown_road", "error", "road_id not in the map",
       "states.parquet: row {row}: road_id {road_id!r} is not a road of the map ({n_rows} rows)",
-      enforces="FORMAT.md 5: road_id is an OpenDRIVE road of map.xodr", scope="rows")
+      enforces="docs/format.md §5: road_id is an OpenDRIVE road of map.xodr", scope="rows")
 def unknown_road(ctx: Context) -> Iterator[Hits]:
     """A state names a road that map.xodr does not contain. One finding per unknown road id, at
     its first row."""
@@ -186,7 +186,7 @@ def unknown_road(ctx: Context) -> Iterator[Hits]:
 
 @rule("map.unknown_lane", "error", "Lane or road_s not on the road",
       "states.parquet: row {row}: road {road_id} has {what}",
-      enforces="FORMAT.md 5: lane_id is an OpenDRIVE lane of the road at road_s; road_s lies on "
+      enforces="docs/format.md §5: lane_id is an OpenDRIVE lane of the road at road_s; road_s lies on "
                "the road", scope="rows")
 def unknown_lane(ctx: Context) -> Iterator[Hits]:
     """road_s lies outside [0, road length] (beyond ``[map] s_margin_m``), or the road has no
@@ -213,7 +213,7 @@ def unknown_lane(ctx: Context) -> Iterator[Hits]:
 @rule("map.road_position_mismatch", "error", "Road coordinates disagree with x/y",
       "states.parquet: row {row}: (road {road_id}, s {s}, t {t}) lies {value} m from x/y "
       "(tolerance {tolerance} m)",
-      enforces="FORMAT.md 5: road_s, road_t are consistent with x, y through the map", scope="rows")
+      enforces="docs/format.md §5: road_s, road_t are consistent with x, y through the map", scope="rows")
 def road_position_mismatch(ctx: Context) -> Iterator[Hits]:
     """The point that (road_id, road_s, road_t) gives through the map lies farther from the state's
     x/y than max(``[map] tolerance_m`` (0.1 m), z sigma of the position)."""
@@ -240,7 +240,7 @@ def road_position_mismatch(ctx: Context) -> Iterator[Hits]:
 @rule("map.lane_mismatch", "error", "lane_id disagrees with road_t",
       "states.parquet: row {row}: road_t {t} m is not in lane {lane_id} of road {road_id} "
       "(borders {inner} .. {outer} m at s {s})",
-      enforces="FORMAT.md 5: lane_id is the lane containing (road_s, road_t)", scope="rows")
+      enforces="docs/format.md §5: lane_id is the lane containing (road_s, road_t)", scope="rows")
 def lane_mismatch(ctx: Context) -> Iterator[Hits]:
     """road_t lies outside the borders of lane ``lane_id`` at road_s (beyond the position
     tolerance of map.road_position_mismatch)."""
@@ -265,7 +265,7 @@ def lane_mismatch(ctx: Context) -> Iterator[Hits]:
 @rule("map.lane_offset_mismatch", "error", "lane_offset disagrees with road_t",
       "states.parquet: row {row}: lane_offset {value} m, but road_t {t} m lies {expected} m from "
       "the centre of lane {lane_id}",
-      enforces="FORMAT.md 2: lane_offset is the offset from the lane's centre line, positive to "
+      enforces="docs/format.md §2: lane_offset is the offset from the lane's centre line, positive to "
                "the left", scope="rows")
 def lane_offset_mismatch(ctx: Context) -> Iterator[Hits]:
     """``lane_offset`` differs from road_t minus the centre of lane ``lane_id`` at road_s by more
@@ -451,7 +451,7 @@ def off_road_causes(net, xy: np.ndarray) -> list[str]:
 
 @rule("map.mostly_off_road", "error", "The recording is mostly off the map",
       "states.parquet: {off} of {n} {who} states ({share} %) are on no road of the map: {causes}",
-      enforces="FORMAT.md 1-2: positions are in the frame of map.xodr, the map of the recorded "
+      enforces="docs/format.md §1-2: positions are in the frame of map.xodr, the map of the recorded "
                "site", needs=("map.off_road",))
 def mostly_off_road(ctx: Context) -> Iterator[Hit]:
     """More than ``[map] off_road_share`` (default half) of the vehicles' states are on no road of

@@ -32,7 +32,7 @@ _METHOD_SENSORS = {
 
 @rule("metadata.provenance_mismatch", "error", "provenance disagrees with the participants",
       "recording.json: provenance is {value!r}, but the participants are {actual}",
-      enforces="FORMAT.md 3: provenance is natural, staged or simulated, or mixed (= the "
+      enforces="docs/format.md §3: provenance is natural, staged or simulated, or mixed (= the "
                "participants differ)")
 def provenance_mismatch(ctx: Context) -> Iterator[Hit]:
     """recording.json ``provenance`` is natural, staged or simulated but a participant has another
@@ -98,11 +98,11 @@ _SHOULD_FIELDS = (
 
 
 @rule("metadata.should_field_missing", "warning", "Recommended metadata field missing",
-      "recording.json: {column} is missing (FORMAT.md 3: SHOULD)",
-      enforces=("FORMAT.md 3: acquisition.platform, .sensors, .not_observable, .site and source "
+      "recording.json: {column} is missing (docs/format.md §3: SHOULD)",
+      enforces=("docs/format.md §3: acquisition.platform, .sensors, .not_observable, .site and source "
                 "SHOULD be given"))
 def should_field_missing(ctx: Context) -> Iterator[Hit]:
-    """A recording.json field that FORMAT.md 3 marks SHOULD is absent or empty:
+    """A recording.json field that docs/format.md §3 marks SHOULD is absent or empty:
     acquisition.platform, .sensors, .not_observable, .site, and source (coverage: see
     unobserved.coverage_missing)."""
     if ctx.meta is None:
@@ -141,7 +141,7 @@ def rights_unclear(ctx: Context) -> Iterator[Hit]:
       "recording.json: acquisition.partner {value!r} does not name an institution",
       enforces=quality("real_values"))
 def partner_placeholder(ctx: Context) -> Iterator[Hit]:
-    """``acquisition.partner`` is a placeholder ("unknown", ...): FORMAT.md 3 requires the
+    """``acquisition.partner`` is a placeholder ("unknown", ...): docs/format.md §3 requires the
     institution that acquired the data."""
     if ctx.meta is not None and _placeholder(ctx, ctx.meta.acquisition.partner):
         yield Hit(file="recording.json", column="acquisition.partner",
@@ -170,7 +170,7 @@ def start_time_implausible(ctx: Context) -> Iterator[Hit]:
 
 @rule("metadata.derived_undocumented", "error", "Derived table not documented",
       "recording.json: {why}",
-      enforces="FORMAT.md 10: each derived table records its method, version and parameters in "
+      enforces="docs/format.md §10: each derived table records its method, version and parameters in "
                "recording.json derived")
 def derived_undocumented(ctx: Context) -> Iterator[Hit]:
     """A derived table is present without an entry in recording.json ``derived``, or an entry
@@ -192,10 +192,10 @@ def derived_undocumented(ctx: Context) -> Iterator[Hit]:
 
 @rule("metadata.derived_stale", "warning", "Derived table is stale",
       "{file}: {table} is stale: {why}",
-      enforces=("FORMAT.md 10: a derived table becomes stale when its inputs change; it SHOULD "
+      enforces=("docs/format.md §10: a derived table becomes stale when its inputs change; it SHOULD "
                 "be derived again"))
 def derived_stale(ctx: Context) -> Iterator[Hit]:
-    """A derived table was computed from inputs that have changed since (FORMAT.md 10: it becomes
+    """A derived table was computed from inputs that have changed since (docs/format.md §10: it becomes
     stale), or with a method whose version has changed. Decided by
     ``aveas_format.derive.registry.stale_derived``; where the derivation package is not available,
     this rule finds nothing. Derived tables without a ``derived`` entry are left to

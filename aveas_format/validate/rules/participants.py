@@ -27,7 +27,7 @@ _F = "participants.parquet"
 @rule("participants.class_pmf_argmax", "error", "class is not the most probable class of class_pmf",
       "participants.parquet: row {row}: participant {participant_id} has class {value!r} but "
       "class_pmf puts most mass on {expected!r} ({p_expected} > {p_value})",
-      enforces="FORMAT.md 4: `class` is the most probable class; the argmax of class_pmf equals "
+      enforces="docs/format.md §4: `class` is the most probable class; the argmax of class_pmf equals "
                "`class`")
 def class_pmf_argmax(ctx: Context) -> Iterator[Hits]:
     """A participant's ``class`` is not a most probable class of its ``class_pmf`` (ties are
@@ -95,11 +95,11 @@ def size_implausible(ctx: Context) -> Iterator[Hits]:
 @rule("participants.size_std_missing", "warning", "Measured participant without size uncertainty",
       "participants.parquet: row {row}: participant {participant_id} is measured ({provenance}) "
       "but {column} is {state}",
-      enforces=("FORMAT.md 2: measured data (provenance natural or staged) SHOULD carry _std for "
+      enforces=("docs/format.md §2: measured data (provenance natural or staged) SHOULD carry _std for "
                 "length and width"))
 def size_std_missing(ctx: Context) -> Iterator[Hits]:
     """A measured participant (provenance natural or staged) has no ``length_std`` / ``width_std``
-    (column absent or null): FORMAT.md 2 says measured data SHOULD carry them."""
+    (column absent or null): docs/format.md §2 says measured data SHOULD carry them."""
     pv = ctx.participants_view
     t = pv.table
     if t is None or not pv.n or not pv.measured.any():
@@ -120,7 +120,7 @@ def size_std_missing(ctx: Context) -> Iterator[Hits]:
 @rule("participants.attached_to_unknown", "error", "attached_to names no other participant",
       "participants.parquet: row {row}: participant {participant_id} is attached_to {value}, "
       "{why}",
-      enforces="FORMAT.md 4: attached_to is another participant (e.g. a trailer's towing vehicle)")
+      enforces="docs/format.md §4: attached_to is another participant (e.g. a trailer's towing vehicle)")
 def attached_to_unknown(ctx: Context) -> Iterator[Hits]:
     """``attached_to`` names a participant id that does not exist, or the participant itself."""
     pv = ctx.participants_view
@@ -161,7 +161,7 @@ def without_states(ctx: Context) -> Iterator[Hits]:
 @rule("participants.unknown_in_states", "error", "States of an unknown participant",
       "{file}: row {row}: participant_id {participant_id} is not in participants.parquet "
       "({n_rows} rows of this participant)",
-      enforces="FORMAT.md 5: states.participant_id refers to participants.parquet")
+      enforces="docs/format.md §5: states.participant_id refers to participants.parquet")
 def unknown_in_states(ctx: Context) -> Iterator[Hits]:
     """states (or interior) rows carry a participant_id that participants.parquet does not declare;
     one finding per unknown id, at its first row."""
@@ -187,7 +187,7 @@ def unknown_in_states(ctx: Context) -> Iterator[Hits]:
 @rule("participants.unknown_reference", "error", "Event or region names an unknown participant",
       "{file}: row {row}: {column} names participant {participant_id}, which is not in "
       "participants.parquet",
-      enforces="FORMAT.md 6-7: events.participant_ids and unobserved.occluder_id refer to "
+      enforces="docs/format.md §6-7: events.participant_ids and unobserved.occluder_id refer to "
                "participants")
 def unknown_reference(ctx: Context) -> Iterator[Hits]:
     """An event's ``participant_ids`` or a region's ``occluder_id`` names a participant that does

@@ -30,7 +30,7 @@ class SourceRule(NamedTuple):
     doc: str
 
 
-_DROPPED_SIZE = ("FORMAT.md 4: length, width MUST be > 0 (a footprint size), so a box or object "
+_DROPPED_SIZE = ("docs/format.md §4: length, width MUST be > 0 (a footprint size), so a box or object "
                  "without one cannot become a state")
 
 #: every ``source.*`` code: (code, severity, title, enforces, doc)
@@ -42,16 +42,16 @@ SOURCE_RULES: tuple[SourceRule, ...] = (
                "-1000, 0). The box is dropped from the frame's rows (its state is lost); the "
                "finding names the frame key and object uid of the first such box and counts all."),
     SourceRule("source.openlabel.duplicate_state", "error", "OpenLABEL boxes repeat a state",
-               "FORMAT.md 5: (participant_id, time) MUST be unique",
+               "docs/format.md §5: (participant_id, time) MUST be unique",
                "Two boxes of the same object at the same frame time. The first is kept, the others "
                "are dropped; the finding names the frame and uid of the first repeat."),
     SourceRule("source.openlabel.unknown_type", "warning", "OpenLABEL object type not in the profile",
-               "FORMAT.md 4: class is one of the 13 classes (the AVEAS OpenLABEL object types); an "
+               "docs/format.md §4: class is one of the 13 classes (the AVEAS OpenLABEL object types); an "
                "object SHOULD carry one of them",
                "An object's ``type`` is none of the AVEAS OpenLABEL profile's 13 classes; the "
                "participant gets class ``other``."),
     SourceRule("source.openlabel.pmf_sum", "warning", "OpenLABEL class PMF does not sum to 1",
-               "FORMAT.md 4: class_pmf is a PMF; it SHOULD sum to 1",
+               "docs/format.md §4: class_pmf is a PMF; it SHOULD sum to 1",
                "An object's class probabilities do not sum to 1 (within tolerance); they are "
                "normalised on import, so the stored PMF differs from the submitted one."),
     SourceRule("source.openlabel.missing_attribute", "error",
@@ -65,7 +65,7 @@ SOURCE_RULES: tuple[SourceRule, ...] = (
                "A box refers to a coordinate system the file's ``coordinate_systems`` does not "
                "declare (or one without a usable projection); it is read in the root frame."),
     SourceRule("source.openlabel.bad_metadata", "warning", "OpenLABEL metadata unusable",
-               "FORMAT.md 3: recording.json's start_time and crs come from the OpenLABEL "
+               "docs/format.md §3: recording.json's start_time and crs come from the OpenLABEL "
                "metadata, which SHOULD be valid (ISO 8601 acquisition_date, a usable "
                "projection_string)",
                "A value of the OpenLABEL ``metadata`` (acquisition date, projection string...) "
@@ -78,7 +78,7 @@ SOURCE_RULES: tuple[SourceRule, ...] = (
                "name, a malformed entry) is skipped; the finding names its JSON path."),
     # -- ASAM OSI; the importer is converters/osi.py
     SourceRule("source.osi.missing_base", "error", "OSI moving object without id or base",
-               "FORMAT.md 5: x, y MUST be given for every state (OSI: a MovingObject's id and "
+               "docs/format.md §5: x, y MUST be given for every state (OSI: a MovingObject's id and "
                "base.position)",
                "A GroundTruth ``moving_object`` has no ``id`` or no ``base``: it cannot be placed, "
                "and the sample is skipped. Located by the OSI message index (and object id where "
@@ -89,12 +89,12 @@ SOURCE_RULES: tuple[SourceRule, ...] = (
                "Where a later message of the same object gives one, that size is used; where none "
                "does, the object is not imported. Located by message index and object id."),
     SourceRule("source.osi.time_not_increasing", "warning", "OSI timestamps do not increase",
-               "ASAM OSI: a trace's messages SHOULD follow each other in time (FORMAT.md 5: time "
+               "ASAM OSI: a trace's messages SHOULD follow each other in time (docs/format.md §5: time "
                "increases along a trajectory)",
                "A GroundTruth's ``timestamp`` is earlier than the previous message's. The states "
                "are sorted by time on import; the finding names the first such message."),
     SourceRule("source.osi.unknown_type", "warning", "OSI object type unknown",
-               "FORMAT.md 4: class is one of the 13 classes; an object SHOULD say what it is",
+               "docs/format.md §4: class is one of the 13 classes; an object SHOULD say what it is",
                "A moving object's ``type`` (or its vehicle classification type) is UNKNOWN or not "
                "mapped; the participant gets class ``other``."),
     # -- ASAM OpenSCENARIO; the importer is converters/openscenario
@@ -104,14 +104,14 @@ SOURCE_RULES: tuple[SourceRule, ...] = (
                "is not converted. Located by the entity name and its XML line."),
     SourceRule("source.openscenario.entity_not_converted", "error",
                "OpenSCENARIO entity not converted",
-               "FORMAT.md 4: every participant MUST have states (an entity that cannot be placed "
+               "docs/format.md §4: every participant MUST have states (an entity that cannot be placed "
                "or replayed has none)",
                "An entity cannot be converted: its catalog entry cannot be resolved, it is not a "
                "Vehicle/Pedestrian/MiscObject, no action places it, or an action of it cannot be "
                "replayed. The finding names the entity, the XML line and why."),
     SourceRule("source.openscenario.unknown_category", "warning",
                "OpenSCENARIO category without a class",
-               "FORMAT.md 4: class is one of the 13 classes; an entity's category SHOULD map to "
+               "docs/format.md §4: class is one of the 13 classes; an entity's category SHOULD map to "
                "one",
                "An entity's ``vehicleCategory``/``pedestrianCategory`` (or a MiscObject) has no "
                "class of the format; the participant gets class ``other``."),
@@ -124,7 +124,7 @@ SOURCE_RULES: tuple[SourceRule, ...] = (
                "times. Located by entity and the vertex's XML line."),
     SourceRule("source.openscenario.repeated_time", "warning",
                "OpenSCENARIO trajectory repeats a time",
-               "FORMAT.md 5: (participant_id, time) MUST be unique; vertices of one time SHOULD "
+               "docs/format.md §5: (participant_id, time) MUST be unique; vertices of one time SHOULD "
                "agree",
                "Trajectory vertices of an entity at the same time with different positions; the "
                "first of each time is kept."),

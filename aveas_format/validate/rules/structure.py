@@ -28,7 +28,7 @@ _REQUIRED_FILES = ("recording.json", "map.xodr", "participants.parquet", "states
 
 @rule("structure.missing_file", "error", "Required file missing",
       "{file}: file missing from the recording",
-      enforces="FORMAT.md 1: recording.json, map.xodr, participants.parquet and states.parquet MUST "
+      enforces="docs/format.md §1: recording.json, map.xodr, participants.parquet and states.parquet MUST "
                "exist; every table listed in recording.json:tables must exist")
 def missing_file(ctx: Context) -> Iterator[Hit]:
     """A file the format requires, or that recording.json lists, is not in the recording."""
@@ -45,7 +45,7 @@ def missing_file(ctx: Context) -> Iterator[Hit]:
 
 @rule("structure.broken_json", "error", "recording.json is not valid JSON",
       "{file}:{line}: not a valid JSON object: {error}",
-      enforces="FORMAT.md 3: recording.json MUST hold the metadata as JSON")
+      enforces="docs/format.md §3: recording.json MUST hold the metadata as JSON")
 def broken_json(ctx: Context) -> Iterator[Hit]:
     """recording.json cannot be parsed as a JSON object; nothing in it can be checked."""
     for p in ctx.problems_of("broken_json"):
@@ -53,7 +53,7 @@ def broken_json(ctx: Context) -> Iterator[Hit]:
 
 
 @rule("structure.format_version", "error", "Unsupported format_version",
-      "{file}: {error}", enforces="FORMAT.md 11: format_version follows semantic versioning")
+      "{file}: {error}", enforces="docs/format.md §11: format_version follows semantic versioning")
 def format_version(ctx: Context) -> Iterator[Hit]:
     """format_version is missing, malformed, newer than this library, or has no migration path."""
     d = ctx.meta_dict
@@ -66,7 +66,7 @@ def format_version(ctx: Context) -> Iterator[Hit]:
 
 @rule("structure.metadata_schema", "error", "recording.json violates its schema",
       "{file}: {column}: {error}",
-      enforces="FORMAT.md 3: the fields of recording.json, their types and required fields")
+      enforces="docs/format.md §3: the fields of recording.json, their types and required fields")
 def metadata_schema(ctx: Context) -> Iterator[Hit]:
     """recording.json fails the JSON Schema of the format (``aveas-format schema``), or a check the
     schema cannot express (PMF sums, calendar dates of timestamps)."""
@@ -96,7 +96,7 @@ def _json_schema() -> dict:
 
 @rule("structure.unlisted_table", "error", "Table not listed in recording.json",
       "{file}: table {table} is not listed in recording.json:tables",
-      enforces="FORMAT.md 1: recording.json lists every table with its row count and SHA-256")
+      enforces="docs/format.md §1: recording.json lists every table with its row count and SHA-256")
 def unlisted_table(ctx: Context) -> Iterator[Hit]:
     """A table file is present but recording.json:tables does not list it, so it cannot be checked
     against a checksum. (In-memory recordings get their entries when written.)"""
@@ -110,7 +110,7 @@ def unlisted_table(ctx: Context) -> Iterator[Hit]:
 
 @rule("structure.unknown_table", "error", "Unknown table in recording.json",
       "recording.json: tables lists {table!r}, which the format does not define",
-      enforces="FORMAT.md 1: the tables of a recording")
+      enforces="docs/format.md §1: the tables of a recording")
 def unknown_table(ctx: Context) -> Iterator[Hit]:
     """recording.json:tables names a table the format does not define."""
     d = ctx.meta_dict
@@ -124,7 +124,7 @@ def unknown_table(ctx: Context) -> Iterator[Hit]:
 @rule("structure.checksum", "error", "Checksum mismatch",
       "{file}: SHA-256 {actual} differs from recording.json ({expected}): changed or truncated "
       "after writing",
-      enforces="FORMAT.md 1: a mismatch of recording.json's SHA-256 is an error")
+      enforces="docs/format.md §1: a mismatch of recording.json's SHA-256 is an error")
 def checksum(ctx: Context) -> Iterator[Hit]:
     """A table's or the map's SHA-256 differs from the one recording.json declares."""
     if ctx.container is None:
@@ -147,7 +147,7 @@ def checksum(ctx: Context) -> Iterator[Hit]:
 
 @rule("structure.row_count", "error", "Row count mismatch",
       "{file}: {actual} rows, recording.json says {expected}",
-      enforces="FORMAT.md 1: recording.json lists every table with its row count")
+      enforces="docs/format.md §1: recording.json lists every table with its row count")
 def row_count(ctx: Context) -> Iterator[Hit]:
     """A table has a different number of rows than recording.json declares."""
     d = ctx.meta_dict or {}
@@ -161,7 +161,7 @@ def row_count(ctx: Context) -> Iterator[Hit]:
 
 @rule("structure.unreadable_table", "error", "Unreadable Parquet file",
       "{file}: not a readable Parquet file: {error}",
-      enforces="FORMAT.md 1: tables are Parquet files")
+      enforces="docs/format.md §1: tables are Parquet files")
 def unreadable_table(ctx: Context) -> Iterator[Hit]:
     """A table file is truncated, corrupt or not Parquet at all."""
     for p in ctx.problems_of("unreadable_table"):
@@ -170,7 +170,7 @@ def unreadable_table(ctx: Context) -> Iterator[Hit]:
 
 @rule("structure.parquet_key", "error", "Missing or invalid 'aveas' Parquet metadata",
       "{file}: Parquet key-value metadata 'aveas' {error}",
-      enforces="FORMAT.md 1: every Parquet file carries key-value metadata under the key 'aveas'")
+      enforces="docs/format.md §1: every Parquet file carries key-value metadata under the key 'aveas'")
 def parquet_key(ctx: Context) -> Iterator[Hit]:
     """The ``aveas`` key-value metadata of a table is missing, not JSON, lacks format_version/table,
     or names another table."""
@@ -197,7 +197,7 @@ def parquet_key(ctx: Context) -> Iterator[Hit]:
 
 @rule("structure.missing_column", "error", "Required column missing",
       "{file}: required column {column!r} missing",
-      enforces="FORMAT.md 4-10: columns marked MUST")
+      enforces="docs/format.md §4-10: columns marked MUST")
 def missing_column(ctx: Context) -> Iterator[Hit]:
     """A column the format marks MUST is absent from its table."""
     for name in ctx.table_names:
@@ -211,7 +211,7 @@ def missing_column(ctx: Context) -> Iterator[Hit]:
 
 @rule("structure.column_type", "error", "Column has the wrong type",
       "{file}: column {column!r} has type {actual}, the format declares {expected}",
-      enforces="FORMAT.md 4-10: the declared type of each column")
+      enforces="docs/format.md §4-10: the declared type of each column")
 def column_type(ctx: Context) -> Iterator[Hit]:
     """A declared column is stored with an incompatible Arrow type (e.g. a string ``x``)."""
     for name in ctx.table_names:
@@ -263,7 +263,7 @@ def _keys(t: pa.Table, rows: np.ndarray) -> dict[str, np.ndarray]:
 
 @rule("structure.null_values", "error", "Nulls in a non-nullable column",
       "{file}: row {row}: {column} is null",
-      enforces="FORMAT.md 4-10: key and required values (ids, time, x, y, heading, ...) are never null", scope="rows")
+      enforces="docs/format.md §4-10: key and required values (ids, time, x, y, heading, ...) are never null", scope="rows")
 def null_values(ctx: Context) -> Iterator[Hits]:
     """A column that must always hold a value (ids, time, position, heading, velocity, lon/lat,
     class, sizes...) has nulls."""
@@ -291,7 +291,7 @@ def _exact_numbers(arr: pa.ChunkedArray) -> np.ndarray:
 
 @rule("structure.value_range", "error", "Value outside the declared range",
       "{file}: row {row}: {column} = {value} outside {range}",
-      enforces="FORMAT.md 2-10: declared ranges (sizes > 0, std >= 0, probabilities and correlations "
+      enforces="docs/format.md §2-10: declared ranges (sizes > 0, std >= 0, probabilities and correlations "
                "in [0, 1] / [-1, 1], heading in (-pi, pi], lon/lat bounds)", scope="rows")
 def value_range(ctx: Context) -> Iterator[Hits]:
     """A numeric value lies outside the range its column declares, or is infinite. Null (NaN) is
@@ -320,7 +320,7 @@ def value_range(ctx: Context) -> Iterator[Hits]:
 
 @rule("structure.category", "error", "Value not in the allowed categories",
       "{file}: row {row}: {column} = {value!r} is not one of the allowed values",
-      enforces="FORMAT.md 4-7: class is one of the 13 classes; role, provenance, kind, origin are "
+      enforces="docs/format.md §4-7: class is one of the 13 classes; role, provenance, kind, origin are "
                "enumerations", scope="rows")
 def category(ctx: Context) -> Iterator[Hits]:
     """A categorical column (class, role, provenance, kind, relation...) holds a value outside its
@@ -341,7 +341,7 @@ def category(ctx: Context) -> Iterator[Hits]:
 
 @rule("structure.pmf", "error", "PMF not normalised",
       "{file}: row {row}: {column} is not a PMF (fields >= 0 summing to 1 ± 1e-3; sum = {sum})",
-      enforces="FORMAT.md 2: PMF fields are >= 0 and sum to 1 (tolerance 1e-3)", scope="rows")
+      enforces="docs/format.md §2: PMF fields are >= 0 and sum to 1 (tolerance 1e-3)", scope="rows")
 def pmf(ctx: Context) -> Iterator[Hits]:
     """A PMF struct column (class_pmf, weather, ...) has a row with negative or non-finite fields or
     a sum that differs from 1 by more than 1e-3."""
@@ -378,7 +378,7 @@ def _key_arrays(t: pa.Table, keys: tuple[str, ...]) -> list[np.ndarray] | None:
 @rule("structure.sort_order", "error", "Rows not in the declared order",
       "{file}: row {row} ({participant_id}, {time}) comes before the row after it in "
       "(participant_id, time) order",
-      enforces="FORMAT.md 5: states.parquet is sorted by participant_id, time")
+      enforces="docs/format.md §5: states.parquet is sorted by participant_id, time")
 def sort_order(ctx: Context) -> Iterator[Hits]:
     """A table with a declared order (states, interior: participant_id then time) is not sorted."""
     for name in ("states", "interior"):
@@ -401,7 +401,7 @@ def sort_order(ctx: Context) -> Iterator[Hits]:
 
 @rule("structure.duplicate_key", "error", "Duplicate key",
       "{file}: row {row}: key ({key}) = {value} repeats an earlier row",
-      enforces="FORMAT.md 4-10: participant_id unique; (participant_id, time) unique; region_id, "
+      enforces="docs/format.md §4-10: participant_id unique; (participant_id, time) unique; region_id, "
                "event_id, conflict_id unique")
 def duplicate_key(ctx: Context) -> Iterator[Hits]:
     """Two rows share the key of their table (participant_id in participants; (participant_id,

@@ -24,7 +24,7 @@ def _duration(ctx: Context) -> float | None:
 
 @rule("time.out_of_range", "error", "time outside [0, duration_s]",
       "{file}: row {row}: {column} = {value} s lies outside [0, duration_s = {duration}]",
-      enforces="FORMAT.md 3: every `time` lies in [0, duration_s]", scope="rows")
+      enforces="docs/format.md §3: every `time` lies in [0, duration_s]", scope="rows")
 def out_of_range(ctx: Context) -> Iterator[Hits]:
     """A ``time`` (states, interior) or an interval bound (``time_start``/``time_end`` of
     unobserved, events, environment) lies before 0 or after recording.json ``duration_s``
@@ -59,7 +59,7 @@ def out_of_range(ctx: Context) -> Iterator[Hits]:
 @rule("time.not_increasing", "error", "time does not increase between samples",
       "states.parquet: row {row}: participant {participant_id}: time {time} s follows the previous "
       "sample after only {dt} s (below the resolution {resolution} s)",
-      enforces="FORMAT.md 5: (participant_id, time) unique; time strictly increasing per "
+      enforces="docs/format.md §5: (participant_id, time) unique; time strictly increasing per "
                "participant", scope="rows")
 def not_increasing(ctx: Context) -> Iterator[Hits]:
     """Two consecutive samples of one participant are less than ``[time] resolution_s`` (1 µs)
@@ -81,7 +81,7 @@ def not_increasing(ctx: Context) -> Iterator[Hits]:
 
 @rule("time.nominal_rate_low", "warning", "Nominal sample rate below 10 Hz",
       "recording.json: nominal_rate_hz = {value} Hz is below {minimum} Hz",
-      enforces=("FORMAT.md 3: nominal_rate_hz SHOULD be above 10 Hz (the paper: several Hz, "
+      enforces=("docs/format.md §3: nominal_rate_hz SHOULD be above 10 Hz (the paper: several Hz, "
                 "preferably more than 10 Hz)"))
 def nominal_rate_low(ctx: Context) -> Iterator[Hit]:
     """recording.json ``nominal_rate_hz`` is below ``[time] min_rate_hz`` (10 Hz): the paper asks
@@ -209,7 +209,7 @@ def interpolated_share(ctx: Context) -> Iterator[Hits]:
 
 @rule("time.interval_order", "error", "Interval ends before it starts",
       "{file}: row {row}: time_end {time_end} s is before time_start {time} s",
-      enforces="FORMAT.md 6-8: validity intervals have time_start <= time_end")
+      enforces="docs/format.md §6-8: validity intervals have time_start <= time_end")
 def interval_order(ctx: Context) -> Iterator[Hits]:
     """An event or environment row has ``time_end`` < ``time_start`` (unobserved regions:
     unobserved.time_order)."""

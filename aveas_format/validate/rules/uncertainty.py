@@ -16,7 +16,7 @@ from aveas_format.validate.context import Context
 from aveas_format.validate.registry import Hit, Hits, rule
 from aveas_format.validate.views import StatesView, ints, num
 
-#: FORMAT.md 2: measured data SHOULD carry _std for x, y, heading, vx, vy (and length/width, see
+#: docs/format.md §2: measured data SHOULD carry _std for x, y, heading, vx, vy (and length/width, see
 #: participants.size_std_missing)
 STATE_STDS = ("x_std", "y_std", "heading_std", "vx_std", "vy_std")
 
@@ -48,12 +48,12 @@ def seg_median(seg: np.ndarray, values: np.ndarray, backend: str | None = None) 
 @rule("uncertainty.std_missing", "warning", "Measured states without uncertainty",
       "states.parquet: row {row}: participant {participant_id} is measured but {column} is {state}"
       "{more}", scope="rows",
-      enforces=("FORMAT.md 2: measured data (provenance natural or staged) SHOULD carry _std for "
+      enforces=("docs/format.md §2: measured data (provenance natural or staged) SHOULD carry _std for "
                 "x, y, heading, vx, vy"))
 def std_missing(ctx: Context) -> Iterator[Hits | Hit]:
     """Measured participants (provenance natural or staged) have states without ``x_std``,
     ``y_std``, ``heading_std``, ``vx_std`` or ``vy_std`` (the column is absent, or null for the
-    participant's samples): FORMAT.md 2 says measured data SHOULD carry them. One finding per column
+    participant's samples): docs/format.md §2 says measured data SHOULD carry them. One finding per column
     (absent) or per participant and column (nulls)."""
     sv = ctx.states_view
     if sv is None or not sv.measured.any():
@@ -87,9 +87,9 @@ def std_missing(ctx: Context) -> Iterator[Hits | Hit]:
 @rule("uncertainty.class_pmf_missing", "warning", "Measured participant without class PMF",
       "participants.parquet: row {row}: participant {participant_id} is measured but class_pmf is "
       "{state}",
-      enforces="FORMAT.md 4: class_pmf SHOULD be given for measured data")
+      enforces="docs/format.md §4: class_pmf SHOULD be given for measured data")
 def class_pmf_missing(ctx: Context) -> Iterator[Hits]:
-    """A measured participant has no ``class_pmf`` (column absent or null): FORMAT.md 4 says
+    """A measured participant has no ``class_pmf`` (column absent or null): docs/format.md §4 says
     class_pmf SHOULD be given for measured data (classification is uncertain)."""
     pv = ctx.participants_view
     t = pv.table

@@ -50,7 +50,7 @@ def _geoms(ctx: Context):
 
 @rule("unobserved.invalid_geometry", "error", "Invalid unobserved region",
       "unobserved.parquet: row {row}: region {region_id}: geometry {why}",
-      enforces="FORMAT.md 6: geometry is a valid WKB Polygon or MultiPolygon")
+      enforces="docs/format.md §6: geometry is a valid WKB Polygon or MultiPolygon")
 def invalid_geometry(ctx: Context) -> Iterator[Hits]:
     """A region's geometry is not WKB, not a (Multi)Polygon, empty, or invalid (self-intersecting
     ring, ...)."""
@@ -70,7 +70,7 @@ def invalid_geometry(ctx: Context) -> Iterator[Hits]:
 
 @rule("unobserved.time_order", "error", "Region ends before it starts",
       "unobserved.parquet: row {row}: time_end {time_end} s is before time_start {time} s",
-      enforces="FORMAT.md 6: validity interval, start <= end")
+      enforces="docs/format.md §6: validity interval, start <= end")
 def time_order(ctx: Context) -> Iterator[Hits]:
     """A region's ``time_end`` is before its ``time_start``."""
     u = ctx.table("unobserved")
@@ -181,10 +181,10 @@ def state_inside(ctx: Context) -> Iterator[Hits]:
 
 @rule("unobserved.table_missing", "warning", "No unobserved.parquet",
       "unobserved.parquet: the recording has no unobserved regions table",
-      enforces=("FORMAT.md 1: unobserved.parquet SHOULD list the regions not observed "
+      enforces=("docs/format.md §1: unobserved.parquet SHOULD list the regions not observed "
                 "(occlusions, sensor limits)"))
 def table_missing(ctx: Context) -> Iterator[Hit]:
-    """The recording has no unobserved.parquet: FORMAT.md 1 says it SHOULD list the regions not
+    """The recording has no unobserved.parquet: docs/format.md §1 says it SHOULD list the regions not
     observed (occlusions, sensor limits), so that users can tell 'nobody there' from 'not seen'."""
     if ctx.meta is None:
         return
@@ -194,9 +194,9 @@ def table_missing(ctx: Context) -> Iterator[Hit]:
 
 @rule("unobserved.coverage_missing", "warning", "No coverage polygon",
       "recording.json: coverage is missing: the observed area is unknown",
-      enforces="FORMAT.md 3: coverage (the area observed at any time) SHOULD be given")
+      enforces="docs/format.md §3: coverage (the area observed at any time) SHOULD be given")
 def coverage_missing(ctx: Context) -> Iterator[Hit]:
-    """recording.json has no ``coverage``: FORMAT.md 3 says it SHOULD give the area observed at any
+    """recording.json has no ``coverage``: docs/format.md §3 says it SHOULD give the area observed at any
     time (everything else is unobserved)."""
     if ctx.meta is not None and not ctx.meta.coverage:
         yield Hit(file="recording.json", column="coverage")
@@ -204,7 +204,7 @@ def coverage_missing(ctx: Context) -> Iterator[Hit]:
 
 @rule("unobserved.coverage_invalid", "error", "coverage is not a valid WKT polygon",
       "recording.json: coverage {why}",
-      enforces="FORMAT.md 3: coverage is a WKT polygon in the local frame")
+      enforces="docs/format.md §3: coverage is a WKT polygon in the local frame")
 def coverage_invalid(ctx: Context) -> Iterator[Hit]:
     """recording.json ``coverage`` is not parseable WKT, not a (Multi)Polygon, empty or invalid."""
     if ctx.meta is None or not ctx.meta.coverage:
