@@ -205,9 +205,9 @@ def release_free_memory() -> None:
         _TRIM(0)
 
 
-#: the environment variable that picks the path of the compiled kernels (the follower/leader
-#: metrics of ``derive``, the OpenLABEL block reader): ``numpy``, ``numba`` or ``auto`` (unset:
-#: auto, numba where it is installed)
+#: the environment variable that picks the path of the compiled kernels (the OpenLABEL import's
+#: block reader and the export's row assembler): ``numpy``, ``numba`` or ``auto`` (unset: auto,
+#: numba where it is installed)
 KERNEL_ENV = "AVEAS_FORMAT_KERNEL"
 KERNEL_BACKENDS = ("numpy", "numba")
 _HAS_NUMBA = importlib.util.find_spec("numba") is not None

@@ -3,18 +3,17 @@ highway streamed by time window.
 
 1. ``pairs``: TTC + DRAC + MTTC + PSD, each with its std, for 10^6 follower/leader pairs: ours
    (:func:`aveas_format.derive.interactions._ttc.follower_leader_metrics`, which also computes THW,
-   DHW and MDRAC) on its numba kernel (serial, and with prange), on its NumPy path, against a
-   straightforward vectorised NumPy implementation of the same formulas written below (whole
-   arrays, MTTC piece by piece, the same analytic std: the baseline of the ratios) and the same
-   with the MTTC std by central finite differences (as the derivations did before), all in one
-   run; warm calls (best of 5), and numba's first call in a fresh process, cold and cached.
+   DHW and MDRAC: NumPy in cache-sized chunks) against a straightforward vectorised NumPy
+   implementation of the same formulas written below (whole arrays, MTTC piece by piece, the same
+   analytic std: the baseline of the ratios) and the same with the MTTC std by central finite
+   differences (as the derivations did before), all in one run; warm calls (best of 5).
 2. ``highway_hour``: ~100 concurrent vehicles at 25 Hz for 1 h (~9M states, a vectorised
    generator below) written as a recording, then every measure (kinematics, interactions with
    DRAC/MDRAC/PSD and their std, conflicts, the criticality summary) streamed by time window
    (:func:`aveas_format.derive.streamed.derive_by_windows`) on 2 worker processes, in a fresh
    process whose peak memory (VmHWM) is reported. Target: <= 120 s.
-3. ``sample``: the real pipeline (``derive(rec, only="interactions")``) on the sample highway on
-   each path of the follower/leader metrics, with the time spent in them; the tables compared.
+3. ``sample``: the real pipeline (``derive(rec, only="interactions")``) on the sample highway,
+   with the share of its time spent in the follower/leader metrics.
 
 Run alone: ``.venv/bin/python benchmarks/bench_criticality.py [pairs|sample|hour [SECONDS [W1,W2...]]]``
 (``hour``: 60-s and 300-s windows on the same recording, the CPU ratio between them).
@@ -106,63 +105,24 @@ def _pairs(n: int, seed: int = 0):
                 al=rng.normal(0, 1.5, n), vlv=np.full(n, 0.01), alv=np.full(n, 0.04))
 
 
-def _compile_child(cache_dir: str) -> None:
-    """In a fresh process with numba's cache in ``cache_dir``: import, then the first call on
-    1,000 pairs (compiles the kernel or loads it from the cache); print the seconds."""
-    t0 = time.perf_counter()
-    from aveas_format.derive.interactions._ttc import follower_leader_metrics
-
-    p = _pairs(1000)
-    t1 = time.perf_counter()
-    follower_leader_metrics(p["g"], p["gv"], 4.5, (p["vf"], p["af"], p["vfv"], p["afv"]),
-                            (p["vl"], p["al"], p["vlv"], p["alv"]), backend="numba")
-    print(json.dumps({"import_s": t1 - t0, "first_call_s": time.perf_counter() - t1}))
-
-
-def _need_numba() -> None:
-    import importlib.util
-
-    if importlib.util.find_spec("numba") is None:
-        raise SystemExit("bench_criticality pairs/sample measure the numba kernel against the NumPy "
-                         "path: pip install -e '.[jit]' (or '.[bench]') first")
-
-
-def _first_calls() -> tuple[dict, dict]:
-    """The numba kernel's first call in a fresh process: cold (an empty cache: it compiles) and
-    warm (a second process: it loads the cache that the first wrote)."""
-    import os
-
-    with tempfile.TemporaryDirectory(prefix="aveas-bench-numba-") as d:
-        env = {**os.environ, "NUMBA_CACHE_DIR": d}
-        out = []
-        for _ in range(2):
-            r = subprocess.run([sys.executable, __file__, "_compile", d], capture_output=True,
-                               text=True, check=True, env=env)
-            out.append(json.loads(r.stdout.strip().splitlines()[-1]))
-    return out[0], out[1]
-
-
 def bench_pairs(n: int = 1_000_000, repeat: int = 5) -> list[dict]:
-    """Ours on numba (serial; and prange over the cores), ours on NumPy, the two baselines, in
-    one run; ratios against the baseline with the same analytic derivatives."""
-    _need_numba()
-    from aveas_format.derive.interactions import _kernel
+    """Ours and the two baselines in one run; the ratio against the baseline with the same
+    analytic derivatives."""
     from aveas_format.derive.interactions._ttc import PASSED_THROUGH, follower_leader_metrics
 
     p = _pairs(n)
-    args = [p["g"], p["gv"], np.full(n, 4.5), p["vf"], p["af"], p["vfv"], p["afv"], p["vl"],
-            p["al"], p["vlv"], p["alv"]]
 
-    def ours(backend):
-        return follower_leader_metrics(*args[:3], tuple(args[3:7]), tuple(args[7:]),
-                                       backend=backend)
+    def ours():
+        return follower_leader_metrics(p["g"], p["gv"], np.full(n, 4.5),
+                                       (p["vf"], p["af"], p["vfv"], p["afv"]),
+                                       (p["vl"], p["al"], p["vlv"], p["alv"]))
 
     cpu = {}
 
     def best(fn, name=None):
         """Best wall time of ``repeat`` warm calls (and, under ``name``, the best CPU time of
         this thread: less sensitive to other processes on the cores than the wall time)."""
-        fn()  # warm: the JIT compiled (or loaded from its cache), the allocator's arrays mapped
+        fn()  # warm: the allocator's arrays mapped
         ts, cs = [], []
         for _ in range(repeat):
             t0, c0 = time.perf_counter(), time.thread_time()
@@ -173,52 +133,33 @@ def bench_pairs(n: int = 1_000_000, repeat: int = 5) -> list[dict]:
             cpu[name] = min(cs)
         return min(ts), r
 
-    cold, warm = _first_calls()
-    t_jit, m = best(lambda: ours("numba"), "numba")
-    t_par, _ = best(lambda: {**_kernel.metrics(args, 1.0, 3.4, parallel=True)})
-    t_np, m_np = best(lambda: ours("numpy"), "numpy")
+    t_np, m = best(ours, "ours")
     t_an, b = best(lambda: baseline(**p, analytic=True), "baseline")
     t_fd, _ = best(lambda: baseline(**p))
     k_out = len(m) - len(PASSED_THROUGH)
     t_floor, _ = best(lambda: [np.full(n, 1.0) for _ in range(k_out)])
-    # the same numbers: values equal to the baseline's, numba's to NumPy's path
+    # the same numbers as the baseline's
     same = {k: bool(np.allclose(m[k], v, rtol=1e-9, equal_nan=True)) for k, v in
             (("ttc", b[0]), ("drac", b[2]), ("ttc_ca", b[4]), ("psd", b[6]))}
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rel = max(float(np.nanmax(np.where(np.isfinite(m_np[k]), np.abs(m[k] - m_np[k])
-                                           / np.abs(m_np[k]), 0.0))) for k in m)
-    base = {"rows": n, "baseline_s": round(t_an, 3)}
-    rows = []
-    for name, t in (("numba", t_jit), ("numba_parallel", t_par), ("numpy", t_np)):
-        rows.append({"benchmark": f"criticality.pairs.{name}", **base, "seconds": round(t, 3),
-                     "rows_per_s": round(n / t), "speedup_vs_baseline": round(t_an / t, 1)})
-    rows[0]["note"] = (
-        f"{n:,} follower pairs, TTC + DRAC + MTTC + PSD with std (ours also THW, DHW, MDRAC); "
-        f"baseline: straightforward NumPy with the same analytic std {t_an:.3f} s; "
-        f"with the MTTC std by central differences {t_fd:.3f} s -> {t_fd / t_jit:.1f}x; "
-        f"ours on NumPy {t_np:.3f} s ({t_an / t_np:.1f}x), numba with prange on "
-        f"{_kernel.numba.get_num_threads()} threads {t_par:.3f} s ({t_an / t_par:.1f}x); "
-        f"values equal to the baseline's: {same}; numba vs NumPy path max relative difference "
-        f"{rel:.1e}; writing {k_out} fresh output arrays alone {t_floor:.3f} s; numba's first "
-        f"call in a fresh process: cold (compiling) {cold['first_call_s']:.1f} s, warm "
-        f"(cache) {warm['first_call_s']:.2f} s (+ import {warm['import_s']:.2f} s); CPU time "
-        f"(this thread, best of {repeat}): numba {cpu['numba']:.3f} s, NumPy path "
-        f"{cpu['numpy']:.3f} s, baseline {cpu['baseline']:.3f} s -> "
-        f"{cpu['baseline'] / cpu['numba']:.1f}x")
-    return rows
+    return [{"benchmark": "criticality.pairs", "rows": n, "baseline_s": round(t_an, 3),
+             "seconds": round(t_np, 3), "rows_per_s": round(n / t_np),
+             "speedup_vs_baseline": round(t_an / t_np, 1),
+             "note": (f"{n:,} follower pairs, TTC + DRAC + MTTC + PSD with std (ours also THW, "
+                      f"DHW, MDRAC); baseline: straightforward NumPy with the same analytic std "
+                      f"{t_an:.3f} s; with the MTTC std by central differences {t_fd:.3f} s -> "
+                      f"{t_fd / t_np:.1f}x; values equal to the baseline's: {same}; writing "
+                      f"{k_out} fresh output arrays alone {t_floor:.3f} s; CPU time (this "
+                      f"thread, best of {repeat}): ours {cpu['ours']:.3f} s, baseline "
+                      f"{cpu['baseline']:.3f} s -> {cpu['baseline'] / cpu['ours']:.1f}x")}]
 
 
 def bench_sample(repeat: int = 3) -> list[dict]:
     """The real pipeline on the sample highway (``sample.highway_scene``: 60 vehicles, 30 s at
-    25 Hz): ``derive(rec, only="interactions")`` on each path of the follower/leader metrics, with
-    the time spent in them (``follower_leader_metrics`` timed where the pipeline calls it); the
-    interactions tables of both paths compared. Best of ``repeat``, same run."""
-    import os
-
-    _need_numba()
+    25 Hz): ``derive(rec, only="interactions")`` with the time spent in the follower/leader
+    metrics (``follower_leader_metrics`` timed where the pipeline calls it). Best of ``repeat``
+    after a warm-up."""
     from aveas_format.derive import derive
     from aveas_format.derive.interactions import _pairs as pairs_mod
-    from aveas_format.numeric import KERNEL_ENV
     from aveas_format.sample import highway_scene
 
     rec = highway_scene()
@@ -233,42 +174,26 @@ def bench_sample(repeat: int = 3) -> list[dict]:
         spent["pairs"] += len(a[0])
         return r
 
-    res, tables = {}, {}
-    old = os.environ.get(KERNEL_ENV)
+    best = None
     pairs_mod.follower_leader_metrics = timed
     try:
-        for backend in ("numba", "numpy") * (repeat + 1):  # the first round warms up
-            os.environ[KERNEL_ENV] = backend
+        for i in range(repeat + 1):  # the first round warms up
             spent.update(s=0.0, pairs=0)
             t0 = time.perf_counter()
             derive(rec, only="interactions")
             total = time.perf_counter() - t0
-            best = res.get(backend)
-            if backend in tables and (best is None or total < best[0]):
-                res[backend] = (total, spent["s"], spent["pairs"])
-            tables[backend] = rec.derived["interactions"]
+            if i and (best is None or total < best[0]):
+                best = (total, spent["s"], spent["pairs"])
     finally:
         pairs_mod.follower_leader_metrics = inner
-        os.environ.pop(KERNEL_ENV) if old is None else os.environ.__setitem__(KERNEL_ENV, old)
-    a, b = tables["numba"], tables["numpy"]
-    cols = [c for c in a.column_names if a.schema.field(c).type in ("double", "float")]
-    worst = 0.0
-    for c in cols:
-        x, y = (np.asarray(t[c].to_numpy(zero_copy_only=False), float) for t in (a, b))
-        assert np.array_equal(np.isnan(x), np.isnan(y)), c
-        f = np.isfinite(y)
-        worst = max(worst, float(np.max(np.abs(x[f] - y[f]) / np.maximum(np.abs(y[f]), 1e-300),
-                                        initial=0.0)))
-    (tj, fj, npairs), (tn, fn, _) = res["numba"], res["numpy"]
+    total, fol, npairs = best
     return [{"benchmark": "criticality.sample_interactions", "rows": n_states,
-             "seconds": round(tj, 3), "rows_per_s": round(n_states / tj),
-             "baseline_s": round(tn, 3), "speedup_vs_baseline": round(tn / tj, 2),
+             "seconds": round(total, 3), "rows_per_s": round(n_states / total),
+             "baseline_s": None, "speedup_vs_baseline": None,
              "note": (f"derive(only='interactions') on the sample highway ({n_states:,} states, "
-                      f"{a.num_rows:,} interaction rows, {npairs:,} follower/leader pairs): "
-                      f"numba path {tj:.3f} s, of it the follower measures {fj:.4f} s; NumPy path "
-                      f"{tn:.3f} s, of it {fn:.4f} s -> follower measures {fn / fj:.1f}x; the "
-                      f"interactions tables equal (NaN alike, {len(cols)} float columns, max "
-                      f"relative difference {worst:.1e})")}]
+                      f"{rec.derived['interactions'].num_rows:,} interaction rows, {npairs:,} "
+                      f"follower/leader pairs): of it the follower measures {fol:.4f} s "
+                      f"({100 * fol / total:.1f} %)")}]
 
 
 # --- an hour of a busy highway ----------------------------------------------------------------------
@@ -401,9 +326,7 @@ def main() -> list[dict]:
 
 
 if __name__ == "__main__":
-    if len(sys.argv) > 1 and sys.argv[1] == "_compile":
-        _compile_child(sys.argv[2])
-    elif len(sys.argv) > 1 and sys.argv[1] == "_child":
+    if len(sys.argv) > 1 and sys.argv[1] == "_child":
         _hour_child(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]))
     elif len(sys.argv) > 1 and sys.argv[1] == "pairs":
         for r in bench_pairs():

@@ -131,8 +131,8 @@ def minimal_meta(**over):
     return d
 
 
-#: the two paths of the compiled kernels (aveas_format.numeric.kernel_backend: the follower/leader
-#: metrics, the OpenLABEL block reader), for
+#: the two paths of the compiled kernels (aveas_format.numeric.kernel_backend: the OpenLABEL block
+#: reader), for
 #: ``pytest.mark.parametrize("backend", KERNEL_BACKENDS)``: the numba one skips without numba
 KERNEL_BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(
     importlib.util.find_spec("numba") is None, reason="numba is not installed (the jit extra)"))]

@@ -11,7 +11,6 @@ from hypothesis import strategies as st
 from aveas_format.derive import derive
 from aveas_format.derive.interactions import ttc_boxes
 
-from helpers_common import KERNEL_BACKENDS, kernel
 from helpers_derive import recording, road_map, row
 
 angle = st.floats(-np.pi, np.pi, allow_nan=False)
@@ -59,11 +58,10 @@ def test_box_ttc_invariant(th, dx, dy, ax, ay, ah, bx, by, bh, avx, avy, bvx, bv
     assert swapped == base or abs(swapped - base) < 1e-9
 
 
-@pytest.mark.parametrize("backend", KERNEL_BACKENDS)
 @settings(max_examples=6, deadline=None)
 @given(th=angle, dx=st.floats(-2000, 2000), dy=st.floats(-2000, 2000),
        gap=st.floats(5, 80), vf=st.floats(5, 40), vl=st.floats(0, 40))
-def test_lane_ttc_thw_invariant(backend, th, dx, dy, gap, vf, vl):
+def test_lane_ttc_thw_invariant(th, dx, dy, gap, vf, vl):
     """The same car-following scene on a road at any angle and place: same TTC, THW, gap."""
     actors = [{"x": 100.0, "y": -1.75, "length": 4.5, "width": 1.8, "vx": vf, "vy": 0.0},
               {"x": 100.0 + gap + 4.5, "y": -1.75, "length": 4.5, "width": 1.8, "vx": vl,
@@ -71,8 +69,7 @@ def test_lane_ttc_thw_invariant(backend, th, dx, dy, gap, vf, vl):
     out = []
     for rot, shift in ((0.0, (0.0, 0.0)), (th, (dx, dy))):
         rec = recording(actors, duration=0.2, rotate=rot, shift=shift)
-        with kernel(backend):
-            derive(rec, only="interactions", box_2d=False)
+        derive(rec, only="interactions", box_2d=False)
         r = row(rec.derived["interactions"], participant_id=0, time=0.0, relation="leader")[0]
         out.append(r)
     a, b = out

