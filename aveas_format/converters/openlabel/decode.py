@@ -2,86 +2,85 @@
 
 :func:`decode_block` takes the bytes of whole frames (``{"key":{...},...}``) and decodes them into
 Structs mirroring frames -> objects -> ``object_data`` (members the import does not read are
-skipped, as the profile allows). The values are kept as raw JSON (``msgspec.Raw``) and decoded per
-attribute for the whole block at once (one typed decode of all boxes' values of a name), so that no
-Python object is made per number. The attributes read are those of
-:data:`~.profile.FRAME_ATTRIBUTES` (one table: adding one is one line there), found by name in any
-kind (``boolean``, ``num``, ``text``, ``vec``; the first item of a name, as the profile reads it).
+skipped, as the profile allows). Attribute items are typed by their name (a tagged union of the
+profile's names: :data:`~.profile.FRAME_ATTRIBUTES`, the interior signals, and the names the
+profile has that the import does not read, whose values are skipped): a block that names another
+attribute, or holds values of other types, is decoded in the *lenient* layout instead (any name,
+values kept as raw JSON and decoded per attribute for the whole block at once). The attributes are
+found by name in any kind (``boolean``, ``num``, ``text``, ``vec``; the first item of a name, as
+the profile reads it) and turned into columns for the whole block at once (no Python step per
+value: adding an attribute is one line in :data:`~.profile.FRAME_ATTRIBUTES`).
 
 The result (:class:`Block`, plain data: it is what a worker process sends back) holds per frame its
 key, timestamp, transforms and objects, and per box (an object with a cuboid) its object, the
-cuboid's values and coordinate system, the attributes' columns, the ``aveas_format`` extension's
-members as Arrow arrays, its interior signals and what the checks of the source found.
+cuboid placed in the root frame (:func:`~.geometry.place`), the attributes' columns, the
+``aveas_format`` extension's members as Arrow arrays, its interior signals and what the checks of
+the source found.
 """
 
 from __future__ import annotations
 
 from itertools import chain, repeat
 from operator import attrgetter, contains, is_not, itemgetter, methodcaller
-from typing import Any
+from types import SimpleNamespace
+from typing import Any, Union
 
 import msgspec
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from aveas_format.converters.labels import implausible_size
 from aveas_format.converters.openlabel.geometry import CoordinateSystems, place
-from aveas_format.converters.openlabel.profile import (EXT, FRAME_ATTRIBUTES, LONGITUDINAL,
-                                                       MANDATORY_FRAME_ATTRIBUTES, attributes_of, enum_value,
-                                                       first_value, pmf_bad)
+from aveas_format.converters.openlabel.profile import (EXT, FRAME_ATTRIBUTES, INTERIOR_ATTRIBUTES, LONGITUDINAL,
+                                                       MANDATORY_FRAME_ATTRIBUTES, UNREAD_ATTRIBUTES, attributes_of,
+                                                       enum_value, first_value, pmf_bad)
 from aveas_format.errors import FormatError
 
-_RAW, _NULL = msgspec.Raw, msgspec.Raw(b"null")
+_NULL = msgspec.Raw(b"null")
+_KINDS = ("boolean", "num", "text", "vec")
+_RAW = msgspec.Raw
+_Cuboid = msgspec.defstruct("Cuboid", [("val", _RAW, _NULL), ("name", Any, None), ("coordinate_system", Any, None),
+                                       ("attributes", _RAW, _NULL), ("ext", _RAW, _NULL)], rename={"ext": EXT}, gc=False)
+#: an attribute item of any name (the lenient layout)
+_Item = msgspec.defstruct("Item", [("name", Any, None), ("val", _RAW, _NULL)], gc=False)
+#: an attribute item of a name the profile has, by its name (the strict layout): its value where
+#: the import reads it, else skipped
+_NAMED = [msgspec.defstruct(f"Named{i}", [("val", _RAW, _NULL)] if read else [], tag=name, tag_field="name", gc=False)
+          for i, (name, read) in enumerate([*((n, True) for n in (*FRAME_ATTRIBUTES, *INTERIOR_ATTRIBUTES)),
+                                            *((n, False) for n in UNREAD_ATTRIBUTES)])]
+_NAME_OF = {t: t.__struct_config__.tag for t in _NAMED}
+_UNREAD = set(UNREAD_ATTRIBUTES)
 
 
-class Cuboid(msgspec.Struct):
-    val: msgspec.Raw = _NULL
-    name: Any = None
-    coordinate_system: Any = None
-    attributes: msgspec.Raw = _NULL
-    ext: msgspec.Raw = msgspec.field(default=_NULL, name=EXT)
+def _layout(item: Any) -> msgspec.json.Decoder:
+    """The decoder of a block of frames (``item``: the attribute items' type)."""
+    items = list[item] | item | None
+    od = msgspec.defstruct("ObjectData", [("cuboid", list[_Cuboid] | _Cuboid | None, None),
+                                          *((kind, items, None) for kind in _KINDS), ("type", Any, None)], gc=False)
+    oif = msgspec.defstruct("ObjectInFrame", [("object_data", od | None, None)], gc=False)
+    frame = msgspec.defstruct("Frame", [("objects", dict[str, oif] | None, None),
+                                        ("frame_properties", _RAW, _NULL)], gc=False)
+    return msgspec.json.Decoder(dict[str, frame])
 
 
-class Item(msgspec.Struct):
-    name: Any = None
-    val: msgspec.Raw = _NULL
-
-
-_Items = list[Item] | Item | None
-
-
-class ObjectData(msgspec.Struct):
-    cuboid: list[Cuboid] | Cuboid | None = None
-    boolean: _Items = None
-    num: _Items = None
-    text: _Items = None
-    vec: _Items = None
-    type: Any = None
-
-
-class ObjectInFrame(msgspec.Struct):
-    object_data: ObjectData | None = None
-
-
-class Frame(msgspec.Struct):
-    objects: dict[str, ObjectInFrame] | None = None
-    frame_properties: msgspec.Raw = _NULL
-
-
-_FRAMES = msgspec.json.Decoder(dict[str, Frame])
+_STRICT, _LENIENT = _layout(Union[tuple(_NAMED)]), _layout(_Item)
 _ANY = msgspec.json.Decoder()
 _CUBOIDS = msgspec.json.Decoder(list[list[float]])
 _VECTORS = msgspec.json.Decoder(list[list[float | None] | None])
 _NUMBERS = msgspec.json.Decoder(list[float | None])
-_KINDS = ("boolean", "num", "text", "vec")
+_OBJECT_DATA, _CUBOID, _TYPE, _NAME, _VAL, _EXT = (attrgetter(a) for a in
+                                                   ("object_data", "cuboid", "type", "name", "val", "ext"))
+_EMPTY = SimpleNamespace(cuboid=None, boolean=None, num=None, text=None, vec=None, type=None)
 
 
 class Block:
     """What :func:`decode_block` made of a block of frames (module docstring): ``keys``, ``stamps``,
     ``props`` (frame index -> its ``frame_properties``, only frames with ``transforms``), ``uids``
-    and ``frame_len`` (the objects of each frame, flat), per box ``cols`` (``slot``: the box's
-    object in ``uids``) and ``ext`` (member -> (values, present)), ``interior`` ((slot, signals)),
-    ``types`` (object -> type given inside a frame), ``found`` ((code, attribute, box, count))."""
+    and ``frame_len`` (the objects of each frame, flat), ``frame_of_slot``, per box ``cols``
+    (``slot``: the box's object in ``uids``) and ``ext`` (member -> (values, present)),
+    ``interior`` ((slot, signals)), ``types`` (object -> type given inside a frame), ``found``
+    ((code, attribute, box, count)), ``lenient`` (decoded in the lenient layout)."""
 
     def __init__(self, **kw: Any) -> None:
         self.__dict__.update(kw)
@@ -95,24 +94,31 @@ def joined(raws: Any) -> bytes:
 def decode_block(buf: bytes, offset: int = 0, systems: CoordinateSystems | None = None) -> Block:
     """The frames of ``buf`` (a JSON object of whole frames; ``offset``: where it starts in the
     file, for errors) as a :class:`Block`, the cuboids placed in the root frame of ``systems``
-    (the file's coordinate systems; :func:`~.geometry.place`). Broken JSON raises
-    :class:`msgspec.DecodeError` (the reader locates it); a layout the typed decoding refuses (an
-    attribute list holding numbers, a frame that is no object...) is read as the same values with
-    what is no object dropped."""
+    (the file's coordinate systems). Broken JSON raises :class:`msgspec.DecodeError` (the reader
+    locates it). A block the strict layout refuses (another attribute name, values of other
+    types, an attribute list holding numbers, a frame that is no object...) is decoded in the
+    lenient layout, what is no object dropped (``Block.lenient``)."""
+    lenient = False
     try:
-        frames = _FRAMES.decode(buf)
-    except msgspec.ValidationError:
-        frames = _FRAMES.decode(msgspec.json.encode(_tidied(_ANY.decode(buf))))
+        try:
+            frames = _STRICT.decode(buf)
+        except msgspec.ValidationError:
+            lenient = True
+            frames = _LENIENT.decode(msgspec.json.encode(_tidied(_ANY.decode(buf))))
     except RecursionError:
         raise FormatError(f"JSON nested too deep (in the frames after byte {offset:,})") from None
     keys = list(frames)
     objs = [fr.objects or {} for fr in frames.values()]
     uids = list(chain.from_iterable(objs))
     frame_len = np.fromiter(map(len, objs), np.int32, len(objs))
-    props = list(map(_ANY.decode, map(attrgetter("frame_properties"), frames.values())))
-    props = [p if isinstance(p, dict) else {} for p in props]
-    ods = [o.object_data if o.object_data is not None else _EMPTY for o in chain.from_iterable(map(dict.values, objs))]
-    cubs = list(map(_bounding_box, map(attrgetter("cuboid"), ods)))
+    props = [p if isinstance(p, dict) else {} for p in map(_ANY.decode, map(attrgetter("frame_properties"),
+                                                                          frames.values()))]
+    props_of = {j: p for j, p in enumerate(props) if p.get("transforms")}
+    ods = list(map(_OBJECT_DATA, chain.from_iterable(map(dict.values, objs))))
+    if None in ods:
+        ods = [_EMPTY if od is None else od for od in ods]
+    all_types = list(map(_TYPE, ods))
+    cubs = _bounding_boxes(list(map(_CUBOID, ods)))
     has = np.fromiter(map(is_not, cubs, repeat(None)), bool, len(cubs))
     slot = np.flatnonzero(has).astype(np.int32)
     if not has.all():
@@ -122,12 +128,11 @@ def decode_block(buf: bytes, offset: int = 0, systems: CoordinateSystems | None 
     def where(i: int) -> str:
         return f"frame {keys[frame_of_slot[slot[i]]]} object {uids[slot[i]]}"
 
-    systems = systems or CoordinateSystems(None)
-    cols = {"slot": slot}
     cub = _cuboids(cubs, where)
+    systems = systems or CoordinateSystems(None)
     edges: dict[int, dict] = {}
     resolved: dict[tuple, tuple] = {}
-    unknown: list[tuple[str, int]] = []
+    unknown: dict[str, int] = {}
 
     def resolve(i: int) -> tuple:
         j, name = int(frame_of_slot[slot[i]]), cub["cs"][i]
@@ -136,52 +141,49 @@ def decode_block(buf: bytes, offset: int = 0, systems: CoordinateSystems | None 
             if j not in edges:
                 edges[j] = systems.frame_edges(props_of.get(j, {}).get("transforms"))
             resolved[key] = systems.resolve(name, edges[j])
-            if name is not None and name in systems.unknown and name not in {u for u, _ in unknown}:
-                unknown.append((name, i))
+            if name is not None and name in systems.unknown:
+                unknown.setdefault(name, i)
         return resolved[key]
 
-    props_of = {j: p for j, p in enumerate(props) if p.get("transforms")}
-    cols.update(place(cub["v"], cub["nval"], cub["cs"], resolve, where))
-    cols["cub_ts"] = cub["cub_ts"]
+    cols = {"slot": slot, **place(cub["v"], cub["nval"], cub["cs"], resolve, where), "cub_ts": cub["cub_ts"]}
     cols["bad"] = implausible_size(np.column_stack([cols["dl"], cols["dw"], cols["dh"]])) if len(cubs) \
         else np.zeros(0, bool)
-    at = _Attributes(ods)
+    at = _Attributes(ods, lenient)
     cols.update(_attribute_columns(at, len(cubs)))
-    types = {}
-    for u, od in zip(uids, (o.object_data for o in chain.from_iterable(map(dict.values, objs)))):
-        if od is not None and isinstance(od.type, str):
-            types.setdefault(u, od.type)
-    found = _findings(at) + [("source.openlabel.unknown_coordinate_system", name, i, 1) for name, i in unknown]
+    types: dict[str, str] = {}
+    if all_types.count(None) < len(all_types):  # (a type inside a frame's object_data: TUM Traffic)
+        for u, t in zip(uids, all_types):
+            if isinstance(t, str):
+                types.setdefault(u, t)
+    found = _findings(at) + [("source.openlabel.unknown_coordinate_system", name, i, 1) for name, i in unknown.items()]
     interior = [(int(slot[i]), irow) for i in at.boxes_with_prefix("interior/")
                 if (irow := interior_signals(_box_attributes(ods[i])))]
-    return Block(keys=keys, stamps=[p.get("timestamp") for p in props],
-                 props=props_of, uids=uids,
-                 frame_len=frame_len, cols=cols, ext=_extension(cubs), interior=interior, types=types,
-                 found=found, frame_of_slot=frame_of_slot)
+    return Block(keys=keys, stamps=[p.get("timestamp") for p in props], props=props_of, uids=uids,
+                 frame_len=frame_len, frame_of_slot=frame_of_slot, cols=cols, ext=_extension(cubs),
+                 interior=interior, types=types, found=found, lenient=lenient)
 
 
-_EMPTY = ObjectData()
+def _bounding_boxes(cubs: list) -> list:
+    """:func:`_bounding_box` of each box's cuboids: at once where each has a list whose first is
+    the ``bounding_box`` with a value (the profile's layout)."""
+    if cubs and set(map(type, cubs)) == {list} and 0 not in map(len, cubs):
+        first = list(map(itemgetter(0), cubs))
+        if list(map(_NAME, first)).count("bounding_box") == len(first) and _NULL not in map(_VAL, first):
+            return first
+    return list(map(_bounding_box, cubs))
 
 
-def _bounding_box(cubs: Any) -> Cuboid | None:
+def _bounding_box(cubs: Any) -> Any:
     """The cuboid named ``bounding_box``, else the first (a single cuboid object: TUM Traffic);
     None where there is none or it has no ``val``."""
-    if isinstance(cubs, Cuboid):
-        cub = cubs
-    elif not cubs:
+    if not cubs:
         return None
+    if not isinstance(cubs, list):
+        cub = cubs
     else:
         cub = cubs[0] if cubs[0].name == "bounding_box" else next(
             (c for c in cubs if c.name == "bounding_box"), cubs[0])
     return None if cub.val == _NULL else cub
-
-
-def _box_attributes(od: ObjectData) -> dict[str, list[dict[str, Any]]]:
-    """One box's attribute items by name, their values decoded (as :func:`~.profile.attributes_of`)."""
-    items = {kind: [{"name": it.name, "val": _ANY.decode(it.val)} for it in
-                    (x if isinstance(x, list) else [x] if x is not None else [])]
-             for kind in _KINDS if (x := getattr(od, kind)) is not None}
-    return attributes_of(items)
 
 
 def _tidied(frames: Any) -> dict:
@@ -196,7 +198,6 @@ def _tidied(frames: Any) -> dict:
         objs = fr.get("objects") or {}
         if not isinstance(objs, dict):
             raise FormatError(f"frame {k}: 'objects' is not an object")
-        fp = fr.get("frame_properties")
         tidy = {}
         for u, oif in objs.items():
             od = oif.get("object_data") if isinstance(oif, dict) else None
@@ -207,16 +208,16 @@ def _tidied(frames: Any) -> dict:
                       [x for x in v if isinstance(x, dict)] if isinstance(v, list) else None)
                   for c, v in od.items() if c in ("cuboid", "type", *_KINDS)}
             tidy[u] = {"object_data": od}
-        out[k] = {"objects": tidy, "frame_properties": fp}
+        out[k] = {"objects": tidy, "frame_properties": fr.get("frame_properties")}
     return out
 
 
-def _cuboids(cubs: list[Cuboid], where) -> dict[str, np.ndarray]:
+def _cuboids(cubs: list, where) -> dict[str, np.ndarray]:
     """The cuboids' values (``v``: n x 10, NaN after the ``nval`` given), coordinate systems
     (``cs``: None for the root) and per-box timestamps (``cub_ts``: the ASAM example's cuboid
     attribute ``timestamp``, NaN where absent)."""
     n = len(cubs)
-    raws = list(map(attrgetter("val"), cubs))
+    raws = list(map(_VAL, cubs))
     try:
         vals = _CUBOIDS.decode(joined(raws))
     except msgspec.ValidationError:
@@ -232,13 +233,16 @@ def _cuboids(cubs: list[Cuboid], where) -> dict[str, np.ndarray]:
         for i, x in enumerate(vals):
             v[i, :len(x)] = x
         v = v[:, :10]
-    cs = np.array([c.coordinate_system or None for c in cubs], object) if n else np.zeros(0, object)
+    cs = list(map(attrgetter("coordinate_system"), cubs))
+    cs = np.array([c or None for c in cs], object) if cs.count(None) < n else np.full(n, None, object)
     cub_ts = np.full(n, np.nan)
-    for i, c in enumerate(cubs):
-        if c.attributes != _NULL:
-            t = first_value(attributes_of(_ANY.decode(c.attributes)), "timestamp")
-            if isinstance(t, (int, float)) and not isinstance(t, bool):
-                cub_ts[i] = float(t)
+    attrs = list(map(attrgetter("attributes"), cubs))
+    if attrs.count(_NULL) < n:
+        for i, a in enumerate(attrs):
+            if a != _NULL:
+                t = first_value(attributes_of(_ANY.decode(a)), "timestamp")
+                if isinstance(t, (int, float)) and not isinstance(t, bool):
+                    cub_ts[i] = float(t)
     return {"v": v, "nval": nval, "cs": cs, "cub_ts": cub_ts}
 
 
@@ -252,51 +256,61 @@ def _numbers(raw: msgspec.Raw) -> bool:
 
 class _Attributes:
     """The attribute items of ``n`` boxes by name: :meth:`first` gives the boxes that have a name
-    and the raw value of its first item (kinds in the order boolean, num, text, vec). Where every
-    box lists the same names in the same order (an export: the common case) a name's values are a
-    stride of the items, else the items are grouped by name."""
+    and the raw value of its first item (kinds in the order boolean, num, text, vec). Where every box lists the same names in the same order (an export: the
+    common case) a name's values are a stride of the items, else the items are grouped by name."""
 
-    def __init__(self, ods: list[ObjectData]) -> None:
+    def __init__(self, ods: list, lenient: bool) -> None:
         self.n = n = len(ods)
-        self.where: dict[str, tuple] = {}  # name -> (items, first, step) or (boxes, items)
+        self.lenient = lenient
+        self.where: dict[str, tuple] = {}  # name -> (items, first, step) or (boxes, values)
         for kind in _KINDS:
-            lists = [x if isinstance(x, list) else [x] if x is not None else [] for x in map(attrgetter(kind), ods)]
+            lists = list(map(attrgetter(kind), ods))
+            if set(map(type, lists)) != {list}:
+                lists = [x if isinstance(x, list) else [x] if x is not None else [] for x in lists]
+            lens = list(map(len, lists))
             flat = list(chain.from_iterable(lists))
             if not flat:
                 continue
-            names = list(map(attrgetter("name"), flat))
-            c = len(lists[0])
-            if len(flat) == c * n and names == names[:c] * n and all(isinstance(s, str) for s in names[:c]):
+            names = list(map(_NAME, flat)) if lenient else list(map(_NAME_OF.__getitem__, map(type, flat)))
+            c = lens[0]
+            if min(lens) == max(lens) and names == names[:c] * n and set(map(type, names[:c])) == {str}:
                 for pos, name in enumerate(names[:c]):
-                    self.where.setdefault(name, (flat, pos, c))
+                    if name not in _UNREAD:
+                        self.where.setdefault(name, (flat, pos, c))
                 continue
-            box = np.repeat(np.arange(n), np.fromiter(map(len, lists), np.int64, n))
-            by: dict[str, list[int]] = {}
-            for i, name in enumerate(names):
-                if isinstance(name, str):
-                    by.setdefault(name, []).append(i)
-            for name, idx in by.items():
-                if name in self.where:
-                    prev = self.where[name]
-                    boxes, raws = self._boxes(prev)
-                    got = dict(zip(box[idx].tolist()[::-1], [flat[i].val for i in idx][::-1]))
-                    got.update(zip(boxes.tolist()[::-1], raws[::-1]))
-                    order = sorted(got)
-                    self.where[name] = (np.asarray(order, np.int64), [got[b] for b in order])
-                else:
-                    b, first = np.unique(box[idx], return_index=True)
-                    self.where[name] = (b, [flat[idx[i]].val for i in first.tolist()])
+            self._grouped(flat, names, np.repeat(np.arange(n), lens))
 
-    def _boxes(self, w: tuple) -> tuple[np.ndarray, list]:
-        if len(w) == 3:
-            flat, pos, c = w
-            return np.arange(self.n), list(map(attrgetter("val"), flat[pos::c]))
-        return w
+    def _grouped(self, flat: list, names: list, box: np.ndarray) -> None:
+        try:
+            enc = pc.dictionary_encode(pa.array(names, pa.string()))
+        except (pa.ArrowInvalid, pa.ArrowTypeError):  # (names that are no text: never read)
+            enc = pc.dictionary_encode(pa.array([v if isinstance(v, str) else None for v in names], pa.string()))
+        codes = enc.indices.fill_null(-1).to_numpy(zero_copy_only=False)
+        order = np.argsort(codes, kind="stable")  # (by name, then in file order: by box)
+        bounds = np.searchsorted(codes[order], np.arange(len(enc.dictionary) + 1))
+        for k, name in enumerate(enc.dictionary.to_pylist()):
+            if name in _UNREAD:
+                continue
+            sel = order[bounds[k]:bounds[k + 1]]
+            b, first = np.unique(box[sel], return_index=True)
+            got = (b, list(map(_VAL, map(flat.__getitem__, sel[first].tolist()))))
+            if name in self.where:  # (an earlier kind's item first, in the boxes that have one)
+                merged = dict(zip(got[0].tolist(), got[1]))
+                before = self.first(name)
+                merged.update(zip(before[0].tolist(), before[1]))
+                keys = sorted(merged)
+                got = (np.asarray(keys, np.int64), [merged[i] for i in keys])
+            self.where[name] = got
 
     def first(self, name: str) -> tuple[np.ndarray, list]:
-        """``(boxes that have the name, the raw value of its first item in each)``."""
+        """``(boxes that have the name, the value of its first item in each)``."""
         w = self.where.get(name)
-        return (np.zeros(0, np.int64), []) if w is None else self._boxes(w)
+        if w is None:
+            return np.zeros(0, np.int64), []
+        if len(w) == 3:
+            flat, pos, c = w
+            return np.arange(self.n), list(map(_VAL, flat[pos::c]))
+        return w
 
     def boxes_with_prefix(self, prefix: str) -> list[int]:
         return sorted(set(chain.from_iterable(self.first(nm)[0].tolist() for nm in self.where
@@ -311,9 +325,9 @@ def _attribute_columns(at: _Attributes, n: int) -> dict[str, np.ndarray]:
     finite acceleration), ``hr`` (road coordinates)."""
     cols: dict[str, np.ndarray] = {}
     for name, (shape, target) in FRAME_ATTRIBUTES.items():
-        boxes, raws = at.first(name)
+        boxes, vals = at.first(name)
         if shape == "vector":
-            vals = _vector_values(raws)
+            vals = _vector_values(vals)
             cols[f"has:{name}"] = has = np.zeros(n, bool)
             has[boxes] = np.fromiter(map(is_not, vals, repeat(None)), bool, len(vals))
             table = _matrix(vals)
@@ -323,12 +337,12 @@ def _attribute_columns(at: _Attributes, n: int) -> dict[str, np.ndarray]:
                     if e < table.shape[1]:
                         a[boxes] = table[:, e]
                 else:
-                    a[boxes] = [_element(v, e) for v in vals]
+                    a[boxes] = [np.nan if v is None or len(v) <= e or v[e] is None else v[e] for v in vals]
         elif shape == "number":
             cols[target] = a = np.full(n, np.nan)
-            a[boxes] = _number_values(raws)
+            a[boxes] = _number_values(vals)
         else:
-            vals = _ANY.decode(joined(raws)) if raws else []
+            vals = _ANY.decode(joined(vals)) if vals else []
             if shape == "flag":
                 cols[target] = a = np.full(n, np.nan)
                 a[boxes] = [np.nan if v is None else float(bool(v)) for v in vals]
@@ -341,20 +355,15 @@ def _attribute_columns(at: _Attributes, n: int) -> dict[str, np.ndarray]:
     on = given & cols["has:open_drive/local_road_coordinates"]
     cols["road_s"] = np.where(given, cols["road_s"], np.nan)
     cols["road_t"] = np.where(given, cols["road_t"], np.nan)
-    texts: dict = {}
-    cols["road_id"] = np.array([(texts[r] if r in texts else texts.setdefault(r, str(r))) if o else None
-                                for r, o in zip(road.tolist(), on.tolist())], object)
-    lanes = np.where(given, cols.pop("lane_code"), None).tolist()
-    cols["lane_id"] = np.array([_lane(x) for x in lanes], object) if any(x is not None for x in lanes) \
-        else np.full(n, None, object)
+    cols["road_id"] = _each(str, np.where(on, road, None))
+    cols["lane_id"] = _each(_lane, np.where(given, cols.pop("lane_code"), None))
     cols["hv"], cols["hr"] = cols["has:velocity"], on
     cols["hacc"] = np.isfinite(cols["au"]) & np.isfinite(cols["av"])
     return cols
 
 
 def _vector_values(raws: list) -> list:
-    """Each raw value as a list of floats (None: null or no list; NaN for an element that is no
-    number)."""
+    """Raw values as lists of floats (None: null or no list; NaN for an element that is no number)."""
     if not raws:
         return []
     try:
@@ -369,10 +378,6 @@ def _matrix(vals: list) -> np.ndarray | None:
     if vals and None not in vals and len(set(map(len, vals))) == 1:
         return np.array(vals, float).reshape(len(vals), -1)
     return None
-
-
-def _element(v: list | None, e: int) -> float:
-    return np.nan if v is None or len(v) <= e or v[e] is None else v[e]
 
 
 def _number_values(raws: list) -> list[float]:
@@ -391,32 +396,67 @@ def _float(x: Any) -> float:
         return np.nan
 
 
+def _each(fn, values: np.ndarray) -> np.ndarray:
+    """``fn`` of each value that is not None (an object array), each distinct value once."""
+    out = np.full(len(values), None, object)
+    idx = np.flatnonzero(~np.equal(values, None))
+    if not len(idx):
+        return out
+    vals = values[idx].tolist()
+    try:
+        enc = pa.array(vals, pa.string()).dictionary_encode()  # (texts, the profile's: at once)
+        out[idx] = np.array([fn(v) for v in enc.dictionary.to_pylist()], object)[enc.indices.to_numpy()]
+        return out
+    except (pa.ArrowInvalid, pa.ArrowTypeError):
+        pass
+    done: dict = {}
+    for i, v in zip(idx.tolist(), vals):
+        try:
+            out[i] = done[v] if v in done else done.setdefault(v, fn(v))
+        except TypeError:  # (unhashable)
+            out[i] = fn(v)
+    return out
+
+
 def _lane(v: Any) -> int | None:
     """A lane id as an integer (an enum text of aveas-openlabel read as its value), else None."""
-    if v is None:
-        return None
     try:
         return int(str(enum_value(v)))
     except ValueError:
         return None
 
 
-def _extension(cubs: list[Cuboid]) -> dict[str, tuple[pa.Array, np.ndarray]]:
+def _extension(cubs: list) -> dict[str, tuple[pa.Array, np.ndarray]]:
     """The ``aveas_format`` items of the boxes' cuboids: per member its values (Arrow, types
     inferred; null where missing) and where the member is present."""
-    raws = list(map(attrgetter("ext"), cubs))
-    if all(r == _NULL for r in raws):
+    raws = list(map(_EXT, cubs))
+    if raws.count(_NULL) == len(raws):
         return {}
-    items = [e if isinstance(e, dict) else {} for e in _ANY.decode(joined(raws))]
+    items = _ANY.decode(joined(raws))
+    items = [e if isinstance(e, dict) else {} for e in items] if set(map(type, items)) != {dict} else items
+    try:  # (all members as one struct: a null where missing or null; told apart where there are nulls)
+        sa = pa.array(items)
+        return {f.name: (sa.field(i), np.fromiter(map(contains, items, repeat(f.name)), bool, len(items))
+                         if sa.field(i).null_count else np.ones(len(items), bool))
+                for i, f in enumerate(sa.type)}
+    except (pa.ArrowInvalid, pa.ArrowTypeError, OverflowError):
+        pass
     out = {}
     for c in dict.fromkeys(chain.from_iterable(items)):
         present = np.fromiter(map(contains, items, repeat(c)), bool, len(items))
-        vals = list(map(methodcaller("get", c), items))
         try:
-            out[c] = (pa.array(vals, from_pandas=False), present)
+            out[c] = (pa.array(list(map(methodcaller("get", c), items)), from_pandas=False), present)
         except (pa.ArrowInvalid, pa.ArrowTypeError, OverflowError):
             raise FormatError(f"the {EXT} member {c!r} of the boxes mixes values of several types") from None
     return out
+
+
+def _box_attributes(od: Any) -> dict[str, list[dict[str, Any]]]:
+    """One box's attribute items by name, their values decoded (as :func:`~.profile.attributes_of`)."""
+    items = {kind: [{"name": _NAME_OF.get(type(it)) or it.name, "val": _ANY.decode(getattr(it, "val", _NULL))}
+                    for it in (x if isinstance(x, list) else [x] if x is not None else [])]
+             for kind in _KINDS if (x := getattr(od, kind)) is not None}
+    return attributes_of(items)
 
 
 def interior_signals(attrs: dict[str, list[dict[str, Any]]]) -> dict[str, Any]:
@@ -448,8 +488,9 @@ def _findings(at: _Attributes) -> list[tuple[str, str, int, int]]:
     out = []
     for name in at.where:
         if name.endswith("/uncertainties"):
-            boxes, raws = at.first(name)
-            bad = np.fromiter(map(pmf_bad, _ANY.decode(joined(raws))), bool, len(raws))
+            boxes, vals = at.first(name)
+            vals = _ANY.decode(joined(vals))
+            bad = np.fromiter(map(pmf_bad, vals), bool, len(vals))
             if bad.any():
                 out.append(("source.openlabel.pmf_sum", name, int(boxes[np.argmax(bad)]), int(bad.sum())))
     for name in MANDATORY_FRAME_ATTRIBUTES:

@@ -103,6 +103,15 @@ FRAME_ATTRIBUTES: dict[str, tuple[str, str | dict[str, int]]] = {
     "open_drive/lane_id": ("text", "lane_code"),
     **{name: ("flag", column) for column, name in LIGHTS.items()},
 }
+#: the interior signals of an object in a frame (the import's interior table)
+INTERIOR_ATTRIBUTES = (LONGITUDINAL, "interior/automated_control/lateral", "interior/steering_angle",
+                       "interior/steering_angle/ustddev", "interior/brake_pedal", "interior/accelerator_pedal",
+                       "interior/gear")
+#: the attributes of an object in a frame that the profile (and this library's export) has and the
+#: import does not read
+UNREAD_ATTRIBUTES = ("road/classification",
+                     *(f"road/number_lanes/{side}/{kind}" for side in ("left", "right") for kind in ("legal", "physical")),
+                     *(f"impact/{k}/{v}" for k in ("gttc", "thw", "pret") for v in ("object_ids", "values")))
 #: the attributes whose columns the import takes only where every box has a velocity (else the
 #: velocities come from the positions: these would not belong to them)
 VELOCITY_ATTRIBUTES = ("velocity", "velocity/ustddev", "acceleration", "acceleration/ustddev")
