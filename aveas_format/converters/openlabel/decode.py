@@ -50,6 +50,7 @@ _NAMED = [msgspec.defstruct(f"Named{i}", [("val", _RAW, _NULL)] if read else [],
           for i, (name, read) in enumerate([*((n, True) for n in (*FRAME_ATTRIBUTES, *INTERIOR_ATTRIBUTES)),
                                             *((n, False) for n in UNREAD_ATTRIBUTES)])]
 _NAME_OF = {t: t.__struct_config__.tag for t in _NAMED}
+
 _UNREAD = set(UNREAD_ATTRIBUTES)
 
 
@@ -213,7 +214,8 @@ def _tidied(frames: Any) -> dict:
 
 
 def _cuboids(cubs: list, where) -> dict[str, np.ndarray]:
-    """The cuboids' values (``v``: n x 10, NaN after the ``nval`` given), coordinate systems
+    """The cuboids' values (``v``: n x 9 where all have 9, else n x 10, NaN after the ``nval``
+    given), coordinate systems
     (``cs``: None for the root) and per-box timestamps (``cub_ts``: the ASAM example's cuboid
     attribute ``timestamp``, NaN where absent)."""
     n = len(cubs)
@@ -225,9 +227,8 @@ def _cuboids(cubs: list, where) -> dict[str, np.ndarray]:
         raise FormatError(f"{where(i)}: cuboid val holds non-numbers: "
                           f"{bytes(raws[i])[:80].decode(errors='replace')}") from None
     nval = np.fromiter(map(len, vals), np.int8, n)
-    if n and (nval == 9).all():
-        v = np.full((n, 10), np.nan)
-        v[:, :9] = vals
+    if n and (nval == 9).all():  # (the profile's: no quaternion, no tenth value)
+        v = np.array(vals, float)
     else:
         v = np.full((n, max(10, int(nval.max(initial=0)))), np.nan)
         for i, x in enumerate(vals):
@@ -262,23 +263,26 @@ class _Attributes:
     def __init__(self, ods: list, lenient: bool) -> None:
         self.n = n = len(ods)
         self.lenient = lenient
-        self.where: dict[str, tuple] = {}  # name -> (items, first, step) or (boxes, values)
+        self.where: dict[str, tuple] = {}  # name -> (the items of each box) or (boxes, raw values)
+        names_of = (lambda items: list(map(_NAME, items))) if lenient else \
+            (lambda items: list(map(_NAME_OF.__getitem__, map(type, items))))
         for kind in _KINDS:
             lists = list(map(attrgetter(kind), ods))
             if set(map(type, lists)) != {list}:
                 lists = [x if isinstance(x, list) else [x] if x is not None else [] for x in lists]
             lens = list(map(len, lists))
+            if not max(lens, default=0):
+                continue
+            if min(lens) == max(lens):  # (the same names in the same order in every box?)
+                cols = [list(map(itemgetter(pos), lists)) for pos in range(lens[0])]
+                names = list(map(names_of, cols))
+                if all(isinstance(nm[0], str) and nm.count(nm[0]) == n for nm in names):
+                    for nm, c in zip(names, cols):
+                        if nm[0] not in _UNREAD:
+                            self.where.setdefault(nm[0], (c,))
+                    continue
             flat = list(chain.from_iterable(lists))
-            if not flat:
-                continue
-            names = list(map(_NAME, flat)) if lenient else list(map(_NAME_OF.__getitem__, map(type, flat)))
-            c = lens[0]
-            if min(lens) == max(lens) and names == names[:c] * n and set(map(type, names[:c])) == {str}:
-                for pos, name in enumerate(names[:c]):
-                    if name not in _UNREAD:
-                        self.where.setdefault(name, (flat, pos, c))
-                continue
-            self._grouped(flat, names, np.repeat(np.arange(n), lens))
+            self._grouped(flat, names_of(flat), np.repeat(np.arange(n), lens))
 
     def _grouped(self, flat: list, names: list, box: np.ndarray) -> None:
         try:
@@ -307,10 +311,7 @@ class _Attributes:
         w = self.where.get(name)
         if w is None:
             return np.zeros(0, np.int64), []
-        if len(w) == 3:
-            flat, pos, c = w
-            return np.arange(self.n), list(map(_VAL, flat[pos::c]))
-        return w
+        return (np.arange(self.n), list(map(_VAL, w[0]))) if len(w) == 1 else w
 
     def boxes_with_prefix(self, prefix: str) -> list[int]:
         return sorted(set(chain.from_iterable(self.first(nm)[0].tolist() for nm in self.where
@@ -327,17 +328,24 @@ def _attribute_columns(at: _Attributes, n: int) -> dict[str, np.ndarray]:
     for name, (shape, target) in FRAME_ATTRIBUTES.items():
         boxes, vals = at.first(name)
         if shape == "vector":
+            whole = len(boxes) == n
+            table = _vectors(vals)
+            if table is not None:  # (one length: a matrix)
+                cols[f"has:{name}"] = np.ones(n, bool) if whole else np.isin(np.arange(n), boxes)
+                for col, e in target.items():
+                    if whole and e < table.shape[1]:
+                        cols[col] = table[:, e].copy()
+                    else:
+                        cols[col] = a = np.full(n, np.nan)
+                        if e < table.shape[1]:
+                            a[boxes] = table[:, e]
+                continue
             vals = _vector_values(vals)
             cols[f"has:{name}"] = has = np.zeros(n, bool)
             has[boxes] = np.fromiter(map(is_not, vals, repeat(None)), bool, len(vals))
-            table = _matrix(vals)
             for col, e in target.items():
                 cols[col] = a = np.full(n, np.nan)
-                if table is not None:
-                    if e < table.shape[1]:
-                        a[boxes] = table[:, e]
-                else:
-                    a[boxes] = [np.nan if v is None or len(v) <= e or v[e] is None else v[e] for v in vals]
+                a[boxes] = [np.nan if v is None or len(v) <= e or v[e] is None else v[e] for v in vals]
         elif shape == "number":
             cols[target] = a = np.full(n, np.nan)
             a[boxes] = _number_values(vals)
@@ -362,6 +370,21 @@ def _attribute_columns(at: _Attributes, n: int) -> dict[str, np.ndarray]:
     return cols
 
 
+def _vectors(raws: list) -> np.ndarray | None:
+    """The raw values as the rows of a matrix where all are lists of numbers of one length (a value
+    that every box repeats decoded once), else None."""
+    if not raws:
+        return None
+    try:
+        if raws.count(raws[0]) == len(raws):
+            row = _CUBOIDS.decode(b"[" + raws[0] + b"]")[0]
+            return np.tile(np.asarray(row, float), (len(raws), 1))
+        vals = _CUBOIDS.decode(joined(raws))
+    except msgspec.ValidationError:
+        return None
+    return np.array(vals, float).reshape(len(vals), -1) if len(set(map(len, vals))) == 1 else None
+
+
 def _vector_values(raws: list) -> list:
     """Raw values as lists of floats (None: null or no list; NaN for an element that is no number)."""
     if not raws:
@@ -371,13 +394,6 @@ def _vector_values(raws: list) -> list:
     except msgspec.ValidationError:  # (no list, or elements that are no numbers)
         return [[_float(x) for x in v] if isinstance(v, list) else None if v is None else []
                 for v in _ANY.decode(joined(raws))]
-
-
-def _matrix(vals: list) -> np.ndarray | None:
-    """The vectors as the rows of a matrix where all are lists of one length (None in a list: NaN)."""
-    if vals and None not in vals and len(set(map(len, vals))) == 1:
-        return np.array(vals, float).reshape(len(vals), -1)
-    return None
 
 
 def _number_values(raws: list) -> list[float]:
@@ -426,6 +442,10 @@ def _lane(v: Any) -> int | None:
         return None
 
 
+#: the Arrow type of the extension's members of the last block
+_EXT_TYPE: dict[str, pa.DataType] = {}
+
+
 def _extension(cubs: list) -> dict[str, tuple[pa.Array, np.ndarray]]:
     """The ``aveas_format`` items of the boxes' cuboids: per member its values (Arrow, types
     inferred; null where missing) and where the member is present."""
@@ -434,8 +454,18 @@ def _extension(cubs: list) -> dict[str, tuple[pa.Array, np.ndarray]]:
         return {}
     items = _ANY.decode(joined(raws))
     items = [e if isinstance(e, dict) else {} for e in items] if set(map(type, items)) != {dict} else items
-    try:  # (all members as one struct: a null where missing or null; told apart where there are nulls)
-        sa = pa.array(items)
+    try:  # (all members as one struct: null where missing or null, told apart where there are nulls)
+        sa = None
+        known = _EXT_TYPE.get("type")  # (the type of the last block: no inference)
+        if known is not None:
+            try:
+                sa = pa.array(items, known)
+            except (pa.ArrowInvalid, pa.ArrowTypeError, OverflowError):
+                pass
+        # (every member given a value, and no other: else the types inferred, the nulls told apart)
+        if sa is None or sum(len(sa) - f.null_count for f in sa.flatten()) != sum(map(len, items)):
+            sa = pa.array(items)
+            _EXT_TYPE["type"] = sa.type
         return {f.name: (sa.field(i), np.fromiter(map(contains, items, repeat(f.name)), bool, len(items))
                          if sa.field(i).null_count else np.ones(len(items), bool))
                 for i, f in enumerate(sa.type)}

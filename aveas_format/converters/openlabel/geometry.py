@@ -190,7 +190,8 @@ def place(v: np.ndarray, nval: np.ndarray, cs: np.ndarray, resolve: Callable[[in
           where: Callable[[int], str]) -> dict[str, np.ndarray]:
     """The cuboids of ``n`` boxes in the root frame: ``v`` their values (``n x 10``, NaN after the
     ``nval`` given), ``cs`` their coordinate systems (None: the root); ``resolve(i)`` gives box
-    ``i``'s ``(4x4 -> root, root, moving)``, ``where(i)`` names it in an error. Columns ``px, py,
+    ``i``'s ``(4x4 -> root, root, moving)``, ``where(i)`` names it in an error (``v``: n x 9 where
+    every cuboid has 9 values). Columns ``px, py,
     pz`` (the ground point), ``yaw``, ``dl, dw, dh`` and ``csroot``.
 
     Level boxes of 9 values in the root frame (the AVEAS profile) are taken as they are. Other

@@ -252,7 +252,7 @@ def _decode_cut(item: tuple) -> Any:
     if key not in _SYSTEMS:
         _SYSTEMS.clear()
         _SYSTEMS[key] = CoordinateSystems(cs)
-    buf = b"{" + data + b"}"
+    buf = b"".join((b"{", data, b"}"))
     try:
         return decode_block(buf, offset, _SYSTEMS[key])
     except msgspec.DecodeError as e:
