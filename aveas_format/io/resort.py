@@ -158,8 +158,9 @@ class StatesWriter:
     (None: never spilled); ``key``: the column naming each row's participant (integers)."""
 
     def __init__(self, spill_dir: Path | str | None = None, *, memory: int | None = MEMORY,
-                 key: str = "participant_id", bucket_bytes: int = BUCKET_BYTES) -> None:
-        self.spill_dir, self.memory, self.key, self.bucket_bytes = spill_dir, memory, key, bucket_bytes
+                 key: str = "participant_id", bucket_bytes: int | None = None) -> None:
+        self.spill_dir, self.memory, self.key = spill_dir, memory, key
+        self.bucket_bytes = bucket_bytes or BUCKET_BYTES
         self.held: list[pa.Table] = []
         self.held_bytes = self.nbytes = self.rows = 0
         self.keys: list[np.ndarray] = []

@@ -42,7 +42,7 @@ from aveas_format.converters.openlabel.geometry import CoordinateSystems
 from aveas_format.converters.openlabel.participants import participants_of
 from aveas_format.converters.openlabel.profile import EXT, no_gc
 from aveas_format.converters.openlabel.source import (BLOCK, ReadWhole, WrongCut, broken, cuts, load_document,
-                                                      open_file, open_frames)
+                                                      open_file, open_frames, read_tail)
 from aveas_format.converters.openlabel.tables import recording_metadata, restore_derived, tables_of
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, report_source
@@ -102,9 +102,10 @@ def _find_map(path: Path | None, ol: dict[str, Any], map_source) -> bytes:
 
 
 def import_openlabel_to(inputs: list[Path], output: Path, *, map_source=None, options=None,
-                        overwrite: bool = False, memory: int | None = MEMORY):
+                        overwrite: bool = False, memory: int | None = None):
     """Import one OpenLABEL file and write the recording to ``output`` (atomically; the boxes
-    spilled beyond ``memory`` bytes, the states written a bucket of participants at a time).
+    spilled beyond ``memory`` bytes (default :data:`MEMORY`), the states written a bucket of
+    participants at a time).
     ``(recording as written, states, states on the map)``; its states are not loaded where they
     were written in parts."""
     import shutil
@@ -116,7 +117,8 @@ def import_openlabel_to(inputs: list[Path], output: Path, *, map_source=None, op
     path = _one(inputs)
     work = Path(tempfile.mkdtemp(prefix=".openlabel-import.", dir=check_target(output, overwrite)))
     try:  # (next to the output: the states file is moved in, not copied)
-        rec, written = _read(path, map_source, options or OpenLabelImportOptions(), spill_dir=work, memory=memory)
+        rec, written = _read(path, map_source, options or OpenLabelImportOptions(), spill_dir=work,
+                             memory=memory or MEMORY)
         if written is None:
             rec.write(output, overwrite=overwrite)
             n = rec.states.num_rows
@@ -203,10 +205,13 @@ def _read_blocks(fr, boxes: Boxes, options) -> None:
     try:
         while True:
             with open_file(fr.path) as f:
-                items = ((str(fr.path) if lazy else None, cut, cs) for cut in cuts(fr, f, BLOCK, lazy, exact_from))
+                items = ((str(fr.path), cut, cs) for cut in cuts(fr, f, BLOCK, lazy, exact_from))
                 jobs = map_ordered(_decode_cut, items, workers=workers)
                 try:
-                    for (_, (offset, data, _), _), block in jobs:
+                    for (_, (offset, data, kind), _), block in jobs:
+                        if kind == "tail":
+                            read_tail(fr, data, offset)
+                            continue
                         if not boxes.keys:  # (the input's digest in a thread: the workers are forked by now)
                             prefetch_sha256(fr.path)
                         boxes.add(block)
@@ -237,8 +242,13 @@ _SYSTEMS: dict[bytes, CoordinateSystems] = {}
 def _decode_cut(item: tuple) -> Any:
     """A block of :func:`~.source.cuts` decoded (in a worker process; its bytes read here where
     the cut gives their range): :class:`WrongCut` where a block cut before a frame head does not
-    decode, the JSON error where one cut by structure does not."""
-    path, (offset, data, exact), cs = item
+    decode, the JSON error where one cut by structure does not (the tail: None, read by the
+    caller in order; the end of a broken file: its error)."""
+    path, (offset, data, kind), cs = item
+    if kind == "tail":
+        return None
+    if kind == "broken":
+        raise FormatError(data, path=path)
     if isinstance(data, tuple):
         start, n = data
         fd = os.open(path, os.O_RDONLY)
@@ -257,7 +267,7 @@ def _decode_cut(item: tuple) -> Any:
         return decode_block(buf, offset, _SYSTEMS[key])
     except msgspec.DecodeError as e:
         err = broken(e, buf, offset - 1, path)
-        if isinstance(err, ReadWhole) or exact:
+        if isinstance(err, ReadWhole) or kind == "structure":
             raise err from None
         raise WrongCut(offset) from None
     except FormatError as e:

@@ -236,11 +236,14 @@ def read_tail(fr: Frames, tail: bytes, offset: int) -> None:
 
 
 def cuts(fr: Frames, f, size: int = BLOCK, lazy: bool = False, exact_from: int | None = None):
-    """``(offset, bytes, exact)`` of the blocks of whole frames of ``f`` (the members between the
-    frames' braces, without the commas between blocks) — ``(offset, (start, length), False)``
-    where ``lazy`` (a plain file: the reader reads the bytes) — then the tail (:func:`read_tail`).
-    ``exact``: cut by the structural index (a cut before a frame head is proven by decoding the
-    block). ``exact_from``: every cut by structure from this offset (a frame boundary) on."""
+    """``(offset, bytes, kind)`` of the blocks of whole frames of ``f`` (the members between the
+    frames' braces, without the commas between blocks): ``kind`` ``"head"`` (cut before a frame
+    head: proven by decoding the block; ``(start, length)`` instead of the bytes where ``lazy``, a
+    plain file the reader reads itself) or ``"structure"`` (cut by the structural index); last
+    ``"tail"`` (the bytes after the frames, for :func:`read_tail`) or ``"broken"`` (an error
+    message: the file ends inside the frames). Both come in order, after the blocks they follow,
+    so that a wrong cut before them is found first. ``exact_from``: every cut by structure from
+    this offset (a frame boundary) on."""
     pos = fr.start + 1 if exact_from is None else exact_from
     f.seek(pos)
     buf = b""
@@ -251,29 +254,32 @@ def cuts(fr: Frames, f, size: int = BLOCK, lazy: bool = False, exact_from: int |
             cut = _head_cut(f.read(w))
             if cut is not None:
                 n = size - w + cut
-                yield pos, (pos, n), False
+                yield pos, (pos, n), "head"
                 pos += n + 1
                 continue
+        if lazy and not buf:
             f.seek(pos)
         data = f.read(size)
         buf += data
         cut = None if exact_from is not None or not data else _head_cut(buf)
         if cut is not None:
-            yield pos, buf[:cut], False
+            yield pos, buf[:cut], "head"
             pos, buf = pos + cut + 1, buf[cut + 1:]
             continue
         kind, at = _boundary(buf)
         if kind == "close":  # the frames end here: the last block, then the tail
             if buf[:at].strip():
-                yield pos, buf[:at], True
+                yield pos, buf[:at], "structure"
+            rest = [buf[at + 1:]]
             while data := f.read(1 << 20):
-                buf += data
-            read_tail(fr, buf[at + 1:], pos + at + 1)
+                rest.append(data)
+            yield pos + at + 1, b"".join(rest), "tail"
             return
         if not data:
-            raise FormatError(f"broken JSON: the file ends inside the frames (after byte {pos:,})", path=fr.path)
+            yield pos, f"broken JSON: the file ends inside the frames (after byte {pos:,})", "broken"
+            return
         if kind == "cut":
-            yield pos, buf[:at], True
+            yield pos, buf[:at], "structure"
             pos, buf = pos + at + 1, buf[at + 1:]
 
 
