@@ -25,8 +25,10 @@ from aveas_format.cli.options import (
     print_failure,
     run_summary,
     scheduler_option,
+    set_verbose,
     validate_option,
     validate_written,
+    verbose_option,
     workers_option,
 )
 
@@ -75,11 +77,13 @@ def convert(
     scheduler: str = scheduler_option(scope="With --each",
                                       help="address of a Dask scheduler (tcp://HOST:PORT)."),
     validate_: bool = validate_option(),
+    verbose: bool = verbose_option(),
 ) -> None:
     """Convert source data into a recording: `aveas-format convert --from sumo-fcd fcd.xml --map
     net.xodr -o run.aveas`."""
     from aveas_format.converters.registry import get_converter
 
+    set_verbose(verbose)
     if list_:
         list_converters(None, fmt)
         return

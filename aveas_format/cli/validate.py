@@ -44,7 +44,9 @@ from aveas_format.cli.options import (
     recordings_argument,
     scheduler_option,
     select_option,
+    set_verbose,
     single_recording,
+    verbose_option,
     workers_option,
 )
 
@@ -107,6 +109,7 @@ def validate(
     crs: str = crs_option(),
     option: list[str] = option_pairs_option("A submitted file: converter"),
     options_file: Path = options_file_option("A submitted file: converter"),
+    verbose: bool = verbose_option(),
 ) -> None:
     """Validate a recording, or a submitted file of any importable format (`validate
     submission.json`, `validate --from osi trace.osi --map map.xodr`): imported on the fly, its
@@ -115,6 +118,7 @@ def validate(
     from aveas_format.validate.config import ValidationConfig, config_toml
     from aveas_format.validate.report import report_json_schema
 
+    set_verbose(verbose)
     if report_schema:
         _print_and_exit(json.dumps(report_json_schema(), indent=2))
     if print_config:

@@ -378,3 +378,22 @@ def test_worker_processes_are_forked_before_the_digest_thread_starts(exported, m
     assert not any(name.startswith("sha256") for names in forks for name in names), forks
     assert rec.meta.source.inputs[0].sha256 == hashlib.sha256(exported.read_bytes()).hexdigest()
 
+
+
+def test_verbose_says_which_path_read_the_file(exported, tmp_path):
+    """``convert -v``: the blocks (how many, how cut, by how many processes); a file the decoder
+    refuses (NaN) read whole, and why."""
+    from typer.testing import CliRunner
+
+    from aveas_format.cli.app import app
+
+    r = CliRunner().invoke(app, ["convert", "--from", "openlabel", str(exported), "-o", str(tmp_path / "a.aveas"),
+                                 "-v", "--workers", "1"])
+    assert r.exit_code == 0, r.output
+    assert "read in 2 blocks of whole frames" in r.output and "decoded by this process" in r.output
+    p = _edited(exported, tmp_path, _nan, name="nan.json")
+    r = CliRunner().invoke(app, ["convert", "--from", "openlabel", str(p), "-o", str(tmp_path / "b.aveas"), "-v"])
+    assert r.exit_code == 0, r.output
+    assert "read whole (NaN or Infinity" in r.output
+    r = CliRunner().invoke(app, ["convert", "--from", "openlabel", str(p), "-o", str(tmp_path / "c.aveas")])
+    assert "read whole" not in r.output

@@ -200,8 +200,8 @@ def _read_blocks(fr, boxes: Boxes, options) -> None:
     cs = fr.head.get("coordinate_systems")
     exact_from = None
     bar = _progress(fr.size, fr.path) if options.progress else None
-    log.info("%s: %d MB read in blocks of whole frames by %s", fr.path, fr.size >> 20,
-             f"{workers} worker processes" if workers > 1 else "this process")
+    by = f"{workers} worker processes" if workers > 1 else "this process"
+    count = {"head": 0, "structure": 0, "lenient": 0}
     try:
         while True:
             with open_file(fr.path) as f:
@@ -215,6 +215,8 @@ def _read_blocks(fr, boxes: Boxes, options) -> None:
                         if not boxes.keys:  # (the input's digest in a thread: the workers are forked by now)
                             prefetch_sha256(fr.path)
                         boxes.add(block)
+                        count[kind] += 1
+                        count["lenient"] += block.lenient
                         if bar is not None:
                             bar.advance(steps=(data[1] if isinstance(data, tuple) else len(data)) + 1)
                     break
@@ -226,6 +228,9 @@ def _read_blocks(fr, boxes: Boxes, options) -> None:
     finally:
         if bar is not None:
             bar.close()
+    log.info("%s: %s MB read in %d blocks of whole frames (%d cut before a frame head, %d by structure; "
+             "%d in the lenient layout) decoded by %s", fr.path, f"{fr.size / 1e6:,.0f}",
+             count["head"] + count["structure"], count["head"], count["structure"], count["lenient"], by)
     if fr.tail and "coordinate_systems" in fr.tail and not cs and boxes.nonsimple:
         raise ReadWhole("coordinate_systems after the frames that place its cuboids")
 
@@ -305,6 +310,8 @@ def _recording(ol: dict[str, Any], boxes: Boxes, map_bytes: bytes, options, path
     if boxes.writer.spilled:
         import pyarrow.parquet as pq
 
+        log.info("%s: the boxes spilled (more than %s MB); the states written a bucket of participants "
+                 "at a time", path, f"{boxes.writer.memory / 1e6:,.0f}")
         states_file, summary, infos = boxes.writer.write(
             Path(boxes.writer.spill_dir) / "states.parquet", transform=partial(_filled, p=p, ctx=ctx, fill=fill_states),
             key_map=p.pid_of_idx, workers=options.workers)
