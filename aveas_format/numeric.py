@@ -206,7 +206,7 @@ def release_free_memory() -> None:
 
 
 #: the environment variable that picks the path of the compiled kernels (the follower/leader
-#: metrics of ``derive``, the OpenLABEL block reader): ``numpy``, ``numba`` or ``auto`` (unset:
+#: metrics of ``derive``, the uncertainty rules' medians): ``numpy``, ``numba`` or ``auto`` (unset:
 #: auto, numba where it is installed)
 KERNEL_ENV = "AVEAS_FORMAT_KERNEL"
 KERNEL_BACKENDS = ("numpy", "numba")
