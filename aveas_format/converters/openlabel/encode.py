@@ -4,8 +4,8 @@ No dict per state: each part of an object's data (the box, the velocity, the lig
 facts, the extension's values...) is one column of JSON fragments, built for a chunk of rows at
 once — numbers are formatted by one ``orjson.dumps`` of a numpy array (split per row), strings
 through a cache of their distinct values, optional parts are empty fragments — and the fragments
-are put together row by row: one ``template % values`` per row (no Python step per value). Only
-what is irregular by nature (interior
+are put together by Arrow (an element-wise join of each template's constants and columns: no
+Python step per value or row). Only what is irregular by nature (interior
 signals, ``impact`` attributes, extension columns of nested types) goes through a Python value per
 row, and only in the rows that have it.
 
@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from aveas_format.converters.openlabel.profile import LONGITUDINAL, EXT, LIGHTS, json_safe
 
@@ -79,6 +80,12 @@ def texts(values: list) -> list[bytes]:
 
 
 _TRUE_FALSE = np.array([b"false", b"true"], dtype=object)
+_EMPTY = pa.scalar(b"", pa.binary())
+
+
+def _split(text: bytes, sep: bytes) -> pa.Array:
+    """The pieces of ``text`` between ``sep`` as an Arrow binary array (split by Arrow)."""
+    return pc.split_pattern(pa.array([text], pa.binary()), pattern=sep).flatten()
 
 
 class _Layout:
@@ -89,8 +96,8 @@ class _Layout:
     (:meth:`join`: items separated by commas, each item present where its mask is true). Rows
     with the same items present share a template (constants and columns constant over the rows
     inlined). Numbers are formatted by one call per kind (float, int) over all of the rows'
-    numeric columns; :meth:`rows` writes one ``template % values`` per row (no Python step per
-    value)."""
+    numeric columns and split by Arrow; each group's template is joined element-wise by Arrow
+    (``binary_join_element_wise``): no Python object per value, no Python step per row."""
 
     def __init__(self, m: int) -> None:
         self.m = m
@@ -180,8 +187,9 @@ class _Layout:
         return [k for k, v in enumerate(self._vals)
                 if isinstance(v, tuple) and v[0] == "n" and v[1].dtype.kind == kind]
 
-    def _format_python(self) -> list[Any]:
-        """Each value as bytes (constant) or an object array of the rows' fragments."""
+    def _fragments(self) -> list[Any]:
+        """Each value as bytes (constant) or an Arrow binary array of the rows' fragments: the
+        numbers of a kind formatted by one call and split by Arrow (no Python object per value)."""
         vals = list(self._vals)
         for kind in ("f", "i"):
             cols = [k for k in self._numbers_of(kind) if vals[k][1].ndim == 1]  # (vectors below)
@@ -190,44 +198,73 @@ class _Layout:
             mat = np.column_stack([vals[k][1] for k in cols])  # rows x columns, one formatting call
             lo, hi = (int(mat.min()), int(mat.max())) if kind == "i" and mat.size else (0, 1 << 62)
             if hi - lo < 65536:  # ids, counts, frames of a chunk: each distinct value's text once
-                table = np.array(numbers(np.arange(lo, hi + 1, dtype=np.int64)), dtype=object)
-                text = table[mat - lo]
-            else:
-                text = np.array(numbers(mat.reshape(-1)), dtype=object).reshape(mat.shape)
+                table = pa.array(numbers(np.arange(lo, hi + 1, dtype=np.int64)), pa.binary())
+                for j, k in enumerate(cols):
+                    vals[k] = table.take(pa.array(mat[:, j] - lo))
+                continue
+            flat = _split(_dump_array(np.ascontiguousarray(mat.reshape(-1)))[1:-1], b",")
             for j, k in enumerate(cols):
-                vals[k] = text[:, j]
+                vals[k] = flat.take(pa.array(np.arange(j, len(flat), len(cols))))
         for k, v in enumerate(vals):
             if isinstance(v, tuple):
-                vals[k] = (np.array(numbers(v[1]), dtype=object) if v[0] == "n"  # (a vector's rows)
-                           else v[1][v[2]] if v[0] == "c" else v[1])
+                if v[0] == "n":  # (a vector's rows: "a,b,c" each)
+                    a = np.ascontiguousarray(v[1], dtype=np.int64 if v[1].dtype.kind in "iub" else np.float64)
+                    vals[k] = _split(_dump_array(a)[2:-2], b"],[") if len(a) else pa.array([], pa.binary())
+                elif v[0] == "c":
+                    vals[k] = pa.array(v[1].tolist(), pa.binary()).take(pa.array(v[2]))
+                else:
+                    vals[k] = pa.array(v[1].tolist(), pa.binary())
         return vals
 
-    def rows(self, segments: list) -> np.ndarray:
-        """The text of each row (an object array of bytes) of the segments (bytes, value tokens
-        (ints), :meth:`join` tuples)."""
+    def _joined(self, segments: list) -> pa.Array:
+        """The text of each row (an Arrow binary array, in row order) of the segments (bytes,
+        value tokens (ints), :meth:`join` tuples): each group's template joined element-wise by
+        Arrow (no Python step per row)."""
         m = self.m
-        vals = self._format_python()
-        out = np.empty(m, dtype=object)
         if m == 0:
-            return out
+            return pa.array([], pa.binary())
+        vals = self._fragments()
         present, inverse = self._groups()
         order = np.argsort(inverse, kind="stable")
         cuts = np.r_[0, np.cumsum(np.bincount(inverse, minlength=len(present)))]
+        done = []
         for g, on in enumerate(present):
             idx = order[cuts[g]:cuts[g + 1]]
             if not len(idx):
                 continue
             parts: list = []
             self._template(segments, on, parts)
-            parts = [vals[p] if isinstance(p, int) else p for p in parts]
-            tmpl = b"".join(p.replace(b"%", b"%%") if isinstance(p, bytes) else b"%s" for p in parts)
             whole = len(idx) == m  # one layout for all rows: in order, no gather
-            cols = [p if whole else p[idx] for p in parts if not isinstance(p, bytes)]
-            if not cols:  # (no value varies: the text itself, not a template)
-                out[idx] = [b"".join(parts)] * len(idx)
-            else:
-                out[idx] = list(map(tmpl.__mod__, zip(*cols)))
-        return out
+            args: list = []
+            for p in parts:  # (neighbouring constants as one)
+                p = vals[p] if isinstance(p, int) else p
+                if isinstance(p, bytes):
+                    if args and isinstance(args[-1], bytes):
+                        args[-1] += p
+                    else:
+                        args.append(p)
+                else:
+                    args.append(p if whole else p.take(pa.array(idx)))
+            if len(args) == 1 and isinstance(args[0], bytes):  # (no value varies: the text itself)
+                done.append(pa.array([args[0]] * len(idx), pa.binary()))
+                continue
+            done.append(pc.binary_join_element_wise(
+                *(pa.scalar(a, pa.binary()) if isinstance(a, bytes) else a for a in args), _EMPTY))
+        if len(done) == 1:
+            return done[0]
+        back = np.empty(m, np.int64)
+        back[order] = np.arange(m)
+        return pa.concat_arrays(done).take(pa.array(back))
+
+    def rows(self, segments: list) -> np.ndarray:
+        """The text of each row (an object array of bytes)."""
+        return np.array(self._joined(segments).to_pylist(), dtype=object)
+
+    def packed(self, segments: list) -> pa.Buffer:
+        """The rows' text one after the other: one buffer (bytes-like)."""
+        out = self._joined(segments)
+        offsets = np.frombuffer(out.buffers()[1], np.int32, len(out) + 1, out.offset * 4) if len(out) else [0, 0]
+        return out.buffers()[2][int(offsets[0]):int(offsets[-1])] if len(out) else pa.py_buffer(b"")
 
     def _template(self, segments: list, on: list[bool], parts: list) -> None:
         """The segments of a group of rows (``on``: which masks they have) as bytes and value
@@ -481,7 +518,7 @@ def _encode_parts(frame_of_row, times, prepare, summary: Any, chunk_rows: int, p
         conn.close()
 
 
-def _objects_packed(r: dict[str, Any], idx: np.ndarray, before: tuple, after: tuple) -> bytes:
+def _objects_packed(r: dict[str, Any], idx: np.ndarray, before: tuple, after: tuple) -> pa.Buffer:
     """``"uid":{"object_data":{...}}`` for the rows ``idx``, one after the other, each between
     a fragment ``before`` and one ``after`` (``(table, each row's index into it)``)."""
     m = len(idx)
@@ -532,7 +569,7 @@ def _objects_packed(r: dict[str, Any], idx: np.ndarray, before: tuple, after: tu
                 lay.join(b'"vec":[', vec, b"]"), b",", lay.join(b'"boolean":[', boolean, b"]"), b",",
                 lay.join(b'"num":[', num, b"]"), b",", lay.join(b'"text":[', text, b"]"), b"}}",
                 lay.coded(*after)]
-    return b"".join(lay.rows(segments).tolist())
+    return lay.packed(segments)
 
 
 def _irregular(r: dict[str, Any], idx: np.ndarray, pid: np.ndarray, lay: _Layout, vec: list,
