@@ -165,6 +165,7 @@ class StatesWriter:
         self.held_bytes = self.nbytes = self.rows = 0
         self.keys: list[np.ndarray] = []
         self.runs: list[tuple[Path, pa.Schema]] = []
+        self._writer: IpcWriter | None = None
         self.dir: Path | None = None
         self._owner = os.getpid()
 
@@ -176,12 +177,17 @@ class StatesWriter:
         if not t.num_rows:
             return
         self.keys.append(np.asarray(t.column(self.key).to_numpy(), np.int64))
-        self.held.append(t)
         self.rows += t.num_rows
         self.nbytes += t.nbytes
+        if self._writer is not None:  # (spilling: straight to the spill)
+            self._write(t)
+            return
+        self.held.append(t)
         self.held_bytes += t.nbytes
         if self.memory is not None and self.held_bytes > self.memory:
-            self._spill()
+            for h in self.held:
+                self._write(h)
+            self.held, self.held_bytes = [], 0
 
     @property
     def spilled(self) -> bool:
@@ -192,14 +198,19 @@ class StatesWriter:
             self.dir = Path(tempfile.mkdtemp(prefix=".aveas-states.", dir=self.spill_dir))
         return self.dir
 
-    def _spill(self) -> None:
-        """The rows held into a run file of their own (one schema)."""
-        t = pa.concat_tables(self.held, promote_options="permissive")
-        path = self._tmp() / f"r{len(self.runs)}.arrow"
-        with IpcWriter(path, t.schema, LZ4) as w:
-            w.write_table(t)
-        self.runs.append((path, t.schema))
-        self.held, self.held_bytes = [], 0
+    def _write(self, t: pa.Table) -> None:
+        """A batch into the spill: the current run file while its schema holds, else a new one."""
+        if self._writer is None or not t.schema.equals(self.runs[-1][1]):
+            self._close_run()
+            path = self._tmp() / f"r{len(self.runs)}.arrow"
+            self._writer = IpcWriter(path, t.schema, LZ4)
+            self.runs.append((path, t.schema))
+        self._writer.write_table(t)
+
+    def _close_run(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+            self._writer = None
 
     # ---- out ------------------------------------------------------------------------------
     def buckets(self, key_map: np.ndarray | None = None) -> Iterator[pa.Table]:
@@ -220,9 +231,9 @@ class StatesWriter:
         return t
 
     def _distribute(self, key_map: np.ndarray | None) -> list[int]:
-        """The spilled rows into bucket files of consecutive (mapped) keys: the buckets' numbers."""
-        if self.held:
-            self._spill()
+        """The spilled rows into bucket files of consecutive (mapped) keys, a spilled batch at a
+        time: the buckets' numbers."""
+        self._close_run()
         keys = np.concatenate(self.keys)
         uniq, inv = np.unique(key_map[keys] if key_map is not None else keys, return_inverse=True)
         del keys
@@ -238,14 +249,15 @@ class StatesWriter:
         off = 0
         try:
             for path, _ in self.runs:
-                t = conformed(read_ipc(path), schema)
+                with pa.OSFile(str(path)) as f:
+                    for batch in pa.ipc.open_stream(f, options=READ):
+                        t = conformed(pa.Table.from_batches([batch]), schema)
+                        b = bucket_of_row[off:off + t.num_rows]
+                        order = np.argsort(b, kind="stable")
+                        write_by_bucket(writers, t.take(pa.array(order)), b[order],
+                                        lambda k: self.dir / f"b{k}.arrow", options)
+                        off += t.num_rows
                 path.unlink()
-                b = bucket_of_row[off:off + t.num_rows]
-                order = np.argsort(b, kind="stable")
-                write_by_bucket(writers, t.take(pa.array(order)), b[order],
-                                lambda k: self.dir / f"b{k}.arrow", options)
-                off += t.num_rows
-                del t
         finally:
             for w in writers.values():
                 w.close()
@@ -312,6 +324,8 @@ class StatesWriter:
     def close(self) -> None:
         """The spill removed (by the process that made it)."""
         self.held, self.keys = [], []
+        if self._owner == os.getpid():
+            self._close_run()
         if self.dir is not None and self._owner == os.getpid():
             shutil.rmtree(self.dir, ignore_errors=True)
             self.dir = None
