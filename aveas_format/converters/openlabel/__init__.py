@@ -102,7 +102,7 @@ blocks, how they were cut, in how many processes. A terminal shows the reading's
 
 Large files: ``convert`` (of one file) and ``validate FILE`` import in bounded memory: the boxes
 are held in a :class:`~aveas_format.io.resort.StatesWriter`, spilled to a hidden temporary
-directory next to the output beyond 256 MB, and made into states a bucket of participants at a
+directory next to the output beyond 128 MB, and made into states a bucket of participants at a
 time (in worker processes) and written to ``states.parquet``: the same recording as the import in
 memory. The Python function ``convert`` returns a recording in memory; ``convert_to`` writes it in
 bounded memory.
