@@ -7,9 +7,7 @@ how a number is written in a message for people (:func:`fmt_num`).
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import os
 from numbers import Real
 from typing import Any
 
@@ -183,50 +181,6 @@ def finite_quantiles(a: np.ndarray, qs: tuple[float, ...]) -> list[np.ndarray]:
             v = np.where(t >= 0.5, x1 - d * (1 - t), x0 + d * t)
         out.append(np.where(n > 0, v, np.nan))
     return out
-
-
-_TRIM: object = None
-
-
-def release_free_memory() -> None:
-    """Hand the memory freed by many small arrays back to the operating system (glibc's
-    ``malloc_trim``; a no-op where there is none): numpy allocates arrays below ~128 kB on the C
-    heap, whose freed pages stay with the process — after the column chunks of a large import
-    are concatenated, several hundred MB of them (``converters/openlabel/frames.py``)."""
-    global _TRIM
-    if _TRIM is None:
-        try:
-            import ctypes
-
-            _TRIM = ctypes.CDLL("libc.so.6").malloc_trim
-        except (OSError, AttributeError):  # not glibc (macOS, Windows, musl)
-            _TRIM = False
-    if _TRIM:
-        _TRIM(0)
-
-
-#: the environment variable that picks the path of the compiled kernels (the OpenLABEL import's
-#: block reader and the export's row assembler): ``numpy``, ``numba`` or ``auto`` (unset: auto,
-#: numba where it is installed)
-KERNEL_ENV = "AVEAS_FORMAT_KERNEL"
-KERNEL_BACKENDS = ("numpy", "numba")
-_HAS_NUMBA = importlib.util.find_spec("numba") is not None
-
-
-def kernel_backend(requested: str | None = None) -> str:
-    """Which path runs where a compiled kernel exists: ``"numba"`` (the ``jit`` extra) or
-    ``"numpy"`` (the arrays-only path: NumPy, Arrow). ``requested``, else the :data:`KERNEL_ENV`
-    variable, else ``auto``: numba where it is installed. Asking for numba without it is an error
-    that says how to install it."""
-    req = (requested or os.environ.get(KERNEL_ENV) or "auto").strip().lower()
-    if req == "auto":
-        return "numba" if _HAS_NUMBA else "numpy"
-    if req not in KERNEL_BACKENDS:
-        src = "backend" if requested else KERNEL_ENV
-        raise ValueError(f"unknown kernel backend {req!r} ({src}): choose auto, numpy or numba")
-    if req == "numba" and not _HAS_NUMBA:
-        raise ImportError("the numba kernel needs numba: pip install 'aveas-format[jit]'")
-    return req
 
 
 class small_pages:

@@ -109,7 +109,7 @@ def run_tasks(fn: Callable[[Any], Any], items: Iterable[Any], *, workers: int | 
     ``fn`` must be picklable (a module-level function) for processes and Dask.
     """
     items = list(items)
-    bar = _Progress(len(items), description) if progress else None
+    bar = Progress(len(items), description) if progress else None
     try:
         if scheduler:
             gen = _run_dask(fn, items, scheduler)
@@ -198,23 +198,25 @@ def _run_dask(fn: Callable[[Any], Any], items: list[Any], scheduler: str) -> Ite
             yield TaskResult(i, items[i], value, err, tb)
 
 
-class _Progress:
-    """A rich progress bar on stderr (quiet when stderr is not a terminal)."""
+class Progress:
+    """A rich progress bar on stderr (quiet when stderr is not a terminal): ``total`` steps (tasks,
+    or bytes of a file read), with a count of the failed tasks where ``failures``."""
 
-    def __init__(self, total: int, description: str) -> None:
+    def __init__(self, total: int, description: str, *, failures: bool = True) -> None:
         from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        from rich.progress import (BarColumn, DownloadColumn, MofNCompleteColumn, Progress, TextColumn,
+                                   TimeElapsedColumn)
 
-        self._p = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                           TextColumn("{task.fields[failed]} failed"), TimeElapsedColumn(),
+        count = (MofNCompleteColumn(), TextColumn("{task.fields[failed]} failed")) if failures else (DownloadColumn(),)
+        self._p = Progress(TextColumn("{task.description}"), BarColumn(), *count, TimeElapsedColumn(),
                            console=Console(file=sys.stderr), disable=not sys.stderr.isatty())
         self._p.start()
         self._task = self._p.add_task(description, total=total, failed=0)
         self._failed = 0
 
-    def advance(self, ok: bool) -> None:
+    def advance(self, ok: bool = True, steps: int = 1) -> None:
         self._failed += 0 if ok else 1
-        self._p.update(self._task, advance=1, failed=self._failed)
+        self._p.update(self._task, advance=steps, failed=self._failed)
 
     def close(self) -> None:
         self._p.stop()
@@ -233,7 +235,9 @@ def map_ordered(fn: Callable[[Any], Any], items: Iterable[Any], *, workers: int 
     workers = processes(workers)
     if workers <= 1:
         for item in items:
-            yield item, fn(item)
+            result = fn(item)
+            yield item, result
+            del item, result  # (not held while the next item is read and run)
         return
     ahead = max(1, ahead or 2 * workers)
     it = iter(items)

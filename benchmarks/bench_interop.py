@@ -11,7 +11,7 @@ tiled in time to N states (participant ids and times shifted, as bench_validate_
 the OpenLABEL export and import each run in a fresh process, with its peak memory (VmHWM) — the
 recording is generated here, never stored in the repository. The compact forms (``.json.gz``,
 ``.json.zst``) are exported and imported on the sample; the import is compared with
-``json.loads`` and ``orjson.loads`` of the same bytes (best of 3 each).
+``json.loads`` and ``msgspec.json.decode`` of the same bytes (best of 3 each).
 
     python benchmarks/bench_interop.py                 # the 23 k sample (make bench)
     python benchmarks/bench_interop.py --states 2000000
@@ -50,27 +50,17 @@ if what in ("export", "export_disk"):  # the recording loaded / its states read 
     base = hwm_mb()
     t0 = time.perf_counter()
     export(rec, out)
-elif what == "parse":  # the floor of a Python-object reader: orjson on the same frames, streamed
-    import orjson
-    from aveas_format.converters.openlabel import stream
-    from aveas_format.safeio import scan_json_member
+elif what == "parse":  # the floor of a Python-object reader: msgspec on the same frames, in blocks
+    import msgspec
+    from aveas_format.converters.openlabel import source
 
     base = hwm_mb()
     t0 = time.perf_counter()
-    with open(out, "rb") as f:
-        _, span, _ = scan_json_member(f, "openlabel", "frames")
-    loads, n = orjson.loads, 0
-
-    def counting(b):
-        global n
-        d = loads(b)
-        n += sum(len(fr.get("objects") or ()) for fr in d.values())
-        return d
-
-    stream.orjson = type("counting_orjson", (), {"loads": staticmethod(counting),
-                                                  "JSONDecodeError": orjson.JSONDecodeError})
-    for _ in stream._fast_frames(out, span):
-        pass
+    fr, n = source.open_frames(out), 0
+    with source.open_file(out) as f:
+        for _, data, kind in source.cuts(fr, f):
+            if kind != "tail":
+                n += sum(len(v.get("objects") or ()) for v in msgspec.json.decode(b"{" + data + b"}").values())
 elif what in ("import_disk", "import_write"):  # the CLI's convert: written in parts / in memory + write
     from aveas_format.converters import convert_to
 
@@ -83,9 +73,6 @@ elif what in ("import_disk", "import_write"):  # the CLI's convert: written in p
         rec = convert("openlabel", [out], options={"workers": 0})
         rec.write(target)
 else:
-    if what == "import_generic":  # the reader before the columnar blocks: frames as Python objects
-        import aveas_format.converters.openlabel.fastblock as fb
-        fb.read_block = lambda *a, **k: None
     base = hwm_mb()
     t0 = time.perf_counter()
     rec = convert("openlabel", [out], options={"workers": 1 if what != "import" else 0})
@@ -184,23 +171,11 @@ def _openlabel_rows(rec, tmp: Path) -> list[dict]:
              _row("import_openlabel", n, dt, "(the same run)",
                   b_loads, "json.loads of the same bytes (no recording built, gc paused as in the import), best of 3"),
              _row("import_openlabel", n, dt, "(the same run)", b_pqr, "pyarrow Parquet read of the states")]
-    try:
-        import orjson
-    except ImportError:  # the [fast] extra
-        orjson = None
-    if orjson is not None:
-        b_or = _best(lambda: orjson.loads(data), gc_off=True)
-        rows.append(_row("import_openlabel", n, dt, "(the same run)", b_or,
-                         "orjson.loads of the same bytes (no recording built, gc paused), best of 3"))
-        import aveas_format.converters.openlabel.fastblock as fb
+    import msgspec
 
-        read_block, fb.read_block = fb.read_block, lambda *a, **k: None
-        try:
-            b_gen = _best(lambda: convert("openlabel", [out]))
-        finally:
-            fb.read_block = read_block
-        rows.append(_row("import_openlabel", n, dt, "(the same run)", b_gen,
-                         "the generic reader (frames as Python objects by orjson, then columns), best of 3"))
+    b_ms = _best(lambda: msgspec.json.decode(data), gc_off=True)
+    rows.append(_row("import_openlabel", n, dt, "(the same run)", b_ms,
+                     "msgspec.json.decode of the same bytes (no recording built, gc paused), best of 3"))
     del data
     rows += _compact_rows(rec, tmp, n, mb)
     return rows
@@ -446,11 +421,11 @@ def main(n_vehicles: int = 60, duration_s: float = 30.0) -> list[dict]:
     return rows
 
 
-def large(target_states: int, generic: bool = True) -> list[dict]:
+def large(target_states: int) -> list[dict]:
     """The OpenLABEL export and import of a recording of ``target_states`` states, each in a fresh
     process (peak memory = its VmHWM; the export's includes the recording it reads), beside
-    orjson parsing the same frames (streamed) and the generic reader (``generic``), each in a fresh
-    process too."""
+    msgspec decoding the same frames in the import's blocks (nothing built), in a fresh process
+    too."""
     from aveas_format.sample import highway_scene
 
     tmp = Path(tempfile.mkdtemp(prefix="aveas-bench-interop-large-"))
@@ -476,7 +451,6 @@ def large(target_states: int, generic: bool = True) -> list[dict]:
                            shallow=False):
             raise RuntimeError("the import written in parts wrote other states than the import in memory")
         i1 = _child("import_1", tmp / "rec", out)
-        ia = _child("import", tmp / "rec", out, env={"AVEAS_FORMAT_KERNEL": "numpy"})
         rows = [
             _row("export_openlabel_large", n, e["seconds"], f"{mb:.0f} MB; frames in parts (one per core); "
                  f"fresh process: peak {e['peak_mb']:.0f} MB with the recording loaded ({e['before_mb']:.0f} MB "
@@ -487,7 +461,7 @@ def large(target_states: int, generic: bool = True) -> list[dict]:
                  f"{ed['peak_mb']:.0f} MB, the forked encoder at most {ed['workers_peak_mb']:.0f} MB",
                  e["seconds"], f"the recording loaded (peak {e['peak_mb']:.0f} MB)"),
             _row("import_openlabel_large", i["states"], i["seconds"],
-                 f"blocks in worker processes (one per core); fresh process: peak {i['peak_mb']:.0f} MB "
+                 f"blocks decoded in worker processes (one per core); fresh process: peak {i['peak_mb']:.0f} MB "
                  f"({i['before_mb']:.0f} MB after imports), each worker at most {i['workers_peak_mb']:.0f} MB",
                  i1["seconds"],
                  f"the same import in one process (workers=1), fresh process: peak {i1['peak_mb']:.0f} MB"),
@@ -498,18 +472,10 @@ def large(target_states: int, generic: bool = True) -> list[dict]:
                          f"{idisk['peak_mb']:.0f} MB, each worker at most {idisk['workers_peak_mb']:.0f} MB",
                          iwrite["seconds"], f"the import in memory + Recording.write (convert before), fresh "
                          f"process: peak {iwrite['peak_mb']:.0f} MB"))
-        rows.append(_row("import_openlabel_large", i["states"], i["seconds"], "(the same run)", ia["seconds"],
-                         f"the same import with Arrow's JSON reader instead of the compiled one "
-                         f"(AVEAS_FORMAT_KERNEL=numpy), fresh process: peak {ia['peak_mb']:.0f} MB"))
         p = _child("parse", tmp / "rec", out)
         rows.append(_row("import_openlabel_large", i["states"], i["seconds"], "(the same run)", p["seconds"],
-                         f"orjson.loads of the same frames in 1 MiB blocks, nothing built ({p['states']:,} "
-                         f"boxes; peak {p['peak_mb']:.0f} MB)"))
-        if generic:
-            g = _child("import_generic", tmp / "rec", out)
-            rows.append(_row("import_openlabel_large", i["states"], i["seconds"], "(the same run)",
-                             g["seconds"], f"the generic reader (frames as Python objects, before the columnar "
-                             f"blocks), fresh process: peak {g['peak_mb']:.0f} MB"))
+                         f"msgspec.json.decode of the same frames in the import's blocks, in one process, "
+                         f"nothing built ({p['states']:,} boxes; peak {p['peak_mb']:.0f} MB)"))
         return rows
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

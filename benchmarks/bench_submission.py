@@ -192,17 +192,23 @@ def large(target_states: int, schema_frames: int = 2) -> list[dict]:
 
 
 def _first_frames(src: Path, frames: int) -> tuple[dict, int]:
-    """The document of ``src`` with its first ``frames`` frames (parsed whole from the frames the
-    streamed reader hands out) and their object-frames."""
-    from aveas_format.converters.openlabel.stream import _stream_doc
+    """The document of ``src`` with its first ``frames`` frames (from the import's blocks) and their
+    object-frames."""
+    import msgspec
 
-    ol, gen = _stream_doc(src)
-    ol = dict(ol)
+    from aveas_format.converters.openlabel import source
+
+    fr = source.open_frames(src)
+    ol = dict(fr.head)
     ol["frames"] = {}
-    for k, fr in gen():
-        ol["frames"][k] = fr
-        if len(ol["frames"]) == frames:
-            break
+    with source.open_file(src) as f:
+        for _, data, kind in source.cuts(fr, f):
+            if kind != "tail":
+                for k, v in msgspec.json.decode(b"{" + data + b"}").items():
+                    if len(ol["frames"]) < frames:
+                        ol["frames"][k] = v
+            if len(ol["frames"]) == frames:
+                break
     ol.pop("frame_intervals", None)
     n = sum(len(f.get("objects", {})) for f in ol["frames"].values())
     return {"openlabel": ol}, n

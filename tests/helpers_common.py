@@ -12,10 +12,7 @@ the marks stay complete). Without ``../shared`` each such test is skipped with t
 
 from __future__ import annotations
 
-import importlib.util
-import os
 from collections.abc import Callable, Iterable
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -131,24 +128,3 @@ def minimal_meta(**over):
     return d
 
 
-#: the two paths of the compiled kernels (aveas_format.numeric.kernel_backend: the OpenLABEL block
-#: reader), for
-#: ``pytest.mark.parametrize("backend", KERNEL_BACKENDS)``: the numba one skips without numba
-KERNEL_BACKENDS = ["numpy", pytest.param("numba", marks=pytest.mark.skipif(
-    importlib.util.find_spec("numba") is None, reason="numba is not installed (the jit extra)"))]
-
-
-@contextmanager
-def kernel(backend: str):
-    """The compiled kernels run on ``backend`` within the block (worker processes inherit it)."""
-    from aveas_format.numeric import KERNEL_ENV
-
-    old = os.environ.get(KERNEL_ENV)
-    os.environ[KERNEL_ENV] = backend
-    try:
-        yield
-    finally:
-        if old is None:
-            os.environ.pop(KERNEL_ENV, None)
-        else:
-            os.environ[KERNEL_ENV] = old

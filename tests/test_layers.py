@@ -48,14 +48,17 @@ def test_the_checks_catch_a_cycle_and_a_private_name():
          "aveas_format.converters.openlabel.read": {"aveas_format.converters.openlabel.parts"},
          "aveas_format.converters.openlabel.parts": {"aveas_format.converters.openlabel.read"}}
     assert layers.cycle_violations(g) == [
+        "import cycle between modules: aveas_format.converters.openlabel.parts <-> "
+        "aveas_format.converters.openlabel.read",
         "import cycle between modules: aveas_format.io.container <-> aveas_format.io.reader <-> "
         "aveas_format.io.writer"]
     uses = [layers.PrivateUse("aveas_format.converters.osi", "aveas_format.converters.osi_columns",
                               "_sub", 12),
             layers.PrivateUse("aveas_format.converters.openlabel.read",
-                              "aveas_format.converters.openlabel.frames", "_pose", 3)]
+                              "aveas_format.converters.openlabel.decode", "_pose", 3)]
     assert layers.private_violations(uses) == [
-        "aveas_format.converters.osi:12: uses aveas_format.converters.osi_columns._sub"]
+        "aveas_format.converters.osi:12: uses aveas_format.converters.osi_columns._sub",
+        "aveas_format.converters.openlabel.read:3: uses aveas_format.converters.openlabel.decode._pose"]
 
 
 def test_private_uses_are_read_from_the_code(tmp_path):

@@ -39,7 +39,7 @@ def test_tutorials_run_where_make_demo_installs(tmp_path):
     from tutorial_env import PythonRunner, blocked_modules, env_with_blocker
 
     demo = set(blocked_modules(["demo"]))
-    assert {"sklearn", "numba", "geopandas", "pytest", "dask"} & set(
+    assert {"sklearn", "geopandas", "pytest", "dask"} & set(
         __import__("importlib").metadata.packages_distributions()) <= demo
     assert not demo & {"pandas", "matplotlib", "pyarrow", "shapely", "mcap", "numpy"}
     assert "sklearn" not in blocked_modules(["demo", "fit"])

@@ -397,15 +397,9 @@ def _private(name: str) -> bool:
 #: package -> why import cycles or private names used across its modules are tolerated there for
 #: now (tests/test_layers.py checks everything else): the owners of these parts change them on
 #: their own branches
-TOLERATED: dict[str, str] = {
-    "aveas_format.converters.openlabel": "OpenLABEL's reader is being rewritten on another branch "
-                                         "(issue 41); its internal API comes with it",
-}
+TOLERATED: dict[str, str] = {}
 #: single private names used across modules outside those packages, each with its reason
 TOLERATED_USES: dict[tuple[str, str, str], str] = {
-    ("aveas_format.converters.infra_lidar", "aveas_format.converters.openlabel.frames", "_Frames"):
-        "the OpenLABEL coordinate-system tree; OpenLABEL's internals are being rewritten on "
-        "another branch (issue 41), which names its internal API",
     ("aveas_format.derive.streamed", "aveas_format.derive.criticality", "_table"):
         "the derivations' part of issue 41, on another branch",
     ("aveas_format.derive.streamed", "aveas_format.derive.registry", "_empty"):

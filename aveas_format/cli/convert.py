@@ -18,7 +18,6 @@ from aveas_format.cli.options import (
     converter_workers,
     crs_option,
     format_option,
-    log_verbose,
     map_option,
     option_pairs_option,
     options_file_option,
@@ -26,6 +25,7 @@ from aveas_format.cli.options import (
     print_failure,
     run_summary,
     scheduler_option,
+    set_verbose,
     validate_option,
     validate_written,
     verbose_option,
@@ -83,10 +83,10 @@ def convert(
     net.xodr -o run.aveas`."""
     from aveas_format.converters.registry import get_converter
 
+    set_verbose(verbose)
     if list_:
         list_converters(None, fmt)
         return
-    log_verbose(verbose)
     if not source or not inputs or not output:
         raise fail("--from NAME, INPUT... and --output are required (or --list)", EXIT_USAGE)
     conv = get_converter(source)

@@ -26,7 +26,11 @@ spelling out ``typer.Option(...)`` again, and calls the helper that goes with th
   :func:`run_summary` (the JSON printed at the end).
 - **Parallel runs**: :func:`workers_option` (``--workers/-j N``: local worker processes, 0 = one
   per core, the default, 1 = in this process; the same name, meaning and default in every
-  command) and :func:`scheduler_option` (``--scheduler``, a Dask cluster).
+  command) and :func:`scheduler_option` (``--scheduler``, a Dask cluster); a converter that reads
+  one input in parallel takes them, and shows its progress on a terminal, through
+  :func:`converter_workers`.
+- **Verbosity**: :func:`verbose_option` (``--verbose/-v``) and :func:`set_verbose`: the
+  library's log (``logging``, level INFO: which reader read a file, how) on stderr.
 
 To add a shared option: a factory here (``typer.Option(...)`` with its one help text) and the
 helper that reads it; a command module then only names it. Error handling, exit codes and plain
@@ -36,6 +40,7 @@ output stay in :mod:`aveas_format.cli.common`.
 from __future__ import annotations
 
 import json
+import logging
 import typing
 from collections.abc import Iterable, Sequence
 from enum import Enum
@@ -337,36 +342,55 @@ def workers_option(*, scope: str = "") -> Any:
 
 def converter_workers(raw: dict[str, Any], model: type, workers: int) -> dict[str, Any]:
     """``--workers`` into a converter's options where the converter reads one input in parallel
-    (its options have ``workers``, e.g. ``openlabel``: blocks of frames in processes); an
-    ``--option workers=N`` given explicitly wins."""
-    if "workers" in getattr(model, "model_fields", {}) and "workers" not in raw:
+    (its options have ``workers``, e.g. ``openlabel``: blocks of frames in processes), and its
+    progress shown on a terminal where it has ``progress``; an ``--option`` given explicitly
+    wins."""
+    fields = getattr(model, "model_fields", {})
+    if "workers" in fields and "workers" not in raw:
         raw["workers"] = workers
+    if "progress" in fields and "progress" not in raw:
+        raw["progress"] = True
     return raw
+
+
+def verbose_option() -> Any:
+    """``--verbose/-v``: say on stderr how the work is done (:func:`set_verbose`)."""
+    return typer.Option(False, "--verbose", "-v", help="Say on stderr how the work is done (e.g. "
+                        "which reader read a file, in how many processes).")
+
+
+def set_verbose(verbose: bool) -> None:
+    """With ``--verbose``, the library's log messages of level INFO and above (logger
+    ``aveas_format``) go to stderr as ``aveas-format: MESSAGE``; without it, none of INFO."""
+    import logging
+
+    log = logging.getLogger("aveas_format")
+    if not verbose:  # (a run without it, after one with it in the same process: quiet again)
+        for h in [h for h in log.handlers if isinstance(h, _Stderr)]:
+            log.removeHandler(h)
+        return
+    if not any(isinstance(h, _Stderr) for h in log.handlers):
+        handler = _Stderr()
+        handler.setFormatter(logging.Formatter("aveas-format: %(message)s"))
+        log.addHandler(handler)
+    log.setLevel(logging.INFO)
+
+
+class _Stderr(logging.StreamHandler):
+    """A handler writing to stderr as it is when a message comes (the CLI's, or a test runner's)."""
+
+    @property
+    def stream(self):
+        import sys
+
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:
+        pass
 
 
 def scheduler_option(*, scope: str = "", help: str = "address of a Dask scheduler "
                      "(tcp://HOST:PORT) (needs aveas-format[dask]).") -> Any:
     """``--scheduler ADDRESS``: run on a Dask cluster instead of local processes."""
     return typer.Option(None, "--scheduler", help=_scoped(scope, help))
-
-
-def verbose_option() -> Any:
-    return typer.Option(False, "--verbose", help="Say how each input was read on stderr: which "
-                        "decoder read it (a fast one, or the library's where the fast one does not "
-                        "take it, and why).")
-
-
-def log_verbose(verbose: bool) -> None:
-    """With ``--verbose``: the INFO messages of aveas_format's loggers (which path read a file,
-    converters/common/fastpath.py) on stderr, one plain line each; without: none."""
-    import logging
-    import sys
-
-    class Stderr(logging.Handler):  # the stderr of the moment (a test's captured one too)
-        def emit(self, record: logging.LogRecord) -> None:
-            print(f"aveas-format: {record.getMessage()}", file=sys.stderr)
-
-    logger = logging.getLogger("aveas_format")
-    if not any(type(h).__name__ == "Stderr" for h in logger.handlers):
-        logger.addHandler(Stderr())
-    logger.setLevel(logging.INFO if verbose else logging.WARNING)

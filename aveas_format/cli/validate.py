@@ -33,7 +33,6 @@ from aveas_format.cli.options import (
     discover_dataset,
     format_option,
     ignore_option,
-    log_verbose,
     map_option,
     option_pairs_option,
     options_file_option,
@@ -42,6 +41,7 @@ from aveas_format.cli.options import (
     recordings_argument,
     scheduler_option,
     select_option,
+    set_verbose,
     single_recording,
     verbose_option,
     workers_option,
@@ -115,7 +115,7 @@ def validate(
     from aveas_format.validate.config import ValidationConfig, config_toml
     from aveas_format.validate.report import report_json_schema
 
-    log_verbose(verbose)
+    set_verbose(verbose)
     if report_schema:
         _print_and_exit(json.dumps(report_json_schema(), indent=2))
     if print_config:

@@ -23,25 +23,25 @@ import numpy as np
 import pyarrow as pa
 
 from aveas_format.converters.openlabel.profile import (
-    _DEFAULT_THRESHOLDS,
-    _LONGITUDINAL,
-    _NO_RECORDER,
-    _PROFILE_PART_COLS,
-    _PROFILE_STATE_COLS,
-    _ROAD_CLASSES,
+    DEFAULT_THRESHOLDS,
+    LONGITUDINAL,
+    NO_RECORDER,
+    PROFILE_PART_COLS,
+    PROFILE_STATE_COLS,
+    ROAD_CLASSES,
     CLASS_TO_TYPE,
     EVENT_TO_TYPE,
     EXT,
     EXT_VERSION,
     LIGHTS,
     METHOD_TO_PROFILE,
-    _body_std,
-    _clean,
-    _environment_data,
-    _iso_ms,
-    _no_gc,
-    _rot_body,
-    _rot_world,
+    vehicle_std,
+    json_safe,
+    environment_data,
+    iso_ms,
+    no_gc,
+    to_vehicle,
+    to_world,
     table_to_json,
 )
 from aveas_format.converters.registry import ConverterOptions
@@ -101,7 +101,7 @@ class OpenLabelExportOptions(ConverterOptions):
 def recording_to_openlabel(rec, *, opendrive: str = "map.xodr", extension: bool = True,
                            road_attributes: bool = True) -> dict[str, Any]:
     """The OpenLABEL document (a dict with the root key ``openlabel``) of a recording."""
-    with _no_gc():
+    with no_gc():
         return _recording_to_openlabel(rec, opendrive, extension, road_attributes)
 
 
@@ -109,7 +109,7 @@ def _recording_to_openlabel(rec, opendrive: str, extension: bool, road_attribute
     """The steps of :func:`recording_to_openlabel` (the keys of the document in this order)."""
     meta = rec.meta
     thr = meta.thresholds.model_dump() if meta.thresholds else {}
-    thr_out = {k: (thr.get(k) or v) for k, v in _DEFAULT_THRESHOLDS.items()}
+    thr_out = {k: (thr.get(k) or v) for k, v in DEFAULT_THRESHOLDS.items()}
     metadata = _profile_metadata(meta, opendrive, thr_out)
     doc: dict[str, Any] = {"metadata": metadata}
     cols = _Columns(rec)
@@ -138,7 +138,7 @@ def _profile_metadata(meta, opendrive: str, thr_out: dict[str, float]) -> dict[s
         "right_of_use": meta.rights.right_of_use.value,
         "acquisition_method": METHOD_TO_PROFILE[meta.acquisition.method.value],
         "acquisition_partner": meta.acquisition.partner,
-        "acquisition_date": _iso_ms(meta.start_time),
+        "acquisition_date": iso_ms(meta.start_time),
         "opendrive": opendrive,
         "projection_string": meta.crs,
         "threshold_gttc": float(thr_out["ttc_s"]),
@@ -175,10 +175,10 @@ class _Columns:
         self.h = h = column_numpy(s, "heading", missing=None)
         self.z = column_numpy(s, "z", missing=None)
         self.vx, self.vy = vx, vy = tuple(column_numpy(s, c, missing=None) for c in ("vx", "vy"))
-        self.vu, self.vv = _rot_body(vx, vy, h)
+        self.vu, self.vv = to_vehicle(vx, vy, h)
         self.ax, self.ay = ax, ay = tuple(column_numpy(s, c, missing=None) for c in ("ax", "ay"))
         self.ax_w, self.ay_w = _world_acceleration(rec, pid, t, vx, vy, ax, ay)
-        self.au, self.av = _rot_body(np.nan_to_num(self.ax_w), np.nan_to_num(self.ay_w), h)
+        self.au, self.av = to_vehicle(np.nan_to_num(self.ax_w), np.nan_to_num(self.ay_w), h)
         self.yaw_rate = column_numpy(s, "yaw_rate", missing=None)
         self.stds = {c: column_numpy(s, c, missing=None) for c in
                      ("x_std", "y_std", "z_std", "heading_std", "vx_std", "vy_std", "ax_std",
@@ -329,9 +329,9 @@ def _exact_values(s: pa.Table, cols: _Columns) -> dict[str, list]:
 
     exact: dict[str, list] = {}
     hw = wrap_angle(cols.h)
-    back = dict(zip(("vx", "vy"), _rot_world(cols.vu, cols.vv, hw)))
+    back = dict(zip(("vx", "vy"), to_world(cols.vu, cols.vv, hw)))
     if cols.ax is not None and cols.ay is not None:
-        back.update(zip(("ax", "ay"), _rot_world(cols.au, cols.av, hw)))
+        back.update(zip(("ax", "ay"), to_world(cols.au, cols.av, hw)))
     z = cols.z
     if z is not None:
         hv = np.asarray([cols.height[q] for q in cols.pid.tolist()], float)
@@ -367,12 +367,12 @@ def _uncertainty(p: pa.Table, cols: _Columns) -> tuple:
     vel_ok = acc_ok = np.zeros(n, bool)
     if stds["vx_std"] is not None and stds["vy_std"] is not None:
         vel_ok = np.isfinite(stds["vx_std"]) & np.isfinite(stds["vy_std"])
-        su, sv = _body_std(_z(stds["vx_std"]), _z(stds["vy_std"]), cols.vxvy, h)
+        su, sv = vehicle_std(_z(stds["vx_std"]), _z(stds["vy_std"]), cols.vxvy, h)
         zero = np.zeros(n)
         vel_std = np.column_stack([su, sv, zero, zero, zero, _z(stds["yaw_rate_std"])]).tolist()
     if stds["ax_std"] is not None and stds["ay_std"] is not None:
         acc_ok = np.isfinite(stds["ax_std"]) & np.isfinite(stds["ay_std"])
-        su, sv = _body_std(_z(stds["ax_std"]), _z(stds["ay_std"]), cols.axay, h)
+        su, sv = vehicle_std(_z(stds["ax_std"]), _z(stds["ay_std"]), cols.axay, h)
         zero = np.zeros(n)
         acc_std = np.column_stack([su, sv, zero, zero, zero, zero]).tolist()
     return box_std, size_std, vel_std, vel_ok, acc_std, acc_ok
@@ -390,7 +390,7 @@ def _frames(rec, cols: _Columns, thr_out: dict[str, float], extension: bool, roa
     interior_rows = _interior_rows(rec.interior)
     impact = _impact(rec.derived, cols.times, thr_out)
     # extension columns of states, and the nullable columns the profile writes a placeholder for
-    ext_cols = [c for c in s.column_names if c not in _PROFILE_STATE_COLS]
+    ext_cols = [c for c in s.column_names if c not in PROFILE_STATE_COLS]
     ext_vals = {c: _pylist(s, c) for c in ext_cols}
     nullable = [c for c in ("z", "z_std", "x_std", "y_std", "heading_std", "ax", "ay", "yaw_rate")
                 if c in s.column_names]
@@ -444,7 +444,7 @@ def _frames(rec, cols: _Columns, thr_out: dict[str, float], extension: bool, roa
                 lp = facts["lane_position"][i]
                 if _finite(lp):
                     num.append({"name": "open_drive/lane_position", "val": _f(lp)})
-                if cls in _ROAD_CLASSES:
+                if cls in ROAD_CLASSES:
                     text.append({"name": "road/classification", "val": str(facts["classification"][i])})
                     for side in ("left", "right"):
                         num.append({"name": f"road/number_lanes/{side}/legal",
@@ -457,9 +457,9 @@ def _frames(rec, cols: _Columns, thr_out: dict[str, float], extension: bool, roa
                 boolean.append({"name": name, "val": bool(a[i] >= 0.5)})
         irow = interior_rows.get((q, tl[i])) if interior_rows else None
         if irow:
-            for c, name in (("automation_longitudinal_p", _LONGITUDINAL),
+            for c, name in (("automation_longitudinal_p", LONGITUDINAL),
                             # the profile's lateral flag carries the longitudinal name (quirk)
-                            ("automation_lateral_p", _LONGITUDINAL)):
+                            ("automation_lateral_p", LONGITUDINAL)):
                 if irow.get(c) is not None:
                     boolean.append({"name": name, "val": bool(irow[c] >= 0.5)})
             for c, name in (("steering_angle", "interior/steering_angle"),
@@ -484,7 +484,7 @@ def _frames(rec, cols: _Columns, thr_out: dict[str, float], extension: bool, roa
                 if not math.isnan(vals[i]):
                     ext[c] = vals[i]
             if ext:
-                cuboid[EXT] = _clean(ext)
+                cuboid[EXT] = json_safe(ext)
         od: dict[str, Any] = {"cuboid": [cuboid], "vec": vec}
         od["boolean"] = boolean
         od["num"] = num
@@ -514,7 +514,7 @@ def _objects(p: pa.Table, cols: _Columns, speed: np.ndarray, extension: bool) ->
     source_ids = _pylist(p, "source_id")
     roles = _pylist(p, "role") or ["observed"] * p.num_rows
     attached = _pylist(p, "attached_to")
-    p_ext_cols = [c for c in p.column_names if c not in _PROFILE_PART_COLS]
+    p_ext_cols = [c for c in p.column_names if c not in PROFILE_PART_COLS]
     p_ext_vals = {c: _pylist(p, c) for c in p_ext_cols}
     objects: dict[str, Any] = {}
     for j, q in enumerate(part_ids.tolist()):
@@ -537,7 +537,7 @@ def _objects(p: pa.Table, cols: _Columns, speed: np.ndarray, extension: bool) ->
                     {"name": "summary/accel/max", "val": _f(acc[rows].max()), "type": "value"},
                     {"name": "summary/accel/min", "val": _f(acc[rows].min()), "type": "value"}]
         obj_data: dict[str, Any] = {"vec": vec, "num": num, "text": [], "boolean": []}
-        if cls not in _NO_RECORDER:
+        if cls not in NO_RECORDER:
             obj_data["boolean"].append({"name": "is_recorder", "val": roles[j] == "recording_vehicle"})
         if attached is not None and attached[j] is not None:
             obj_data["text"].append({"name": "attached_to", "val": str(attached[j])})
@@ -551,7 +551,7 @@ def _objects(p: pa.Table, cols: _Columns, speed: np.ndarray, extension: bool) ->
                     ext[c] = None
             if pmf is not None and np.isfinite(pmf[j]).all():
                 ext["class_pmf"] = [float(v) for v in pmf[j]]
-            size[EXT] = _clean(ext)
+            size[EXT] = json_safe(ext)
         objects[str(q)] = {
             "name": str(source_ids[j]) if source_ids else str(q),
             "type": CLASS_TO_TYPE[cls],
@@ -597,7 +597,7 @@ def _contexts(rec, times: np.ndarray, speed: np.ndarray) -> dict[str, Any]:
                        "context_data": {"boolean": boolean, "num": num, "text": [], "vec": vec}}
     if meta.conditions is not None:
         out["1"] = {"name": "environment_context", "type": "EnvironmentContext",
-                              "context_data": _environment_data(meta.conditions.model_dump())}
+                              "context_data": environment_data(meta.conditions.model_dump())}
     env = rec.environment
     if env is not None and env.num_rows and len(times):
         for k, r in enumerate(env.to_pylist()):
@@ -606,7 +606,7 @@ def _contexts(rec, times: np.ndarray, speed: np.ndarray) -> dict[str, Any]:
             out[str(k + 2)] = {
                 "name": "environment_context", "type": "EnvironmentContext",
                 "frame_intervals": [{"frame_start": fs, "frame_end": fe}],
-                "context_data": _environment_data(r)}
+                "context_data": environment_data(r)}
     return out
 
 
@@ -640,7 +640,7 @@ def _extension(rec, thr: dict[str, Any]) -> dict[str, Any]:
     md = meta.model_dump(mode="json", exclude_none=True)
     for k in ("tables", "derived", "map", "source"):
         md.pop(k, None)
-    return _clean({
+    return json_safe({
         "version": EXT_VERSION,
         "frame_timestamps": "seconds since acquisition_date",
         "start_time": meta.start_time,

@@ -50,49 +50,6 @@ def test_numbers_keep_float32_values_and_null_nan():
     assert encode.numbers(np.array([[1, 2], [3, 4]])) == [b"1,2", b"3,4"]
 
 
-# --- the import's fast path: frames cut into blocks and parsed with orjson ----------------------
-
-def _frames_of(path, monkeypatch, *, fast: bool, block: int = 1 << 20) -> list:
-    from aveas_format.converters.openlabel import stream
-
-    monkeypatch.setattr(stream, "_BLOCK", block)
-    if not fast:
-        monkeypatch.setattr(stream, "orjson", None)
-    ol, frames = stream._stream_doc(path)
-    out = list(frames())
-    monkeypatch.undo()
-    return out
-
-
-def test_fast_frames_equal_ijson_frames_whatever_the_block(demo, tmp_path, monkeypatch):
-    path = tmp_path / "d.json"
-    path.write_bytes(b"".join(write.openlabel_chunks(demo)))
-    want = _frames_of(path, monkeypatch, fast=False)
-    assert len(want) == len(set(demo.states.column("time").to_pylist()))
-    for block in (1 << 20, 3000, 50):  # one block, many, smaller than a frame
-        assert _frames_of(path, monkeypatch, fast=True, block=block) == want
-
-
-def test_fast_frames_hand_over_to_ijson_where_they_cannot_cut(tmp_path, monkeypatch):
-    """A frame head inside a string, another layout after some frames, a repeated key, NaN: the
-    frames are the streaming parser's (a repeated key inside one block comes once, with its last
-    value: what the importer keeps either way)."""
-    trap = ',"9":{"frame_properties":{"timestamp":0}'
-    frames = {str(k): {"frame_properties": {"timestamp": k * 0.1},
-                       "objects": {"1": {"object_data": {"text": [{"name": "note", "val": trap * (k % 2)}]}}}}
-              for k in range(40)}
-    frames["30"] = {"objects": frames["30"]["objects"], "frame_properties": {"timestamp": 3.0}}
-    text = json.dumps({"openlabel": {"metadata": {"schema_version": "1.0.0"}, "frames": frames}},
-                      separators=(",", ":"))
-    text = text.replace('"frames":{', '"frames":{"5":{"objects":{}},', 1)  # repeated key (kept last)
-    path = tmp_path / "g.json"
-    path.write_text(text)
-    want = _frames_of(path, monkeypatch, fast=False)
-    assert len(want) == 41
-    for block in (1 << 20, 700, 64):
-        assert dict(_frames_of(path, monkeypatch, fast=True, block=block)) == dict(want)
-
-
 def test_layout_templates_keep_bits_and_optional_items():
     """Rows of one layout: columns constant over the rows go into the template (by their bits:
     -0.0 stays -0.0), optional items and their commas only where present."""
@@ -118,48 +75,18 @@ def test_layout_of_rows_with_no_varying_value_keeps_a_percent_sign():
     assert lay.rows(segs).tolist() == [b'{"a%b":1.5,"c":7}']
 
 
-# --- the compiled assembler of the rows (numba, the jit extra): the same bytes as the % path ----
+# --- odd values: what the layout writes is what json.loads reads --------------------------------
 
-def _both_paths(rec, monkeypatch, **kw) -> tuple[bytes, bytes, int]:
-    """The document by the Python path and by the compiled one, and how often the compiled
-    assembler ran."""
-    from aveas_format.converters.openlabel import _jitrows
-
-    calls = []
-    real = _jitrows.assemble
-    monkeypatch.setattr(_jitrows, "assemble", lambda *a: calls.append(1) or real(*a))
-    monkeypatch.setattr(encode, "COMPILED_MIN_ROWS", 10**12)
-    py = b"".join(write.openlabel_chunks(rec, **kw))
-    monkeypatch.setattr(encode, "COMPILED_MIN_ROWS", 0)
-    compiled = b"".join(write.openlabel_chunks(rec, **kw))
-    return py, compiled, len(calls)
-
-
-@pytest.mark.parametrize("chunk_rows", [7, 300, None])
-@pytest.mark.parametrize("extension", [True, False])
-def test_compiled_rows_write_the_same_bytes(rich, demo, monkeypatch, chunk_rows, extension):
-    """The rich recording (lights, interior signals, impact attributes, uncertainty, z, float32
-    extension columns, a trailer) and the demo scene, in chunks of a few rows to whole frames."""
-    pytest.importorskip("numba", reason="numba is not installed (the jit extra)")
-    from aveas_format.converters.openlabel import _jitrows
-
-    for rec in (rich, demo):
-        py, compiled, calls = _both_paths(rec, monkeypatch, chunk_rows=chunk_rows, extension=extension)
-        assert calls > 0 and compiled == py
-    # (one argument type each: numba compiles once per type, ~2 s)
-    assert len(_jitrows.number_spans.signatures) == 1
-    monkeypatch.undo()
-    assert len(_jitrows.assemble.signatures) == 1
-
-
-def test_compiled_rows_with_extension_columns_of_every_type(monkeypatch):
+def test_extension_columns_of_every_type_round_trip(tmp_path):
     """States columns the profile lacks, of each Arrow type the extension block writes: strings
     (with quotes, commas, brackets, a percent sign, non-ASCII), booleans, integers beyond
-    2**53, float32, lists, nulls; numbers NaN, infinite, -0.0, subnormal, huge."""
-    pytest.importorskip("numba", reason="numba is not installed (the jit extra)")
+    2**53, float32, lists, nulls; numbers NaN, infinite, -0.0, subnormal, huge: the file parses
+    with json.loads and the import gives the columns back as they were (NaN and infinities as
+    null: JSON has neither)."""
     import numpy as np
     import pyarrow as pa
 
+    from aveas_format.converters import convert, get_converter
     from aveas_format.io.writer import prepare_table
     from aveas_format.schema.tables import TABLES
 
@@ -175,46 +102,29 @@ def test_compiled_rows_with_extension_columns_of_every_type(monkeypatch):
     s = s.append_column("odd", pa.array(odd[np.arange(n) % len(odd)]))
     s = s.append_column("tags", pa.array([[i, i + 1] if i % 2 else [] for i in range(n)], pa.list_(pa.int32())))
     rec.replace_tables({"states": prepare_table(s, TABLES["states"])})
-    py, compiled, calls = _both_paths(rec, monkeypatch, chunk_rows=50)
-    assert calls > 0 and compiled == py
-    frames = json.loads(compiled)["openlabel"]["frames"]
+    out = tmp_path / "odd.json"
+    get_converter("openlabel", "export")(rec, out, options={"workers": 1})
+    frames = json.loads(out.read_bytes())["openlabel"]["frames"]
     ext = [o["object_data"]["cuboid"][0].get("aveas_format", {}) for f in frames.values()
            for o in f["objects"].values()]
     assert any("note" in e and "," in e["note"] for e in ext) and any(e.get("count", 0) > 2**62 for e in ext)
+    back = convert("openlabel", [out]).states
+    want = rec.states
+    for c in ("note", "flag", "count", "gain", "tags"):
+        assert back.column(c).cast(want.column(c).type).to_pylist() == want.column(c).to_pylist(), c
+    got, ref = back.column("odd").to_numpy(zero_copy_only=False), want.column("odd").to_numpy()
+    fin = np.isfinite(ref)  # (JSON has no NaN or infinity: null, as the profile's values)
+    np.testing.assert_array_equal(got[fin], ref[fin])
+    np.testing.assert_array_equal(np.signbit(got[fin]), np.signbit(ref[fin]))
+    assert back.column("odd").is_null().to_numpy(zero_copy_only=False)[~fin].all()
 
 
-def _layout_case(draw_values, m: int, comma) -> tuple:
-    """A layout of ``m`` rows from drawn values (see the hypothesis test), a comma before the
-    rows where ``comma``."""
-    import numpy as np
+def test_layout_rows_are_what_json_loads_reads():
+    """Any values, masks and row counts: each row of a layout parses with json.loads to the values
+    it was given (numbers of every kind, NaN and infinities as null, vectors, texts, items present
+    in some rows only, lists empty in some)."""
+    import math
 
-    lay = encode._Layout(m)
-    segs: list = [lay.coded(np.array([b"", b","], dtype=object), comma.astype(np.int64)), b"{"]
-    items = []
-    for kind, data, mask in draw_values:
-        if kind == "f":
-            tok = lay.floats(np.array(data, dtype=np.float64).reshape(m, -1) if data and isinstance(data[0], list)
-                             else np.array(data, dtype=np.float64))
-        elif kind == "i":
-            tok = lay.ints(np.array(data, dtype=np.int64))
-        elif kind == "t":
-            tok = lay.text([bytes(x) for x in data])
-        elif kind == "c":
-            tok = lay.coded(np.array([b"false", b"true", b'"x%s,y"'], dtype=object), np.array(data) % 3)
-        else:
-            tok = lay.floats(data)  # (a scalar: the same in every row)
-        items.append((lay.mask(None if mask is None else np.array(mask, dtype=bool)), [b'"k%":', tok]))
-    segs.append(lay.join(b"[", items, b"]", empty=b"E"))
-    segs.append(lay.join(b",(", items[::-1], b")"))
-    segs.append(b"}")
-    return lay, segs
-
-
-def test_compiled_layout_equals_the_python_layout():
-    """Any values, masks and row counts: the compiled assembler's text is the % path's, byte
-    for byte (numbers of every kind, vectors, fragments with commas and brackets,
-    items present in some rows, lists empty in some)."""
-    pytest.importorskip("numba", reason="numba is not installed (the jit extra)")
     import numpy as np
     from hypothesis import given, settings
     from hypothesis import strategies as st
@@ -222,48 +132,54 @@ def test_compiled_layout_equals_the_python_layout():
     floats = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([-0.0, 0.0, 5e-324, 1e22]))
     ints = st.integers(-(2**63), 2**63 - 1)
 
+    def as_json(v):
+        return None if isinstance(v, float) and not math.isfinite(v) else v
+
     @st.composite
     def cases(draw):
         m = draw(st.integers(0, 12))
         values = []
         for _ in range(draw(st.integers(0, 6))):
-            kind = draw(st.sampled_from("fivtcs"))
+            kind = draw(st.sampled_from("fvit"))
             mask = draw(st.one_of(st.none(), st.lists(st.booleans(), min_size=m, max_size=m)))
             if kind == "f":
                 data = draw(st.lists(floats, min_size=m, max_size=m))
             elif kind == "v":
                 w = draw(st.integers(1, 4))
                 data = [draw(st.lists(floats, min_size=w, max_size=w)) for _ in range(m)]
-                kind = "f"
             elif kind == "i":
-                small = draw(st.booleans())
-                data = draw(st.lists(st.integers(-5, 70000) if small else ints, min_size=m, max_size=m))
-            elif kind == "t":
-                data = draw(st.lists(st.binary(max_size=6), min_size=m, max_size=m))
-            elif kind == "c":
-                data = draw(st.lists(st.integers(0, 2), min_size=m, max_size=m))
+                data = draw(st.lists(st.one_of(st.integers(-5, 70000), ints), min_size=m, max_size=m))
             else:
-                data = draw(floats)
+                data = draw(st.lists(st.text(max_size=6), min_size=m, max_size=m))
             values.append((kind, data, mask))
-        comma = draw(st.lists(st.booleans(), min_size=m, max_size=m))
-        return m, values, np.array(comma, dtype=bool)
+        return m, values
 
     @settings(max_examples=300, deadline=None)
     @given(cases())
     def check(case):
-        m, values, comma = case
-        lay, segs = _layout_case(values, m, comma)
-        want = lay.packed(segs, False)
-        lay, segs = _layout_case(values, m, comma)
-        assert bytes(lay.packed(segs, True)) == want
+        m, values = case
+        lay = encode._Layout(m)
+        items = []
+        for k, (kind, data, mask) in enumerate(values):
+            if kind == "f":
+                tok = [lay.floats(np.array(data, dtype=np.float64))]
+            elif kind == "v":
+                tok = [b"[", lay.floats(np.array(data, dtype=np.float64).reshape(m, len(data[0]) if m else 1)), b"]"]
+            elif kind == "i":
+                tok = [lay.ints(np.array(data, dtype=np.int64))]
+            else:
+                tok = [lay.text(encode.texts(data))]
+            items.append((lay.mask(None if mask is None else np.array(mask, dtype=bool)),
+                          [b'{"k%d":' % k, *tok, b"}"]))
+        rows = lay.rows([b'{"a":', lay.join(b"[", items, b"]"), b"}"]).tolist()
+        for i, row in enumerate(rows):
+            want = [{f"k{k}": [as_json(x) for x in data[i]] if kind == "v" else as_json(data[i])}
+                    for k, (kind, data, mask) in enumerate(values) if mask is None or mask[i]]
+            got = json.loads(row)["a"]
+            assert got == want
+            assert [math.copysign(1, x) for d in got for v in d.values() for x in (v if isinstance(v, list) else [v])
+                    if isinstance(x, float) and x == 0] == \
+                   [math.copysign(1, x) for d in want for v in d.values() for x in (v if isinstance(v, list) else [v])
+                    if isinstance(x, float) and x == 0]
 
     check()
-
-
-def test_compiled_rows_without_orjson_write_the_same_bytes(rich, monkeypatch):
-    """The standard library's numbers (``1e-05``, ``NaN`` written as null) scanned by the
-    compiled path as orjson's are."""
-    pytest.importorskip("numba", reason="numba is not installed (the jit extra)")
-    monkeypatch.setattr(encode, "orjson", None)
-    py, compiled, calls = _both_paths(rich, monkeypatch, chunk_rows=50)
-    assert calls > 0 and compiled == py

@@ -63,7 +63,7 @@ def _kinematics(rec) -> pa.Table:
                                                 for w in (1, 2)] + [("states", 2, False)])
 def test_spilled_export_gives_the_loaded_exports_bytes(tmp_path, monkeypatch, small_spill, kind, workers, plain):
     """``plain``: the buckets' files uncompressed (few states), else lz4."""
-    from aveas_format.converters.openlabel import spill
+    from aveas_format.io import resort as spill
 
     if not plain:
         monkeypatch.setattr(spill, "PLAIN_BUCKETS_BYTES", 0)

@@ -1,7 +1,6 @@
-"""The streamed OpenLABEL import (issue 11): frames read one at a time with ijson give the same
-recording as the dict path, in any frame order; broken, non-UTF-8, oversized and deeply nested
-files give a clear FormatError naming the file; memory stays bounded by a small multiple of the
-file."""
+"""The OpenLABEL import of a file (its frames read in blocks) gives the recording of the document as
+``json.loads`` reads it, in any frame order; broken, non-UTF-8, oversized and deeply nested files
+give a clear FormatError naming the file; memory stays bounded by a small multiple of the file."""
 
 from __future__ import annotations
 
@@ -51,17 +50,6 @@ def scene_file(tmp_path_factory):
 def test_streamed_equals_dict_path(rich, scene_file, tmp_path):
     for path in (_export(rich, tmp_path / "rich.json"), scene_file):
         assert_identical(_streamed(path), _dict_path(path))
-
-
-def test_wgs84_in_a_thread_gives_the_same_recording(rich, scene_file, tmp_path, monkeypatch):
-    """The tail's WGS 84 coordinates computed in a thread (large imports) are the recording's own."""
-    from aveas_format.converters.openlabel import read
-
-    for path in (_export(rich, tmp_path / "rich.json"), scene_file):
-        before = _streamed(path)
-        monkeypatch.setattr(read, "_THREADED_MIN", 0)
-        assert_identical(_streamed(path), before)
-        monkeypatch.setattr(read, "_THREADED_MIN", 1 << 16)
 
 
 def test_shuffled_frame_order_gives_the_same_recording(scene_file, tmp_path):
@@ -152,7 +140,7 @@ def test_not_utf8(tmp_path):
 
 
 def test_size_limit(scene_file, monkeypatch):
-    import aveas_format.converters.openlabel.stream as ol
+    import aveas_format.converters.openlabel.source as ol
 
     monkeypatch.setattr(ol, "MAX_STREAMED_JSON_BYTES", 1000)
     _err(scene_file, "exceeds the limit of 1,000")
@@ -161,17 +149,21 @@ def test_size_limit(scene_file, monkeypatch):
 def test_a_streamed_file_may_be_larger_than_a_file_read_whole(scene_file, tmp_path, monkeypatch):
     """The 1-hour file (~10 GB) is over the limit of JSON read whole (4 GiB): streamed, its memory
     grows with its states, not its text; a file that has to be read whole keeps that limit."""
-    import aveas_format.converters.openlabel.stream as ol
+    import aveas_format.converters.openlabel.source as ol
 
     want = _streamed(scene_file)
     monkeypatch.setattr(ol, "MAX_BULK_JSON_BYTES", 1000)
     assert_identical(_streamed(scene_file), want)
-    nan = tmp_path / "nan.json"  # (NaN: the streaming parser refuses it, the file is read whole)
+    nan = tmp_path / "nan.json"  # (NaN: the decoder refuses it, the file is read whole)
     nan.write_bytes(scene_file.read_bytes().replace(b'"timestamp":0.0', b'"timestamp":NaN', 1))
     _err(nan, "exceeds the limit of 1,000")
 
 
 def test_deep_nesting(tmp_path):
+    """What the structural pre-scan reads (the members before and after the frames; the whole of a
+    file smaller than its first chunk) is held to the 64 levels of load_json; in the frames of a
+    larger file, a member the import does not read is skipped by the decoder, which refuses
+    nesting beyond Python's recursion limit: a clear error, never a crash."""
     deep = "[" * 200 + "]" * 200
     p = tmp_path / "deep.json"
     p.write_bytes(_generic_doc('{"1": ' + _box(1.0, 0.0) + '}').replace(
@@ -179,6 +171,12 @@ def test_deep_nesting(tmp_path):
     _err(p, "nested deeper than 64")
     p.write_bytes(_generic_doc('{"1": {"objects": {}, "x": ' + deep + '}}'))
     _err(p, "nested deeper than 64")
+    filler = ", ".join(f'"{k}": ' + _box(1.0 + k, 0.1 * k) for k in range(2, 12000))
+    deeper = "[" * 5000 + "]" * 5000
+    p.write_bytes(_generic_doc('{"1": ' + _box(1.0, 0.0) + ', ' + filler + ', "99999": {"objects": {}, "x": '
+                               + deeper + '}}'))
+    assert p.stat().st_size > 2 << 20  # (beyond the pre-scan's first chunk)
+    _err(p, "nested too deep")
 
 
 def test_not_openlabel(tmp_path):
@@ -273,7 +271,7 @@ def test_repeated_frames_member_is_read_whole_as_json_does(tmp_path):
 
 def test_nan_and_infinity_as_json_loads_reads_them(tmp_path):
     """Python's JSON extensions (aveas-openlabel writes them with json.dumps' defaults): the
-    streaming parser refuses them, the import then reads the file whole as before."""
+    decoder refuses them, the import then reads the file whole."""
     p = tmp_path / "nan.json"
     p.write_bytes(_generic_doc('{"1": ' + _box(1.0, 0.0) + ', "2": ' + _box(2.0, 0.1).replace(
         '"objects"', '"x": NaN, "y": -Infinity, "objects"') + '}'))
@@ -287,14 +285,12 @@ def _parts_export(rec, path, **kw):
     return write_chunks_atomic(path, openlabel_chunks(rec, chunk_rows=300, **kw)).read_bytes()
 
 
-@pytest.mark.parametrize("workers,part_rows,compiled", [(2, 200_000, False), (3, 200_000, False),
-                                                        (2, 1_000, False), (3, 1_000, True)])
-def test_frames_encoded_in_forked_parts_give_the_same_file(tmp_path, monkeypatch, workers, part_rows, compiled):
+@pytest.mark.parametrize("workers,part_rows", [(2, 200_000), (3, 200_000), (2, 1_000), (3, 1_000)])
+def test_frames_encoded_in_forked_parts_give_the_same_file(tmp_path, monkeypatch, workers, part_rows):
     """The frames of a large export in parts (one round, or many: parts of ~1,000 rows dealt in
     turn), those of the forked processes encoded into files next to the output and copied in by
     the kernel: the same bytes as in one process, no part file left. A process that fails at
-    once, or after its first part, has its parts (the rest) encoded here instead. ``compiled``:
-    the parts' rows put together by the compiled assembler (where numba is installed)."""
+    once, or after its first part, has its parts (the rest) encoded here instead."""
     import os
 
     from aveas_format.converters.openlabel import encode
@@ -304,9 +300,6 @@ def test_frames_encoded_in_forked_parts_give_the_same_file(tmp_path, monkeypatch
     monkeypatch.setattr(encode, "PARTS_MIN_ROWS", 0)
     monkeypatch.setattr(encode, "PART_ROWS", part_rows)
     one = _parts_export(rec, tmp_path / "one.json")
-    if compiled:
-        pytest.importorskip("numba", reason="numba is not installed (the jit extra)")
-        monkeypatch.setattr(encode, "COMPILED_MIN_ROWS", 0)
     out = tmp_path / "parts"
     out.mkdir()
     assert _parts_export(rec, out / "rec.json", workers=workers, spill_dir=out) == one

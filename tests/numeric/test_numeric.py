@@ -156,25 +156,3 @@ def test_finite_quantiles_equal_nanquantile(k, m, seed):
             ref = (np.nanquantile(np.where(np.isfinite(a), a, np.nan), q, axis=0) if k
                    else np.full(m, np.nan))
             np.testing.assert_array_equal(g, ref)
-
-
-def test_kernel_backend_choice(monkeypatch):
-    """The compiled kernels' path: asked for, else AVEAS_FORMAT_KERNEL, else numba where installed;
-    a wrong name and numba without numba are errors that say what to do."""
-    from aveas_format import numeric
-    from aveas_format.numeric import kernel_backend
-
-    monkeypatch.delenv(numeric.KERNEL_ENV, raising=False)
-    assert kernel_backend("numpy") == "numpy"
-    monkeypatch.setenv(numeric.KERNEL_ENV, "numpy")
-    assert kernel_backend() == "numpy"
-    monkeypatch.setenv(numeric.KERNEL_ENV, "fortran")
-    with pytest.raises(ValueError, match="'fortran'.*AVEAS_FORMAT_KERNEL.*auto, numpy or numba"):
-        kernel_backend()
-    monkeypatch.setattr(numeric, "_HAS_NUMBA", False)
-    monkeypatch.delenv(numeric.KERNEL_ENV)
-    assert kernel_backend() == "numpy"
-    with pytest.raises(ImportError, match=r"aveas-format\[jit\]"):
-        kernel_backend("numba")
-    monkeypatch.setattr(numeric, "_HAS_NUMBA", True)
-    assert kernel_backend() == "numba" == kernel_backend("auto")

@@ -90,11 +90,22 @@ input. Positions are the box centres at ground level; velocities without a ``vel
 are computed from the positions; road coordinates are taken from the file where it has them, else
 computed through the map.
 
-Large files: ``convert`` (of one file) and ``validate FILE`` import in bounded memory from 500,000
-boxes on: the boxes are spilled to a hidden temporary directory next to the output as they are
-read and the states written a bucket of participants at a time (the hour of highway, 9.2 million
-states, in under 0.9 GB; the same recording as the import in memory). The Python function
-``convert`` returns a recording in memory; ``convert_to`` writes it in bounded memory.
+How a file is read: the members of ``openlabel`` before and after the frames are read whole; the
+frames in blocks of whole frames (8 MiB), each decoded by msgspec into typed Structs (frames ->
+objects -> ``object_data``, attribute items typed by the profile's names, members the import does
+not read skipped) and turned into columns for the whole block at once — by worker processes that
+read their blocks themselves for a large plain file (``workers``), in this process for a small or
+compressed one. A file the block reader does not take (no ``openlabel.frames`` object, no object
+at the top level, Python's ``NaN``/``Infinity``, ``openlabel`` or ``frames`` twice) is read whole
+with ``json``, its frames decoded the same way. ``aveas-format convert -v`` says which: how many
+blocks, how they were cut, in how many processes. A terminal shows the reading's progress.
+
+Large files: ``convert`` (of one file) and ``validate FILE`` import in bounded memory: the boxes
+are held in a :class:`~aveas_format.io.resort.StatesWriter`, spilled to a hidden temporary
+directory next to the output beyond 128 MB, and made into states a bucket of participants at a
+time (in worker processes) and written to ``states.parquet``: the same recording as the import in
+memory. The Python function ``convert`` returns a recording in memory; ``convert_to`` writes it in
+bounded memory.
 
 Tested on: ``../shared/data/real/vcd/openlabel100_kitti_tracking_0003.json`` (VCD's KITTI
 converter), ``tests/data/third_party/vcd__openlabel100_kitti_tracking_0016_excerpt.json``
@@ -104,13 +115,16 @@ and the AVEAS profile's ``aveas__minimum_openlabel_example.json`` (``../shared/d
 tests/realdata/test_openlabel.py), plus this library's own exports.
 
 Modules (``aveas_format.converters.openlabel``): ``profile`` the profile's mapping shared by both
-directions (classes, events, lights, conditions, timestamps, the extension's table encoding);
-``write`` recording -> OpenLABEL (``recording_to_openlabel``, the exporter); ``read`` OpenLABEL ->
-recording (``openlabel_to_recording``, the importer); ``frames`` the frames into per-box columns and
-the coordinate systems of generic files; ``stream`` the streamed, bounded reading of large files;
-``parts`` and ``spill`` the import that writes its recording itself (``convert`` of one file,
-``validate FILE``): the boxes spilled as they are read, the states written a bucket of
-participants at a time (bounded memory); ``states`` the export's states spilled in frame order.
+directions (classes, events, lights, conditions, timestamps, the attributes the import reads
+(``FRAME_ATTRIBUTES``: adding one is one line), the extension's table encoding); ``write`` and
+``encode`` recording -> OpenLABEL (``recording_to_openlabel``, the exporter; the frames' JSON
+built from columns); ``states`` the export's states in frame order (bounded memory); ``read`` the
+importer (``openlabel_to_recording``, ``import_openlabel_to``): which path reads a file, the
+recording; ``source`` the file (head, blocks of whole frames, tail, errors, compression);
+``decode`` a block of frames into columns (msgspec); ``geometry`` coordinate systems and cuboids in
+the root frame; ``boxes`` the boxes of all blocks -> what is decided over all of them -> states
+columns a bucket at a time; ``participants``, ``tables`` and ``findings`` the participants, the
+other tables and metadata, the located findings about the source.
 """
 
 from __future__ import annotations

@@ -4,10 +4,8 @@ No dict per state: each part of an object's data (the box, the velocity, the lig
 facts, the extension's values...) is one column of JSON fragments, built for a chunk of rows at
 once — numbers are formatted by one ``orjson.dumps`` of a numpy array (split per row), strings
 through a cache of their distinct values, optional parts are empty fragments — and the fragments
-are put together row by row: one ``template % values`` per row, or, where numba is installed
-(the ``jit`` extra) and the export is large (:data:`COMPILED_MIN_ROWS`), copied from spans of
-one buffer by a compiled loop (:mod:`._jitrows`: no Python object per value; the same bytes, 1.65x
-less CPU per row at 2M states). Only what is irregular by nature (interior
+are put together by Arrow (an element-wise join of each template's constants and columns: no
+Python step per value or row). Only what is irregular by nature (interior
 signals, ``impact`` attributes, extension columns of nested types) goes through a Python value per
 row, and only in the rows that have it.
 
@@ -28,8 +26,9 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 
-from aveas_format.converters.openlabel.profile import _LONGITUDINAL, EXT, LIGHTS, _clean
+from aveas_format.converters.openlabel.profile import LONGITUDINAL, EXT, LIGHTS, json_safe
 
 try:  # the fast JSON encoder (extra ``fast``); the standard library's otherwise
     import orjson
@@ -41,17 +40,17 @@ CHUNK_ROWS = 16384
 
 
 def dumps(v: Any) -> bytes:
-    """Compact JSON of a Python value as :func:`~aveas_format.converters.openlabel.profile._clean`
+    """Compact JSON of a Python value as :func:`~aveas_format.converters.openlabel.profile.json_safe`
     makes it JSON-safe (NaN/inf -> null, numpy scalars -> Python, bytes -> ``{"base64": ...}``)."""
     if orjson is not None:  # orjson does the same itself, without walking the value in Python
         return orjson.dumps(v, default=_clean_other, option=orjson.OPT_SERIALIZE_NUMPY)
-    return json.dumps(_clean(v), separators=(",", ":"), allow_nan=False).encode()
+    return json.dumps(json_safe(v), separators=(",", ":"), allow_nan=False).encode()
 
 
 def _clean_other(v: Any) -> Any:
-    """What orjson leaves to its ``default``: bytes and other numpy scalars, as ``_clean``."""
+    """What orjson leaves to its ``default``: bytes and other numpy scalars, as ``json_safe``."""
     if isinstance(v, (bytes, bytearray, np.generic)):
-        return _clean(v)
+        return json_safe(v)
     raise TypeError(f"not JSON serialisable: {type(v).__name__}")
 
 
@@ -81,6 +80,12 @@ def texts(values: list) -> list[bytes]:
 
 
 _TRUE_FALSE = np.array([b"false", b"true"], dtype=object)
+_EMPTY = pa.scalar(b"", pa.binary())
+
+
+def _split(text: bytes, sep: bytes) -> pa.Array:
+    """The pieces of ``text`` between ``sep`` as an Arrow binary array (split by Arrow)."""
+    return pc.split_pattern(pa.array([text], pa.binary()), pattern=sep).flatten()
 
 
 class _Layout:
@@ -91,9 +96,8 @@ class _Layout:
     (:meth:`join`: items separated by commas, each item present where its mask is true). Rows
     with the same items present share a template (constants and columns constant over the rows
     inlined). Numbers are formatted by one call per kind (float, int) over all of the rows'
-    numeric columns. Two paths write the same bytes: :meth:`rows`, one ``template % values``
-    per row (no Python step per value), and :meth:`packed` with ``compiled``, the rows copied
-    from spans of one buffer by :func:`._jitrows.assemble` (no Python object per value)."""
+    numeric columns and split by Arrow; each group's template is joined element-wise by Arrow
+    (``binary_join_element_wise``): no Python object per value, no Python step per row."""
 
     def __init__(self, m: int) -> None:
         self.m = m
@@ -183,8 +187,9 @@ class _Layout:
         return [k for k, v in enumerate(self._vals)
                 if isinstance(v, tuple) and v[0] == "n" and v[1].dtype.kind == kind]
 
-    def _format_python(self) -> list[Any]:
-        """Each value as bytes (constant) or an object array of the rows' fragments."""
+    def _fragments(self) -> list[Any]:
+        """Each value as bytes (constant) or an Arrow binary array of the rows' fragments: the
+        numbers of a kind formatted by one call and split by Arrow (no Python object per value)."""
         vals = list(self._vals)
         for kind in ("f", "i"):
             cols = [k for k in self._numbers_of(kind) if vals[k][1].ndim == 1]  # (vectors below)
@@ -193,117 +198,73 @@ class _Layout:
             mat = np.column_stack([vals[k][1] for k in cols])  # rows x columns, one formatting call
             lo, hi = (int(mat.min()), int(mat.max())) if kind == "i" and mat.size else (0, 1 << 62)
             if hi - lo < 65536:  # ids, counts, frames of a chunk: each distinct value's text once
-                table = np.array(numbers(np.arange(lo, hi + 1, dtype=np.int64)), dtype=object)
-                text = table[mat - lo]
-            else:
-                text = np.array(numbers(mat.reshape(-1)), dtype=object).reshape(mat.shape)
+                table = pa.array(numbers(np.arange(lo, hi + 1, dtype=np.int64)), pa.binary())
+                for j, k in enumerate(cols):
+                    vals[k] = table.take(pa.array(mat[:, j] - lo))
+                continue
+            flat = _split(_dump_array(np.ascontiguousarray(mat.reshape(-1)))[1:-1], b",")
             for j, k in enumerate(cols):
-                vals[k] = text[:, j]
+                vals[k] = flat.take(pa.array(np.arange(j, len(flat), len(cols))))
         for k, v in enumerate(vals):
             if isinstance(v, tuple):
-                vals[k] = (np.array(numbers(v[1]), dtype=object) if v[0] == "n"  # (a vector's rows)
-                           else v[1][v[2]] if v[0] == "c" else v[1])
+                if v[0] == "n":  # (a vector's rows: "a,b,c" each)
+                    a = np.ascontiguousarray(v[1], dtype=np.int64 if v[1].dtype.kind in "iub" else np.float64)
+                    vals[k] = _split(_dump_array(a)[2:-2], b"],[") if len(a) else pa.array([], pa.binary())
+                elif v[0] == "c":  # (a negative code: a row whose mask leaves the value out)
+                    vals[k] = pa.array(v[1].tolist(), pa.binary()).take(pa.array(v[2], mask=v[2] < 0))
+                else:
+                    vals[k] = pa.array(v[1].tolist(), pa.binary())
         return vals
 
-    def rows(self, segments: list) -> np.ndarray:
-        """The text of each row (an object array of bytes) of the segments (bytes, value tokens
-        (ints), :meth:`join` tuples)."""
+    def _joined(self, segments: list) -> pa.Array:
+        """The text of each row (an Arrow binary array, in row order) of the segments (bytes,
+        value tokens (ints), :meth:`join` tuples): each group's template joined element-wise by
+        Arrow (no Python step per row)."""
         m = self.m
-        vals = self._format_python()
-        out = np.empty(m, dtype=object)
         if m == 0:
-            return out
+            return pa.array([], pa.binary())
+        vals = self._fragments()
         present, inverse = self._groups()
         order = np.argsort(inverse, kind="stable")
         cuts = np.r_[0, np.cumsum(np.bincount(inverse, minlength=len(present)))]
+        done = []
         for g, on in enumerate(present):
             idx = order[cuts[g]:cuts[g + 1]]
             if not len(idx):
                 continue
             parts: list = []
             self._template(segments, on, parts)
-            parts = [vals[p] if isinstance(p, int) else p for p in parts]
-            tmpl = b"".join(p.replace(b"%", b"%%") if isinstance(p, bytes) else b"%s" for p in parts)
             whole = len(idx) == m  # one layout for all rows: in order, no gather
-            cols = [p if whole else p[idx] for p in parts if not isinstance(p, bytes)]
-            if not cols:  # (no value varies: the text itself, not a template)
-                out[idx] = [b"".join(parts)] * len(idx)
-            else:
-                out[idx] = list(map(tmpl.__mod__, zip(*cols)))
-        return out
-
-    def packed(self, segments: list, compiled: bool) -> Any:
-        """The rows' text one after the other, as one bytes-like object: copied from spans of one
-        buffer by :func:`._jitrows.assemble` where ``compiled`` (a uint8 array), else joined
-        from :meth:`rows` (bytes; the same bytes)."""
-        if not compiled:
-            return b"".join(self.rows(segments).tolist())
-        from aveas_format.converters.openlabel._jitrows import assemble
-
-        g, start, end, col_of = self._spans()
-        const: dict[bytes, int] = {}  # (the constants' text -> index, in the order met)
-        present, group = self._groups()
-        prog: list[int] = []
-        prog_off = [0]
-        for on in present:
-            parts: list = []
-            self._template(segments, on, parts)
-            text = b""
+            args: list = []
             for p in parts:  # (neighbouring constants as one)
-                if isinstance(p, int) and p in col_of:
-                    if text:
-                        prog.append(-1 - const.setdefault(text, len(const)))
-                        text = b""
-                    prog.append(col_of[p])
+                p = vals[p] if isinstance(p, int) else p
+                if isinstance(p, bytes):
+                    if args and isinstance(args[-1], bytes):
+                        args[-1] += p
+                    else:
+                        args.append(p)
                 else:
-                    text += p if isinstance(p, bytes) else self._vals[p]
-            if text:
-                prog.append(-1 - const.setdefault(text, len(const)))
-            prog_off.append(len(prog))
-        cbytes = list(const)  # (insertion order: the constants' indices)
-        clen = np.fromiter(map(len, cbytes), np.int64, len(cbytes))
-        cstart = len(g) + np.cumsum(clen) - clen
-        buf = np.frombuffer(g + b"".join(cbytes), np.uint8)
-        return assemble(buf, cstart, cstart + clen, np.array(prog, np.int64), np.array(prog_off, np.int64),
-                        group, start, end)
-
-    def _spans(self) -> tuple[bytes, np.ndarray, np.ndarray, dict[int, int]]:
-        """The values that vary over the rows as spans of one buffer: ``(buffer, start, end,
-        column of each such token)`` (``start``/``end``: rows x columns, into the buffer)."""
-        from aveas_format.converters.openlabel._jitrows import number_spans
-
-        m = self.m
-        cols = [k for k, v in enumerate(self._vals) if isinstance(v, tuple)]
-        col_of = {k: j for j, k in enumerate(cols)}
-        start = np.empty((m, len(cols)), np.int64)
-        end = np.empty((m, len(cols)), np.int64)
-        pieces: list[bytes] = []
-        at = 0
-        for kind in ("f", "i"):  # every number of a kind in one call
-            ks = self._numbers_of(kind)
-            if not ks:
+                    args.append(p if whole else p.take(pa.array(idx)))
+            if len(args) == 1 and isinstance(args[0], bytes):  # (no value varies: the text itself)
+                done.append(pa.array([args[0]] * len(idx), pa.binary()))
                 continue
-            arrays = [self._vals[k][1] for k in ks]
-            b = _dump_array(np.concatenate([a.reshape(-1) for a in arrays]))
-            number_spans(np.frombuffer(b, np.uint8), at,
-                         np.array([1 if a.ndim == 1 else a.shape[1] for a in arrays], np.int64),
-                         np.array([col_of[k] for k in ks], np.int64), start, end)
-            pieces.append(b)
-            at += len(b)
-        for k in cols:
-            v = self._vals[k]
-            if v[0] == "n":
-                continue
-            frags = v[1].tolist()
-            lens = np.fromiter(map(len, frags), np.int64, len(frags))
-            ends = at + np.cumsum(lens)
-            if v[0] == "c":  # (the table once, each row's span by its index)
-                start[:, col_of[k]], end[:, col_of[k]] = (ends - lens)[v[2]], ends[v[2]]
-            else:
-                start[:, col_of[k]], end[:, col_of[k]] = ends - lens, ends
-            pieces.append(b"".join(frags))
-            at += int(lens.sum())
-        return b"".join(pieces), start, end, col_of
+            done.append(pc.binary_join_element_wise(
+                *(pa.scalar(a, pa.binary()) if isinstance(a, bytes) else a for a in args), _EMPTY))
+        if len(done) == 1:
+            return done[0]
+        back = np.empty(m, np.int64)
+        back[order] = np.arange(m)
+        return pa.concat_arrays(done).take(pa.array(back))
+
+    def rows(self, segments: list) -> np.ndarray:
+        """The text of each row (an object array of bytes)."""
+        return np.array(self._joined(segments).to_pylist(), dtype=object)
+
+    def packed(self, segments: list) -> pa.Buffer:
+        """The rows' text one after the other: one buffer (bytes-like)."""
+        out = self._joined(segments)
+        offsets = np.frombuffer(out.buffers()[1], np.int32, len(out) + 1, out.offset * 4) if len(out) else [0, 0]
+        return out.buffers()[2][int(offsets[0]):int(offsets[-1])] if len(out) else pa.py_buffer(b"")
 
     def _template(self, segments: list, on: list[bool], parts: list) -> None:
         """The segments of a group of rows (``on``: which masks they have) as bytes and value
@@ -348,16 +309,13 @@ def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
     ``times``), ``prepare(rows)`` = the per-row inputs of the state rows ``rows`` (in that order;
     :func:`aveas_format.converters.openlabel.write.openlabel_chunks`), asked for one chunk at a
     time. ``part``: only the chunks ``[first, last)`` of :func:`chunk_bounds` (their text is the
-    same as in the whole sequence: a comma before every chunk but the very first). A chunk is
-    bytes, or a uint8 array where the compiled assembler made it (:func:`compiled_rows`): a
-    bytes-like object either way (written, joined or compressed as it is)."""
+    same as in the whole sequence: a comma before every chunk but the very first)."""
     order = np.argsort(frame_of_row, kind="stable")  # in a frame: the objects in the states' order
     if len(order) < 2**31:
         order = order.astype(np.int32)  # (half the memory: one index per state)
     fs = frame_of_row[order]
     ts = numbers(times)
     bounds = chunk_bounds(fs, chunk_rows)
-    compiled = compiled_rows(len(order))
     c0, c1 = part if part is not None else (0, len(bounds) - 1)
     for c in range(c0, c1):
         start, stop = bounds[c], bounds[c + 1]
@@ -374,36 +332,10 @@ def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
         after = np.zeros(m, np.int64)
         after[np.r_[lo[1:] - 1, m - 1]] = 1
         yield _objects_packed(prepare(rows), np.arange(m), (np.array([b",", *heads], dtype=object), before),
-                              (_AFTER, after), compiled)
+                              (_AFTER, after))
 
 
 _AFTER = np.array([b"", b"}}"], dtype=object)
-
-
-#: rows of an export from which its objects' text is put together by the compiled assembler
-#: (where numba is installed; below, loading numba costs more than it saves)
-COMPILED_MIN_ROWS = 200_000
-
-
-def compiled_rows(rows: int) -> bool:
-    """Whether the objects of an export of ``rows`` state rows are put together by
-    :func:`._jitrows.assemble` (numba installed and picked, :func:`~aveas_format.numeric.kernel_backend`;
-    ``rows`` >= :data:`COMPILED_MIN_ROWS`); it is compiled or loaded here (a forked encoder
-    inherits it; ~0.7 s once in a process: not overlapped with the export's pass over the
-    states in a thread, which it slows by more, both holding the GIL)."""
-    from aveas_format.numeric import kernel_backend
-
-    if rows < COMPILED_MIN_ROWS:
-        return False
-    try:
-        if kernel_backend() != "numba":
-            return False
-    except (ValueError, ImportError):  # (a kernel asked for that is not there: the Python path)
-        return False
-    from aveas_format.converters.openlabel import _jitrows
-
-    _jitrows.warm()
-    return True
 
 
 def chunk_bounds(fs: np.ndarray, chunk_rows: int = CHUNK_ROWS) -> list[int]:
@@ -467,7 +399,6 @@ class FrameParts:
                 or "fork" not in multiprocessing.get_all_start_methods()):
             self.parts = [(0, len(bounds) - 1, 0)]
             return
-        compiled_rows(len(frame_of_row))  # (compiled or loaded once, before the encoders fork)
         ctx = multiprocessing.get_context("fork")
         try:
             for owner in range(1, workers):
@@ -587,10 +518,9 @@ def _encode_parts(frame_of_row, times, prepare, summary: Any, chunk_rows: int, p
         conn.close()
 
 
-def _objects_packed(r: dict[str, Any], idx: np.ndarray, before: tuple, after: tuple, compiled: bool) -> Any:
+def _objects_packed(r: dict[str, Any], idx: np.ndarray, before: tuple, after: tuple) -> pa.Buffer:
     """``"uid":{"object_data":{...}}`` for the rows ``idx``, one after the other, each between
-    a fragment ``before`` and one ``after`` (``(table, each row's index into it)``): one
-    bytes-like object (:meth:`_Layout.packed`)."""
+    a fragment ``before`` and one ``after`` (``(table, each row's index into it)``)."""
     m = len(idx)
     lay = _Layout(m)
     pid = r["pid"][idx]
@@ -639,7 +569,7 @@ def _objects_packed(r: dict[str, Any], idx: np.ndarray, before: tuple, after: tu
                 lay.join(b'"vec":[', vec, b"]"), b",", lay.join(b'"boolean":[', boolean, b"]"), b",",
                 lay.join(b'"num":[', num, b"]"), b",", lay.join(b'"text":[', text, b"]"), b"}}",
                 lay.coded(*after)]
-    return lay.packed(segments, compiled)
+    return lay.packed(segments)
 
 
 def _irregular(r: dict[str, Any], idx: np.ndarray, pid: np.ndarray, lay: _Layout, vec: list,
@@ -659,7 +589,7 @@ def _irregular(r: dict[str, Any], idx: np.ndarray, pid: np.ndarray, lay: _Layout
             for c in ("automation_longitudinal_p", "automation_lateral_p"):
                 # the profile's lateral flag carries the longitudinal name (quirk)
                 if irow.get(c) is not None:
-                    bl.append({"name": _LONGITUDINAL, "val": bool(irow[c] >= 0.5)})
+                    bl.append({"name": LONGITUDINAL, "val": bool(irow[c] >= 0.5)})
             for c, name in (("steering_angle", "interior/steering_angle"),
                             ("steering_angle_std", "interior/steering_angle/ustddev"),
                             ("brake_pedal", "interior/brake_pedal"),

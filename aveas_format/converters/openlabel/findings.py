@@ -9,13 +9,12 @@ from pathlib import Path
 from typing import Any
 
 from aveas_format.converters.labels import label_kind
-from aveas_format.converters.openlabel.columns import _pmf_bad
-from aveas_format.converters.openlabel.frames import _FrameData
-from aveas_format.converters.openlabel.profile import MANDATORY_OBJECT_ATTRIBUTES, TYPE_TO_CLASS, _attrs, _first
+from aveas_format.converters.openlabel.profile import (MANDATORY_OBJECT_ATTRIBUTES, TYPE_TO_CLASS, attributes_of,
+                                                       first_value, pmf_bad)
 from aveas_format.errors import report_source
 
 
-def _jpath(*keys: Any) -> str | None:
+def jpath(*keys: Any) -> str | None:
     """A JSONPath into the document: ``$.openlabel.frames['12'].objects['3']...``; None where a key
     is unknown."""
     if any(k is None for k in keys):
@@ -26,7 +25,7 @@ def _jpath(*keys: Any) -> str | None:
     return out
 
 
-def _claims_profile(md: dict[str, Any], objects: Any) -> bool:
+def claims_profile(md: dict[str, Any], objects: Any) -> bool:
     """Whether a file claims the AVEAS profile: its metadata has the profile's
     ``acquisition_method``, or an object has one of the profile's types (``vehicle/car``...)."""
     if isinstance(md, dict) and md.get("acquisition_method") is not None:
@@ -35,31 +34,31 @@ def _claims_profile(md: dict[str, Any], objects: Any) -> bool:
         isinstance(o, dict) and o.get("type") in TYPE_TO_CLASS for o in objects.values())
 
 
-def _report_frame_findings(fd: _FrameData, path: Path | None) -> None:
-    """What the frames' checks found (:meth:`_FrameRows._check_block`, the coordinate systems):
-    one finding per kind and attribute, at its first box, with the count."""
+def report_frame_findings(found: dict[tuple[str, str], list], path: Path | None) -> None:
+    """What the checks of the frames found (``(code, attribute or coordinate system) -> [first
+    frame, first object, count]``): one finding per kind and attribute, at its first box."""
     file = str(path) if path is not None else None
-    unknown = [what for (code, what) in fd.found if code == "source.openlabel.unknown_coordinate_system"]
-    for (code, what), (frame, uid, count) in fd.found.items():
+    unknown = [what for (code, what) in found if code == "source.openlabel.unknown_coordinate_system"]
+    for (code, what), (frame, uid, count) in found.items():
         if code == "source.openlabel.unknown_coordinate_system":
             if what != unknown[0]:
                 continue  # one finding for all (as the one warning always said)
             msg = ("coordinate system(s) " + ", ".join(map(repr, sorted(unknown)))
                    + " are not in coordinate_systems: taken as the root frame")
             count = len(unknown)
-            jp = _jpath("frames", frame, "objects", uid, "object_data", "cuboid") if uid else None
+            jp = jpath("frames", frame, "objects", uid, "object_data", "cuboid") if uid else None
         elif code == "source.openlabel.pmf_sum":
             msg = f"{count} value(s) of {what!r} do not sum to 1 (first: frame {frame}, object {uid})"
-            jp = _jpath("frames", frame, "objects", uid, "object_data", "vec")
+            jp = jpath("frames", frame, "objects", uid, "object_data", "vec")
         else:
             msg = (f"{count} object(s) in frames lack the profile's mandatory attribute {what!r} "
                    f"(first: frame {frame}, object {uid})")
-            jp = _jpath("frames", frame, "objects", uid, "object_data")
+            jp = jpath("frames", frame, "objects", uid, "object_data")
         report_source(code, f"OpenLABEL: {msg}", count=count, stacklevel=4, file=file,
                       frame=frame, uid=uid, json_path=jp)
 
 
-def _check_objects(uids: list[str], objects: dict[str, Any], frame_types: dict[str, str],
+def check_objects(uids: list[str], objects: dict[str, Any], frame_types: dict[str, str],
                    profile: bool, path: Path | None) -> None:
     """The objects' findings: a type that is not one of the profile's (in a file that claims the
     profile; in any file a type no table knows, read as ``other``), a ``classification/
@@ -79,27 +78,45 @@ def _check_objects(uids: list[str], objects: dict[str, Any], frame_types: dict[s
         if otype not in TYPE_TO_CLASS and (profile or label_kind(otype) == ("other", "road_user")
                                            and otype.lower() != "other"):
             types.setdefault(otype, [u, 0])[1] += 1
-        attrs = _attrs(od)
-        pmf = _first(attrs, "classification/uncertainties")
+        attrs = attributes_of(od)
+        pmf = first_value(attrs, "classification/uncertainties")
         if pmf is not None:
             pmfs.append((u, pmf))
         if profile and u in objects:
             for name in MANDATORY_OBJECT_ATTRIBUTES:
-                if _first(attrs, name) is None:
+                if first_value(attrs, name) is None:
                     missing.setdefault(name, [u, 0])[1] += 1
     for otype, (u, count) in types.items():
         cls = TYPE_TO_CLASS.get(otype) or label_kind(otype)[0]
         report_source("source.openlabel.unknown_type", where + f"object type {otype!r} is not one of the "
                       f"AVEAS profile's types: read as class {cls} ({count} object(s), first {u})",
-                      count=count, stacklevel=3, file=file, uid=u, json_path=_jpath("objects", u, "type"))
+                      count=count, stacklevel=3, file=file, uid=u, json_path=jpath("objects", u, "type"))
     for name, (u, count) in missing.items():
         report_source("source.openlabel.missing_attribute", where + f"{count} object(s) lack the "
                       f"profile's mandatory attribute {name!r} (first {u})", count=count, stacklevel=3,
-                      file=file, uid=u, json_path=_jpath("objects", u, "object_data"))
+                      file=file, uid=u, json_path=jpath("objects", u, "object_data"))
     if pmfs:
-        bad = [u for u, v in pmfs if _pmf_bad(v)]
+        bad = [u for u, v in pmfs if pmf_bad(v)]
         if bad:
             report_source("source.openlabel.pmf_sum", where + f"{len(bad)} object(s)' "
                           f"'classification/uncertainties' do not sum to 1 (first {bad[0]})",
                           count=len(bad), stacklevel=3, file=file, uid=bad[0],
-                          json_path=_jpath("objects", bad[0], "object_data", "vec"))
+                          json_path=jpath("objects", bad[0], "object_data", "vec"))
+
+
+def report_repeats(count: int, frame: Any, uid: str, path: Path | None) -> None:
+    report_source("source.openlabel.duplicate_state",
+                  f"OpenLABEL: {count} boxes repeat a (participant, time) and were "
+                  f"dropped (first: frame {frame}, object {uid})", count=count,
+                  stacklevel=4, file=str(path) if path is not None else None, frame=frame,
+                  uid=uid, json_path=jpath("frames", frame, "objects", uid))
+
+
+def report_bad_sizes(count: int, who: set[str], frame: Any, uid: str, path: Path | None) -> None:
+    who_ = sorted(who)
+    report_source("source.openlabel.bad_size",
+                  f"OpenLABEL: dropped {count} boxes with a sentinel or impossible size "
+                  f"(<= 0, not finite or > 400 m) of object(s) {', '.join(who_[:5])}"
+                  + (" ..." if len(who_) > 5 else ""), count=count, stacklevel=4,
+                  file=str(path) if path is not None else None, frame=frame, uid=uid,
+                  json_path=jpath("frames", frame, "objects", uid, "object_data", "cuboid"))

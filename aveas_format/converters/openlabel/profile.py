@@ -7,10 +7,10 @@
 - conditions <-> environment-context attributes (PMF vectors, Beaufort force), both ways;
 - timestamps (the profile's ``acquisition_date`` format, any ISO 8601 -> UTC), enum values as
   ``aveas-openlabel`` writes them, world <-> vehicle frame of velocities and their 1-sigma;
-- attribute lookup in an OpenLABEL ``object_data``/``context_data`` (``_attrs``, ``_first``);
+- attribute lookup in an OpenLABEL ``object_data``/``context_data`` (``attributes_of``, ``first_value``);
 - the extension's table encoding (:func:`table_to_json` / :func:`table_from_json`, lossless:
   non-finite floats, binary and the derived-table metadata survive JSON);
-- :class:`_no_gc`, which both directions use around building or walking millions of small dicts.
+- :class:`no_gc`, which both directions use around building or walking millions of small dicts.
 """
 
 from __future__ import annotations
@@ -55,9 +55,9 @@ GENERIC_TYPES: dict[str, str] = {
     "pushable_pullable": "pushable_pullable", "other": "other",
 }
 #: classes without ``is_recorder`` in the profile
-_NO_RECORDER = {"animal", "pushable_pullable", "trailer"}
+NO_RECORDER = {"animal", "pushable_pullable", "trailer"}
 #: classes whose frames carry the mandatory road attributes in the profile
-_ROAD_CLASSES = {"bicycle", "bus", "car", "mobility_device", "motorcycle", "other", "railvehicle",
+ROAD_CLASSES = {"bicycle", "bus", "car", "mobility_device", "motorcycle", "other", "railvehicle",
                  "trailer", "truck", "van"}
 #: the attributes every object in a frame carries in the profile (its ``velocity`` and
 #: ``acceleration`` are mandatory); a file that claims the profile (its metadata or object types)
@@ -84,7 +84,37 @@ LIGHTS = {
     "light_indicator_right_p": "lights/indicator/right", "light_front_p": "lights/front",
     "light_high_beam_p": "lights/high_beam",
 }
-_LONGITUDINAL = "interior/automated_control/longitudinal"
+LONGITUDINAL = "interior/automated_control/longitudinal"
+#: the attributes of an object in a frame that the import reads, declared once: name -> (shape,
+#: column or {column: element}). A ``vector``'s elements go to their columns (a column named like
+#: a states column is that column, else the import turns it into one: vehicle -> world frame);
+#: ``number`` a float, ``text`` the value, ``flag`` 0/1 (NaN where absent) into its column.
+#: Adding an attribute that is a states column is this one line (the export writes its own).
+FRAME_ATTRIBUTES: dict[str, tuple[str, str | dict[str, int]]] = {
+    "velocity": ("vector", {"vu": 0, "vv": 1, "yaw_rate": 5}),
+    "acceleration": ("vector", {"au": 0, "av": 1}),
+    "velocity/ustddev": ("vector", {"vu_std": 0, "vv_std": 1, "yaw_rate_std": 5}),
+    "acceleration/ustddev": ("vector", {"au_std": 0, "av_std": 1}),
+    "bounding_box/ustddev": ("vector", {"x_std": 0, "y_std": 1, "z_std": 2, "heading_std": 5}),
+    "open_drive/local_road_coordinates": ("vector", {"road_s": 0, "road_t": 1}),
+    "open_drive/lane_position": ("number", "lane_position"),
+    "used_road_link": ("text", "road_link"),  # (the profile's name of the road id)
+    "open_drive/road_id": ("text", "road_alt"),
+    "open_drive/lane_id": ("text", "lane_code"),
+    **{name: ("flag", column) for column, name in LIGHTS.items()},
+}
+#: the interior signals of an object in a frame (the import's interior table)
+INTERIOR_ATTRIBUTES = (LONGITUDINAL, "interior/automated_control/lateral", "interior/steering_angle",
+                       "interior/steering_angle/ustddev", "interior/brake_pedal", "interior/accelerator_pedal",
+                       "interior/gear")
+#: the attributes of an object in a frame that the profile (and this library's export) has and the
+#: import does not read
+UNREAD_ATTRIBUTES = ("road/classification",
+                     *(f"road/number_lanes/{side}/{kind}" for side in ("left", "right") for kind in ("legal", "physical")),
+                     *(f"impact/{k}/{v}" for k in ("gttc", "thw", "pret") for v in ("object_ids", "values")))
+#: the attributes whose columns the import takes only where every box has a velocity (else the
+#: velocities come from the positions: these would not belong to them)
+VELOCITY_ATTRIBUTES = ("velocity", "velocity/ustddev", "acceleration", "acceleration/ustddev")
 #: format lighting PMF <-> profile lighting_conditions (profile order: darkness, artificial,
 #: civil_twilight, day)
 LIGHTING_TO_PROFILE = {"day": "day", "twilight": "civil_twilight", "darkness_lit": "artificial",
@@ -92,13 +122,13 @@ LIGHTING_TO_PROFILE = {"day": "day", "twilight": "civil_twilight", "darkness_lit
 PROFILE_LIGHTING = ("darkness", "artificial", "civil_twilight", "day")
 PROFILE_ROAD = ("dry", "wet", "slippery")
 _BEAUFORT = (0.5, 1.5, 3.3, 5.5, 7.9, 10.7, 13.8, 17.1, 20.7, 24.4, 28.4, 32.6)  # upper m/s bounds
-_DEFAULT_THRESHOLDS = {"ttc_s": 3.0, "pet_s": 1.5, "thw_s": 1.0}
+DEFAULT_THRESHOLDS = {"ttc_s": 3.0, "pet_s": 1.5, "thw_s": 1.0}
 
 #: states columns the profile attributes carry (possibly as a placeholder where null)
-_PROFILE_STATE_COLS = {"participant_id", "time", "x", "y", "z", "heading", "vx", "vy", "ax", "ay",
+PROFILE_STATE_COLS = {"participant_id", "time", "x", "y", "z", "heading", "vx", "vy", "ax", "ay",
                        "yaw_rate", "lon", "lat", "road_id", "lane_id", "road_s", "road_t",
                        "x_std", "y_std", "z_std", "heading_std"}
-_PROFILE_PART_COLS = {"participant_id", "source_id", "class", "class_pmf", "length", "width",
+PROFILE_PART_COLS = {"participant_id", "source_id", "class", "class_pmf", "length", "width",
                       "height", "length_std", "width_std", "height_std", "attached_to"}
 
 
@@ -106,7 +136,7 @@ _PROFILE_PART_COLS = {"participant_id", "source_id", "class", "class_pmf", "leng
 # helpers
 # ================================================================================================
 
-def _clean(v: Any) -> Any:
+def json_safe(v: Any) -> Any:
     """JSON-safe: NaN -> None, numpy scalars -> Python."""
     if isinstance(v, (np.floating, float)):
         v = float(v)
@@ -118,9 +148,9 @@ def _clean(v: Any) -> Any:
     if isinstance(v, (bytes, bytearray)):
         return {"base64": base64.b64encode(bytes(v)).decode()}
     if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
+        return {k: json_safe(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
+        return [json_safe(x) for x in v]
     return v
 
 
@@ -152,7 +182,7 @@ def table_to_json(table: pa.Table | None) -> dict[str, Any] | None:
             bad = {k: v for k, v in bad.items() if v}
             if bad:
                 nonfinite[name] = bad
-        cols[name] = _clean(col.to_pylist())
+        cols[name] = json_safe(col.to_pylist())
     out: dict[str, Any] = {"columns": cols, "rows": table.num_rows}
     if nonfinite:
         out["nonfinite"] = nonfinite
@@ -201,7 +231,7 @@ def table_from_json(obj: dict[str, Any] | None, name: str) -> pa.Table | None:
     return table
 
 
-def _iso_ms(ts: str) -> str:
+def iso_ms(ts: str) -> str:
     """recording start_time -> the profile's yyyy-MM-ddTHH:mm:ss.FFFZ."""
     m = re.match(r"^(\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2})(?:\.(\d+))?Z$", ts)
     if not m:
@@ -209,7 +239,7 @@ def _iso_ms(ts: str) -> str:
     return f"{m[1]}.{(m[2] or '').ljust(3, '0')[:3]}Z"
 
 
-def _to_utc(ts: str) -> str:
+def to_utc(ts: str) -> str:
     """Any ISO 8601 timestamp (with offset) -> UTC ``...Z`` keeping the fraction digits."""
     s = ts.strip()
     m = re.match(r"^(\d{4}-\d{2}-\d{2})[T ](\d{2}:\d{2}:\d{2})(?:\.(\d{1,9}))?(Z|[+-]\d{2}(?::?\d{2})?)?$", s)
@@ -227,7 +257,7 @@ def _to_utc(ts: str) -> str:
     return dt.strftime("%Y-%m-%dT%H:%M:%S") + (f".{frac}" if frac else "") + "Z"
 
 
-def _enum_value(v: Any) -> Any:
+def enum_value(v: Any) -> Any:
     """aveas-openlabel writes str enums as ``"Road__ClassificationValue.STRAIGHT"``: -> "straight"."""
     if isinstance(v, str) and "." in v:
         head, tail = v.split(".", 1)
@@ -246,18 +276,18 @@ def _beaufort_speed(force: float) -> float:
     return round(0.5 * (edges[k] + edges[k + 1]), 2)
 
 
-def _rot_body(vx: np.ndarray, vy: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def to_vehicle(vx: np.ndarray, vy: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World -> vehicle frame (x forward, y left)."""
     c, s = np.cos(h), np.sin(h)
     return c * vx + s * vy, -s * vx + c * vy
 
 
-def _rot_world(u: np.ndarray, v: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def to_world(u: np.ndarray, v: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     c, s = np.cos(h), np.sin(h)
     return c * u - s * v, s * u + c * v
 
 
-def _body_std(sx: np.ndarray, sy: np.ndarray, corr: np.ndarray | None, h: np.ndarray
+def vehicle_std(sx: np.ndarray, sy: np.ndarray, corr: np.ndarray | None, h: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray]:
     """1-sigma of the vehicle-frame components of a world-frame Gaussian vector."""
     r = np.zeros_like(sx) if corr is None else np.nan_to_num(corr)
@@ -272,7 +302,7 @@ def _body_std(sx: np.ndarray, sy: np.ndarray, corr: np.ndarray | None, h: np.nda
 # attributes of object_data / context_data
 # ================================================================================================
 
-def _attrs(od: dict[str, Any] | None) -> dict[str, list[dict[str, Any]]]:
+def attributes_of(od: dict[str, Any] | None) -> dict[str, list[dict[str, Any]]]:
     """name -> list of items (all types), in file order (on the import's hot path: one call per box)."""
     out: dict[str, list] = {}
     if not od:
@@ -294,9 +324,20 @@ def _attrs(od: dict[str, Any] | None) -> dict[str, list[dict[str, Any]]]:
     return out
 
 
-def _first(attrs, name, default=None):
+def first_value(attrs, name, default=None):
     items = attrs.get(name)
     return items[0].get("val", default) if items else default
+
+
+def pmf_bad(v: Any) -> bool:
+    """Whether a PMF value is no vector of numbers summing to 1 (within the schema's tolerance)."""
+    from aveas_format.schema.pmf import pmf_problems
+
+    try:
+        m = np.asarray([v], float)
+    except (TypeError, ValueError):
+        return True
+    return m.ndim != 2 or bool(pmf_problems(m)[0])
 
 
 # ================================================================================================
@@ -314,7 +355,7 @@ def _pmf_vector(pmf: dict | None, cats: tuple[str, ...], mapping: dict[str, str]
     return [v / tot for v in vals.values()] if tot > 0 else None
 
 
-def _environment_data(cond: dict[str, Any]) -> dict[str, list]:
+def environment_data(cond: dict[str, Any]) -> dict[str, list]:
     data: dict[str, list] = {"num": [], "text": [], "vec": []}
     lighting = _pmf_vector(cond.get("lighting"), LIGHTING, LIGHTING_TO_PROFILE, PROFILE_LIGHTING)
     if lighting:
@@ -343,18 +384,18 @@ def _environment_data(cond: dict[str, Any]) -> dict[str, list]:
     return data
 
 
-def _conditions_from(cd: dict[str, Any]) -> dict[str, Any]:
-    a = _attrs(cd)
+def conditions_from(cd: dict[str, Any]) -> dict[str, Any]:
+    a = attributes_of(cd)
     out: dict[str, Any] = {}
-    lu = _first(a, "environment/lighting_conditions/uncertainties")
-    lv = _enum_value(_first(a, "lighting_conditions"))
+    lu = first_value(a, "environment/lighting_conditions/uncertainties")
+    lv = enum_value(first_value(a, "lighting_conditions"))
     inv = {v: k for k, v in LIGHTING_TO_PROFILE.items()}
     if lu and len(lu) == 4:
         out["lighting"] = {inv[c]: float(v) for c, v in zip(PROFILE_LIGHTING, lu)}
     elif lv in inv:
         out["lighting"] = {inv[lv]: 1.0}
-    ru = _first(a, "environment/road_condition/uncertainties")
-    rv = _enum_value(_first(a, "road_condition"))
+    ru = first_value(a, "environment/road_condition/uncertainties")
+    rv = enum_value(first_value(a, "road_condition"))
     if ru and len(ru) == 3:
         out["road_surface"] = {c: float(v) for c, v in zip(PROFILE_ROAD, ru)}
     elif rv in PROFILE_ROAD:
@@ -363,13 +404,13 @@ def _conditions_from(cd: dict[str, Any]) -> dict[str, Any]:
                       ("environment/temperature/ustddev", "temperature_c_std"),
                       ("environment/precipitation_intensity", "precipitation_mm_h"),
                       ("environment/visibility_range", "visibility_m")):
-        v = _first(a, name)
+        v = first_value(a, name)
         if v is not None:
             out[key] = float(v)
-    cc = _first(a, "environment/cloud_cover")
+    cc = first_value(a, "environment/cloud_cover")
     if cc is not None and 0 <= int(cc) <= 8:
         out["cloud_cover_okta"] = int(cc)
-    bf = _first(a, "environment/wind/beaufort_force")
+    bf = first_value(a, "environment/wind/beaufort_force")
     if bf is not None:
         out["wind_speed_m_s"] = _beaufort_speed(float(bf))
     return out
@@ -379,7 +420,7 @@ def _conditions_from(cd: dict[str, Any]) -> dict[str, Any]:
 # garbage collection
 # ================================================================================================
 
-class _no_gc:
+class no_gc:
     """Pause the cyclic garbage collector while building or walking millions of small dicts
     (it otherwise runs again and again over the growing, acyclic document)."""
 

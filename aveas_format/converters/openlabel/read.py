@@ -1,61 +1,60 @@
 """OpenLABEL -> recording (the import): AVEAS-profile files, this library's own (lossless through
 the ``aveas_format`` extension) and generic ASAM OpenLABEL with cuboids.
 
-:func:`import_openlabel` is the registered importer (``openlabel``): it streams the file
-(:mod:`.stream`) and finds the map; :func:`openlabel_to_recording` takes a parsed document. Both run
-:func:`_openlabel_to_recording` in steps: the CRS; the frames into per-box columns
-(:class:`~aveas_format.converters.openlabel.frames._FrameRows`); frame times and participant ids;
-the boxes into states columns (duplicates dropped, world -> the map's local frame, vehicle -> world
-frame, the file's road coordinates, the extension's exact values); participants; the events,
-interior, environment tables and conditions (from the extension, else the profile's events and
-contexts); the recording's metadata; :func:`build_recording`; the derived tables of our own export.
+:func:`import_openlabel` is the registered importer (``openlabel``), :func:`import_openlabel_to`
+the import that writes its recording itself (bounded memory: ``convert`` of one file, ``validate
+FILE``), :func:`openlabel_to_recording` takes a parsed document. The reading path is chosen by what
+the input is (:func:`_read`):
+
+- **blocks** (:mod:`.source`): the members before the frames read whole, the frames cut into blocks
+  of whole frames and decoded (:func:`~.decode.decode_block`) in this process (small and
+  compressed files) or by worker processes that read their blocks' bytes themselves (large plain
+  files), the members after the frames read once the last block is;
+- **whole**: a file the block reader does not take (no ``openlabel.frames`` object, no object at
+  the top level, ``NaN``/``Infinity``, a repeated member: :class:`~.source.ReadWhole`) is read
+  whole with ``json`` and its frames encoded into the same blocks; so is a parsed document.
+
+Either way the blocks go through the same :class:`~.boxes.Boxes`, whose
+:class:`~aveas_format.io.resort.StatesWriter` holds the boxes in memory or, for an import that
+writes its recording, spills them and turns them into states a bucket of participants at a time
+(:func:`~.boxes.states_of`), in worker processes. The log (``aveas-format -v``) says which path read
+the file; a long read shows its progress on a terminal (``progress``).
 """
 
 from __future__ import annotations
 
-import math
-import warnings
-from collections import defaultdict
-from contextlib import closing
+import logging
+import os
+from functools import partial
 from pathlib import Path
-from types import SimpleNamespace
 from typing import Any, Literal
 
-import numpy as np
+import msgspec
 import pyarrow as pa
 from pydantic import Field
 
 from aveas_format.converters.common.provenance import prefetch_sha256, source_block
-from aveas_format.converters.common.timestamps import TIMESTAMP_UNITS, resolve_timestamps
-from aveas_format.mapref.build import load_map_bytes
-from aveas_format.converters.labels import LabelFilter, implausible_size, label_kind
-from aveas_format.converters.openlabel.findings import (_check_objects, _claims_profile, _jpath,
-                                                        _report_frame_findings)
-from aveas_format.converters.openlabel.parts import import_openlabel_to
-from aveas_format.converters.openlabel.frames import (_MISSING, _FrameData, _Frames, _FrameRows, _rep_list,
-                                                      _rep_take, _static_cuboids, _utm_crs)
-from aveas_format.converters.openlabel.profile import (
-    EXT,
-    LIGHTS,
-    TYPE_TO_CLASS,
-    _attrs,
-    _body_std,
-    _first,
-    _no_gc,
-    _rot_world,
-    _to_utc,
-)
-from aveas_format.converters.openlabel.stream import (COLUMNAR, _check_stream, _load_doc, _NotStrictJSON, _Rescan,
-                                                      _stream_doc)
-from aveas_format.converters.openlabel.tables import _recording_metadata, _restore_derived, _tables
+from aveas_format.converters.common.timestamps import TIMESTAMP_UNITS
+from aveas_format.converters.openlabel.boxes import Boxes, keep_by_type, needs_size, states_of
+from aveas_format.converters.openlabel.decode import decode_block
+from aveas_format.converters.openlabel.findings import check_objects, claims_profile, report_frame_findings
+from aveas_format.converters.openlabel.geometry import CoordinateSystems
+from aveas_format.converters.openlabel.participants import participants_of
+from aveas_format.converters.openlabel.profile import EXT, no_gc
+from aveas_format.converters.openlabel.source import (BLOCK, ReadWhole, WrongCut, broken, cuts, load_document,
+                                                      open_file, open_frames, read_tail)
+from aveas_format.converters.openlabel.tables import recording_metadata, restore_derived, tables_of
 from aveas_format.converters.registry import ImportOptions, converter
+from aveas_format.mapref.build import load_map_bytes
 from aveas_format.errors import FormatError, report_source
 from aveas_format.numeric import small_pages
-from aveas_format.parallel import background
-from aveas_format.schema.taxonomy import CLASSES
 
-#: states from which side work of the import's tail runs in a thread (WGS 84 coordinates)
-_THREADED_MIN = 1 << 16
+log = logging.getLogger(__name__)
+#: bytes of boxes held in memory by an import that writes its recording (beyond: spilled)
+MEMORY = 128 << 20
+#: files up to this many bytes are read in this process (a few blocks: starting worker processes
+#: costs more than it saves; the 27 MB sample: 1.1 s here, 1.8 s in two workers)
+SMALL = 4 * BLOCK
 
 
 class OpenLabelImportOptions(ImportOptions):
@@ -85,201 +84,284 @@ class OpenLabelImportOptions(ImportOptions):
     """Import objects whose type is no road user (barriers, signs, static persons...; see
     docs/converters.md "Labels that are not road users"), as class other; ignore-type objects
     (KITTI's DontCare) are never imported."""
+    progress: bool = Field(False, exclude=True)
+    """Show the reading's progress on a terminal (the CLI sets it; not recorded)."""
 
 
-def _find_map(path: Path, ol: dict[str, Any], map_source, options) -> bytes:
+def _find_map(path: Path | None, ol: dict[str, Any], map_source) -> bytes:
     if map_source is not None:
         return load_map_bytes(map_source)
     name = (ol.get("metadata") or {}).get("opendrive")
-    if name:
-        cand = (path.parent / str(name))
+    if name and path is not None:
+        cand = path.parent / str(name)
         if cand.is_file():
             return cand.read_bytes()
-        # case-insensitive match next to the file
-        for q in path.parent.iterdir():
+        for q in path.parent.iterdir():  # case-insensitive match next to the file
             if q.name.lower() == str(name).lower():
                 return q.read_bytes()
     raise FormatError("no map: pass --map MAP.xodr (metadata.opendrive "
                       + (f"{name!r} is not next to the file)" if name else "is absent)"), path=path)
 
 
+def import_openlabel_to(inputs: list[Path], output: Path, *, map_source=None, options=None,
+                        overwrite: bool = False, memory: int | None = None):
+    """Import one OpenLABEL file and write the recording to ``output`` (atomically; the boxes
+    spilled beyond ``memory`` bytes (default :data:`MEMORY`), the states written a bucket of
+    participants at a time).
+    ``(recording as written, states, states on the map)``; its states are not loaded where they
+    were written in parts."""
+    import shutil
+    import tempfile
+
+    from aveas_format.io.writer import check_target, write_recording
+
+    output = Path(output)
+    path = _one(inputs)
+    work = Path(tempfile.mkdtemp(prefix=".openlabel-import.", dir=check_target(output, overwrite)))
+    try:  # (next to the output: the states file is moved in, not copied)
+        rec, written = _read(path, map_source, options or OpenLabelImportOptions(), spill_dir=work,
+                             memory=memory or MEMORY)
+        if written is None:
+            rec.write(output, overwrite=overwrite)
+            n = rec.states.num_rows
+            return rec, n, n - rec.states.column("road_id").null_count
+        states_file, summary = written
+        write_recording(rec, output, overwrite=overwrite, states_file=states_file)
+        return rec, states_file.rows, summary["on_road"]
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
 @converter("openlabel", description="ASAM OpenLABEL 1.0 JSON (AVEAS profile and generic cuboids)",
            patterns=("*.json", "*.json.gz", "*.json.zst"), method=None, options=OpenLabelImportOptions,
            needs_map=False, provides=("partner", "start_time", "license"), writes=import_openlabel_to,
            sniff=(b'"openlabel"',))
-def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImportOptions, parts=None):
-    """``parts``: an import that writes its recording itself (:func:`.parts.import_openlabel_to`)."""
+def import_openlabel(inputs: list[Path], *, map_source, options: OpenLabelImportOptions):
+    return _read(_one(inputs), map_source, options)[0]
+
+
+def _one(inputs: list[Path]) -> Path:
     if len(inputs) != 1:
         raise FormatError(f"openlabel: expected one input file, got {len(inputs)}")
-    path = Path(inputs[0])
-    import importlib.util
-
-    if importlib.util.find_spec("ijson") is None:  # a dependency; without it: read whole, as before
-        warnings.warn("ijson is not installed: the OpenLABEL file is read whole (pip install ijson, "
-                      "a dependency of aveas-format)",
-                      stacklevel=2)
-    else:
-        with _no_gc(), small_pages():
-            try:
-                try:
-                    try:  # without the structural pre-scan of the frames, where it can
-                        ol, frames = _stream_doc(path, prescan=False)
-                        map_bytes = _find_map(path, ol, map_source, options)
-                        return _openlabel_to_recording(ol, map_bytes, options=options, path=path,
-                                                       frames=frames, parts=parts)
-                    except _Rescan:
-                        pass
-                    ol, frames = _stream_doc(path)
-                    map_bytes = _find_map(path, ol, map_source, options)
-                    return _openlabel_to_recording(ol, map_bytes, options=options, path=path,
-                                                   frames=frames, parts=parts)
-                except (_NotStrictJSON, FormatError) as e:
-                    if isinstance(e, _NotStrictJSON) or str(e.message).startswith(
-                            ("broken JSON", "not UTF-8", "JSON ")):
-                        raise
-                    _check_stream(path)
-                    raise
-                except Exception:
-                    # as when the file was parsed whole: a JSON error anywhere in the file comes
-                    # before what the frames read so far made of it (checked only on failure)
-                    _check_stream(path)
-                    raise
-            except _NotStrictJSON:
-                pass
-    with _no_gc():
-        ol = _load_doc(path)
-    map_bytes = _find_map(path, ol, map_source, options)
-    return openlabel_to_recording(ol, map_bytes, options=options, path=path)
+    return Path(inputs[0])
 
 
 def openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=None, path: Path | None = None):
     """A recording from a parsed OpenLABEL document (the object under ``openlabel``)."""
-    with _no_gc():
-        return _openlabel_to_recording(ol, map_bytes, options=options, path=path)
+    with no_gc():
+        if "openlabel" in ol and isinstance(ol["openlabel"], dict):
+            ol = ol["openlabel"]
+        return _document(ol, map_bytes, options or OpenLabelImportOptions(), path)[0]
 
 
-def _openlabel_to_recording(ol: dict[str, Any], map_bytes: bytes, *, options=None,
-                            path: Path | None = None, frames=None, parts=None):
-    """``frames``: a function yielding ``(key, frame)`` in file order (the streamed import); else
-    the frames are ``ol["frames"]``. Both go through :class:`_FrameRows`. ``parts``: an import
-    that writes its recording itself (:class:`.parts.Parts`; the states are then not in the
-    recording returned, but in ``parts.states_file``)."""
-    from aveas_format.mapref.build import build_recording
+def _document(ol: dict[str, Any], map_bytes: bytes, options, path: Path | None, spill_dir=None, memory=None):
+    """The import of a document read whole: its frames encoded into blocks of the same decoder."""
+    frames = ol.get("frames") or {}
+    if not isinstance(frames, dict):
+        raise FormatError("'openlabel.frames' is not an object", path=path)
+    boxes = Boxes(path, spill_dir, memory)
+    try:
+        systems = CoordinateSystems(ol.get("coordinate_systems"))
+        keys = list(frames)
+        for i in range(0, len(keys), 512):
+            block = {k: frames[k] for k in keys[i:i + 512]}
+            boxes.add(decode_block(msgspec.json.encode(block), 0, systems))
+        return _recording(ol, boxes, map_bytes, options, path)
+    finally:
+        boxes.close()
+
+
+def _read(path: Path, map_source, options, *, spill_dir=None, memory=None):
+    """``(recording, (states file, summary) or None)`` of the file at ``path`` (module docstring)."""
+    with no_gc(), small_pages():
+        fr = open_frames(path)
+        if fr is not None:
+            boxes = Boxes(path, spill_dir, memory)
+            try:
+                map_bytes = _find_map(path, fr.head, map_source) if "metadata" in fr.head or map_source else None
+                _read_blocks(fr, boxes, options)
+                ol = fr.document()
+                return _recording(ol, boxes, map_bytes or _find_map(path, ol, map_source), options, path)
+            except ReadWhole as e:
+                log.info("%s: read whole (%s)", path, e)
+            finally:
+                boxes.close()
+        else:
+            log.info("%s: read whole (no 'openlabel.frames' object the block reader takes)", path)
+        ol = load_document(path)
+        return _document(ol, _find_map(path, ol, map_source), options, path, spill_dir, memory)
+
+
+def _read_blocks(fr, boxes: Boxes, options) -> None:
+    """The frames of ``fr`` block by block into ``boxes``: in worker processes that read their
+    blocks themselves (a large plain file), else here; from a cut before a frame head that proves
+    wrong (:class:`~.source.WrongCut`) on, cut by structure (here)."""
+    from aveas_format.parallel import map_ordered, processes
+
+    workers = processes(options.workers) if fr.size > SMALL else 1
+    lazy = workers > 1 and not fr.compressed and hasattr(os, "pread")
+    cs = fr.head.get("coordinate_systems")
+    exact_from = None
+    bar = _progress(fr.size, fr.path) if options.progress else None
+    by = f"{workers} worker processes" if workers > 1 else "this process"
+    count = {"head": 0, "structure": 0, "lenient": 0}
+    try:
+        while True:
+            with open_file(fr.path) as f:
+                items = ((str(fr.path), cut, cs) for cut in cuts(fr, f, BLOCK, lazy, exact_from))
+                jobs = map_ordered(_decode_cut, items, workers=workers)
+                try:
+                    for (_, (offset, data, kind), _), block in jobs:
+                        if kind == "tail":
+                            read_tail(fr, data, offset)
+                            continue
+                        if not boxes.keys:  # (the input's digest in a thread: the workers are forked by now)
+                            prefetch_sha256(fr.path)
+                        boxes.add(block)
+                        count[kind] += 1
+                        count["lenient"] += block.lenient
+                        if bar is not None:
+                            bar.advance(steps=(data[1] if isinstance(data, tuple) else len(data)) + 1)
+                        del data, block  # (not held while the next block is read and decoded)
+                    break
+                except WrongCut as e:
+                    log.info("%s: the cut at byte %d was inside a frame: cut by structure from there", fr.path, e.offset)
+                    exact_from, lazy, workers = e.offset, False, 1
+                finally:
+                    jobs.close()
+    finally:
+        if bar is not None:
+            bar.close()
+    log.info("%s: %s MB read in %d blocks of whole frames (%d cut before a frame head, %d by structure; "
+             "%d in the lenient layout) decoded by %s", fr.path, f"{fr.size / 1e6:,.0f}",
+             count["head"] + count["structure"], count["head"], count["structure"], count["lenient"], by)
+    if fr.tail and "coordinate_systems" in fr.tail and not cs and boxes.nonsimple:
+        raise ReadWhole("coordinate_systems after the frames that place its cuboids")
+
+
+def _progress(total: int, path: Path):
+    from aveas_format.parallel import Progress
+
+    return Progress(total, f"reading {path.name}", failures=False)
+
+
+_SYSTEMS: dict[bytes, CoordinateSystems] = {}
+
+
+def _decode_cut(item: tuple) -> Any:
+    """A block of :func:`~.source.cuts` decoded (in a worker process; its bytes read here where
+    the cut gives their range): :class:`WrongCut` where a block cut before a frame head does not
+    decode, the JSON error where one cut by structure does not (the tail: None, read by the
+    caller in order; the end of a broken file: its error)."""
+    path, (offset, data, kind), cs = item
+    if kind == "tail":
+        return None
+    if kind == "broken":
+        raise FormatError(data, path=path)
+    if isinstance(data, tuple):
+        start, n = data
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            data = os.pread(fd, n, start)
+        finally:
+            os.close(fd)
+        if len(data) != n:
+            raise FormatError("the file changed while it was read", path=path)
+    key = msgspec.json.encode(cs)
+    if key not in _SYSTEMS:
+        _SYSTEMS.clear()
+        _SYSTEMS[key] = CoordinateSystems(cs)
+    buf = b"".join((b"{", data, b"}"))
+    try:
+        return decode_block(buf, offset, _SYSTEMS[key])
+    except msgspec.DecodeError as e:
+        err = broken(e, buf, offset - 1, path)
+        if isinstance(err, ReadWhole) or kind == "structure":
+            raise err from None
+        raise WrongCut(offset) from None
+    except FormatError as e:
+        if e.path is None and path is not None:
+            raise FormatError(e.message, path=path, **e.where) from None
+        raise
+
+
+def _recording(ol: dict[str, Any], boxes: Boxes, map_bytes: bytes, options, path: Path | None):
+    """``(recording, (states file, summary) or None)`` from the frames read into ``boxes`` and the
+    other members of the document ``ol``."""
+    from aveas_format.mapref.build import build_recording, fill_states
     from aveas_format.crs import LocalFrame
     from aveas_format.opendrive import load_map
 
-    options = options or OpenLabelImportOptions()
-    if "openlabel" in ol and isinstance(ol["openlabel"], dict):
-        ol = ol["openlabel"]
     md = ol.get("metadata") or {}
     ext = md.get(EXT) if isinstance(md.get(EXT), dict) else None
     rmeta = dict((ext or {}).get("recording") or {})
     net = load_map(map_bytes)
     crs = _crs(net, rmeta, md, path)
     local = LocalFrame(crs, offset=net.header.offset, warn=False)
-
-    # frames (streamed one at a time, or from the dict) into per-box columns, and time
     objects = ol.get("objects") or {}
-    acc = _FrameRows(objects, _Frames(ol.get("coordinate_systems")), path)
-    acc.profile = _claims_profile(md, objects)
-    acc.parts = parts
-    if frames is None:
-        for k, fr in (ol.get("frames") or {}).items():
-            acc.add(k, fr)
-    else:  # blocks of frames in columns (the profile's layout) or one frame at a time
-        # (closed before an error leaves: the workers done, none writing into the spill then)
-        with closing(frames(columnar=not acc.static_cuboids, workers=options.workers,
-                            spill_to=acc.spill_target)) as got:
-            for k, fr in got:
-                if path is not None and not acc.keys:  # (the input's digest in a thread from here
-                    prefetch_sha256(path)              # on: the worker processes are forked by now)
-                if k is COLUMNAR:
-                    acc.add_columns(fr)
-                else:
-                    acc.add(k, fr)
-        if "objects" not in ol or ol["objects"] is not objects:  # read after the frames (no pre-scan)
-            objects = ol.get("objects") or {}
-            if _static_cuboids(objects):  # (their boxes come from the frames' transforms)
-                raise _Rescan
-            acc.objects, acc.profile = objects, _claims_profile(md, objects)
-    fd = acc.finish()
-    _report_frame_findings(fd, path)
-    fnum, time_of, start_time, resolved = _frame_times(fd.fkeys, fd.stamps, ext, md, options, path)
-    uids = list(objects)
-    uids += fd.seen_in_frames
-    # (what the states are made with besides the boxes)
-    ctx = SimpleNamespace(ol=ol, ext=ext, objects=objects, options=options, path=path, local=local, net=net)
-    got = None
-    if fd.rows is None:  # (spilled: the states written in parts, or None: read back into memory)
-        got = parts.write_states(fd, uids, time_of, start_time, ctx)
-        if got is None:
-            fd = acc.finish(materialise=True)
-    if got is None:
-        got = _states_in_memory(fd, uids, time_of, start_time, resolved, ctx)
-    uids, obj_ext, pid_of, states, n, start_time, use_file, meta_kw = got
-    interior = fd.interior(pid_of, time_of)
+    systems = CoordinateSystems(ol.get("coordinate_systems"))
+    boxes.add_static(objects, systems)
+    profile = claims_profile(md, objects)
+    if not profile:
+        boxes.found = {k: v for k, v in boxes.found.items() if k[0] != "source.openlabel.missing_attribute"}
+    report_frame_findings(boxes.found, path)
+    p = boxes.decide(ol, options, keep_by_type(path, objects, options.keep_non_road_users))
+    if p.n == 0 and p.uids:
+        raise _no_boxes_error(objects, path)
+    use_file = options.road_coordinates == "file" or (options.road_coordinates == "auto" and p.has_road)
+    ctx = _Context(local=local, net=net, use_file=use_file, needs_size=needs_size(objects, p.names))
+    written = None
+    if boxes.writer.spilled:
+        import pyarrow.parquet as pq
 
-    participants, ego_seen = _participants(uids, objects, pid_of, obj_ext, fd.sizes, ext, fd.frame_types)
-    _check_objects(uids, objects, fd.frame_types, _claims_profile(md, objects), path)
-    if n == 0:
+        log.info("%s: the boxes spilled (more than %s MB); the states written a bucket of participants "
+                 "at a time", path, f"{boxes.writer.memory / 1e6:,.0f}")
+        states_file, summary, infos = boxes.writer.write(
+            Path(boxes.writer.spill_dir) / "states.parquet", transform=partial(_filled, p=p, ctx=ctx, fill=fill_states),
+            key_map=p.pid_of_idx, workers=options.workers)
+        written = (states_file, summary)
+        states = pq.read_schema(states_file.path).empty_table()
+        meta_kw = {k: summary[k] for k in ("duration_s", "nominal_rate_hz", "location")} if summary["rows"] else {}
+    else:
+        got = list(boxes.writer.map(lambda t: states_of(t, p, ctx), key_map=p.pid_of_idx))
+        infos = [s for _, s in got]
+        tables = [t for t, _ in got]
+        states = pa.concat_tables(tables, promote_options="permissive") if tables else None
+        meta_kw = {}
+    sizes = {p.names[i]: v.tolist() for info in infos for i, v in info.items()}
+    participants, ego_seen = participants_of(p.uids, objects, p.pid_of, p.obj_ext, sizes, ext, boxes.types)
+    check_objects(p.uids, objects, boxes.types, profile, path)
+    if states is None or (written is None and p.n == 0):
         states = {c: pa.array([], pa.int64() if c == "participant_id" else pa.float64())
                   for c in ("participant_id", "time", "x", "y", "heading", "vx", "vy")}
-    tables, conditions, staged = _tables(ol, ext, {fnum[k]: time_of[k] for k in fd.fkeys}, pid_of,
-                                         interior)
-    meta_args, kw = _recording_metadata(options, md, rmeta, ext, path, n, ego_seen, staged, conditions)
-    kw = {**meta_kw, **kw}  # (the states' duration, rate and location where they were written in parts)
+    tables, conditions, staged = tables_of(ol, ext, {p.fnum[k]: p.time_of[k] for k in p.fkeys}, p.pid_of,
+                                           p.interior)
+    meta_args, kw = recording_metadata(options, md, rmeta, ext, path, p.n, ego_seen, staged, conditions)
     rec = build_recording(
-        map_source=map_bytes, participants=participants, states=states, **tables, crs=crs,
-        **meta_args, start_time=start_time,
-        recording_id=options.recording_id or rmeta.get("recording_id"),
-        reference=not use_file,
-        source=source_block("openlabel", [path] if path is not None else [], options,
-                            resolved=resolved),
-        **kw)
+        map_source=map_bytes, participants=participants, states=states, **tables, crs=crs, **meta_args,
+        start_time=p.start_time, recording_id=options.recording_id or rmeta.get("recording_id"),
+        reference=not use_file, source=source_block("openlabel", [path] if path is not None else [], options,
+                                                    resolved=p.resolved), **{**meta_kw, **kw})
     if ext is not None:
-        _restore_derived(rec, ext, path)
-    return rec
+        restore_derived(rec, ext, path)
+    return rec, written
 
 
-def _states_in_memory(fd: _FrameData, uids: list[str], time_of: dict, start_time: str,
-                      resolved: dict[str, str], ctx: SimpleNamespace) -> tuple:
-    """``(uids, obj_ext, pid_of, states columns, n, start_time, use_file, {})``: the boxes of all
-    frames (``fd.rows``) into the states' columns at once."""
-    objects, ext, options, path = ctx.objects, ctx.ext, ctx.options, ctx.path
-    if ext is None:  # a foreign file: objects that are no road users, sentinel sizes
-        uids = _drop_non_participants(fd, objects, uids, options, path)
-    obj_ext, pid_of = _participant_ids(objects, uids)
-
-    # per object and frame: one state per box
-    rows = _box_rows(fd, pid_of, time_of)
-    n = len(rows["time"])
-    if n == 0 and uids:
-        raise _no_boxes_error(objects, path)
-    start_time = _box_timestamps(rows, ext, options, start_time, resolved)
-    state_ext = _drop_repeats(rows, fd, path)
-    n = len(rows["time"])
-    x, y, heading = _to_local(rows, ctx.ol, ctx.local, options.world_crs)
-    # (WGS 84 in a thread while the other columns are made: PROJ releases the GIL)
-    lonlat = background(ctx.local.to_wgs84, x, y, name="wgs84") if n >= _THREADED_MIN else None
-    states = _state_columns(rows, x, y, heading, fd.has_vel)
-    use_file = options.road_coordinates == "file" or (options.road_coordinates == "auto" and fd.has_road)
-    if use_file and n:
-        _file_road_coordinates(states, rows, ctx.net, state_ext)
-    _apply_state_extension(states, state_ext)
-    del rows, state_ext  # the per-box columns are in ``states`` now
-    fd.rows = fd.ext = None
-    same_xy = states["x"] is x and states["y"] is y and "lon" not in states and "lat" not in states
-    states = _state_arrays(states, ext)
-    if lonlat is not None:
-        lon, lat = lonlat.result()
-        if same_xy:  # (else the extension changed them: build_recording's from the final ones)
-            states["lon"], states["lat"] = pa.array(lon), pa.array(lat)
-    return uids, obj_ext, pid_of, states, n, start_time, use_file, {}
+class _Context:
+    def __init__(self, **kw: Any) -> None:
+        self.__dict__.update(kw)
 
 
-# ================================================================================================
-# CRS, time, participant ids
-# ================================================================================================
+def _filled(t: pa.Table, p, ctx, fill) -> tuple[pa.Table, Any]:
+    """A bucket's states as the recording has them (:func:`~aveas_format.mapref.build.fill_states`)."""
+    from aveas_format.io.arrow import conform
+    from aveas_format.io.writer import prepare_table
+    from aveas_format.schema.tables import TABLES
+
+    states, sizes = states_of(t, p, ctx)
+    spec = TABLES["states"]
+    return fill(prepare_table(conform(states, spec), spec), ctx.local, None if ctx.use_file else ctx.net), sizes
+
 
 def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], path: Path | None) -> str:
     """The CRS: the map's ``<geoReference>``, else the recording's, else ``projection_string``."""
@@ -302,485 +384,13 @@ def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], path: Path | None) -> s
     return crs
 
 
-def _frame_times(fkeys: list, stamps: dict[Any, Any], ext: dict[str, Any] | None, md: dict[str, Any],
-                 options: OpenLabelImportOptions, path: Path | None = None
-                 ) -> tuple[dict, dict, str, dict[str, str]]:
-    """``(frame number by key, time by key, start_time, resolved)``: in our own files the frames'
-    timestamps are seconds since ``acquisition_date``; in foreign files their unit and epoch are
-    inferred (:func:`~aveas_format.converters.common.resolve_timestamps`; ``timestamp_unit``
-    fixes the unit); without a timestamp on every frame, frame numbers at ``rate_hz``.
-    ``resolved`` records the choice for the ``source`` block."""
-    fnum = {k: (int(k) if str(k).lstrip("-").isdigit() else i) for i, k in enumerate(fkeys)}
-    start_time = None
-    resolved: dict[str, str] = {}
-    if ext and ext.get("start_time"):
-        start_time = ext["start_time"]
-        time_of = {k: float(stamps[k]) if isinstance(stamps[k], (int, float)) else 0.0 for k in fkeys}
-    else:
-        ts = resolve_timestamps([stamps[k] for k in fkeys], options.timestamp_unit,
-                                what="frame_properties.timestamp") if fkeys else None
-        if ts is not None and np.isfinite(ts.seconds).all():
-            time_of = dict(zip(fkeys, ts.seconds.tolist()))
-            start_time = ts.start_time
-            resolved = ts.resolved()
-        else:
-            f0 = min(fnum.values()) if fnum else 0
-            time_of = {k: (fnum[k] - f0) / options.rate_hz for k in fkeys}
-            missing = "no frame has" if ts is None or np.isnan(ts.seconds).all() else "not every frame has"
-            resolved = {"timestamps": f"{missing} a timestamp: frame numbers at rate_hz "
-                                      f"{options.rate_hz:g}"}
-        if start_time is None and md.get("acquisition_date"):
-            try:
-                start_time = _to_utc(str(md["acquisition_date"]))
-            except FormatError:
-                report_source("source.openlabel.bad_metadata",
-                              f"metadata.acquisition_date {md['acquisition_date']!r} is not an ISO "
-                              "8601 time: ignored", stacklevel=3,
-                              file=str(path) if path is not None else None,
-                              json_path="$.openlabel.metadata.acquisition_date")
-    start_time = options.start_time or start_time or "1970-01-01T00:00:00Z"
-    return fnum, time_of, start_time, resolved
-
-
-def _drop_non_participants(fd: _FrameData, objects: dict[str, Any], uids: list[str],
-                           options: OpenLabelImportOptions, path: Path | None) -> list[str]:
-    """The objects to import: not those whose type is no road user (unless
-    ``keep_non_road_users``) or an ignore type (KITTI's DontCare), nor boxes with a sentinel or
-    impossible size (a -1000, a 0): each is dropped from the frames' rows, with one warning
-    saying how many and why. An object left without boxes is dropped when it had any."""
-    keep_uid, report_skipped = _object_filter(fd, objects, uids, options, path)
-    report_skipped()
-    rows = fd.rows
-    if len(rows["uidx"]):
-        keep, dropped = _box_filter(rows, keep_uid, fd.uid_names)
-        if dropped.any():
-            first = int(np.argmax(dropped))
-            _report_bad_sizes(int(dropped.sum()), {fd.uid_names[i] for i in np.unique(rows["uidx"][dropped])},
-                              fd.fkeys[int(rows["rank"][first])], fd.uid_names[int(rows["uidx"][first])], path)
-        if not keep.all():
-            had = set(np.unique(rows["uidx"]).tolist())
-            left = set(np.unique(rows["uidx"][keep]).tolist())
-            for i in had - left:
-                keep_uid[fd.uid_names[i]] = False
-            idx = np.flatnonzero(keep)
-            for c in list(rows):
-                rows[c] = rows[c][idx]
-            fd.ext = {c: _rep_take(r, idx) for c, r in fd.ext.items()}
-    return _kept_uids(fd, uids, keep_uid)
-
-
-def _object_filter(fd: _FrameData, objects: dict[str, Any], uids: list[str],
-                   options: OpenLabelImportOptions, path: Path | None) -> tuple[dict[str, bool], Any]:
-    """``(whether each object is imported by its type, a function reporting those that are not)``."""
-    labels = LabelFilter(options.keep_non_road_users)
-    keep_uid: dict[str, bool] = {}
-    first_skipped = None
-    for u in uids:
-        obj = objects.get(u) if isinstance(objects.get(u), dict) else {}
-        od = obj.get("object_data") if isinstance(obj.get("object_data"), dict) else {}
-        otype = obj.get("type") or (od.get("type") if isinstance(od.get("type"), str) else None) \
-            or fd.frame_types.get(u) or "other"
-        keep_uid[u] = labels(otype) is not None
-        if first_skipped is None and not keep_uid[u]:
-            first_skipped = u
-
-    def report() -> None:
-        note = labels.note("objects")
-        if note:  # (the file is the finding's location)
-            report_source("source.openlabel.skipped_object", "OpenLABEL: " + note,
-                          count=sum(labels.skipped.values()), stacklevel=4,
-                          file=str(path) if path is not None else None, uid=first_skipped,
-                          json_path=_jpath("objects", first_skipped, "type"))
-    return keep_uid, report
-
-
-def _box_filter(rows: dict[str, np.ndarray], keep_uid: dict[str, bool], names: list[str]
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """``(the boxes kept, those dropped for their size)`` of objects kept by type."""
-    by_index = np.asarray([keep_uid.get(u, True) for u in names], bool)
-    keep = by_index[rows["uidx"]]
-    bad = implausible_size(np.c_[rows["dl"], rows["dw"], rows["dh"]])
-    return keep & ~bad, keep & bad
-
-
-def _report_bad_sizes(count: int, who: set[str], frame: Any, uid: str, path: Path | None) -> None:
-    who_ = sorted(who)
-    report_source("source.openlabel.bad_size",
-                  f"OpenLABEL: dropped {count} boxes with a sentinel or impossible size "
-                  f"(<= 0, not finite or > 400 m) of object(s) {', '.join(who_[:5])}"
-                  + (" ..." if len(who_) > 5 else ""), count=count, stacklevel=4,
-                  file=str(path) if path is not None else None, frame=frame, uid=uid,
-                  json_path=_jpath("frames", frame, "objects", uid, "object_data", "cuboid"))
-
-
-def _kept_uids(fd: _FrameData, uids: list[str], keep_uid: dict[str, bool]) -> list[str]:
-    """The objects imported; ``fd.sizes`` of those, without implausible sizes."""
-    for u in list(fd.sizes):
-        if not keep_uid.get(u, True):
-            del fd.sizes[u]
-        else:
-            arr = np.asarray(fd.sizes[u], float).reshape(-1, 3)
-            fd.sizes[u] = arr[~implausible_size(arr)].tolist()
-    return [u for u in uids if keep_uid.get(u, True)]
-
-
-def _participant_ids(objects: dict[str, Any], uids: list[str]) -> tuple[dict, dict[str, int]]:
-    """``(extension item by object, participant id by object)``: the ids our own export wrote, else
-    the object keys where all are numbers, else 0, 1, ... in order."""
-    obj_ext = {}
-    for u in uids:
-        size_items = _attrs((objects.get(u) or {}).get("object_data")).get("dimensions/size") or []
-        e = size_items[0].get(EXT) if size_items and isinstance(size_items[0].get(EXT), dict) else None
-        obj_ext[u] = e
-    if all(e is not None and "participant_id" in e for e in obj_ext.values()) and uids:
-        pid_of = {u: int(obj_ext[u]["participant_id"]) for u in uids}
-    elif all(str(u).isdigit() for u in uids):
-        pid_of = {u: int(u) for u in uids}
-    else:
-        pid_of = {u: i for i, u in enumerate(uids)}
-    return obj_ext, pid_of
-
-
-# ================================================================================================
-# the boxes -> states columns
-# ================================================================================================
-
-def _box_rows(fd: _FrameData, pid_of: dict[str, int], time_of: dict) -> dict[str, np.ndarray]:
-    """The per-box columns of the frames, with ``participant_id`` and ``time`` in place of the
-    object and frame indices."""
-    rows = fd.rows
-    uidx, rank = rows["uidx"], rows["rank"]  # (kept: where the findings are)
-    rows["participant_id"] = np.asarray([pid_of.get(u, 0) for u in fd.uid_names])[uidx] \
-        if fd.uid_names else np.asarray([])
-    rows["time"] = np.asarray([time_of[k] for k in fd.fkeys], float)[rank] if fd.fkeys else np.asarray([])
-    return rows
-
-
 def _no_boxes_error(objects: dict[str, Any], path: Path | None) -> FormatError:
-    static = sum(1 for o in objects.values()
-                 if isinstance(o, dict) and isinstance(o.get("object_data"), dict)
+    static = sum(1 for o in objects.values() if isinstance(o, dict) and isinstance(o.get("object_data"), dict)
                  and "cuboid" in o["object_data"])
-    flat = sum(1 for o in objects.values()
-               if isinstance(o, dict) and isinstance(o.get("object_data"), dict)
+    flat = sum(1 for o in objects.values() if isinstance(o, dict) and isinstance(o.get("object_data"), dict)
                and o["object_data"].get("bbox") and not o["object_data"].get("cuboid"))
     hint = (f" ({static} object(s) carry a static cuboid in object_data, which has no time: "
             "a trajectory needs frames)" if static else
             f" ({flat} objects carry 2D boxes (bbox) only: image coordinates, no position on the "
             "ground)" if flat else "")
     return FormatError(f"no frame has a cuboid for any object{hint}", path=path)
-
-
-def _box_timestamps(rows: dict[str, np.ndarray], ext: dict[str, Any] | None,
-                    options: OpenLabelImportOptions, start_time: str, resolved: dict[str, str]) -> str:
-    """Per-box measurement timestamps (cuboid attribute "timestamp", absolute) beat the frame's:
-    the ASAM example repeats frame timestamps while its boxes' differ. Sets ``rows["time"]``
-    (and ``resolved``); returns the start time."""
-    cts = np.asarray(rows["cub_ts"], float)
-    if ext is None and len(rows["time"]) and np.isfinite(cts).all():
-        ts = resolve_timestamps(cts.tolist(), options.timestamp_unit,
-                                what="cuboid attribute timestamp")
-        if ts.epoch:
-            rows["time"] = ts.seconds
-            resolved.update(ts.resolved())
-            if not options.start_time:
-                start_time = ts.start_time
-    return start_time
-
-
-def _drop_repeats(rows: dict[str, np.ndarray], fd: _FrameData, path: Path | None,
-                  dropped: list | None = None) -> dict[str, tuple]:
-    """One state per participant and time: later duplicates are dropped (from ``rows``, in place,
-    and from the extension columns ``fd.ext``, returned), reported at the first one dropped; or,
-    given a list ``dropped``, ``(count, index of the first, frame, object)`` appended to it."""
-    state_ext = fd.ext
-    n = len(rows["time"])
-    if n:
-        pid, t = np.asarray(rows["participant_id"]), np.asarray(rows["time"], float)
-        order = np.lexsort((t, pid))  # (stable: the first of equal keys first)
-        ps, ts = pid[order], t[order]
-        repeat = (ps[1:] == ps[:-1]) & (ts[1:] == ts[:-1])
-        if repeat.any():
-            keep = np.sort(order[np.concatenate([[True], ~repeat])])
-            dup = np.ones(n, bool)
-            dup[keep] = False
-            i = int(np.argmax(dup))
-            frame, uid = fd.fkeys[int(rows["rank"][i])], fd.uid_names[int(rows["uidx"][i])]
-            if dropped is not None:
-                dropped.append((n - len(keep), i, frame, uid))
-            else:
-                _report_repeats(n - len(keep), frame, uid, path)
-            for c in list(rows):
-                rows[c] = rows[c][keep]
-            state_ext = {c: _rep_take(r, keep) for c, r in state_ext.items()}
-    return state_ext
-
-
-def _report_repeats(count: int, frame: Any, uid: str, path: Path | None) -> None:
-    report_source("source.openlabel.duplicate_state",
-                  f"OpenLABEL: {count} boxes repeat a (participant, time) and were "
-                  f"dropped (first: frame {frame}, object {uid})", count=count,
-                  stacklevel=4, file=str(path) if path is not None else None, frame=frame,
-                  uid=uid, json_path=_jpath("frames", frame, "objects", uid))
-
-
-def _to_local(rows: dict[str, np.ndarray], ol: dict[str, Any], local, root_crs: str | None,
-              roots: set | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Box centres and yaw in the map's local frame: through WGS84 where the root coordinate system
-    has a CRS (``world_crs``, or a UTM root's name), else the root is the map frame. ``roots``:
-    the root coordinate systems of all boxes (default: of ``rows``)."""
-    from aveas_format.crs import parse_crs
-    from aveas_format.numeric import wrap_angle
-
-    n = len(rows["time"])
-    px, py = np.asarray(rows["px"], float), np.asarray(rows["py"], float)
-    yaw = np.asarray(rows["yaw"], float)
-    if roots is None:
-        roots = {r for r in rows["csroot"] if r}
-    wcrs = root_crs
-    if wcrs is None and len(roots) == 1:
-        r = next(iter(roots))
-        wcrs = _utm_crs(r, ((ol.get("coordinate_systems") or {}).get(r) or {}).get("type"))
-    if wcrs is not None and n:
-        import pyproj
-
-        tr = pyproj.Transformer.from_crs(parse_crs(wcrs).crs, "EPSG:4326", always_xy=True)
-        lon, lat = tr.transform(px, py)
-        lon2, lat2 = tr.transform(px + np.cos(yaw), py + np.sin(yaw))
-        x, y = local.from_wgs84(np.asarray(lon), np.asarray(lat))
-        x2, y2 = local.from_wgs84(np.asarray(lon2), np.asarray(lat2))
-        heading = np.arctan2(y2 - y, x2 - x)
-    else:
-        x, y, heading = px, py, yaw
-    return x, y, wrap_angle(heading)
-
-
-def _state_columns(rows: dict[str, np.ndarray], x: np.ndarray, y: np.ndarray, heading: np.ndarray,
-                   has_vel: bool, has_acc: bool | None = None) -> dict[str, Any]:
-    """The states' columns from the profile's attributes: position, velocity and acceleration
-    (vehicle -> world frame) with their 1-sigma, yaw rate, lights. ``has_acc``: every box has an
-    acceleration (default: every box of ``rows``)."""
-    n = len(rows["time"])
-    pid = np.asarray(rows["participant_id"], np.int64)
-    t = np.asarray(rows["time"], float)
-    states: dict[str, Any] = {"participant_id": pid, "time": t, "x": x, "y": y, "heading": heading,
-                              "z": np.asarray(rows["pz"], float)}
-    if has_vel and n:
-        vx, vy = _rot_world(np.asarray(rows["vu"], float), np.asarray(rows["vv"], float), heading)
-        states["vx"], states["vy"] = vx, vy
-        yr = np.asarray(rows["yr"], float)
-        if np.isfinite(yr).any():
-            states["yaw_rate"] = yr
-        au, av = np.asarray(rows["au"], float), np.asarray(rows["av"], float)
-        if has_acc is None:
-            has_acc = bool(np.isfinite(au).all() and np.isfinite(av).all())
-        if has_acc:
-            states["ax"], states["ay"] = _rot_world(au, av, heading)
-        for c in ("x_std", "y_std", "z_std", "heading_std"):
-            a = np.asarray(rows[c], float)
-            if np.isfinite(a).any():
-                states[c] = a
-        su, sv = np.asarray(rows["vu_std"], float), np.asarray(rows["vv_std"], float)
-        if np.isfinite(su).any():
-            sx, sy = _body_std(su, sv, None, -heading)  # vehicle -> world (independent components)
-            states["vx_std"], states["vy_std"] = sx, sy
-        ysd = np.asarray(rows["yr_std"], float)
-        if np.isfinite(ysd).any():
-            states["yaw_rate_std"] = ysd
-        su, sv = np.asarray(rows["au_std"], float), np.asarray(rows["av_std"], float)
-        if np.isfinite(su).any() and "ax" in states:
-            states["ax_std"], states["ay_std"] = _body_std(su, sv, None, -heading)
-    for c in LIGHTS:
-        a = np.asarray(rows[c], float)
-        if not np.isnan(a).all():
-            states[c] = pa.array(a, mask=np.isnan(a), type=pa.float32())
-    return states
-
-
-def _file_road_coordinates(states: dict[str, Any], rows: dict[str, np.ndarray], net,
-                           state_ext: dict[str, tuple] | None = None) -> None:
-    """The file's road coordinates into ``states`` (the lane offset from ``lane_position`` and the
-    lane's width in the map, except where this library's extension item gives it: it replaces
-    the map's value there, :func:`_apply_state_extension`)."""
-    n = len(rows["time"])
-    road = pa.array(rows["road_id"], pa.string(), from_pandas=True)
-    states["road_id"] = road
-    lanes = pa.array(rows["lane_id"], pa.int16(), from_pandas=True)
-    states["lane_id"] = lanes
-    states["road_s"] = np.asarray(rows["road_s"], float)
-    states["road_t"] = np.asarray(rows["road_t"], float)
-    lp = np.asarray(rows["lane_position"], float)
-    if np.isfinite(lp).any():
-        enc = road.dictionary_encode()
-        code = enc.indices.fill_null(-1).to_numpy(zero_copy_only=False)
-        lane = lanes.fill_null(0).to_numpy(zero_copy_only=False).astype(np.int64)
-        ok = np.isfinite(lp) & (code >= 0)
-        given = (state_ext or {}).get("lane_offset")
-        if given is not None and given[0] == "f":
-            ok &= ~given[2]  # (present in the extension: null or a value, the map's is not used)
-        lo = np.full(n, np.nan)
-        idx = np.flatnonzero(ok)
-        order = idx[np.argsort(code[idx], kind="stable")]
-        bounds = np.searchsorted(code[order], np.arange(len(enc.dictionary) + 1))
-        for k, r in enumerate(enc.dictionary.to_pylist()):
-            m = order[bounds[k]:bounds[k + 1]]
-            if not len(m):
-                continue
-            try:
-                inner, outer = net.lane_borders(r, states["road_s"][m], lane[m])
-                lo[m] = lp[m] * np.abs(outer - inner)
-            except Exception:  # noqa: BLE001 — a road the map lacks
-                pass
-        states["lane_offset"] = lo
-
-
-def _apply_state_extension(states: dict[str, Any], state_ext: dict[str, tuple]) -> None:
-    """The extension of this library's own export into ``states``: its columns and the exact
-    values (and nulls) where the profile's would differ."""
-    for c in sorted(state_ext):
-        base = states.get(c)
-        rep = state_ext[c]
-        if rep[0] == "f":  # floats (the common case): vectorised, same result as below
-            _, fv, pr, nl = rep
-            if base is None and (pr & ~nl).any():
-                states[c] = pa.array(fv, mask=~(pr & ~nl), type=pa.float64())
-                continue
-            if (isinstance(base, np.ndarray) and base.dtype == np.float64 and base.ndim == 1
-                    and len(base) == len(fv)):
-                null = np.where(pr, nl, np.isnan(base))
-                if not null.all():
-                    states[c] = pa.array(np.where(pr, fv, base), mask=null, type=pa.float64())
-                    continue
-        if base is None and rep[0] == "o":  # (bools, ints, texts: Arrow infers from the objects)
-            try:
-                states[c] = pa.array(rep[1], mask=rep[1] == _MISSING)
-                continue
-            except (pa.ArrowException, TypeError, ValueError):  # (mixed values: as a list below)
-                pass
-        vals = _rep_list(rep)
-        if base is None:
-            states[c] = pa.array([None if v is _MISSING else v for v in vals])
-        else:
-            cur = base.to_pylist() if isinstance(base, (pa.Array, pa.ChunkedArray)) else [
-                None if (isinstance(b, float) and math.isnan(b)) else b for b in np.asarray(base).tolist()]
-            states[c] = pa.array([cur[i] if v is _MISSING else v for i, v in enumerate(vals)])
-
-
-def _state_arrays(states: dict[str, Any], ext: dict[str, Any] | None) -> dict[str, pa.Array]:
-    """The states' columns as Arrow arrays (only those our own export had, where it says)."""
-    cols_keep = (ext or {}).get("states_columns")
-    if cols_keep:
-        for c in list(states):
-            if c not in cols_keep:
-                del states[c]
-    return {c: (v if isinstance(v, (pa.Array, pa.ChunkedArray)) else pa.array(
-        np.asarray(v), from_pandas=True)) for c, v in states.items()}
-
-
-# ================================================================================================
-# participants
-# ================================================================================================
-
-def _participants(uids: list[str], objects: dict[str, Any], pid_of: dict[str, int], obj_ext: dict,
-                  sizes: dict[str, list], ext: dict[str, Any] | None, frame_types: dict[str, str]
-                  ) -> tuple[dict[str, Any], bool]:
-    """``(participants columns, whether an object is the recording vehicle)``."""
-    part, ego_seen = _profile_participants(uids, objects, pid_of, sizes, frame_types)
-    if all(v is None for v in part["class_pmf"]):
-        del part["class_pmf"]
-    else:
-        from aveas_format.schema.pmf import one_hot
-
-        part["class_pmf"] = [v if v is not None else one_hot([c], "class")[0].tolist()
-                             for v, c in zip(part["class_pmf"], part["class"])]
-        m = np.asarray(part["class_pmf"], np.float32)
-        part["class_pmf"] = pa.array(list(m), pa.list_(pa.float32()))
-        # the class is the PMF's argmax (a foreign file may disagree; the PMF wins)
-        part["class"] = [CLASSES[int(np.argmax(r))] if not obj_ext.get(u) else c
-                         for r, c, u in zip(m, part["class"], uids)]
-    for c in ("attached_to", "height", "length_std", "width_std", "height_std"):
-        if c in part and all(v is None for v in part[c]):
-            del part[c]
-    p_ext_rows = [obj_ext.get(u) for u in uids]
-    if any(e for e in p_ext_rows):
-        _apply_participants_extension(part, p_ext_rows)
-    pcols = (ext or {}).get("participants_columns")
-    if pcols:
-        for c in list(part):
-            if c not in pcols:
-                del part[c]
-    participants = {c: (v if isinstance(v, (pa.Array, pa.ChunkedArray)) else pa.array(v))
-                    for c, v in part.items()}
-    if not uids:  # a file without objects (e.g. the profile's minimum example)
-        participants = {"participant_id": pa.array([], pa.int64()), "class": pa.array([], pa.string()),
-                        "length": pa.array([], pa.float64()), "width": pa.array([], pa.float64())}
-    return participants, ego_seen
-
-
-def _profile_participants(uids: list[str], objects: dict[str, Any], pid_of: dict[str, int],
-                          sizes: dict[str, list], frame_types: dict[str, str]
-                          ) -> tuple[dict[str, list], bool]:
-    """The participants' columns from the objects' types (in ``objects``, or inside a frame's
-    object_data as TUM Traffic writes them) and static attributes (the size, else the median of
-    the object's boxes; a static size with a sentinel value is ignored)."""
-    part: dict[str, list] = defaultdict(list)
-    ego_seen = False
-    for u in uids:
-        obj = objects.get(u) or {}
-        attrs = _attrs(obj.get("object_data"))
-        od = obj.get("object_data") if isinstance(obj.get("object_data"), dict) else {}
-        otype = str(obj.get("type") or (od.get("type") if isinstance(od.get("type"), str) else None)
-                    or frame_types.get(u) or "other")
-        cls = TYPE_TO_CLASS.get(otype) or label_kind(otype)[0]
-        is_ego = otype.lower() in ("egocar", "ego", "ego_vehicle") or bool(_first(attrs, "is_recorder", False))
-        ego_seen |= is_ego
-        size = _static_size(_first(attrs, "dimensions/size"))
-        if size is None:
-            arr = np.asarray(sizes.get(u) or [[1.0, 1.0, 1.0]], float)
-            size = np.median(arr, axis=0).tolist()
-        ssd = _first(attrs, "dimensions/size/ustddev")
-        pmf = _first(attrs, "classification/uncertainties")
-        part["participant_id"].append(pid_of[u])
-        part["source_id"].append(str(obj.get("name") or u))
-        part["class"].append(cls)
-        part["length"].append(float(size[0]))
-        part["width"].append(float(size[1]))
-        part["height"].append(float(size[2]) if len(size) > 2 and size[2] else None)
-        part["length_std"].append(float(ssd[0]) if ssd else None)
-        part["width_std"].append(float(ssd[1]) if ssd else None)
-        part["height_std"].append(float(ssd[2]) if ssd and len(ssd) > 2 else None)
-        part["class_pmf"].append([float(v) for v in pmf] if pmf and len(pmf) == len(CLASSES) else None)
-        att = _first(attrs, "attached_to")
-        part["attached_to"].append(pid_of.get(str(att)) if att is not None else None)
-        part["role"].append("recording_vehicle" if is_ego else "observed")
-    return part, ego_seen
-
-
-def _static_size(size: Any) -> list | None:
-    """An object's static ``dimensions/size`` (length, width[, height]), or None where absent or
-    a sentinel (a -1000, a 0, not numbers)."""
-    if not isinstance(size, (list, tuple)) or len(size) < 2:
-        return None
-    try:
-        arr = np.asarray([[float(v) for v in size[:3]] + [np.nan] * (3 - len(size[:3]))])
-    except (TypeError, ValueError):
-        return None
-    return None if implausible_size(arr)[0] else list(size)
-
-
-def _apply_participants_extension(part: dict[str, Any], p_ext_rows: list) -> None:
-    """The participants' extension items of this library's own export into ``part``."""
-    keys = sorted({c for e in p_ext_rows if e for c in e} - {"participant_id"})
-    for c in keys:
-        vals = [e.get(c, _MISSING) if e else _MISSING for e in p_ext_rows]
-        cur = part.get(c)
-        if c == "class_pmf":
-            mats = [None if v is _MISSING else v for v in vals]
-            if cur is not None:
-                curl = cur.to_pylist()
-                mats = [curl[i] if v is _MISSING else v for i, v in enumerate(vals)]
-            part[c] = pa.array(mats, pa.list_(pa.float32()))
-            continue
-        if cur is None:
-            part[c] = [None if v is _MISSING else v for v in vals]
-        else:
-            part[c] = [cur[i] if v is _MISSING else v for i, v in enumerate(vals)]

@@ -10,7 +10,7 @@ rows of one chunk of frames at a time (:func:`~.encode.frame_chunks`), in frame 
   ``streams_states``): one pass over ``states.parquet`` row group by row group writes each row to
   the spill file of its *bucket* — consecutive whole chunks of frames, about
   :data:`BUCKET_BYTES` of states each (Arrow IPC streams; uncompressed up to
-  :data:`.spill.PLAIN_BUCKETS_BYTES` of states, else lz4) — which is the transpose done out
+  :data:`aveas_format.io.resort.PLAIN_BUCKETS_BYTES` of states, else lz4) — which is the transpose done out
   of core; then the export holds one bucket at a time. Memory: one row group during the pass, one
   bucket and one chunk's text during the encoding, plus a few numbers per state (the frame of each
   row; docs/performance.md "Memory"), whatever the recording's length.
@@ -32,7 +32,7 @@ import numpy as np
 import pyarrow as pa
 
 from aveas_format.converters.openlabel.encode import chunk_bounds
-from aveas_format.converters.openlabel.spill import READ, IpcWriter, bucket_options, write_by_bucket
+from aveas_format.io.resort import READ, IpcWriter, bucket_options, write_by_bucket
 from aveas_format.io.arrow import column_numpy
 from aveas_format.parallel import read_ahead
 

@@ -1,5 +1,5 @@
 """The OpenLABEL import's tables and metadata (the last steps of
-:func:`aveas_format.converters.openlabel.read._openlabel_to_recording`): the events, interior,
+:func:`aveas_format.converters.openlabel.read.openlabel_to_recording`): the events, interior,
 environment and unobserved tables and the static conditions — from the ``aveas_format`` extension
 where the file has it, else from the profile's events and contexts — the recording's metadata, and
 the derived tables of our own export restored.
@@ -8,7 +8,7 @@ the derived tables of our own export restored.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import pyarrow as pa
 
@@ -16,19 +16,16 @@ from aveas_format.converters.openlabel.profile import (
     EXT,
     PROFILE_TO_METHOD,
     TYPE_TO_EVENT,
-    _attrs,
-    _conditions_from,
-    _enum_value,
-    _first,
+    attributes_of,
+    conditions_from,
+    enum_value,
+    first_value,
     table_from_json,
 )
 from aveas_format.errors import report_source
 
-if TYPE_CHECKING:
-    from aveas_format.converters.openlabel.read import OpenLabelImportOptions
 
-
-def _tables(ol: dict[str, Any], ext: dict[str, Any] | None, frame_time: dict[int, float],
+def tables_of(ol: dict[str, Any], ext: dict[str, Any] | None, frame_time: dict[int, float],
             pid_of: dict[str, int], interior: dict[str, list]) -> tuple[dict[str, Any], dict | None, bool]:
     """``(events, unobserved, environment and interior tables, static conditions, staged)``: the
     tables from the extension, else from the profile's events, interior attributes and contexts."""
@@ -38,11 +35,11 @@ def _tables(ol: dict[str, Any], ext: dict[str, Any] | None, frame_time: dict[int
     environment = table_from_json(tables_ext.get("environment"), "environment")
     interior_t = table_from_json(tables_ext.get("interior"), "interior")
     if ext is None:
-        events = _profile_events(ol, frame_time, pid_of)
+        events = profile_events(ol, frame_time, pid_of)
         if interior:
             interior_t = pa.table({c: pa.array(v) for c, v in interior.items()
                                    if c in ("participant_id", "time") or any(x is not None for x in v)})
-    conditions, environment_rows, staged = _profile_contexts(ol, frame_time)
+    conditions, environment_rows, staged = profile_contexts(ol, frame_time)
     if ext is None and environment_rows:
         environment = pa.table({k: [r.get(k) for r in environment_rows]
                                 for k in sorted({k for r in environment_rows for k in r})})
@@ -50,14 +47,14 @@ def _tables(ol: dict[str, Any], ext: dict[str, Any] | None, frame_time: dict[int
     return tables, conditions, staged
 
 
-def _recording_metadata(options: OpenLabelImportOptions, md: dict[str, Any], rmeta: dict[str, Any],
+def recording_metadata(options, md: dict[str, Any], rmeta: dict[str, Any],
                         ext: dict[str, Any] | None, path: Path | None, n: int, ego_seen: bool,
                         staged: bool, conditions: dict[str, Any] | None
                         ) -> tuple[dict[str, Any], dict[str, Any]]:
     """``(method, partner, provenance, acquisition, rights; the other recording.json fields)``:
     the options beat our own export's recording.json, which beats the profile's metadata."""
     method = options.method or ((rmeta.get("acquisition") or {}).get("method")) or \
-        PROFILE_TO_METHOD.get(str(_enum_value(md.get("acquisition_method"))), None) or \
+        PROFILE_TO_METHOD.get(str(enum_value(md.get("acquisition_method"))), None) or \
         ("road_vehicle" if ego_seen else "infrastructure_camera")
     partner = options.partner or (rmeta.get("acquisition") or {}).get("partner") or \
         md.get("acquisition_partner") or md.get("annotator") or "unknown"
@@ -68,7 +65,7 @@ def _recording_metadata(options: OpenLabelImportOptions, md: dict[str, Any], rme
     if not acq and path is not None:
         acq = {"platform": f"imported from OpenLABEL {path.name}"}
     rights = rmeta.get("rights") or {
-        "right_of_use": str(_enum_value(md.get("right_of_use") or options.right_of_use)),
+        "right_of_use": str(enum_value(md.get("right_of_use") or options.right_of_use)),
         "license": options.license, "owner": options.owner or partner}
     if options.owner or options.license != "unspecified":
         rights = {**rights, "license": options.license if options.license != "unspecified"
@@ -103,7 +100,7 @@ def _recording_metadata(options: OpenLabelImportOptions, md: dict[str, Any], rme
     return meta_args, kw
 
 
-def _restore_derived(rec, ext: dict[str, Any], path: Path | None = None) -> None:
+def restore_derived(rec, ext: dict[str, Any], path: Path | None = None) -> None:
     """The derived tables and recording.json ``derived`` entries of this library's own export."""
     from aveas_format.schema.metadata import DerivedEntry
     from aveas_format.schema.tables import TABLES
@@ -135,11 +132,11 @@ def _restore_derived(rec, ext: dict[str, Any], path: Path | None = None) -> None
 
 
 
-def _profile_events(ol: dict[str, Any], frame_time: dict[int, float], pid_of: dict[str, int]):
+def profile_events(ol: dict[str, Any], frame_time: dict[int, float], pid_of: dict[str, int]):
     evs = ol.get("events") or {}
     rows = []
     for k, ev in evs.items():
-        etype = str(_enum_value((ev or {}).get("type") or ""))
+        etype = str(enum_value((ev or {}).get("type") or ""))
         kind = TYPE_TO_EVENT.get(etype) or TYPE_TO_EVENT.get(etype.replace("_", " "))
         if kind is None and etype.replace(" ", "_") in {"near_miss", "accident", "lane_change", "cut_in",
                                                         "overtaking", "following", "turning", "parking",
@@ -148,9 +145,9 @@ def _profile_events(ol: dict[str, Any], frame_time: dict[int, float], pid_of: di
             kind = etype.replace(" ", "_")
         if kind is None:
             continue
-        attrs = _attrs(ev.get("event_data"))
-        a = _first(attrs, "event_participant/role_a_id")
-        b = _first(attrs, "event_participants/role_b_ids") or []
+        attrs = attributes_of(ev.get("event_data"))
+        a = first_value(attrs, "event_participant/role_a_id")
+        b = first_value(attrs, "event_participants/role_b_ids") or []
         ids = [pid_of[str(v)] for v in ([a] if a is not None else []) + list(b) if str(v) in pid_of]
         fi = (ev.get("frame_intervals") or [{}])[0]
         fs, fe = fi.get("frame_start"), fi.get("frame_end")
@@ -166,7 +163,7 @@ def _profile_events(ol: dict[str, Any], frame_time: dict[int, float], pid_of: di
     return pa.table({k: [r[k] for r in rows] for k in rows[0]})
 
 
-def _profile_contexts(ol: dict[str, Any], frame_time: dict[int, float]):
+def profile_contexts(ol: dict[str, Any], frame_time: dict[int, float]):
     conditions: dict[str, Any] = {}
     env_rows: list[dict[str, Any]] = []
     staged = False
@@ -175,9 +172,9 @@ def _profile_contexts(ol: dict[str, Any], frame_time: dict[int, float]):
         name, typ = str(ctx.get("name", "")), str(ctx.get("type", ""))
         cd = ctx.get("context_data") or {}
         if "scenario" in name.lower() or typ == "ScenarioContext":
-            staged |= bool(_first(_attrs(cd), "scenario/is_staged", False))
+            staged |= bool(first_value(attributes_of(cd), "scenario/is_staged", False))
         elif "environment" in name.lower() or typ == "EnvironmentContext":
-            c = _conditions_from(cd)
+            c = conditions_from(cd)
             fis = ctx.get("frame_intervals")
             if fis:
                 for fi in fis:

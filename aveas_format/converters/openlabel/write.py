@@ -26,29 +26,29 @@ import pyarrow as pa
 from pydantic import Field
 
 from aveas_format.converters.openlabel.profile import (
-    _DEFAULT_THRESHOLDS,
-    _NO_RECORDER,
-    _PROFILE_PART_COLS,
-    _PROFILE_STATE_COLS,
-    _ROAD_CLASSES,
+    DEFAULT_THRESHOLDS,
+    NO_RECORDER,
+    PROFILE_PART_COLS,
+    PROFILE_STATE_COLS,
+    ROAD_CLASSES,
     CLASS_TO_TYPE,
     EVENT_TO_TYPE,
     EXT,
     EXT_VERSION,
     LIGHTS,
     METHOD_TO_PROFILE,
-    _body_std,
-    _clean,
-    _environment_data,
-    _iso_ms,
-    _no_gc,
-    _rot_body,
-    _rot_world,
+    vehicle_std,
+    json_safe,
+    environment_data,
+    iso_ms,
+    no_gc,
+    to_vehicle,
+    to_world,
     table_to_json,
 )
 from aveas_format.converters.openlabel.encode import CHUNK_ROWS, FrameParts, dumps, frame_chunks, orjson
 from aveas_format.converters.openlabel.states import open_states
-from aveas_format.converters.openlabel.stream import compression
+from aveas_format.converters.openlabel.source import compression
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.io.arrow import column_numpy
 
@@ -152,7 +152,7 @@ def _document(rec, states, opendrive: str, extension: bool, road_attributes: boo
     (:func:`~.states.open_states`)."""
     meta = rec.meta
     thr = meta.thresholds.model_dump() if meta.thresholds else {}
-    thr_out = {k: (thr.get(k) or v) for k, v in _DEFAULT_THRESHOLDS.items()}
+    thr_out = {k: (thr.get(k) or v) for k, v in DEFAULT_THRESHOLDS.items()}
     metadata = _profile_metadata(meta, opendrive, thr_out)
     if extension:
         metadata[EXT] = _extension(rec, thr, states.column_names)
@@ -175,7 +175,7 @@ def _document(rec, states, opendrive: str, extension: bool, road_attributes: boo
     try:
         yield b'{"openlabel":{"metadata":' + dumps(metadata) + b',"frames":{'
         del metadata
-        with _no_gc():
+        with no_gc():
             if parts is not None:
                 yield from parts.frames()
             else:
@@ -206,7 +206,7 @@ def _profile_metadata(meta, opendrive: str, thr_out: dict[str, float]) -> dict[s
         "right_of_use": meta.rights.right_of_use.value,
         "acquisition_method": METHOD_TO_PROFILE[meta.acquisition.method.value],
         "acquisition_partner": meta.acquisition.partner,
-        "acquisition_date": _iso_ms(meta.start_time),
+        "acquisition_date": iso_ms(meta.start_time),
         "opendrive": opendrive,
         "projection_string": meta.crs,
         "threshold_gttc": float(thr_out["ttc_s"]),
@@ -234,7 +234,7 @@ class _Statics:
                                          for c in ("length_std", "width_std", "height_std")]).reshape(-1, 3)
         self.sizes = np.asarray([[self.length[q], self.width[q], self.height[q]] for q in ids],
                                 dtype=np.float64).reshape(-1, 3)
-        self.road_class = np.asarray([c in _ROAD_CLASSES for c in self.classes], dtype=bool)
+        self.road_class = np.asarray([c in ROAD_CLASSES for c in self.classes], dtype=bool)
 
     def rows(self, pid: np.ndarray) -> np.ndarray:
         """The participants' row of each state (KeyError: a state of no participant)."""
@@ -269,10 +269,10 @@ class _Columns:
         self.h = h = column_numpy(s, "heading", missing=None)
         self.z = column_numpy(s, "z", missing=None)
         self.vx, self.vy = vx, vy = tuple(column_numpy(s, c, missing=None) for c in ("vx", "vy"))
-        self.vu, self.vv = _rot_body(vx, vy, h)
+        self.vu, self.vv = to_vehicle(vx, vy, h)
         self.ax, self.ay = ax, ay = tuple(column_numpy(s, c, missing=None) for c in ("ax", "ay"))
         self.ax_w, self.ay_w = (ax, ay) if acc_w is None else acc_w
-        self.au, self.av = _rot_body(np.nan_to_num(self.ax_w), np.nan_to_num(self.ay_w), h)
+        self.au, self.av = to_vehicle(np.nan_to_num(self.ax_w), np.nan_to_num(self.ay_w), h)
         self.yaw_rate = column_numpy(s, "yaw_rate", missing=None)
         self.stds = {c: column_numpy(s, c, missing=None) for c in
                      ("x_std", "y_std", "z_std", "heading_std", "vx_std", "vy_std", "ax_std",
@@ -453,9 +453,9 @@ def _exact_values(s: pa.Table, cols: _Columns) -> dict[str, np.ndarray]:
 
     exact: dict[str, list] = {}
     hw = wrap_angle(cols.h)
-    back = dict(zip(("vx", "vy"), _rot_world(cols.vu, cols.vv, hw)))
+    back = dict(zip(("vx", "vy"), to_world(cols.vu, cols.vv, hw)))
     if cols.ax is not None and cols.ay is not None:
-        back.update(zip(("ax", "ay"), _rot_world(cols.au, cols.av, hw)))
+        back.update(zip(("ax", "ay"), to_world(cols.au, cols.av, hw)))
     z = cols.z
     if z is not None:
         hv = cols.static.sizes[cols.prow, 2]
@@ -484,11 +484,11 @@ def _uncertainty(cols: _Columns) -> tuple:
     vel_ok = acc_ok = np.zeros(n, bool)
     if stds["vx_std"] is not None and stds["vy_std"] is not None:
         vel_ok = np.isfinite(stds["vx_std"]) & np.isfinite(stds["vy_std"])
-        su, sv = _body_std(_z(stds["vx_std"]), _z(stds["vy_std"]), cols.vxvy, h)
+        su, sv = vehicle_std(_z(stds["vx_std"]), _z(stds["vy_std"]), cols.vxvy, h)
         vel_std = [su, sv, 0.0, 0.0, 0.0, _z(stds["yaw_rate_std"])]
     if stds["ax_std"] is not None and stds["ay_std"] is not None:
         acc_ok = np.isfinite(stds["ax_std"]) & np.isfinite(stds["ay_std"])
-        su, sv = _body_std(_z(stds["ax_std"]), _z(stds["ay_std"]), cols.axay, h)
+        su, sv = vehicle_std(_z(stds["ax_std"]), _z(stds["ay_std"]), cols.axay, h)
         acc_std = [su, sv, 0.0, 0.0, 0.0, 0.0]
     return box_std, vel_std, vel_ok, acc_std, acc_ok
 
@@ -513,7 +513,7 @@ def _frame_inputs(rec, cols: _Columns, extension: bool, road_attributes: bool) -
     if extension:
         nullable = [c for c in ("z", "z_std", "x_std", "y_std", "heading_std", "ax", "ay", "yaw_rate")
                     if c in s.column_names]
-        ext = {"columns": {c: s.column(c) for c in s.column_names if c not in _PROFILE_STATE_COLS},
+        ext = {"columns": {c: s.column(c) for c in s.column_names if c not in PROFILE_STATE_COLS},
                "nullable": {c: s.column(c).is_null().to_numpy(zero_copy_only=False) for c in nullable},
                "exact": _exact_values(s, cols) if n else {}}
     return {
@@ -553,7 +553,7 @@ def _objects(p: pa.Table, pid: np.ndarray, static: _Statics, frame_of_row: np.nd
     source_ids = _pylist(p, "source_id")
     roles = _pylist(p, "role") or ["observed"] * p.num_rows
     attached = _pylist(p, "attached_to")
-    p_ext_cols = [c for c in p.column_names if c not in _PROFILE_PART_COLS]
+    p_ext_cols = [c for c in p.column_names if c not in PROFILE_PART_COLS]
     p_ext_vals = {c: _pylist(p, c) for c in p_ext_cols}
     p_nulls = {c: p.column(c).is_null().to_numpy(zero_copy_only=False) for c in
                ("height", "length_std", "width_std", "height_std", "class_pmf") if c in p.column_names}
@@ -578,7 +578,7 @@ def _objects(p: pa.Table, pid: np.ndarray, static: _Statics, frame_of_row: np.nd
                     {"name": "summary/accel/max", "val": _f(summary.acc_max[j]), "type": "value"},
                     {"name": "summary/accel/min", "val": _f(summary.acc_min[j]), "type": "value"}]
         obj_data: dict[str, Any] = {"vec": vec, "num": num, "text": [], "boolean": []}
-        if cls not in _NO_RECORDER:
+        if cls not in NO_RECORDER:
             obj_data["boolean"].append({"name": "is_recorder", "val": roles[j] == "recording_vehicle"})
         if attached is not None and attached[j] is not None:
             obj_data["text"].append({"name": "attached_to", "val": str(attached[j])})
@@ -592,7 +592,7 @@ def _objects(p: pa.Table, pid: np.ndarray, static: _Statics, frame_of_row: np.nd
                     ext[c] = None
             if pmf is not None and np.isfinite(pmf[j]).all():
                 ext["class_pmf"] = [float(v) for v in pmf[j]]
-            size[EXT] = _clean(ext)
+            size[EXT] = json_safe(ext)
         objects[str(q)] = {
             "name": str(source_ids[j]) if source_ids else str(q),
             "type": CLASS_TO_TYPE[cls],
@@ -628,7 +628,7 @@ def _contexts(rec, times: np.ndarray, summary: _Summary) -> dict[str, Any]:
                        "context_data": {"boolean": boolean, "num": num, "text": [], "vec": vec}}
     if meta.conditions is not None:
         out["1"] = {"name": "environment_context", "type": "EnvironmentContext",
-                              "context_data": _environment_data(meta.conditions.model_dump())}
+                              "context_data": environment_data(meta.conditions.model_dump())}
     env = rec.environment
     if env is not None and env.num_rows and len(times):
         for k, r in enumerate(env.to_pylist()):
@@ -637,7 +637,7 @@ def _contexts(rec, times: np.ndarray, summary: _Summary) -> dict[str, Any]:
             out[str(k + 2)] = {
                 "name": "environment_context", "type": "EnvironmentContext",
                 "frame_intervals": [{"frame_start": fs, "frame_end": fe}],
-                "context_data": _environment_data(r)}
+                "context_data": environment_data(r)}
     return out
 
 
@@ -671,7 +671,7 @@ def _extension(rec, thr: dict[str, Any], states_columns: list[str]) -> dict[str,
     md = meta.model_dump(mode="json", exclude_none=True)
     for k in ("tables", "derived", "map", "source"):
         md.pop(k, None)
-    return _clean({
+    return json_safe({
         "version": EXT_VERSION,
         "frame_timestamps": "seconds since acquisition_date",
         "start_time": meta.start_time,
@@ -709,7 +709,7 @@ GZIP_LEVEL, ZSTD_LEVEL = 3, 1
 
 def compressed(chunks, kind: str):
     """The chunks compressed as a stream: one gzip member / one zstd frame (``kind`` as
-    :func:`~.stream.compression` says)."""
+    :func:`~.source.compression` says)."""
     if kind == "gzip":
         import zlib
 
