@@ -292,7 +292,7 @@ def merge_summaries(parts: list[pa.Table]) -> pa.Table:
                                         for i in ids], np.int64)
     out["min_ttc_kind"] = np.array([by[i].get("min_ttc_kind") for i in ids], object)
     out["ttc_samples_below"] = np.array([by[i]["ttc_samples_below"] for i in ids], np.int64)
-    counts = {"near_misses": np.zeros(n, np.int64), "hard_braking": np.zeros(n, np.int64)}
+    counts = {k: np.zeros(n, np.int64) for k in ("near_misses", "conflicts", "hard_braking")}
 
     def nanarg(v, largest=False):
         if not np.isfinite(v).any():
@@ -316,7 +316,7 @@ def merge_summaries(parts: list[pa.Table]) -> pa.Table:
     rv["cpi"] = float(np.nansum(out["cpi"] * T) / tot) if tot > 0 else np.nan
     rv["cpi_std"] = float(np.sqrt(np.nansum((out["cpi_std"] * T) ** 2)) / tot) if tot > 0 else np.nan
     rv["ttc_samples_below"] = int(out["ttc_samples_below"].sum())
-    rv["near_misses"] = rv["hard_braking"] = 0
+    rv["near_misses"] = rv["conflicts"] = rv["hard_braking"] = 0
     return _table(ids, out, counts, [[] for _ in range(n)], rv, [])
 
 

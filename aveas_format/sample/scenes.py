@@ -541,5 +541,51 @@ def conflict_scene(kind: str, min_ttc: float = 1.2, *, method: str = "aerial",
                    recording_id=f"{kind}-{method}-{seed}")
 
 
-__all__ = ["CONFLICT_KINDS", "METHODS", "THRESHOLDS", "conflict_scene", "design_ttc",
-           "traffic_scene"]
+def _clearance(a: _Mover, b: _Mover) -> np.ndarray:
+    """Signed distance of two footprints aligned with the axes over the fine grid (negative: the
+    depth by which they overlap)."""
+    p, q = a.xy(), b.xy()
+    (ax_, ay_), (bx_, by_) = _extent(a), _extent(b)
+    gx = np.abs(q["x"] - p["x"]) - ax_ - bx_
+    gy = np.abs(q["y"] - p["y"]) - ay_ - by_
+    outside = np.hypot(np.maximum(gx, 0.0), np.maximum(gy, 0.0))
+    return np.where((gx < 0) & (gy < 0), np.maximum(gx, gy), outside)
+
+
+def close_pass_scene(margin_m: float = 0.3, *, method: str = "aerial",
+                     position_std: float | None = None, rate_hz: float | None = None,
+                     seed: int = 0, return_truth: bool = False):
+    """Two vehicles crossing paths at the junction at constant speed, the second passing behind
+    the first with a true closest clearance of ``margin_m`` m between the footprints (negative:
+    they collide, by that depth); measured as ``method``. The encounters of the collision
+    probability's calibration (docs/derive.md)."""
+    if method not in METHODS:
+        raise ValueError(f"method: one of {', '.join(METHODS)}")
+    rng = np.random.default_rng([seed, 3])
+    t = _fine_grid(16.0)
+    T = 8.0
+    veh_a, veh_b = _car(rng), _car(rng)
+    vA, vB = rng.uniform(7.0, 13.0), rng.uniform(7.0, 13.0)
+    xc = -LANE_Y[-1]
+    a = _straight(t, "car", veh_a, vA, [], (xc - vA * T, LANE_Y[-1]), 0.0, role="crossing")
+
+    def mover(delay: float) -> _Mover:
+        return _straight(t, "car", veh_b, vB, [], (xc, LANE_Y[-1] - vB * (T + delay)), np.pi / 2,
+                         role="passing")
+
+    # the later the second, the larger the clearance once it passes behind
+    delay = _solve(lambda d: float(_clearance(a, mover(d)).min()), float(margin_m), 0.0, 3.0)
+    b = mover(delay)
+    t_min = float(t[int(np.argmin(_clearance(a, b)))])
+    scene = _Scene([a, b], [{"kind": "close_pass", "min_ttc": float("nan"), "margin_m":
+                             float(_clearance(a, b).min()), "time_of_min": t_min,
+                             "movers": [a, b]}])
+    return _record(scene, _junction_xodr(), method=method, position_std=position_std,
+                   rate_hz=rate_hz, seed=seed, duration_s=16.0,
+                   title=f"Two vehicles crossing paths, {margin_m:g} m apart",
+                   bounds=(-120.0, -120.0, 120.0, 120.0), return_truth=return_truth,
+                   recording_id=f"close-pass-{method}-{seed}")
+
+
+__all__ = ["CONFLICT_KINDS", "METHODS", "THRESHOLDS", "close_pass_scene", "conflict_scene",
+           "design_ttc", "traffic_scene"]

@@ -300,12 +300,88 @@ def events_table(new: list[dict], start_id: int = 0) -> pa.Table:
     })
 
 
+#: units of the metrics of derived events
+METRIC_UNITS = {"ttc": "s", "pet": "s", "drac": "m/s²", "a_lon": "m/s²"}
+#: one line each for the tables that list events (info, find, the HTML report)
+EXPLAIN = {
+    "kind": "conflict: critical by its measure and averted by the behaviour the recording shows; "
+            "near_miss: averted predominantly by chance (P(collision) at least 0.5)",
+    "value": "the event's extreme (TTC, PET: smallest; DRAC: largest) ± 1 std",
+    "P(collision)": "the share of variations of the recorded encounter — its state within the "
+                    "stated uncertainty, a driver's variability of the acceleration — in which the "
+                    "two touch (± its Monte Carlo std)",
+    "CPI": "crash potential index: the share of the observed time in which the deceleration "
+           "needed to avoid a crash (DRAC) exceeds the one available, N(8.45, 1.4²) m/s² on dry "
+           "asphalt",
+    "TET / TIT": "time exposed / time integrated TTC: the time (s) with TTC at or below the "
+                 "threshold, and the integral of threshold - TTC over it (s²), summed over "
+                 "participants",
+}
+
+
+def worst_events(events: pa.Table | None, top: int | None = None) -> list[dict]:
+    """The derived conflicts and near misses of ``events``, most critical first (the largest
+    collision probability, then the smallest TTC or PET, then the largest DRAC), as dicts with
+    ``event_id``, ``kind``, ``participant_ids``, ``relation``, ``time_start``, ``time_end``,
+    ``time_extreme``, ``metric``, ``value``, ``value_std``, ``duration``,
+    ``collision_probability`` and ``collision_probability_std`` (None where the events table
+    predates these columns)."""
+    if events is None or not events.num_rows:
+        return []
+    cols = ("event_id", "kind", "origin", "participant_ids", "relation", "time_start", "time_end",
+            "time_extreme", "metric", "value", "value_std", "duration", "collision_probability",
+            "collision_probability_std", "attributes")
+    d = events.select([c for c in cols if c in events.column_names]).to_pylist()
+    out = []
+    for r in d:
+        if str(r.get("origin")) != "derived" or str(r.get("kind")) not in ("near_miss",
+                                                                              "conflict"):
+            continue
+        row = {c: r.get(c) for c in cols if c not in ("origin", "attributes")}
+        row["kind"] = str(row["kind"])
+        if row.get("metric") is None and r.get("attributes"):  # written before the columns
+            a = json.loads(r["attributes"]) or {}
+            row["metric"] = a.get("metric")
+            row["value"] = a.get("min_value_s", a.get("value_s", a.get("max_value_mps2")))
+            row["value_std"] = a.get("min_value_std_s", a.get("value_std_s"))
+            row["relation"] = a.get("relation")
+        out.append(row)
+
+    def key(r):
+        p = r.get("collision_probability")
+        v = r.get("value")
+        v = float("inf") if v is None else (-v if r.get("metric") == "drac" else v)
+        return (-(p if p is not None else 0.0), r.get("metric") == "drac", v)
+
+    out.sort(key=key)
+    return out[:top] if top is not None else out
+
+
+def format_value(metric: str | None, value, std, digits: int = 2) -> str:
+    """``0.92 ± 0.07 s`` (the metric's unit; ``-`` without a value)."""
+    if value is None:
+        return "-"
+    unit = METRIC_UNITS.get(metric or "", "")
+    sd = f" ± {std:.{digits}f}" if std is not None else ""
+    return f"{value:.{digits}f}{sd}{(' ' + unit) if unit else ''}"
+
+
+def format_probability(p, std) -> str:
+    """``0.16 ± 0.02`` (``-`` without a value; ``< 0.01`` where the draws never touched)."""
+    if p is None:
+        return "-"
+    if p == 0.0:
+        return "< 0.01" if std is not None and std < 0.01 else "0"
+    return f"{p:.2f}" + (f" ± {std:.2f}" if std is not None else "")
+
+
 def criticality_summary(rec) -> dict:
     """Per-recording criticality facts for ``aveas-format info``: minimum TTC (with the pair, time
     and kind), minimum PET, counts of derived near misses (by metric) and hard-braking events, the
     thresholds and, where ``derived/criticality_summary`` exists, its recording row (TET, TIT, CPI,
     max DRAC, min PSD with their std, samples below the TTC threshold, the worst events). Uses
-    what the recording's derived tables and events hold; empty values where a table is missing."""
+    what the recording's derived tables and events hold; empty values where a table is missing.
+    ``worst``: the five most critical derived events (:func:`worst_events`)."""
     out: dict = {"min_ttc_s": None, "min_pet_s": None, "near_misses": 0, "near_misses_ttc": 0,
                  "near_misses_pet": 0, "near_misses_drac": 0, "conflicts": 0, "hard_braking": 0}
     th = rec.meta.thresholds
@@ -355,6 +431,7 @@ def criticality_summary(rec) -> dict:
                 out["conflicts"] += 1
             elif str(kind) == "hard_braking":
                 out["hard_braking"] += 1
+        out["worst"] = worst_events(ev, 5)
     return out
 
 
