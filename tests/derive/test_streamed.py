@@ -91,8 +91,8 @@ def test_summary_as_derived_at_once(whole_and_windows):
     the TET; min_pet and the event counts need encroachments and events (not by windows)."""
     whole, win, _, _ = whole_and_windows
     a, b = (t.derived["criticality_summary"] for t in (whole, win))
-    skip = {"tet_std", "tit_std", "min_pet", "min_pet_std", "near_misses", "hard_braking",
-            "worst_events"}
+    skip = {"tet_std", "tit_std", "min_pet", "min_pet_std", "near_misses", "conflicts",
+            "hard_braking", "worst_events"}
     keep = [c for c in a.column_names if c not in skip]
     _equal(a.select(keep), b.select(keep), "criticality_summary")
     np.testing.assert_allclose(b.column("tet_std").to_numpy(zero_copy_only=False),

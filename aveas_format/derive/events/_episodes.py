@@ -165,9 +165,13 @@ def threshold_episodes(r: dict[str, np.ndarray], metric: str, thr: float, prob: 
 
 
 def pet_episodes(en: pa.Table, thr: float, p: EventsParams) -> list[dict]:
-    """One episode per encroachment with ``P(PET <= thr) >= evidence`` (normal approximation)."""
+    """One episode per encroachment with ``P(PET <= thr) >= evidence`` (normal approximation).
+    Where both occupied the conflict area at once (``pet`` null: a collision, or a pass so close
+    that the footprints' occupancies of the area overlap) the value is the negative overlap,
+    ``time_second_enter - time_first_exit``: beyond any threshold."""
     pet, std, t0, t1 = (column_numpy(en, c, missing=np.nan) for c in
                         ("pet", "pet_std", "time_first_exit", "time_second_enter"))
+    pet = np.where(np.isfinite(pet), pet, np.where(t1 < t0, t1 - t0, np.nan))
     first = en.column("first_id").to_numpy()
     second = en.column("second_id").to_numpy()
     cid = en.column("conflict_id").to_numpy()
