@@ -166,6 +166,37 @@ def conflicts(ttcs=(0.8, 1.0, 1.2, 1.4, 1.6), seeds=(0, 1), methods=tuple(NOISE)
             "other_events": other, "rows": rows}
 
 
+def sumo_episodes(duration: float = 300.0, seeds: tuple[int, ...] = (1,)) -> dict | None:
+    """SUMO's crossing conflicts at the junction scenario against ours, episode by episode
+    (:func:`aveas_format.sim.ssm.compare_episodes`; drivers without random imperfection, as
+    tests/sim/test_ssm.py); None without SUMO."""
+    from aveas_format.derive import derive
+    from aveas_format.sim import SumoNotFoundError, find_sumo
+    from aveas_format.sim.ssm import compare_episodes, junction_scenario
+
+    try:
+        find_sumo("sumo")
+    except SumoNotFoundError:
+        return None
+    tot: dict = {}
+    for seed in seeds:
+        run = junction_scenario(duration=duration, seed=seed, sigma=0.0)
+        derive(run.recording, only=["interactions", "conflicts"], velocities="states")
+        r = compare_episodes(run)
+        r.pop("episodes")
+        for k, v in r.items():
+            if isinstance(v, dict):
+                tot.setdefault(k, {})
+                for kk, vv in v.items():
+                    tot[k][kk] = tot[k].get(kk, 0) + vv
+            elif k.endswith("_max_abs_s"):
+                vals = [x for x in (tot.get(k), v) if x is not None]
+                tot[k] = max(vals) if vals else None
+            else:
+                tot[k] = tot.get(k, 0) + v
+    return tot
+
+
 def main() -> list[dict]:
     out = []
     t0 = time.perf_counter()
@@ -195,6 +226,33 @@ def main() -> list[dict]:
                          f"{100 * c['coverage']:.0f} % of {c['ttc_samples']:,} samples with true "
                          f"TTC <= 3 s (target 55-80 %); other events in these recordings: "
                          f"{len(c['other_events'])}")})
+    t0 = time.perf_counter()
+    cal = collision_calibration()
+    secs = time.perf_counter() - t0
+    bins = "; ".join(f"{b['from']:.2f}-{b['to']:.2f}: {b['events']} events, mean p "
+                     f"{b['mean_p']:.2f}, collided {b['collided']:.2f}" for b in cal["bins"])
+    out.append({"benchmark": "near_miss.collision_calibration", "rows": cal["events"],
+                "seconds": round(secs, 1), "rows_per_s": None, "baseline_s": None,
+                "speedup_vs_baseline": None,
+                "note": (f"{cal['events']} encounters ({cal['collided']} of their true variations "
+                         f"collided): Brier score {cal['brier']:.3f} against "
+                         f"{cal['brier_climatology']:.3f} of the base rate; {bins}")})
+    t0 = time.perf_counter()
+    s_ = sumo_episodes()
+    if s_ is not None:
+        comp = s_["by_class"]["comparable"]
+        out.append({"benchmark": "near_miss.sumo_junction", "rows": s_["sumo_episodes"],
+                    "seconds": round(time.perf_counter() - t0, 1), "rows_per_s": None,
+                    "baseline_s": None, "speedup_vs_baseline": None,
+                    "note": (f"SUMO's crossing conflict episodes (TTC <= 3 s, PPET or PET <= 2 s; "
+                             f"junction 300 s): {s_['sumo_episodes']} "
+                             f"({json.dumps(s_['by_class'])}); comparable matched "
+                             f"{s_['comparable_matched']}/{comp} (target >= 95 %); straight-on "
+                             f"crossings: min TTC within {s_['straight_min_ttc_max_abs_s']} s "
+                             f"({s_['straight_min_ttc_n']} episodes), PET within "
+                             f"{s_['straight_pet_max_abs_s']} s ({s_['straight_pet_n']}); with a "
+                             f"turning vehicle (lane-level conflict area in SUMO) min TTC within "
+                             f"{s_['turning_min_ttc_max_abs_s']} s")})
     return out
 
 
@@ -263,6 +321,8 @@ if __name__ == "__main__":
         print(json.dumps(r, indent=1, default=str))
         for x in rows:
             print(x)
+    elif what == "sumo":
+        print(json.dumps(sumo_episodes(duration=90.0 if quick else 300.0), indent=1))
     elif what == "collision":
         r = collision_calibration(n_per=2 if quick else 8)
         rows = r.pop("rows")

@@ -325,10 +325,50 @@ def _smoothed_positions(rec: Any, a: int, b: int) -> dict[int, tuple]:
     return out
 
 
+def reliability_figure(p: np.ndarray, outcome: np.ndarray, edges=(0.0, 0.05, 0.2, 0.4, 0.6, 0.8,
+                                                                  1.0), title: str | None = None):
+    """Reliability diagram of collision probabilities ``p`` against the outcomes (1: the
+    encounter collided): per bin of ``p`` (``edges``) the share that collided (with its 95 %
+    Wilson interval) over the bin's mean ``p``, the diagonal, and the events per bin."""
+    from aveas_format.derive.events._episodes import wilson
+    from aveas_format.plot._mpl import Figure
+
+    p, y = np.asarray(p, float), np.asarray(outcome, float)
+    fig = Figure(figsize=(8.5, 3.8))
+    ax, ah = fig.subplots(1, 2, gridspec_kw={"width_ratios": (1.2, 1.0)})
+    ax.plot([0, 1], [0, 1], "--", color="0.5", lw=1, label="calibrated")
+    e = np.asarray(edges, float)
+    for lo, hi in zip(e[:-1], e[1:]):
+        m = (p >= lo) & ((p < hi) | (hi >= 1.0))
+        if not m.any():
+            continue
+        k, n = float(y[m].sum()), int(m.sum())
+        lo_ci, hi_ci = wilson(np.array(k), n)
+        mp, fr = float(p[m].mean()), k / n
+        ax.errorbar(mp, fr, yerr=[[fr - float(lo_ci)], [float(hi_ci) - fr]], fmt="o",
+                    color="tab:red", capsize=3, ms=5)
+        ax.annotate(str(n), (mp, fr), textcoords="offset points", xytext=(6, -10), fontsize=7)
+    ax.set_xlim(-0.02, 1.02)
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel("collision probability (derived, bin mean)")
+    ax.set_ylabel("share that collided (truth)")
+    ax.set_aspect("equal")
+    ax.legend(loc="upper left", fontsize=8)
+    ah.hist(p, bins=np.linspace(0, 1, 21), color="tab:red", alpha=0.7)
+    ah.set_xlabel("collision probability")
+    ah.set_ylabel("events")
+    ah.set_yscale("log")
+    fig.suptitle(title or f"{len(p)} encounters: reliability (error bars: 95 % Wilson)",
+                 fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
 def _ids_array(values):
     import pyarrow as pa
 
     return pa.array(values, pa.int64())
 
 
-__all__ = ["criticality_section", "cpi_text", "event_caption", "event_figure", "events_html"]
+__all__ = ["criticality_section", "cpi_text", "event_caption", "event_figure", "events_html",
+           "reliability_figure"]
