@@ -88,6 +88,27 @@ def recording_situations(path: str) -> dict[str, Any]:
     return {"path": path, "recording_id": meta.recording_id, "rows": rows, "has_summary": True}
 
 
+def _collect(task, flag: str, paths: Iterable[str | Path], workers: int | None,
+             scheduler: str | None, progress: bool,
+             on_result: Callable[[TaskResult], None] | None):
+    """``task`` on every recording in parallel: ``(values, missing, failed)``, ``missing`` the
+    paths whose value's ``flag`` is false, ``failed`` ``(path, error)`` of those not read."""
+    values: list[dict[str, Any]] = []
+    missing: list[str] = []
+    failed: list[tuple[str, str]] = []
+    for r in map_recordings(task, [str(p) for p in paths], workers=workers, scheduler=scheduler,
+                            progress=progress, description="find"):
+        if on_result is not None:
+            on_result(r)
+        if not r.ok:
+            failed.append((r.item, r.error))
+            continue
+        values.append(r.value)
+        if not r.value[flag]:
+            missing.append(r.value["path"])
+    return values, missing, failed
+
+
 def situations(paths: Iterable[str | Path], *, workers: int | None = 1,
                scheduler: str | None = None, progress: bool = False,
                on_result: Callable[[TaskResult], None] | None = None):
@@ -97,18 +118,9 @@ def situations(paths: Iterable[str | Path], *, workers: int | None = 1,
     import pyarrow as pa
 
     rows: list[dict[str, Any]] = []
-    missing: list[str] = []
-    failed: list[tuple[str, str]] = []
-    for r in map_recordings(recording_situations, [str(p) for p in paths], workers=workers,
-                            scheduler=scheduler, progress=progress, description="find"):
-        if on_result is not None:
-            on_result(r)
-        if not r.ok:
-            failed.append((r.item, r.error))
-            continue
-        v = r.value
-        if not v["has_summary"]:
-            missing.append(v["path"])
+    values, missing, failed = _collect(recording_situations, "has_summary", paths, workers,
+                                       scheduler, progress, on_result)
+    for v in values:
         for s in v["rows"]:
             rows.append({"path": v["path"], "recording_id": v["recording_id"],
                          "participant_id": s["participant_id"], "other_id": s["min_ttc_other_id"],
@@ -200,18 +212,9 @@ def critical_events(paths: Iterable[str | Path], *, workers: int | None = 1,
     import pyarrow as pa
 
     rows: list[dict[str, Any]] = []
-    missing: list[str] = []
-    failed: list[tuple[str, str]] = []
-    for r in map_recordings(recording_events, [str(p) for p in paths], workers=workers,
-                            scheduler=scheduler, progress=progress, description="find"):
-        if on_result is not None:
-            on_result(r)
-        if not r.ok:
-            failed.append((r.item, r.error))
-            continue
-        v = r.value
-        if not v["has_events"]:
-            missing.append(v["path"])
+    values, missing, failed = _collect(recording_events, "has_events", paths, workers, scheduler,
+                                       progress, on_result)
+    for v in values:
         for e in v["rows"]:
             ids = list(e["participant_ids"] or []) + [None, None]
             rows.append({"path": v["path"], "recording_id": v["recording_id"],

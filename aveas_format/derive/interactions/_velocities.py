@@ -18,25 +18,10 @@ def smoothed_velocities(S: Samples, mode: str) -> int:
     ``speed``), keeping the measured across-motion component and its variance, for samples moving
     at >= 0.5 m/s. Exact positions and velocities (std 0) are kept by ``auto``. Returns the number
     of velocities replaced."""
-    S.x, S.y, S.sx, S.sy, S.rxy = (np.array(a, np.float64)
-                                   for a in (S.x, S.y, S.sx, S.sy, S.rxy))
-    pos = (np.isfinite(S.k_x) & np.isfinite(S.k_y) & np.isfinite(S.k_sx)
-           & np.isfinite(S.k_sy))
-    if mode == "auto":
-        pos &= S.k_sx ** 2 + S.k_sy ** 2 < S.sx ** 2 + S.sy ** 2
-    S.shift_x = np.where(pos, S.k_x - S.x, 0.0)
-    S.shift_y = np.where(pos, S.k_y - S.y, 0.0)
-    S.x[pos], S.y[pos], S.sx[pos], S.sy[pos] = S.k_x[pos], S.k_y[pos], S.k_sx[pos], S.k_sy[pos]
-    S.rxy[pos] = np.nan_to_num(S.k_rxy[pos])
-    S.vx, S.vy, S.svx, S.svy, S.rv = (np.array(a, np.float64)
-                                      for a in (S.vx, S.vy, S.svx, S.svy, S.rv))
-    vec = (np.isfinite(S.k_vx) & np.isfinite(S.k_vy) & np.isfinite(S.k_svx)
-           & np.isfinite(S.k_svy))
-    if mode == "auto":
-        vec &= S.k_svx ** 2 + S.k_svy ** 2 < S.svx ** 2 + S.svy ** 2
-    S.vx[vec], S.vy[vec], S.svx[vec], S.svy[vec] = S.k_vx[vec], S.k_vy[vec], S.k_svx[vec], \
-        S.k_svy[vec]
-    S.rv[vec] = np.nan_to_num(S.k_rv[vec])
+    x0, y0 = np.array(S.x, np.float64), np.array(S.y, np.float64)
+    _take_smoothed(S, ("x", "y", "sx", "sy", "rxy"), mode)
+    S.shift_x, S.shift_y = S.x - x0, S.y - y0
+    vec = _take_smoothed(S, ("vx", "vy", "svx", "svy", "rv"), mode)
     have = np.isfinite(S.k_vx)
     speed, speed_std = S.k_speed, S.k_speed_std
     v = np.hypot(S.vx, S.vy)
@@ -57,6 +42,21 @@ def smoothed_velocities(S: Samples, mode: str) -> int:
     with np.errstate(invalid="ignore", divide="ignore"):
         S.rv[use] = np.where((vxx > 0) & (vyy > 0), vxy / np.sqrt(vxx * vyy), 0.0)
     return int(vec.sum() + use.sum())
+
+
+def _take_smoothed(S: Samples, names: tuple[str, str, str, str, str], mode: str) -> np.ndarray:
+    """Replace the vector ``names`` (two components, their std and correlation) of ``S`` by
+    derived/kinematics' (``k_`` + name) where it is given and, for ``auto``, its covariance has
+    the smaller trace; returns where it was replaced."""
+    cur = [np.array(getattr(S, n), np.float64) for n in names]
+    new = [getattr(S, f"k_{n}") for n in names]
+    use = np.isfinite(new[0]) & np.isfinite(new[1]) & np.isfinite(new[2]) & np.isfinite(new[3])
+    if mode == "auto":
+        use &= new[2] ** 2 + new[3] ** 2 < cur[2] ** 2 + cur[3] ** 2
+    for n, c, k in zip(names, cur, new):
+        c[use] = np.nan_to_num(k[use]) if n in ("rxy", "rv") else k[use]
+        setattr(S, n, c)
+    return use
 
 
 def var_along(S: Samples, i, c, sn):
