@@ -120,7 +120,8 @@ def test_demo(tmp_path):
     assert all((demo / "figures" / f).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for f in figures)
     nxt = res.stdout[res.stdout.index(f"Look at {demo / 'report.html'}"):].splitlines()
     commands = [line.split("#")[0].strip() for line in nxt[1:] if line.startswith("  aveas-format ")]
-    assert len(commands) == 3 and commands[0].startswith(f"aveas-format derive {demo / 'highway.aveas'}")
+    assert len(commands) == 3 and commands[0].startswith(f"aveas-format info {demo / 'conflicts.aveas'}")
+    assert commands[1].startswith(f"aveas-format derive {demo / 'highway.aveas'}")
     for command in commands:  # they run as printed
         cli(*command.split()[1:], check_rc=0)
     again = cli("demo", "--output", demo, "--vehicles", "3", "--duration", "2")

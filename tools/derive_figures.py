@@ -9,6 +9,11 @@ The scenes and their derivation are made here; the figures are drawn by
   1-sigma bands (the follower reacts after 0.8 s).
 - ``derive_kinematics.png``: derived longitudinal/lateral acceleration with its 1-sigma band
   against the truth for one lane-changing car of the noisy synthetic highway (sigma 0.1 m, 25 Hz).
+- ``derive_event.png``: one derived conflict (a cut-in with a true minimum TTC of 1 s, aerial
+  noise): its paths on the map and the pair's TTC and DRAC (:func:`aveas_format.plot.criticality.
+  event_figure`).
+- ``derive_collision_reliability.png``: the collision probability's reliability diagram from
+  ``benchmarks/bench_near_miss.py``'s calibration (the numbers are printed).
 """
 
 from __future__ import annotations
@@ -114,12 +119,44 @@ def kinematics_figure(path: Path) -> Path:
     return save_figure_atomic(fig, path, dpi=120)
 
 
+def event_figure(path: Path) -> Path:
+    from aveas_format.derive import derive
+    from aveas_format.derive.events import worst_events
+    from aveas_format.plot.criticality import event_figure as draw
+    from aveas_format.sample.scenes import conflict_scene
+
+    rec = conflict_scene("cut_in", 1.0, method="aerial", position_std=0.2, seed=4)
+    derive(rec)
+    return save_figure_atomic(draw(rec, worst_events(rec.events, 1)[0]), path, dpi=110)
+
+
+def reliability_figure(path: Path, n_per: int = 8) -> Path:
+    import importlib.util
+    import json
+
+    from aveas_format.plot.criticality import reliability_figure as draw
+
+    bench = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_near_miss.py"
+    spec = importlib.util.spec_from_file_location("bench_near_miss", bench)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    cal = mod.collision_calibration(n_per=n_per)
+    rows = cal.pop("rows")
+    print(json.dumps(cal, indent=1))
+    fig = draw([r["p"] for r in rows], [r["outcome"] for r in rows],
+               title=f"Collision probability, {len(rows)} encounters (aerial and LiDAR noise): "
+               "reliability (95 % Wilson)")
+    return save_figure_atomic(fig, path, dpi=120)
+
+
 def main(outdir: str | Path | None = None) -> list[Path]:
     out = Path(outdir) if outdir else Path(__file__).resolve().parents[1] / "docs" / "figures"
     out.mkdir(parents=True, exist_ok=True)
     return [cut_in_figure(out / "derive_cut_in_ttc.png"),
             ttc_drac_figure(out / "derive_ttc_drac.png"),
-            kinematics_figure(out / "derive_kinematics.png")]
+            kinematics_figure(out / "derive_kinematics.png"),
+            event_figure(out / "derive_event.png"),
+            reliability_figure(out / "derive_collision_reliability.png")]
 
 
 if __name__ == "__main__":

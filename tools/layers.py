@@ -394,19 +394,11 @@ def _private(name: str) -> bool:
     return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
 
 
-#: package -> why import cycles or private names used across its modules are tolerated there for
-#: now (tests/test_layers.py checks everything else): the owners of these parts change them on
-#: their own branches
+#: package -> why import cycles or private names used across its modules are tolerated there
+#: (tests/test_layers.py checks everything else; none is tolerated today: an entry needs a reason)
 TOLERATED: dict[str, str] = {}
 #: single private names used across modules outside those packages, each with its reason
-TOLERATED_USES: dict[tuple[str, str, str], str] = {
-    ("aveas_format.derive.streamed", "aveas_format.derive.criticality", "_table"):
-        "the derivations' part of issue 41, on another branch",
-    ("aveas_format.derive.streamed", "aveas_format.derive.registry", "_empty"):
-        "the derivations' part of issue 41, on another branch",
-    ("aveas_format.sim.ssm", "aveas_format.sim.runner", "_run"):
-        "the SUMO runner's part of issue 41, on another branch",
-}
+TOLERATED_USES: dict[tuple[str, str, str], str] = {}
 
 
 def tolerated(module: str) -> bool:

@@ -1,5 +1,6 @@
-"""``aveas-format demo``: write, read back, validate and summarise a sample recording, then write
-its HTML validation report and figures and say what to try next."""
+"""``aveas-format demo``: write, derive, read back, validate and summarise a sample recording, then
+write its HTML validation report (with its criticality) and figures, a second recording with real
+conflicts and its report, and say what to try next."""
 
 from __future__ import annotations
 
@@ -42,10 +43,11 @@ def demo(
     duration: float = typer.Option(30.0, "--duration", min=1.0, help="Seconds to simulate."),
     overwrite: bool = overwrite_option(help="Replace the files of an existing OUTPUT directory."),
 ) -> None:
-    """Generate a sample aerial highway recording (map, uncertainty, occlusions, metadata), write it
-    as a directory and as a ZIP, export it as OpenLABEL, OpenSCENARIO, MCAP (Foxglove) and an ASAM
-    OSI trace, read it back, validate it, print its summary and write the HTML validation report
-    and the figures next to it."""
+    """Generate a sample aerial highway recording (map, uncertainty, occlusions, metadata), derive
+    its kinematics and criticality, write it as a directory and as a ZIP, export it as OpenLABEL,
+    OpenSCENARIO, MCAP (Foxglove) and an ASAM OSI trace, read it back, validate it, print its
+    summary and write the HTML validation report and the figures next to it; then a minute of
+    lane-keeping traffic with a planted cut-in and hard braking, derived, with its report."""
     import aveas_format
     from aveas_format.converters import get_converter
     from aveas_format.errors import MissingDependencyError
@@ -65,6 +67,12 @@ def demo(
     elif length > 1000.0:
         err.print(f"note: the road is {length / 1000:g} km long so that all {vehicles} vehicles "
                   f"drive on it within {duration:g} s")
+    from aveas_format.derive import derive
+
+    t0 = time.perf_counter()
+    derive(rec)
+    err.print(f"derived {', '.join(sorted(rec.derived))} and the events in "
+              f"{time.perf_counter() - t0:.1f} s")
     d = rec.write(output / "highway.aveas", overwrite=True)
     z = rec.write(output / "highway.aveas.zip", overwrite=True)
     err.print(f"wrote {d} and {z}")
@@ -87,14 +95,47 @@ def demo(
 
     info_cmd(d, fmt=OutputFormat.text, as_json=False)
     look = _report_and_figures(d, report, output)
+    look += _conflicts(output)
     print()
     print("Look at " + (" and ".join(str(p) for p in look) if look else f"{d}") + ". Next:")
-    print(f"  aveas-format derive {d} -o {output / 'derived.aveas'}   # TTC, headways, PET "
-          "with uncertainty")
-    print(f"  aveas-format info {output / 'derived.aveas'}   # the criticality of the scene")
+    print(f"  aveas-format info {output / 'conflicts.aveas'} --figures {output / 'events'}"
+          "   # its conflicts with a figure each")
+    print(f"  aveas-format derive {d} -o {output / 'derived.aveas'} --ttc 5   # again, another "
+          "TTC threshold")
     print("  aveas-format convert --list   # converters for your own data")
     if report.exit_code("error") != 0 or not same:
         raise typer.Exit(1)
+
+
+def _conflicts(output: Path) -> list[Path]:
+    """A minute of lane-keeping traffic with a planted cut-in and hard braking (aerial noise),
+    derived, written as ``conflicts.aveas`` with its HTML report (its criticality section lists
+    the conflicts with a figure each); what was written."""
+    import aveas_format
+    from aveas_format.derive import derive
+    from aveas_format.errors import MissingDependencyError
+    from aveas_format.plot import render_html
+    from aveas_format.plot.recording import open_for_figures
+    from aveas_format.safeio import write_text_atomic
+    from aveas_format.sample.scenes import traffic_scene
+
+    t0 = time.perf_counter()
+    rec = traffic_scene(60.0, conflicts=(("cut_in", 1.0), ("hard_braking", 1.3)), seed=2)
+    derive(rec)
+    p = rec.write(output / "conflicts.aveas", overwrite=True)
+    kinds = rec.events.column("kind").to_pylist() if rec.events is not None else []
+    err.print(f"wrote {p}: a minute of traffic with a planted cut-in and hard braking, "
+              f"{kinds.count('conflict')} conflicts and {kinds.count('near_miss')} near misses "
+              f"found ({time.perf_counter() - t0:.1f} s)")
+    report = aveas_format.validate(p)
+    try:
+        html = write_text_atomic(output / "conflicts-report.html",
+                                 render_html(report, open_for_figures(p, report)))
+    except MissingDependencyError as e:
+        err.print(f"skipped the report of {p}: {e}")
+        return [p]
+    err.print(f"wrote {html}")
+    return [html]
 
 
 def _report_and_figures(path: Path, report, output: Path) -> list[Path]:

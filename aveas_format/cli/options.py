@@ -99,6 +99,13 @@ class OutputFormat(str, Enum):
     json = "json"
 
 
+def event_figures_option() -> Any:
+    """``--figures DIR``: one PNG per listed critical event (its paths on the map and the pair's
+    TTC and DRAC with their 1-sigma bands)."""
+    return typer.Option(None, "--figures", help="Write a figure of each listed event into this "
+                        "directory (EVENT.png: the paths on the map, TTC and DRAC ± 1 std).")
+
+
 def format_option(default: Enum = OutputFormat.text, *flags: str,
                   help: str = "Output format: text (for people) or json (for machines).") -> Any:
     """``--format FORMAT`` (the command's Enum of formats, :class:`OutputFormat` by default; extra

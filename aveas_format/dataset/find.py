@@ -1,4 +1,4 @@
-"""Find the most critical situations across an archive and cut each out for replay.
+"""Find the most critical situations and events across an archive and cut each out for replay.
 
 A *situation* is one participant's most critical moment in a recording: a participant row of
 ``derived/criticality_summary`` (its minimum TTC with the other participant and the time, the
@@ -7,6 +7,11 @@ gathers them from every recording of a dataset (one small table read per recordi
 :func:`find` filters them with a condition such as ``"min_ttc < 1.5 and max_drac > 3"`` and ranks
 them; :func:`cut_out` writes one situation as a small recording (the two participants over a time
 window around the moment, map included) and as an OpenSCENARIO file for replay.
+
+An *event* is a derived conflict or near miss (events.parquet): :func:`critical_events` gathers
+them from every recording and :func:`rank_events` filters (``"collision_probability > 0.2"``,
+on :data:`EVENT_MEASURES`) and ranks them, most likely to collide first; a row is a situation for
+:func:`cut_out` too (its pair around its extreme).
 
 >>> from aveas_format.dataset import discover
 >>> from aveas_format.dataset.find import find, cut_out
@@ -36,13 +41,16 @@ MEASURES = {"min_ttc": "min_ttc_std", "max_drac": "max_drac_std", "min_psd": "mi
 #: ranking: the measures where smaller is more critical
 SMALLER_IS_WORSE = {"min_ttc", "min_psd", "min_pet"}
 
+#: the measures of an event (events.parquet) a condition may name
+EVENT_MEASURES = ("collision_probability", "value", "duration", "time_start")
+
 _COND = re.compile(r"^\s*([a-z_]+)\s*(<=|>=|==|!=|<|>)\s*([-+0-9.eE]+)\s*$")
 
 
-def parse_where(where: str | None) -> list[tuple[str, str, float]]:
+def parse_where(where: str | None, measures=MEASURES) -> list[tuple[str, str, float]]:
     """``"min_ttc < 1.5 and max_drac >= 3"`` -> ``[("min_ttc", "<", 1.5), ("max_drac", ">=",
-    3.0)]``; conditions on the measures (:data:`MEASURES`) joined by ``and``. ValueError naming
-    the part that cannot be read."""
+    3.0)]``; conditions on ``measures`` (:data:`MEASURES`, or :data:`EVENT_MEASURES`) joined by
+    ``and``. ValueError naming the part that cannot be read."""
     if not where or not where.strip():
         return []
     out = []
@@ -52,8 +60,8 @@ def parse_where(where: str | None) -> list[tuple[str, str, float]]:
             raise ValueError(f"--where: cannot read {part.strip()!r}: expected MEASURE OP NUMBER "
                              "(OP one of < <= > >= == !=), joined by 'and'")
         name, op, num = m.groups()
-        if name not in MEASURES:
-            raise ValueError(f"--where: unknown measure {name!r}; known: {', '.join(MEASURES)}")
+        if name not in measures:
+            raise ValueError(f"--where: unknown measure {name!r}; known: {', '.join(measures)}")
         try:
             out.append((name, op, float(num)))
         except ValueError:
@@ -80,6 +88,27 @@ def recording_situations(path: str) -> dict[str, Any]:
     return {"path": path, "recording_id": meta.recording_id, "rows": rows, "has_summary": True}
 
 
+def _collect(task, flag: str, paths: Iterable[str | Path], workers: int | None,
+             scheduler: str | None, progress: bool,
+             on_result: Callable[[TaskResult], None] | None):
+    """``task`` on every recording in parallel: ``(values, missing, failed)``, ``missing`` the
+    paths whose value's ``flag`` is false, ``failed`` ``(path, error)`` of those not read."""
+    values: list[dict[str, Any]] = []
+    missing: list[str] = []
+    failed: list[tuple[str, str]] = []
+    for r in map_recordings(task, [str(p) for p in paths], workers=workers, scheduler=scheduler,
+                            progress=progress, description="find"):
+        if on_result is not None:
+            on_result(r)
+        if not r.ok:
+            failed.append((r.item, r.error))
+            continue
+        values.append(r.value)
+        if not r.value[flag]:
+            missing.append(r.value["path"])
+    return values, missing, failed
+
+
 def situations(paths: Iterable[str | Path], *, workers: int | None = 1,
                scheduler: str | None = None, progress: bool = False,
                on_result: Callable[[TaskResult], None] | None = None):
@@ -89,18 +118,9 @@ def situations(paths: Iterable[str | Path], *, workers: int | None = 1,
     import pyarrow as pa
 
     rows: list[dict[str, Any]] = []
-    missing: list[str] = []
-    failed: list[tuple[str, str]] = []
-    for r in map_recordings(recording_situations, [str(p) for p in paths], workers=workers,
-                            scheduler=scheduler, progress=progress, description="find"):
-        if on_result is not None:
-            on_result(r)
-        if not r.ok:
-            failed.append((r.item, r.error))
-            continue
-        v = r.value
-        if not v["has_summary"]:
-            missing.append(v["path"])
+    values, missing, failed = _collect(recording_situations, "has_summary", paths, workers,
+                                       scheduler, progress, on_result)
+    for v in values:
         for s in v["rows"]:
             rows.append({"path": v["path"], "recording_id": v["recording_id"],
                          "participant_id": s["participant_id"], "other_id": s["min_ttc_other_id"],
@@ -125,6 +145,7 @@ def situations(paths: Iterable[str | Path], *, workers: int | None = 1,
 def rank(table, where: str | None = None, by: str = "min_ttc", top: int | None = 20):
     """The situations matching ``where`` (:func:`parse_where`), most critical by ``by`` first
     (ascending for ``min_ttc``, ``min_psd``, ``min_pet``; descending otherwise), at most ``top``."""
+    import pyarrow as pa
     import pyarrow.compute as pc
 
     if by not in MEASURES:
@@ -148,7 +169,83 @@ def rank(table, where: str | None = None, by: str = "min_ttc", top: int | None =
             seen.add(key)
         if top is not None and len(keep) >= top:
             break
-    return table.take(keep)
+    return table.take(pa.array(keep, pa.int64()))
+
+
+def recording_events(path: str) -> dict[str, Any]:
+    """The derived conflicts and near misses of one recording (a task), most critical first
+    (:func:`aveas_format.derive.events.worst_events`), with the recording's path and id."""
+    from aveas_format.derive.events import worst_events
+    from aveas_format.io.container import Container
+    from aveas_format.io.reader import open_recording, read_meta, table_names_present
+
+    with local_copy(path) as local:
+        with Container(local) as c:
+            meta, _ = read_meta(c)
+            present = table_names_present(c, meta)
+        if "events" not in present:
+            return {"path": path, "recording_id": meta.recording_id, "rows": [],
+                    "has_events": False}
+        rec = open_recording(local, tables=["events"], verify=False)
+        rows = worst_events(rec.events)
+        derived = any(e.table == "events" for e in meta.derived) or bool(rows) or (
+            rec.events is not None and "origin" in rec.events.column_names and any(
+                str(o) == "derived" for o in rec.events.column("origin").to_pylist()))
+    return {"path": path, "recording_id": meta.recording_id, "rows": rows, "has_events": derived}
+
+
+#: the columns of :func:`critical_events`' table
+EVENT_FIELDS = (("path", "string"), ("recording_id", "string"), ("event_id", "int64"),
+                ("kind", "string"), ("participant_id", "int64"), ("other_id", "int64"),
+                ("relation", "string"), ("time_start", "float64"), ("time_end", "float64"),
+                ("time", "float64"), ("metric", "string"), ("value", "float64"),
+                ("value_std", "float64"), ("duration", "float64"),
+                ("collision_probability", "float64"), ("collision_probability_std", "float64"))
+
+
+def critical_events(paths: Iterable[str | Path], *, workers: int | None = 1,
+                    scheduler: str | None = None, progress: bool = False,
+                    on_result: Callable[[TaskResult], None] | None = None):
+    """Every derived conflict and near miss of every recording, one row each (a pyarrow table of
+    :data:`EVENT_FIELDS`; ``participant_id``/``other_id`` its pair, ``time`` its extreme), the
+    recordings without derived events, and the failures (``(table, missing, failed)``)."""
+    import pyarrow as pa
+
+    rows: list[dict[str, Any]] = []
+    values, missing, failed = _collect(recording_events, "has_events", paths, workers, scheduler,
+                                       progress, on_result)
+    for v in values:
+        for e in v["rows"]:
+            ids = list(e["participant_ids"] or []) + [None, None]
+            rows.append({"path": v["path"], "recording_id": v["recording_id"],
+                         "participant_id": ids[0], "other_id": ids[1],
+                         "time": e.get("time_extreme") if e.get("time_extreme") is not None
+                         else e["time_start"],
+                         **{k: e.get(k) for k, _ in EVENT_FIELDS if k not in (
+                             "path", "recording_id", "participant_id", "other_id", "time")}})
+    schema = pa.schema([(k, getattr(pa, t)()) for k, t in EVENT_FIELDS])
+    table = pa.Table.from_pylist(rows, schema=schema) if rows else schema.empty_table()
+    return table, missing, failed
+
+
+def rank_events(table, where: str | None = None, top: int | None = 20):
+    """The events matching ``where`` (on :data:`EVENT_MEASURES`), most likely to collide first
+    (then the smaller TTC or PET), at most ``top``."""
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    ops = {"<": pc.less, "<=": pc.less_equal, ">": pc.greater, ">=": pc.greater_equal,
+           "==": pc.equal, "!=": pc.not_equal}
+    for name, op, num in parse_where(where, EVENT_MEASURES):
+        table = table.filter(pc.fill_null(ops[op](table.column(name), num), False))
+    p = pc.fill_null(table.column("collision_probability"), 0.0)
+    v = table.column("value").to_numpy(zero_copy_only=False).astype(float)
+    drac = (table.column("metric").to_numpy(zero_copy_only=False) == "drac")
+    key = np.lexsort((np.where(drac, -v, v), drac, -p.to_numpy(zero_copy_only=False)))
+    if top is not None:
+        key = key[:top]
+    return table.take(pa.array(key, pa.int64()))
 
 
 def find(paths: Iterable[str | Path], *, where: str | None = None, by: str = "min_ttc",
@@ -267,5 +364,6 @@ def cut_out(situation: dict[str, Any], out_dir: str | Path, *, before_s: float =
     return written
 
 
-__all__ = ["MEASURES", "cut_name", "cut_out", "find", "parse_where", "rank",
+__all__ = ["EVENT_FIELDS", "EVENT_MEASURES", "MEASURES", "critical_events", "cut_name",
+           "cut_out", "find", "parse_where", "rank", "rank_events", "recording_events",
            "recording_situations", "situations"]

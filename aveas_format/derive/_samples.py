@@ -44,8 +44,16 @@ class Samples:
         kin = _kinematics_columns(rec, self.pid, self.t,
                                   ("ax", "ay", "ax_std", "ay_std", "speed", "speed_std"))
         self.ax, self.ay, self.sax, self.say = _accel(rec, kin[:4])
-        # smoothed speed (interactions.velocities.smoothed_velocities)
+        # smoothed speed and velocity (interactions.velocities.smoothed_velocities); the velocity
+        # is NaN where the kinematics table has none (written before it carried vx/vy)
         self.k_speed, self.k_speed_std = kin[4:]
+        self.k_vx, self.k_vy, self.k_svx, self.k_svy, self.k_rv = _kinematics_columns(
+            rec, self.pid, self.t, ("vx", "vy", "vx_std", "vy_std", "vxvy_corr"))
+        # smoothed positions (NaN where none); ``shift``: smoothed minus measured position where
+        # the smoothed one replaced it (interactions.velocities.smoothed_velocities)
+        self.k_x, self.k_y, self.k_sx, self.k_sy, self.k_rxy = _kinematics_columns(
+            rec, self.pid, self.t, ("x", "y", "x_std", "y_std", "xy_corr"))
+        self.shift_x = self.shift_y = None
         tk = np.round(self.t / time_resolution).astype(np.int64)
         self.tstep = np.unique(tk, return_inverse=True)[1].ravel()
         self.n = len(self.t)

@@ -20,8 +20,8 @@ leader (1D), its neighbours and conflicting participants (2D). Definitions:
 - **max DRAC**, **min PSD**: over the same rows; **min PET**: over ``derived/encroachments`` rows
   the participant is in; counts: samples with ``TTC <= TTC*``, derived near misses and
   hard-braking events the participant is in; ``worst_events``: the ids of up to five of those
-  near misses, most critical first (smallest TTC/PET, then those from DRAC alone, largest
-  first).
+  near misses and conflicts, most critical first (the largest collision probability, then the
+  smallest TTC/PET, then those from DRAC alone, largest first).
 
 Uncertainty: ``min_ttc_std`` is the std of the minimum's row. TET and TIT take their std from
 ``samples`` Monte Carlo draws of every TTC below ``TTC* + 4 σ``, ``TTC_t + σ_t z`` with one ``z``
@@ -46,7 +46,7 @@ from aveas_format.derive._samples import find_rows, segments, string_values
 from aveas_format.derive.events import DEFAULT_THRESHOLD_S
 from aveas_format.derive.registry import Derivation, Params, register
 from aveas_format.io.arrow import column_numpy
-from aveas_format.schema.columns import MUST, col, enum_col, gaussian
+from aveas_format.schema.columns import MAY, MUST, col, enum_col, gaussian
 from aveas_format.schema.tables import derived_table
 
 #: how many event ids ``worst_events`` lists
@@ -184,9 +184,9 @@ def compute(rec, p: CriticalityParams, core: tuple[float, float] | None = None) 
     rv["min_pet"], rv["min_pet_std"], _ = nanmin_at(out["min_pet"], out["min_pet_std"])
     rv["ttc_samples_below"] = int(out["ttc_samples_below"].sum())
     # events: the recording counts each event once
-    for k in ("near_misses", "hard_braking"):
+    for k in ("near_misses", "conflicts", "hard_braking"):
         rv[k] = counts.get(f"recording_{k}", 0)
-    return _table(ids, out, counts, worst, rv, rec_worst)
+    return summary_table(ids, out, counts, worst, rv, rec_worst)
 
 
 def _interaction_measures(it: pa.Table, ids: np.ndarray, out: dict, thr: float, spid, st, sdt,
@@ -295,43 +295,50 @@ def _pet_measures(en: pa.Table, ids: np.ndarray, out: dict) -> None:
         out["min_pet_std"] = np.where(better, sd[np.maximum(best, 0)], out["min_pet_std"])
 
 
-def _severity(kind: str, attrs: dict) -> tuple[int, float]:
-    """Sort key of a near miss, most critical first: by TTC or PET (smaller first), then those
-    from DRAC alone (larger first)."""
+def _severity(attrs: dict, p: float | None) -> tuple[float, int, float]:
+    """Sort key of a critical event, most critical first: by collision probability (larger
+    first), then by TTC or PET (smaller first), then those from DRAC alone (larger first)."""
+    pk = -(p if p is not None else 0.0)
     v = attrs.get("min_value_s", attrs.get("value_s"))
     if v is not None:
-        return (0, float(v))
-    return (1, -float(attrs.get("max_value_mps2", 0.0) or 0.0))
+        return (pk, 0, float(v))
+    return (pk, 1, -float(attrs.get("max_value_mps2", 0.0) or 0.0))
+
+
+#: the kinds of critical events (``worst_events``), counted as the summary's columns
+CRITICAL = {"near_miss": "near_misses", "conflict": "conflicts"}
 
 
 def _event_measures(rec, ids: np.ndarray) -> tuple[dict, list[list[int]], list[int]]:
-    """Counts of derived near misses and hard-braking events per participant (and for the
-    recording) and the worst near misses' ids."""
+    """Counts of derived near misses, conflicts and hard-braking events per participant (and for
+    the recording) and the worst critical events' ids."""
     n = len(ids)
-    counts = {"near_misses": np.zeros(n, np.int64), "hard_braking": np.zeros(n, np.int64)}
+    counts = {k: np.zeros(n, np.int64) for k in ("near_misses", "conflicts", "hard_braking")}
     worst: list[list[tuple]] = [[] for _ in range(n)]
     allw: list[tuple] = []
     ev = rec.events
     if ev is not None and ev.num_rows:
-        d = ev.select([c for c in ("event_id", "kind", "origin", "participant_ids", "attributes")
+        d = ev.select([c for c in ("event_id", "kind", "origin", "participant_ids", "attributes",
+                                   "collision_probability")
                        if c in ev.column_names]).to_pydict()
         attrs_all = d.get("attributes") or [None] * ev.num_rows
-        for eid, kind, origin, pids, attr in zip(d["event_id"], d["kind"], d["origin"],
-                                                 d["participant_ids"], attrs_all):
-            if str(origin) != "derived" or str(kind) not in ("near_miss", "hard_braking"):
-                continue
+        probs = d.get("collision_probability") or [None] * ev.num_rows
+        for eid, kind, origin, pids, attr, prob in zip(d["event_id"], d["kind"], d["origin"],
+                                                       d["participant_ids"], attrs_all, probs):
             kind = str(kind)
+            if str(origin) != "derived" or kind not in (*CRITICAL, "hard_braking"):
+                continue
             a = json.loads(attr) if attr else {}
-            key = "near_misses" if kind == "near_miss" else "hard_braking"
+            key = CRITICAL.get(kind, "hard_braking")
             counts[f"recording_{key}"] = counts.get(f"recording_{key}", 0) + 1
-            if kind == "near_miss":
-                allw.append((_severity(kind, a), int(eid)))
+            if kind in CRITICAL:
+                allw.append((_severity(a, prob), int(eid)))
             for q in pids or []:
                 g = int(np.searchsorted(ids, q))
                 if g < n and ids[g] == q:
                     counts[key][g] += 1
-                    if kind == "near_miss":
-                        worst[g].append((_severity(kind, a), int(eid)))
+                    if kind in CRITICAL:
+                        worst[g].append((_severity(a, prob), int(eid)))
     top = [[e for _, e in sorted(w)[:N_WORST]] for w in worst]
     return counts, top, [e for _, e in sorted(allw)[:N_WORST]]
 
@@ -341,7 +348,9 @@ def _f(v: Iterable) -> pa.Array:
     return pa.array(v, pa.float64(), mask=~np.isfinite(v))
 
 
-def _table(ids, out, counts, worst, rv, rec_worst) -> pa.Table:
+def summary_table(ids, out, counts, worst, rv, rec_worst) -> pa.Table:
+    """The ``criticality_summary`` table: one row per participant (``ids``) from the per-participant
+    measures ``out``, event ``counts`` and worst events, and the recording's row."""
     n = len(ids)
     floats = ("duration_s", "min_ttc", "min_ttc_std", "min_ttc_time", "tet", "tet_std", "tit",
               "tit_std", "cpi", "cpi_std", "max_drac", "max_drac_std", "min_psd", "min_psd_std",
@@ -357,8 +366,8 @@ def _table(ids, out, counts, worst, rv, rec_worst) -> pa.Table:
     cols["min_ttc_kind"] = pa.array(list(out["min_ttc_kind"]) + [rv["min_ttc_kind"]], pa.string())
     cols["ttc_samples_below"] = pa.array(np.r_[out["ttc_samples_below"], rv["ttc_samples_below"]],
                                          pa.int64())
-    for k in ("near_misses", "hard_braking"):
-        cols[k] = pa.array(np.r_[counts[k], rv[k]], pa.int64())
+    for k in ("near_misses", "conflicts", "hard_braking"):
+        cols[k] = pa.array(np.r_[counts.get(k, np.zeros(n, np.int64)), rv.get(k, 0)], pa.int64())
     cols["worst_events"] = pa.array(list(worst) + [rec_worst], pa.list_(pa.int64()))
     return pa.table(cols)
 
@@ -397,17 +406,21 @@ TABLE = derived_table(
         *_g("min_pet", "s", "smallest PET (derived/encroachments)", minimum=0.0),
         col("ttc_samples_below", "int64", MUST, "samples (time steps) with TTC <= the threshold",
             minimum=0),
-        col("near_misses", "int64", MUST, "derived near-miss events", minimum=0),
+        col("near_misses", "int64", MUST, "derived near-miss events (collision probability at "
+            "least the events' near_miss_probability)", minimum=0),
+        col("conflicts", "int64", MAY, "derived conflicts (critical by TTC, PET or DRAC, averted "
+            "by the recorded behaviour)", minimum=0),
         col("hard_braking", "int64", MUST, "derived hard-braking events", minimum=0),
         col("worst_events", "list<int64>", MUST, "ids (events.event_id) of up to five near "
-            "misses, most critical first"),
+            "misses and conflicts, most critical first (the largest collision probability, then "
+            "the smallest TTC or PET)"),
     ),
 )
 
 CRITICALITY_SUMMARY = register(Derivation(
     name="criticality_summary",
     spec=TABLE,
-    version="1.0.0",
+    version="1.1.0",
     params=CriticalityParams,
     fn=compute,
     needs={"states": ("participant_id", "time"), "participants": ("participant_id",)},

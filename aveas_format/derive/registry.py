@@ -207,7 +207,7 @@ def _params_for(d: Derivation, per: Mapping[str, Any], flat: Mapping[str, Any],
         raise FormatError(f"derivation {d.name}: parameter {loc}: {first['msg']}") from None
 
 
-def _empty(name: str) -> pa.Table:
+def empty_table(name: str) -> pa.Table:
     """A zero-row table of the required columns of derived table ``name``."""
     from aveas_format.io.arrow import arrow_schema
 
@@ -259,7 +259,7 @@ def derive(rec, only: str | Iterable[str] | None = None, **params: Any) -> list[
             check_columns(get_table(rec, tname), tname, cols, n)
         inputs = {t: table_sha256(rec, t) for t in d.inputs() if get_table(rec, t) is not None}
         if not rec.states.num_rows and d.table != "events":
-            table = _empty(d.table)  # nothing to derive from: an empty table, documented as usual
+            table = empty_table(d.table)  # nothing to derive from: an empty table, documented as usual
         else:
             table = d.fn(rec, p)
         method = d.method(p)

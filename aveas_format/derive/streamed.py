@@ -247,7 +247,7 @@ def merge_summaries(parts: list[pa.Table]) -> pa.Table:
     """One criticality summary from the summaries of disjoint time windows: sums of duration,
     TET, TIT and counts (stds added in quadrature), minima (maxima for DRAC) with their std, time
     and pair, CPI weighted by the observed time; the recording's row from the participants'."""
-    from aveas_format.derive.criticality import _table
+    from aveas_format.derive.criticality import summary_table
 
     rows = [r for t in parts for r in t.to_pylist() if str(r["scope"]) == "participant"]
     by: dict[int, dict[str, Any]] = {}
@@ -292,7 +292,7 @@ def merge_summaries(parts: list[pa.Table]) -> pa.Table:
                                         for i in ids], np.int64)
     out["min_ttc_kind"] = np.array([by[i].get("min_ttc_kind") for i in ids], object)
     out["ttc_samples_below"] = np.array([by[i]["ttc_samples_below"] for i in ids], np.int64)
-    counts = {"near_misses": np.zeros(n, np.int64), "hard_braking": np.zeros(n, np.int64)}
+    counts = {k: np.zeros(n, np.int64) for k in ("near_misses", "conflicts", "hard_braking")}
 
     def nanarg(v, largest=False):
         if not np.isfinite(v).any():
@@ -316,8 +316,8 @@ def merge_summaries(parts: list[pa.Table]) -> pa.Table:
     rv["cpi"] = float(np.nansum(out["cpi"] * T) / tot) if tot > 0 else np.nan
     rv["cpi_std"] = float(np.sqrt(np.nansum((out["cpi_std"] * T) ** 2)) / tot) if tot > 0 else np.nan
     rv["ttc_samples_below"] = int(out["ttc_samples_below"].sum())
-    rv["near_misses"] = rv["hard_braking"] = 0
-    return _table(ids, out, counts, [[] for _ in range(n)], rv, [])
+    rv["near_misses"] = rv["conflicts"] = rv["hard_braking"] = 0
+    return summary_table(ids, out, counts, [[] for _ in range(n)], rv, [])
 
 
 def derive_by_windows(path: str | Path, out_dir: str | Path, *,
@@ -395,7 +395,7 @@ def _assemble(parts: Path, spec, dest: Path, provenance: bytes) -> tuple[int, st
     in the table's key order, a participant range at a time; return (rows, SHA-256)."""
     import pyarrow.dataset as ds
 
-    from aveas_format.derive.registry import DERIVED_KEY, _empty
+    from aveas_format.derive.registry import DERIVED_KEY, empty_table
     from aveas_format.io.writer import ROW_GROUP_ROWS, parquet_options, prepare_table
 
     files = sorted(parts.glob("part-*.parquet")) if parts.is_dir() else []
@@ -417,7 +417,7 @@ def _assemble(parts: Path, spec, dest: Path, provenance: bytes) -> tuple[int, st
             pieces = [None]
         for rng in pieces:
             if rng is None:
-                t = data.to_table() if data is not None else _empty(spec.name)
+                t = data.to_table() if data is not None else empty_table(spec.name)
             else:
                 f = pc.field("participant_id")
                 t = data.to_table(filter=(f >= rng[0]) & (f <= rng[1]))

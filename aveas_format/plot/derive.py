@@ -101,42 +101,65 @@ def acceleration_figure(kinematics: pa.Table, participant_id: int, *,
 
 def ttc_drac_figure(interactions: pa.Table, participant_id: int, other_id: int, *,
                     xlim: tuple[float, float] | None = None, ttc_max: float = 10.0,
-                    title: str | None = None) -> Figure:
-    """TTC (top) and DRAC (bottom) of ``participant_id`` to ``other_id`` over time with ±1 std
-    bands, by ``ttc_kind`` (the rows of ``derived/interactions`` of that pair; DRAC is drawn
-    where it is defined, i.e. while the pair closes in)."""
-    fig = Figure(figsize=(7, 4.8))
-    axes = fig.subplots(2, 1, sharex=True)
+                    title: str | None = None, axes=None,
+                    span: tuple[float, float] | None = None) -> Figure:
+    """TTC (top) and DRAC (bottom) of ``participant_id`` to ``other_id`` over time with their
+    ±1 std bands where the rows have a std, by ``ttc_kind`` (the rows of
+    ``derived/interactions`` of that pair; DRAC is drawn where it is defined, i.e. while the pair
+    closes in). ``axes``: two axes to draw into (their figure is returned; else a new figure),
+    ``span``: a time span to shade (a critical episode)."""
+    if axes is None:
+        fig = Figure(figsize=(7, 4.8))
+        axes = fig.subplots(2, 1, sharex=True)
+        own = True
+    else:
+        fig = axes[0].figure
+        own = False
     pair = _is(interactions, "participant_id", participant_id) & _is(interactions, "other_id", other_id)
     kind = np.asarray(interactions.column("ttc_kind").to_pylist(), dtype=object)
     time = column_numpy(interactions, "time")
+    banded = False
     for a, col, unit in ((axes[0], "ttc", "s"), (axes[1], "drac", "m/s²")):
         if col not in interactions.column_names:
             continue
         v = column_numpy(interactions, col)
-        sd = column_numpy(interactions, f"{col}_std", null=0.0)
+        sd = (column_numpy(interactions, f"{col}_std") if f"{col}_std" in
+              interactions.column_names else np.full(len(v), np.nan))
         for k, (colour, label) in TTC_KINDS.items():
             m = pair & (kind == k) & np.isfinite(v)
             if not m.any():
                 continue
             o = np.argsort(time[m])
-            t, y, e = time[m][o], v[m][o], np.nan_to_num(sd[m][o])
+            t, y, e = time[m][o], v[m][o], sd[m][o]
             if len(t) > 2:  # no line across gaps (where the pair had no such row)
                 gap = np.flatnonzero(np.diff(t) > 3 * np.median(np.diff(t)))
-                t, y, e = (np.insert(a, gap + 1, np.nan) for a in (t, y, e))
+                t, y, e = (np.insert(a_, gap + 1, np.nan) for a_ in (t, y, e))
             a.plot(t, y, ".-", ms=3, lw=0.8, color=colour, label=label)
-            a.fill_between(t, y - e, y + e, color=colour, alpha=0.25, lw=0)
+            # a band where the value is drawn (a TTC far above the axis with a std of its size
+            # would paint the whole height)
+            has = np.isfinite(e) & (y <= (ttc_max if col == "ttc" else np.inf))
+            if has.any():
+                banded = True
+                a.fill_between(t, y - e, y + e, where=has, color=colour, alpha=0.3, lw=0,
+                               label=f"±1 std ({label.split(' (')[0]})" if col == "ttc" else None)
+        if span is not None:
+            a.axvspan(span[0], span[1], color="0.85", zorder=0)
         a.set_ylabel(f"{col.upper()} ({unit})")
     axes[0].set_ylim(0.0, ttc_max)
     axes[1].set_ylim(bottom=0.0)
     axes[1].set_xlabel("time (s)")
+    if not own:
+        axes[0].set_xlabel("time (s)")
     handles, labels = axes[0].get_legend_handles_labels()
     if handles:
-        axes[0].legend(loc="upper right", fontsize=8)
+        axes[0].legend(loc="upper right", fontsize=7)
     if xlim is not None:
         axes[1].set_xlim(*xlim)
-    axes[0].set_title(title or f"participant {participant_id} to {other_id}: TTC and DRAC ± 1 std")
-    fig.tight_layout()
+    what = "TTC and DRAC" + (" ± 1 std (shaded)" if banded else " (no std)")
+    axes[0].set_title(title or f"participant {participant_id} to {other_id}: {what}",
+                      fontsize=9 if not own else None)
+    if own:
+        fig.tight_layout()
     return fig
 
 

@@ -93,6 +93,7 @@ class UnobservedKind(StrEnum):
 
 class EventKind(StrEnum):
     NEAR_MISS = "near_miss"
+    CONFLICT = "conflict"
     ACCIDENT = "accident"
     LANE_CHANGE = "lane_change"
     CUT_IN = "cut_in"

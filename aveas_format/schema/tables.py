@@ -153,8 +153,10 @@ EVENTS = TableSpec(
     name="events",
     file="events.parquet",
     requirement=MAY,
-    doc="Labelled or derived events (near misses, lane changes, ...). A near miss is a scenario in "
-    "which an accident was averted predominantly due to stochastic effects.",
+    doc="Labelled or derived events (near misses, conflicts, lane changes, ...). A near miss is a "
+    "scenario in which an accident was averted predominantly due to stochastic effects; a "
+    "conflict one in which road users came so close that they would have collided had they kept "
+    "their motion, and the recorded behaviour averted it.",
     key=("event_id",),
     sort=("event_id",),
     columns=(
@@ -169,6 +171,19 @@ EVENTS = TableSpec(
         enum_col("origin", EventOrigin.values(), MUST, "annotated by a person or derived by a method",
                  nullable=False),
         col("attributes", "string", MAY, "JSON object: metric and threshold for derived events, ..."),
+        col("metric", "string", MAY, "the measure that found a derived event: ttc, pet, drac "
+            "or a_lon"),
+        col("relation", "string", MAY, "how the participants of a derived event relate at its "
+            "extreme: leader, left_neighbour, right_neighbour, conflicting (derived/interactions) "
+            "or crossing (an encroachment)"),
+        *gaussian("value", None, MAY, "the extreme value of `metric` in the event, in its unit "
+                  "(s for ttc and pet, m/s² for drac and a_lon)"),
+        col("time_extreme", "float64", MAY, "time of `value`", "s"),
+        col("duration", "float64", MAY, "observed time in which the measure was beyond its "
+            "threshold (the sampling intervals of its steps)", "s", minimum=0.0),
+        *gaussian("collision_probability", None, MAY, "probability that the participants touch "
+                  "under variations of the recorded encounter within its stated uncertainty "
+                  "(docs/derive.md)", minimum=0.0, maximum=1.0),
     ),
 )
 

@@ -81,7 +81,9 @@ def _supports_parquet(binary: Path) -> bool:
     return "Parquet" in v.stdout
 
 
-def _run(cmd: list[str], cwd: Path, log: Path, what: str, timeout: float | None) -> None:
+def run_tool(cmd: list[str], cwd: Path, log: Path, what: str, timeout: float | None) -> None:
+    """Run a SUMO tool (``cmd``) in ``cwd``, its output appended to ``log``; a failure or a timeout
+    is a :class:`SimulationError` naming ``what`` and the log's last lines."""
     try:
         with open(log, "ab") as f:
             p = subprocess.run(cmd, cwd=cwd, stdout=f, stderr=subprocess.STDOUT, timeout=timeout,
@@ -194,7 +196,7 @@ def _build_network(net: Network, workdir: Path, timeout: float | None) -> NetInf
         xodr = _map_bytes(Path(net.map))
     (workdir / "map.xodr").write_bytes(xodr)
     log = workdir / "netconvert.log"
-    _run([str(find_sumo("netconvert")), "--opendrive-files", "map.xodr", "-o", "net.net.xml",
+    run_tool([str(find_sumo("netconvert")), "--opendrive-files", "map.xodr", "-o", "net.net.xml",
           "--no-warnings"], workdir, log, "netconvert", timeout)
     path = workdir / "net.net.xml"
     tree = etree.parse(str(path))
@@ -365,7 +367,7 @@ def simulate(scenario: Scenario, *, recording: bool = False, speed_factors: bool
         if speed_factors:
             cmd += ["--vehroute-output", "vehroutes.xml", "--vehroute-output.speedfactor", "true"]
         cmd += scenario.extra_args
-        _run(cmd, wd, wd / "sumo.stdout.log", "sumo", timeout)
+        run_tool(cmd, wd, wd / "sumo.stdout.log", "sumo", timeout)
         t3 = time.perf_counter()
         timings["sumo"] = t3 - t2
         runtime = t3 - t0

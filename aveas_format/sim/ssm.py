@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from aveas_format.sim.runner import SimulationError, _run, find_sumo
+from aveas_format.sim.runner import SimulationError, find_sumo, run_tool
 
 #: every measure of SUMO's device (1.28)
 SSM_MEASURES = ("TTC", "DRAC", "MDRAC", "PET", "PPET", "BR", "SGAP", "TGAP")
@@ -217,10 +217,10 @@ def junction_scenario(workdir: str | Path | None = None, *, duration: float = 12
         (wd / "n.edg.xml").write_text(_junction_edges(1, speed))
         nc = str(find_sumo("netconvert"))
         log = wd / "netconvert.log"
-        _run([nc, "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "net.net.xml", "--no-turnarounds",
+        run_tool([nc, "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "net.net.xml", "--no-turnarounds",
               "--offset.disable-normalization", "true", "--no-warnings"], wd, log, "netconvert",
              timeout)
-        _run([nc, "-s", "net.net.xml", "--opendrive-output", "map.xodr", "--no-warnings"], wd,
+        run_tool([nc, "-s", "net.net.xml", "--opendrive-output", "map.xodr", "--no-warnings"], wd,
              log, "netconvert", timeout)
         _add_geo_reference(wd / "map.xodr", geo_reference)
         routes = ['<routes>', '  <vType id="car" vClass="passenger" length="5" width="1.8" '
@@ -235,7 +235,7 @@ def junction_scenario(workdir: str | Path | None = None, *, duration: float = 12
                                   'departLane="best"/>')
         routes.append("</routes>")
         (wd / "routes.rou.xml").write_text("\n".join(routes) + "\n")
-        _run([str(find_sumo("sumo")), "-n", "net.net.xml", "-r", "routes.rou.xml",
+        run_tool([str(find_sumo("sumo")), "-n", "net.net.xml", "-r", "routes.rou.xml",
               "--step-length", f"{step:g}", "--seed", str(seed), "--end", f"{duration:g}",
               "--fcd-output", "fcd.xml", "--fcd-output.attributes", "id,type,speed,lane,pos,x,y,"
               "angle,acceleration", "--no-step-log", "true", "--collision.action", "warn",
@@ -563,6 +563,119 @@ def compare(run: SsmRun, rel: float = 0.01) -> dict[str, Any]:
     return out
 
 
-__all__ = ["CROSSING", "FOLLOWING_FOLLOWER", "MERGING", "SSM_MEASURES", "SsmRun",
-           "autobahn_scenario", "compare", "follower_pairs", "junction_scenario", "read_ssm",
-           "ssm_args", "with_fcd_acceleration"]
+#: SUMO's encounter types of a crossing: approaching (10, 11: ego leads / follows), in the
+#: conflict area (12-14), leaving it (15-17)
+CROSSING_PHASES = (10, 11, 12, 13, 14, 15, 16, 17)
+
+
+def _episodes(pair: list, t: np.ndarray, gap: float) -> list[tuple[Any, float, float, np.ndarray]]:
+    """``(pair, start, end, rows)`` of consecutive rows of one pair (rows sorted by pair, time;
+    a new episode after a gap longer than ``gap``)."""
+    out = []
+    k = 0
+    n = len(t)
+    while k < n:
+        j = k
+        while j + 1 < n and pair[j + 1] == pair[k] and t[j + 1] - t[j] <= gap:
+            j += 1
+        out.append((pair[k], float(t[k]), float(t[j]), np.arange(k, j + 1)))
+        k = j + 1
+    return out
+
+
+def _min(v) -> float | None:
+    v = np.asarray(v, float)
+    v = v[np.isfinite(v)]
+    return float(v.min()) if len(v) else None
+
+
+def compare_episodes(run: SsmRun, ttc_s: float = 3.0, pet_s: float = 2.0, gap_s: float = 0.5,
+                     slack_s: float = 1.0) -> dict[str, Any]:
+    """SUMO's crossing conflicts against ``derived/conflicts``, conflict by conflict.
+
+    A *conflict episode* is a pair's consecutive crossing samples (:data:`CROSSING_PHASES`;
+    gaps up to ``gap_s``) with TTC <= ``ttc_s`` or PPET <= ``pet_s``, plus the pair's observed
+    PET <= ``pet_s``; ours the same from ``derived/conflicts`` (``ttc``, ``ppet``, ``pet``). A
+    SUMO episode is matched by an episode of ours of the same pair overlapping it in time (within
+    ``slack_s``). SUMO's episodes are classified by where the definitions differ (docs/derive.md):
+    ``opposing_left_turns`` (SUMO's lanes pass each other without crossing: it logs them with a
+    conflict distance of 0, values that are not measurements), ``not_in_recording`` (a vehicle
+    still on its way when the run ends: SUMO knows its route, the recording not its path); the
+    rest are ``comparable``. Per matched comparable episode the minimum TTC, minimum PPET and
+    PET of both, and (``*_max_abs_s``) the largest difference of the minimum TTC and of the PET
+    over the episodes of ``straight`` pairs (both on straight-on routes: a right-angle crossing,
+    where the conflict areas are the same) and of the others."""
+    import pyarrow.compute as pc
+
+    rec = run.recording
+    ids = _ids(rec)
+    src = {v: k for k, v in ids.items()}
+    e = run.ssm["encounters"]
+    e = e.filter(pc.is_in(e.column("type"), pa.array(list(CROSSING_PHASES), pa.int64())))
+    E = e.to_pandas()
+    E = E[(E.ttc <= ttc_s) | (E.ppet <= pet_s)]
+    E = E.assign(pair=[tuple(sorted(p)) for p in zip(E.ego, E.foe)]).sort_values(["pair", "time"])
+    c = rec.derived["conflicts"].to_pandas()
+    c = c.assign(pair=[tuple(sorted((src.get(a), src.get(b)))) for a, b in
+                       zip(c.participant_id, c.other_id)])
+    O = c[(c.ttc <= ttc_s) | (c.ppet <= pet_s) | (c.pet <= pet_s)].sort_values(["pair", "time"])
+    P = run.ssm["pet"].to_pandas()
+    P = P[P.pet.between(0.0, pet_s)]
+    sumo_eps = [(p, a, b, E.iloc[r]) for p, a, b, r in _episodes(list(E.pair), E.time.to_numpy(),
+                                                                  gap_s)]
+    for _, row in P.iterrows():  # an observed PET below the threshold: an episode at its time
+        p = tuple(sorted((row.ego, row.foe)))
+        if not any(q == p and a - pet_s - slack_s <= row.time <= b + pet_s + slack_s
+                   for q, a, b, _ in sumo_eps):
+            sumo_eps.append((p, float(row.time) - float(row.pet), float(row.time), E.iloc[0:0]))
+    ours = _episodes(list(O.pair), O.time.to_numpy(), gap_s)
+    st = rec.states
+    pid, t = st.column("participant_id").to_numpy(), st.column("time").to_numpy()
+    t_end = float(t.max()) if len(t) else 0.0
+    last = {}
+    for i, tt in zip(pid.tolist(), t.tolist()):
+        last[i] = max(last.get(i, -np.inf), tt)
+    rows = []
+    for p, a, b, S in sumo_eps:
+        if frozenset(map(_route, p)) in OPPOSING_LEFT_TURNS:
+            cls = "opposing_left_turns"
+        elif any(last.get(ids.get(v), t_end) >= t_end for v in p):
+            cls = "not_in_recording"
+        else:
+            cls = "comparable"
+        mine = [r for q, x, y, r in ours if q == p and x <= b + slack_s + pet_s
+                and y >= a - slack_s - pet_s]
+        r = O.iloc[np.concatenate(mine)] if mine else O.iloc[0:0]
+        pet_sumo = P[[tuple(sorted(q)) == p for q in zip(P.ego, P.foe)]].pet
+        rows.append({"pair": "/".join(p), "start": a, "end": b, "class": cls,
+                     "straight": all(_route(v) in STRAIGHT_ROUTES for v in p),
+                     "matched": bool(mine),
+                     "sumo_min_ttc": _min(S.ttc), "ours_min_ttc": _min(r.ttc),
+                     "sumo_min_ppet": _min(S.ppet), "ours_min_ppet": _min(r.ppet),
+                     "sumo_pet": float(pet_sumo.min()) if len(pet_sumo) else None,
+                     "ours_pet": float(r.pet.min()) if len(r) and r.pet.notna().any() else None})
+    comp = [r for r in rows if r["class"] == "comparable"]
+
+    def diffs(key: str, straight: bool) -> list[float]:
+        return [abs(r[f"ours_{key}"] - r[f"sumo_{key}"]) for r in comp if r["matched"]
+                and r["straight"] == straight and r[f"ours_{key}"] is not None
+                and r[f"sumo_{key}"] is not None]
+
+    out: dict[str, Any] = {"sumo_episodes": len(rows),
+                           "by_class": {k: sum(r["class"] == k for r in rows) for k in
+                                        ("comparable", "not_in_recording",
+                                         "opposing_left_turns")},
+                           "comparable_matched": sum(r["matched"] for r in comp),
+                           "ours_episodes": len(ours), "episodes": rows}
+    for key in ("min_ttc", "pet"):
+        for straight in (True, False):
+            d = diffs(key, straight)
+            out[f"{'straight' if straight else 'turning'}_{key}_max_abs_s"] = (
+                max(d) if d else None)
+            out[f"{'straight' if straight else 'turning'}_{key}_n"] = len(d)
+    return out
+
+
+__all__ = ["CROSSING", "CROSSING_PHASES", "FOLLOWING_FOLLOWER", "MERGING", "SSM_MEASURES",
+           "SsmRun", "autobahn_scenario", "compare", "compare_episodes", "follower_pairs",
+           "junction_scenario", "read_ssm", "ssm_args", "with_fcd_acceleration"]

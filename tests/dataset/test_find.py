@@ -56,7 +56,45 @@ def test_find_ranks_across_recordings_and_cuts_out(dataset_root, tmp_path):
     res = cli("find", dataset_root, "--by", "max_drac")
     assert res.returncode == 0 and "most critical" in res.stdout
     assert "have no derived/criticality_summary" in res.stderr
+    # every header whole, however narrow the pipe (rich cut them at 80 columns)
+    assert "max DRAC m/s²" in res.stdout and "…" not in res.stdout
     assert cli("find", dataset_root, "--where", "nope > 1").returncode == 2
+    assert cli("find", dataset_root, "--events", "--where", "min_ttc < 1").returncode == 2
+
+
+def test_find_on_recordings_never_derived(dataset_root):
+    """Issue 42: the hint, and no internal error, where no recording has a summary or events."""
+    never = [str(dataset_root / "kit" / "u1.aveas"), str(dataset_root / "tub" / "v2.aveas")]
+    for extra in ((), ("--events",)):
+        res = cli("find", *never, *extra)
+        assert res.returncode == 0, res.stderr
+        assert "run aveas-format derive" in res.stderr and "Error" not in res.stderr
+        assert "0 " in res.stdout.splitlines()[0]
+        res = cli("find", *never, *extra, "--format", "json")
+        assert res.returncode == 0 and json.loads(res.stdout)["results"] == []
+
+
+def test_find_events_across_recordings(tmp_path):
+    """--events: the derived conflicts of every recording, most likely to collide first, with a
+    figure each."""
+    from aveas_format.derive import derive
+    from aveas_format.sample.scenes import conflict_scene
+
+    paths = []
+    for k, kind in enumerate(("cut_in", "crossing")):
+        rec = conflict_scene(kind, 1.0, method="lidar", seed=k)
+        derive(rec)
+        paths.append(rec.write(tmp_path / f"{kind}.aveas"))
+    res = cli("find", *paths, "--events", "--format", "json", "--figures", tmp_path / "figs")
+    assert res.returncode == 0, res.stderr
+    d = json.loads(res.stdout)
+    assert d["events"] == 2 and len(d["results"]) == 2
+    p = [r["collision_probability"] for r in d["results"]]
+    assert p == sorted(p, reverse=True)
+    assert all(r["kind"] == "conflict" and r["metric"] == "ttc" for r in d["results"])
+    assert all((tmp_path / "figs").joinpath(r["figure"]).exists() for r in d["results"])
+    res = cli("find", *paths, "--events", "--where", "collision_probability >= 0")
+    assert res.returncode == 0 and "P(collision)" in res.stdout and "conflict" in res.stdout
 
 
 def test_catalog_has_the_summary_columns(dataset_root, tmp_path):
@@ -77,4 +115,4 @@ def test_info_and_report_show_the_criticality(dataset_root, tmp_path):
     assert "TET (s)" in res.stdout and "max DRAC" in res.stdout
     res = cli("validate", path, "--format", "html")
     assert res.returncode == 0 and "<h2>Criticality</h2>" in res.stdout
-    assert "TTC and DRAC of participant" in res.stdout
+    assert "<h3>Worst events</h3>" in res.stdout and "CPI</span>" in res.stdout

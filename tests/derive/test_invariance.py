@@ -69,7 +69,7 @@ def test_lane_ttc_thw_invariant(th, dx, dy, gap, vf, vl):
     out = []
     for rot, shift in ((0.0, (0.0, 0.0)), (th, (dx, dy))):
         rec = recording(actors, duration=0.2, rotate=rot, shift=shift)
-        derive(rec, only="interactions", box_2d=False)
+        derive(rec, only="interactions", box_2d=False, velocities="states")
         r = row(rec.derived["interactions"], participant_id=0, time=0.0, relation="leader")[0]
         out.append(r)
     a, b = out

@@ -50,9 +50,12 @@ def test_write_open_validate(tmp_path, derived_scene):
     errors = [r for r in report.results if r.severity.value == "error"]
     assert not errors, errors
     assert not [r for r in report.results if r.code == "metadata.derived_stale"]
-    ev = back.events.to_pylist()
-    assert ev and all(e["origin"] == "derived" for e in ev)
-    assert all(json.loads(e["attributes"])["metric"] in ("ttc", "pet", "a_lon") for e in ev)
+    # the scene's events (if any: lane-keeping and a few lane changes) come back as derived
+    # events with their metric (the events of true conflicts: test_near_miss)
+    ev = back.events.to_pylist() if back.events is not None else []
+    assert all(e["origin"] == "derived" for e in ev)
+    assert all(e["metric"] == json.loads(e["attributes"])["metric"] in ("ttc", "pet", "a_lon")
+               for e in ev)
 
 
 def test_staleness_after_input_change(tmp_path):

@@ -1,5 +1,8 @@
 """Every analytic case of ../shared/data/criticality/vectors.json, reproduced by building a small
-recording with the given motion and running ``derive`` on it."""
+recording with the given motion and running ``derive`` on it. The motions are exact (noise-free
+positions and velocities that declare a std), so the pairs are derived from the states' own
+values (``velocities="states"``): the cases check the definitions, the smoothing has its own
+accuracy tests (test_kinematics, test_velocities, test_near_miss)."""
 
 from __future__ import annotations
 
@@ -40,7 +43,7 @@ def test_ttc1d_cv(rotate):
         i = var["inputs"]
         rec = _following(i["gap_m"], i["v_follower"], i["v_leader"], rotate=rotate,
                          shift=(30.0, -20.0))
-        derive(rec, only="interactions", box_2d=False)
+        derive(rec, only="interactions", box_2d=False, velocities="states")
         r = _at0(rec)
         want = value(var["expected"]["ttc_s"])
         got = np.inf if r["ttc"] is None else r["ttc"]
@@ -58,7 +61,7 @@ def test_ttc1d_ca_leader_braking():
     i = v["inputs"]
     rec = _following(i["gap_m"], i["v_follower"], i["v_leader"], a_f=i["a_follower"],
                      a_l=i["a_leader"])
-    derive(rec, only="interactions")
+    derive(rec, only="interactions", velocities="states")
     r = _at0(rec)
     assert r["ttc_ca"] == pytest.approx(v["expected"]["ttc_s"], abs=v["tolerance_abs"])
     assert r["ttc"] is None  # equal speeds: no collision course at constant velocity
@@ -71,7 +74,7 @@ def test_headway_thw_dhw():
     i, e = v["inputs"], v["expected"]
     gap = i["leader_rear_s"] - i["follower_front_s"]
     rec = _following(gap, i["v_follower"], i["v_leader"], L=i["leader_length"])
-    derive(rec, only="interactions", box_2d=False)
+    derive(rec, only="interactions", box_2d=False, velocities="states")
     r = _at0(rec)
     tol = v["tolerance_abs"]
     assert r["gap"] == pytest.approx(e["gap_m"], abs=tol)
@@ -80,7 +83,7 @@ def test_headway_thw_dhw():
     assert r["dhw"] / i["v_follower"] == pytest.approx(e["thw_gross_s"], abs=tol)
     # a standing follower has infinite headway: null
     rec0 = _following(gap, 0.0, i["v_leader"], L=i["leader_length"])
-    derive(rec0, only="interactions", box_2d=False)
+    derive(rec0, only="interactions", box_2d=False, velocities="states")
     assert _at0(rec0)["thw"] is None and value(e["thw_if_v_follower_zero"]) == np.inf
 
 
@@ -99,7 +102,7 @@ def test_ttc2d(case):
     actors = [{"x": a["x"], "y": a["y"], "heading": a["heading_rad"], "length": a["length"],
                "width": a["width"], "vx": a["vx"], "vy": a["vy"]} for a in (A, B)]
     rec = recording(actors, shift=(0.0, 500.0), xodr=road_map())
-    derive(rec, only="interactions")
+    derive(rec, only="interactions", velocities="states")
     r = _at0(rec, "conflicting")
     assert r["other_id"] == 1 and r["ttc_kind"] == "box_2d"
     assert r["ttc"] == pytest.approx(want, abs=v["tolerance_abs"])
@@ -126,7 +129,8 @@ def test_pet_crossing_explicit_area(rotate):
     v = vectors()["pet_crossing_lane_ca"]
     e = v["expected"]
     rec = _crossing(v, rotate=rotate)
-    derive(rec, only=["interactions", "encroachments"], conflict_areas=[_area(v, rotate)])
+    derive(rec, only=["interactions", "encroachments"], conflict_areas=[_area(v, rotate)],
+           velocities="states")
     en = rec.derived["encroachments"].to_pylist()
     assert len(en) == 1
     r = en[0]

@@ -55,7 +55,12 @@ import pyarrow.compute as pc
 from pydantic import Field
 
 from aveas_format.derive._samples import Samples
-from aveas_format.derive.interactions._boxes import box_conflicts, candidate_pairs, ttc_boxes
+from aveas_format.derive.interactions._boxes import (
+    box_conflicts,
+    candidate_pairs,
+    ttc_boxes,
+    ttc_draws,
+)
 from aveas_format.derive.interactions._lanes import LaneGraph, lane_chains, lane_graph
 from aveas_format.derive.interactions._pairs import SURROGATE_KEYS, lane_rows
 from aveas_format.derive.interactions._ttc import ttc_constant_acceleration, ttc_constant_velocity
@@ -119,7 +124,8 @@ def compute(rec, p: InteractionsParams, core: tuple[float, float] | None = None)
     if not parts:
         return _table(S, {k: np.zeros(0, t) for k, t in
                           (("i", np.int64), ("j", np.int64), ("rel", object), ("gap", float),
-                           ("gap_var", float), ("closing", float), ("ttc", float),
+                           ("gap_var", float), ("closing", float), ("closing_var", float),
+                           ("ttc", float),
                            ("ttc_std", float), ("thw", float), ("dhw", float), ("ttc_ca", float),
                            ("ttc_ca_std", float), ("kind", object),
                            *((k, float) for k in SURROGATE_KEYS))})
@@ -178,6 +184,7 @@ def _table(S: Samples, r: dict[str, np.ndarray]) -> pa.Table:
         "thw": _f(r["thw"]),
         "dhw": _f(r["dhw"]),
         "closing_speed": _f(r["closing"]),
+        "closing_speed_std": _f(np.sqrt(r["closing_var"])),
         "ttc_ca": _f(r["ttc_ca"]),
         "ttc_ca_std": _f(np.where(np.isfinite(r["ttc_ca"]), r["ttc_ca_std"], np.nan)),
         **{k: _f(r[k]) for k in SURROGATE_KEYS},
@@ -207,8 +214,8 @@ TABLE = derived_table(
         col("dhw", "float64", MAY, "distance headway: gross front-to-front spacing (gap + leader "
             "length); in left/right_neighbour rows the signed front-to-front distance along the "
             "lane (>= 0: the neighbour leads, < 0: it lags)", "m"),
-        col("closing_speed", "float64", MAY, "rate at which the gap closes (positive = closing)",
-            "m/s"),
+        *gaussian("closing_speed", "m/s", MAY, "rate at which the gap closes (positive = "
+                  "closing)"),
         *gaussian("drac", "m/s²", MAY, "deceleration rate to avoid a crash: closing speed² / (2 "
                   "gap) for lane pairs, |relative velocity| / (2 TTC) for 2D pairs (null = not "
                   "closing)", minimum=0.0),
@@ -224,7 +231,7 @@ TABLE = derived_table(
 INTERACTIONS = register(Derivation(
     name="interactions",
     spec=TABLE,
-    version="1.3.0",
+    version="1.4.0",
     params=InteractionsParams,
     fn=compute,
     needs={"states": ("participant_id", "time", "x", "y", "heading", "vx", "vy"),
@@ -238,5 +245,5 @@ INTERACTIONS = register(Derivation(
 ))
 
 __all__ = ["INTERACTIONS", "TABLE", "InteractionsParams", "LaneGraph", "candidate_pairs", "compute",
-           "lane_chains", "lane_graph", "ttc_boxes", "ttc_constant_acceleration",
-           "ttc_constant_velocity"]
+           "lane_chains", "lane_graph", "smoothed_velocities", "ttc_boxes",
+           "ttc_constant_acceleration", "ttc_constant_velocity", "ttc_draws"]

@@ -19,7 +19,7 @@ import numpy as np
 
 from aveas_format.derive._samples import Samples, ragged
 from aveas_format.derive.interactions._surrogates import box_surrogates, sample_std
-from aveas_format.derive.interactions._velocities import range_rate
+from aveas_format.derive.interactions._velocities import range_rate, range_rate_var
 from aveas_format.numeric import keyed_normals
 
 if TYPE_CHECKING:
@@ -212,6 +212,15 @@ def _draw(S: Samples, k: np.ndarray, other: np.ndarray, K: int, seed: int):
     return x, y, h, L, W, vx, vy
 
 
+def ttc_draws(S: Samples, i: np.ndarray, j: np.ndarray, samples: int, seed: int):
+    """``samples`` Monte Carlo draws of the 2D TTC of the pairs ``(i, j)`` (``(samples, pairs)``,
+    inf where a draw never touches) and the draws of both participants' states (:func:`_draw`:
+    keyed by the seed, the pair and the time, so a pair's draws do not depend on the other rows)."""
+    a = _draw(S, i, j, samples, seed)
+    b = _draw(S, j, i, samples, seed)
+    return ttc_boxes(*a, *b), a, b
+
+
 def box_std(S: Samples, i: np.ndarray, j: np.ndarray, p: InteractionsParams
             ) -> dict[str, np.ndarray]:
     """Std of the 2D TTC and of the surrogates derived from it (``ttc``, ``drac``, ``mdrac``,
@@ -221,9 +230,7 @@ def box_std(S: Samples, i: np.ndarray, j: np.ndarray, p: InteractionsParams
     keys = ("ttc", "drac", "mdrac", "psd_i", "psd_j")
     if p.samples == 0 or len(i) == 0:
         return {k: np.full(len(i), np.nan) for k in keys}
-    a = _draw(S, i, j, p.samples, p.seed)
-    b = _draw(S, j, i, p.samples, p.seed)
-    tt = ttc_boxes(*a, *b)
+    tt, a, b = ttc_draws(S, i, j, p.samples, p.seed)
     w = np.hypot(b[5] - a[5], b[6] - a[6])
     drac, mdrac, psd_i = box_surrogates(tt, w, np.hypot(a[5], a[6]), p.reaction_time,
                                         p.max_deceleration)
@@ -287,7 +294,7 @@ def box_conflicts(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
     if not len(ci):
         return {}
     m = len(ci)
-    rr = range_rate(S, ci, cj)
+    rr, rv = range_rate(S, ci, cj), range_rate_var(S, ci, cj)
     nan = np.full(2 * m, np.nan)
 
     def both(v: np.ndarray) -> np.ndarray:
@@ -296,7 +303,8 @@ def box_conflicts(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
     return {
         "i": np.r_[ci, cj], "j": np.r_[cj, ci],
         "rel": np.full(2 * m, "conflicting", object),
-        "gap": nan, "gap_var": nan, "closing": np.r_[rr, rr], "ttc": np.r_[ct, ct],
+        "gap": nan, "gap_var": nan, "closing": np.r_[rr, rr], "closing_var": np.r_[rv, rv],
+        "ttc": np.r_[ct, ct],
         "ttc_std": both(sd["ttc"]), "thw": nan, "dhw": nan,
         "ttc_ca": np.full(2 * m, np.inf), "ttc_ca_std": nan,
         "drac": both(val["drac"]), "drac_std": both(sd["drac"]),

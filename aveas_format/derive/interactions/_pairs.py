@@ -18,14 +18,14 @@ import numpy as np
 from aveas_format.derive._samples import Samples, ragged, road_columns, searchsorted_segments
 from aveas_format.derive.interactions._lanes import LaneGraph, lane_graph, lane_positions
 from aveas_format.derive.interactions._ttc import follower_leader_metrics
-from aveas_format.derive.interactions._velocities import range_rate, var_along
+from aveas_format.derive.interactions._velocities import range_rate, range_rate_var, var_along
 
 if TYPE_CHECKING:
     from aveas_format.derive.interactions import InteractionsParams
 
 #: the columns of a block of relation rows (before ``kind``)
-ROW_KEYS = ("i", "j", "rel", "gap", "gap_var", "closing", "ttc", "ttc_std", "thw", "dhw", "ttc_ca",
-            "ttc_ca_std", "drac", "drac_std", "mdrac", "mdrac_std", "psd", "psd_std")
+ROW_KEYS = ("i", "j", "rel", "gap", "gap_var", "closing", "closing_var", "ttc", "ttc_std", "thw",
+            "dhw", "ttc_ca", "ttc_ca_std", "drac", "drac_std", "mdrac", "mdrac_std", "psd", "psd_std")
 #: the surrogate columns (``._surrogates``), NaN where a relation has none
 SURROGATE_KEYS = ("drac", "drac_std", "mdrac", "mdrac_std", "psd", "psd_std")
 
@@ -77,6 +77,11 @@ def lane_samples(rec, S: Samples, p: InteractionsParams) -> LaneSamples | None:
     if not len(idx):
         return None
     c, sn = np.cos(theta), np.sin(theta)
+    if S.shift_x is not None:
+        # the smoothed positions (interactions.velocities) move the travel coordinates along
+        du = S.shift_x[idx] * c + S.shift_y[idx] * sn
+        u = u + du
+        adj_u = adj_u + du
     vp, vv, va = var_along(S, idx, c, sn)
     return LaneSamples(G=G, idx=idx, pid=S.pid[idx], ts=S.tstep[idx], rid=rid, chain=chain, u=u,
                        adj_chain=adj_chain, adj_u=adj_u, v=S.vx[idx] * c + S.vy[idx] * sn,
@@ -125,6 +130,7 @@ def _leader_rows(rows: dict[str, list], S: Samples, L: LaneSamples, p: Interacti
     m = follower_leader_metrics(gap, gvar, S.L[li], (L.v[a], L.a[a], L.vv[a], L.va[a]),
                                 (L.v[b], L.a[b], L.vv[b], L.va[b]), p.reaction_time,
                                 p.max_deceleration)
+    m = {**m, "closing_var": L.vv[a] + L.vv[b]}
     for (i, j, rel) in ((fi, li, "leader"), (li, fi, "follower")):
         _append(rows, i, j, rel, m)
 
@@ -163,6 +169,7 @@ def _neighbour_rows(rows: dict[str, list], S: Samples, L: LaneSamples, p: Intera
             nan = np.full(len(i), np.nan)
             _append(rows, i, j, rel, {
                 "gap": gap, "gap_var": gvar, "closing": range_rate(S, i, j),
+                "closing_var": range_rate_var(S, i, j),
                 "ttc": np.full(len(i), np.inf), "ttc_std": nan, "thw": nan, "dhw": dh,
                 "ttc_ca": np.full(len(i), np.inf), "ttc_ca_std": nan,
                 **{k: nan for k in SURROGATE_KEYS}})

@@ -49,7 +49,7 @@ from pydantic import Field
 from aveas_format.derive.kinematics._estimate import estimate
 from aveas_format.derive.registry import Derivation, Params, register
 from aveas_format.io.arrow import column_numpy
-from aveas_format.schema.columns import MUST, gaussian, pid_col, time_col
+from aveas_format.schema.columns import MAY, MUST, corr, gaussian, pid_col, time_col
 from aveas_format.schema.tables import derived_table
 
 
@@ -108,23 +108,36 @@ def compute(rec, p: KinematicsParams) -> pa.Table:
         heading = heading[order] if heading is not None else None
     res = estimate(pid, t, x, y, sx, sy, rho, heading, p)
     cols = {"participant_id": pa.array(pid, pa.int64()), "time": pa.array(t, pa.float64())}
-    for name in ("speed", "ax", "ay", "a_lon", "a_lat", "jerk_lon"):
+    for name in ("x", "y", "speed", "vx", "vy", "ax", "ay", "a_lon", "a_lat", "jerk_lon"):
         for c in (name, f"{name}_std"):
             v = res[c]
             cols[c] = pa.array(v, pa.float64(), mask=~np.isfinite(v))
+        if name in ("y", "vy"):
+            c = "xy_corr" if name == "y" else "vxvy_corr"
+            v = res[c]
+            cols[c] = pa.array(v.astype(np.float32), pa.float32(), mask=~np.isfinite(v))
     return pa.table(cols)
 
 
 TABLE = derived_table(
     "kinematics",
-    doc="Speed, accelerations and jerk per participant and time, estimated from the positions with "
-    "their uncertainty.",
+    doc="Smoothed position, speed, velocity, accelerations and jerk per participant and time, "
+    "estimated from the positions with their uncertainty.",
     key=("participant_id", "time"),
     sort=("participant_id", "time"),
     columns=(
         pid_col(),
         time_col(),
+        *gaussian("x", "m", MAY, "smoothed position x, local frame (ca_kalman_rts; null with "
+                  "savitzky_golay)", std_req=MAY),
+        *gaussian("y", "m", MAY, "smoothed position y, local frame", std_req=MAY),
+        corr("xy_corr", "x", "y"),
         *gaussian("speed", "m/s", MUST, "speed over ground", minimum=0.0, std_req=MUST),
+        *gaussian("vx", "m/s", MAY, "smoothed velocity x, local frame (the extrapolations of "
+                  "derived/interactions and the events' collision probability use it)",
+                  std_req=MAY),
+        *gaussian("vy", "m/s", MAY, "smoothed velocity y, local frame", std_req=MAY),
+        corr("vxvy_corr", "vx", "vy"),
         *gaussian("ax", "m/s²", MUST, "acceleration x, local frame", std_req=MUST),
         *gaussian("ay", "m/s²", MUST, "acceleration y, local frame", std_req=MUST),
         *gaussian("a_lon", "m/s²", MUST, "longitudinal acceleration (along the heading)",
@@ -138,12 +151,12 @@ TABLE = derived_table(
 KINEMATICS = register(Derivation(
     name="kinematics",
     spec=TABLE,
-    version="1.1.0",
+    version="1.2.0",
     params=KinematicsParams,
     fn=compute,
     needs={"states": ("participant_id", "time", "x", "y")},
-    doc="speed, ax/ay, a_lon/a_lat and jerk_lon with standard deviations from the positions "
-        "(constant-acceleration Kalman + RTS smoother, or Savitzky-Golay)",
+    doc="smoothed x/y, speed, vx/vy, ax/ay, a_lon/a_lat and jerk_lon with standard deviations "
+        "from the positions (constant-acceleration Kalman + RTS smoother, or Savitzky-Golay)",
     method=lambda p: p.method,
 ))
 

@@ -25,8 +25,8 @@ def estimate(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray, x_std
     segment is too short: fewer than 3 samples)."""
     n = len(t)
     out = {k: np.full(n, np.nan) for k in
-           ("speed", "ax", "ay", "a_lon", "a_lat", "jerk_lon", "speed_std", "ax_std", "ay_std",
-            "a_lon_std", "a_lat_std", "jerk_lon_std")}
+           ("x", "y", "x_std", "y_std", "xy_corr", "speed", "vx", "vy", "ax", "ay", "a_lon",
+            "a_lat", "jerk_lon", "speed_std", "vx_std", "vy_std", "vxvy_corr", "ax_std", "ay_std", "a_lon_std", "a_lat_std", "jerk_lon_std")}
     if n == 0:
         return out
     if n > 1:
@@ -50,16 +50,20 @@ def estimate(pid: np.ndarray, t: np.ndarray, x: np.ndarray, y: np.ndarray, x_std
         res = savgol(t, x, y, sx, sy, start, length, p)
     else:
         res = kalman(t, x, y, sx, sy, rho, start, length, p)
-    vx, vy, ax, ay, cov, jx, jy, jcov = res
+    vx, vy, ax, ay, cov, jx, jy, jcov, px, py = res
     ok = np.repeat(length >= 3, length)
     _combine(out, vx, vy, ax, ay, cov, jx, jy, jcov, heading, p.min_speed)
+    if "xx" in cov:
+        out["x"], out["y"] = px, py
+        out["x_std"], out["y_std"], out["xy_corr"] = _std_corr(cov["xx"], cov["yy"], cov["xy"])
     for k in out:
         out[k][~ok] = np.nan
     return out
 
 
 def _combine(out, vx, vy, ax, ay, cov, jx, jy, jcov, heading, min_speed):
-    """speed, a_lon, a_lat, jerk_lon and their std (delta method) into ``out``."""
+    """speed, the velocity (vx, vy, their std and correlation), a_lon, a_lat, jerk_lon and their
+    std (delta method) into ``out``."""
     s = np.hypot(vx, vy)
     moving = s >= max(min_speed, 1e-9)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -86,6 +90,9 @@ def _combine(out, vx, vy, ax, ay, cov, jx, jy, jcov, heading, min_speed):
         return np.sqrt(np.maximum(v, 0.0))
 
     out["speed"] = s
+    out["vx"], out["vy"] = vx, vy
+    out["vx_std"], out["vy_std"], out["vxvy_corr"] = _std_corr(cov["vxvx"], cov["vyvy"],
+                                                               cov["vxvy"])
     out["speed_std"] = np.sqrt(np.maximum(ux * ux * cov["vxvx"] + uy * uy * cov["vyvy"]
                                           + 2 * ux * uy * cov["vxvy"], 0.0))
     out["ax"], out["ay"] = ax, ay
@@ -96,3 +103,12 @@ def _combine(out, vx, vy, ax, ay, cov, jx, jy, jcov, heading, min_speed):
     out["jerk_lon"] = jx * ux + jy * uy + a_lat * a_lat * inv_s
     out["jerk_lon_std"] = np.sqrt(np.maximum(ux * ux * jcov["xx"] + uy * uy * jcov["yy"]
                                              + 2 * ux * uy * jcov["xy"], 0.0))
+
+
+def _std_corr(vxx: np.ndarray, vyy: np.ndarray, vxy: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Standard deviations and correlation of a 2x2 covariance ``[[vxx, vxy], [vxy, vyy]]``."""
+    sx, sy = np.sqrt(np.maximum(vxx, 0.0)), np.sqrt(np.maximum(vyy, 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.where(sx * sy > 0, np.clip(vxy / (sx * sy), -1.0, 1.0), 0.0)
+    return sx, sy, r

@@ -51,4 +51,5 @@ def savgol(t, x, y, sx, sy, start, length, p):
         cov["axax"][sl], cov["ayay"][sl] = c22 * vx2, c22 * vy2
         cov["vxax"][sl], cov["vyay"][sl] = c12 * vx2, c12 * vy2
         jcov["xx"][sl], jcov["yy"][sl] = c33 * vx2, c33 * vy2
-    return vx, vy, ax, ay, cov, jx, jy, jcov
+    # no smoothed positions: the positions stay the measured ones (NaN here)
+    return vx, vy, ax, ay, cov, jx, jy, jcov, np.full(n, np.nan), np.full(n, np.nan)

@@ -57,8 +57,9 @@ def pack(length: np.ndarray, rows: int) -> tuple[np.ndarray, np.ndarray, int, in
 def kalman(t, x, y, sx, sy, rho, start, length, p):
     n = len(t)
     vx, vy, ax, ay = (np.empty(n) for _ in range(4))
+    px, py = np.empty(n), np.empty(n)
     cov = {k: np.zeros(n) for k in ("vxvx", "vyvy", "vxvy", "axax", "ayay", "axay",
-                                     "vxax", "vyay", "vxay", "vyax")}
+                                     "vxax", "vyay", "vxay", "vyax", "xx", "yy", "xy")}
     lagx, lagy, lagxy, lagyx = (np.full(n, np.nan) for _ in range(4))
     # long segments are cut into overlapping windows; windows are processed in chunks so the
     # grid stays bounded (~2M samples per chunk); windows with correlated x/y noise go through the
@@ -74,15 +75,19 @@ def kalman(t, x, y, sx, sy, rho, start, length, p):
         for coupled in (False, True):
             sel = segs[corr == coupled]
             if len(sel):
-                _run_grid(sel, wst, wln, klo, khi, t, x, y, sx, sy, rho, p, coupled, vx, vy, ax,
-                          ay, cov, (lagx, lagy, lagxy, lagyx))
+                _run_grid(sel, wst, wln, klo, khi, t, x, y, sx, sy, rho, p, coupled,
+                          (px, py, vx, vy, ax, ay), cov, (lagx, lagy, lagxy, lagyx))
     # jerk per axis: forward differences of the smoothed acceleration (backward at segment ends)
     jx, jy, jcov = _jerk(t, ax, ay, cov, lagx, lagy, lagxy, lagyx, start, length)
-    return vx, vy, ax, ay, cov, jx, jy, jcov
+    return vx, vy, ax, ay, cov, jx, jy, jcov, px, py
 
 
-def _run_grid(segs, start, length, keep_lo, keep_hi, t, x, y, sx, sy, rho, p, coupled, vx, vy,
-              ax, ay, cov, lags):
+def _run_grid(segs, start, length, keep_lo, keep_hi, t, x, y, sx, sy, rho, p, coupled, states,
+              cov, lags):
+    """Filter and smooth the windows ``segs`` on one lockstep grid; write the kept samples'
+    smoothed ``states`` (positions, velocities, accelerations), covariances and lag-one
+    covariances."""
+    px, py, vx, vy, ax, ay = states
     lagx, lagy, lagxy, lagyx = lags
     ln = length[segs]
     row, off, W, L = pack(ln, p.batch_rows)
@@ -120,7 +125,11 @@ def _run_grid(segs, start, length, keep_lo, keep_hi, t, x, y, sx, sy, rho, p, co
     if not coupled:
         Xs, Ps, lag = ca_decoupled(z, r, dt[:, None, :], first[:, None, :], q,
                                     p.prior_speed_std, p.prior_accel_std)
+        x0, y0 = np.repeat(x[start[segs]], ln)[keep], np.repeat(y[start[segs]], ln)[keep]
         idx, sstep, srow = idx[keep], sstep[keep], srow[keep]
+        px[idx], py[idx] = Xs[0][sstep, 0, srow] + x0, Xs[0][sstep, 1, srow] + y0
+        cov["xx"][idx], cov["yy"][idx] = Ps[0][sstep, 0, srow], Ps[0][sstep, 1, srow]
+        cov["xy"][idx] = 0.0
         vx[idx], vy[idx] = Xs[1][sstep, 0, srow], Xs[1][sstep, 1, srow]
         ax[idx], ay[idx] = Xs[2][sstep, 0, srow], Xs[2][sstep, 1, srow]
         cov["vxvx"][idx] = Ps[3][sstep, 0, srow]
@@ -142,11 +151,14 @@ def _run_grid(segs, start, length, keep_lo, keep_hi, t, x, y, sx, sy, rho, p, co
         R[sstep, srow, 0, 1] = R[sstep, srow, 1, 0] = cxy
         Xs, Ps, lag = ca_coupled(z.transpose(0, 2, 1), R, dt, first, q, p.prior_speed_std,
                                   p.prior_accel_std)
+        x0, y0 = np.repeat(x[start[segs]], ln)[keep], np.repeat(y[start[segs]], ln)[keep]
         idx, sstep, srow = idx[keep], sstep[keep], srow[keep]
         X = Xs[sstep, srow]
         P = Ps[sstep, srow]
+        px[idx], py[idx] = X[:, 0] + x0, X[:, 3] + y0
         vx[idx], ax[idx], vy[idx], ay[idx] = X[:, 1], X[:, 2], X[:, 4], X[:, 5]
-        for k, (i, j) in {"vxvx": (1, 1), "vyvy": (4, 4), "vxvy": (1, 4), "axax": (2, 2),
+        for k, (i, j) in {"xx": (0, 0), "yy": (3, 3), "xy": (0, 3), "vxvx": (1, 1),
+                          "vyvy": (4, 4), "vxvy": (1, 4), "axax": (2, 2),
                           "ayay": (5, 5), "axay": (2, 5), "vxax": (1, 2), "vyay": (4, 5),
                           "vxay": (1, 5), "vyax": (4, 2)}.items():
             cov[k][idx] = P[:, i, j]
