@@ -56,9 +56,12 @@ from aveas_format.errors import AveasError, MissingCrsError, UsageError, did_you
 
 class ConverterOptions(BaseModel):
     """Base of every converter's options: unknown options are errors. A docstring under a field
-    is its description (shown in docs/converters.md)."""
+    is its description (shown in docs/converters.md). A number given for a text option (an id
+    ``1`` in an options file or the API) is its text; the CLI's ``-O KEY=VALUE`` reads every
+    value by its field's type (:func:`aveas_format.cli.options.coerce_option`)."""
 
-    model_config = ConfigDict(extra="forbid", use_attribute_docstrings=True)
+    model_config = ConfigDict(extra="forbid", use_attribute_docstrings=True,
+                              coerce_numbers_to_str=True)
 
 
 class ImportOptions(ConverterOptions):
