@@ -17,6 +17,7 @@ import math
 import warnings
 from collections import defaultdict
 from contextlib import closing
+from decimal import Decimal
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, Literal
@@ -315,7 +316,7 @@ def _frame_times(fkeys: list, stamps: dict[Any, Any], ext: dict[str, Any] | None
     resolved: dict[str, str] = {}
     if ext and ext.get("start_time"):
         start_time = ext["start_time"]
-        time_of = {k: float(stamps[k]) if isinstance(stamps[k], (int, float)) else 0.0 for k in fkeys}
+        time_of = {k: float(stamps[k]) if isinstance(stamps[k], (int, float, Decimal)) else 0.0 for k in fkeys}
     else:
         ts = resolve_timestamps([stamps[k] for k in fkeys], options.timestamp_unit,
                                 what="frame_properties.timestamp") if fkeys else None
