@@ -308,23 +308,16 @@ def coerce_option(key: str, raw: str, ann: Any) -> Any:
         return raw
 
 
-#: each value an importer asks for (``converter.unstated``): what it is, how to state it
-_ASK_HOW = {"partner": ("the partner", "partner=INSTITUTION"),
-            "start_time": ("the start time", "start_time=2024-05-13T08:15:00Z (UTC of time 0)"),
-            "license": ("the licence", "license=LICENCE (an SPDX id, e.g. CC-BY-4.0)")}
-
-
 def ask_unstated(conv: Any, raw: dict[str, Any]) -> None:
-    """A usage error (exit 2), before any work, when the converter's source cannot state a value
-    only a person knows (the partner, the start time, the licence) and the options do not give
-    it: the converter would otherwise write a stand-in the validator flags."""
+    """A usage error (exit 2), before any work, when a simulation (``sim run``) would write a
+    stand-in for a value only a person knows (the partner, the start time, the licence) that
+    the options do not give. (Imports go ahead and warn: :class:`~aveas_format.converters.
+    registry.UnstatedWarning`.)"""
+    from aveas_format.converters.registry import unstated_note
+
     missing = conv.unstated(raw)
     if missing:
-        what = [_ASK_HOW[k][0] for k in missing]
-        what_text = ", ".join(what[:-1]) + " and " + what[-1] if len(what) > 1 else what[0]
-        raise fail(f"converter {conv.name}: its source does not state {what_text}; pass "
-                   + " ".join(f"-O {_ASK_HOW[k][1]}" for k in missing)
-                   + " (or put them in --options FILE.json)", EXIT_USAGE)
+        raise fail(unstated_note(conv.name, missing), EXIT_USAGE)
 
 
 def converter_options(options_file: Path | None, pairs: list[str] | None, model: type) -> dict[str, Any]:
