@@ -61,6 +61,13 @@ def importer_of(inputs: Sequence[Path], converter: str | None = None) -> str:
     hits = importers_for(first)
     if len(hits) == 1:
         return hits[0]
+    if first.suffix.lower() == ".mcap" and len(hits) != 1:
+        from aveas_format.converters.common.mcap import viewing_export_note
+        from aveas_format.errors import FormatError
+
+        note = viewing_export_note(first)
+        if note:
+            raise FormatError(f"not importable: {note}", path=first)
     if hits:
         raise UsageError(f"{first}: several converters read {first.suffix or 'it'} "
                          f"({', '.join(hits)}): pass --from NAME")

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from lxml import etree
 
-from aveas_format.converters.common.companion import companion_map, companion_map_path
+from aveas_format.converters.common.companion import companion_map_path, write_companion_map
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.errors import FormatError
 
@@ -321,7 +321,7 @@ def export_openscenario(rec, output: Path, *, options: OpenScenarioExportOptions
     written = [write_bytes_atomic(output, data)]
     if companion is not None and rec.map_source is not None:
         # the recording's crs travels in the map's <geoReference> (OpenSCENARIO has no place for it)
-        written.append(write_bytes_atomic(companion, companion_map(rec)))
+        written.append(write_companion_map(rec, companion))
     return written
 
 
