@@ -116,8 +116,8 @@ def test_an_unknown_option_is_a_one_line_usage_error(capsys, path):
      "needs a map: pass --map"),
     (("convert", "--from", "sumo-fcd", "FCD", "--map", "MAP", "-o", "OUT", "-O", "net_ofset=1"),
      "net_ofset: Extra inputs are not permitted (did you mean 'net_offset'?)"),
-    (("convert", "--from", "sumo-fcd", "FCD", "--map", "MAP", "-o", "OUT"),
-     "its source does not state the partner and the licence; pass -O partner=INSTITUTION"),
+    (("convert", "--from", "sumo-fcd", "FCD", "--map", "MAP", "-o", "OUT", "-O", "net_offset=1"),
+     "option net_offset: expected a comma-separated list of 2 numbers, got '1'"),
     (("export", "--to", "openlabl", "REC", "-o", "OUT"), "(did you mean 'openlabel'?)"),
     (("export", "--to", "openlabel", "REC", "-o", "OUT", "-O", "indnet=2"), "(did you mean 'indent'?)"),
     (("validate", "REC", "--format", "htm"), "(did you mean 'html'?)"),
@@ -151,6 +151,21 @@ def test_usage_errors_exit_2_in_one_line(capsys, env, tmp_path, args, needle):
     assert code == 2, err
     assert needle in one_error_line(err)
     assert not (tmp_path / "out.aveas").exists()
+
+
+def test_unstated_values_are_one_warning_for_every_importer(capsys, env, tmp_path):
+    """The one rule (issue 42): an import whose source and options do not state the licence (or
+    partner, start time) goes ahead with a stand-in the validator warns about, and says so in one
+    warning naming each missing value and the -O that states it."""
+    out = tmp_path / "f.aveas"
+    code, _, err = cli(capsys, "convert", "--from", "sumo-fcd", env["FCD"], "--map", env["MAP"],
+                       "-o", out, "--no-validate")
+    assert code == 0, err
+    warned = [ln for ln in err.splitlines() if "does not state" in ln]
+    assert len(warned) == 1 and "-O license=LICENCE" in warned[0], err
+    import aveas_format
+
+    assert aveas_format.open(out).meta.rights.license == "unspecified"
 
 
 class BlockImports:
@@ -478,3 +493,49 @@ def test_dir_lists_the_lazy_api():
             "print('pyarrow' in sys.modules, 'aveas_format.io.reader' in sys.modules)")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert res.stdout.split() == ["False", "False"], res  # the lazy loading is kept
+
+
+# ---------------------------------------------------------------------------------------------
+# exports of one recording, side by side, and their re-imports
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    """The demo's scene, smaller: 25 Hz, 0.1 m position noise, a 0.4 s sensor outage."""
+    from aveas_format.sample import highway_scene
+
+    return highway_scene(n_vehicles=12, duration_s=12.0, rate_hz=25.0).write(
+        tmp_path_factory.mktemp("scene") / "hw.aveas")
+
+
+def test_exports_side_by_side_re_import_with_nothing_asked(capsys, scene, tmp_path):
+    """Issue 42's second hour, as a user would: exports of one recording next to each other share
+    their map (no refusal), each re-imports without --map or -O (the map's name and the metadata
+    travel in the file; a .osi trace has no place for the licence: one warning), the OpenSCENARIO
+    round trip validates (no acceleration errors, no unexplained gaps), and the Foxglove MCAP says
+    it is a viewing format."""
+    import aveas_format
+
+    for to, name in (("openlabel", "hw.json"), ("openscenario", "hw.xosc"), ("osi", "hw.osi"),
+                     ("osi", "trace.mcap"), ("mcap", "hw.mcap")):
+        code, _, err = cli(capsys, "export", "--to", to, scene, "-o", tmp_path / name)
+        assert code == 0, err
+    assert sorted(p.name for p in tmp_path.glob("*.xodr")) == ["hw.xodr", "trace.xodr"]
+    src = aveas_format.open(scene).meta
+    for name, conv, asked in (("hw.json", "openlabel", False), ("hw.xosc", "openscenario", False),
+                              ("trace.mcap", "osi", False), ("hw.osi", "osi", True)):
+        out = tmp_path / f"{name}.aveas"
+        code, _, err = cli(capsys, "convert", "--from", conv, tmp_path / name, "-o", out)
+        assert code == 0, f"{name}: {err}"
+        assert ("does not state the licence" in err) == asked, err
+        meta = aveas_format.open(out).meta
+        assert meta.acquisition.partner == src.acquisition.partner or asked, name
+        assert meta.rights.license == (src.rights.license if not asked else "unspecified"), name
+        if conv == "openscenario":
+            rep = aveas_format.validate(out)
+            assert rep.counts["error"] == 0
+            assert not {f.code for f in rep.findings()} & {"time.gap", "kinematics.acceleration",
+                                                            "time.nominal_rate_low"}
+            assert meta.start_time == src.start_time and meta.nominal_rate_hz == 10.0
+    code, _, err = cli(capsys, "convert", "--from", "osi", tmp_path / "hw.mcap", "-o", tmp_path / "v")
+    assert code == 3 and "a Foxglove MCAP for viewing" in one_error_line(err)
+    code, _, err = cli(capsys, "validate", tmp_path / "hw.mcap")
+    assert code == 3 and "a Foxglove MCAP for viewing" in one_error_line(err)

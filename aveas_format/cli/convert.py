@@ -11,7 +11,6 @@ from aveas_format.cli.app import app
 from aveas_format.cli.common import EXIT_USAGE, err, fail, handle_errors, print_table
 from aveas_format.cli.options import (
     OutputFormat,
-    ask_unstated,
     check_output,
     converter_name_option,
     converter_options,
@@ -93,9 +92,8 @@ def convert(
     raw = converter_options(options_file, option, conv.options)
     if crs:
         raw["crs"] = crs
-    conv.parse_options(raw)  # usage errors (an unknown option, no map, unstated values) first
+    conv.parse_options(raw)  # usage errors (an unknown option, no map) first
     conv.check_map(map_file)
-    ask_unstated(conv, raw)
     if each or group:
         _convert_many(source, [str(i) for i in inputs], map_file, raw, output, group, overwrite,
                       validate_, workers, scheduler)

@@ -49,11 +49,21 @@ def export(
         raise fail("--to NAME, RECORDING and --output are required (or --list)", EXIT_USAGE)
     conv = get_converter(target, "export")
     raw = converter_workers(converter_options(options_file, option, conv.options), conv.options, workers)
-    check_output(conv.outputs(output, raw), overwrite)  # the output and its companion files
-    conv.require()  # a missing optional dependency before reading the recording
     import aveas_format
+
+    outputs = conv.outputs(output, raw)
+    same: set[Path] = set()
+    maps = [p for p in outputs[1:] if p.suffix.lower() == ".xodr" and p.exists() and not overwrite]
+    if maps:  # another export of this recording wrote the same map next to it: no conflict
+        from aveas_format.converters.common.companion import is_same_companion
+
+        head = aveas_format.open(recording, states=False)
+        same = {p for p in maps if is_same_companion(head, p)}
+        outputs = [p for p in outputs if p not in same]
+    check_output(outputs, overwrite)  # the output and its companion files
+    conv.require()  # a missing optional dependency before reading the recording
 
     # (an exporter that streams the states reads them from the file: bounded memory)
     rec = aveas_format.open(recording, states=not conv.streams_states)
     for p in conv(rec, output, options=raw):
-        err.print(f"wrote {p}")
+        err.print(f"kept {p} (the same map, written by another export)" if p in same else f"wrote {p}")

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import json
 import logging
+import types
 import typing
 from collections.abc import Iterable, Sequence
 from enum import Enum
@@ -164,8 +165,12 @@ def parse_option_pairs(pairs: list[str], model: type) -> dict[str, Any]:
     """``["net_file=a.net.xml", "vtypes=a.rou.xml,b.rou.xml", "geo=true", "parameter.Speed=60"]``
     -> dict (``KEY.NAME=VALUE`` sets the entry ``NAME`` of the dict option ``KEY``).
 
-    Values are read as JSON where they parse (numbers, booleans, lists), else as strings; a
-    comma-separated string becomes a list for list-typed options.
+    Each value is read by the type the options model declares for its key
+    (:func:`coerce_option`): ``subject_id=1`` of a text option is the text ``"1"``, ``rate_hz=10``
+    of a number option the number 10, ``geo=yes`` of a boolean true, a comma-separated list (or a
+    JSON one) for list and tuple options; a value that does not fit is a ``ValueError`` naming
+    the option and the type expected. Keys the model does not declare (and models without
+    fields, ``fit``'s metric options) are read as JSON where they parse, else as text.
     """
     out_: dict[str, Any] = {}
     fields = getattr(model, "model_fields", {})
@@ -174,38 +179,157 @@ def parse_option_pairs(pairs: list[str], model: type) -> dict[str, Any]:
             raise ValueError(f"--option {pair!r}: expected KEY=VALUE")
         key, raw = pair.split("=", 1)
         key = key.strip().replace("-", "_")
-        try:
-            value: Any = json.loads(raw)
-        except json.JSONDecodeError:
-            value = raw
         if "." in key:  # KEY.NAME=VALUE: one entry of a dict option (parameter.Speed=60)
             head, name = key.split(".", 1)
-            out_.setdefault(head, {})[name] = raw if isinstance(value, (dict, list)) else value
+            ann = fields[head].annotation if head in fields else None
+            args = typing.get_args(_non_null(ann)) if typing.get_origin(_non_null(ann)) is dict else ()
+            out_.setdefault(head, {})[name] = coerce_option(key, raw, args[1] if len(args) == 2 else None)
             continue
-        ann = fields[key].annotation if key in fields else None
-        if typing.get_origin(ann) in (list, tuple) and isinstance(value, str):
-            value = [v for v in value.split(",") if v]
-        out_[key] = value
+        out_[key] = coerce_option(key, raw, fields[key].annotation if key in fields else None)
     return out_
 
 
-#: each value an importer asks for (``converter.unstated``): what it is, how to state it
-_ASK_HOW = {"partner": ("the partner", "partner=INSTITUTION"),
-            "start_time": ("the start time", "start_time=2024-05-13T08:15:00Z (UTC of time 0)"),
-            "license": ("the licence", "license=LICENCE (an SPDX id, e.g. CC-BY-4.0)")}
+def _non_null(ann: Any) -> Any:
+    """``T`` of ``T | None`` (other annotations as they are)."""
+    if typing.get_origin(ann) in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(ann) if a is not type(None)]
+        if len(args) == 1:
+            return args[0]
+    return ann
+
+
+_TRUE, _FALSE = {"true", "1", "yes", "on"}, {"false", "0", "no", "off"}
+
+
+def _type_name(ann: Any) -> str:
+    """How an option's type reads in a message: ``an integer``, ``one of 'deg', 'rad'``..."""
+    origin, args = typing.get_origin(ann), typing.get_args(ann)
+    if origin is typing.Literal:
+        return "one of " + ", ".join(repr(a) for a in args)
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(_type_name(a) for a in args if a is not type(None))
+    if origin in (list, tuple):
+        inner = args[0] if args else str
+        n = f"{len(args)} " if origin is tuple and args and args[-1] is not Ellipsis else ""
+        return f"a comma-separated list of {n}{_type_name(inner).removeprefix('a ').removeprefix('an ')}s"
+    if isinstance(ann, type) and issubclass(ann, Enum):
+        return "one of " + ", ".join(repr(m.value) for m in ann)
+    if origin is dict or ann is dict:
+        return "a JSON object"
+    return {bool: "a boolean (true/false)", int: "an integer", float: "a number",
+            str: "a text", Path: "a path"}.get(ann, "a JSON value")
+
+
+def coerce_option(key: str, raw: str, ann: Any) -> Any:
+    """The text ``raw`` of ``-O key=raw`` as the type ``ann`` the options model declares: text,
+    path, integer, number, boolean (true/false, 1/0, yes/no, on/off), a ``Literal`` or ``Enum``
+    value, a list or tuple (comma-separated or JSON, each item by its type), a dict (JSON), ``T |
+    None`` (``none``/``null`` for None). Without a declared type: JSON where it parses, else text.
+    A value that fits none: ``ValueError("option KEY: expected an integer, got 'x'")``."""
+    def bad() -> ValueError:
+        return ValueError(f"option {key}: expected {_type_name(ann)}, got {raw!r}")
+
+    if ann is None or ann is Any:
+        try:
+            return json.loads(raw)
+        except json.JSONDecodeError:
+            return raw
+    origin, args = typing.get_origin(ann), typing.get_args(ann)
+    text = raw.strip()
+    if origin in (typing.Union, types.UnionType):
+        if type(None) in args and text.lower() in ("none", "null", ""):
+            return None
+        members = [a for a in args if a is not type(None)]
+        # the most specific reading first: a literal, then booleans, numbers, lists; text last
+        rank = {bool: 1, int: 2, float: 3, Path: 5, str: 6}
+        for a in sorted(members, key=lambda a: rank.get(a, 4 if typing.get_origin(a) is not typing.Literal else 0)):
+            try:
+                return coerce_option(key, raw, a)
+            except ValueError:
+                continue
+        raise bad()
+    if ann is str:
+        return raw
+    if ann is Path:
+        return Path(raw)
+    if ann is bool:
+        if text.lower() in _TRUE:
+            return True
+        if text.lower() in _FALSE:
+            return False
+        raise bad()
+    if ann is int:
+        try:
+            return int(text)
+        except ValueError:
+            try:
+                f = float(text)
+            except ValueError:
+                raise bad() from None
+            if not f.is_integer():
+                raise bad() from None
+            return int(f)
+    if ann is float:
+        try:
+            return float(text)
+        except ValueError:
+            raise bad() from None
+    if origin is typing.Literal:
+        for a in args:
+            if str(a) == text or (isinstance(a, str) and a.lower() == text.lower()):
+                return a
+        from aveas_format.errors import did_you_mean
+
+        raise ValueError(f"option {key}: expected {_type_name(ann)}, got {raw!r}"
+                         f"{did_you_mean(text, [str(a) for a in args])}")
+    if isinstance(ann, type) and issubclass(ann, Enum):
+        for m in ann:
+            if str(m.value) == text or m.name == text:
+                return m.value
+        raise bad()
+    if origin in (list, tuple, set, frozenset):
+        if text.startswith("["):
+            try:
+                items = json.loads(text)
+            except json.JSONDecodeError:
+                raise bad() from None
+            items = [i if isinstance(i, str) else json.dumps(i) for i in items]
+        else:
+            items = [v.strip() for v in text.split(",") if v.strip()]
+        if origin is tuple and args and args[-1] is not Ellipsis:
+            if len(items) != len(args):
+                raise ValueError(f"option {key}: expected {len(args)} comma-separated values, got "
+                                 f"{len(items)} in {raw!r}")
+            return [coerce_option(key, v, a) for v, a in zip(items, args)]
+        inner = args[0] if args else None
+        try:
+            return [coerce_option(key, v, inner) for v in items]
+        except ValueError:
+            raise bad() from None
+    if origin is dict or ann is dict:
+        try:
+            value = json.loads(text)
+        except json.JSONDecodeError:
+            raise bad() from None
+        if not isinstance(value, dict):
+            raise bad()
+        return value
+    try:  # anything else (a nested model...): JSON, else the text for pydantic to judge
+        return json.loads(raw)
+    except json.JSONDecodeError:
+        return raw
 
 
 def ask_unstated(conv: Any, raw: dict[str, Any]) -> None:
-    """A usage error (exit 2), before any work, when the converter's source cannot state a value
-    only a person knows (the partner, the start time, the licence) and the options do not give
-    it: the converter would otherwise write a stand-in the validator flags."""
+    """A usage error (exit 2), before any work, when a simulation (``sim run``) would write a
+    stand-in for a value only a person knows (the partner, the start time, the licence) that
+    the options do not give. (Imports go ahead and warn: :class:`~aveas_format.converters.
+    registry.UnstatedWarning`.)"""
+    from aveas_format.converters.registry import unstated_note
+
     missing = conv.unstated(raw)
     if missing:
-        what = [_ASK_HOW[k][0] for k in missing]
-        what_text = ", ".join(what[:-1]) + " and " + what[-1] if len(what) > 1 else what[0]
-        raise fail(f"converter {conv.name}: its source does not state {what_text}; pass "
-                   + " ".join(f"-O {_ASK_HOW[k][1]}" for k in missing)
-                   + " (or put them in --options FILE.json)", EXIT_USAGE)
+        raise fail(unstated_note(conv.name, missing), EXIT_USAGE)
 
 
 def converter_options(options_file: Path | None, pairs: list[str] | None, model: type) -> dict[str, Any]:

@@ -41,8 +41,11 @@ and then into the map's frame. Provenance ``simulated``, role ``simulated_agent`
 method ``traffic_simulation`` (option ``method`` for driving-simulator traces).
 
 Where the map has no ``<geoReference>``, the trace's ``proj_string`` (with its
-``proj_frame_offset``, a translation) is the recording's CRS, or ``--crs`` gives it; the OSI export
-writes ``proj_string`` and the map next to the trace, so that its re-import needs nothing else.
+``proj_frame_offset``, a translation) is the recording's CRS, or ``--crs`` gives it. The map is
+``--map``, else the file the first GroundTruth's ``map_reference`` names, next to the trace. The
+OSI export writes ``proj_string``, ``map_reference`` and the map next to the trace, and in an MCAP
+trace a metadata record ``aveas`` with the recording's partner, rights, start time and title, so
+that its re-import needs nothing else.
 
 Tested on: omega-prime's esmini-written traces ``alks_cut-in.osi`` and ``acc-test.osi`` on
 ``straight_500m.xodr`` (``../shared/data/real/omega-prime``; also with the map's geoReference
@@ -65,7 +68,7 @@ from pydantic import Field
 from aveas_format.converters import _protowire as pw
 from aveas_format.converters.common.assemble import to_recording
 from aveas_format.converters.common.boxes import Boxes, Rows, Sensor
-from aveas_format.converters.common.companion import companion_map, companion_map_path
+from aveas_format.converters.common.companion import companion_map_path, write_companion_map
 from aveas_format.converters.common.fastpath import FastPathUnsupported, read_by
 from aveas_format.converters.common.geometry import projected_to_local, rotate
 from aveas_format.converters.registry import ConverterOptions, ImportOptions, converter
@@ -139,11 +142,17 @@ def _messages(path: Path, options: OsiOptions):
     raise RecordingIOError("not an OSI trace (.osi or .mcap)", path=path)
 
 
-def _zero_time(path: Path) -> str | None:
-    """``zero_time`` of an MCAP trace's ``net.asam.osi.trace`` metadata (None without; an
-    unreadable metadata section is reported as a finding)."""
+#: the MCAP metadata record in which this toolkit's OSI export carries the recording.json values a
+#: person states (:mod:`aveas_format.converters.common.carried`) and the map's file name
+CARRIED_RECORD = "aveas"
+
+
+def _trace_metadata(path: Path) -> dict[str, dict[str, str]]:
+    """The metadata records of an MCAP trace by name (``net.asam.osi.trace``: ``zero_time``...;
+    :data:`CARRIED_RECORD`); none for a .osi trace. An unreadable metadata section is reported
+    as a finding."""
     if path.suffix.lower() != ".mcap":
-        return None
+        return {}
     import betterosi
 
     from aveas_format.converters.common.mcap import mcap_errors, why
@@ -153,18 +162,50 @@ def _zero_time(path: Path) -> str | None:
     except mcap_errors() as e:
         report_source("source.other", f"the MCAP metadata cannot be read "
                       f"({why(e)}): no zero_time, no start time from the trace", file=str(path))
-        return None
-    for md in records:
-        if md.get("name") == "net.asam.osi.trace":
-            return (md.get("data") or md.get("metadata") or {}).get("zero_time")
-    return None
+        return {}
+    return {str(md.get("name")): dict(md.get("data") or md.get("metadata") or {}) for md in records}
+
+
+def _map_of_trace(path: Path, map_source, meta: dict[str, dict[str, str]], options: OsiOptions):
+    """The map: ``--map``, else the one the trace names next to it (the first GroundTruth's
+    ``map_reference``, or the export's metadata record); none is an error saying so."""
+    if map_source is not None:
+        return map_source
+    name = (meta.get(CARRIED_RECORD) or {}).get("map")
+    if not name:
+        try:
+            first = next(iter(_messages(path, options)), None)
+        except Exception:  # noqa: BLE001 — the decoders report a damaged trace, located
+            first = None
+        name = str(getattr(first, "map_reference", "") or "") if first is not None else ""
+    if not name or not name.lower().endswith(".xodr"):  # (esmini writes its proj string there)
+        raise FormatError("no map: pass --map MAP.xodr (the trace names no map file: its "
+                          + (f"map_reference {name!r} is no .xodr file name)" if name else
+                             "GroundTruth has no map_reference)"), path=path)
+    cand = path.parent / Path(name).name
+    if not cand.is_file():
+        raise FormatError(f"no map: pass --map MAP.xodr (the trace's map_reference {name!r} is "
+                          f"not next to it, at {cand})", path=path)
+    return cand
 
 
 @converter("osi", description="ASAM OSI trace (.osi length-prefixed binary or MCAP): GroundTruth "
            "moving objects", patterns=("*.osi", "*.mcap"), method="traffic_simulation",
-           options=OsiOptions, requires=("betterosi",), extra="osi", sniff=(b"osi3.", b"net.asam.osi"))
+           options=OsiOptions, requires=("betterosi",), extra="osi", sniff=(b"osi3.", b"net.asam.osi"),
+           needs_map=False)
 def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
+    """The map is ``--map`` or the one the trace references (``map_reference``) next to it."""
+    from aveas_format.converters.common.carried import sensor_values
     from aveas_format.opendrive import load_map
+
+    if inputs[0].suffix.lower() == ".mcap":
+        from aveas_format.converters.common.mcap import viewing_export_note
+
+        note = viewing_export_note(inputs[0])
+        if note:
+            raise FormatError(f"not an OSI trace: {note}", path=inputs[0])
+    meta = _trace_metadata(inputs[0])
+    map_source = _map_of_trace(inputs[0], map_source, meta, options)
 
     what = ", ".join(p.name for p in inputs)
     f, ids, msgs, static, host_ids, proj, found = read_by(
@@ -213,11 +254,13 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
         "attributes": [json.dumps({"osi_type": d["osi_type"], "osi_lanes": sorted(d["lanes"])})
                        for d in info],
     }
-    zt = _zero_time(inputs[0])
-    sensor = Sensor(method=options.method, provenance="simulated", partner="ASAM OSI simulation",
+    zt = (meta.get("net.asam.osi.trace") or {}).get("zero_time")
+    carried = sensor_values(meta.get(CARRIED_RECORD) or {})
+    if zt and not options.start_time:
+        carried["start_time"] = _shift_iso(zt, t0)
+    sensor = Sensor(method=options.method, provenance="simulated",
                     platform="ASAM OSI trace", sensors=[{"id": "osi", "kind": "simulator"}],
-                    crs=crs, **({"start_time": _shift_iso(zt, t0)} if zt and not options.start_time
-                                else {}))
+                    crs=crs, **{"partner": "ASAM OSI simulation", **carried})
     return to_recording(boxes, sensor, converter="osi", inputs=inputs, options=options,
                         map_bytes=map_bytes, participants=participants)
 
@@ -542,7 +585,8 @@ class OsiExportOptions(ConverterOptions):
     """File name of the map written next to the trace (default: the trace's name with .xodr)."""
     write_map: bool = True
     """Write the map next to the trace (with the recording's crs as its geoReference where the map
-    has none), so that the trace re-imports: ``convert --from osi TRACE --map MAP``."""
+    has none); every GroundTruth's ``map_reference`` names it, so that the trace re-imports
+    without ``--map``."""
 
 
 def _light_state(b, brake: float, left: float, right: float, hazard: float):
@@ -566,7 +610,7 @@ _DEFAULT_HEIGHT = {"pedestrian": 1.75, "bicycle": 1.7, "truck": 3.5, "bus": 3.2,
 
 def encode_ground_truths(b, participants, order: np.ndarray, bounds: np.ndarray, sec: np.ndarray,
                          nanos: np.ndarray, host: int | None, proj_string: str, *, pid, x, y,
-                         heading, vx, vy, ax, ay, lights) -> pw.Ragged:
+                         heading, vx, vy, ax, ay, lights, map_reference: str = "") -> pw.Ragged:
     """The serialized ``osi3.GroundTruth`` of each time step, from columns (:mod:`._protowire`):
     the states ``order[bounds[k]:bounds[k+1]]`` are the moving objects of step ``k`` (timestamp
     ``sec[k]``, ``nanos[k]``). Field for field what the bindings' messages held (the module
@@ -632,6 +676,8 @@ def encode_ground_truths(b, participants, order: np.ndarray, bounds: np.ndarray,
     parts.append(pw.group(pw.f_message(5, mo), bounds))                # moving_object
     if proj_string:
         parts.append(pw.Ragged.const(pw.f_strings(14, [proj_string]).data.tobytes(), m))
+    if map_reference:  # the map's file name, next to the trace
+        parts.append(pw.Ragged.const(pw.f_strings(15, [map_reference]).data.tobytes(), m))
     return pw.concat(*parts)
 
 
@@ -666,13 +712,16 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
 
     import betterosi as b
 
-    from aveas_format.safeio import write_bytes_atomic, write_chunks_atomic
+    from aveas_format.converters.common.carried import carried_meta
+    from aveas_format.safeio import write_chunks_atomic
 
     suffix = output.suffix.lower()
     if suffix not in (".osi", ".mcap"):
         raise FormatError("the OSI export writes .osi or .mcap (by the output's suffix)", path=output)
     st = rec.states
     n = st.num_rows
+    companion = companion_map_path(output, options)
+    map_name = companion.name if companion is not None else (options.map_file or "")
 
     pid = st["participant_id"].to_numpy()
     t = column_numpy(st, "time")
@@ -712,11 +761,10 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
                 b, rec.participants, order[bounds[k0]:bounds[k1]], bounds[k0:k1 + 1] - bounds[k0],
                 sec[k0:k1], nanos[k0:k1], host, rec.meta.crs or "", pid=pid, x=x, y=y,
                 heading=heading, vx=vx, vy=vy, ax=ax, ay=ay,
-                lights=lights if has_lights else None), range(k0, k1)
+                lights=lights if has_lights else None, map_reference=map_name), range(k0, k1)
             k0 = k1
 
-    companion = companion_map_path(output, options)
-    extra = ([write_bytes_atomic(companion, companion_map(rec))]
+    extra = ([write_companion_map(rec, companion)]
              if companion is not None and rec.map_source is not None else [])
     if suffix == ".osi":
         return [write_chunks_atomic(output, (pw.length_prefixed(g) for g, _ in batches())),
@@ -728,6 +776,8 @@ def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
             with b.Writer(tmp, metadata={"zero_time": rec.meta.start_time,
                                          "description": f"aveas-format export of "
                                                         f"{rec.meta.recording_id}"}) as w:
+                w.add_metadata(CARRIED_RECORD, {**carried_meta(rec),
+                                                **({"map": map_name} if map_name else {})})
                 proto = b.GroundTruth()
                 for gts, steps in batches():
                     for raw, k in zip(gts.tolist(), steps):

@@ -17,10 +17,14 @@ An importer that can write the recording itself, its states in parts (bounded me
 ``writes=FUNCTION`` (``(inputs, output, *, map_source, options, overwrite)``): :func:`convert_to`
 and the CLI's ``convert`` of one recording call it.
 
-An importer declares which of the recording.json values a person must state (:data:`ASKED`:
-partner, start time, licence) its source can carry, ``provides=("start_time",)``: for the others
-the CLI asks (``-O KEY=VALUE``) instead of writing a stand-in ("unknown", 1970-01-01,
-"unspecified") that the validator would then flag (:meth:`Converter.unstated`).
+The recording.json values only a person can state (:data:`ASKED`: partner, start time, licence)
+follow one rule for every importer: where neither the source nor the options state one, the
+recording gets a stand-in ("unknown", 1970-01-01, "unspecified"; the validator warns about each,
+it breaks no MUST of the format) and the import says so in one warning that names every missing
+value and the ``-O KEY=VALUE`` that states it (:class:`UnstatedWarning`, after the import, when
+the recording's values are known: a source may carry them, as this toolkit's exports do). An
+importer declares which of them its source can carry, ``provides=("start_time",)``
+(:meth:`Converter.unstated`: those the CLI of a simulation asks for).
 
 An importer declares how to recognise its files: ``patterns`` (file name globs) and ``sniff``,
 either byte strings of which one occurs in the file's first :data:`SNIFF_BYTES` bytes, or a
@@ -56,9 +60,12 @@ from aveas_format.errors import AveasError, MissingCrsError, UsageError, did_you
 
 class ConverterOptions(BaseModel):
     """Base of every converter's options: unknown options are errors. A docstring under a field
-    is its description (shown in docs/converters.md)."""
+    is its description (shown in docs/converters.md). A number given for a text option (an id
+    ``1`` in an options file or the API) is its text; the CLI's ``-O KEY=VALUE`` reads every
+    value by its field's type (:func:`aveas_format.cli.options.coerce_option`)."""
 
-    model_config = ConfigDict(extra="forbid", use_attribute_docstrings=True)
+    model_config = ConfigDict(extra="forbid", use_attribute_docstrings=True,
+                              coerce_numbers_to_str=True)
 
 
 class ImportOptions(ConverterOptions):
@@ -95,6 +102,24 @@ SNIFF_BYTES = 1 << 16
 
 #: recording.json values only a person can state (the import options of the same names)
 ASKED = ("partner", "start_time", "license")
+#: each of :data:`ASKED`: what it is, how to state it
+ASK_HOW = {"partner": ("the partner", "partner=INSTITUTION"),
+           "start_time": ("the start time", "start_time=2024-05-13T08:15:00Z (UTC of time 0)"),
+           "license": ("the licence", "license=LICENCE (an SPDX id, e.g. CC-BY-4.0)")}
+
+
+class UnstatedWarning(UserWarning):
+    """An import wrote a stand-in for a value only a person can state (:data:`ASKED`)."""
+
+
+def unstated_note(name: str, missing: list[str]) -> str:
+    """``converter NAME: its source does not state the partner and the licence; pass -O
+    partner=INSTITUTION -O license=...`` for the values of :data:`ASKED` in ``missing``."""
+    what = [ASK_HOW[k][0] for k in missing]
+    what_text = ", ".join(what[:-1]) + " and " + what[-1] if len(what) > 1 else what[0]
+    return (f"converter {name}: its source does not state {what_text}; pass "
+            + " ".join(f"-O {ASK_HOW[k][1]}" for k in missing)
+            + " (or put them in --options FILE.json)")
 #: acquisition methods of simulations: their time zero has no calendar date, start_time is not asked
 SIMULATION_METHODS = ("traffic_simulation", "driving_simulator")
 
@@ -320,7 +345,7 @@ def _run(name: str, inputs: list[str | Path], map_source: Any, options: dict[str
 
             raise RecordingIOError("input not found", path=p)
     try:
-        return call(conv, paths, opts)
+        result = call(conv, paths, opts)
     except MissingCrsError as e:
         from aveas_format.mapref.build import EXAMPLE_CRS
 
@@ -337,6 +362,24 @@ def _run(name: str, inputs: list[str | Path], map_source: Any, options: dict[str
             # a located error without its file: name the (only) input
             raise type(e)(e.message, path=paths[0], **e.where) from None
         raise
+    _report_stand_ins(conv, result[0] if isinstance(result, tuple) else result)
+    return result
+
+
+def _report_stand_ins(conv: Converter, rec: Any) -> None:
+    """The one rule for values only a person can state: one :class:`UnstatedWarning` naming
+    each one the recording has only as a stand-in (neither the source nor the options state
+    it), with the options that state them."""
+    import warnings
+
+    from aveas_format.converters.common.carried import stand_ins
+
+    meta = getattr(rec, "meta", None)
+    missing = stand_ins(meta) if meta is not None else []
+    if missing:
+        warnings.warn(unstated_note(conv.name, missing).replace(
+            "; pass", ": the recording has a stand-in the validator warns about; pass"),
+            UnstatedWarning, stacklevel=3)
 
 
 def _quote(p: Any) -> str:

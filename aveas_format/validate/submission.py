@@ -61,6 +61,13 @@ def importer_of(inputs: Sequence[Path], converter: str | None = None) -> str:
     hits = importers_for(first)
     if len(hits) == 1:
         return hits[0]
+    if first.suffix.lower() == ".mcap" and len(hits) != 1:
+        from aveas_format.converters.common.mcap import viewing_export_note
+        from aveas_format.errors import FormatError
+
+        note = viewing_export_note(first)
+        if note:
+            raise FormatError(f"not importable: {note}", path=first)
     if hits:
         raise UsageError(f"{first}: several converters read {first.suffix or 'it'} "
                          f"({', '.join(hits)}): pass --from NAME")
@@ -77,7 +84,7 @@ def import_submission(inputs: Sequence[Path], converter: str | None = None,
     there (a large file's states in parts) and the recording is its path where its states were
     not loaded. Findings without a file name the (first) input; a warning of an importer that
     does not report located findings becomes a ``source.other`` finding."""
-    from aveas_format.converters.registry import convert, convert_to, get_converter
+    from aveas_format.converters.registry import UnstatedWarning, convert, convert_to, get_converter
 
     inputs = [Path(p) for p in inputs]
     name = importer_of(inputs, converter)
@@ -86,6 +93,7 @@ def import_submission(inputs: Sequence[Path], converter: str | None = None,
         warnings.simplefilter("always")
         warnings.simplefilter("ignore", DeprecationWarning)
         warnings.simplefilter("ignore", PendingDeprecationWarning)
+        warnings.simplefilter("ignore", UnstatedWarning)  # (the metadata rules say it, located)
         try:
             if to_disk:
                 rec, _, _ = convert_to(name, inputs, Path(workdir) / "submission.aveas",

@@ -88,6 +88,21 @@ def test_timestamp_units_inferred(stamps, unit, epoch, dt):
         assert ts.start_time == "2024-05-01T08:00:00.500000000Z"
 
 
+def test_decimal_epoch_seconds_keep_their_nanoseconds(tmp_path):
+    """Epoch seconds written as decimal text with nine digits (a rail dataset's
+    ``"1631441453.299504123"``) kept exact: the start time to the nanosecond (a float64 of the
+    epoch value is off by up to 119 ns), the frame times exact differences."""
+    stamps = [f"1631441453.{299504123 + 100_000_007 * k:09d}" for k in range(7)]
+    ts = resolve_timestamps(stamps)
+    assert (ts.unit, ts.epoch, ts.start_ns) == ("s", True, 1631441453_299504123)
+    assert ts.start_time == "2021-09-12T10:10:53.299504123Z"
+    assert np.array_equal(ts.seconds, [k * 0.100000007 for k in range(7)])
+    with pytest.warns(UserWarning):
+        rec = convert("openlabel", [write(tmp_path, kitti_doc(n=7, stamps=stamps))],
+                      map_source=STRAIGHT_MAP)
+    assert rec.meta.start_time.startswith("2021-09-12T10:10:53.299504123")
+
+
 def test_timestamp_unit_option_overrides(tmp_path):
     """1000, 1100, ... read as microseconds since the start when told so (auto: milliseconds)."""
     stamps = [1000 + 100 * k for k in range(20)]

@@ -11,6 +11,7 @@ import pytest
 from helpers_common import STRAIGHT_MAP
 
 from aveas_format.converters import convert, get_converter
+from aveas_format.converters.registry import UnstatedWarning
 from aveas_format.errors import collect_source_findings
 from aveas_format.sample import highway_scene
 
@@ -68,6 +69,7 @@ def _by_code(found) -> dict[str, list]:
 def test_findings_are_collected_with_their_location(profile_file):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # collected, not warned
+        warnings.simplefilter("ignore", UnstatedWarning)  # (no partner, licence, start time: said once)
         with collect_source_findings() as found:
             rec = convert("openlabel", [profile_file], map_source=STRAIGHT_MAP)
     by = _by_code(found)

@@ -122,10 +122,14 @@ def test_alks_cut_in_on_a_map_without_georeference(shared_data, tmp_path):
     assert r.returncode == 2 and "pass --overwrite" in r.stderr  # companion files are outputs
     (tmp_path / "x.osi").unlink()
     r = _cli("export", "--to", "osi", out, "-o", tmp_path / "x.osi")
-    assert r.returncode == 2 and "x.xodr: exists" in r.stderr  # ... the map too
+    assert r.returncode == 0 and "kept " + str(tmp_path / "x.xodr") in r.stderr  # the same map
+    (tmp_path / "x.osi").unlink()
+    (tmp_path / "x.xodr").write_bytes((tmp_path / "x.xodr").read_bytes() + b"\n")
+    r = _cli("export", "--to", "osi", out, "-o", tmp_path / "x.osi")
+    assert r.returncode == 2 and "x.xodr: exists" in r.stderr  # ... another map is not replaced
     r = _cli("export", "--to", "osi", out, "-o", tmp_path / "x.osi", "--overwrite")
     assert r.returncode == 0, r.stderr
-    back = convert("osi", [tmp_path / "x.osi"], map_source=tmp_path / "x.xodr")
+    back = convert("osi", [tmp_path / "x.osi"])  # its map_reference names x.xodr
     assert back.meta.crs == SOME_CRS
     assert_same_motion(rec, back)
 

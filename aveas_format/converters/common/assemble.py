@@ -138,9 +138,11 @@ def hand_over(converter: str, inputs: Sequence[Path], options: Any, *, map_bytes
     partner = getattr(o, "partner", None) or sensor.partner
     md: dict[str, Any] = {
         "start_time": getattr(o, "start_time", None) or sensor.start_time,
-        "rights": {"right_of_use": getattr(o, "right_of_use", "research_only"),
-                   "license": getattr(o, "license", "unspecified"),
-                   "owner": getattr(o, "owner", None) or partner},
+        "rights": {"right_of_use": _given(o, "right_of_use") or sensor.right_of_use
+                   or getattr(o, "right_of_use", "research_only"),
+                   "license": _given(o, "license") or sensor.license
+                   or getattr(o, "license", "unspecified"),
+                   "owner": getattr(o, "owner", None) or sensor.owner or partner},
         "method": sensor.method, "provenance": sensor.provenance,
         "acquisition": sensor.acquisition(),
     }
@@ -156,6 +158,13 @@ def hand_over(converter: str, inputs: Sequence[Path], options: Any, *, map_bytes
     return build_recording(map_source=map_bytes, participants=participants, states=states,
                            partner=partner, source=source_block(converter, inputs, options, version,
                                                                 dict(resolved or {})), **md)
+
+
+def _given(options: Any, name: str) -> Any:
+    """An import option's value where the user gave it (not its default), else None."""
+    if name in getattr(options, "model_fields_set", ()) and getattr(options, name) not in (None, ""):
+        return getattr(options, name)
+    return None
 
 
 # --- coverage -------------------------------------------------------------------------------------

@@ -247,7 +247,8 @@ class Sizes:
 class Sensor:
     """How the boxes were acquired (see the module doc): ``method`` (acquisition.method),
     ``platform`` and ``sensors`` (acquisition.sensors entries), ``provenance`` of the recording,
-    ``partner``/``start_time`` as the source states them (the import options override them),
+    ``partner``/``start_time`` and the rights (``license``, ``owner``, ``right_of_use``; None: not
+    stated) as the source states them (the import options given override them),
     ``not_observable`` and ``site`` (acquisition), ``crs`` (the recording's CRS where the source
     fixes the frame and the map has no geoReference), ``coverage``, ``sizes``,
     ``nominal_rate_hz``/``duration_s`` where the source states them, ``title``, and ``extras``
@@ -268,6 +269,9 @@ class Sensor:
     duration_s: float | None = None
     title: str | None = None
     extras: Mapping[str, Any] | None = None
+    license: str | None = None
+    owner: str | None = None
+    right_of_use: str | None = None
 
     def acquisition(self) -> dict[str, Any]:
         out: dict[str, Any] = {"platform": self.platform, "sensors": [dict(s) for s in self.sensors]}

@@ -1,5 +1,11 @@
 """What an exporter writes next to its output so that the export re-imports: the map, with the
-recording's CRS as its ``<geoReference>`` where the map has none."""
+recording's CRS as its ``<geoReference>`` where the map has none.
+
+Two exports of one recording next to each other (``-o hw.json`` and ``-o hw.xosc``) name the same
+map (``hw.xodr``): every exporter writes the same bytes for it (:func:`companion_map`), and an
+existing file with exactly those bytes is no conflict (:func:`is_same_companion`): it is kept as
+it is (:func:`write_companion_map`). A different file of that name is replaced only with
+``--overwrite``."""
 
 from __future__ import annotations
 
@@ -39,3 +45,22 @@ def companion_map(rec) -> bytes | None:
     else:
         new = head.group(0) + geo
     return data[:head.start()] + new + data[head.end():]
+
+
+def is_same_companion(rec, path: Path) -> bool:
+    """Whether ``path`` is a file with exactly the bytes of ``rec``'s companion map (another
+    export of the same recording wrote it): no conflict, nothing to write."""
+    path = Path(path)
+    data = companion_map(rec)
+    return data is not None and path.is_file() and path.stat().st_size == len(data) \
+        and path.read_bytes() == data
+
+
+def write_companion_map(rec, path: Path) -> Path:
+    """Write ``rec``'s companion map to ``path`` (atomically), unless the file there has exactly
+    its bytes already (kept as it is); ``path`` either way."""
+    from aveas_format.safeio import write_bytes_atomic
+
+    if is_same_companion(rec, path):
+        return Path(path)
+    return write_bytes_atomic(Path(path), companion_map(rec))

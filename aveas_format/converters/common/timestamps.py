@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from datetime import datetime, timezone
+from decimal import ROUND_HALF_EVEN, Decimal, InvalidOperation
 from typing import Any
 
 import numpy as np
@@ -61,25 +62,35 @@ def iso_to_ns(text: str) -> int | None:
     return int(dt.timestamp()) * 1_000_000_000 + int((m[2] or "").ljust(9, "0"))
 
 
-def timestamp_value(v: Any) -> int | float | str | None:
-    """A number (exact int where the text is an integer, so that epoch nanoseconds keep their
-    digits), an ISO text kept as text, None where absent or unreadable."""
+def timestamp_value(v: Any) -> int | float | Decimal | str | None:
+    """A number kept exact where it is written exactly: an integer (text) as an int, a decimal
+    text (``"1631441453.299504000"``) or a ``Decimal`` (a JSON parser's exact number) as a
+    ``Decimal``, so that epoch seconds keep their nanoseconds (a float64 of an epoch in seconds
+    has a step of 238 ns); a float as it is; an ISO text kept as text; None where absent or
+    unreadable."""
     if v is None or isinstance(v, bool):
         return None
     if isinstance(v, (int, np.integer)):
         return int(v)
     if isinstance(v, (float, np.floating)):
         return float(v) if np.isfinite(v) else None
+    if isinstance(v, Decimal):
+        return v if v.is_finite() else None
     if isinstance(v, str):
         t = v.strip()
         if t.lstrip("+-").isdigit():
             return int(t)
         try:
-            f = float(t)
-            return f if np.isfinite(f) else None
-        except ValueError:
+            d = Decimal(t)
+        except InvalidOperation:
             return t if iso_to_ns(t) is not None else None
+        return d if d.is_finite() else None
     return None
+
+
+def _exact(v: int | float | Decimal) -> int | Decimal:
+    """An int as it is, a float or Decimal as the exact Decimal of its value."""
+    return v if isinstance(v, (int, Decimal)) else Decimal(v)
 
 
 def resolve_timestamps(values: Sequence[Any], unit: str = "auto", *, what: str = "timestamps"
@@ -131,8 +142,9 @@ def resolve_timestamps(values: Sequence[Any], unit: str = "auto", *, what: str =
     if all(isinstance(v, int) for v in have):
         sec = np.array([np.nan if v is None else (v - first) * scale / 1e9 for v in vals])
         start_ns = first * scale if epoch else None
-    else:
-        sec = np.array([np.nan if v is None else (float(v) - float(first)) * scale / 1e9 for v in vals])
-        start_ns = int(round(float(first) * scale)) if epoch else None
+    else:  # exact decimal arithmetic down to the nanosecond (no float of the epoch value)
+        d0 = _exact(first)
+        sec = np.array([np.nan if v is None else float((_exact(v) - d0) * scale) / 1e9 for v in vals])
+        start_ns = int((d0 * scale).to_integral_value(ROUND_HALF_EVEN)) if epoch else None
     ref = "since the Unix epoch" if epoch else "since the start of the recording"
     return Timestamps(sec, start_ns, unit, epoch, f"{what}: {_UNIT_WORD[unit]} {ref} ({how})")

@@ -14,6 +14,8 @@ the world CRS. :func:`states_of` turns a bucket of whole participants' boxes int
 
 from __future__ import annotations
 
+from decimal import Decimal
+
 import math
 from collections import defaultdict
 from pathlib import Path
@@ -308,7 +310,7 @@ def frame_times(fkeys: list, stamps: dict[Any, Any], ext: dict[str, Any] | None,
     resolved: dict[str, str] = {}
     if ext and ext.get("start_time"):
         start_time = ext["start_time"]
-        time_of = {k: float(stamps[k]) if isinstance(stamps[k], (int, float)) else 0.0 for k in fkeys}
+        time_of = {k: float(stamps[k]) if isinstance(stamps[k], (int, float, Decimal)) else 0.0 for k in fkeys}
     else:
         ts = resolve_timestamps([stamps[k] for k in fkeys], options.timestamp_unit,
                                 what="frame_properties.timestamp") if fkeys else None

@@ -735,7 +735,7 @@ def compressed(chunks, kind: str):
            description="ASAM OpenLABEL 1.0 JSON, AVEAS profile (+ the map as .xodr next to it); "
                        "OUT.json.gz / OUT.json.zst: compressed")
 def export_openlabel(rec, output: Path, *, options: OpenLabelExportOptions) -> list[Path]:
-    from aveas_format.safeio import write_bytes_atomic, write_chunks_atomic
+    from aveas_format.safeio import write_chunks_atomic
 
     output = Path(output)
     map_name = _map_name(output, options)
@@ -754,6 +754,8 @@ def export_openlabel(rec, output: Path, *, options: OpenLabelExportOptions) -> l
         chunks = compressed(chunks, kind)
     written = [write_chunks_atomic(output, chunks)]
     if options.write_map and rec.map_source is not None:
-        written.append(write_bytes_atomic(output.parent / map_name, rec.map_source))
+        from aveas_format.converters.common.companion import write_companion_map
+
+        written.append(write_companion_map(rec, output.parent / map_name))
     return written
 

@@ -110,7 +110,7 @@ def _entity(so, catalogs) -> tuple[Any, str | None, int | None]:
 @converter("openscenario", description="ASAM OpenSCENARIO XML 1.0-1.3: the storyboard's motion "
            "replayed (trajectories, speeds, teleports; parameters, catalogs)",
            patterns=("*.xosc",), method="traffic_simulation", options=OpenScenarioImportOptions,
-           needs_map=False, provides=("partner",))
+           needs_map=False, provides=("partner", "license"))
 def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenarioImportOptions):
     """The motion an OpenSCENARIO file prescribes, replayed kinematically (module
     :mod:`aveas_format.converters.openscenario.replay` says what is carried out and what is not).
@@ -144,16 +144,34 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
     boxes, participants, dropped = _boxes(info, replay.run(), problems, where, path)
     notes = _report(problems, where, replay, dropped, path)
     hdr = root.find("FileHeader")
+    carried = _header_values(hdr)
     sensor = Sensor(
         method=options.method, provenance=options.provenance,
-        partner=(hdr.get("author") if hdr is not None else None) or "unknown",
-        title=options.title or (hdr.get("description") if hdr is not None else None),
+        **{"partner": (hdr.get("author") if hdr is not None else None) or "unknown",
+           "title": options.title or (hdr.get("description") if hdr is not None else None),
+           **carried},
         platform=f"OpenSCENARIO {path.name}", sensors=[{"id": "scenario", "kind": "simulator"}],
         extras={"openscenario": {"replay_rate_hz": options.rate_hz, "duration_s": replay.t,
                                  "catalog_files": [f.name for f in catalogs.files],
                                  "not_converted": problems, **notes}})
     return to_recording(boxes, sensor, converter="openscenario", inputs=[path], options=options,
                         map_bytes=map_bytes, participants=participants)
+
+
+def _header_values(hdr) -> dict[str, str]:
+    """What the ``FileHeader`` states of the recording.json values a person states: the licence
+    (``License``: its ``spdxId``, else its ``name``) and what an export of this toolkit carries
+    in its ``Properties`` (``aveas:partner``, ``aveas:start_time``...)."""
+    from aveas_format.converters.common.carried import sensor_values
+
+    if hdr is None:
+        return {}
+    values = {pr.get("name", "").removeprefix("aveas:"): pr.get("value")
+              for pr in hdr.iterfind("Properties/Property") if pr.get("name", "").startswith("aveas:")}
+    lic = hdr.find("License")
+    if lic is not None and (lic.get("spdxId") or lic.get("name")):
+        values["license"] = lic.get("spdxId") or lic.get("name")
+    return sensor_values(values)
 
 
 def _scenario(path: Path, options: OpenScenarioImportOptions):
@@ -227,7 +245,7 @@ def _boxes(info: dict[str, dict[str, Any]], ents, problems: dict[str, str],
     vertices repeating a time the first), their participants' columns, and the repeated times
     with another position, per entity. An entity without rows joins ``problems``; none
     converted is an error."""
-    rows: dict[str, list] = {k: [] for k in ("code", "time", "x", "y", "z", "heading")}
+    rows: dict[str, list] = {k: [] for k in ("code", "time", "x", "y", "z", "heading", "interpolated")}
     part: dict[str, list] = {k: [] for k in ("participant_id", "source_id", "class", "length",
                                              "width", "height", "role")}
     dropped: list[tuple[str, float]] = []
@@ -260,7 +278,7 @@ def _boxes(info: dict[str, dict[str, Any]], ents, problems: dict[str, str],
                     dropped.append((name, r[0]))
                 continue
             first[key] = r
-        for tt, x, y, z, h in sorted(first.values()):
+        for tt, x, y, z, h, filled in sorted(first.values()):
             hh = h if np.isfinite(h) else 0.0
             # the entity's reference point -> the footprint centre (the bounding box centre)
             rows["code"].append(len(part["participant_id"]))
@@ -269,6 +287,7 @@ def _boxes(info: dict[str, dict[str, Any]], ents, problems: dict[str, str],
             rows["y"].append(y + d["cx"] * math.sin(hh) + d["cy"] * math.cos(hh))
             rows["z"].append(z)
             rows["heading"].append(h)
+            rows["interpolated"].append(filled)
         part["participant_id"].append(pid)
         for k in ("source_id", "class", "length", "width", "height"):
             part[k].append(d[k])
@@ -283,7 +302,9 @@ def _boxes(info: dict[str, dict[str, Any]], ents, problems: dict[str, str],
     heading = np.asarray(rows["heading"], np.float64)
     boxes = Boxes(rows["code"], rows["time"], rows["x"], rows["y"], source_ids=part["source_id"],
                   rows=Rows([path]), z=np.asarray(rows["z"], np.float64),
-                  heading=None if np.isnan(heading).any() else heading)  # (else from the motion)
+                  heading=None if np.isnan(heading).any() else heading,  # (else from the motion)
+                  interpolated=np.asarray(rows["interpolated"], bool) if any(rows["interpolated"])
+                  else None)
     participants = {k: np.asarray(v, dtype=object if k in ("source_id", "class", "role") else
                                   np.int64 if k == "participant_id" else np.float64)
                     for k, v in part.items()}

@@ -28,9 +28,13 @@ fixed rate (``rate_hz``) and what the file prescribes is carried out:
   relative to the action's start, ``scale``, ``offset``); untimed shapes (``TimeReference/None``
   or no times) at the entity's speed then (negative: backwards along the path), from
   ``initialDistanceOffset``. A trajectory's own samples (timed polyline vertices, else one per
-  step) are recorded: timed vertices as they are, without samples added between them (a gap between
-  vertices stays a gap, as in a recording exported with one). An untimed trajectory of an entity at rest cannot be timed: that entity is
-  not converted (one warning line naming it and why).
+  step) are recorded: timed vertices as they are; where two timed vertices lie more than
+  ``GAP_STEPS`` (3) of the trajectory's median vertex steps apart, the motion between them (the
+  straight line a simulator follows) is sampled at that median step too, those samples flagged
+  ``interpolated`` (a simulated entity exists and moves between its vertices: a recording
+  exported with a gap, a sensor outage, comes back as a simulator would replay it). An untimed
+  trajectory of an entity at rest cannot be timed: that entity is not converted (one warning
+  line naming it and why).
 - Steps are ``1 / rate_hz`` apart, with extra steps where a trajectory or speed ramp ends or a
   condition's delay runs out between two steps (so that chained events start when the element
   they wait for ends).
@@ -62,6 +66,11 @@ class EntityError(FormatError):
     """An entity's motion cannot be replayed (the entity is not converted)."""
 
 
+#: a step between timed vertices longer than this many of the trajectory's median steps is
+#: sampled at the median step (the samples flagged ``interpolated``)
+GAP_STEPS = 3.0
+
+
 @dataclass
 class Traj:
     t: np.ndarray
@@ -70,9 +79,32 @@ class Traj:
     z: np.ndarray
     h: np.ndarray
     timed: bool
+    #: per sample: filled in between vertices, not prescribed by one (:meth:`fill_gaps`)
+    filled: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.h = np.unwrap(np.asarray(self.h, np.float64))  # interpolated without 2 pi jumps
+        if self.filled is None:
+            self.filled = np.zeros(len(self.t), bool)
+
+    def fill_gaps(self) -> Traj:
+        """The trajectory with its gaps (consecutive samples more than :data:`GAP_STEPS` median
+        steps apart) sampled at the median step, linearly (``filled`` marks the new samples)."""
+        dt = np.diff(self.t)
+        if len(dt) < 2:
+            return self
+        step = float(np.median(dt))
+        gaps = np.flatnonzero(dt > GAP_STEPS * step) if step > 0 else np.array([], int)
+        if not len(gaps):
+            return self
+        extra = np.concatenate([self.t[k] + step * np.arange(1, int(np.ceil(dt[k] / step - 1e-9)))
+                                for k in gaps])
+        t = np.concatenate([self.t, extra])
+        order = np.argsort(t, kind="stable")
+        at = [np.interp(extra, self.t, v) for v in (self.x, self.y, self.z, self.h)]
+        x, y, z, h = (np.concatenate([v, a])[order] for v, a in zip((self.x, self.y, self.z, self.h), at))
+        filled = np.r_[np.zeros(len(self.t), bool), np.ones(len(extra), bool)][order]
+        return Traj(t[order], x, y, z, h, self.timed, filled)
 
     def at(self, t: float) -> Pose:
         return Pose(float(np.interp(t, self.t, self.x)), float(np.interp(t, self.t, self.y)),
@@ -95,7 +127,8 @@ class Entity:
     offroad_since: float | None = None
     lane_id: int = 0  # of lane following
     lat: tuple[float, float, float, float, str] | None = None  # lane change: t0, t1, from, to, shape
-    rows: list[tuple[float, float, float, float, float]] = field(default_factory=list)
+    #: the recorded samples: time, x, y, z, heading, filled in (not prescribed by a vertex)
+    rows: list[tuple[float, float, float, float, float, bool]] = field(default_factory=list)
     rest_since: float | None = None
     error: str | None = None
     error_line: int | None = None  # the XML line of the action that failed
@@ -132,7 +165,7 @@ class Replay:
         return None if e is None else e.pose
 
     def _record(self, e: Entity, t: float, p: Pose) -> None:
-        e.rows.append((t, p.x, p.y, p.z, np.nan if p.h is None else p.h))
+        e.rows.append((t, p.x, p.y, p.z, np.nan if p.h is None else p.h, False))
 
     def _fail(self, e: Entity, why: str, line: int | None = None) -> None:
         if e.error is None:
@@ -307,7 +340,7 @@ class Replay:
             if np.any(np.diff(tt) < 0):
                 raise EntityError(f"trajectory {traj.get('name')!r}: times decrease",
                                   line=traj.sourceline)
-            tr = Traj(tt, path.x, path.y, path.z, h, timed=True)
+            tr = Traj(tt, path.x, path.y, path.z, h, timed=True).fill_gaps()
         else:
             if timing is not None:  # timed, but a vertex has no time: followed at the speed
                 untimed = next((v for v in traj.iter("Vertex") if v.get("time") is None), traj)
@@ -353,7 +386,7 @@ class Replay:
         keep = tr.t <= t + 1e-9
         for k in np.flatnonzero(keep):
             e.rows.append((float(tr.t[k]), float(tr.x[k]), float(tr.y[k]), float(tr.z[k]),
-                           float(tr.h[k])))
+                           float(tr.h[k]), bool(tr.filled[k])))
         if t < tr.t[-1] - 1e-9 and t > tr.t[0]:
             self._record(e, t, tr.at(t))
         e.pose = tr.at(min(max(t, tr.t[0]), tr.t[-1]))

@@ -25,13 +25,15 @@ entity of ``role = system_under_test`` / ``recording_vehicle`` is marked in its 
 
 from __future__ import annotations
 
+import re
 from datetime import datetime, timezone
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from lxml import etree
 
-from aveas_format.converters.common.companion import companion_map, companion_map_path
+from aveas_format.converters.common.companion import companion_map_path, write_companion_map
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.errors import FormatError
 
@@ -103,6 +105,101 @@ def _sim_time_trigger(parent, tag: str, name: str, value: float, rule: str = "gr
     _sub(bv, "SimulationTimeCondition", value=value, rule=rule)
 
 
+def _carried_header(header, rec, t0: float) -> None:
+    """The recording's partner, rights, start time (of the exported window) and title in the
+    ``FileHeader`` (its ``License`` and ``Properties``, ``aveas:`` names): the re-import asks
+    for nothing (:mod:`aveas_format.converters.common.carried`)."""
+    from aveas_format.converters.common.carried import carried_meta
+    from aveas_format.converters.common.timestamps import utc_iso_from_ns
+
+    values = carried_meta(rec)
+    if "start_time" in values and t0:
+        values["start_time"] = utc_iso_from_ns(rec.meta.start_time_ns + int(round(t0 * 1e9)))
+    if "license" in values:
+        lic = values["license"]
+        _sub(header, "License", name=lic, **({"spdxId": lic} if _SPDX.fullmatch(lic) else {}))
+    if values:
+        props = _sub(header, "Properties")
+        for k, v in values.items():
+            _sub(props, "Property", name=f"aveas:{k}", value=v)
+
+
+#: an SPDX licence id or expression (``CC-BY-4.0``, ``MIT OR Apache-2.0``)
+_SPDX = re.compile(r"[A-Za-z0-9.+-]+(?: (?:AND|OR|WITH) [A-Za-z0-9.+-]+)*")
+
+
+def _by_participant(rows: list[dict]) -> dict[int, list[dict]]:
+    out: dict[int, list[dict]] = {}
+    for r in rows:
+        out.setdefault(r["participant_id"], []).append(r)
+    return out
+
+
+#: a step longer than this many of the recording's median steps is a gap: no vertex is made up in it
+GAP_STEPS = 1.5
+
+
+def vertices(states, max_rate_hz: float) -> list[dict]:
+    """The polyline vertices of each participant at most ``max_rate_hz`` per second: where the
+    recording is sampled faster, on a regular grid of ``1 / max_rate_hz`` from each participant's
+    first sample (so that a simulator's replay, and this toolkit's re-import, sees steady
+    steps), the values linearly interpolated between the two samples around each grid time
+    (heading on the circle; road coordinates where both lie on the same lane, else a world
+    position); a participant's last samples after its last grid time (less than one step) are
+    not exported; no vertex is made up inside a gap (two samples more than :data:`GAP_STEPS` of the
+    recording's median steps apart). Where the recording is not faster: every sample. ``states``
+    sorted by (participant, time) (as a recording's are)."""
+    from aveas_format.io.arrow import column_numpy
+
+    pid = states.column("participant_id").to_numpy()
+    t = column_numpy(states, "time")
+    same = pid[1:] == pid[:-1]
+    steps = np.diff(t)[same]
+    period = 1.0 / max_rate_hz
+    if not len(steps) or float(np.median(steps)) >= period * (1 - 1e-6):
+        return states.to_pylist()
+    native = float(np.median(steps))
+    starts = np.r_[0, np.flatnonzero(~same) + 1]
+    ends = np.r_[starts[1:], len(t)]
+    span = t[ends - 1] - t[starts]
+    k = np.floor(span / period + 1e-6).astype(np.int64) + 1
+    seg = np.repeat(np.arange(len(starts)), k)
+    rel = (np.arange(k.sum()) - np.repeat(np.cumsum(k) - k, k)) * period  # grid, from each start
+    stride = float(span.max()) + 2 * period + 1.0  # (participants apart on one key axis)
+    row_seg = np.repeat(np.arange(len(starts)), ends - starts)
+    key = (t - t[starts][row_seg]) + row_seg * stride
+    i = np.searchsorted(key, rel + seg * stride + 1e-9, side="right") - 1
+    i = np.clip(i, starts[seg], ends[seg] - 1)
+    j = np.minimum(i + 1, ends[seg] - 1)
+    g = t[starts][seg] + rel
+    dt = t[j] - t[i]
+    w = np.clip(np.where(j > i, (g - t[i]) / np.where(j > i, dt, 1.0), 0.0), 0.0, 1.0)
+    exact = np.abs(g - t[i]) <= 1e-9
+    keep = exact | (dt <= GAP_STEPS * native + 1e-9)
+    i, j, w, g = i[keep], j[keep], np.where(exact, 0.0, w)[keep], g[keep]
+    near = np.where(w <= 0.5, i, j)
+    out: dict[str, Any] = {"participant_id": pid[i], "time": np.round(g, 9)}
+    for c in ("x", "y", "z", "road_s", "lane_offset"):
+        if c in states.column_names:
+            v = column_numpy(states, c, null=np.nan)
+            a, b = v[i], v[j]
+            out[c] = np.where(np.isfinite(a) & np.isfinite(b), a + w * (b - a), v[near])
+    h = column_numpy(states, "heading", null=0.0)
+    out["heading"] = h[i] + w * np.angle(np.exp(1j * (h[j] - h[i])))
+    road = {c: states.column(c).to_pylist() for c in ("road_id", "lane_id") if c in states.column_names}
+    rows = []
+    for n in range(len(i)):
+        r = {c: (None if isinstance(v[n], float) and not np.isfinite(v[n]) else v[n].item())
+             for c, v in out.items()}
+        if road:
+            a, b = int(i[n]), int(j[n])
+            same_lane = all(road[c][a] == road[c][b] for c in road)
+            for c in road:
+                r[c] = road[c][a] if same_lane or w[n] == 0.0 else None
+        rows.append(r)
+    return rows
+
+
 def recording_to_openscenario(rec, *, logic_file: str = "map.xodr",
                               options: OpenScenarioExportOptions | None = None) -> bytes:
     """The OpenSCENARIO XML of a recording (bytes)."""
@@ -130,10 +227,11 @@ def recording_to_openscenario(rec, *, logic_file: str = "map.xodr",
     root = etree.Element("OpenSCENARIO")
     now = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%S")
     title = rec.meta.title or rec.meta.recording_id
-    _sub(root, "FileHeader", revMajor=1, revMinor=int(o.version.split(".")[1]), date=now,
-         description=f"{title} [{t0:g} s, {t1:g} s] (recording {rec.meta.recording_id}, "
-                     f"start {rec.meta.start_time})",
-         author="aveas-format")
+    header = _sub(root, "FileHeader", revMajor=1, revMinor=int(o.version.split(".")[1]), date=now,
+                  description=f"{title} [{t0:g} s, {t1:g} s] (recording {rec.meta.recording_id}, "
+                              f"start {rec.meta.start_time})",
+                  author="aveas-format")
+    _carried_header(header, rec, t0)
     _sub(root, "ParameterDeclarations")
     _sub(root, "CatalogLocations")
     rn = _sub(root, "RoadNetwork")
@@ -170,28 +268,21 @@ def recording_to_openscenario(rec, *, logic_file: str = "map.xodr",
     sb = _sub(root, "Storyboard")
     init = _sub(sb, "Init")
     acts = _sub(init, "Actions")
-    rows_by_pid: dict[int, list[dict]] = {}
     cols = [c for c in ("participant_id", "time", "x", "y", "z", "heading", "road_id", "lane_id",
                         "road_s", "lane_offset") if c in s.column_names]
-    for r in s.select(cols).to_pylist():
-        rows_by_pid.setdefault(r["participant_id"], []).append(r)
+    rows_by_pid = _by_participant(s.select(cols).to_pylist())
     for q in pids.tolist():
         first = rows_by_pid[q][0]
         pr = _sub(acts, "Private", entityRef=f"p{q}")
         pa_ = _sub(pr, "PrivateAction")
         tp = _sub(pa_, "TeleportAction")
         _position(tp, first, "world")
+    if o.max_rate_hz:
+        rows_by_pid = _by_participant(vertices(s.select(cols), o.max_rate_hz))
     story = _sub(sb, "Story", name="recorded")
     act = _sub(story, "Act", name="replay")
     for q in pids.tolist():
         rows = rows_by_pid[q]
-        if o.max_rate_hz and len(rows) > 2:
-            keep, last = [], -1e18
-            for k, r in enumerate(rows):
-                if r["time"] - last >= 1.0 / o.max_rate_hz - 1e-6 or k == len(rows) - 1:
-                    keep.append(r)
-                    last = r["time"]
-            rows = keep
         mg = _sub(act, "ManeuverGroup", maximumExecutionCount=1, name=f"mg_p{q}")
         actors = _sub(mg, "Actors", selectTriggeringEntities=False)
         _sub(actors, "EntityRef", entityRef=f"p{q}")
@@ -230,7 +321,7 @@ def export_openscenario(rec, output: Path, *, options: OpenScenarioExportOptions
     written = [write_bytes_atomic(output, data)]
     if companion is not None and rec.map_source is not None:
         # the recording's crs travels in the map's <geoReference> (OpenSCENARIO has no place for it)
-        written.append(write_bytes_atomic(companion, companion_map(rec)))
+        written.append(write_companion_map(rec, companion))
     return written
 
 

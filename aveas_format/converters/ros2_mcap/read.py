@@ -80,6 +80,11 @@ def _select_topics(paths: list[Path], opts: Ros2McapOptions):
     fix = _pick(types, T_FIX, opts.navsatfix_topic, PREFERRED_FIX, first, "NavSatFix")
     tf_topics = [t for t in opts.tf_topics if types.get(t) == T_TF]
     if not obj_topics and odom is None and fix is None:
+        from aveas_format.converters.common.mcap import viewing_export_note
+
+        note = viewing_export_note(first)
+        if note:
+            raise FormatError(f"not a ROS 2 recording: {note}", path=first)
         raise FormatError("no object, odometry or NavSatFix topics found; topics: "
                           f"{ {t: ty for t, ty in sorted(types.items())} }", path=first)
     return types, obj_topics, odom, fix, tf_topics
