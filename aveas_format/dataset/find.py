@@ -69,9 +69,9 @@ def parse_where(where: str | None, measures=MEASURES) -> list[tuple[str, str, fl
     return out
 
 
-def recording_situations(path: str) -> dict[str, Any]:
-    """The participant rows of one recording's ``derived/criticality_summary`` (a task), as
-    columns, with the recording's path and id; empty where the recording has no summary."""
+def _with_table(path: str, table: str, read: Callable[[Any, Any], dict[str, Any]]) -> dict[str, Any]:
+    """``read(meta, rec)`` on the recording at ``path`` opened with only ``table`` (``rec`` None
+    where it has no such table), with the recording's path and id."""
     from aveas_format.io.container import Container
     from aveas_format.io.reader import open_recording, read_meta, table_names_present
 
@@ -79,13 +79,20 @@ def recording_situations(path: str) -> dict[str, Any]:
         with Container(local) as c:
             meta, _ = read_meta(c)
             present = table_names_present(c, meta)
-        if "derived/criticality_summary" not in present:
-            return {"path": path, "recording_id": meta.recording_id, "rows": [],
-                    "has_summary": False}
-        rec = open_recording(local, tables=["derived/criticality_summary"], verify=False)
-        rows = [r for r in rec.derived["criticality_summary"].to_pylist()
-                if str(r["scope"]) == "participant"]
-    return {"path": path, "recording_id": meta.recording_id, "rows": rows, "has_summary": True}
+        rec = open_recording(local, tables=[table], verify=False) if table in present else None
+        return {"path": path, "recording_id": meta.recording_id, **read(meta, rec)}
+
+
+def recording_situations(path: str) -> dict[str, Any]:
+    """The participant rows of one recording's ``derived/criticality_summary`` (a task), as
+    columns, with the recording's path and id; empty where the recording has no summary."""
+    def read(meta, rec) -> dict[str, Any]:
+        if rec is None:
+            return {"rows": [], "has_summary": False}
+        return {"rows": [r for r in rec.derived["criticality_summary"].to_pylist()
+                         if str(r["scope"]) == "participant"], "has_summary": True}
+
+    return _with_table(path, "derived/criticality_summary", read)
 
 
 def _collect(task, flag: str, paths: Iterable[str | Path], workers: int | None,
@@ -176,22 +183,17 @@ def recording_events(path: str) -> dict[str, Any]:
     """The derived conflicts and near misses of one recording (a task), most critical first
     (:func:`aveas_format.derive.events.worst_events`), with the recording's path and id."""
     from aveas_format.derive.events import worst_events
-    from aveas_format.io.container import Container
-    from aveas_format.io.reader import open_recording, read_meta, table_names_present
 
-    with local_copy(path) as local:
-        with Container(local) as c:
-            meta, _ = read_meta(c)
-            present = table_names_present(c, meta)
-        if "events" not in present:
-            return {"path": path, "recording_id": meta.recording_id, "rows": [],
-                    "has_events": False}
-        rec = open_recording(local, tables=["events"], verify=False)
+    def read(meta, rec) -> dict[str, Any]:
+        if rec is None:
+            return {"rows": [], "has_events": False}
         rows = worst_events(rec.events)
         derived = any(e.table == "events" for e in meta.derived) or bool(rows) or (
             rec.events is not None and "origin" in rec.events.column_names and any(
                 str(o) == "derived" for o in rec.events.column("origin").to_pylist()))
-    return {"path": path, "recording_id": meta.recording_id, "rows": rows, "has_events": derived}
+        return {"rows": rows, "has_events": derived}
+
+    return _with_table(path, "events", read)
 
 
 #: the columns of :func:`critical_events`' table
