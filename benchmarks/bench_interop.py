@@ -201,11 +201,11 @@ def _compact_rows(rec, tmp: Path, n: int, plain_mb: float) -> list[dict]:
     return rows
 
 
-# ---- OSI and MCAP (issue 22): the columnar protobuf encoder against the bindings, same run ------
+# ---- OSI and MCAP: the columnar protobuf encoder against the bindings, same run ---------------
 
 def _osi_bindings(rec) -> bytes:
-    """The OSI export as it was built before issue 22 (one betterosi message per moving object,
-    serialized per time step): the same-run baseline; the new export writes the same bytes."""
+    """The OSI export through the bindings (one betterosi message per moving object, serialized per
+    time step): the same-run baseline; the columnar export is meant to write the same bytes."""
     import math
     import struct
     import warnings
@@ -264,7 +264,7 @@ def _osi_bindings(rec) -> bytes:
 
 
 def _upb_fields(path: Path) -> float:
-    """The alternative to the columnar decoder measured by brief 22f: the ``protobuf`` package's C
+    """An alternative to the columnar decoder: the ``protobuf`` package's C
     (upb) backend with OSI classes made from betterosi's descriptor set, each object's fields the
     import reads accessed in Python (seconds)."""
     import os
@@ -325,7 +325,7 @@ def _osi_mcap_rows(rec, tmp: Path) -> list[dict]:
         floor = _timed(lambda: [b.MovingObject(id=b.Identifier(value=i)).to_binary() for i in range(n)])
     rows.append(_row("export_osi", n, dt, f"{(tmp / 'rec.osi').stat().st_size / 1e6:.1f} MB, bytes "
                      f"{'identical to' if same else 'DIFFERENT from'} the bindings' (+ the map)", b_old,
-                     "the bindings: one betterosi message per object (the export before issue 22)"))
+                     "the bindings: one betterosi message per object"))
     rows.append(_row("export_osi", n, dt, "(the same run)", floor, "floor of the bindings: one "
                      "MovingObject(id) built + serialized per state"))
     dt = _timed(lambda: osi(rec, tmp / "rec_osi.mcap"))
@@ -368,7 +368,7 @@ def _osi_mcap_rows(rec, tmp: Path) -> list[dict]:
     rows.append(_row("import_osi", n, dt, "(the same run)", b_touch,
                      "floor: betterosi decoding + reading each object's fields the import reads"))
     rows.append(_row("import_osi", n, dt, "(the same run)", dt_objects,
-                     "the import decoding with betterosi (the import before brief 22f)"))
+                     "the import decoding with betterosi instead of the columnar decoder"))
     rows.append(_row("decode_osi_columns", n, dt_cols, "the import's columnar decoder alone "
                      "(samples and per-object statics)", b_touch,
                      "betterosi decoding + reading the fields the import reads"))
@@ -493,7 +493,7 @@ name, rec_dir, out = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3])
 if name in ("osi-import", "osi-import-betterosi"):  # the trace of an earlier child, on its map
     from aveas_format.converters import convert
 
-    if name == "osi-import-betterosi":  # the import decoding with betterosi (before brief 22f)
+    if name == "osi-import-betterosi":  # the import decoding with betterosi instead of the columnar decoder
         import aveas_format.converters.osi as osi_mod
         from aveas_format.converters.common.fastpath import FastPathUnsupported
 

@@ -6,8 +6,8 @@ noise at 10 Hz).
 1. ``noise``: an hour of lane-keeping three-lane highway traffic (same-lane net time headways
    >= 1.8 s; 30 recordings of two minutes, ten per method, position std drawn from the method's
    range) derived as ``aveas-format derive`` does: critical events per hour (target 0), against
-   the events of the same recordings derived the way they were before issue 40 (measured
-   velocities, a TTC episode of any length: the baseline).
+   the events of the same recordings derived naively (measured velocities, a TTC episode of any
+   length: the baseline).
 2. ``conflicts``: true conflicts — cut-in, hard braking, crossing paths at a junction, a
    pedestrian crossing — with true minimum TTC 0.8-1.6 s, each measured by every method:
    the share found (target 100 %), the minimum TTC's error (target within max(0.3 s, 20 %) of the
@@ -49,20 +49,20 @@ def _events(rec) -> list[dict]:
     return [e for e in ev.to_pylist() if e["origin"] == "derived" and e["kind"] != "hard_braking"]
 
 
-#: the columns derived/kinematics gained in issue 40
-NEW_KINEMATICS = ("x", "x_std", "y", "y_std", "xy_corr", "vx", "vx_std", "vy", "vy_std",
+#: the smoothed position and velocity-vector columns of derived/kinematics (dropped for the baseline)
+SMOOTHED_KINEMATICS = ("x", "x_std", "y", "y_std", "xy_corr", "vx", "vx_std", "vy", "vy_std",
                   "vxvy_corr")
 
 
-def before_issue_40(rec) -> None:
-    """Derive ``rec``'s interactions and events as before issue 40: without the smoothed
+def naive_events(rec) -> None:
+    """Derive ``rec``'s interactions and events naively (the baseline): without the smoothed
     positions and velocity vectors (the along-motion speed smoothed, the across-motion component
     as measured) and every TTC sample at or below the threshold critical (an evidence of 0.5, no
     persistence, each metric's episodes on their own)."""
     from aveas_format.derive import derive
 
     k = rec.derived["kinematics"]
-    rec.derived["kinematics"] = k.drop_columns([c for c in NEW_KINEMATICS if c in k.column_names])
+    rec.derived["kinematics"] = k.drop_columns([c for c in SMOOTHED_KINEMATICS if c in k.column_names])
     derive(rec, only=["interactions", "events"], evidence=0.5, persistence_s=0.0,
            collision_samples=0, encounter_gap_s=0.0)
     rec.derived["kinematics"] = k
@@ -97,7 +97,7 @@ def noise_hour(pieces: int = 30, piece_s: float = 120.0, seed: int = 0, baseline
                              "value": e["value"]} for e in ev[:3]]
         if baseline:
             t0 = time.perf_counter()
-            before_issue_40(rec)
+            naive_events(rec)
             out["baseline_seconds"] += time.perf_counter() - t0
             nb = len(_events(rec))
             out["baseline_events"] += nb
@@ -210,9 +210,9 @@ def main() -> list[dict]:
                 "note": (f"{n['hours']:g} h of lane-keeping traffic ({n['states']:,} states, 30 "
                          f"recordings of 2 min, aerial/LiDAR/simulator): "
                          f"{n['events'] / n['hours']:.0f} critical events per hour (target 0; "
-                         f"derived as before issue 40: {n['baseline_events'] / n['hours']:.0f} "
+                         f"derived naively: {n['baseline_events'] / n['hours']:.0f} "
                          f"per hour); per method {json.dumps(n['by_method'])}; seconds: every "
-                         f"derivation, baseline: interactions and events again the old way; "
+                         f"derivation, baseline: interactions and events again, naively; "
                          f"{secs:.0f} s in all")})
     t0 = time.perf_counter()
     c = conflicts()

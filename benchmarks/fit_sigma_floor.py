@@ -1,4 +1,5 @@
-"""Where sigma_car's error comes from (docs/fitting.md, "Why sigma_car stays above 1.5x the floor").
+"""Where sigma_car's error comes from (docs/fitting.md, "Why sigma_car stays above the other
+parameters' ratios").
 
     python benchmarks/fit_sigma_floor.py [OUT.json] [--seeds 30] [--fit-seeds 4] [--workers 2]
 

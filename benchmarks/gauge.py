@@ -1,8 +1,7 @@
 """How fast this machine is right now, for reading numbers of different days side by side.
 
-The VMs the benchmarks run on differ by 2-5x between sessions (2026-12-01: a CPython loop at
-5-9 M iterations/s, the compiled OpenLABEL parser 85 ms per 8 MiB block, against 15.7 ms in an
-earlier session), more than any change measured here. Each benchmark has its baseline in the same
+Machines, and one machine under other work, differ by 2-5x in speed (a CPython loop at 5-30 M
+iterations/s), more than most changes measured here. Each benchmark has its baseline in the same
 run (read the ratios); this gauge, printed at the head of ``make bench`` and of the large runs,
 says what kind of machine gave the seconds.
 """

@@ -19,8 +19,8 @@ SUMO's conventions and what the converter does with them:
   speed along the lane's direction (the map's, at the footprint centre) plus the lateral speed
   across it — ``speedLat`` where the file has it (``--fcd-output.attributes speedLat``, or the
   sublane model), else the motion of the positions across the lane. (The speed along the heading
-  is short by v (1 - cos theta) there: TTC against SUMO's SSM device was off by a median 0.4 %
-  during lane changes, now 0.05 %; tests/realdata/test_sumo.py.)
+  is short by v (1 - cos theta) there: with it TTC against SUMO's SSM device is off by a median
+  0.4 % during lane changes, with the lane-based velocity 0.05 %; tests/realdata/test_sumo.py.)
 - Instantaneous lane changes (SUMO's default: the vehicle is moved one lane width across in one
   step, without lateral speed) are kept as they are and reported by ``validate`` as
   ``kinematics.instant_lane_change``, once per vehicle. ``-O lane_change_duration=N`` reconstructs

@@ -44,7 +44,7 @@ WINDOW_DERIVATIONS = ("kinematics", "interactions", "conflicts")
 #: every derived table :func:`write_by_windows` writes
 WINDOW_TABLES = (*WINDOW_DERIVATIONS, "criticality_summary")
 #: the default window (s): its participants' whole tracks and its derived rows are what one
-#: worker holds (docs/performance.md "Criticality")
+#: worker holds (docs/performance.md "Derivations and criticality")
 DEFAULT_WINDOW_S = 60.0
 #: rows per row group of a window's part files
 PART_ROW_GROUP = 16_384

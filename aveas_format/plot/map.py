@@ -8,7 +8,7 @@
 >>> save_map(net, "map.png")                            # doctest: +SKIP
 
 No pyplot state is touched: without ``ax`` a standalone :class:`matplotlib.figure.Figure` (Agg
-canvas) is made, so this works headless and does not change the backend of an interactive session.
+canvas) is made, so this works headless and does not change the backend of an interactive shell or notebook.
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ Every function takes a :class:`~aveas_format.io.recording.Recording` and returns
 Large recordings are subsampled for drawing (``max_points``); histograms use every sample, and
 :func:`open_for_figures` reads a bounded subset of a large recording. The map underneath is drawn by
 :func:`aveas_format.plot.map.plot_map`. Figures are standalone ``Figure`` objects (no pyplot state),
-so drawing never switches the backend of an interactive session.
+so drawing never switches the backend of an interactive shell or notebook.
 """
 
 from __future__ import annotations

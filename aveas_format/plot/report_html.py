@@ -229,7 +229,7 @@ def render_html(report: Report, rec: Any = None, figures: dict[str, bytes] | Non
         f"{_e(report.format_version)} · aveas-format {_e(report.tool_version)}</p>",
     ]
     out += _summary(report, rec, None)
-    # extra sections (issue 20: the criticality summary goes here)
+    # extra sections (the criticality summary goes here)
     for title, body in sections:
         out.append(f"<h2>{_e(title)}</h2>{body}")
     if report.results:

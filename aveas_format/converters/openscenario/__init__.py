@@ -76,10 +76,9 @@ catalogs and maps (``../shared/data/real/esmini``), and esmini's
 ``lane-change_clothoid_based_trajectory.xosc`` (``tests/data/third_party/esmini``); plus this
 toolkit's own exports.
 
-Modules (a package since issue 18: the import grew a parameter resolver, a shape evaluator and a
-storyboard replay): ``write`` (export), ``read`` (import: entities, catalogs, the recording),
-``params`` (parameters, expressions, catalogs), ``shapes`` (positions, trajectory shapes),
-``replay`` (the storyboard replay).
+Modules (for developers): ``write`` (export), ``read`` (import: entities, catalogs, the
+recording), ``params`` (the parameter resolver: parameters, expressions, catalogs), ``shapes``
+(the shape evaluator: positions, trajectory shapes), ``replay`` (the storyboard replay).
 """
 
 from aveas_format.converters.openscenario.read import OpenScenarioImportOptions, import_openscenario
