@@ -203,9 +203,10 @@ def _compact_rows(rec, tmp: Path, n: int, plain_mb: float) -> list[dict]:
 
 # ---- OSI and MCAP: the columnar protobuf encoder against the bindings, same run ---------------
 
-def _osi_bindings(rec) -> bytes:
+def _osi_bindings(rec, map_reference: str = "") -> bytes:
     """The OSI export through the bindings (one betterosi message per moving object, serialized per
-    time step): the same-run baseline; the columnar export is meant to write the same bytes."""
+    time step, every GroundTruth naming the map written next to the trace): the same-run
+    baseline; the columnar export writes the same bytes."""
     import math
     import struct
     import warnings
@@ -255,7 +256,7 @@ def _osi_bindings(rec) -> bytes:
             sec, nanos = divmod(round(float(times[k]) * 1e9), 10**9)
             gt = b.GroundTruth(timestamp=b.Timestamp(seconds=sec, nanos=nanos),
                                moving_object=[moving_object(int(i)) for i in order[bounds[k]:bounds[k + 1]]],
-                               proj_string=rec.meta.crs or "")
+                               proj_string=rec.meta.crs or "", map_reference=map_reference)
             if host is not None:
                 gt.host_vehicle_id = b.Identifier(value=int(host))
             m = gt.to_binary()
@@ -318,8 +319,8 @@ def _osi_mcap_rows(rec, tmp: Path) -> list[dict]:
     convert("osi", [tmp / "warm.osi"], map_source=tmp / "warm.xodr")
     mc(rec, tmp / "warm.mcap")
     dt = _timed(lambda: osi(rec, tmp / "rec.osi"))
-    b_old = _timed(lambda: _osi_bindings(rec))
-    same = _osi_bindings(rec) == (tmp / "rec.osi").read_bytes()
+    b_old = _timed(lambda: _osi_bindings(rec, "rec.xodr"))
+    same = _osi_bindings(rec, "rec.xodr") == (tmp / "rec.osi").read_bytes()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         floor = _timed(lambda: [b.MovingObject(id=b.Identifier(value=i)).to_binary() for i in range(n)])
