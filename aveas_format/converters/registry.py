@@ -151,6 +151,9 @@ class Converter:
     writes: Callable[..., Any] | None = None
     #: how an importer recognises its files beyond ``patterns`` (see the module docstring)
     sniff: Sniff | None = None
+    #: what to try when an import lands mostly off its map (:class:`~aveas_format.mapref.offmap.
+    #: OffMapWarning`), after the general hint (the map, the CRS)
+    off_map_hint: str = ""
 
     def matches(self, path: Path) -> bool:
         """Whether ``path``'s name matches one of the file patterns."""
@@ -242,12 +245,13 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
               outputs: Callable[[Path, Any], list[Path]] | None = None,
               provides: tuple[str, ...] = (), streams_states: bool = False,
               writes: Callable[..., Any] | None = None, sniff: Sniff | None = None,
-              ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+              off_map_hint: str = "") -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Register a converter function (decorator); ``requires``/``extra``: its optional
     dependencies, ``outputs``: an exporter's files, ``provides``: the :data:`ASKED` values its
     source carries, ``streams_states``: an exporter reads the states from the recording's file,
     ``writes``: an importer writes the recording itself, ``sniff``: how an importer recognises
-    its files (see the module docstring)."""
+    its files (see the module docstring), ``off_map_hint``: what else to try when an import
+    lands mostly off its map (an option of the source's frame...)."""
     if direction not in ("import", "export"):
         raise ValueError("direction must be 'import' or 'export'")
     key = name if direction == "import" else f"{name}:export"
@@ -260,7 +264,8 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
                                     patterns=patterns, method=method, options=options, fn=fn,
                                     needs_map=needs_map, version=version, requires=requires,
                                     extra=extra, outputs_fn=outputs, provides=provides,
-                                    streams_states=streams_states, writes=writes, sniff=sniff)
+                                    streams_states=streams_states, writes=writes, sniff=sniff,
+                                    off_map_hint=off_map_hint)
         return fn
 
     return register
@@ -363,7 +368,53 @@ def _run(name: str, inputs: list[str | Path], map_source: Any, options: dict[str
             raise type(e)(e.message, path=paths[0], **e.where) from None
         raise
     _report_stand_ins(conv, result[0] if isinstance(result, tuple) else result)
+    _report_off_map(conv, result)
     return result
+
+
+#: the general hint of an import mostly off its map (a converter's own follows it)
+OFF_MAP_HINT = "check that the map (--map) is the one of this site and the CRS (--crs) the positions'"
+
+
+def _report_off_map(conv: Converter, result: Any) -> None:
+    """The one test of every import for positions off its map
+    (:func:`aveas_format.mapref.offmap.mostly_off`, the validator's ``map.mostly_off_road``): one
+    :class:`~aveas_format.mapref.offmap.OffMapWarning` with the share, the causes that would put
+    the positions on the map, and what to try (:data:`OFF_MAP_HINT`, the converter's
+    ``off_map_hint``). A recording written in parts (its states not loaded) is tested on the
+    counts its importer returns."""
+    import warnings
+
+    from aveas_format.mapref import offmap
+
+    rec = result[0] if isinstance(result, tuple) else result
+    states = getattr(rec, "states", None)
+    if states is not None and states.num_rows and "road_id" in states.column_names:
+        import numpy as np
+        import pyarrow.compute as pc
+
+        from aveas_format.schema.taxonomy import VEHICLE_CLASSES
+
+        parts = rec.participants
+        is_vehicle = np.isin(np.asarray(parts["class"].to_pylist(), dtype=object),
+                             list(VEHICLE_CLASSES))
+        vehicle = is_vehicle[pc.index_in(states["participant_id"],
+                                         parts["participant_id"]).to_numpy(zero_copy_only=False)]
+        x, y = (states[c].to_numpy().astype(np.float64) for c in ("x", "y"))
+        n, off, xy = offmap.off_road_counts(states["road_id"].is_valid().to_numpy(
+            zero_copy_only=False), x, y, vehicle)
+        found = offmap.mostly_off(rec.map, n, off, xy, bool(vehicle.any()))
+    elif isinstance(result, tuple) and len(result) == 3:  # written in parts: (rec, states, on map)
+        n, on = int(result[1]), int(result[2])
+        found = (offmap.OffMap(n, n - on, "", []) if n >= offmap.OFF_MAP_MIN_STATES
+                 and n - on > offmap.OFF_MAP_SHARE * n else None)
+    else:
+        return
+    if found is not None:
+        warnings.warn(f"converter {conv.name}: the recording is mostly off its map: "
+                      f"{found.message()}; {OFF_MAP_HINT}"
+                      + (f"; {conv.off_map_hint}" if conv.off_map_hint else ""),
+                      offmap.OffMapWarning, stacklevel=3)
 
 
 def _report_stand_ins(conv: Converter, rec: Any) -> None:

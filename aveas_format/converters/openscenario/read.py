@@ -168,7 +168,9 @@ def _entity(so, catalogs) -> tuple[Any, str | None, int | None]:
 @converter("openscenario", description="ASAM OpenSCENARIO XML 1.0-1.3: the storyboard's motion "
            "replayed (trajectories, speeds, teleports; parameters, catalogs)",
            patterns=("*.xosc",), method="traffic_simulation", options=OpenScenarioImportOptions,
-           needs_map=False, provides=("partner", "license"))
+           needs_map=False, provides=("partner", "license"),
+           off_map_hint="a scenario written for CARLA is in its left-handed frame: -O "
+                        "handedness=left reads it so (handedness=right: OpenSCENARIO's own)")
 def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenarioImportOptions):
     """The motion an OpenSCENARIO file prescribes, replayed kinematically (module
     :mod:`aveas_format.converters.openscenario.replay` says what is carried out and what is not).
