@@ -123,11 +123,13 @@ def off_road_causes(net, xy: np.ndarray) -> list[str]:
     unit (mm, cm, feet, km), the map header's ``<offset>`` applied the wrong way, or y mirrored (a
     left-handed frame, as CARLA's); each as ``"with x and y swapped, 96% would be on a road"``,
     best first, those reaching 50 % (and still spread over at least 20 m and 5 % of the map's
-    extent: shrinking every point onto one spot of a road explains nothing)."""
+    extent, where a unit shrinks them: shrinking every point onto one spot of a road explains
+    nothing)."""
     x, y = xy[:, 0], xy[:, 1]
     tries: list[tuple[str, np.ndarray, np.ndarray]] = [
         ("with x and y swapped", y, x),
         ("with y negated (a left-handed frame, as CARLA's)", x, -y)]
+    rescaled = {f"read as {unit}" for unit in ("millimetres", "centimetres", "feet")}
     for unit, f in (("millimetres", 1e-3), ("centimetres", 1e-2), ("feet", 0.3048),
                     ("kilometres", 1e3)):
         tries.append((f"read as {unit}", x * f, y * f))
@@ -141,7 +143,7 @@ def off_road_causes(net, xy: np.ndarray) -> list[str]:
     least = max(20.0, 0.05 * float(np.hypot(xmax - xmin, ymax - ymin)))
     found = []
     for what, tx, ty in tries:
-        if len(tx) > 1 and np.hypot(np.ptp(tx), np.ptp(ty)) < least:
+        if what in rescaled and len(tx) > 1 and np.hypot(np.ptp(tx), np.ptp(ty)) < least:
             continue  # shrunk onto a spot of the map: no explanation
         share = on_map_share(net, tx, ty)
         if share >= 0.5:
