@@ -381,35 +381,14 @@ def _report_off_map(conv: Converter, result: Any) -> None:
     (:func:`aveas_format.mapref.offmap.mostly_off`, the validator's ``map.mostly_off_road``): one
     :class:`~aveas_format.mapref.offmap.OffMapWarning` with the share, the causes that would put
     the positions on the map, and what to try (:data:`OFF_MAP_HINT`, the converter's
-    ``off_map_hint``). A recording written in parts (its states not loaded) is tested on the
-    counts its importer returns."""
+    ``off_map_hint``). A recording written in parts (its states not loaded) is read back a row
+    group at a time."""
     import warnings
 
     from aveas_format.mapref import offmap
 
     rec = result[0] if isinstance(result, tuple) else result
-    states = getattr(rec, "states", None)
-    if states is not None and states.num_rows and "road_id" in states.column_names:
-        import numpy as np
-        import pyarrow.compute as pc
-
-        from aveas_format.schema.taxonomy import VEHICLE_CLASSES
-
-        parts = rec.participants
-        is_vehicle = np.isin(np.asarray(parts["class"].to_pylist(), dtype=object),
-                             list(VEHICLE_CLASSES))
-        vehicle = is_vehicle[pc.index_in(states["participant_id"],
-                                         parts["participant_id"]).to_numpy(zero_copy_only=False)]
-        x, y = (states[c].to_numpy().astype(np.float64) for c in ("x", "y"))
-        n, off, xy = offmap.off_road_counts(states["road_id"].is_valid().to_numpy(
-            zero_copy_only=False), x, y, vehicle)
-        found = offmap.mostly_off(rec.map, n, off, xy, bool(vehicle.any()))
-    elif isinstance(result, tuple) and len(result) == 3:  # written in parts: (rec, states, on map)
-        n, on = int(result[1]), int(result[2])
-        found = (offmap.OffMap(n, n - on, "", []) if n >= offmap.OFF_MAP_MIN_STATES
-                 and n - on > offmap.OFF_MAP_SHARE * n else None)
-    else:
-        return
+    found = offmap.of_recording(rec)
     if found is not None:
         warnings.warn(f"converter {conv.name}: the recording is mostly off its map: "
                       f"{found.message()}; {OFF_MAP_HINT}"

@@ -69,14 +69,48 @@ def sample(idx: np.ndarray, k: int = SAMPLE) -> np.ndarray:
 
 def off_road_counts(on_road: np.ndarray, x: np.ndarray, y: np.ndarray, vehicle: np.ndarray | None
                     ) -> tuple[int, int, np.ndarray]:
-    """``(states, states on no road, a sample of their x/y)``: of the vehicles, or of everyone
-    where there is no vehicle (``vehicle`` None: everyone)."""
+    """``(states, states on no road, a sample of their x/y)`` of the states where ``vehicle``
+    (None: of every state)."""
     ok = np.isfinite(x) & np.isfinite(y)
-    if vehicle is not None and (vehicle & ok).any():
-        ok = vehicle & ok
+    if vehicle is not None:
+        ok &= vehicle
     off = ok & ~np.asarray(on_road, bool)
     idx = sample(np.flatnonzero(off))
     return int(ok.sum()), int(off.sum()), np.c_[x[idx], y[idx]]
+
+
+def of_recording(rec) -> OffMap | None:
+    """The :class:`OffMap` of a recording mostly off its map, else None: of its vehicles' states
+    (of everyone's where it has no vehicle). A recording whose states are not loaded (written in
+    parts) is read a row group at a time, four columns of it (bounded memory)."""
+    import pyarrow.compute as pc
+
+    from aveas_format.schema.taxonomy import VEHICLE_CLASSES
+
+    parts = rec.participants
+    is_vehicle = np.isin(np.asarray(parts["class"].to_pylist(), dtype=object), list(VEHICLE_CLASSES))
+    cols = ["participant_id", "x", "y", "road_id"]
+    if rec.states is not None:
+        chunks = iter([rec.states.select(cols)]) if rec.states.num_rows else iter(())
+    else:
+        from aveas_format.io.reader import TableParts
+
+        tp = TableParts(rec.path, rec.meta, "states")
+        chunks = (tp.read(i, cols) for i in range(tp.num_row_groups))
+    n = off = 0
+    xys = []
+    with_vehicles = bool(is_vehicle.any())
+    for t in chunks:
+        idx = pc.index_in(t["participant_id"], parts["participant_id"]).to_numpy(zero_copy_only=False)
+        x, y = (t[c].to_numpy().astype(np.float64) for c in ("x", "y"))
+        k, o, xy = off_road_counts(t["road_id"].is_valid().to_numpy(zero_copy_only=False), x, y,
+                                   is_vehicle[idx] if with_vehicles else None)
+        n, off = n + k, off + o
+        xys.append(xy)
+    if not n:
+        return None
+    xy = np.vstack(xys)
+    return mostly_off(rec.map, n, off, xy[sample(np.arange(len(xy)))], with_vehicles)
 
 
 def mostly_off(net, n: int, off: int, xy: np.ndarray, vehicles: bool, *,

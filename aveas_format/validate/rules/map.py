@@ -387,7 +387,7 @@ def _off_road(ctx: Context) -> tuple[int, int, np.ndarray] | None:
     x, y = (sv.col("x"), sv.col("y")) if sv is not None else (None, None)
     if rs is None or x is None or y is None:
         return None
-    return off_road_counts(rs[0] >= 0, x, y, sv.vehicle)
+    return off_road_counts(rs[0] >= 0, x, y, sv.vehicle if sv.vehicle.any() else None)
 
 
 @rule("map.mostly_off_road", "error", "The recording is mostly off the map",
