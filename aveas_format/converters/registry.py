@@ -373,7 +373,7 @@ def _run(name: str, inputs: list[str | Path], map_source: Any, options: dict[str
 
 
 #: the general hint of an import mostly off its map (a converter's own follows it)
-OFF_MAP_HINT = "check that the map (--map) is the one of this site and the CRS (--crs) the positions'"
+OFF_MAP_HINT = "check that --map is the map of this site and --crs the CRS of the positions"
 
 
 def _report_off_map(conv: Converter, result: Any) -> None:
