@@ -174,4 +174,7 @@ def test_convert_onto_the_wrong_map_says_so(tmp_path):
     assert "map.mostly_off_road" in r.stdout and "with x and y swapped, 100%" in r.stdout
     r = cli(*args, "--overwrite", "--no-validate")
     assert r.returncode == 0, r.stderr
-    assert "warning: states.parquet: 60 of 60 vehicle states (100.0 %) are on no road" in r.stderr
+    assert ("warning: converter openscenario: the recording is mostly off its map: 60 of 60 "
+            "vehicle states (100.0 %) are on no road" in r.stderr)
+    assert "with x and y swapped, 100%" in r.stderr and "--crs" in r.stderr
+    assert r.stderr.count("mostly off its map") == 1

@@ -107,19 +107,8 @@ def convert(
     on_map = on_road / n if n else 0.0
     err.print(f"wrote {path}: {rec.participants.num_rows} participants, {n:,} states, "
               f"{on_map:.1%} on the map")
-    if validate_:
-        validate_written(path)  # map.mostly_off_road among the rules
-    elif on_road < n:  # (every state on a road: nothing to say, and nothing to read again)
-        _off_map_note(path)
-
-
-def _off_map_note(path: Path) -> None:
-    """Without --validate, still say when the recording is mostly off its map (wrong map, CRS,
-    offset, axes or unit): the one finding a conversion must not keep quiet about."""
-    import aveas_format
-
-    for f in aveas_format.validate(path, select=["map.mostly_off_road"]).findings():
-        err.print(f"warning: {f.message}", markup=False, highlight=False)
+    if validate_:  # (a recording mostly off its map: the import has warned, and
+        validate_written(path)  # map.mostly_off_road is among the rules)
 
 
 def _convert_many(source: str, inputs: list[str], map_file: Path | None, raw: dict, output: Path,

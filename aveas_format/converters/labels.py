@@ -208,3 +208,24 @@ def implausible_size(size: np.ndarray) -> np.ndarray:
         h = s[:, 2]
         bad |= (h < 0) | (h > MAX_SIZE_M)
     return bad
+
+
+#: an assumed size per class, where a source states none (or 0): ``(length, width, height)`` m
+#: and its 1-sigma ``(length_std, width_std, height_std)`` m, large on purpose: the spread of the
+#: class in traffic (a car 3.6-5.3 m long, a truck a 7.5 t box van to a 16.5 m articulated
+#: lorry...), so that no measure treats an assumed size as a measured one
+CLASS_SIZE: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
+    "car": ((4.5, 1.8, 1.5), (0.6, 0.15, 0.2)),
+    "van": ((5.5, 2.0, 2.2), (0.8, 0.15, 0.4)),
+    "truck": ((12.0, 2.5, 3.5), (4.0, 0.1, 0.4)),
+    "bus": ((12.0, 2.55, 3.2), (2.5, 0.05, 0.3)),
+    "trailer": ((8.0, 2.5, 3.0), (3.0, 0.1, 0.8)),
+    "motorcycle": ((2.2, 0.8, 1.4), (0.3, 0.15, 0.2)),
+    "bicycle": ((1.8, 0.6, 1.7), (0.2, 0.1, 0.2)),
+    "pedestrian": ((0.5, 0.6, 1.75), (0.15, 0.15, 0.15)),
+    "mobility_device": ((1.0, 0.7, 1.4), (0.4, 0.2, 0.3)),
+    "pushable_pullable": ((1.0, 0.6, 1.0), (0.4, 0.2, 0.3)),
+    "animal": ((1.5, 0.6, 1.2), (0.8, 0.3, 0.5)),
+    "railvehicle": ((30.0, 2.65, 3.5), (10.0, 0.2, 0.5)),
+    "other": ((2.0, 1.0, 1.5), (1.5, 0.7, 0.8)),
+}

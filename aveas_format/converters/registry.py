@@ -151,6 +151,9 @@ class Converter:
     writes: Callable[..., Any] | None = None
     #: how an importer recognises its files beyond ``patterns`` (see the module docstring)
     sniff: Sniff | None = None
+    #: what to try when an import lands mostly off its map (:class:`~aveas_format.mapref.offmap.
+    #: OffMapWarning`), after the general hint (the map, the CRS)
+    off_map_hint: str = ""
 
     def matches(self, path: Path) -> bool:
         """Whether ``path``'s name matches one of the file patterns."""
@@ -242,12 +245,13 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
               outputs: Callable[[Path, Any], list[Path]] | None = None,
               provides: tuple[str, ...] = (), streams_states: bool = False,
               writes: Callable[..., Any] | None = None, sniff: Sniff | None = None,
-              ) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+              off_map_hint: str = "") -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Register a converter function (decorator); ``requires``/``extra``: its optional
     dependencies, ``outputs``: an exporter's files, ``provides``: the :data:`ASKED` values its
     source carries, ``streams_states``: an exporter reads the states from the recording's file,
     ``writes``: an importer writes the recording itself, ``sniff``: how an importer recognises
-    its files (see the module docstring)."""
+    its files (see the module docstring), ``off_map_hint``: what else to try when an import
+    lands mostly off its map (an option of the source's frame...)."""
     if direction not in ("import", "export"):
         raise ValueError("direction must be 'import' or 'export'")
     key = name if direction == "import" else f"{name}:export"
@@ -260,7 +264,8 @@ def converter(name: str, *, description: str, patterns: tuple[str, ...] = (),
                                     patterns=patterns, method=method, options=options, fn=fn,
                                     needs_map=needs_map, version=version, requires=requires,
                                     extra=extra, outputs_fn=outputs, provides=provides,
-                                    streams_states=streams_states, writes=writes, sniff=sniff)
+                                    streams_states=streams_states, writes=writes, sniff=sniff,
+                                    off_map_hint=off_map_hint)
         return fn
 
     return register
@@ -363,7 +368,32 @@ def _run(name: str, inputs: list[str | Path], map_source: Any, options: dict[str
             raise type(e)(e.message, path=paths[0], **e.where) from None
         raise
     _report_stand_ins(conv, result[0] if isinstance(result, tuple) else result)
+    _report_off_map(conv, result)
     return result
+
+
+#: the general hint of an import mostly off its map (a converter's own follows it)
+OFF_MAP_HINT = "check that --map is the map of this site and --crs the CRS of the positions"
+
+
+def _report_off_map(conv: Converter, result: Any) -> None:
+    """The one test of every import for positions off its map
+    (:func:`aveas_format.mapref.offmap.mostly_off`, the validator's ``map.mostly_off_road``): one
+    :class:`~aveas_format.mapref.offmap.OffMapWarning` with the share, the causes that would put
+    the positions on the map, and what to try (:data:`OFF_MAP_HINT`, the converter's
+    ``off_map_hint``). A recording written in parts (its states not loaded) is read back a row
+    group at a time."""
+    import warnings
+
+    from aveas_format.mapref import offmap
+
+    rec = result[0] if isinstance(result, tuple) else result
+    found = offmap.of_recording(rec)
+    if found is not None:
+        warnings.warn(f"converter {conv.name}: the recording is mostly off its map: "
+                      f"{found.message()}; {OFF_MAP_HINT}"
+                      + (f"; {conv.off_map_hint}" if conv.off_map_hint else ""),
+                      offmap.OffMapWarning, stacklevel=3)
 
 
 def _report_stand_ins(conv: Converter, rec: Any) -> None:

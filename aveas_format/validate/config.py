@@ -27,6 +27,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from aveas_format.errors import FormatError
+from aveas_format.mapref.offmap import OFF_MAP_MIN_STATES, OFF_MAP_SHARE, OFF_MAP_WALK_M
 
 
 class _Section(BaseModel):
@@ -133,11 +134,11 @@ class MapConfig(_Section):
                                    "the lane direction is driving against it")
     min_wrong_way_s: float = Field(0.5, ge=0, description="s; shorter wrong-way episodes are "
                                    "ignored")
-    off_road_share: float = Field(0.5, ge=0, le=1, description="a recording whose states are on "
+    off_road_share: float = Field(OFF_MAP_SHARE, ge=0, le=1, description="a recording whose states are on "
                                   "no road of the map for more than this share is an error "
                                   "(map.mostly_off_road: wrong map, CRS, offset, axes or unit)")
-    off_road_min_states: int = Field(10, ge=1, description="... checked from this many states on")
-    off_road_walk_m: float = Field(30.0, ge=0, description="in a recording without vehicles, a "
+    off_road_min_states: int = Field(OFF_MAP_MIN_STATES, ge=1, description="... checked from this many states on")
+    off_road_walk_m: float = Field(OFF_MAP_WALK_M, ge=0, description="in a recording without vehicles, a "
                                    "state counts as off the map only this far from every lane "
                                    "(pedestrians walk beside the roads)")
 

@@ -85,6 +85,7 @@ def import_submission(inputs: Sequence[Path], converter: str | None = None,
     not loaded. Findings without a file name the (first) input; a warning of an importer that
     does not report located findings becomes a ``source.other`` finding."""
     from aveas_format.converters.registry import UnstatedWarning, convert, convert_to, get_converter
+    from aveas_format.mapref.offmap import OffMapWarning
 
     inputs = [Path(p) for p in inputs]
     name = importer_of(inputs, converter)
@@ -94,6 +95,7 @@ def import_submission(inputs: Sequence[Path], converter: str | None = None,
         warnings.simplefilter("ignore", DeprecationWarning)
         warnings.simplefilter("ignore", PendingDeprecationWarning)
         warnings.simplefilter("ignore", UnstatedWarning)  # (the metadata rules say it, located)
+        warnings.simplefilter("ignore", OffMapWarning)  # (map.mostly_off_road says it)
         try:
             if to_disk:
                 rec, _, _ = convert_to(name, inputs, Path(workdir) / "submission.aveas",

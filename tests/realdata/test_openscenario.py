@@ -14,6 +14,7 @@ import pytest
 
 import aveas_format
 from aveas_format.converters.registry import convert
+from aveas_format.mapref.offmap import OffMapWarning
 from helpers_realdata import DATA, assert_same_motion, crs_for, real_files, round_trips
 
 def _is_scenario(param) -> bool:
@@ -57,6 +58,10 @@ def _convert(path):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         rec = convert("openscenario", [path], map_source=map_path, crs=crs_for(logic))
+    assert not [w for w in caught if issubclass(w.category, OffMapWarning)]  # (none is off its map)
+    assert not [w for w in caught if "BoundingBox states" in str(w.message)]  # (no size 0)
+    # esmini writes OpenSCENARIO's right-handed frame (no "CARLA:" header): nothing mirrored
+    assert rec.meta.extras["openscenario"]["handedness"]["frame"] == "right"
     return rec, [str(w.message) for w in caught if issubclass(w.category, UserWarning)
                  and "not converted" in str(w.message)]
 

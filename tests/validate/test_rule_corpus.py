@@ -575,7 +575,8 @@ def _moved(sc, transform):
 @pytest.mark.parametrize("transform,cause", [
     (lambda x, y: (y, x), "with x and y swapped, 100% would be on a road"),
     (lambda x, y: (x * 100.0, y * 100.0), "read as centimetres, 100% would be on a road"),
-    (lambda x, y: (x + 5000.0, y + 3000.0), "the offset): none puts the positions on the map"),
+    (lambda x, y: (x + 5000.0, y + 3000.0), "y mirrored): none puts the positions on the map"),
+    (lambda x, y: (x, -y), "with y negated (a left-handed frame, as CARLA's), 100% would be on a road"),
 ])
 def test_mostly_off_road_names_the_likely_cause(scene, transform, cause):
     """A recording whose vehicles are on no road (issue 18, point 7) is an error naming the likely

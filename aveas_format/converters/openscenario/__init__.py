@@ -21,11 +21,24 @@ closed-loop dynamics). Precisely:
   minus, comparisons, ``and or not``, ``true``/``false``, the functions ``round floor ceil sqrt
   pow sin cos tan asin acos atan abs min max`` and ``pi``), evaluated on a whitelisted syntax tree,
   never ``eval``; ``-O parameter.NAME=VALUE`` overrides a global parameter. Not supported:
-  parameter distributions, ``ParameterSetAction``/``ParameterModifyAction`` at run time, variables.
+  ``ParameterSetAction``/``ParameterModifyAction`` at run time, variables.
+- *Logical scenarios*: a parameter variation file (a ``ParameterValueDistribution`` over a
+  template ``ScenarioFile``) is not one scenario: the import says what it is, names the template
+  and the number of concrete variations; ``-O variation=N`` imports the template with the values
+  of variation N of its ``Deterministic`` distributions (sets, ranges, value sets; every
+  combination, the last varying fastest). ``Stochastic`` distributions are not expanded (their
+  parameters keep the template's values; one finding says so).
+- *Frame*: OpenSCENARIO's right-handed one, or CARLA's left-handed one where the ``FileHeader``
+  description starts with ``CARLA:`` (scenario_runner's convention): then y, headings,
+  ``Orientation``, the lateral ``dy`` of relative world/object positions and clothoid curvatures
+  are mirrored into the map's frame (road and lane positions need nothing). ``-O
+  handedness=left|right`` forces either; recording.json says which was read and why.
 - *Entities*: ``Vehicle``, ``Pedestrian``, ``MiscObject``, inline or by ``CatalogReference``
   (``CatalogLocations`` directories relative to the file; the entry's parameters with the
   reference's ``ParameterAssignments``). Positions are moved from the entity's reference point to
-  the bounding box centre. Class from the category. An entity that cannot be converted (an
+  the bounding box centre. Class from the category. A ``BoundingBox`` of size 0 (or less: tools
+  write ``0 0 0`` for an unknown size) gets the class's default size with a large std, and one
+  finding names the entity and its catalog entry. An entity that cannot be converted (an
   ``ExternalObjectReference``, a catalog entry not found, an untimed trajectory at speed 0...)
   is one warning line naming it and why; an error only when none can be converted.
 - *Storyboard*: ``Init`` teleports, speeds and trajectories at t = 0; acts and events start when
@@ -77,8 +90,9 @@ catalogs and maps (``../shared/data/real/esmini``), and esmini's
 toolkit's own exports.
 
 Modules (for developers): ``write`` (export), ``read`` (import: entities, catalogs, the
-recording), ``params`` (the parameter resolver: parameters, expressions, catalogs), ``shapes``
-(the shape evaluator: positions, trajectory shapes), ``replay`` (the storyboard replay).
+recording), ``params`` (the parameter resolver: parameters, expressions, catalogs), ``variation``
+(parameter variation files), ``handedness`` (CARLA's left-handed frame), ``shapes`` (the shape
+evaluator: positions, trajectory shapes), ``replay`` (the storyboard replay).
 """
 
 from aveas_format.converters.openscenario.read import OpenScenarioImportOptions, import_openscenario

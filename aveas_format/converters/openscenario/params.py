@@ -14,7 +14,8 @@
   ``CatalogLocations`` directories (relative to the scenario file), copied and resolved with its own
   ``ParameterDeclarations`` overridden by the reference's ``ParameterAssignments``.
 
-Not resolved: ``ParameterValueDistribution`` files (parameter variation), ``ParameterSetAction``
+Parameter variation files (``ParameterValueDistribution``) are expanded by :mod:`.variation`
+into the values of one concrete variation. Not resolved: ``ParameterSetAction``
 / ``ParameterModifyAction`` at run time (the replay keeps the declared values), ``VariableDeclarations``.
 """
 
@@ -250,6 +251,8 @@ class Catalogs:
         self.entries: dict[tuple[str, str], Any] = {}
         self.scope = scope
         self.files: list[Path] = []
+        #: applied to each resolved entry (the frame of a left-handed file: handedness.mirror)
+        self.mirror: Any = None
         for loc in root.iterfind("CatalogLocations/*/Directory"):
             d = (base / (loc.get("path") or "")).resolve()
             if not d.is_dir():
@@ -277,4 +280,6 @@ class Catalogs:
         assigned = {a.get("parameterRef"): a.get("value") for a in
                     ref.iterfind("ParameterAssignments/ParameterAssignment")}
         resolve_tree(entry, dict(self.scope), assigned)
+        if self.mirror is not None:
+            self.mirror(entry)
         return entry

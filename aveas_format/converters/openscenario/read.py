@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from lxml import etree
@@ -16,6 +16,7 @@ from pydantic import Field
 
 from aveas_format.converters.common.assemble import to_recording
 from aveas_format.converters.common.boxes import Boxes, Rows, Sensor
+from aveas_format.converters.openscenario.handedness import handedness, mirror
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError, report_source
 from aveas_format.mapref.build import load_map_bytes
@@ -42,6 +43,13 @@ class OpenScenarioImportOptions(ImportOptions):
     timed polyline vertices are kept as they are)."""
     max_duration: float = Field(600.0, gt=0)
     """End of the replay (s) where no stop trigger ends it earlier."""
+    handedness: Literal["auto", "right", "left"] = "auto"
+    """The frame of the file's world positions: ``right`` (OpenSCENARIO's), ``left`` (CARLA's:
+    y and headings mirrored), ``auto`` (left where the FileHeader description starts with
+    ``CARLA:``, scenario_runner's convention, else right)."""
+    variation: int | None = Field(None, ge=0)
+    """Of a logical scenario (a parameter variation file): the concrete variation to import,
+    0-based (the template scenario with that variation's parameter values)."""
 
 
 def _read(path: Path):
@@ -54,6 +62,56 @@ def _read(path: Path):
     if root.tag != "OpenSCENARIO":
         raise FormatError(f"not OpenSCENARIO: root element <{root.tag}>", path=path)
     return root
+
+
+def _concrete(path: Path, options: OpenScenarioImportOptions):
+    """The concrete scenario to replay: ``(its path, its root, the parameter values over its
+    declared defaults, notes for extras)``: the file itself, or of a parameter variation file
+    (:mod:`.variation`) its template with the variation ``options.variation`` (without it an
+    error saying what the file is). A catalog, or a file without a storyboard, is an error
+    saying so."""
+    from aveas_format.converters.openscenario import variation as pv
+
+    root = _read(path)
+    values, notes = dict(options.parameter), {}
+    if pv.is_logical(root):
+        if options.variation is None:
+            raise pv.logical_scenario_error(root, path)
+        var = pv.variations(root, path)
+        chosen = var[options.variation]
+        template = _read(var.template)
+        if pv.is_logical(template):
+            raise FormatError("the template scenario of a parameter variation is itself a "
+                              "parameter variation file", path=var.template)
+        declared = {d.get("name") for d in
+                    template.iterfind("ParameterDeclarations/ParameterDeclaration")}
+        missing = sorted(set(chosen) - declared)
+        if missing:
+            raise FormatError(f"parameter {missing[0]!r} of the parameter variation is not "
+                              f"declared by the template scenario {var.template.name}", path=path)
+        if var.stochastic:
+            report_source("source.openscenario.stochastic_not_expanded",
+                          f"stochastic distributions are not expanded: parameter"
+                          f"{'s' if len(var.stochastic) > 1 else ''} "
+                          f"{', '.join(var.stochastic)} keep the template's declared values",
+                          count=len(var.stochastic), file=str(path))
+        values = {**chosen, **options.parameter}  # (the user's parameter.NAME wins)
+        notes = {"variation": {"file": path.name, "template": var.template.name,
+                               "index": options.variation, "of": len(var),
+                               "parameters": chosen}}
+        path, root = var.template, template
+    elif options.variation is not None:
+        raise FormatError("option variation: the file is a concrete scenario, not a parameter "
+                          "variation file", path=path)
+    if root.find("Storyboard") is None:
+        cat = root.find("Catalog")
+        if cat is not None:
+            raise FormatError(f"a catalog (catalog {cat.get('name', '')!r}), not a scenario: "
+                              "convert a scenario whose CatalogLocations lists its directory",
+                              path=path)
+        raise FormatError("no <Storyboard>: not a scenario (nor a parameter variation file)",
+                          path=path)
+    return path, root, values, notes
 
 
 def _map_of(root, path: Path, map_source):
@@ -110,7 +168,9 @@ def _entity(so, catalogs) -> tuple[Any, str | None, int | None]:
 @converter("openscenario", description="ASAM OpenSCENARIO XML 1.0-1.3: the storyboard's motion "
            "replayed (trajectories, speeds, teleports; parameters, catalogs)",
            patterns=("*.xosc",), method="traffic_simulation", options=OpenScenarioImportOptions,
-           needs_map=False, provides=("partner", "license"))
+           needs_map=False, provides=("partner", "license"),
+           off_map_hint="a scenario written for CARLA is in its left-handed frame: -O "
+                        "handedness=left reads it so (handedness=right: OpenSCENARIO's own)")
 def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenarioImportOptions):
     """The motion an OpenSCENARIO file prescribes, replayed kinematically (module
     :mod:`aveas_format.converters.openscenario.replay` says what is carried out and what is not).
@@ -130,8 +190,10 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
 
     if len(inputs) != 1:
         raise FormatError(f"openscenario: expected one input file, got {len(inputs)}")
-    path = Path(inputs[0])
-    root, scope, catalogs = _scenario(path, options)
+    given = Path(inputs[0])
+    path, root, values, notes = _concrete(given, options)
+    side, why = handedness(root, options.handedness)
+    root, scope, catalogs = _scenario(root, path, values, side)
     map_bytes = load_map_bytes(_map_of(root, path, map_source))
     net = load_map(map_bytes)
     crs = net.header.geo_reference or options.crs
@@ -142,7 +204,7 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
                     params=scope)
     replay.catalogs = catalogs
     boxes, participants, dropped = _boxes(info, replay.run(), problems, where, path)
-    notes = _report(problems, where, replay, dropped, path)
+    notes.update(_report(problems, where, replay, dropped, path))
     hdr = root.find("FileHeader")
     carried = _header_values(hdr)
     sensor = Sensor(
@@ -153,9 +215,12 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
         platform=f"OpenSCENARIO {path.name}", sensors=[{"id": "scenario", "kind": "simulator"}],
         extras={"openscenario": {"replay_rate_hz": options.rate_hz, "duration_s": replay.t,
                                  "catalog_files": [f.name for f in catalogs.files],
+                                 "handedness": {"frame": side, "why": why},
                                  "not_converted": problems, **notes}})
-    return to_recording(boxes, sensor, converter="openscenario", inputs=[path], options=options,
-                        map_bytes=map_bytes, participants=participants)
+    return to_recording(boxes, sensor, converter="openscenario",
+                        inputs=[given] + ([path] if path != given else []), options=options,
+                        map_bytes=map_bytes, participants=participants,
+                        resolved={"handedness": side})
 
 
 def _header_values(hdr) -> dict[str, str]:
@@ -174,24 +239,27 @@ def _header_values(hdr) -> dict[str, str]:
     return sensor_values(values)
 
 
-def _scenario(path: Path, options: OpenScenarioImportOptions):
-    """The scenario's XML with its parameters resolved (the options' values over the declared
-    defaults) and its maneuver catalog references inlined; the global parameters; the catalogs."""
+def _scenario(root, path: Path, values: dict[str, Any], side: str):
+    """The scenario's XML with its parameters resolved (``values`` over the declared defaults),
+    in the right-handed frame (``side`` left: mirrored, :mod:`.handedness`) and its maneuver
+    catalog references inlined; the global parameters; the catalogs."""
     from aveas_format.converters.openscenario.params import Catalogs, declare, resolve_tree
 
-    root = _read(path)
     declared = {d.get("name") for d in root.iterfind("ParameterDeclarations/ParameterDeclaration")}
-    unknown = sorted(set(options.parameter) - declared)
+    unknown = sorted(set(values) - declared)
     if unknown:
         raise FormatError(f"parameter {unknown[0]!r} (option parameter.{unknown[0]}) is not declared "
                           f"by the scenario; declared: {', '.join(sorted(x for x in declared if x))}",
                           path=path)
     try:
-        scope = declare(root.find("ParameterDeclarations"), {}, options.parameter)
-        resolve_tree(root, {}, options.parameter)
+        scope = declare(root.find("ParameterDeclarations"), {}, values)
+        resolve_tree(root, {}, values)
         catalogs = Catalogs(root, path.parent, scope)
     except FormatError as e:
         raise FormatError(e.message, path=e.path or path, **e.where) from None
+    if side == "left":
+        mirror(root)
+        catalogs.mirror = mirror  # (each catalog entry as it is resolved)
     _inline_catalog_maneuvers(root, catalogs, path)
     return root, scope, catalogs
 
@@ -231,12 +299,40 @@ def _entities(root, catalogs, path: Path):
             problems[name] = f"its BoundingBox: {e.message}"
             where[name] = ("source.openscenario.no_bounding_box", e.where.get("line"))
             continue
-        info[name] = {"class": props.get("aveas:class") or CATEGORY_TO_CLASS.get(cat or "", "other"),
-                      **f, "cx": c["x"], "cy": c["y"],
+        cls = props.get("aveas:class") or CATEGORY_TO_CLASS.get(cat or "", "other")
+        f.update(_assumed_size(f, cls, name, so, el, path))
+        info[name] = {"class": cls, **f, "cx": c["x"], "cy": c["y"],
                       "participant_id": props.get("aveas:participant_id"),
                       "source_id": props.get("aveas:source_id") or name,
                       "role": props.get("aveas:role")}
     return info, problems, where
+
+
+def _assumed_size(f: dict[str, float], cls: str, name: str, so, el, path: Path) -> dict[str, float]:
+    """Where the BoundingBox states no positive length, width or height (tools that fill it with
+    0 0 0): the class default (:data:`~aveas_format.converters.labels.CLASS_SIZE`) with its large
+    std, and one finding naming the entity (and its catalog entry); the std of stated sizes is
+    unknown (NaN)."""
+    from aveas_format.converters.labels import CLASS_SIZE
+
+    size, std = CLASS_SIZE.get(cls, CLASS_SIZE["other"])
+    out = {f"{k}_std": math.nan for k in f}
+    bad = [k for k in ("length", "width", "height") if not (math.isfinite(f[k]) and f[k] > 0)]
+    if not bad:
+        return out
+    for i, k in enumerate(("length", "width", "height")):
+        if k in bad:
+            out[k], out[f"{k}_std"] = size[i], std[i]
+    ref = so.find("CatalogReference")
+    entry = (f" (catalog entry {ref.get('entryName')!r} of catalog {ref.get('catalogName')!r})"
+             if ref is not None else "")
+    stated = ", ".join(f"{k} {fmt_num(f[k])}" for k in bad)
+    report_source("source.openscenario.zero_size",
+                  f"entity {name!r}{entry}: its BoundingBox states {stated}: the default of class "
+                  f"{cls} taken instead, "
+                  + ", ".join(f"{k} {fmt_num(out[k])} ± {fmt_num(out[f'{k}_std'])} m" for k in bad),
+                  file=str(path), entity=name, line=el.find("BoundingBox/Dimensions").sourceline)
+    return out
 
 
 def _boxes(info: dict[str, dict[str, Any]], ents, problems: dict[str, str],
@@ -247,7 +343,8 @@ def _boxes(info: dict[str, dict[str, Any]], ents, problems: dict[str, str],
     converted is an error."""
     rows: dict[str, list] = {k: [] for k in ("code", "time", "x", "y", "z", "heading", "interpolated")}
     part: dict[str, list] = {k: [] for k in ("participant_id", "source_id", "class", "length",
-                                             "width", "height", "role")}
+                                             "width", "height", "length_std", "width_std",
+                                             "height_std", "role")}
     dropped: list[tuple[str, float]] = []
     used_ids = {int(d["participant_id"]) for d in info.values()
                 if d["participant_id"] and str(d["participant_id"]).isdigit()}
@@ -289,7 +386,8 @@ def _boxes(info: dict[str, dict[str, Any]], ents, problems: dict[str, str],
             rows["heading"].append(h)
             rows["interpolated"].append(filled)
         part["participant_id"].append(pid)
-        for k in ("source_id", "class", "length", "width", "height"):
+        for k in ("source_id", "class", "length", "width", "height", "length_std", "width_std",
+                  "height_std"):
             part[k].append(d[k])
         part["role"].append(d["role"] if d["role"] and d["role"] not in ("None", "observed")
                             else "simulated_agent")
@@ -307,7 +405,8 @@ def _boxes(info: dict[str, dict[str, Any]], ents, problems: dict[str, str],
                   else None)
     participants = {k: np.asarray(v, dtype=object if k in ("source_id", "class", "role") else
                                   np.int64 if k == "participant_id" else np.float64)
-                    for k, v in part.items()}
+                    for k, v in part.items()
+                    if not (k.endswith("_std") and np.isnan(np.asarray(v, np.float64)).all())}
     return boxes, participants, dropped
 
 

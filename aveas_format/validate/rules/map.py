@@ -364,89 +364,30 @@ def wrong_way(ctx: Context) -> Iterator[Hits]:
                    const={**_F, "column": "vx,vy"})
 
 
-# --- a recording that is not on its map ---------------------------------------------------------
-_SAMPLE = 2000  # off-road positions kept to test the likely causes
-
+# --- a recording that is not on its map (the test is aveas_format.mapref.offmap's) ---------------
 
 def _merge_off_road(parts: list[tuple[int, int, np.ndarray]]) -> tuple[int, int, np.ndarray] | None:
+    from aveas_format.mapref.offmap import sample
+
     parts = [p for p in parts if p is not None]
     if not parts:
         return None
     xy = np.vstack([p[2] for p in parts])
-    if len(xy) > _SAMPLE:
-        xy = xy[np.linspace(0, len(xy) - 1, _SAMPLE).astype(np.int64)]
-    return sum(p[0] for p in parts), sum(p[1] for p in parts), xy
+    return sum(p[0] for p in parts), sum(p[1] for p in parts), xy[sample(np.arange(len(xy)))]
 
 
 @collector("map.off_road", merge=_merge_off_road)
 def _off_road(ctx: Context) -> tuple[int, int, np.ndarray] | None:
     """(states, states on no road, a sample of their x/y) of one batch: of the vehicles, or of
     everyone in a batch without vehicles."""
+    from aveas_format.mapref.offmap import off_road_counts
+
     sv = ctx.states_view
     rs = sv.strings("road_id") if sv is not None else None
     x, y = (sv.col("x"), sv.col("y")) if sv is not None else (None, None)
     if rs is None or x is None or y is None:
         return None
-    ok = np.isfinite(x) & np.isfinite(y)
-    veh = sv.vehicle & ok
-    if veh.any():  # vehicles belong on roads; pedestrians may walk beside them
-        ok = veh
-    off = ok & (rs[0] < 0)
-    idx = np.flatnonzero(off)
-    if len(idx) > _SAMPLE:
-        idx = idx[np.linspace(0, len(idx) - 1, _SAMPLE).astype(np.int64)]
-    return int(ok.sum()), int(off.sum()), np.c_[x[idx], y[idx]]
-
-
-def _on_map_share(net, x: np.ndarray, y: np.ndarray) -> float:
-    if not len(x):
-        return 0.0
-    return float(np.mean(net.world_to_road(x, y).on_road))
-
-
-def _far_from_lanes(net, xy: np.ndarray, dist_m: float) -> np.ndarray:
-    """Which of the points ``xy`` are farther than ``dist_m`` from every road surface of ``net``
-    (one bulk nearest-neighbour query on the map's own spatial index, the one ``world_to_road``
-    uses: road chunks with their lanes' extent)."""
-    import shapely
-
-    index = net.spatial_index
-    if not len(index.polygons):
-        return np.ones(len(xy), dtype=bool)
-    (i, _), d = index.tree.query_nearest(shapely.points(xy[:, 0], xy[:, 1]), return_distance=True,
-                                         all_matches=False)
-    far = np.ones(len(xy), dtype=bool)
-    far[i] = d > dist_m
-    return far
-
-
-def off_road_causes(net, xy: np.ndarray) -> list[str]:
-    """Which of the cheap explanations puts off-road positions ``xy`` on the map: swapped axes, a
-    unit (mm, cm, feet, km) or the map header's ``<offset>`` applied the wrong way; each as
-    ``"with x and y swapped, 96% would be on a road"``, best first, those reaching 50 % (and
-    still spread over at least 20 m and 5 % of the map's extent: shrinking every point onto one
-    spot of a road explains nothing)."""
-    x, y = xy[:, 0], xy[:, 1]
-    tries: list[tuple[str, np.ndarray, np.ndarray]] = [("with x and y swapped", y, x)]
-    for unit, f in (("millimetres", 1e-3), ("centimetres", 1e-2), ("feet", 0.3048),
-                    ("kilometres", 1e3)):
-        tries.append((f"read as {unit}", x * f, y * f))
-    ox, oy, _, hdg = net.header.offset or (0.0, 0.0, 0.0, 0.0)
-    if ox or oy or hdg:
-        c, s_ = np.cos(hdg), np.sin(hdg)
-        tries.append(("without the map's <offset> (positions in the projected CRS)",
-                      (x - ox) * c + (y - oy) * s_, -(x - ox) * s_ + (y - oy) * c))
-        tries.append(("with the map's <offset> added", x * c - y * s_ + ox, x * s_ + y * c + oy))
-    xmin, ymin, xmax, ymax = net.bounds
-    least = max(20.0, 0.05 * float(np.hypot(xmax - xmin, ymax - ymin)))
-    found = []
-    for what, tx, ty in tries:
-        if len(tx) > 1 and np.hypot(np.ptp(tx), np.ptp(ty)) < least:
-            continue  # shrunk onto a spot of the map: no explanation
-        share = _on_map_share(net, tx, ty)
-        if share >= 0.5:
-            found.append((share, f"{what}, {share:.0%} would be on a road"))
-    return [f for _, f in sorted(found, reverse=True)]
+    return off_road_counts(rs[0] >= 0, x, y, sv.vehicle if sv.vehicle.any() else None)
 
 
 @rule("map.mostly_off_road", "error", "The recording is mostly off the map",
@@ -458,8 +399,11 @@ def mostly_off_road(ctx: Context) -> Iterator[Hit]:
     the map (null road coordinates) — in a recording without vehicles, of all states farther than
     ``[map] off_road_walk_m`` from every lane: the positions are not in the map's frame. The message names the
     likely causes (a map of another site, the wrong CRS, the map header's ``<offset>``, x/y
-    swapped, another unit) and says which of the cheap ones (swapped axes, mm/cm/feet/km, the
-    offset) would put the sampled positions on the map."""
+    swapped, another unit, a left-handed frame) and says which of the cheap ones (swapped axes,
+    mm/cm/feet/km, the offset, y mirrored) would put the sampled positions on the map. Every
+    import runs the same test (:mod:`aveas_format.mapref.offmap`) and warns."""
+    from aveas_format.mapref.offmap import mostly_off
+
     got = ctx.collected.get("map.off_road")
     net = ctx.network
     if got is None or net is None:
@@ -467,17 +411,11 @@ def mostly_off_road(ctx: Context) -> Iterator[Hit]:
     n, off, xy = got
     cfg = ctx.config.map
     sv = ctx.states_view
-    who = "vehicle" if sv is not None and sv.vehicle.any() else "participant"
-    if who == "participant" and off and len(xy):
-        # no vehicles: pedestrians and the like walk beside the roads; off the map means far
-        # from every lane (estimated on the evenly spaced sample of the off-road states)
-        far = _far_from_lanes(net, xy, cfg.off_road_walk_m)
-        off, xy = int(round(off * float(np.mean(far)))), xy[far]
-    if n < cfg.off_road_min_states or off <= cfg.off_road_share * n:
+    found = mostly_off(net, n, off, xy, sv is not None and bool(sv.vehicle.any()),
+                       share=cfg.off_road_share, min_states=cfg.off_road_min_states,
+                       walk_m=cfg.off_road_walk_m)
+    if found is None:
         return
-    found = off_road_causes(net, xy)
-    causes = ("likely a map of another site, the wrong CRS, the map header's <offset>, x/y swapped "
-              "or another unit; of those tried (swapped axes, mm/cm/feet/km, the offset): "
-              + ("; ".join(found) if found else "none puts the positions on the map"))
-    yield Hit(file="states.parquet", table="states", column="x,y", n=n, off=off, who=who,
-              share=round(100.0 * off / n, 1), causes=causes)
+    causes = found.message().split(": ", 1)[1]
+    yield Hit(file="states.parquet", table="states", column="x,y", n=found.n, off=found.off,
+              who=found.who, share=round(100.0 * found.share, 1), causes=causes)

@@ -109,6 +109,19 @@ SOURCE_RULES: tuple[SourceRule, ...] = (
                "An entity cannot be converted: its catalog entry cannot be resolved, it is not a "
                "Vehicle/Pedestrian/MiscObject, no action places it, or an action of it cannot be "
                "replayed. The finding names the entity, the XML line and why."),
+    SourceRule("source.openscenario.zero_size", "warning",
+               "OpenSCENARIO bounding box of size 0",
+               "docs/format.md §4: length, width MUST be > 0; an assumed size SHOULD say how "
+               "uncertain it is (its _std)",
+               "An entity's ``BoundingBox/Dimensions`` states a length, width or height of 0 (or "
+               "less), as tools write for an unknown size: the participant gets its class's "
+               "default size with a large std (the spread of the class). The finding names the "
+               "entity, its catalog entry and the XML line."),
+    SourceRule("source.openscenario.stochastic_not_expanded", "info",
+               "OpenSCENARIO stochastic distribution not expanded", None,
+               "A concrete variation of a parameter variation file was imported (option "
+               "``variation``): its ``Stochastic`` distributions name no concrete values and are "
+               "not drawn from; their parameters keep the template's declared values."),
     SourceRule("source.openscenario.unknown_category", "warning",
                "OpenSCENARIO category without a class",
                "docs/format.md §4: class is one of the 13 classes; an entity's category SHOULD map to "
