@@ -296,7 +296,7 @@ def _recording(ol: dict[str, Any], boxes: Boxes, map_bytes: bytes, options, path
     ext = md.get(EXT) if isinstance(md.get(EXT), dict) else None
     rmeta = dict((ext or {}).get("recording") or {})
     net = load_map(map_bytes)
-    crs = _crs(net, rmeta, md, path)
+    crs = _crs(net, rmeta, md, options, path)
     local = LocalFrame(crs, offset=net.header.offset, warn=False)
     objects = ol.get("objects") or {}
     systems = CoordinateSystems(ol.get("coordinate_systems"))
@@ -363,10 +363,16 @@ def _filled(t: pa.Table, p, ctx, fill) -> tuple[pa.Table, Any]:
     return fill(prepare_table(conform(states, spec), spec), ctx.local, None if ctx.use_file else ctx.net), sizes
 
 
-def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], path: Path | None) -> str:
-    """The CRS: the map's ``<geoReference>``, else the recording's, else ``projection_string``."""
+def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], options, path: Path | None) -> str:
+    """The CRS: the map's ``<geoReference>`` (a ``crs`` option must agree with it), else the
+    ``crs`` option (``--crs``), else the recording's (this library's export), else
+    ``projection_string``; none: :class:`~aveas_format.errors.MissingCrsError`."""
     from aveas_format.crs import parse_crs
+    from aveas_format.converters.common.geometry import missing_crs
+    from aveas_format.mapref.build import check_crs
 
+    if options.crs:
+        return check_crs(options.crs, net.header.geo_reference)
     crs = net.header.geo_reference or rmeta.get("crs")
     if not crs:
         ps = md.get("projection_string")
@@ -379,7 +385,7 @@ def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], path: Path | None) -> s
                               stacklevel=3, file=str(path) if path is not None else None,
                               json_path="$.openlabel.metadata.projection_string")
     if not crs:
-        raise FormatError("neither the map (<geoReference>) nor metadata.projection_string gives "
+        raise missing_crs("neither the map (<geoReference>) nor the file (metadata.projection_string) gives "
                           "a usable CRS", path=path)
     return crs
 
