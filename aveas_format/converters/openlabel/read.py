@@ -306,8 +306,8 @@ def _recording(ol: dict[str, Any], boxes: Boxes, map_bytes: bytes, options, path
         boxes.found = {k: v for k, v in boxes.found.items() if k[0] != "source.openlabel.missing_attribute"}
     report_frame_findings(boxes.found, path)
     p = boxes.decide(ol, options, keep_by_type(path, objects, options.keep_non_road_users))
-    if p.n == 0 and p.uids:
-        raise _no_boxes_error(objects, path)
+    if p.n == 0 and (p.uids or p.no_state):
+        raise _no_boxes_error(objects, boxes.shapes, path)
     use_file = options.road_coordinates == "file" or (options.road_coordinates == "auto" and p.has_road)
     ctx = _Context(local=local, net=net, use_file=use_file, needs_size=needs_size(objects, p.names))
     written = None
@@ -390,13 +390,16 @@ def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], options, path: Path | N
     return crs
 
 
-def _no_boxes_error(objects: dict[str, Any], path: Path | None) -> FormatError:
-    static = sum(1 for o in objects.values() if isinstance(o, dict) and isinstance(o.get("object_data"), dict)
-                 and "cuboid" in o["object_data"])
-    flat = sum(1 for o in objects.values() if isinstance(o, dict) and isinstance(o.get("object_data"), dict)
-               and o["object_data"].get("bbox") and not o["object_data"].get("cuboid"))
+def _no_boxes_error(objects: dict[str, Any], shapes: dict[str, set[str]], path: Path | None) -> FormatError:
+    from aveas_format.converters.openlabel.findings import what_objects_have
+
+    uids = [*objects, *(u for u in shapes if u not in objects)]
+    have = what_objects_have(uids, objects, shapes)
+    static = sum("static cuboid" in v for v in have.values())
+    flat = sum(v != "nothing" and "static cuboid" not in v for v in have.values())
     hint = (f" ({static} object(s) carry a static cuboid in object_data, which has no time: "
             "a trajectory needs frames)" if static else
-            f" ({flat} objects carry 2D boxes (bbox) only: image coordinates, no position on the "
-            "ground)" if flat else "")
+            f" ({flat} objects carry labels without a cuboid only "
+            f"({', '.join(sorted({k for v in have.values() if v != 'nothing' for k in v.split('+')}))}): "
+            "image coordinates or shapes, no box on the ground)" if flat else "")
     return FormatError(f"no frame has a cuboid for any object{hint}", path=path)
