@@ -200,3 +200,26 @@ def test_crs_that_differs_from_the_maps_geo_reference_is_refused(tmp_path):
 
     with pytest.raises(FormatError, match="differs from the map's <geoReference>"):
         convert("openlabel", inputs, map_source=geo, crs=CRS)
+
+
+def test_cli_crs_and_option_and_the_hint_without_them(tmp_path):
+    """The issue's case on the command line: without a CRS the usage error (exit 2) shows the
+    command with --crs; --crs and -O crs= both give the recording its CRS."""
+    import subprocess
+
+    import aveas_format
+
+    inputs, map_path, _ = _openlabel(tmp_path)
+
+    def cli(*args):
+        return subprocess.run([sys.executable, "-m", "aveas_format", "convert", "--from", "openlabel", inputs[0],
+                               "--map", map_path, *args], capture_output=True, text=True, timeout=300)
+
+    res = cli("-o", tmp_path / "none.aveas")
+    assert res.returncode == 2, res.stderr
+    assert "--crs '+proj=tmerc" in res.stderr and "aveas-format convert --from openlabel" in res.stderr
+    assert not (tmp_path / "none.aveas").exists()
+    for name, args in (("a", ["--crs", CRS]), ("b", ["-O", f"crs={CRS}"])):
+        res = cli(*args, "-o", tmp_path / f"{name}.aveas")
+        assert res.returncode == 0, res.stderr
+        assert aveas_format.open(tmp_path / f"{name}.aveas").meta.crs == CRS
