@@ -81,12 +81,7 @@ def _infra_lwir(d):
     m = sibling("test_infra_lwir")
     mot = d / "gt.txt"
     mot.write_text("\n".join(m.mot_lines()) + "\n")
-    xs = np.array([0.0, 0.0, 30.0, 30.0, 60.0, 60.0, 100.0, 100.0, 15.0, 80.0])
-    ys = np.array([0.0, -10.5, 0.0, -10.5, 2.0, -10.5, 0.0, -10.5, -5.0, -3.0])
-    u, v = m.project(xs, ys)
-    lm = d / "landmarks.csv"
-    lm.write_text("name,u,v,x,y\n" + "".join(f"L{i},{a:.6f},{b:.6f},{c},{e}\n"
-                                            for i, (a, b, c, e) in enumerate(zip(u, v, xs, ys))))
+    lm = m.write_landmarks(d / "landmarks.csv")
     return [mot, lm], plain_map(d), {}
 
 
