@@ -27,7 +27,7 @@ then by their last and first component. Unknown names are road users of class ``
 | DOTA v1.0/1.5/2.0 | small-vehicle (car), large-vehicle (truck) | plane, ship, storage-tank, baseball-diamond, tennis-court, basketball-court, ground-track-field, harbor, bridge, helicopter, roundabout, soccer-ball-field, swimming-pool, container-crane, airport, helipad | |
 | Autoware ObjectClassification | CAR, TRUCK, BUS, TRAILER, MOTORCYCLE, BICYCLE, PEDESTRIAN, ANIMAL, UNKNOWN (other) | HAZARD, OVER_DRIVABLE, UNDER_DRIVABLE | |
 | derived_object_msgs Object | PEDESTRIAN, BIKE, CAR, TRUCK, MOTORCYCLE, OTHER_VEHICLE, UNKNOWN* (other) | BARRIER, SIGN | |
-| OSDaR23 / OSDaR26 (rail, OpenLABEL) | person, train, wagons/wagon (railvehicle), road_vehicle (car), bicycle, motorcycle, scooter, wheelchair, pram, animal | static infrastructure: track, transition, switch, catenary_pole, signal_pole, signal, signal_bridge, buffer_stop; drag_shoe, personal_item, flame, smoke | crowd, group_of_bicycles, group_of_animals, ignore_tracks |
+| OSDaR23 / OSDaR26 (rail, OpenLABEL) | person, train, wagons/wagon (railvehicle), road_vehicle (car; its box's ``type`` attribute van, truck, bus, constructionVehicle, trailer: that class), bicycle, motorcycle, scooter, wheelchair, pram, animal | static infrastructure: track, transition, switch, catenary_pole, signal_pole, signal, signal_bridge, buffer_stop; drag_shoe, personal_item, flame, smoke | crowd, group_of_bicycles, group_of_animals, ignore_tracks |
 | nuScenes lidarseg (first part) | | flat.*, static.* (surfaces, buildings, vegetation) | noise |
 
 Static infrastructure (rail tracks, switches, poles, signals, buffer stops; traffic lights and signs
@@ -73,7 +73,8 @@ CLASS_SYNONYMS: dict[str, str] = {
     "coach": "bus", "bendy": "bus", "rigid": "bus", "school_bus": "bus", "articulated_bus": "bus",
     "tram": "railvehicle", "train": "railvehicle", "railed_vehicle": "railvehicle",
     "wagons": "railvehicle", "wagon": "railvehicle", "locomotive": "railvehicle",
-    "rail_vehicle": "railvehicle", "road_vehicle": "car",
+    "rail_vehicle": "railvehicle", "road_vehicle": "car", "constructionvehicle": "truck",
+    "construction_vehicle": "truck",
     "dog": "animal", "deer": "animal",
     "type_pedestrian": "pedestrian", "type_cyclist": "bicycle",
     "unknown": "other", "misc": "other", "type_unknown": "other", "other_vehicle": "other",
@@ -158,6 +159,23 @@ def label_kind(name: object, extra: dict[str, str] | None = None) -> tuple[str, 
     if len(parts) > 1 and parts[0] in ("human", "animal"):  # nuScenes human.pedestrian.*
         return ("pedestrian" if parts[0] == "human" else "animal"), ROAD_USER
     return "other", ROAD_USER
+
+
+#: generic labels whose subtype names the class: a box's text attribute ``type`` (OSDaR's
+#: ``road_vehicle`` of type car, van, truck, bus, constructionVehicle, trailer)
+SUBTYPED: frozenset[str] = frozenset({"road_vehicle", "vehicle"})
+
+
+def refine(name: object, subtype: object = None) -> str:
+    """The class of a road user's label ``name`` (:func:`label_kind`), made specific by its
+    ``subtype`` where the label is generic (:data:`SUBTYPED`) and the subtype names a road user's
+    class other than ``other``."""
+    cls = label_kind(name)[0]
+    if subtype is not None and normalise(name) in SUBTYPED:
+        sub, kind = label_kind(subtype)
+        if kind == ROAD_USER and sub != "other":
+            return sub
+    return cls
 
 
 def is_infrastructure(name: object) -> bool:

@@ -14,7 +14,8 @@ import pytest
 
 import aveas_format
 from aveas_format.converters import convert
-from aveas_format.converters.labels import IGNORE, NOT_ROAD_USER, ROAD_USER, is_infrastructure, label_kind
+from aveas_format.converters.labels import (IGNORE, NOT_ROAD_USER, ROAD_USER, is_infrastructure, label_kind,
+                                            refine)
 from aveas_format.opendrive.builder import straight_highway
 
 
@@ -23,6 +24,7 @@ RATE, NF, T0 = 10.0, 30, 1_680_000_000.0
 #: the movers: uid -> (type, x0, y, vx, (l, w, h)) and the class they must get
 MOVERS = {"t1": ("train", -80.0, 5.25, 10.0, (60.0, 3.0, 4.0), "railvehicle"),
           "rv": ("road_vehicle", -40.0, -1.75, 8.0, (4.5, 1.8, 1.5), "car"),
+          "lorry": ("road_vehicle", -70.0, -5.25, 6.0, (9.0, 2.5, 3.2), "truck"),  # (its boxes: type truck)
           "p1": ("person", 0.0, -5.0, 1.4, (0.5, 0.5, 1.8), "pedestrian")}
 #: static infrastructure with label jitter: uid -> (type, x, y, (l, w, h))
 STATIC = {"cp1": ("catenary_pole", 10.0, 9.0, (0.4, 0.4, 8.0)), "cp2": ("catenary_pole", 60.0, 9.0, (0.4, 0.4, 8.0)),
@@ -36,7 +38,7 @@ def cuboid(x, y, yaw, size):
 
 
 def rail_doc(seed: int = 3) -> dict:
-    """A rail scene in the OSDaR23 vocabulary: three movers, six pieces of static infrastructure
+    """A rail scene in the OSDaR23 vocabulary: four movers (a road vehicle of type truck), six pieces of static infrastructure
     whose labels jitter by 5 cm a frame, a crowd, a track with a poly3d only, a car with 2D boxes
     only and a person with a static poly2d only."""
     rng = np.random.default_rng(seed)
@@ -51,6 +53,10 @@ def rail_doc(seed: int = 3) -> dict:
         t = k / RATE
         objs = {u: {"object_data": {"cuboid": [cuboid(x0 + vx * t, y, 0.0, size)]}}
                 for u, (_, x0, y, vx, size, _) in MOVERS.items()}
+        # OSDaR's layout: the annotation's attributes, the road vehicle's type among them
+        objs["lorry"]["object_data"]["cuboid"][0]["attributes"] = {
+            "text": [{"name": "occlusion", "val": "0-25 %"}, {"name": "type", "val": "truck"}],
+            "boolean": [{"name": "isTruncated", "val": False}]}
         for u, (_, x, y, size) in STATIC.items():
             jx, jy, jyaw = rng.normal(0, 0.05, 3)
             objs[u] = {"object_data": {"cuboid": [cuboid(x + jx, y + jy, 0.2 * jyaw, size)]}}
@@ -90,6 +96,7 @@ def test_rail_scene_imports_the_movers_with_their_classes(rail):
         assert t[sel] == pytest.approx(np.arange(NF) / RATE)
         assert x[sel] == pytest.approx(x0 + vx * t[sel], abs=1e-6)
         assert s.column("y").to_numpy()[sel] == pytest.approx(y, abs=1e-6)
+        assert np.cos(s.column("heading").to_numpy()[sel]) == pytest.approx(1.0)  # (cuboid yaw 0)
     # one note for the objects that are no participant by their type, naming the infrastructure
     skipped = [n for n in notes if "skipped" in n]
     assert len(skipped) == 1, notes
@@ -170,6 +177,17 @@ VOCABULARIES = {
 @pytest.mark.parametrize("name", list(VOCABULARIES))
 def test_dataset_vocabularies(name):
     assert label_kind(name) == VOCABULARIES[name]
+
+
+@pytest.mark.parametrize("name,subtype,cls", [
+    ("road_vehicle", "truck", "truck"), ("road_vehicle", "bus", "bus"), ("road_vehicle", "van", "van"),
+    ("road_vehicle", "constructionVehicle", "truck"), ("road_vehicle", "trailer", "trailer"),
+    ("road_vehicle", "other", "car"), ("road_vehicle", "unknown", "car"), ("road_vehicle", None, "car"),
+    ("train", "locomotive", "railvehicle"), ("person", "worker", "pedestrian"),
+    ("road_vehicle", "catenary_pole", "car"),  # (a subtype that is no road user names no class)
+])
+def test_a_generic_label_takes_the_class_of_its_subtype(name, subtype, cls):
+    assert refine(name, subtype) == cls
 
 
 def test_static_infrastructure_is_named_apart():

@@ -63,6 +63,8 @@ class Boxes:
         self.root_names: dict[str | None, int] = {None: 0}
         self.n = 0
         self.types: dict[str, str] = {}
+        #: per object its boxes' text attribute ``type`` (a generic label's subtype)
+        self.subtypes: dict[str, str] = {}
         #: per object the label kinds without a 3D state it has in a frame (bbox, poly2d...)
         self.shapes: dict[str, set[str]] = {}
         self.found: dict[tuple[str, str], list] = {}
@@ -92,6 +94,8 @@ class Boxes:
         self.frame_len.append(b.frame_len)
         for u, t in b.types.items():
             self.types.setdefault(u, t)
+        for u, t in b.subtypes.items():
+            self.subtypes.setdefault(u, t)
         for u, kinds in b.shapes.items():
             self.shapes.setdefault(u, set()).update(kinds)
         slot = b.cols["slot"]

@@ -106,7 +106,8 @@ class Block:
     (``slot``: the box's object in ``uids``) and ``ext`` (member -> (values, present)),
     ``interior`` ((slot, signals)), ``types`` (object -> type given inside a frame), ``found``
     ((code, attribute, box, count)), ``lenient`` (decoded in the lenient layout), ``shapes``
-    (object -> the :data:`SHAPES` kinds it has where it has no cuboid)."""
+    (object -> the :data:`SHAPES` kinds it has where it has no cuboid), ``subtypes`` (object -> its
+    box's text attribute ``type``)."""
 
     def __init__(self, **kw: Any) -> None:
         self.__dict__.update(kw)
@@ -173,6 +174,7 @@ def decode_block(buf: bytes, offset: int = 0, systems: CoordinateSystems | None 
         return resolved[key]
 
     cols = {"slot": slot, **place(cub["v"], cub["nval"], cub["cs"], resolve, where), "cub_ts": cub["cub_ts"]}
+    subtypes = _subtypes(uids, slot, cubs)
     cols["bad"] = implausible_size(np.column_stack([cols["dl"], cols["dw"], cols["dh"]])) if len(cubs) \
         else np.zeros(0, bool)
     at = _Attributes(ods, lenient)
@@ -188,7 +190,30 @@ def decode_block(buf: bytes, offset: int = 0, systems: CoordinateSystems | None 
     stamps = [_stamp(fr.frame_properties) if "timestamp" in p else None for fr, p in zip(frames.values(), props)]
     return Block(keys=keys, stamps=stamps, props=props_of, uids=uids,
                  frame_len=frame_len, frame_of_slot=frame_of_slot, cols=cols, ext=_extension(cubs),
-                 interior=interior, types=types, found=found, lenient=lenient, shapes=shapes)
+                 interior=interior, types=types, found=found, lenient=lenient, shapes=shapes,
+                 subtypes=subtypes)
+
+
+def _subtypes(uids: list[str], slot: np.ndarray, cubs: list) -> dict[str, str]:
+    """Per object of the block the text attribute ``type`` of its first box that has one there
+    (a generic label's subtype: OSDaR's ``road_vehicle`` of type truck, :func:`~aveas_format.
+    converters.labels.refine`); the attributes decoded only of each object's first box."""
+    first = dict(zip(map(uids.__getitem__, slot[::-1].tolist()), range(len(slot) - 1, -1, -1)))
+    out: dict[str, str] = {}
+    for u, i in first.items():
+        raw = cubs[i].attributes
+        if raw is _NULL or b'"type"' not in bytes(raw):
+            continue
+        try:
+            at = _ANY.decode(raw)
+        except msgspec.DecodeError:
+            continue
+        texts = at.get("text") if isinstance(at, dict) else None
+        for it in texts if isinstance(texts, list) else [texts]:
+            if isinstance(it, dict) and it.get("name") == "type" and isinstance(it.get("val"), str):
+                out[u] = it["val"]
+                break
+    return out
 
 
 def _shapes(uids: list[str], ods: list, rows: list[int]) -> dict[str, set[str]]:

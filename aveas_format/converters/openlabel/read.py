@@ -329,7 +329,8 @@ def _recording(ol: dict[str, Any], boxes: Boxes, map_bytes: bytes, options, path
         states = pa.concat_tables(tables, promote_options="permissive") if tables else None
         meta_kw = {}
     sizes = {p.names[i]: v.tolist() for info in infos for i, v in info.items()}
-    participants, ego_seen = participants_of(p.uids, objects, p.pid_of, p.obj_ext, sizes, ext, boxes.types)
+    participants, ego_seen = participants_of(p.uids, objects, p.pid_of, p.obj_ext, sizes, ext, boxes.types,
+                                             boxes.subtypes)
     check_objects(p.uids, objects, boxes.types, profile, path)
     if states is None or (written is None and p.n == 0):
         states = {c: pa.array([], pa.int64() if c == "participant_id" else pa.float64())
