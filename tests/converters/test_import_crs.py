@@ -115,6 +115,14 @@ def _osi(d):
     return [m.write_osi(d / "run_gt.osi", m.messages(t, objs))], plain_map(d), {}
 
 
+def _ros2_mcap(d):
+    """The ego from NavSatFix (projected through the map frame's CRS: here the one given)."""
+    m = sibling("test_ros2_mcap")
+    path = m.write_mcap(d / "fix.mcap", m.navsatfix_messages(CRS))
+    return [path], plain_map(d, x0=m.OFFSET[0], y0=m.OFFSET[1], hdg=m.YAW0, lanes_left=0, length=1000.0), \
+        m._opts(ego_center_offset=0.0)
+
+
 def _rotated_boxes(d):
     """``crs`` of this converter is its world file's CRS: without a map geoReference it is also
     the recording's."""
@@ -135,17 +143,15 @@ BUILD = {
     "accident": _accident, "driving-simulator": _driving_simulator, "highd": _highd, "ind": _ind,
     "exid": lambda d: _ind(d, exid=True), "infra-lidar": _infra_lidar, "infra-lwir": _infra_lwir,
     "openlabel": _openlabel, "openscenario": _openscenario, "osi": _osi, "rotated-boxes": _rotated_boxes,
-    "sumo-fcd": _sumo_fcd,
+    "sumo-fcd": _sumo_fcd, "ros2-mcap": _ros2_mcap,
 }
 #: importers not walked, each with its reason
 SKIP = {
     "interaction": "its map is a Lanelet2 OSM file in lon/lat: the converted map always has a "
-                   "geoReference, so --crs must equal it (tested with the converter)",
-    "ros2-mcap": "its inputs need the ROS 2 message definitions in ../shared; the lon/lat of its "
-                 "NavSatFix go through the same map_crs (tests/converters/test_ros2_mcap.py)",
+                   "geoReference (no map without one to walk); a --crs must equal it",
 }
-#: importers whose inputs read ../shared (a real calibration)
-REAL = {"infra-lidar"}
+#: importers whose inputs read ../shared
+REAL = {"infra-lidar", "ros2-mcap"}  # (a real calibration; the ROS 2 message definitions)
 
 
 def importers() -> list:
@@ -183,7 +189,8 @@ def test_openlabel_without_any_crs_suggests_the_option(tmp_path):
     with pytest.raises(MissingCrsError) as e:
         convert("openlabel", inputs, map_source=map_path)
     msg = str(e.value)
-    assert "--crs" in msg and "aveas-format convert --from openlabel" in msg 
+    assert "--crs" in msg and "aveas-format convert --from openlabel" in msg
+    assert msg.count("neither the map (<geoReference>) nor the file (metadata.projection_string)") == 1
 
 
 def test_crs_that_differs_from_the_maps_geo_reference_is_refused(tmp_path):
@@ -218,3 +225,20 @@ def test_cli_crs_and_option_and_the_hint_without_them(tmp_path):
         res = cli(*args, "-o", tmp_path / f"{name}.aveas")
         assert res.returncode == 0, res.stderr
         assert aveas_format.open(tmp_path / f"{name}.aveas").meta.crs == CRS
+
+
+@pytest.mark.realdata
+def test_navsatfix_goes_through_the_crs_option(tmp_path):
+    """ROS 2 NavSatFix on a map without geoReference: the lon/lat projected through --crs land on
+    the ego's true map-frame track; without it the error suggests --crs."""
+    m = sibling("test_ros2_mcap")
+    inputs, map_path, opts = _ros2_mcap(tmp_path)
+    rec = convert("ros2-mcap", inputs, map_source=map_path, options=opts, crs=CRS)
+    s = rec.states
+    e = s.column("participant_id").to_numpy() == 0
+    t = s.column("time").to_numpy()[e]
+    tx, ty = m.to_local(m.ego_x(t), np.full(e.sum(), m.EGO_Y))
+    assert np.allclose(s.column("x").to_numpy()[e], tx, atol=1e-6)
+    assert np.allclose(s.column("y").to_numpy()[e], ty, atol=1e-6)
+    with pytest.raises(MissingCrsError, match="NavSatFix.*--crs"):
+        convert("ros2-mcap", inputs, map_source=map_path, options=opts)

@@ -136,5 +136,7 @@ def missing_crs(what: str, path=None):
     with ``--crs``)."""
     from aveas_format.errors import MissingCrsError
 
-    return MissingCrsError(f"{what}: the map has no <geoReference> and no --crs is given (API: crs=); "
-                           "pass the recording's CRS with --crs", path=path)
+    err = MissingCrsError(f"{what}: the map has no <geoReference> and no --crs is given (API: crs=); "
+                          "pass the recording's CRS with --crs", path=path)
+    err.what = what  # (the CLI's message with the command keeps it)
+    return err
