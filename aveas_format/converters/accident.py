@@ -24,8 +24,8 @@ Map: every road becomes an OpenDRIVE road whose reference line follows the ``ref
 fallback until the map builder has a polyline fitter); each border line's mean signed offset from
 the reference line gives the lane widths (left lanes positive, right lanes negative ids), edges
 solid and markings broken road marks; a road without border lines gets one ``lane_width`` lane per
-side. The map's geoReference is a transverse Mercator at ``site_lonlat`` (PCM cases are
-anonymised: the default 0, 0 marks an unknown site).
+side. The map's geoReference is the shared ``crs`` option (``--crs``) where given, else a transverse
+Mercator at ``site_lonlat`` (PCM cases are anonymised: the default 0, 0 marks an unknown site).
 
 Collision: the ``case.csv`` step and participants become an ``accident`` event (origin
 ``annotated``); without them, the first time two footprints overlap (origin ``derived``).
@@ -77,7 +77,7 @@ class AccidentOptions(ImportOptions):
     dimension_tol_m: float = 0.05
     """95 % tolerance of lengths and widths (m)."""
     site_lonlat: tuple[float, float] = (0.0, 0.0)
-    """WGS 84 lon, lat of the site frame's origin (anonymised cases: 0, 0)."""
+    """WGS 84 lon, lat of the site frame's origin (anonymised cases: 0, 0); ``crs`` wins where given."""
     lane_width: float = 3.5
     """Lane width of roads without border lines (m)."""
     map_step_m: float = 2.0
@@ -383,8 +383,8 @@ def _dynamics(dp: Path, parts: dict[str, Any], rate: float, stds: dict[str, floa
 
 
 def _road_map(rp: Path, o: AccidentOptions) -> str:
-    """The OpenDRIVE text of the case's road lines (roads.csv), its geoReference a transverse
-    Mercator at ``site_lonlat``."""
+    """The OpenDRIVE text of the case's road lines (roads.csv), its geoReference the ``crs``
+    option (``--crs``), else a transverse Mercator at ``site_lonlat``."""
     rt = read_table(rp, required=("line_id", "kind", "seq", "x", "y"), numeric=("seq", "x", "y"))
     _check_finite(rt, ("seq", "x", "y"), rp)
     rid = (rt.column("road_id").cast(pa.string()).to_pylist() if "road_id" in rt.column_names
@@ -402,8 +402,8 @@ def _road_map(rp: Path, o: AccidentOptions) -> str:
         i0 = rows[0]
         roads.setdefault(rid[i0], {})[lid[i0]] = (kinds[i0], np.c_[rx[rows], ry[rows]])
     lon, lat = o.site_lonlat
-    geo = (f"+proj=tmerc +lat_0={lat} +lon_0={lon} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m "
-           "+no_defs")
+    geo = o.crs or (f"+proj=tmerc +lat_0={lat} +lon_0={lon} +k=1 +x_0=0 +y_0=0 +ellps=WGS84 +units=m "
+                    "+no_defs")
     return build_map_from_lines(roads, geo, o.lane_width, o.map_step_m, rp)
 
 

@@ -27,6 +27,13 @@ then by their last and first component. Unknown names are road users of class ``
 | DOTA v1.0/1.5/2.0 | small-vehicle (car), large-vehicle (truck) | plane, ship, storage-tank, baseball-diamond, tennis-court, basketball-court, ground-track-field, harbor, bridge, helicopter, roundabout, soccer-ball-field, swimming-pool, container-crane, airport, helipad | |
 | Autoware ObjectClassification | CAR, TRUCK, BUS, TRAILER, MOTORCYCLE, BICYCLE, PEDESTRIAN, ANIMAL, UNKNOWN (other) | HAZARD, OVER_DRIVABLE, UNDER_DRIVABLE | |
 | derived_object_msgs Object | PEDESTRIAN, BIKE, CAR, TRUCK, MOTORCYCLE, OTHER_VEHICLE, UNKNOWN* (other) | BARRIER, SIGN | |
+| OSDaR23 / OSDaR26 (rail, OpenLABEL) | person, train, wagons/wagon (railvehicle), road_vehicle (car; its box's ``type`` attribute van, truck, bus, constructionVehicle, trailer: that class), bicycle, motorcycle, scooter, wheelchair, pram, animal | static infrastructure: track, transition, switch, catenary_pole, signal_pole, signal, signal_bridge, buffer_stop; drag_shoe, personal_item, flame, smoke | crowd, group_of_bicycles, group_of_animals, ignore_tracks |
+| nuScenes lidarseg (first part) | | flat.*, static.* (surfaces, buildings, vegetation) | noise |
+
+Static infrastructure (rail tracks, switches, poles, signals, buffer stops; traffic lights and signs
+of road datasets) is no participant: the format keeps the map for it. Its labels jitter from frame to
+frame, which a participant's derivations would read as motion (hundreds of m/s^2). A note names it
+apart from the other labels that are no road user.
 
 A participant's label decides; a sanity rule on sizes (:func:`implausible_size`) catches sentinel
 values (KITTI's -1000) whatever the label says.
@@ -65,6 +72,9 @@ CLASS_SYNONYMS: dict[str, str] = {
     "vehicular_trailer": "trailer",
     "coach": "bus", "bendy": "bus", "rigid": "bus", "school_bus": "bus", "articulated_bus": "bus",
     "tram": "railvehicle", "train": "railvehicle", "railed_vehicle": "railvehicle",
+    "wagons": "railvehicle", "wagon": "railvehicle", "locomotive": "railvehicle",
+    "rail_vehicle": "railvehicle", "road_vehicle": "car", "constructionvehicle": "truck",
+    "construction_vehicle": "truck",
     "dog": "animal", "deer": "animal",
     "type_pedestrian": "pedestrian", "type_cyclist": "bicycle",
     "unknown": "other", "misc": "other", "type_unknown": "other", "other_vehicle": "other",
@@ -85,6 +95,9 @@ NOT_ROAD_USERS: dict[str, str] = {
     "mobile_pedestrian_sign": "other", "message_board_trailer": "trailer",
     "traffic_light_trailer": "trailer", "hazard": "other", "over_drivable": "other",
     "under_drivable": "other",
+    # rail (OSDaR23/26) and other objects on a scene that take no part in traffic
+    "drag_shoe": "other", "personal_item": "other", "flame": "other", "smoke": "other",
+    "movable_object": "other", "static_object": "other", "static": "other", "flat": "other",
     # DOTA (aerial images): everything but small/large vehicles
     "plane": "other", "ship": "other", "storage_tank": "other", "baseball_diamond": "other",
     "tennis_court": "other", "basketball_court": "other", "ground_track_field": "other",
@@ -93,10 +106,21 @@ NOT_ROAD_USERS: dict[str, str] = {
     "airport": "other", "helipad": "other",
 }
 
+#: static infrastructure: not road users either (the map's, never a participant); named apart in notes
+STATIC_INFRASTRUCTURE: dict[str, str] = {
+    "track": "other", "rail": "other", "transition": "other", "switch": "other", "catenary_pole": "other",
+    "signal_pole": "other", "signal": "other", "signal_bridge": "other", "buffer_stop": "other",
+    "railway_signal": "other", "level_crossing": "other", "platform": "other",
+    "traffic_light": "other", "traffic_sign": "other", "sign": "other", "type_sign": "other",
+    "stop_sign": "other", "pole": "other",
+}
+NOT_ROAD_USERS.update(STATIC_INFRASTRUCTURE)
+
 #: annotation artefacts: never imported
 IGNORED: frozenset[str] = frozenset({
     "dontcare", "dont_care", "don't_care", "ignore", "ignored", "ignore_region", "noise", "void",
-    "unlabeled", "unlabelled", "crowd",
+    "unlabeled", "unlabelled", "crowd", "group_of_bicycles", "group_of_animals", "group_of_people",
+    "ignore_tracks",
 })
 
 #: MOTChallenge ground-truth class ids (MOT16/17; 13 = crowd in MOT20)
@@ -135,6 +159,31 @@ def label_kind(name: object, extra: dict[str, str] | None = None) -> tuple[str, 
     if len(parts) > 1 and parts[0] in ("human", "animal"):  # nuScenes human.pedestrian.*
         return ("pedestrian" if parts[0] == "human" else "animal"), ROAD_USER
     return "other", ROAD_USER
+
+
+#: generic labels whose subtype names the class: a box's text attribute ``type`` (OSDaR's
+#: ``road_vehicle`` of type car, van, truck, bus, constructionVehicle, trailer)
+SUBTYPED: frozenset[str] = frozenset({"road_vehicle", "vehicle"})
+
+
+def refine(name: object, subtype: object = None) -> str:
+    """The class of a road user's label ``name`` (:func:`label_kind`), made specific by its
+    ``subtype`` where the label is generic (:data:`SUBTYPED`) and the subtype names a road user's
+    class other than ``other``."""
+    cls = label_kind(name)[0]
+    if subtype is not None and normalise(name) in SUBTYPED:
+        sub, kind = label_kind(subtype)
+        if kind == ROAD_USER and sub != "other":
+            return sub
+    return cls
+
+
+def is_infrastructure(name: object) -> bool:
+    """Whether a label names static infrastructure (:data:`STATIC_INFRASTRUCTURE`; hierarchical
+    names by their last or first part)."""
+    key = normalise(name)
+    parts = [p for p in key.replace("/", ".").split(".") if p]
+    return any(k in STATIC_INFRASTRUCTURE for k in (key, *parts[-1:], *parts[:1]))
 
 
 def class_of(name: str, extra: dict[str, str] | None = None) -> str:
@@ -181,9 +230,10 @@ class LabelFilter:
         if not self.skipped:
             return None
         parts = []
-        for kind, why in ((NOT_ROAD_USER, "no road user"),
-                          (IGNORE, "ignore-type label: an annotation artefact, no object")):
-            got = {n: c for (n, k), c in self.skipped.items() if k == kind}
+        for kind, infra, why in ((NOT_ROAD_USER, True, "static infrastructure: the map's, no participant"),
+                                 (NOT_ROAD_USER, False, "no road user"),
+                                 (IGNORE, False, "ignore-type label: an annotation artefact, no object")):
+            got = {n: c for (n, k), c in self.skipped.items() if k == kind and infra == is_infrastructure(n)}
             if got:
                 parts.append(", ".join(f"{c} {n}" for n, c in sorted(got.items())) + f" ({why})")
         total = sum(self.skipped.values())

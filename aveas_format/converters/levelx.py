@@ -122,7 +122,8 @@ class LevelXOptions(ImportOptions):
 
 class HighDOptions(LevelXOptions):
     geo_reference: str = HIGHD_GEO_REFERENCE
-    """PROJ string of the image-aligned frame (x right, y up) for the built map; nominal default."""
+    """PROJ string of the image-aligned frame (x right, y up) for the built map; nominal default
+    (the shared ``crs`` option, ``--crs``, wins where given)."""
     heading_min_speed: float = 1.0
     """Below this speed (m/s) the heading is the driving direction instead of the velocity's."""
     road_margin: float = 10.0
@@ -395,7 +396,7 @@ def convert_highd(inputs: list[Path], *, map_source=None, options: HighDOptions)
         x1 = math.ceil(float(np.max(x + bw / 2.0)) + options.road_margin)
         limit = rec.get("speedLimit")
         limit = float(limit) if limit is not None and float(limit) > 0 else None
-        map_bytes = highd_map(upper, lower, x0, x1, geo_reference=options.geo_reference,
+        map_bytes = highd_map(upper, lower, x0, x1, geo_reference=options.crs or options.geo_reference,
                               shoulder_width=options.shoulder_width, speed_limit=limit,
                               name=f"highD location {rec.get('locationId', '')}".strip()).encode()
         top, bottom = -float(upper[0]) + options.shoulder_width, -float(lower[-1]) - options.shoulder_width

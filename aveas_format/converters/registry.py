@@ -359,7 +359,8 @@ def _run(name: str, inputs: list[str | Path], map_source: Any, options: dict[str
                + "".join(f" -O {_quote(f'{k}={v}')}" for k in ASKED
                          if (v := (options if isinstance(options, dict) else {}).get(k)) not in (None, ""))
                + f" --crs '{EXAMPLE_CRS}' -o OUT.aveas")
-        raise MissingCrsError("the map has no <geoReference>, so the recording's CRS must be given "
+        raise MissingCrsError((f"{e.what}; " if getattr(e, "what", None) else "")
+                              + "the map has no <geoReference>, so the recording's CRS must be given "
                               f"(API: crs=): {cmd} (a transverse Mercator at the site: put its "
                               "latitude and longitude in +lat_0/+lon_0)", path=e.path) from None
     except AveasError as e:

@@ -328,9 +328,12 @@ def _to_map_frame(boxes: Boxes, net, geo: bool, options: SumoFcdOptions) -> None
     if geo:
         from aveas_format.crs import LocalFrame
 
-        if not net.header.geo_reference:
-            raise FormatError("geo FCD needs a map with a <geoReference> to project lon/lat")
-        x, y = LocalFrame(net.header.geo_reference, net.header.offset).from_wgs84(x, y)
+        from aveas_format.converters.common.geometry import map_crs, missing_crs
+
+        crs = map_crs(net.header, options)
+        if crs is None:
+            raise missing_crs("geo FCD (lon/lat) needs the map frame's CRS to project")
+        x, y = LocalFrame(crs, net.header.offset).from_wgs84(x, y)
     else:
         dx, dy = _net_offset(options)
         x, y = x - dx, y - dy

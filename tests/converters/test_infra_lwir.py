@@ -39,15 +39,19 @@ def road_map(tmp_path_factory):
     return p
 
 
-@pytest.fixture(scope="module")
-def landmarks(tmp_path_factory):
+def write_landmarks(p):
+    """Ten ground landmarks of the camera (:func:`project`) as the converter reads them."""
     xs = np.array([0.0, 0.0, 30.0, 30.0, 60.0, 60.0, 100.0, 100.0, 15.0, 80.0])
     ys = np.array([0.0, -10.5, 0.0, -10.5, 2.0, -10.5, 0.0, -10.5, -5.0, -3.0])
     u, v = project(xs, ys)
-    p = tmp_path_factory.mktemp("lm") / "landmarks.csv"
     p.write_text("name,u,v,x,y\n" + "".join(f"L{i},{a:.6f},{b:.6f},{c},{d}\n"
                                            for i, (a, b, c, d) in enumerate(zip(u, v, xs, ys))))
     return p
+
+
+@pytest.fixture(scope="module")
+def landmarks(tmp_path_factory):
+    return write_landmarks(tmp_path_factory.mktemp("lm") / "landmarks.csv")
 
 
 def mot_lines(nine=False):

@@ -277,13 +277,12 @@ def test_relative_velocity(scene_mcap, road_map):
     assert np.allclose(s.column("vx").to_numpy()[b], 41 * math.cos(YAW0))
 
 
-@pytest.mark.realdata
-def test_navsatfix_ego_and_tf_static(road_map, tmp_path):
-    """No odometry: the ego from NavSatFix (heading from motion); vision_msgs detections in a lidar
-    frame 1 m ahead of base_link (/tf_static); velocity from positions."""
+def navsatfix_messages(geo: str = GEO) -> list:
+    """The ego as NavSatFix lon/lat (through ``geo``), a pedestrian 21 m ahead and 5 m left of it
+    as vision_msgs detections in a lidar frame 1 m ahead of base_link (/tf_static)."""
     from aveas_format.crs import LocalFrame
 
-    frame = LocalFrame(GEO)
+    frame = LocalFrame(geo)
     msgs = [("/tf_static", "tf2_msgs/msg/TFMessage", {"transforms": [{
         "header": header(T0, "base_link"), "child_frame_id": "lidar_top",
         "transform": {"translation": {"x": 1.0, "y": 0.0, "z": 1.8}, "rotation": quat(0.0)}}]}, T0)]
@@ -305,7 +304,14 @@ def test_navsatfix_ego_and_tf_static(road_map, tmp_path):
                              "pose": {"pose": pose(0, 0, 0, 0), "covariance": [0.0] * 36}}],
                 "bbox": {"center": pose(20.0, 5.0, 0.0, 0.0), "size": {"x": 0.6, "y": 0.6, "z": 1.8}},
                 "id": "ped1"}]}, t_ns))
-    path = write_mcap(tmp_path / "fix.mcap", msgs)
+    return msgs
+
+
+@pytest.mark.realdata
+def test_navsatfix_ego_and_tf_static(road_map, tmp_path):
+    """No odometry: the ego from NavSatFix (heading from motion); vision_msgs detections in a lidar
+    frame 1 m ahead of base_link (/tf_static); velocity from positions."""
+    path = write_mcap(tmp_path / "fix.mcap", navsatfix_messages())
     rec = convert("ros2-mcap", [path], map_source=road_map, options=_opts(ego_center_offset=0.0))
     p, s = rec.participants, rec.states
     assert p.column("class").to_pylist() == ["car", "pedestrian"]

@@ -27,7 +27,7 @@ FILES = real_files("openlabel/*.json", "real/vcd/*.json") + third_party("*.json"
 
 #: files that are no trajectory: the error they deserve
 NOT_TRAJECTORIES = {
-    "asam_spec__openlabel100_test_bbox_simple.json": r"objects carry 2D boxes \(bbox\) only",
+    "asam_spec__openlabel100_test_bbox_simple.json": r"7 objects carry labels without a cuboid only \(bbox\)",
     "vcd__openlabel100_test_cuboids.json": r"2 object\(s\) carry a static cuboid",
 }
 #: defects of the files themselves: the error findings they get
@@ -151,3 +151,21 @@ def test_kitti_0003_label_glitch_is_the_one_error(path, tmp_path):
     assert f.code == "kinematics.acceleration"
     assert f.location.participant_id == car0.column("participant_id")[0].as_py()
     assert 5.0 <= f.location.time <= 6.1
+
+
+@pytest.mark.parametrize("path", FILES)
+def test_every_participant_has_states_and_a_road_user_type(path, tmp_path):
+    """No participant from 2D labels or a static cuboid alone (it would have no state and a
+    placeholder size), none of a type the label table says is no road user (issue 42)."""
+    from aveas_format.converters.labels import ROAD_USER, label_kind
+
+    if path.name in NOT_TRAJECTORIES:
+        return  # (their error: test_converts_validates_and_round_trips)
+    rec, _ = _convert(path, tmp_path)
+    pids = set(rec.participants.column("participant_id").to_pylist())
+    assert pids <= set(rec.states.column("participant_id").unique().to_pylist()), path.name
+    doc = json.loads(path.read_text())["openlabel"]
+    by_name = {str((o or {}).get("name") or u): (o or {}).get("type") for u, o in (doc.get("objects") or {}).items()}
+    for sid in rec.participants.column("source_id").to_pylist():
+        if by_name.get(sid):
+            assert label_kind(by_name[sid])[1] == ROAD_USER, (path.name, sid, by_name[sid])

@@ -152,8 +152,8 @@ def hand_over(converter: str, inputs: Sequence[Path], options: Any, *, map_bytes
     if title:
         md["title"] = title
     md.update({k: v for k, v in meta.items() if v is not None})
-    if getattr(o, "crs", None) and getattr(o, "crs_is_recording_crs", True) and not md.get("crs"):
-        md["crs"] = o.crs
+    if getattr(o, "crs", None) and getattr(o, "crs_is_recording_crs", True):
+        md["crs"] = o.crs  # (the user's wins over one the source implies: both name the map's frame)
         md["check_map_crs"] = True  # the user's CRS must agree with the map's geoReference
     return build_recording(map_source=map_bytes, participants=participants, states=states,
                            partner=partner, source=source_block(converter, inputs, options, version,

@@ -1,6 +1,7 @@
 """Geometry of source frames: reference points moved along the heading, angle conventions,
 rotations (quaternions, 2D), covariances turned and reduced to std and correlation, oriented box
-corners, and points of a projected source CRS in the map's local frame."""
+corners, points of a projected source CRS in the map's local frame, and the CRS of the map's frame
+(:func:`map_crs`: its geoReference, else the import's ``crs`` option)."""
 
 from __future__ import annotations
 
@@ -116,3 +117,26 @@ def projected_to_local(x: np.ndarray, y: np.ndarray, source_crs: str, map_crs: s
     rot = np.arctan2(qy - py, qx - px) - hdg
     lx, ly = frame.from_projected(px, py)
     return lx, ly, rot
+
+
+def map_crs(header, options) -> str | None:
+    """The CRS of the map's frame for an import: the map's ``<geoReference>``, else the import's
+    shared ``crs`` option (``--crs``; where it means the recording's CRS), else None. A converter
+    that needs it to project lon/lat raises :func:`missing_crs` on None."""
+    if header.geo_reference:
+        return header.geo_reference
+    if getattr(options, "crs_is_recording_crs", True) and getattr(options, "crs", None):
+        return options.crs
+    return None
+
+
+def missing_crs(what: str, path=None):
+    """The error of an import that needs the map frame's CRS where neither the map nor the source
+    nor ``--crs`` gives it (:class:`~aveas_format.errors.MissingCrsError`: the CLI adds the command
+    with ``--crs``)."""
+    from aveas_format.errors import MissingCrsError
+
+    err = MissingCrsError(f"{what}: the map has no <geoReference> and no --crs is given (API: crs=); "
+                          "pass the recording's CRS with --crs", path=path)
+    err.what = what  # (the CLI's message with the command keeps it)
+    return err

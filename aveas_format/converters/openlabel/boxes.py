@@ -7,7 +7,7 @@ bounded memory) and a few numbers of it stay here (its object, frame, root coord
 flags). :meth:`Boxes.decide` makes, once every frame is read, what the import decides over all
 boxes (:class:`Plan`): the frames' order (a key given twice: the last frame, as ``json.loads``
 reads it) and times, the objects imported and their participant ids, the boxes dropped (objects
-that are no road users, sentinel sizes, states that repeat a participant and time: the first in
+that are no road users, objects without any cuboid: no 3D state, sentinel sizes, states that repeat a participant and time: the first in
 frame order is kept), whether velocities, accelerations and road coordinates come from the file,
 the world CRS. :func:`states_of` turns a bucket of whole participants' boxes into states columns.
 """
@@ -26,7 +26,7 @@ import pyarrow as pa
 
 from aveas_format.converters.common.timestamps import resolve_timestamps, timestamp_value
 from aveas_format.converters.labels import LabelFilter, implausible_size
-from aveas_format.converters.openlabel.findings import jpath, report_bad_sizes, report_repeats
+from aveas_format.converters.openlabel.findings import jpath, report_bad_sizes, report_no_state, report_repeats
 from aveas_format.converters.openlabel.geometry import in_intervals, place, static_cuboids, utm_crs
 from aveas_format.converters.openlabel.profile import (EXT, FRAME_ATTRIBUTES, LIGHTS, VELOCITY_ATTRIBUTES,
                                                        attributes_of, first_value, to_utc, to_world, vehicle_std)
@@ -63,6 +63,10 @@ class Boxes:
         self.root_names: dict[str | None, int] = {None: 0}
         self.n = 0
         self.types: dict[str, str] = {}
+        #: per object its boxes' text attribute ``type`` (a generic label's subtype)
+        self.subtypes: dict[str, str] = {}
+        #: per object the label kinds without a 3D state it has in a frame (bbox, poly2d...)
+        self.shapes: dict[str, set[str]] = {}
         self.found: dict[tuple[str, str], list] = {}
         self.interior: list[tuple[int, str, dict]] = []
         self.nonsimple = False
@@ -90,6 +94,10 @@ class Boxes:
         self.frame_len.append(b.frame_len)
         for u, t in b.types.items():
             self.types.setdefault(u, t)
+        for u, t in b.subtypes.items():
+            self.subtypes.setdefault(u, t)
+        for u, kinds in b.shapes.items():
+            self.shapes.setdefault(u, set()).update(kinds)
         slot = b.cols["slot"]
         occ = (j0 + b.frame_of_slot[slot]).astype(np.int32)
         for code, what, i, count in b.found:
@@ -203,12 +211,15 @@ class Boxes:
             left[uidx[ok]] = True
             had = np.zeros(len(names), bool)
             had[uidx[typed]] = True
-            keep_idx &= left | ~had
+            # an object without any box has no 3D state (2D labels only...): not a participant
+            p.no_state = [u for u in uids if keep.get(u, True) and (u not in self.uid_index
+                                                                    or not had[self.uid_index[u]])]
+            keep_idx &= left
             kept = ok & keep_idx[uidx]
-            uids = [u for u in uids if keep.get(u, True) and (u not in self.uid_index
-                                                                or keep_idx[self.uid_index[u]])]
+            uids = [u for u in uids if keep.get(u, True) and u in self.uid_index and keep_idx[self.uid_index[u]]]
         else:
             kept = frame_kept.copy()
+            p.no_state = []
         p.uids, p.keep_idx = uids, keep_idx
         p.obj_ext, p.pid_of = participant_ids(objects, uids)
         p.pid_of_idx = np.asarray([p.pid_of.get(u, -1) for u in names], np.int64)
@@ -238,6 +249,8 @@ class Boxes:
             kept[idx[rep]] = False
         p.final = kept
         p.n = int(kept.sum())
+        if p.n:  # (none: the import's error says what the objects have)
+            report_no_state(p.no_state, objects, self.shapes, self.path)
         p.has_acc = bool((flags[kept] & _HACC > 0).all())
         roots = {r for r, c in self.root_names.items() if r and (root[kept] == c).any()}
         p.wcrs = options.world_crs

@@ -54,13 +54,18 @@ _NAMED = [msgspec.defstruct(f"Named{i}", [("val", _RAW, _NULL)] if read else [],
 _NAME_OF = {t: t.__struct_config__.tag for t in _NAMED}
 
 _UNREAD = set(UNREAD_ATTRIBUTES)
+#: OpenLABEL object_data kinds of labels without a 3D state (no ``cuboid``): what an object that has
+#: only these carries is said when it is left out (``Block.shapes``)
+SHAPES = ("bbox", "rbbox", "poly2d", "point2d", "binary", "image", "mat", "point3d", "poly3d", "mesh",
+          "area_reference", "line_reference")
 
 
 def _layout(item: Any) -> msgspec.json.Decoder:
     """The decoder of a block of frames (``item``: the attribute items' type)."""
     items = list[item] | item | None
     od = msgspec.defstruct("ObjectData", [("cuboid", list[_Cuboid] | _Cuboid | None, None),
-                                          *((kind, items, None) for kind in _KINDS), ("type", Any, None)], gc=False)
+                                          *((kind, items, None) for kind in _KINDS), ("type", Any, None),
+                                          *((kind, _RAW, _NULL) for kind in SHAPES)], gc=False)
     oif = msgspec.defstruct("ObjectInFrame", [("object_data", od | None, None)], gc=False)
     frame = msgspec.defstruct("Frame", [("objects", dict[str, oif] | None, None),
                                         ("frame_properties", _RAW, _NULL)], gc=False)
@@ -90,7 +95,8 @@ _VECTORS = msgspec.json.Decoder(list[list[float | None] | None])
 _NUMBERS = msgspec.json.Decoder(list[float | None])
 _OBJECT_DATA, _CUBOID, _TYPE, _NAME, _VAL, _EXT = (attrgetter(a) for a in
                                                    ("object_data", "cuboid", "type", "name", "val", "ext"))
-_EMPTY = SimpleNamespace(cuboid=None, boolean=None, num=None, text=None, vec=None, type=None)
+_EMPTY = SimpleNamespace(cuboid=None, boolean=None, num=None, text=None, vec=None, type=None,
+                         **dict.fromkeys(SHAPES, _NULL))
 
 
 class Block:
@@ -99,7 +105,9 @@ class Block:
     and ``frame_len`` (the objects of each frame, flat), ``frame_of_slot``, per box ``cols``
     (``slot``: the box's object in ``uids``) and ``ext`` (member -> (values, present)),
     ``interior`` ((slot, signals)), ``types`` (object -> type given inside a frame), ``found``
-    ((code, attribute, box, count)), ``lenient`` (decoded in the lenient layout)."""
+    ((code, attribute, box, count)), ``lenient`` (decoded in the lenient layout), ``shapes``
+    (object -> the :data:`SHAPES` kinds it has where it has no cuboid), ``subtypes`` (object -> its
+    box's text attribute ``type``)."""
 
     def __init__(self, **kw: Any) -> None:
         self.__dict__.update(kw)
@@ -140,6 +148,7 @@ def decode_block(buf: bytes, offset: int = 0, systems: CoordinateSystems | None 
     cubs = _bounding_boxes(list(map(_CUBOID, ods)))
     has = np.fromiter(map(is_not, cubs, repeat(None)), bool, len(cubs))
     slot = np.flatnonzero(has).astype(np.int32)
+    shapes = _shapes(uids, ods, np.flatnonzero(~has).tolist()) if not has.all() else {}
     if not has.all():
         ods, cubs = [ods[i] for i in slot.tolist()], [cubs[i] for i in slot.tolist()]
     frame_of_slot = np.repeat(np.arange(len(keys), dtype=np.int32), frame_len)
@@ -165,6 +174,7 @@ def decode_block(buf: bytes, offset: int = 0, systems: CoordinateSystems | None 
         return resolved[key]
 
     cols = {"slot": slot, **place(cub["v"], cub["nval"], cub["cs"], resolve, where), "cub_ts": cub["cub_ts"]}
+    subtypes = _subtypes(uids, slot, cubs)
     cols["bad"] = implausible_size(np.column_stack([cols["dl"], cols["dw"], cols["dh"]])) if len(cubs) \
         else np.zeros(0, bool)
     at = _Attributes(ods, lenient)
@@ -180,7 +190,41 @@ def decode_block(buf: bytes, offset: int = 0, systems: CoordinateSystems | None 
     stamps = [_stamp(fr.frame_properties) if "timestamp" in p else None for fr, p in zip(frames.values(), props)]
     return Block(keys=keys, stamps=stamps, props=props_of, uids=uids,
                  frame_len=frame_len, frame_of_slot=frame_of_slot, cols=cols, ext=_extension(cubs),
-                 interior=interior, types=types, found=found, lenient=lenient)
+                 interior=interior, types=types, found=found, lenient=lenient, shapes=shapes,
+                 subtypes=subtypes)
+
+
+def _subtypes(uids: list[str], slot: np.ndarray, cubs: list) -> dict[str, str]:
+    """Per object of the block the text attribute ``type`` of its first box that has one there
+    (a generic label's subtype: OSDaR's ``road_vehicle`` of type truck, :func:`~aveas_format.
+    converters.labels.refine`); the attributes decoded only of each object's first box."""
+    first = dict(zip(map(uids.__getitem__, slot[::-1].tolist()), range(len(slot) - 1, -1, -1)))
+    out: dict[str, str] = {}
+    for u, i in first.items():
+        raw = cubs[i].attributes
+        if raw is _NULL or b'"type"' not in bytes(raw):
+            continue
+        try:
+            at = _ANY.decode(raw)
+        except msgspec.DecodeError:
+            continue
+        texts = at.get("text") if isinstance(at, dict) else None
+        for it in texts if isinstance(texts, list) else [texts]:
+            if isinstance(it, dict) and it.get("name") == "type" and isinstance(it.get("val"), str):
+                out[u] = it["val"]
+                break
+    return out
+
+
+def _shapes(uids: list[str], ods: list, rows: list[int]) -> dict[str, set[str]]:
+    """Per object of the boxes ``rows`` (without a cuboid) the kinds of :data:`SHAPES` it carries
+    there (only objects without a box are reported: the kinds are what their report says)."""
+    out: dict[str, set[str]] = {}
+    for i in rows:
+        od = ods[i]
+        kinds = {k for k in SHAPES if (v := getattr(od, k)) is not _NULL and bytes(v) != b"null"}
+        out.setdefault(uids[i], set()).update(kinds)
+    return out
 
 
 def _bounding_boxes(cubs: list) -> list:
@@ -226,7 +270,7 @@ def _tidied(frames: Any) -> dict:
                 continue
             od = {c: (v if isinstance(v, dict) or c not in ("cuboid", *_KINDS) else
                       [x for x in v if isinstance(x, dict)] if isinstance(v, list) else None)
-                  for c, v in od.items() if c in ("cuboid", "type", *_KINDS)}
+                  for c, v in od.items() if c in ("cuboid", "type", *_KINDS, *SHAPES)}
             tidy[u] = {"object_data": od}
         out[k] = {"objects": tidy, "frame_properties": fr.get("frame_properties")}
     return out

@@ -120,3 +120,39 @@ def report_bad_sizes(count: int, who: set[str], frame: Any, uid: str, path: Path
                   + (" ..." if len(who_) > 5 else ""), count=count, stacklevel=4,
                   file=str(path) if path is not None else None, frame=frame, uid=uid,
                   json_path=jpath("frames", frame, "objects", uid, "object_data", "cuboid"))
+
+
+def what_objects_have(uids: list[str], objects: dict[str, Any], shapes: dict[str, set[str]]) -> dict[str, str]:
+    """Per object (``uids``) what labels it carries without a 3D state: the kinds of
+    ``object_data`` (``bbox``, ``poly2d``, ... in its frames, ``shapes``; in ``objects``, a static
+    ``cuboid`` too), ``nothing`` where it has none."""
+    from aveas_format.converters.openlabel.decode import SHAPES
+
+    out = {}
+    for u in uids:
+        od = (objects.get(u) or {}).get("object_data") if isinstance(objects.get(u), dict) else None
+        static = {k for k in (*SHAPES, "cuboid") if isinstance(od, dict) and od.get(k)}
+        kinds = sorted(shapes.get(u, set()) | {k for k in static if k != "cuboid"})
+        if "cuboid" in static:
+            kinds.append("a static cuboid without time")
+        out[u] = "+".join(kinds) if kinds else "nothing"
+    return out
+
+
+def report_no_state(uids: list[str], objects: dict[str, Any], shapes: dict[str, set[str]],
+                    path: Path | None) -> None:
+    """One finding for the objects left out because no frame gives them a 3D state (a cuboid):
+    2D image labels only (``bbox``, ``poly2d``...), a static cuboid without time, or nothing."""
+    if not uids:
+        return
+    have = what_objects_have(uids, objects, shapes)
+    by: dict[str, int] = {}
+    for v in have.values():
+        by[v] = by.get(v, 0) + 1
+    kinds = ", ".join(f"{c} with {k}" for k, c in sorted(by.items(), key=lambda kv: -kv[1]))
+    first = uids[0]
+    report_source("source.openlabel.no_3d_state",
+                  f"OpenLABEL: {len(uids)} object(s) have no 3D state (no cuboid in any frame) and are not "
+                  f"imported as participants: {kinds}; the first: {first!r} ({have[first]})",
+                  count=len(uids), stacklevel=4, file=str(path) if path is not None else None, uid=first,
+                  json_path=jpath("objects", first) if first in objects else None)

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from aveas_format.converters.labels import implausible_size, label_kind
+from aveas_format.converters.labels import implausible_size, refine
 from aveas_format.converters.openlabel.profile import TYPE_TO_CLASS, attributes_of, first_value
 from aveas_format.schema.taxonomy import CLASSES
 
@@ -21,10 +21,11 @@ MISSING = object()
 
 
 def participants_of(uids: list[str], objects: dict[str, Any], pid_of: dict[str, int], obj_ext: dict,
-                  sizes: dict[str, list], ext: dict[str, Any] | None, frame_types: dict[str, str]
-                  ) -> tuple[dict[str, Any], bool]:
-    """``(participants columns, whether an object is the recording vehicle)``."""
-    part, ego_seen = _profile_participants(uids, objects, pid_of, sizes, frame_types)
+                    sizes: dict[str, list], ext: dict[str, Any] | None, frame_types: dict[str, str],
+                    subtypes: dict[str, str] | None = None) -> tuple[dict[str, Any], bool]:
+    """``(participants columns, whether an object is the recording vehicle)``; ``subtypes``: per
+    object its boxes' ``type`` attribute (the class of a generic label, :func:`refine`)."""
+    part, ego_seen = _profile_participants(uids, objects, pid_of, sizes, frame_types, subtypes or {})
     if all(v is None for v in part["class_pmf"]):
         del part["class_pmf"]
     else:
@@ -57,7 +58,7 @@ def participants_of(uids: list[str], objects: dict[str, Any], pid_of: dict[str, 
 
 
 def _profile_participants(uids: list[str], objects: dict[str, Any], pid_of: dict[str, int],
-                          sizes: dict[str, list], frame_types: dict[str, str]
+                          sizes: dict[str, list], frame_types: dict[str, str], subtypes: dict[str, str]
                           ) -> tuple[dict[str, list], bool]:
     """The participants' columns from the objects' types (in ``objects``, or inside a frame's
     object_data as TUM Traffic writes them) and static attributes (the size, else the median of
@@ -70,7 +71,7 @@ def _profile_participants(uids: list[str], objects: dict[str, Any], pid_of: dict
         od = obj.get("object_data") if isinstance(obj.get("object_data"), dict) else {}
         otype = str(obj.get("type") or (od.get("type") if isinstance(od.get("type"), str) else None)
                     or frame_types.get(u) or "other")
-        cls = TYPE_TO_CLASS.get(otype) or label_kind(otype)[0]
+        cls = TYPE_TO_CLASS.get(otype) or refine(otype, subtypes.get(u))
         is_ego = otype.lower() in ("egocar", "ego", "ego_vehicle") or bool(first_value(attrs, "is_recorder", False))
         ego_seen |= is_ego
         size = _static_size(first_value(attrs, "dimensions/size"))

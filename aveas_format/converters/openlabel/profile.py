@@ -1,7 +1,7 @@
 """The AVEAS OpenLABEL profile, shared by both directions: what maps to what, and the encodings.
 
-- the mapping tables: format class <-> object type (``CLASS_TO_TYPE``, and ``GENERIC_TYPES`` for
-  generic files), event kinds, acquisition methods, lights, lighting and road-surface categories;
+- the mapping tables: format class <-> object type (``CLASS_TO_TYPE``; the types of generic files:
+  the one label table, :mod:`aveas_format.converters.labels`), event kinds, acquisition methods, lights, lighting and road-surface categories;
   which states and participants columns the profile's attributes carry (the rest goes into the
   ``aveas_format`` extension, ``EXT``);
 - conditions <-> environment-context attributes (PMF vectors, Beaufort force), both ways;
@@ -41,19 +41,6 @@ CLASS_TO_TYPE: dict[str, str] = {
     "van": "vehicle/van",
 }
 TYPE_TO_CLASS = {v: k for k, v in CLASS_TO_TYPE.items()}
-#: generic OpenLABEL / dataset type names -> class (lower-case, after the AVEAS names)
-GENERIC_TYPES: dict[str, str] = {
-    "car": "car", "egocar": "car", "ego": "car", "ego_vehicle": "car", "vehicle": "car",
-    "passenger_car": "car", "sedan": "car", "suv": "car", "taxi": "car", "emergency_vehicle": "car",
-    "police_car": "car", "van": "van", "truck": "truck", "lorry": "truck", "trailer": "trailer",
-    "bus": "bus", "pedestrian": "pedestrian", "person": "pedestrian", "human": "pedestrian",
-    "adult": "pedestrian", "child": "pedestrian", "bicycle": "bicycle", "cyclist": "bicycle",
-    "bike": "bicycle", "motorcycle": "motorcycle", "motorbike": "motorcycle",
-    "motorcyclist": "motorcycle", "scooter": "mobility_device", "wheelchair": "mobility_device",
-    "mobility_device": "mobility_device", "tram": "railvehicle", "train": "railvehicle",
-    "railvehicle": "railvehicle", "animal": "animal", "dog": "animal", "stroller": "pushable_pullable",
-    "pushable_pullable": "pushable_pullable", "other": "other",
-}
 #: classes without ``is_recorder`` in the profile
 NO_RECORDER = {"animal", "pushable_pullable", "trailer"}
 #: classes whose frames carry the mandatory road attributes in the profile

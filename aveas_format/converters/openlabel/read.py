@@ -296,7 +296,7 @@ def _recording(ol: dict[str, Any], boxes: Boxes, map_bytes: bytes, options, path
     ext = md.get(EXT) if isinstance(md.get(EXT), dict) else None
     rmeta = dict((ext or {}).get("recording") or {})
     net = load_map(map_bytes)
-    crs = _crs(net, rmeta, md, path)
+    crs = _crs(net, rmeta, md, options, path)
     local = LocalFrame(crs, offset=net.header.offset, warn=False)
     objects = ol.get("objects") or {}
     systems = CoordinateSystems(ol.get("coordinate_systems"))
@@ -306,8 +306,8 @@ def _recording(ol: dict[str, Any], boxes: Boxes, map_bytes: bytes, options, path
         boxes.found = {k: v for k, v in boxes.found.items() if k[0] != "source.openlabel.missing_attribute"}
     report_frame_findings(boxes.found, path)
     p = boxes.decide(ol, options, keep_by_type(path, objects, options.keep_non_road_users))
-    if p.n == 0 and p.uids:
-        raise _no_boxes_error(objects, path)
+    if p.n == 0 and (p.uids or p.no_state):
+        raise _no_boxes_error(objects, boxes.shapes, path)
     use_file = options.road_coordinates == "file" or (options.road_coordinates == "auto" and p.has_road)
     ctx = _Context(local=local, net=net, use_file=use_file, needs_size=needs_size(objects, p.names))
     written = None
@@ -329,7 +329,8 @@ def _recording(ol: dict[str, Any], boxes: Boxes, map_bytes: bytes, options, path
         states = pa.concat_tables(tables, promote_options="permissive") if tables else None
         meta_kw = {}
     sizes = {p.names[i]: v.tolist() for info in infos for i, v in info.items()}
-    participants, ego_seen = participants_of(p.uids, objects, p.pid_of, p.obj_ext, sizes, ext, boxes.types)
+    participants, ego_seen = participants_of(p.uids, objects, p.pid_of, p.obj_ext, sizes, ext, boxes.types,
+                                             boxes.subtypes)
     check_objects(p.uids, objects, boxes.types, profile, path)
     if states is None or (written is None and p.n == 0):
         states = {c: pa.array([], pa.int64() if c == "participant_id" else pa.float64())
@@ -363,10 +364,16 @@ def _filled(t: pa.Table, p, ctx, fill) -> tuple[pa.Table, Any]:
     return fill(prepare_table(conform(states, spec), spec), ctx.local, None if ctx.use_file else ctx.net), sizes
 
 
-def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], path: Path | None) -> str:
-    """The CRS: the map's ``<geoReference>``, else the recording's, else ``projection_string``."""
+def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], options, path: Path | None) -> str:
+    """The CRS: the map's ``<geoReference>`` (a ``crs`` option must agree with it), else the
+    ``crs`` option (``--crs``), else the recording's (this library's export), else
+    ``projection_string``; none: :class:`~aveas_format.errors.MissingCrsError`."""
     from aveas_format.crs import parse_crs
+    from aveas_format.converters.common.geometry import missing_crs
+    from aveas_format.mapref.build import check_crs
 
+    if options.crs:
+        return check_crs(options.crs, net.header.geo_reference)
     crs = net.header.geo_reference or rmeta.get("crs")
     if not crs:
         ps = md.get("projection_string")
@@ -379,18 +386,21 @@ def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], path: Path | None) -> s
                               stacklevel=3, file=str(path) if path is not None else None,
                               json_path="$.openlabel.metadata.projection_string")
     if not crs:
-        raise FormatError("neither the map (<geoReference>) nor metadata.projection_string gives "
+        raise missing_crs("neither the map (<geoReference>) nor the file (metadata.projection_string) gives "
                           "a usable CRS", path=path)
     return crs
 
 
-def _no_boxes_error(objects: dict[str, Any], path: Path | None) -> FormatError:
-    static = sum(1 for o in objects.values() if isinstance(o, dict) and isinstance(o.get("object_data"), dict)
-                 and "cuboid" in o["object_data"])
-    flat = sum(1 for o in objects.values() if isinstance(o, dict) and isinstance(o.get("object_data"), dict)
-               and o["object_data"].get("bbox") and not o["object_data"].get("cuboid"))
+def _no_boxes_error(objects: dict[str, Any], shapes: dict[str, set[str]], path: Path | None) -> FormatError:
+    from aveas_format.converters.openlabel.findings import what_objects_have
+
+    uids = [*objects, *(u for u in shapes if u not in objects)]
+    have = what_objects_have(uids, objects, shapes)
+    static = sum("static cuboid" in v for v in have.values())
+    flat = sum(v != "nothing" and "static cuboid" not in v for v in have.values())
     hint = (f" ({static} object(s) carry a static cuboid in object_data, which has no time: "
             "a trajectory needs frames)" if static else
-            f" ({flat} objects carry 2D boxes (bbox) only: image coordinates, no position on the "
-            "ground)" if flat else "")
+            f" ({flat} objects carry labels without a cuboid only "
+            f"({', '.join(sorted({k for v in have.values() if v != 'nothing' for k in v.split('+')}))}): "
+            "image coordinates or shapes, no box on the ground)" if flat else "")
     return FormatError(f"no frame has a cuboid for any object{hint}", path=path)

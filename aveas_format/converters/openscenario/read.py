@@ -184,6 +184,7 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
     ``convert``, a ``source.openscenario.*`` rule of ``validate FILE``) naming it and why; an error
     only when none can.
     """
+    from aveas_format.converters.common.geometry import map_crs
     from aveas_format.converters.openscenario.replay import Replay
     from aveas_format.crs import LocalFrame
     from aveas_format.opendrive import load_map
@@ -196,7 +197,7 @@ def import_openscenario(inputs: list[Path], *, map_source, options: OpenScenario
     root, scope, catalogs = _scenario(root, path, values, side)
     map_bytes = load_map_bytes(_map_of(root, path, map_source))
     net = load_map(map_bytes)
-    crs = net.header.geo_reference or options.crs
+    crs = map_crs(net.header, options)
     info, problems, where = _entities(root, catalogs, path)
     replay = Replay(root, net, {n: d["length"] for n, d in info.items()}, rate_hz=options.rate_hz,
                     max_duration=options.max_duration,

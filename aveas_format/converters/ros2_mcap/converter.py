@@ -107,15 +107,17 @@ def _ego_from_navsatfix(ego_fix: dict[str, list], fix: str, tree: TransformTree,
     """The ego track in the map frame from NavSatFix lon/lat (projected through the map's CRS;
     heading and velocity from the motion); map -> base_frame joins the transform tree unless the
     tree already reaches base_frame."""
+    from aveas_format.converters.common.geometry import map_crs, missing_crs
     from aveas_format.crs import LocalFrame
     from aveas_format.opendrive import load_map
 
     net = load_map(map_bytes)
-    if not net.header.geo_reference:
-        raise FormatError("NavSatFix needs a map with a <geoReference> to project lon/lat")
+    crs = map_crs(net.header, o)
+    if crs is None:
+        raise missing_crs("NavSatFix (lon/lat) needs the map frame's CRS to project")
     order, t = _sorted_unique(ego_fix["t"])
     ll = np.asarray(ego_fix["lonlat"], np.float64)[order]
-    lx, ly = LocalFrame(net.header.geo_reference, net.header.offset, warn=False).from_wgs84(
+    lx, ly = LocalFrame(crs, net.header.offset, warn=False).from_wgs84(
         ll[:, 0], ll[:, 1])
     fc = np.asarray(ego_fix["cov"], np.float64)[order].reshape(-1, 2, 2)
     # local frame -> ROS map frame (inverse frame_offset), so objects can use the same tree
