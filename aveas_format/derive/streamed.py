@@ -205,7 +205,7 @@ def _run(rec, name: str, params: dict[str, Any], **kw: Any) -> pa.Table:
 
 
 def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: str,
-                 params: dict[str, Any]) -> dict[str, Any]:
+                 params: dict[str, Any], events: bool = True) -> dict[str, Any]:
     """Derive one window and write its core rows; returns its summary rows and counts."""
     from aveas_format.derive.criticality import compute as summary
     from aveas_format.derive.criticality import CriticalityParams
@@ -253,7 +253,7 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
     # the critical episodes of the core (the collision probabilities follow the tracks beyond
     # it); the events are made of all windows' episodes (derive_by_windows), and the summary's
     # event counts from them (merge_summaries)
-    episodes = window_episodes(rec, _params(rec, "events", params), (t0, t1))
+    episodes = window_episodes(rec, _params(rec, "events", params), (t0, t1)) if events else []
     rec.events = None
     cp = {k_: v for k_, v in params.items() if k_ in CriticalityParams.model_fields}
     s = summary(rec, CriticalityParams(**cp), core=(t0, t1))
@@ -342,14 +342,17 @@ def merge_summaries(parts: list[pa.Table], events: pa.Table | None = None) -> pa
 
 def derive_by_windows(path: str | Path, out_dir: str | Path, *,
                       window_s: float = DEFAULT_WINDOW_S, workers: int | None = 2,
-                      progress: bool = False, track_chunk_rows: int = 200_000, **params: Any) -> dict[str, Any]:
+                      progress: bool = False, track_chunk_rows: int = 200_000,
+                      events: bool = True, **params: Any) -> dict[str, Any]:
     """Derive the criticality measures of the recording at ``path`` into ``out_dir`` (module
     docstring): kinematics per chunk of whole tracks (about ``track_chunk_rows`` states), then
-    interactions, conflicts and the summary per time window; ``params`` (flat: a parameter name
-    and its value) go to every derivation that has such a parameter. Memory per worker grows
-    with the window (and the chunk), not with the recording; the CPU time hardly depends on the
-    window (docs/performance.md). Returns counts: windows, rows per derived
-    table, the largest worker's peak memory (kB)."""
+    interactions, conflicts, the events' episodes and the summary per time window, the events
+    (``out_dir/events.parquet``: the source's non-derived events and the derived ones) from all
+    windows' episodes (``events`` False: none, the summary without event counts); ``params``
+    (flat: a parameter name and its value) go to every derivation that has such a parameter.
+    Memory per worker grows with the window (and the chunk), not with the recording; the CPU
+    time hardly depends on the window (docs/performance.md). Returns counts: windows, rows per
+    derived table (``events``: the derived events), the largest worker's peak memory (kB)."""
     from aveas_format.derive.events import from_windows
     from aveas_format.errors import AveasError
     from aveas_format.io.reader import open_recording
@@ -379,7 +382,7 @@ def derive_by_windows(path: str | Path, out_dir: str | Path, *,
             (tmp / f"c-{j}.arrow").unlink()
         windows = [(k, k * window_s, (k + 1) * window_s) for k in sorted(cores)]
         fn = functools.partial(_window_task, path=str(path), tmp=str(tmp), out=str(out),
-                               params=params)
+                               params=params, events=events)
         sums, episodes = [], []
         for v in results(fn, windows, "windows"):
             sums.append(v["summary"])
@@ -387,11 +390,15 @@ def derive_by_windows(path: str | Path, out_dir: str | Path, *,
             for k, n in v["counts"].items():
                 counts[k] += n
             peak = max(peak, v["peak_kb"] or 0)
-        head = open_recording(path, tables=["participants", "events"], verify=False)
-        events = from_windows(head, episodes, _params(head, "events", params))
-        pq.write_table(events, out / "events.parquet")
-        counts["events"] = _derived_count(events)
-        summary = merge_summaries(sums, events)
+        ev = None
+        if events:
+            head = open_recording(path, tables=["participants", "events"], verify=False)
+            ev = from_windows(head, episodes, _params(head, "events", params))
+            pq.write_table(ev, out / "events.parquet")
+            counts["events"] = _derived_count(ev)
+        else:
+            del counts["events"]
+        summary = merge_summaries(sums, ev)
         pq.write_table(summary, out / "criticality_summary.parquet")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -478,14 +485,15 @@ def _assemble(parts: Path, spec, dest: Path, provenance: bytes) -> tuple[int, st
 
 def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEFAULT_WINDOW_S,
                      workers: int | None = 2, overwrite: bool = False,
-                     progress: bool = False, **params: Any) -> dict[str, Any]:
+                     progress: bool = False, events: bool = True, **params: Any) -> dict[str, Any]:
     """The recording at ``src`` with its criticality tables (``WINDOW_TABLES``) derived window by
     window (:func:`derive_by_windows`), written to ``path`` (directory form, or ZIP when the name
     ends in ``.zip``) without holding the recording in memory: the source's other files are
     copied as they are, each derived table is assembled from the windows' parts one participant
     range at a time, and ``recording.json`` gets their table entries and provenance as
     :func:`aveas_format.derive.derive` writes them. Atomic; an existing ``path`` is replaced only
-    with ``overwrite``. Returns :func:`derive_by_windows`' counts and the derived table names."""
+    with ``overwrite``; ``events`` False: the events are not derived (the source's are copied).
+    Returns :func:`derive_by_windows`' counts and the derived table names."""
     import json
     import uuid
     import zipfile
@@ -505,13 +513,14 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
     head = open_recording(src, tables=["participants"], verify=False)
     meta = head.meta.model_copy(deep=True)
     reg = derivations()
-    ours = {reg[n].table for n in WINDOW_TABLES}
+    names = [n for n in WINDOW_TABLES if events or n != "events"]
+    ours = {reg[n].table for n in names}
     work = parent / f".{path.name}.work-{uuid.uuid4().hex[:8]}"
     tmp = parent / f".{path.name}.tmp-{uuid.uuid4().hex[:8]}"
     try:
         work.mkdir()
         info = derive_by_windows(src, work, window_s=window_s, workers=workers,
-                                 progress=progress, **params)
+                                 progress=progress, events=events, **params)
         tmp.mkdir()
         with Container(src) as c:
             for name in c.names():
@@ -524,7 +533,7 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
                         g.write(block)
         shas = {n: e.sha256 for n, e in meta.tables.items() if n not in ours}
         created = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-        for n in WINDOW_TABLES:
+        for n in names:
             d = reg[n]
             p = d.params(**{k: v for k, v in params.items() if k in d.params.model_fields})
             # the windows derive no encroachments: the events are not made of the source's
@@ -574,8 +583,8 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
             shutil.rmtree(tmp, ignore_errors=True)
         elif tmp.exists():
             tmp.unlink(missing_ok=True)
-    return {**info, "recording": str(path), "derived": list(WINDOW_TABLES),
-            "tables": {reg[n].table: meta.tables[reg[n].table].rows for n in WINDOW_TABLES}}
+    return {**info, "recording": str(path), "derived": names,
+            "tables": {reg[n].table: meta.tables[reg[n].table].rows for n in names}}
 
 
 __all__ = ["DEFAULT_WINDOW_S", "WINDOW_DERIVATIONS", "WINDOW_TABLES", "derive_by_windows",
