@@ -9,14 +9,18 @@ highway streamed by time window.
    differences (as the derivations did before), all in one run; warm calls (best of 5).
 2. ``highway_hour``: ~100 concurrent vehicles at 25 Hz for 1 h (~9M states, a vectorised
    generator below) written as a recording, then every measure (kinematics, interactions with
-   DRAC/MDRAC/PSD and their std, conflicts, the criticality summary) streamed by time window
-   (:func:`aveas_format.derive.streamed.derive_by_windows`) on 2 worker processes, in a fresh
-   process whose peak memory (VmHWM) is reported. Target: <= 120 s.
+   DRAC/MDRAC/PSD and their std, conflicts, the events — episodes by evidence and persistence,
+   encounters, a collision probability each — and the criticality summary) streamed by time
+   window (:func:`aveas_format.derive.streamed.derive_by_windows`) on 2 worker processes, in a
+   fresh process whose peak memory (VmHWM) is reported. Target: <= 120 s. ``events``: the cost
+   of the events alone — the same derivation without and with them in interleaved pairs on one
+   recording, the CPU ratio (median of the pairs).
 3. ``sample``: the real pipeline (``derive(rec, only="interactions")``) on the sample highway,
    with the share of its time spent in the follower/leader metrics.
 
-Run alone: ``.venv/bin/python benchmarks/bench_criticality.py [pairs|sample|hour [SECONDS [W1,W2...]]]``
-(``hour``: 60-s and 300-s windows on the same recording, the CPU ratio between them).
+Run alone: ``.venv/bin/python benchmarks/bench_criticality.py [pairs|sample|hour [SECONDS
+[W1,W2...]]|events [SECONDS [WINDOW [PAIRS]]]]`` (``hour``: 60-s and 300-s windows on the same
+recording, the CPU ratio between them; ``events``: default 600 s, 300-s windows, 2 pairs).
 """
 
 from __future__ import annotations
@@ -256,14 +260,15 @@ def highway_hour(path: Path, duration_s: float = 3600.0, concurrent: int = 100,
     return n
 
 
-def _hour_child(path: str, workers: int, window_s: float) -> None:
+def _hour_child(path: str, workers: int, window_s: float, events: bool = True) -> None:
     """In a fresh process: derive the recording by windows into a new recording (what
-    ``aveas-format derive REC --window S -o OUT`` does); print seconds and peak memory."""
+    ``aveas-format derive REC --window S -o OUT`` does; ``events`` False: without the events);
+    print seconds, CPU time and peak memory."""
     from aveas_format.derive.streamed import write_by_windows
 
     t0 = time.perf_counter()
     info = write_by_windows(path, Path(path).parent / "derived.aveas", window_s=window_s,
-                            workers=workers, overwrite=True)
+                            workers=workers, overwrite=True, events=events)
     secs = time.perf_counter() - t0
     import resource
 
@@ -273,6 +278,48 @@ def _hour_child(path: str, workers: int, window_s: float) -> None:
     hwm = next((int(ln.split()[1]) for ln in Path("/proc/self/status").read_text().splitlines()
                 if ln.startswith("VmHWM")), None)
     print(json.dumps({"seconds": secs, "cpu_s": cpu, "vmhwm_kb": hwm, **info}))
+
+
+def _run_child(path: Path, workers: int, window_s: float, events: bool = True) -> dict:
+    """:func:`_hour_child` in a fresh process, with the load average at its start and end."""
+    with open("/proc/loadavg") as f:
+        load0 = f.read().split()[0]
+    res = subprocess.run([sys.executable, __file__, "_child", str(path), str(workers),
+                          str(window_s), "1" if events else "0"], capture_output=True, text=True,
+                         check=False)
+    if res.returncode != 0:
+        raise RuntimeError(res.stderr[-3000:])
+    info = json.loads(res.stdout.strip().splitlines()[-1])
+    with open("/proc/loadavg") as f:
+        info["load"] = f"{load0}-{f.read().split()[0]}"
+    return info
+
+
+def bench_events(duration_s: float = 600.0, window_s: float = 300.0, pairs: int = 2,
+                 workers: int = 2) -> list[dict]:
+    """The cost of the events in the streamed derivation: the highway (:func:`highway_hour`) of
+    ``duration_s`` derived by ``window_s`` windows without and with the events, in ``pairs``
+    interleaved pairs of fresh processes; the ratio of their CPU times (process and workers),
+    median of the pairs."""
+    with tempfile.TemporaryDirectory(prefix="aveas-bench-events-") as d:
+        path = Path(d) / "hour.aveas"
+        n = highway_hour(path, duration_s=duration_s)
+        runs = [(_run_child(path, workers, window_s, False), _run_child(path, workers, window_s))
+                for _ in range(pairs)]
+    ratios = [w["cpu_s"] / wo["cpu_s"] for wo, w in runs]
+    wo, w = runs[int(np.argsort(ratios)[len(ratios) // 2])]
+    ratio = float(np.median(ratios))
+    return [{"benchmark": "criticality.highway_events", "rows": n,
+             "seconds": round(w["seconds"], 1), "rows_per_s": round(n / w["seconds"]),
+             "baseline_s": round(wo["seconds"], 1), "speedup_vs_baseline": round(1 / ratio, 3),
+             "note": (f"{duration_s:g} s of the busy highway ({n:,} states), {window_s:g}-s "
+                      f"windows on {workers} workers, without and with the events in {pairs} "
+                      f"interleaved pairs: CPU time with/without "
+                      f"{', '.join(f'{r:.3f}' for r in ratios)} (median {ratio:.3f}x; the median "
+                      f"pair {wo['cpu_s']:.0f} s -> {w['cpu_s']:.0f} s); "
+                      f"{w.get('events', 0):,} derived events; largest worker "
+                      f"{wo['worker_peak_kb'] / 1024:.0f} -> {w['worker_peak_kb'] / 1024:.0f} MB; "
+                      f"load average {', '.join(r['load'] for p in runs for r in p)}")}]
 
 
 def bench_hour(duration_s: float = 3600.0, workers: int = 2,
@@ -289,16 +336,7 @@ def bench_hour(duration_s: float = 3600.0, workers: int = 2,
         n = highway_hour(path, duration_s=duration_s)
         tb = time.perf_counter() - t0
         for window_s in windows:
-            with open("/proc/loadavg") as f:
-                load0 = f.read().split()[0]
-            res = subprocess.run([sys.executable, __file__, "_child", str(path), str(workers),
-                                  str(window_s)], capture_output=True, text=True, check=False)
-            if res.returncode != 0:
-                raise RuntimeError(res.stderr[-3000:])
-            info = json.loads(res.stdout.strip().splitlines()[-1])
-            with open("/proc/loadavg") as f:
-                info["load"] = f"{load0}-{f.read().split()[0]}"
-            infos.append((window_s, info))
+            infos.append((window_s, _run_child(path, workers, window_s)))
     ref_w, ref = infos[-1]
     for window_s, info in infos:
         out.append({
@@ -306,7 +344,9 @@ def bench_hour(duration_s: float = 3600.0, workers: int = 2,
             "seconds": round(info["seconds"], 1), "rows_per_s": round(n / info["seconds"]),
             "baseline_s": None, "speedup_vs_baseline": None,
             "note": (f"{duration_s:g} s, ~100 concurrent vehicles at 25 Hz ({n:,} states; built "
-                     f"and written in {tb:.0f} s); every measure with std, {info['windows']} "
+                     f"and written in {tb:.0f} s); every measure with std and the events "
+                     f"({info.get('events', 0):,} derived: episodes by evidence and persistence, "
+                     f"encounters, a collision probability each), {info['windows']} "
                      f"windows of {window_s:g} s on {workers} workers; "
                      f"CPU time of the deriving process and its workers {info['cpu_s']:.0f} s "
                      f"(/{workers} = {info['cpu_s'] / workers:.0f} s: the wall time on "
@@ -327,7 +367,8 @@ def main() -> list[dict]:
 
 if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "_child":
-        _hour_child(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]))
+        _hour_child(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]),
+                    len(sys.argv) <= 5 or sys.argv[5] == "1")
     elif len(sys.argv) > 1 and sys.argv[1] == "pairs":
         for r in bench_pairs():
             print(r)
@@ -338,6 +379,11 @@ if __name__ == "__main__":
         for r in bench_hour(float(sys.argv[2]) if len(sys.argv) > 2 else 3600.0,
                             windows=tuple(float(w) for w in sys.argv[3].split(","))
                             if len(sys.argv) > 3 else None):
+            print(r)
+    elif len(sys.argv) > 1 and sys.argv[1] == "events":
+        a = sys.argv[2:]
+        for r in bench_events(float(a[0]) if a else 600.0, float(a[1]) if len(a) > 1 else 300.0,
+                              int(a[2]) if len(a) > 2 else 2):
             print(r)
     else:
         for r in main():

@@ -67,8 +67,9 @@ def derive(
                                     "traffic.cell_duration_s=30."),
     window: float | None = typer.Option(None, "--window", min=1.0, help="Derive by time "
                                         "windows of SECONDS with bounded memory (kinematics, "
-                                        "interactions, conflicts, criticality_summary; 60 is a "
-                                        "good choice; docs/derive.md 'Large recordings'). One "
+                                        "interactions, conflicts, events, criticality_summary; "
+                                        "60 is a good choice; docs/derive.md 'Large "
+                                        "recordings'). One "
                                         "recording; --workers processes."),
     workers: int = workers_option(scope="Dataset or --window"),
     scheduler: str = scheduler_option(scope="Dataset"),
@@ -162,12 +163,9 @@ def _derive_windows(recording: str, output: Path | None, in_place: bool, overwri
     if outside:
         raise fail(f"--window derives {', '.join(WINDOW_TABLES)}; --only {outside[0]} is not "
                    "derived by windows (derive it without --window)", EXIT_USAGE)
-    ev = params.pop("events", {})
-    flags = {"pet_s": "--pet", "hard_braking_mps2": "--hard-braking", "drac_mps2": "--drac"}
-    unwindowed = [flags.get(k, f"--param events.{k}") for k in ev if k != "ttc_s"]
-    if unwindowed:
-        raise fail(f"{unwindowed[0]}: events are not derived by windows (derive them without "
-                   "--window)", EXIT_USAGE)
+    if "pet_s" in params.get("events", {}):
+        raise fail("--pet (events.pet_s): PET events need encroachments, which are not derived "
+                   "by windows (derive them without --window)", EXIT_USAGE)
     flat: dict = {}
     for name, ps in params.items():
         if name not in WINDOW_TABLES:
@@ -178,14 +176,13 @@ def _derive_windows(recording: str, output: Path | None, in_place: bool, overwri
                 raise fail(f"--param {name}.{k}: differs from another derivation's {k}; by "
                            "windows a parameter has one value for all", EXIT_USAGE)
             flat[k] = v
-    if "ttc_s" in ev:
-        flat["ttc_s"] = ev["ttc_s"]
     target = Path(recording) if in_place else output
     assert target is not None  # --output or --in-place, checked by the caller
     info = write_by_windows(recording, target, window_s=window, workers=workers or None,
                             overwrite=in_place or overwrite, progress=True, **flat)
     summary = {"recording": info["recording"], "derived": info["derived"],
-               "tables": info["tables"], "events": 0, "windows": info["windows"],
+               "tables": info["tables"], "events": info["tables"]["events"],
+               "windows": info["windows"],
                "window_s": window, "worker_peak_mb": round(info["worker_peak_kb"] / 1024, 1)}
     print(json.dumps(summary, indent=2))
     err.print(f"derived {', '.join(info['derived'])} in {info['windows']} windows of {window:g} s "

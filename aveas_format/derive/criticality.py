@@ -152,7 +152,7 @@ def compute(rec, p: CriticalityParams, core: tuple[float, float] | None = None) 
     en = rec.derived.get("encroachments")
     if en is not None and en.num_rows:
         _pet_measures(en, ids, out)
-    counts, worst, rec_worst = _event_measures(rec, ids)
+    counts, worst, rec_worst = event_measures(rec.events, ids)
     # --- the recording row ---------------------------------------------------------------------
     total_T = float(T.sum())
 
@@ -309,14 +309,15 @@ def _severity(attrs: dict, p: float | None) -> tuple[float, int, float]:
 CRITICAL = {"near_miss": "near_misses", "conflict": "conflicts"}
 
 
-def _event_measures(rec, ids: np.ndarray) -> tuple[dict, list[list[int]], list[int]]:
-    """Counts of derived near misses, conflicts and hard-braking events per participant (and for
-    the recording) and the worst critical events' ids."""
+def event_measures(ev: pa.Table | None, ids: np.ndarray
+                   ) -> tuple[dict, list[list[int]], list[int]]:
+    """Counts of the derived near misses, conflicts and hard-braking events of the events table
+    ``ev`` per participant of ``ids`` (and for the recording: ``recording_near_misses``, ...) and
+    the worst critical events' ids (per participant, of the recording)."""
     n = len(ids)
     counts = {k: np.zeros(n, np.int64) for k in ("near_misses", "conflicts", "hard_braking")}
     worst: list[list[tuple]] = [[] for _ in range(n)]
     allw: list[tuple] = []
-    ev = rec.events
     if ev is not None and ev.num_rows:
         d = ev.select([c for c in ("event_id", "kind", "origin", "participant_ids", "attributes",
                                    "collision_probability")

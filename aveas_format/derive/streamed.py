@@ -39,8 +39,9 @@ import pyarrow.compute as pc
 import pyarrow.feather as feather
 import pyarrow.parquet as pq
 
-#: the derivations run per window
-WINDOW_DERIVATIONS = ("kinematics", "interactions", "conflicts")
+#: the derivations run per window (events: their episodes per window, joined across the
+#: windows' boundaries when assembled)
+WINDOW_DERIVATIONS = ("kinematics", "interactions", "conflicts", "events")
 #: every derived table :func:`write_by_windows` writes
 WINDOW_TABLES = (*WINDOW_DERIVATIONS, "criticality_summary")
 #: the default window (s): its participants' whole tracks and its derived rows are what one
@@ -180,21 +181,35 @@ def _window_recording(path: str, states: pa.Table):
                      head.map_source)
 
 
-def _run(rec, name: str, params: dict[str, Any], **kw: Any) -> pa.Table:
-    """Derivation ``name``'s function on ``rec`` with the ``params`` it has (directly: a window
-    needs no provenance; input hashes would serialise its states once per derivation); ``kw`` go
-    to the function (``core`` of interactions)."""
+def _params(rec, name: str, params: dict[str, Any]):
+    """Derivation ``name``'s parameters: those of the flat ``params`` it has."""
     from aveas_format.derive.registry import derivations
 
     d = derivations()[name]
-    return d.fn(rec, d.params(**{k: v for k, v in params.items() if k in d.params.model_fields}), **kw)
+    return d.params(**{k: v for k, v in params.items() if k in d.params.model_fields})
+
+
+def _run(rec, name: str, params: dict[str, Any], **kw: Any) -> pa.Table:
+    """Derivation ``name``'s function on ``rec`` with the ``params`` it has (directly: a window
+    needs no input hashes, which would serialise its states once per derivation; the parameters
+    go into the table's metadata, where the events read the interactions' own); ``kw`` go to the
+    function (``core`` of interactions)."""
+    import json
+
+    from aveas_format.derive.registry import DERIVED_KEY, derivations
+
+    p = _params(rec, name, params)
+    t = derivations()[name].fn(rec, p, **kw)
+    return t.replace_schema_metadata({**(t.schema.metadata or {}), DERIVED_KEY: json.dumps(
+        {"derivation": name, "parameters": p.model_dump(mode="json")}).encode()})
 
 
 def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: str,
-                 params: dict[str, Any]) -> dict[str, Any]:
+                 params: dict[str, Any], events: bool = True) -> dict[str, Any]:
     """Derive one window and write its core rows; returns its summary rows and counts."""
     from aveas_format.derive.criticality import compute as summary
     from aveas_format.derive.criticality import CriticalityParams
+    from aveas_format.derive.events import window_episodes
     from aveas_format.io.writer import prepare_table
     from aveas_format.schema.tables import TABLES
 
@@ -220,9 +235,7 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
             rec.derived[name] = t
     rec.derived["interactions"] = _run(rec, "interactions", params, core=(t0, t1))
     counts = {}
-    for name in WINDOW_DERIVATIONS:
-        if name == "kinematics":
-            continue
+    for name in ("interactions", "conflicts"):
         t = rec.derived[name]
         tt = t.column("time")
         core = t.filter(pc.and_(pc.greater_equal(tt, t0), pc.less(tt, t1)))
@@ -237,17 +250,23 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
         t = rec.derived[name]
         rec.derived[name] = t.filter(pc.and_(pc.greater_equal(t.column("time"), t0),
                                              pc.less(t.column("time"), t1)))
+    # the critical episodes of the core (the collision probabilities follow the tracks beyond
+    # it); the events are made of all windows' episodes (derive_by_windows), and the summary's
+    # event counts from them (merge_summaries)
+    episodes = window_episodes(rec, _params(rec, "events", params), (t0, t1)) if events else []
     rec.events = None
     cp = {k_: v for k_, v in params.items() if k_ in CriticalityParams.model_fields}
     s = summary(rec, CriticalityParams(**cp), core=(t0, t1))
-    return {"window": k, "counts": counts, "summary": s, "peak_kb": _peak_kb()}
+    return {"window": k, "counts": counts, "summary": s, "episodes": episodes,
+            "peak_kb": _peak_kb()}
 
 
-def merge_summaries(parts: list[pa.Table]) -> pa.Table:
+def merge_summaries(parts: list[pa.Table], events: pa.Table | None = None) -> pa.Table:
     """One criticality summary from the summaries of disjoint time windows: sums of duration,
     TET, TIT and counts (stds added in quadrature), minima (maxima for DRAC) with their std, time
-    and pair, CPI weighted by the observed time; the recording's row from the participants'."""
-    from aveas_format.derive.criticality import summary_table
+    and pair, CPI weighted by the observed time; the recording's row from the participants'; the
+    event counts and worst events from the recording's ``events`` (assembled from all windows)."""
+    from aveas_format.derive.criticality import event_measures, summary_table
 
     rows = [r for t in parts for r in t.to_pylist() if str(r["scope"]) == "participant"]
     by: dict[int, dict[str, Any]] = {}
@@ -292,7 +311,7 @@ def merge_summaries(parts: list[pa.Table]) -> pa.Table:
                                         for i in ids], np.int64)
     out["min_ttc_kind"] = np.array([by[i].get("min_ttc_kind") for i in ids], object)
     out["ttc_samples_below"] = np.array([by[i]["ttc_samples_below"] for i in ids], np.int64)
-    counts = {k: np.zeros(n, np.int64) for k in ("near_misses", "conflicts", "hard_braking")}
+    counts, worst, rec_worst = event_measures(events, ids)
 
     def nanarg(v, largest=False):
         if not np.isfinite(v).any():
@@ -316,21 +335,27 @@ def merge_summaries(parts: list[pa.Table]) -> pa.Table:
     rv["cpi"] = float(np.nansum(out["cpi"] * T) / tot) if tot > 0 else np.nan
     rv["cpi_std"] = float(np.sqrt(np.nansum((out["cpi_std"] * T) ** 2)) / tot) if tot > 0 else np.nan
     rv["ttc_samples_below"] = int(out["ttc_samples_below"].sum())
-    rv["near_misses"] = rv["conflicts"] = rv["hard_braking"] = 0
-    return summary_table(ids, out, counts, [[] for _ in range(n)], rv, [])
+    for c in ("near_misses", "conflicts", "hard_braking"):
+        rv[c] = counts.get(f"recording_{c}", 0)
+    return summary_table(ids, out, counts, worst, rv, rec_worst)
 
 
 def derive_by_windows(path: str | Path, out_dir: str | Path, *,
                       window_s: float = DEFAULT_WINDOW_S, workers: int | None = 2,
-                      progress: bool = False, track_chunk_rows: int = 200_000, **params: Any) -> dict[str, Any]:
+                      progress: bool = False, track_chunk_rows: int = 200_000,
+                      events: bool = True, **params: Any) -> dict[str, Any]:
     """Derive the criticality measures of the recording at ``path`` into ``out_dir`` (module
     docstring): kinematics per chunk of whole tracks (about ``track_chunk_rows`` states), then
-    interactions, conflicts and the summary per time window; ``params`` (flat: a parameter name
-    and its value) go to every derivation that has such a parameter. Memory per worker grows
-    with the window (and the chunk), not with the recording; the CPU time hardly depends on the
-    window (docs/performance.md). Returns counts: windows, rows per derived
-    table, the largest worker's peak memory (kB)."""
+    interactions, conflicts, the events' episodes and the summary per time window, the events
+    (``out_dir/events.parquet``: the source's non-derived events and the derived ones) from all
+    windows' episodes (``events`` False: none, the summary without event counts); ``params``
+    (flat: a parameter name and its value) go to every derivation that has such a parameter.
+    Memory per worker grows with the window (and the chunk), not with the recording; the CPU
+    time hardly depends on the window (docs/performance.md). Returns counts: windows, rows per
+    derived table (``events``: the derived events), the largest worker's peak memory (kB)."""
+    from aveas_format.derive.events import from_windows
     from aveas_format.errors import AveasError
+    from aveas_format.io.reader import open_recording
     from aveas_format.parallel import run_tasks
 
     path, out = Path(path), Path(out_dir)
@@ -357,19 +382,34 @@ def derive_by_windows(path: str | Path, out_dir: str | Path, *,
             (tmp / f"c-{j}.arrow").unlink()
         windows = [(k, k * window_s, (k + 1) * window_s) for k in sorted(cores)]
         fn = functools.partial(_window_task, path=str(path), tmp=str(tmp), out=str(out),
-                               params=params)
-        sums = []
+                               params=params, events=events)
+        sums, episodes = [], []
         for v in results(fn, windows, "windows"):
             sums.append(v["summary"])
+            episodes += v["episodes"]
             for k, n in v["counts"].items():
                 counts[k] += n
             peak = max(peak, v["peak_kb"] or 0)
-        summary = merge_summaries(sums)
+        ev = None
+        if events:
+            head = open_recording(path, tables=["participants", "events"], verify=False)
+            ev = from_windows(head, episodes, _params(head, "events", params))
+            pq.write_table(ev, out / "events.parquet")
+            counts["events"] = _derived_count(ev)
+        else:
+            del counts["events"]
+        summary = merge_summaries(sums, ev)
         pq.write_table(summary, out / "criticality_summary.parquet")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return {"windows": len(windows), **counts, "worker_peak_kb": peak,
             "participants": summary.num_rows - 1}
+
+
+def _derived_count(events: pa.Table) -> int:
+    """The derived events of an events table."""
+    origin = events.column("origin")
+    return int(pc.sum(pc.equal(origin.cast(pa.string()), "derived")).as_py() or 0)
 
 
 def _pid_ranges(dataset, rows: int) -> list[tuple[int, int]]:
@@ -445,14 +485,15 @@ def _assemble(parts: Path, spec, dest: Path, provenance: bytes) -> tuple[int, st
 
 def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEFAULT_WINDOW_S,
                      workers: int | None = 2, overwrite: bool = False,
-                     progress: bool = False, **params: Any) -> dict[str, Any]:
+                     progress: bool = False, events: bool = True, **params: Any) -> dict[str, Any]:
     """The recording at ``src`` with its criticality tables (``WINDOW_TABLES``) derived window by
     window (:func:`derive_by_windows`), written to ``path`` (directory form, or ZIP when the name
     ends in ``.zip``) without holding the recording in memory: the source's other files are
     copied as they are, each derived table is assembled from the windows' parts one participant
     range at a time, and ``recording.json`` gets their table entries and provenance as
     :func:`aveas_format.derive.derive` writes them. Atomic; an existing ``path`` is replaced only
-    with ``overwrite``. Returns :func:`derive_by_windows`' counts and the derived table names."""
+    with ``overwrite``; ``events`` False: the events are not derived (the source's are copied).
+    Returns :func:`derive_by_windows`' counts and the derived table names."""
     import json
     import uuid
     import zipfile
@@ -472,13 +513,14 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
     head = open_recording(src, tables=["participants"], verify=False)
     meta = head.meta.model_copy(deep=True)
     reg = derivations()
-    ours = {reg[n].table for n in WINDOW_TABLES}
+    names = [n for n in WINDOW_TABLES if events or n != "events"]
+    ours = {reg[n].table for n in names}
     work = parent / f".{path.name}.work-{uuid.uuid4().hex[:8]}"
     tmp = parent / f".{path.name}.tmp-{uuid.uuid4().hex[:8]}"
     try:
         work.mkdir()
         info = derive_by_windows(src, work, window_s=window_s, workers=workers,
-                                 progress=progress, **params)
+                                 progress=progress, events=events, **params)
         tmp.mkdir()
         with Container(src) as c:
             for name in c.names():
@@ -491,17 +533,19 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
                         g.write(block)
         shas = {n: e.sha256 for n, e in meta.tables.items() if n not in ours}
         created = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-        for n in WINDOW_TABLES:
+        for n in names:
             d = reg[n]
             p = d.params(**{k: v for k, v in params.items() if k in d.params.model_fields})
-            inputs = {t: shas[t] for t in d.inputs() if t in shas}
+            # the windows derive no encroachments: the events are not made of the source's
+            inputs = {t: shas[t] for t in d.inputs() if t in shas
+                      and not (n == "events" and t == "derived/encroachments")}
             pdump = p.model_dump(mode="json")
             method = d.method(p)
             prov = json.dumps({"derivation": n, "method": method, "version": d.version,
                                "parameters": pdump, "inputs": inputs}).encode()
             spec = TABLES[d.table]
-            if n == "criticality_summary":
-                t = prepare_table(pq.read_table(work / "criticality_summary.parquet"), spec)
+            if n in ("events", "criticality_summary"):
+                t = prepare_table(pq.read_table(work / f"{n}.parquet"), spec)
                 t = t.replace_schema_metadata({**(t.schema.metadata or {}), DERIVED_KEY: prov})
                 buf = parquet_bytes(t, spec)
                 (tmp / spec.file).parent.mkdir(parents=True, exist_ok=True)
@@ -511,9 +555,11 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
                 rows, sha = _assemble(work / n, spec, tmp / spec.file, prov)
             meta.tables[d.table] = TableEntry(rows=rows, sha256=sha)
             shas[d.table] = sha
-            meta.derived = [e for e in meta.derived if e.table != d.table] + [DerivedEntry(
+            # derived events carry their provenance in the events table only (as derive writes)
+            meta.derived = [e for e in meta.derived if e.table != d.table] + ([] if n == "events"
+                                                                               else [DerivedEntry(
                 table=d.table, method=method, version=d.version, parameters=pdump,
-                created=created, inputs=inputs)]
+                created=created, inputs=inputs)])
         meta.format_version = FORMAT_VERSION
         (tmp / "recording.json").write_text(meta.to_json())
         if path.name.endswith(".zip"):
@@ -537,8 +583,8 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
             shutil.rmtree(tmp, ignore_errors=True)
         elif tmp.exists():
             tmp.unlink(missing_ok=True)
-    return {**info, "recording": str(path), "derived": list(WINDOW_TABLES),
-            "tables": {reg[n].table: meta.tables[reg[n].table].rows for n in WINDOW_TABLES}}
+    return {**info, "recording": str(path), "derived": names,
+            "tables": {reg[n].table: meta.tables[reg[n].table].rows for n in names}}
 
 
 __all__ = ["DEFAULT_WINDOW_S", "WINDOW_DERIVATIONS", "WINDOW_TABLES", "derive_by_windows",

@@ -50,14 +50,15 @@ def test_derive_by_windows_cli(tmp_path):
     assert r.exit_code == 0, r.output
     summary = json.loads(r.stdout[r.stdout.index("{"):r.stdout.rindex("}") + 1])
     assert summary["windows"] == 3 and summary["derived"] == [
-        "kinematics", "interactions", "conflicts", "criticality_summary"]
+        "kinematics", "interactions", "conflicts", "events", "criticality_summary"]
+    assert summary["events"] == aveas_format.open(out).events.num_rows
     back = aveas_format.open(out)
     assert summary["tables"]["derived/interactions"] == back.derived["interactions"].num_rows > 0
     e = {x.table: x for x in back.meta.derived}
     assert e["derived/interactions"].parameters["velocities"] == "states"
     assert e["derived/criticality_summary"].parameters["ttc_s"] == 2
     for args, needle in ((["--only", "traffic"], "not derived by windows"),
-                         (["--pet", "1"], "--pet: events are not derived by windows"),
+                         (["--pet", "1"], "PET events need encroachments"),
                          (["--param", "traffic.cell_duration_s=2"], "not derived by windows")):
         r = runner.invoke(app, ["derive", str(src), "--window", "2", "-o",
                                 str(tmp_path / "x.aveas"), *args])

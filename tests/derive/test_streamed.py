@@ -3,6 +3,8 @@ whole recording at once: the same tables (docs/derive.md "Large recordings")."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pyarrow as pa
 import pyarrow.dataset as ds
@@ -14,6 +16,7 @@ from aveas_format.derive import derive
 from aveas_format.derive.registry import stale_derived
 from aveas_format.derive.streamed import derive_by_windows, merge_summaries, write_by_windows
 from aveas_format.sample import highway_scene
+from aveas_format.sample.scenes import traffic_scene
 
 WINDOWED = ["kinematics", "interactions", "conflicts", "criticality_summary"]
 
@@ -160,3 +163,92 @@ def test_merge_of_two_halves_by_hand():
     assert r["ttc_samples_below"] == 6
     whole = next(r for r in m.to_pylist() if r["scope"] == "recording")
     assert whole["tet"] == 3.0 and whole["min_ttc"] == 1.2
+
+
+# --- events by windows: against the truth and deriving at once ----------------------------------
+
+EVENT_COLUMNS = ("kind", "participant_ids", "roles", "metric", "relation", "time_start",
+                 "time_end", "time_extreme", "duration", "value", "value_std",
+                 "collision_probability", "collision_probability_std", "confidence")
+
+
+def _events_whole_and_windows(tmp_path, rec, window_s: float):
+    src = rec.write(tmp_path / "s.aveas")
+    whole = aveas_format.open(src)
+    derive(whole, only=[*WINDOWED, "events"])
+    write_by_windows(src, tmp_path / "w.aveas", window_s=window_s, workers=1)
+    return whole, aveas_format.open(tmp_path / "w.aveas")
+
+
+def _same(y, x, where: str) -> None:
+    """``y`` equals ``x`` (numbers to 1e-9, nested in dicts and lists)."""
+    if isinstance(x, dict):
+        assert y.keys() == x.keys(), where
+        for k in x:
+            _same(y[k], x[k], f"{where}.{k}")
+    elif isinstance(x, list):
+        assert len(y) == len(x), where
+        for i, (u, v) in enumerate(zip(y, x)):
+            _same(u, v, f"{where}[{i}]")
+    elif isinstance(x, float):
+        assert y == pytest.approx(x, rel=1e-9, abs=1e-12), where
+    else:
+        assert y == x, where
+
+
+def _derived_events(rec) -> list[dict]:
+    ev = rec.events
+    return [] if ev is None else [r for r in ev.to_pylist() if r["origin"] == "derived"]
+
+
+@pytest.mark.parametrize("window_s", [15.0, 16.0])
+def test_events_cut_by_windows_as_derived_at_once(tmp_path, window_s):
+    """A cut-in (true minimum TTC 1.0 s) and a hard braking (1.3 s) on a motorway, in windows
+    whose boundaries cut the encounters (15 s: the cut-in's first 0.08 s critical in one window,
+    the rest in the next; the braking and its TTC encounter at 45 s; 16 s: the cut-in in the
+    middle): the events are the truth's (pairs, minimum TTC within max(0.3 s, 20 %)) and the same
+    as deriving at once — pairs, kinds, extremes, times, durations, collision probabilities —
+    and so are the summary's event counts and worst events."""
+    rec, truth = traffic_scene(60.0, conflicts=(("cut_in", 1.0), ("hard_braking", 1.3)), seed=2,
+                               return_truth=True)
+    whole, win = _events_whole_and_windows(tmp_path, rec, window_s)
+    a, b = _derived_events(whole), _derived_events(win)
+    crit = [e for e in b if e["kind"] in ("conflict", "near_miss")]
+    assert sorted(tuple(sorted(e["participant_ids"])) for e in crit) == sorted(
+        tuple(sorted(c["participants"])) for c in truth["conflicts"])
+    for c in truth["conflicts"]:
+        e = next(e for e in crit if set(e["participant_ids"]) == set(c["participants"]))
+        assert abs(e["value"] - c["min_ttc"]) <= max(0.3, 0.2 * c["min_ttc"]), (e, c)
+    # a boundary cuts an encounter (the test is about something)
+    cuts = [k * window_s for k in range(1, int(60 // window_s) + 1)]
+    assert any(e["time_start"] < c < e["time_end"] for e in crit for c in cuts)
+    assert any(e["kind"] == "hard_braking" for e in b)
+    assert len(a) == len(b)
+    for x, y in zip(a, b):
+        for c in EVENT_COLUMNS:
+            if isinstance(x[c], float):
+                assert y[c] == pytest.approx(x[c], rel=1e-9, abs=1e-9), (c, x, y)
+            else:
+                assert y[c] == x[c], (c, x, y)
+        ax, ay = json.loads(x["attributes"]), json.loads(y["attributes"])
+        assert ax.keys() == ay.keys()
+        for k in ax:
+            if k != "cpi":  # of a joined episode: weighted by its pieces' durations
+                _same(ay[k], ax[k], k)
+    sa, sb = (t.derived["criticality_summary"].select(
+        ["participant_id", "near_misses", "conflicts", "hard_braking", "worst_events"])
+        for t in (whole, win))
+    assert sb.equals(sa)
+    assert stale_derived(win) == []
+
+
+def test_no_events_in_noise_by_windows(tmp_path):
+    """Lane-keeping traffic with the worst aerial noise (0.3 m) in 10-s windows: no conflict, no
+    near miss, as deriving at once."""
+    rec = traffic_scene(40.0, method="aerial", position_std=0.3, seed=11)
+    whole, win = _events_whole_and_windows(tmp_path, rec, 10.0)
+    assert [e for e in _derived_events(win) if e["kind"] != "hard_braking"] == []
+    assert len(_derived_events(win)) == len(_derived_events(whole))
+    r = next(r for r in win.derived["criticality_summary"].to_pylist()
+             if r["scope"] == "recording")
+    assert (r["near_misses"], r["conflicts"]) == (0, 0)

@@ -42,6 +42,7 @@ from aveas_format.derive.events._collision import Tracks, collision_probability
 from aveas_format.derive.events._episodes import (
     braking_episodes,
     encounters,
+    join_windows,
     pair_rows,
     pet_episodes,
     threshold_episodes,
@@ -171,10 +172,10 @@ def _step(rec) -> float:
     return 1.0 / float(hz) if hz else 0.0
 
 
-def _pair_events(rec, ttc_thr: float, pet_thr: float, p: EventsParams, st: _States
-                 ) -> list[dict]:
-    """The encounters (TTC, DRAC, PET episodes merged by pair) with their collision
-    probability and kind."""
+def _pair_episodes(rec, ttc_thr: float, pet_thr: float, p: EventsParams, st: _States,
+                   open_at: tuple[float, float] | None = None) -> list[dict]:
+    """The critical episodes of pairs: TTC, DRAC (where ``drac_mps2`` is given) and PET;
+    ``open_at``: of a time window (:func:`window_episodes`)."""
     step = _step(rec)
     eps: list[dict] = []
     it = rec.derived.get("interactions")
@@ -186,7 +187,7 @@ def _pair_events(rec, ttc_thr: float, pet_thr: float, p: EventsParams, st: _Stat
             draws = st.draws(p.evidence_samples, int(st.params.get("seed", 0))) \
                 if rec.states is not None and rec.states.num_rows else None
             prob[cand] = ttc_probability(r, cand, ttc_thr, draws)
-        eps += threshold_episodes(r, "ttc", ttc_thr, prob, p, step)
+        eps += threshold_episodes(r, "ttc", ttc_thr, prob, p, step, open_at)
         if p.drac_mps2 is not None:
             d, sd = r["drac"], np.nan_to_num(r["drac_std"])
             from scipy.special import ndtr
@@ -195,28 +196,47 @@ def _pair_events(rec, ttc_thr: float, pet_thr: float, p: EventsParams, st: _Stat
                 pd_ = np.where(sd > 0, ndtr((d - p.drac_mps2) / sd),
                                (d >= p.drac_mps2).astype(float))
             pd_ = np.where(np.isfinite(d) & (d >= p.drac_mps2), pd_, np.nan)
-            eps += threshold_episodes(r, "drac", p.drac_mps2, pd_, p, step)
+            eps += threshold_episodes(r, "drac", p.drac_mps2, pd_, p, step, open_at)
     en = rec.derived.get("encroachments")
     if en is not None and en.num_rows:
         eps += pet_episodes(en, pet_thr, p)
-    out = encounters(eps, p.encounter_gap_s)
+    return eps
+
+
+def _collision(rec, e: dict, p: EventsParams, st: _States) -> dict | None:
+    """The collision probability of the encounter or episode ``e`` (None: not drawn)."""
+    if not p.collision_samples or rec.states is None or not rec.states.num_rows:
+        return None
+    a, b = e["pair"]
+    t_ref = e["time_extreme"] if e["metric"] != "pet" else max(
+        e["start"] - PET_LEAD_S, max(st.tracks.first_time(a), st.tracks.first_time(b)))
+    return collision_probability(st.tracks, a, b, t_ref, p.collision_horizon_s,
+                                 p.collision_samples, p.seed, p.driver_accel_std_mps2,
+                                 p.driver_accel_length_s)
+
+
+def _classify(e: dict, p: EventsParams) -> dict:
+    """``kind`` of the encounter ``e`` from its ``collision`` probability, which goes into its
+    attributes."""
+    cp = e["collision"]
+    e["kind"] = "near_miss" if cp is not None and cp["p"] >= p.near_miss_probability \
+        else "conflict"
+    if cp is not None:
+        e["attributes"]["collision_probability"] = {
+            "p": cp["p"], "std": cp["std"], "ci95": [cp["low"], cp["high"]],
+            "t_ref": cp["t_ref"], "horizon_s": cp["horizon"],
+            "samples": p.collision_samples, "near_miss_probability": p.near_miss_probability}
+    return e
+
+
+def _pair_events(rec, ttc_thr: float, pet_thr: float, p: EventsParams, st: _States
+                 ) -> list[dict]:
+    """The encounters (TTC, DRAC, PET episodes merged by pair) with their collision
+    probability and kind."""
+    out = encounters(_pair_episodes(rec, ttc_thr, pet_thr, p, st), p.encounter_gap_s)
     for e in out:
-        cp = None
-        if p.collision_samples and rec.states is not None and rec.states.num_rows:
-            a, b = e["pair"]
-            t_ref = e["time_extreme"] if e["metric"] != "pet" else max(
-                e["start"] - PET_LEAD_S, max(st.tracks.first_time(a), st.tracks.first_time(b)))
-            cp = collision_probability(st.tracks, a, b, t_ref, p.collision_horizon_s,
-                                       p.collision_samples, p.seed, p.driver_accel_std_mps2,
-                                       p.driver_accel_length_s)
-        e["collision"] = cp
-        e["kind"] = "near_miss" if cp is not None and cp["p"] >= p.near_miss_probability \
-            else "conflict"
-        if cp is not None:
-            e["attributes"]["collision_probability"] = {
-                "p": cp["p"], "std": cp["std"], "ci95": [cp["low"], cp["high"]],
-                "t_ref": cp["t_ref"], "horizon_s": cp["horizon"],
-                "samples": p.collision_samples, "near_miss_probability": p.near_miss_probability}
+        e["collision"] = _collision(rec, e, p, st)
+        _classify(e, p)
     return out
 
 
@@ -230,10 +250,58 @@ def compute(rec, p: EventsParams) -> pa.Table:
         for e in braking_episodes(k, p, _step(rec)):
             e["kind"], e["collision"] = "hard_braking", None
             new.append(e)
+    return with_kept(new, rec.events)
+
+
+def window_episodes(rec, p: EventsParams, core: tuple[float, float]) -> list[dict]:
+    """The critical episodes of the time window ``core`` = ``[t0, t1)`` of a longer recording
+    (derive.streamed): ``rec`` holds the window's interactions, its kinematics from ``t0`` on and
+    the states from ``t0`` on (the collision probabilities follow the tracks beyond ``t1``).
+    Episodes that may go on in the next or previous window are kept whatever their length
+    (``open``). Each episode that can be an encounter's extreme once the windows are joined (the
+    extreme of its encounter in the window, or open) carries its ``collision`` probability: it
+    is keyed by pair and time, so it is the one deriving at once draws. :func:`from_windows`
+    makes the events of all windows."""
+    ttc_thr, pet_thr = thresholds(rec, p)
+    st = _States(rec)
+    eps = _pair_episodes(rec, ttc_thr, pet_thr, p, st, open_at=core)
+    main = {id(next(e for e in eps if e["pair"] == m["pair"]
+                    and e["time_extreme"] == m["time_extreme"] and e["metric"] == m["metric"]))
+            for m in encounters(eps, p.encounter_gap_s)}
+    for e in eps:
+        e["collision"] = _collision(rec, e, p, st) if e["open"] or id(e) in main else None
+    k = rec.derived.get("kinematics")
+    if k is not None and k.num_rows:
+        tk = k.column("time")
+        k = k.filter(pc.and_(pc.greater_equal(tk, core[0]), pc.less(tk, core[1])))
+        for e in braking_episodes(k, p, _step(rec), open_at=core):
+            e["collision"] = None
+            eps.append(e)
+    return eps
+
+
+def from_windows(rec, episodes: list[dict], p: EventsParams) -> pa.Table:
+    """The events table of ``rec`` (its metadata and events: the non-derived ones are kept) from
+    the :func:`window_episodes` of all its windows: the pieces of an episode cut by a window
+    boundary joined (:func:`join_windows`), the pairs' episodes merged into encounters and
+    classified as :func:`compute` does."""
+    eps = join_windows(episodes, p, _step(rec))
+    new = encounters([e for e in eps if e["metric"] != "a_lon"], p.encounter_gap_s)
+    for e in new:
+        _classify(e, p)
+    for e in eps:
+        if e["metric"] == "a_lon":
+            e["kind"] = "hard_braking"
+            new.append(e)
+    return with_kept(new, rec.events)
+
+
+def with_kept(new: list[dict], old: pa.Table | None) -> pa.Table:
+    """The events table of the derived events ``new`` (dicts with ``kind``) after the
+    non-derived events of ``old`` (numbered on from its largest ``event_id``)."""
     for e in new:
         e["attributes"]["method"] = f"derive.events {VERSION}"
     new.sort(key=lambda e: (e["start"], e["pair"]))
-    old = rec.events
     keep = None
     start_id = 0
     if old is not None and old.num_rows:

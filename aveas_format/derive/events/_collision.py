@@ -135,6 +135,16 @@ def collision_probability(tracks: Tracks, a: int, b: int, t_ref: float, horizon:
     """The collision probability of participants ``a`` and ``b`` from ``t_ref`` on (module
     docstring): ``{"p", "std", "low", "high", "t_ref", "horizon"}``, None where the two are not
     both observed at two or more common times in the window."""
+    # the matrices are small (one row per time step of the horizon): BLAS's threads would only
+    # oversubscribe the cores (docs/architecture.md "Dependencies and why")
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1):
+        return _probability(tracks, a, b, t_ref, horizon, samples, seed, driver_std, length_s)
+
+
+def _probability(tracks: Tracks, a: int, b: int, t_ref: float, horizon: float, samples: int,
+                 seed: int, driver_std: float, length_s: float) -> dict[str, float] | None:
     S = tracks.S
     ra = tracks.rows(a, t_ref, t_ref + horizon)
     rb = tracks.rows(b, t_ref, t_ref + horizon)

@@ -126,12 +126,21 @@ def _surrogates_of(r: dict[str, np.ndarray], rows: np.ndarray, p: EventsParams) 
     return out
 
 
+def _open(start: float, end: float, gap: float, open_at: tuple[float, float] | None) -> bool:
+    """Whether an episode of a time window ``open_at`` = ``(t0, t1)`` may go on in the window
+    before or after (its first or last step within ``gap`` of the window's edge)."""
+    return open_at is not None and (start - gap < open_at[0] or end + gap >= open_at[1])
+
+
 def threshold_episodes(r: dict[str, np.ndarray], metric: str, thr: float, prob: np.ndarray,
-                       p: EventsParams, step: float) -> list[dict]:
+                       p: EventsParams, step: float,
+                       open_at: tuple[float, float] | None = None) -> list[dict]:
     """Episodes of one metric (``ttc``: ``<= thr``; ``drac``: ``>= thr``) from the pair rows with
     ``prob`` (the probability of being beyond the threshold, NaN: not a candidate) at least
     ``p.evidence``, lasting at least ``p.persistence_s`` (``step``: the sampling interval one
-    step stands for)."""
+    step stands for). ``open_at``: the rows are the time window ``(t0, t1)`` of a longer
+    recording; an episode that may go on beyond it is kept whatever its length, marked
+    ``open`` (:func:`join_windows` joins and checks it)."""
     v = r[metric]
     m = np.isfinite(prob) & (prob >= p.evidence)
     if not m.any():
@@ -146,7 +155,8 @@ def threshold_episodes(r: dict[str, np.ndarray], metric: str, thr: float, prob: 
     for e in np.unique(ep):
         rr = rows[ep == e]
         duration = float(t[rr].max() - t[rr].min()) + step
-        if duration < p.persistence_s - 1e-9:
+        is_open = _open(float(t[rr].min()), float(t[rr].max()), p.merge_gap_s, open_at)
+        if duration < p.persistence_s - 1e-9 and not is_open:
             continue
         k = rr[np.argmin(v[rr])] if metric == "ttc" else rr[np.argmax(v[rr])]
         sd = _num(r[f"{metric}_std"][k])
@@ -160,7 +170,8 @@ def threshold_episodes(r: dict[str, np.ndarray], metric: str, thr: float, prob: 
                     "relation": str(r["rel"][k]), "start": float(t[rr].min()),
                     "end": float(t[rr].max()), "duration": duration, "value": float(v[k]),
                     "std": sd, "time_extreme": float(t[k]),
-                    "confidence": float(np.max(prob[rr])), "attributes": attrs})
+                    "confidence": float(np.max(prob[rr])), "attributes": attrs,
+                    "open": is_open})
     return out
 
 
@@ -193,9 +204,11 @@ def pet_episodes(en: pa.Table, thr: float, p: EventsParams) -> list[dict]:
     return out
 
 
-def braking_episodes(k: pa.Table, p: EventsParams, step: float) -> list[dict]:
+def braking_episodes(k: pa.Table, p: EventsParams, step: float,
+                     open_at: tuple[float, float] | None = None) -> list[dict]:
     """Hard braking: episodes of at least ``min_duration_s`` with ``P(a_lon <= threshold) >=
-    evidence`` (normal approximation with ``a_lon_std``)."""
+    evidence`` (normal approximation with ``a_lon_std``); ``open_at`` as in
+    :func:`threshold_episodes`."""
     pid = k.column("participant_id").to_numpy()
     t, a, sd = (column_numpy(k, c, missing=np.nan) for c in ("time", "a_lon", "a_lon_std"))
     s = np.nan_to_num(sd)
@@ -210,7 +223,8 @@ def braking_episodes(k: pa.Table, p: EventsParams, step: float) -> list[dict]:
     out = []
     for e in np.unique(ep):
         r = rows[ep == e]
-        if t[r].max() - t[r].min() < p.min_duration_s:
+        is_open = _open(float(t[r].min()), float(t[r].max()), p.merge_gap_s, open_at)
+        if t[r].max() - t[r].min() < p.min_duration_s and not is_open:
             continue
         j = r[np.argmin(a[r])]
         sj = _num(sd[j])
@@ -220,8 +234,64 @@ def braking_episodes(k: pa.Table, p: EventsParams, step: float) -> list[dict]:
                     "std": sj, "time_extreme": float(t[j]), "confidence": float(prob[r].max()),
                     "attributes": {"metric": "a_lon", "threshold_mps2": thr,
                                    "min_value_mps2": float(a[j]), "min_value_std_mps2": sj,
-                                   "time_of_min": float(t[j]), "evidence": p.evidence}})
+                                   "time_of_min": float(t[j]), "evidence": p.evidence},
+                    "open": is_open})
     return out
+
+
+def _pair_of(e: dict) -> tuple[int, ...]:
+    return tuple(sorted(e["pair"]))
+
+
+def join_windows(episodes: list[dict], p: EventsParams, step: float) -> list[dict]:
+    """The episodes of a recording from those of its disjoint time windows
+    (:func:`threshold_episodes`, :func:`braking_episodes` with ``open_at``): the pieces of one
+    pair's (or participant's) episode of one metric cut by window boundaries — consecutive
+    critical steps at most ``merge_gap_s`` apart across the boundary — are one episode again
+    (start of the first, end of the last, the duration from them as for an uncut episode, the
+    extreme and its attributes of the more extreme piece, the largest confidence, the other
+    surrogates' extremes over both, CPI weighted by duration); then the persistence rules
+    (``persistence_s``; ``min_duration_s`` of hard braking) apply to the whole episode. Keys other
+    than the episode's own (a precomputed ``collision``) come with the extreme."""
+    def worse(e: dict, f: dict) -> bool:
+        return e["value"] > f["value"] if e["metric"] == "drac" else e["value"] < f["value"]
+
+    out: list[dict] = []
+    for e in sorted(episodes, key=lambda e: (e["metric"], _pair_of(e), e["start"])):
+        last = out[-1] if out else None
+        if (last is not None and last["metric"] == e["metric"] and _pair_of(last) == _pair_of(e)
+                and 0 < e["start"] - last["end"] <= p.merge_gap_s):
+            out[-1] = _join(last, e, worse(e, last), step)
+        else:
+            out.append(dict(e))
+    kept = []
+    for e in out:
+        e.pop("open", None)
+        if e["metric"] == "a_lon":
+            if e["end"] - e["start"] < p.min_duration_s:
+                continue
+        elif e["duration"] < p.persistence_s - 1e-9:
+            continue
+        kept.append(e)
+    return kept
+
+
+def _join(a: dict, b: dict, b_worse: bool, step: float) -> dict:
+    """Episode ``a`` and its continuation ``b`` in the next window as one (:func:`join_windows`)."""
+    main, other = (b, a) if b_worse else (a, b)
+    attrs = dict(main["attributes"])
+    oa = other["attributes"]
+    for k, largest in (("max_drac", True), ("max_mdrac", True), ("min_psd", False)):
+        if oa.get(k) is not None and (attrs.get(k) is None or (
+                oa[k] > attrs[k] if largest else oa[k] < attrs[k])):
+            attrs[k], attrs[f"{k}_std"] = oa[k], oa.get(f"{k}_std")
+    if "cpi" in attrs or "cpi" in oa:
+        w = [(e["attributes"].get("cpi"), e["duration"]) for e in (a, b)]
+        w = [(c, d) for c, d in w if c is not None]
+        attrs["cpi"] = sum(c * d for c, d in w) / sum(d for _, d in w) if w else None
+    return {**main, "start": a["start"], "end": b["end"],
+            "duration": float(b["end"] - a["start"]) + step,
+            "confidence": max(a["confidence"], b["confidence"]), "attributes": attrs}
 
 
 def encounters(episodes: list[dict], gap: float) -> list[dict]:
@@ -280,5 +350,5 @@ def wilson(hits: np.ndarray, n: int, z: float = 1.96) -> tuple[np.ndarray, np.nd
     return np.maximum(mid - half, 0.0), np.minimum(mid + half, 1.0)
 
 
-__all__ = ["METRIC_ORDER", "braking_episodes", "encounters", "pair_key", "pair_rows",
-           "pet_episodes", "threshold_episodes", "ttc_probability", "wilson"]
+__all__ = ["METRIC_ORDER", "braking_episodes", "encounters", "join_windows", "pair_key",
+           "pair_rows", "pet_episodes", "threshold_episodes", "ttc_probability", "wilson"]
