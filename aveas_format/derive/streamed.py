@@ -291,7 +291,6 @@ def merge_summaries(parts: list[pa.Table], events: pa.Table | None = None) -> pa
                         "min_ttc_other_id"]
                     m["min_ttc_kind"] = r["min_ttc_kind"]
     ids = np.array(sorted(by), np.int64)
-    n = len(ids)
 
     def col(k, default=np.nan):
         return np.array([by[i].get(k) if by[i].get(k) is not None else default for i in ids],
@@ -564,10 +563,10 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
         (tmp / "recording.json").write_text(meta.to_json())
         if path.name.endswith(".zip"):
             z = parent / f".{path.name}.zip-{uuid.uuid4().hex[:8]}"
-            names = sorted((q.relative_to(tmp).as_posix() for q in tmp.rglob("*") if q.is_file()),
+            files = sorted((q.relative_to(tmp).as_posix() for q in tmp.rglob("*") if q.is_file()),
                            key=lambda n: n != "recording.json")
             with zipfile.ZipFile(z, "w", compression=zipfile.ZIP_STORED) as zf:
-                for n in names:
+                for n in files:
                     zi = zipfile.ZipInfo(n, date_time=(1980, 1, 1, 0, 0, 0))
                     big = (tmp / n).stat().st_size >= 1 << 31
                     with open(tmp / n, "rb") as f, zf.open(zi, "w", force_zip64=big) as g:
