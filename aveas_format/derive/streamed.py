@@ -436,6 +436,7 @@ def _assemble(parts: Path, spec, dest: Path, provenance: bytes) -> tuple[int, st
 
     from aveas_format.derive.registry import DERIVED_KEY, empty_table
     from aveas_format.io.writer import ROW_GROUP_ROWS, parquet_options, prepare_table
+    from aveas_format.parallel import read_ahead
 
     files = sorted(parts.glob("part-*.parquet")) if parts.is_dir() else []
     dest.parent.mkdir(parents=True, exist_ok=True)
@@ -450,22 +451,25 @@ def _assemble(parts: Path, spec, dest: Path, provenance: bytes) -> tuple[int, st
         ids = data.to_table(columns=["participant_id", "other_id"])
         a, b = (ids.column(c).to_numpy() for c in ("participant_id", "other_id"))
         pairs = np.unique(np.minimum(a, b) * (1 << 32) + np.maximum(a, b))
+
+    def load(rng: tuple[int, int] | None) -> pa.Table:
+        if rng is None:
+            t = data.to_table() if data is not None else empty_table(spec.name)
+        else:
+            f = pc.field("participant_id")
+            t = data.to_table(filter=(f >= rng[0]) & (f <= rng[1]))
+        if pairs is not None and t.num_rows:
+            a, b = (t.column(c).to_numpy() for c in ("participant_id", "other_id"))
+            cid = np.searchsorted(pairs, np.minimum(a, b) * (1 << 32) + np.maximum(a, b))
+            t = t.set_column(t.schema.get_field_index("conflict_id"), "conflict_id",
+                             pa.array(cid.astype(np.int64)))
+        return prepare_table(t, spec)
+
     try:
-        pieces = _pid_ranges(data, ASSEMBLE_ROWS) if data is not None else []
-        if not pieces:
-            pieces = [None]
-        for rng in pieces:
-            if rng is None:
-                t = data.to_table() if data is not None else empty_table(spec.name)
-            else:
-                f = pc.field("participant_id")
-                t = data.to_table(filter=(f >= rng[0]) & (f <= rng[1]))
-            if pairs is not None and t.num_rows:
-                a, b = (t.column(c).to_numpy() for c in ("participant_id", "other_id"))
-                cid = np.searchsorted(pairs, np.minimum(a, b) * (1 << 32) + np.maximum(a, b))
-                t = t.set_column(t.schema.get_field_index("conflict_id"), "conflict_id",
-                                 pa.array(cid.astype(np.int64)))
-            t = prepare_table(t, spec)
+        pieces = (_pid_ranges(data, ASSEMBLE_ROWS) if data is not None else []) or [None]
+        # the next range read and sorted while this one is encoded and written (both release
+        # the GIL: the assembly, serial after the windows, on two cores)
+        for t in read_ahead(load, pieces):
             if writer is None:
                 schema, options = parquet_options(t.schema.with_metadata(
                     {**(t.schema.metadata or {}), DERIVED_KEY: provenance}), spec)
