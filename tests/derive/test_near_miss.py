@@ -13,6 +13,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from aveas_format.derive import derive
 from aveas_format.derive.events import EventsParams
@@ -205,3 +207,31 @@ def test_events_table_keeps_its_contract(tmp_path):
     report = aveas_format.validate(back.path)
     assert report.counts["error"] == 0, [r for r in report.results if r.severity.value == "error"]
     assert isinstance(ev.column("participant_ids").type, pa.ListType)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), spread=st.floats(0.5, 30.0))
+def test_the_contact_prefilter_keeps_every_contact(seed, spread):
+    """The collision probability's contacts are the exact box test's on every step: the disc
+    prefilter only skips steps where the footprints cannot meet (random draws, near and far,
+    touching and overlapping)."""
+    from aveas_format.derive.events._collision import _first_contacts
+    from aveas_format.derive.interactions import ttc_boxes
+
+    rng = np.random.default_rng(seed)
+    K, M = 64, 30
+    dt = np.full((1, M - 1), 0.04)
+
+    def draws():
+        x = rng.normal(0, spread, (K, 1)) + np.cumsum(rng.normal(0, 1.5, (K, M)), axis=1)
+        y = rng.normal(0, spread / 4, (K, 1)) + np.cumsum(rng.normal(0, 0.5, (K, M)), axis=1)
+        h = rng.uniform(-np.pi, np.pi, (K, 1)) + np.cumsum(rng.normal(0, 0.05, (K, M)), axis=1)
+        return x, y, h, rng.uniform(1, 12, (K, 1)), rng.uniform(0.5, 2.6, (K, 1))
+
+    (xa, ya, ha, La, Wa), (xb, yb, hb, Lb, Wb) = draws(), draws()
+    first = ttc_boxes(xa[:, :-1], ya[:, :-1], ha[:, :-1], La, Wa, np.diff(xa, axis=1) / dt,
+                      np.diff(ya, axis=1) / dt, xb[:, :-1], yb[:, :-1], hb[:, :-1], Lb, Wb,
+                      np.diff(xb, axis=1) / dt, np.diff(yb, axis=1) / dt)
+    want = (first <= dt).any(axis=1)
+    got = _first_contacts(xa, ya, ha, La, Wa, xb, yb, hb, Lb, Wb, dt)
+    np.testing.assert_array_equal(got, want)

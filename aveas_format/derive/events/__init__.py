@@ -38,7 +38,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 from pydantic import Field
 
-from aveas_format.derive.events._collision import Tracks, collision_probability
+from aveas_format.derive.events._collision import Tracks, collision_probability, one_blas_thread
 from aveas_format.derive.events._episodes import (
     braking_episodes,
     encounters,
@@ -234,9 +234,10 @@ def _pair_events(rec, ttc_thr: float, pet_thr: float, p: EventsParams, st: _Stat
     """The encounters (TTC, DRAC, PET episodes merged by pair) with their collision
     probability and kind."""
     out = encounters(_pair_episodes(rec, ttc_thr, pet_thr, p, st), p.encounter_gap_s)
-    for e in out:
-        e["collision"] = _collision(rec, e, p, st)
-        _classify(e, p)
+    with one_blas_thread():
+        for e in out:
+            e["collision"] = _collision(rec, e, p, st)
+            _classify(e, p)
     return out
 
 
@@ -268,8 +269,9 @@ def window_episodes(rec, p: EventsParams, core: tuple[float, float]) -> list[dic
     main = {id(next(e for e in eps if e["pair"] == m["pair"]
                     and e["time_extreme"] == m["time_extreme"] and e["metric"] == m["metric"]))
             for m in encounters(eps, p.encounter_gap_s)}
-    for e in eps:
-        e["collision"] = _collision(rec, e, p, st) if e["open"] or id(e) in main else None
+    with one_blas_thread():
+        for e in eps:
+            e["collision"] = _collision(rec, e, p, st) if e["open"] or id(e) in main else None
     k = rec.derived.get("kinematics")
     if k is not None and k.num_rows:
         tk = k.column("time")

@@ -134,13 +134,38 @@ def collision_probability(tracks: Tracks, a: int, b: int, t_ref: float, horizon:
                           length_s: float = 1.4) -> dict[str, float] | None:
     """The collision probability of participants ``a`` and ``b`` from ``t_ref`` on (module
     docstring): ``{"p", "std", "low", "high", "t_ref", "horizon"}``, None where the two are not
-    both observed at two or more common times in the window."""
-    # the matrices are small (one row per time step of the horizon): BLAS's threads would only
-    # oversubscribe the cores (docs/architecture.md "Dependencies and why")
+    both observed at two or more common times in the window. Its matrices are small (one row
+    per time step of the horizon): callers of many run them within :func:`one_blas_thread`."""
+    return _probability(tracks, a, b, t_ref, horizon, samples, seed, driver_std, length_s)
+
+
+def one_blas_thread():
+    """A context in which BLAS runs on one thread: the collision probabilities' small matrices
+    would only oversubscribe the cores with BLAS's threads (docs/architecture.md "Dependencies
+    and why"); entered once per batch of encounters (entering it costs ~2 ms)."""
     from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(1):
-        return _probability(tracks, a, b, t_ref, horizon, samples, seed, driver_std, length_s)
+    return threadpool_limits(1)
+
+
+def _first_contacts(xa, ya, ha, La, Wa, xb, yb, hb, Lb, Wb, dt) -> np.ndarray:
+    """The draws (``(K, M)`` positions and headings, ``(K, 1)`` sizes) whose footprints touch
+    between consecutive samples (constant velocity within a step): a boolean ``(K,)``. The exact
+    box test (:func:`~aveas_format.derive.interactions.ttc_boxes`) runs only where the two discs
+    around the footprints (radius half the diagonal) can meet within the step — the centres'
+    distance less their relative displacement within reach — a necessary condition, so the
+    result is the test's on every step."""
+    vax, vay = np.diff(xa, axis=1) / dt, np.diff(ya, axis=1) / dt
+    vbx, vby = np.diff(xb, axis=1) / dt, np.diff(yb, axis=1) / dt
+    reach = 0.5 * (np.hypot(La, Wa) + np.hypot(Lb, Wb)) + 1e-6
+    near = (np.hypot(xb[:, :-1] - xa[:, :-1], yb[:, :-1] - ya[:, :-1])
+            - np.hypot(vbx - vax, vby - vay) * dt) <= reach
+    k, m = np.nonzero(near)
+    first = ttc_boxes(xa[k, m], ya[k, m], ha[k, m], La[k, 0], Wa[k, 0], vax[k, m], vay[k, m],
+                      xb[k, m], yb[k, m], hb[k, m], Lb[k, 0], Wb[k, 0], vbx[k, m], vby[k, m])
+    hit = np.zeros(len(xa), bool)
+    hit[k[first <= dt[0, m]]] = True
+    return hit
 
 
 def _probability(tracks: Tracks, a: int, b: int, t_ref: float, horizon: float, samples: int,
@@ -163,12 +188,8 @@ def _probability(tracks: Tracks, a: int, b: int, t_ref: float, horizon: float, s
         var.append(_vary(_path(S, tracks.rows(p, t_ref, t_ref + horizon), times), times,
                          z.reshape(n, samples), F, driver_std))
     (xa, ya, ha, La, Wa), (xb, yb, hb, Lb, Wb) = var
-    dt = np.diff(times)[None, :]
-    first = ttc_boxes(xa[:, :-1], ya[:, :-1], ha[:, :-1], La, Wa,
-                      (xa[:, 1:] - xa[:, :-1]) / dt, (ya[:, 1:] - ya[:, :-1]) / dt,
-                      xb[:, :-1], yb[:, :-1], hb[:, :-1], Lb, Wb,
-                      (xb[:, 1:] - xb[:, :-1]) / dt, (yb[:, 1:] - yb[:, :-1]) / dt)
-    hits = float((first <= dt).any(axis=1).sum())
+    hits = float(_first_contacts(xa, ya, ha, La, Wa, xb, yb, hb, Lb, Wb,
+                                 np.diff(times)[None, :]).sum())
     pt = (hits + 2.0) / (samples + 4.0)  # Agresti-Coull
     lo, hi = wilson(np.array(hits), samples)
     return {"p": hits / samples, "std": float(np.sqrt(pt * (1 - pt) / (samples + 4.0))),
@@ -176,4 +197,4 @@ def _probability(tracks: Tracks, a: int, b: int, t_ref: float, horizon: float, s
             "horizon": float(times[-1] - times[0])}
 
 
-__all__ = ["V_STOP", "Tracks", "collision_probability"]
+__all__ = ["V_STOP", "Tracks", "collision_probability", "one_blas_thread"]
