@@ -23,7 +23,8 @@ Three steps, each a subcommand (``python tools/compare_conversions.py STEP ...``
 Example (the baseline worktree against this one)::
 
     python tools/compare_conversions.py capture /tmp/corpus
-    python tools/compare_conversions.py run /work/wt/base /tmp/corpus /tmp/out-base
+    git worktree add ../base BASE_COMMIT
+    python tools/compare_conversions.py run ../base /tmp/corpus /tmp/out-base
     python tools/compare_conversions.py run . /tmp/corpus /tmp/out-new
     python tools/compare_conversions.py compare /tmp/out-base /tmp/out-new
 """
