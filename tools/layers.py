@@ -159,13 +159,18 @@ def violations(edges: list[Edge] | None = None) -> list[str]:
     return out
 
 
+def _graph(pairs) -> dict[str, set[str]]:
+    """node -> the nodes it imports, from ``(importer, imported)`` pairs (self-imports left out)."""
+    g: dict[str, set[str]] = defaultdict(set)
+    for a, b in pairs:
+        if a != b:
+            g[a].add(b)
+    return g
+
+
 def unit_graph(edges: list[Edge] | None = None) -> dict[str, set[str]]:
     """unit -> the units it imports (self-imports left out)."""
-    g: dict[str, set[str]] = defaultdict(set)
-    for e in edges if edges is not None else imports():
-        if e.src_unit != e.dst_unit:
-            g[e.src_unit].add(e.dst_unit)
-    return g
+    return _graph((e.src_unit, e.dst_unit) for e in (edges if edges is not None else imports()))
 
 
 def markdown_table(edges: list[Edge] | None = None) -> str:
@@ -296,11 +301,8 @@ def runtime_imports(package: Path = PACKAGE) -> list[Edge]:
 
 def module_graph(edges: list[Edge] | None = None) -> dict[str, set[str]]:
     """module -> the modules it imports (:func:`runtime_imports`)."""
-    g: dict[str, set[str]] = defaultdict(set)
-    for e in edges if edges is not None else runtime_imports():
-        if e.target != e.module:
-            g[e.module].add(e.target)
-    return g
+    return _graph((e.module, e.target) for e in (edges if edges is not None
+                                                 else runtime_imports()))
 
 
 def cycles(g: dict[str, set[str]]) -> list[list[str]]:

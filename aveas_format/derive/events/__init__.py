@@ -445,6 +445,14 @@ def format_probability(p, std) -> str:
     return f"{p:.2f}" + (f" ± {std:.2f}" if std is not None else "")
 
 
+def _min_row(table: pa.Table, col: str) -> dict | None:
+    """The row of ``table`` with the smallest finite ``col`` (None: it has none)."""
+    v = column_numpy(table, col, missing=np.nan)
+    if not np.isfinite(v).any():
+        return None
+    return table.slice(int(np.nanargmin(np.where(np.isfinite(v), v, np.nan))), 1).to_pylist()[0]
+
+
 def criticality_summary(rec) -> dict:
     """Per-recording criticality facts for ``aveas-format info``: minimum TTC (with the pair, time
     and kind), minimum PET, counts of derived near misses (by metric) and hard-braking events, the
@@ -458,20 +466,16 @@ def criticality_summary(rec) -> dict:
     out["thresholds"] = th.model_dump(exclude_none=True) if th is not None else {}
     it = rec.derived.get("interactions")
     if it is not None and it.num_rows:
-        ttc = column_numpy(it, "ttc", missing=np.nan)
-        if np.isfinite(ttc).any():
-            k = int(np.nanargmin(np.where(np.isfinite(ttc), ttc, np.nan)))
-            row = it.slice(k, 1).to_pylist()[0]
+        row = _min_row(it, "ttc")
+        if row is not None:
             out["min_ttc_s"] = {"value": row["ttc"], "std": row.get("ttc_std"),
                                 "participant_id": row["participant_id"],
                                 "other_id": row["other_id"], "time": row["time"],
                                 "relation": str(row["relation"]), "kind": row.get("ttc_kind")}
     en = rec.derived.get("encroachments")
     if en is not None and en.num_rows:
-        pet = column_numpy(en, "pet", missing=np.nan)
-        if np.isfinite(pet).any():
-            k = int(np.nanargmin(np.where(np.isfinite(pet), pet, np.nan)))
-            row = en.slice(k, 1).to_pylist()[0]
+        row = _min_row(en, "pet")
+        if row is not None:
             out["min_pet_s"] = {"value": row["pet"], "std": row.get("pet_std"),
                                 "first_id": row["first_id"], "second_id": row["second_id"],
                                 "time": row["time_first_exit"]}
