@@ -185,10 +185,13 @@ def criticality_section(rec: Any, *, participants: int = 5, events: int = 10,
             except Exception:  # noqa: BLE001 — a figure is a bonus of the report
                 continue
             b64 = base64.b64encode(png_bytes(fig)).decode("ascii")
-            cap = event_caption(r)
-            out.append(f'<figure id="event-{r["event_id"]}"><img alt="{html.escape(cap)}" '
-                       f'src="data:image/png;base64,{b64}"><figcaption>{html.escape(cap)}'
-                       "</figcaption></figure>")
+            # the figure's title names the event; the caption says how to read it
+            alt = html.escape(event_caption(r))
+            out.append(f'<figure id="event-{r["event_id"]}"><img alt="{alt}" '
+                       f'src="data:image/png;base64,{b64}"><figcaption>Event {r["event_id"]}: '
+                       "the two paths on the map (thick while critical, footprints at the "
+                       "event's extreme) and their TTC and DRAC over time, ± 1 std shaded; grey: "
+                       "the time the event was critical</figcaption></figure>")
     return "\n".join(out)
 
 
