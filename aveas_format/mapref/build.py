@@ -19,13 +19,14 @@ import numpy as np
 import pyarrow as pa
 from pydantic import ValidationError
 
-from aveas_format.errors import FormatError, MissingCrsError, RecordingIOError
+from aveas_format.errors import FormatError, MissingCrsError
 from aveas_format.io.arrow import conform
 from aveas_format.io.container import sha256_of
 from aveas_format.io.recording import Recording
 from aveas_format.io.writer import opendrive_version, prepare_table
 from aveas_format.schema.enums import AcquisitionMethod, Provenance, RecordingProvenance, Role
 from aveas_format.schema.metadata import RecordingMeta
+from aveas_format.safeio import xml_source
 from aveas_format.schema.tables import TABLES
 from aveas_format.crs import LocalFrame
 from aveas_format.mapref.roads import road_coordinates
@@ -58,17 +59,7 @@ def _array(v: Any) -> pa.Array:
 
 def load_map_bytes(source: str | bytes | Path) -> bytes:
     """The bytes of a map given as a path, XML text or bytes."""
-    if isinstance(source, (bytes, bytearray, memoryview)):
-        return bytes(source)
-    if isinstance(source, str) and source.lstrip().startswith("<"):
-        return source.encode("utf-8")
-    path = Path(source)
-    try:
-        return path.read_bytes()
-    except FileNotFoundError:
-        raise RecordingIOError("map file not found", path=path) from None
-    except OSError as e:
-        raise RecordingIOError(f"cannot read map: {e.strerror or e}", path=path) from None
+    return xml_source(source)[0]
 
 
 #: an example CRS for maps without ``<geoReference>``: a transverse Mercator at the site

@@ -10,16 +10,14 @@ naming the file and the XML line (lxml keeps ``sourceline`` for every element).
 from __future__ import annotations
 
 import math
-import os
 import re
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from lxml import etree
 
-from ..errors import MapError, RecordingIOError
-from aveas_format.safeio import xml_parser
+from ..errors import MapError
+from aveas_format.safeio import xml_parser, xml_source
 from .model import (
     Connection,
     Geometry,
@@ -94,23 +92,6 @@ class _Ctx:
                 raise self.error(f"<{el.tag}> lacks the required attribute {name!r}", el)
             return default
         return raw.strip()
-
-
-def _read_source(source: Any) -> tuple[bytes, str | None]:
-    """Bytes of the map and a name for messages; ``source`` is a path, bytes or XML text."""
-    if isinstance(source, (bytes, bytearray, memoryview)):
-        return bytes(source), None
-    if isinstance(source, str) and source.lstrip().startswith("<"):
-        return source.encode("utf-8"), None
-    if isinstance(source, (str, os.PathLike)):
-        path = Path(source)
-        try:
-            return path.read_bytes(), str(path)
-        except FileNotFoundError:
-            raise RecordingIOError("map file not found", path=path) from None
-        except OSError as exc:
-            raise RecordingIOError(f"cannot read map: {exc.strerror or exc}", path=path) from None
-    raise TypeError(f"load_map() expects a path, bytes or XML text, not {type(source).__name__}")
 
 
 def _parse_xml(data: bytes, ctx: _Ctx) -> Any:
@@ -432,7 +413,7 @@ def parse(source: Any) -> tuple[Header, dict[str, Road], dict[str, Junction], st
 
     ``source`` is a path, bytes, or XML text (a ``str`` starting with ``<``).
     """
-    data, path = _read_source(source)
+    data, path = xml_source(source)
     ctx = _Ctx(path)
     root = _parse_xml(data, ctx)
     _strip_ns(root)

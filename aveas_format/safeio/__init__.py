@@ -38,6 +38,7 @@ from aveas_format.safeio.readers import (
     scan_json_member,
     stream_json_error,
     xml_parser,
+    xml_source,
 )
 
 __all__ = [
@@ -46,5 +47,5 @@ __all__ = [
     "CountingReader",
     "check_json_size", "check_mcap", "check_zip_member", "iterparse", "load_json",
     "save_figure_atomic", "scan_json_member", "stream_json_error", "write_bytes_atomic", "write_chunks_atomic",
-    "write_parquet_atomic", "write_text_atomic", "xml_parser",
+    "write_parquet_atomic", "write_text_atomic", "xml_parser", "xml_source",
 ]

@@ -12,8 +12,9 @@ names, bounded decompressed size and ratio).
 from __future__ import annotations
 
 import json
+import os
 import zipfile
-from pathlib import PurePosixPath
+from pathlib import Path, PurePosixPath
 from typing import IO, Any
 
 from lxml import etree
@@ -40,6 +41,25 @@ def xml_parser(*, remove_comments: bool = True, **kw: Any) -> etree.XMLParser:
     return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
                            dtd_validation=False, huge_tree=False, remove_comments=remove_comments,
                            remove_pis=True, **kw)
+
+
+def xml_source(source: Any, what: str = "map") -> tuple[bytes, str | None]:
+    """The bytes of an XML document given as a path, bytes or XML text, and its path for messages
+    (None unless read from a file); a missing or unreadable file is a :class:`RecordingIOError`
+    naming it (``what`` in the message: ``map file not found``)."""
+    if isinstance(source, (bytes, bytearray, memoryview)):
+        return bytes(source), None
+    if isinstance(source, str) and source.lstrip().startswith("<"):
+        return source.encode("utf-8"), None
+    if isinstance(source, (str, os.PathLike)):
+        path = Path(source)
+        try:
+            return path.read_bytes(), str(path)
+        except FileNotFoundError:
+            raise RecordingIOError(f"{what} file not found", path=path) from None
+        except OSError as e:
+            raise RecordingIOError(f"cannot read {what}: {e.strerror or e}", path=path) from None
+    raise TypeError(f"expected a path, bytes or XML text, not {type(source).__name__}")
 
 
 def iterparse(source: str | IO[bytes], **kw: Any) -> etree.iterparse:

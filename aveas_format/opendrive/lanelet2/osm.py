@@ -19,16 +19,14 @@ Malformed files raise :class:`~aveas_format.errors.MapError` naming the file and
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from lxml import etree
 
-from aveas_format.errors import MapError, RecordingIOError
-from aveas_format.safeio import xml_parser
+from aveas_format.errors import MapError
+from aveas_format.safeio import xml_parser, xml_source
 
 
 @dataclass
@@ -79,22 +77,6 @@ class OsmMap:
                            path=self.path or "<osm>", line=way.line) from None
 
 
-def _read(source: Any) -> tuple[bytes, str | None]:
-    if isinstance(source, (bytes, bytearray)):
-        return bytes(source), None
-    if isinstance(source, str) and source.lstrip().startswith("<"):
-        return source.encode("utf-8"), None
-    if isinstance(source, (str, os.PathLike)):
-        p = Path(source)
-        try:
-            return p.read_bytes(), str(p)
-        except FileNotFoundError:
-            raise RecordingIOError("Lanelet2 map not found", path=p) from None
-        except OSError as e:
-            raise RecordingIOError(f"cannot read the Lanelet2 map: {e.strerror or e}", path=p) from None
-    raise TypeError(f"expected a path, bytes or XML text, not {type(source).__name__}")
-
-
 def _int(el: Any, name: str, where: str, path: str) -> int:
     raw = el.get(name)
     try:
@@ -110,7 +92,7 @@ def _tags(el: Any) -> dict[str, str]:
 
 def read_osm(source: Any) -> OsmMap:
     """Parse an OSM XML file (a path, bytes or XML text) into an :class:`OsmMap`."""
-    data, path = _read(source)
+    data, path = xml_source(source, "Lanelet2 map")
     name = path or "<osm>"
     try:
         root = etree.fromstring(data, xml_parser())
