@@ -270,32 +270,48 @@ def modules(package: Path = PACKAGE) -> set[str]:
     return out
 
 
+def _package_trees(package: Path):
+    """``(module, its package, its syntax tree)`` of every module of ``package``, in path order."""
+    for path in sorted(package.rglob("*.py")):
+        mod = _module_name(path, package)
+        yield mod, _package_of(path, mod), _tree(path)
+
+
+def _imports(tree: ast.AST, pkg: str):
+    """``(node, target, alias)`` of every import in ``tree`` that may name a package module:
+    ``from TARGET import alias.name`` (TARGET resolved against ``pkg``, within the package) and
+    ``import alias.name`` (target None)."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            target = _from_target(node, pkg)
+            if target.startswith("aveas_format"):
+                for a in node.names:
+                    yield node, target, a
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                yield node, None, a
+
+
 def runtime_imports(package: Path = PACKAGE) -> list[Edge]:
     """Every import of a package module that runs (module level and inside functions; not those
     under ``if TYPE_CHECKING:``), its target the imported module: ``from pkg import name`` is
     ``pkg.name`` where that is a module, else ``pkg``."""
     mods = modules(package)
     out: list[Edge] = []
-    for path in sorted(package.rglob("*.py")):
-        mod = _module_name(path, package)
+    for mod, pkg, tree in _package_trees(package):
         src = "aveas_format" if mod == "aveas_format.__init__" else mod
-        pkg = _package_of(path, mod)
-        tree = _tree(path)
         typing_only = {id(n) for node in ast.walk(tree) if isinstance(node, ast.If)
                        and getattr(node.test, "id", getattr(node.test, "attr", None)) == "TYPE_CHECKING"
                        for stmt in node.body for n in ast.walk(stmt)}
-        for node in ast.walk(tree):
+        for node, target, a in _imports(tree, pkg):
             if id(node) in typing_only:
                 continue
-            if isinstance(node, ast.ImportFrom):
-                target = _from_target(node, pkg)
-                if not target.startswith("aveas_format"):
-                    continue
-                for a in node.names:
-                    full = f"{target}.{a.name}"
-                    out.append(Edge(src, full if full in mods else target, node.lineno))
-            elif isinstance(node, ast.Import):
-                out += [Edge(src, a.name, node.lineno) for a in node.names if a.name in mods]
+            if target is None:
+                if a.name in mods:
+                    out.append(Edge(src, a.name, node.lineno))
+            else:
+                full = f"{target}.{a.name}"
+                out.append(Edge(src, full if full in mods else target, node.lineno))
     return out
 
 
@@ -360,30 +376,20 @@ def private_uses(package: Path = PACKAGE) -> list[PrivateUse]:
     be imported within its own package."""
     mods = modules(package)
     out: list[PrivateUse] = []
-    for path in sorted(package.rglob("*.py")):
-        mod = _module_name(path, package)
-        pkg = _package_of(path, mod)
-        tree = _tree(path)
+    for mod, pkg, tree in _package_trees(package):
         aliases: dict[str, str] = {}  # local name -> package module
-        for node in ast.walk(tree):
-            if isinstance(node, ast.ImportFrom):
-                target = _from_target(node, pkg)
-                if not target.startswith("aveas_format"):
-                    continue
-                for a in node.names:
-                    full = f"{target}.{a.name}"
-                    if full in mods:
-                        aliases[a.asname or a.name] = full
-                        owner_pkg = target
-                        if a.name.startswith("_") and not mod.startswith(owner_pkg + ".") \
-                                and mod != owner_pkg:
-                            out.append(PrivateUse(mod, target, a.name, node.lineno))
-                    elif _private(a.name) and target != mod:
-                        out.append(PrivateUse(mod, target, a.name, node.lineno))
-            elif isinstance(node, ast.Import):
-                for a in node.names:
-                    if a.name in mods and a.asname:
-                        aliases[a.asname] = a.name
+        for node, target, a in _imports(tree, pkg):
+            if target is None:
+                if a.name in mods and a.asname:
+                    aliases[a.asname] = a.name
+                continue
+            full = f"{target}.{a.name}"
+            if full in mods:
+                aliases[a.asname or a.name] = full
+                if a.name.startswith("_") and not mod.startswith(target + ".") and mod != target:
+                    out.append(PrivateUse(mod, target, a.name, node.lineno))
+            elif _private(a.name) and target != mod:
+                out.append(PrivateUse(mod, target, a.name, node.lineno))
         for node in ast.walk(tree):
             if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
                     and node.value.id in aliases and _private(node.attr)
