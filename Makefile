@@ -34,7 +34,7 @@ test: $(STAMP)
 	$(PY) -m pytest -q -m "not slow" -n auto
 
 test-all: $(STAMP)
-	$(PY) -m pytest -q -n auto
+	HYPOTHESIS_PROFILE=explore $(PY) -m pytest -q -n auto
 
 # a longer, randomised fuzzing campaign of the readers (make test replays a fixed, short one)
 fuzz: $(STAMP)

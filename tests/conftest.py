@@ -13,6 +13,14 @@ import pytest
 
 import helpers_common
 from helpers_common import REALDATA, REALDATA_FIXTURES, SHARED, realdata_fixture, shared, small_recording
+from hypothesis import settings
+
+# `make test` is a gate: its property tests draw the same examples on every run (derandomize);
+# `make test-all` explores afresh each time (HYPOTHESIS_PROFILE=explore), where a new failing
+# example becomes an @example of its test
+settings.register_profile("gate", derandomize=True)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "gate"))
 
 
 def pytest_collection_modifyitems(items):
