@@ -318,3 +318,13 @@ def test_core_time_steps_follow_the_route_from_later_states(route):
     lead = compute(rec, p, core=(0.0, 0.05)).to_pylist()
     assert {r["other_id"] for r in lead if r["participant_id"] == 0
             and r["relation"] == "leader"} == ({2} if route[1] == "10" else {1})
+
+
+def test_relation_and_kind_codes_name_the_tables_categories():
+    """The rows carry relations and TTC kinds as codes; their names are the table's categories
+    (relations sorted: the table's order of rows of one pair and time)."""
+    from aveas_format.derive.interactions._pairs import KIND_NAMES, REL_NAMES
+    from aveas_format.schema.enums import Relation, TtcKind
+
+    assert REL_NAMES == tuple(sorted(Relation.values()))
+    assert set(KIND_NAMES) - {None} == set(TtcKind.values())

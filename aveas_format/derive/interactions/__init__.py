@@ -62,7 +62,7 @@ from aveas_format.derive.interactions._boxes import (
     ttc_draws,
 )
 from aveas_format.derive.interactions._lanes import LaneGraph, lane_chains, lane_graph
-from aveas_format.derive.interactions._pairs import SURROGATE_KEYS, lane_rows
+from aveas_format.derive.interactions._pairs import KIND_NAMES, REL_NAMES, SURROGATE_KEYS, lane_rows
 from aveas_format.derive.interactions._ttc import ttc_constant_acceleration, ttc_constant_velocity
 from aveas_format.derive.interactions._velocities import smoothed_velocities
 from aveas_format.derive.registry import Derivation, Params, register
@@ -123,11 +123,11 @@ def compute(rec, p: InteractionsParams, core: tuple[float, float] | None = None)
             parts.append(conflicting)
     if not parts:
         return _table(S, {k: np.zeros(0, t) for k, t in
-                          (("i", np.int64), ("j", np.int64), ("rel", object), ("gap", float),
+                          (("i", np.int64), ("j", np.int64), ("rel", np.int8), ("gap", float),
                            ("gap_var", float), ("closing", float), ("closing_var", float),
                            ("ttc", float),
                            ("ttc_std", float), ("thw", float), ("dhw", float), ("ttc_ca", float),
-                           ("ttc_ca_std", float), ("kind", object),
+                           ("ttc_ca_std", float), ("kind", np.int8),
                            *((k, float) for k in SURROGATE_KEYS))})
     allr = {k: np.concatenate([q[k] for q in parts]) for k in parts[0]}
     return _table(S, allr)
@@ -137,6 +137,9 @@ def _f(v: np.ndarray) -> pa.Array:
     """float64 array with nulls for NaN and +inf (null = undefined / no collision course)."""
     v = np.asarray(v, float)
     return pa.array(v, pa.float64(), mask=~np.isfinite(v))
+
+
+_NAMES_REL, _NAMES_KIND = pa.array(REL_NAMES, pa.string()), pa.array(KIND_NAMES, pa.string())
 
 
 def _row_order(S: Samples, i: np.ndarray, j: np.ndarray, rel: np.ndarray) -> np.ndarray:
@@ -156,20 +159,16 @@ def _row_order(S: Samples, i: np.ndarray, j: np.ndarray, rel: np.ndarray) -> np.
 
 def _table(S: Samples, r: dict[str, np.ndarray]) -> pa.Table:
     i, j = r["i"].astype(np.int64), r["j"].astype(np.int64)
-    # the string columns as Arrow arrays at once (object arrays compare and gather slowly)
-    rel = pa.array(r["rel"], pa.string())
-    kind = pc.if_else(pa.array(np.isfinite(r["ttc"])), pa.array(r["kind"], pa.string()),
-                      pa.scalar(None, pa.string()))
+    rel, kind = r["rel"], r["kind"]
     if len(i):
         # the table's order (participant, time, other, relation), sorted on the index arrays
-        enc = pc.dictionary_encode(rel)
-        names = sorted({str(x) for x in Relation})
-        rel_code = np.array([names.index(v) for v in enc.dictionary.to_pylist()],
-                            np.int8)[enc.indices.to_numpy()]
-        order = _row_order(S, i, j, rel_code)
-        r = {k: v[order] for k, v in r.items() if k not in ("rel", "kind")}
-        i, j = i[order], j[order]
-        rel, kind = rel.take(pa.array(order)), kind.take(pa.array(order))
+        order = _row_order(S, i, j, rel)
+        r = {k: v[order] for k, v in r.items()}
+        i, j, rel, kind = i[order], j[order], r["rel"], r["kind"]
+    # the string columns from their codes at once (object arrays compare and gather slowly)
+    kind = pc.if_else(pa.array(np.isfinite(r["ttc"])), _NAMES_KIND.take(pa.array(kind)),
+                      pa.scalar(None, pa.string()))
+    rel = _NAMES_REL.take(pa.array(rel))
     ttc = r["ttc"]
     t = pa.table({
         "participant_id": pa.array(S.pid[i], pa.int64()),

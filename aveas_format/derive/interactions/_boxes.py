@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from aveas_format.derive._samples import Samples, ragged
+from aveas_format.derive.interactions._pairs import KIND, REL, along_lane
 from aveas_format.derive.interactions._surrogates import box_surrogates, sample_std
 from aveas_format.derive.interactions._velocities import range_rate, range_rate_var
 from aveas_format.numeric import keyed_normals
@@ -176,7 +177,7 @@ def box_rows(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams,
         near = np.hypot(S.x[j] - S.x[i], S.y[j] - S.y[i]) <= p.search_radius
         i, j = i[near], j[near]
     if lane:
-        lf = np.isin(lane["rel"], ["leader", "follower"])
+        lf = along_lane(lane["rel"])
         lane_keys = np.unique(pair_key(lane["i"][lf], lane["j"][lf], S.n))
         _, is_lane = lookup(lane_keys, pair_key(i, j, S.n))
         i, j = i[~is_lane], j[~is_lane]
@@ -265,7 +266,7 @@ def box_conflicts(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
     ks = key[korder]
     if lane:
         # neighbours get the 2D TTC (and surrogates) of their pair
-        nb = ~np.isin(lane["rel"], ["leader", "follower"])
+        nb = ~along_lane(lane["rel"])
         lk = pair_key(lane["i"], lane["j"], S.n)
         pos, found = lookup(ks, lk)
         hit = nb & found
@@ -285,7 +286,7 @@ def box_conflicts(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
                                lane["psd"])
         lane["psd_std"] = np.where(hit, np.where(is_i, take(sd["psd_i"]), take(sd["psd_j"])),
                                    lane["psd_std"])
-        lane["kind"] = np.where(hit, "box_2d", lane["kind"])
+        lane["kind"] = np.where(hit, KIND["box_2d"], lane["kind"])
         _, is_nb = lookup(np.unique(lk[nb]), key)
     else:
         is_nb = np.zeros(len(key), bool)
@@ -302,7 +303,7 @@ def box_conflicts(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
 
     return {
         "i": np.r_[ci, cj], "j": np.r_[cj, ci],
-        "rel": np.full(2 * m, "conflicting", object),
+        "rel": np.full(2 * m, REL["conflicting"]),
         "gap": nan, "gap_var": nan, "closing": np.r_[rr, rr], "closing_var": np.r_[rv, rv],
         "ttc": np.r_[ct, ct],
         "ttc_std": both(sd["ttc"]), "thw": nan, "dhw": nan,
@@ -311,5 +312,5 @@ def box_conflicts(S: Samples, lane: dict[str, np.ndarray], p: InteractionsParams
         "mdrac": both(val["mdrac"]), "mdrac_std": both(sd["mdrac"]),
         "psd": np.r_[val["psd_i"][c], val["psd_j"][c]],
         "psd_std": np.r_[sd["psd_i"][c], sd["psd_j"][c]],
-        "kind": np.full(2 * m, "box_2d", object),
+        "kind": np.full(2 * m, KIND["box_2d"]),
     }

@@ -26,6 +26,13 @@ if TYPE_CHECKING:
 #: the columns of a block of relation rows (before ``kind``)
 ROW_KEYS = ("i", "j", "rel", "gap", "gap_var", "closing", "closing_var", "ttc", "ttc_std", "thw",
             "dhw", "ttc_ca", "ttc_ca_std", "drac", "drac_std", "mdrac", "mdrac_std", "psd", "psd_std")
+#: ``rel`` of a block of rows: a code, the position of the relation's name in :data:`REL_NAMES`
+#: (sorted: the table's order of relations)
+REL_NAMES = ("conflicting", "follower", "leader", "left_neighbour", "right_neighbour")
+REL = {name: np.int8(k) for k, name in enumerate(REL_NAMES)}
+#: ``kind`` of a block of rows (the TTC's): a code, the position in :data:`KIND_NAMES`
+KIND_NAMES = (None, "lane_1d", "box_2d")
+KIND = {name: np.int8(k) for k, name in enumerate(KIND_NAMES)}
 #: the surrogate columns (``._surrogates``), NaN where a relation has none
 SURROGATE_KEYS = ("drac", "drac_std", "mdrac", "mdrac_std", "psd", "psd_std")
 
@@ -104,15 +111,20 @@ def lane_rows(rec, S: Samples, p: InteractionsParams, active: np.ndarray | None 
     if not rows["i"]:
         return {}
     out = {k: np.concatenate(v) for k, v in rows.items()}
-    out["kind"] = np.where(np.isin(out["rel"], ["leader", "follower"]), "lane_1d", None)
+    out["kind"] = np.where(along_lane(out["rel"]), KIND["lane_1d"], KIND[None])
     return out
+
+
+def along_lane(rel: np.ndarray) -> np.ndarray:
+    """Which rows (``rel`` codes) are leader or follower rows."""
+    return (rel == REL["leader"]) | (rel == REL["follower"])
 
 
 def _append(rows: dict[str, list], i: np.ndarray, j: np.ndarray, rel: str,
             metrics: dict[str, np.ndarray]) -> None:
     rows["i"].append(i)
     rows["j"].append(j)
-    rows["rel"].append(np.full(len(i), rel, object))
+    rows["rel"].append(np.full(len(i), REL[rel]))
     for k in ROW_KEYS[3:]:
         rows[k].append(metrics[k])
 
