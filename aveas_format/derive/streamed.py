@@ -204,6 +204,16 @@ def _run(rec, name: str, params: dict[str, Any], **kw: Any) -> pa.Table:
         {"derivation": name, "parameters": p.model_dump(mode="json")}).encode()})
 
 
+def _core_rows(t: pa.Table, t0: float, t1: float) -> pa.Table:
+    """The rows of ``t`` with ``t0 <= time < t1`` (``t`` itself where all are: the interactions
+    of a window have only core rows)."""
+    tt = t.column("time")
+    lo_hi = pc.min_max(tt)
+    if not t.num_rows or (lo_hi["min"].as_py() >= t0 and lo_hi["max"].as_py() < t1):
+        return t
+    return t.filter(pc.and_(pc.greater_equal(tt, t0), pc.less(tt, t1)))
+
+
 def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: str,
                  params: dict[str, Any], events: bool = True) -> dict[str, Any]:
     """Derive one window and write its core rows; returns its summary rows and counts."""
@@ -236,20 +246,15 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
     rec.derived["interactions"] = _run(rec, "interactions", params, core=(t0, t1))
     counts = {}
     for name in ("interactions", "conflicts"):
-        t = rec.derived[name]
-        tt = t.column("time")
-        core = t.filter(pc.and_(pc.greater_equal(tt, t0), pc.less(tt, t1)))
+        # the core rows only: written, and the window's summary over them (each sample counted
+        # once over all windows)
+        rec.derived[name] = core = _core_rows(rec.derived[name], t0, t1)
         (Path(out) / name).mkdir(parents=True, exist_ok=True)
         # sorted as the table declares, in small row groups: assembling the table in key order
         # (write_by_windows) reads each participant range from the parts by their statistics
         core = prepare_table(core, TABLES[f"derived/{name}"])
         _write_part(core, Path(out) / name / f"part-{k:06d}.parquet")
         counts[name] = core.num_rows
-    # the window's summary over its core rows only (each sample counted once over all windows)
-    for name in ("interactions", "conflicts"):
-        t = rec.derived[name]
-        rec.derived[name] = t.filter(pc.and_(pc.greater_equal(t.column("time"), t0),
-                                             pc.less(t.column("time"), t1)))
     # the critical episodes of the core (the collision probabilities follow the tracks beyond
     # it); the events are made of all windows' episodes (derive_by_windows), and the summary's
     # event counts from them (merge_summaries)
@@ -341,7 +346,7 @@ def merge_summaries(parts: list[pa.Table], events: pa.Table | None = None) -> pa
 
 def derive_by_windows(path: str | Path, out_dir: str | Path, *,
                       window_s: float = DEFAULT_WINDOW_S, workers: int | None = 2,
-                      progress: bool = False, track_chunk_rows: int = 200_000,
+                      progress: bool = False, track_chunk_rows: int = 500_000,
                       events: bool = True, **params: Any) -> dict[str, Any]:
     """Derive the criticality measures of the recording at ``path`` into ``out_dir`` (module
     docstring): kinematics per chunk of whole tracks (about ``track_chunk_rows`` states), then
