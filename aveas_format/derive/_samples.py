@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from aveas_format.errors import FormatError
 from aveas_format.io.arrow import column_numpy
@@ -112,10 +113,18 @@ def _kinematics_columns(rec, pid: np.ndarray, t: np.ndarray, cols: tuple[str, ..
 # --- road columns and strings --------------------------------------------------------------------
 
 def string_values(table: pa.Table, name: str) -> np.ndarray:
-    """A (dictionary) string column as an object array of str, None where null."""
-    a = table.column(name)
-    a = a.cast(pa.string()) if pa.types.is_dictionary(a.type) else a
-    return np.asarray(a.to_numpy(zero_copy_only=False), dtype=object)
+    """A (dictionary) string column as an object array of str, None where null (one str object
+    per distinct value: a column of a few categories over millions of rows is a gather)."""
+    out = []
+    for a in table.column(name).chunks:
+        if pa.types.is_null(a.type):
+            out.append(np.full(len(a), None, object))
+            continue
+        if not pa.types.is_dictionary(a.type):
+            a = pc.dictionary_encode(a)
+        names = np.array([*a.dictionary.to_pylist(), None], object)
+        out.append(names[a.indices.fill_null(-1).to_numpy()])
+    return np.concatenate(out) if out else np.zeros(0, object)
 
 
 def road_columns(states: pa.Table) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -44,7 +44,7 @@ def pair_rows(it: pa.Table) -> dict[str, np.ndarray]:
     pid = it.column("participant_id").to_numpy()
     oid = it.column("other_id").to_numpy()
     use = ((rel == "leader") | ((rel == "conflicting") & (pid < oid))
-           | (np.isin(rel, ["left_neighbour", "right_neighbour"]) & (pid < oid)))
+           | (((rel == "left_neighbour") | (rel == "right_neighbour")) & (pid < oid)))
     r = {"rel": rel[use], "pid": pid[use], "oid": oid[use],
          "kind": string_values(it, "ttc_kind")[use]}
     for c in PAIR_COLUMNS:

@@ -255,12 +255,15 @@ def chain_lookup(chains: dict[tuple[str, int, int], tuple[int, float, int]], roa
 def _node_lookup(arcs: LaneArcs, road_id: str, section: np.ndarray, lane_id: np.ndarray
                  ) -> np.ndarray:
     """The :class:`LaneArcs` index of each (section, lane) of one road (0 where none)."""
-    out = np.zeros(len(lane_id), np.int64)
-    for si, lid in set(zip(section.tolist(), lane_id.tolist())):
-        k = arcs.node.get((road_id, si, lid))
-        if k is not None:
-            out[(section == si) & (lane_id == lid)] = k
-    return out
+    if not len(lane_id):
+        return np.zeros(0, np.int64)
+    section, lane_id = np.asarray(section, np.int64), np.asarray(lane_id, np.int64)
+    lo = int(lane_id.min())
+    span = int(lane_id.max()) - lo + 1
+    keys, inv = np.unique(section * span + (lane_id - lo), return_inverse=True)  # (section, lane)
+    nodes = np.array([arcs.node.get((road_id, si, lid + lo), 0) for si, lid in
+                      zip(*(v.tolist() for v in np.divmod(keys, span)))], np.int64)
+    return nodes[inv.ravel()]
 
 
 def lane_positions(net, G: LaneGraph, rid: np.ndarray, lid: np.ndarray, sv: np.ndarray
