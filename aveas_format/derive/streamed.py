@@ -29,7 +29,8 @@ from __future__ import annotations
 import functools
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -118,9 +119,10 @@ def _track_chunks(path: Path, tmp: Path, rows: int) -> list[int]:
 
 def _write_part(table: pa.Table, path: Path) -> None:
     """A window's or chunk's part of a derived table: small row groups (read back by their
-    statistics), dictionaries for the string columns only (as the format's writer: trying them
-    on every float column doubles the time to write and read)."""
-    pq.write_table(table, path, row_group_size=PART_ROW_GROUP,
+    participant ids' statistics, the only ones written), dictionaries for the string columns
+    only (as the format's writer: trying them on every float column doubles the time to write
+    and read)."""
+    pq.write_table(table, path, row_group_size=PART_ROW_GROUP, write_statistics=["participant_id"],
                    use_dictionary=[f.name for f in table.schema if pa.types.is_string(f.type)
                                    or pa.types.is_dictionary(f.type)] or False)
 
@@ -347,13 +349,15 @@ def merge_summaries(parts: list[pa.Table], events: pa.Table | None = None) -> pa
 def derive_by_windows(path: str | Path, out_dir: str | Path, *,
                       window_s: float = DEFAULT_WINDOW_S, workers: int | None = 2,
                       progress: bool = False, track_chunk_rows: int = 500_000,
-                      events: bool = True, **params: Any) -> dict[str, Any]:
+                      events: bool = True, tracks_done: Callable[[], Any] | None = None,
+                      **params: Any) -> dict[str, Any]:
     """Derive the criticality measures of the recording at ``path`` into ``out_dir`` (module
     docstring): kinematics per chunk of whole tracks (about ``track_chunk_rows`` states), then
     interactions, conflicts, the events' episodes and the summary per time window, the events
     (``out_dir/events.parquet``: the source's non-derived events and the derived ones) from all
     windows' episodes (``events`` False: none, the summary without event counts); ``params``
-    (flat: a parameter name and its value) go to every derivation that has such a parameter.
+    (flat: a parameter name and its value) go to every derivation that has such a parameter;
+    ``tracks_done`` is called once ``out_dir/kinematics`` is complete (before the windows).
     Memory per worker grows with the window (and the chunk), not with the recording; the CPU
     time hardly depends on the window (docs/performance.md). Returns counts: windows, rows per
     derived table (``events``: the derived events), the largest worker's peak memory (kB)."""
@@ -384,16 +388,21 @@ def derive_by_windows(path: str | Path, out_dir: str | Path, *,
             peak = max(peak, v["peak_kb"] or 0)
         for j in chunks:
             (tmp / f"c-{j}.arrow").unlink()
+        if tracks_done is not None:
+            tracks_done()
         windows = [(k, k * window_s, (k + 1) * window_s) for k in sorted(cores)]
         fn = functools.partial(_window_task, path=str(path), tmp=str(tmp), out=str(out),
                                params=params, events=events)
-        sums, episodes = [], []
+        done = []
         for v in results(fn, windows, "windows"):
-            sums.append(v["summary"])
-            episodes += v["episodes"]
+            done.append(v)
             for k, n in v["counts"].items():
                 counts[k] += n
             peak = max(peak, v["peak_kb"] or 0)
+        # in window order, whichever finished first: the same sums to the last bit on every run
+        done.sort(key=lambda v: v["window"])
+        sums = [v["summary"] for v in done]
+        episodes = [e for v in done for e in v["episodes"]]
         ev = None
         if events:
             head = open_recording(path, tables=["participants", "events"], verify=False)
@@ -525,11 +534,35 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
     ours = {reg[n].table for n in names}
     work = parent / f".{path.name}.work-{uuid.uuid4().hex[:8]}"
     tmp = parent / f".{path.name}.tmp-{uuid.uuid4().hex[:8]}"
+    shas = {n: e.sha256 for n, e in meta.tables.items() if n not in ours}
+    created = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+    def provenance(n: str) -> tuple[bytes, dict, dict, str]:
+        d = reg[n]
+        p = d.params(**{k: v for k, v in params.items() if k in d.params.model_fields})
+        # the windows derive no encroachments: the events are not made of the source's
+        inputs = {t: shas[t] for t in d.inputs() if t in shas
+                  and not (n == "events" and t == "derived/encroachments")}
+        pdump, method = p.model_dump(mode="json"), d.method(p)
+        return (json.dumps({"derivation": n, "method": method, "version": d.version,
+                            "parameters": pdump, "inputs": inputs}).encode(), inputs, pdump, method)
+
+    # the kinematics (an input of the others' provenance) are assembled while the windows are
+    # derived: the parent's serial work after them is the other tables'. In a process of its
+    # own, started before the windows' workers (none is forked while a thread of this one runs)
+    early: dict[str, Future] = {}
+    pool = ProcessPoolExecutor(1)
+
+    def tracks_done() -> None:
+        spec = TABLES[reg["kinematics"].table]
+        early["kinematics"] = pool.submit(_assemble, work / "kinematics", spec, tmp / spec.file,
+                                          provenance("kinematics")[0])
     try:
         work.mkdir()
-        info = derive_by_windows(src, work, window_s=window_s, workers=workers,
-                                 progress=progress, events=events, **params)
         tmp.mkdir()
+        info = derive_by_windows(src, work, window_s=window_s, workers=workers,
+                                 progress=progress, events=events, tracks_done=tracks_done,
+                                 **params)
         with Container(src) as c:
             for name in c.names():
                 if name == "recording.json" or name.removesuffix(".parquet") in ours:
@@ -539,20 +572,13 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
                 with c.input_file(name) as f, open(target, "wb") as g:
                     while block := f.read(1 << 22):
                         g.write(block)
-        shas = {n: e.sha256 for n, e in meta.tables.items() if n not in ours}
-        created = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
         for n in names:
             d = reg[n]
-            p = d.params(**{k: v for k, v in params.items() if k in d.params.model_fields})
-            # the windows derive no encroachments: the events are not made of the source's
-            inputs = {t: shas[t] for t in d.inputs() if t in shas
-                      and not (n == "events" and t == "derived/encroachments")}
-            pdump = p.model_dump(mode="json")
-            method = d.method(p)
-            prov = json.dumps({"derivation": n, "method": method, "version": d.version,
-                               "parameters": pdump, "inputs": inputs}).encode()
+            prov, inputs, pdump, method = provenance(n)
             spec = TABLES[d.table]
-            if n in ("events", "criticality_summary"):
+            if n in early:
+                rows, sha = early.pop(n).result()
+            elif n in ("events", "criticality_summary"):
                 t = prepare_table(pq.read_table(work / f"{n}.parquet"), spec)
                 t = t.replace_schema_metadata({**(t.schema.metadata or {}), DERIVED_KEY: prov})
                 buf = parquet_bytes(t, spec)
@@ -586,6 +612,7 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
     except OSError as e:
         raise RecordingIOError(f"cannot write: {e.strerror or e}", path=path) from None
     finally:
+        pool.shutdown()  # (an error before the kinematics were taken: their writing ends first)
         shutil.rmtree(work, ignore_errors=True)
         if tmp.is_dir():
             shutil.rmtree(tmp, ignore_errors=True)
