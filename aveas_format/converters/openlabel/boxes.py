@@ -27,7 +27,8 @@ import pyarrow as pa
 from aveas_format.converters.common.timestamps import resolve_timestamps, timestamp_value
 from aveas_format.converters.labels import LabelFilter, implausible_size
 from aveas_format.converters.openlabel.findings import jpath, report_bad_sizes, report_no_state, report_repeats
-from aveas_format.converters.openlabel.geometry import in_intervals, place, static_cuboids, utm_crs
+from aveas_format.converters.common.coordinate_systems import utm_crs
+from aveas_format.converters.openlabel.geometry import in_intervals, place, static_cuboids
 from aveas_format.converters.openlabel.profile import (EXT, FRAME_ATTRIBUTES, LIGHTS, VELOCITY_ATTRIBUTES,
                                                        attributes_of, first_value, to_utc, to_world, vehicle_std)
 from aveas_format.errors import FormatError, report_source
@@ -256,7 +257,7 @@ class Boxes:
         p.wcrs = options.world_crs
         if p.wcrs is None and len(roots) == 1:
             r = next(iter(roots))
-            p.wcrs = utm_crs(r, ((ol.get("coordinate_systems") or {}).get(r) or {}).get("type"))
+            p.wcrs = utm_crs(r)
         p.interior = self._interior(rank_of, p)
         return p
 

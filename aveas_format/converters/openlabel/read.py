@@ -38,7 +38,7 @@ from aveas_format.converters.common.timestamps import TIMESTAMP_UNITS
 from aveas_format.converters.openlabel.boxes import Boxes, keep_by_type, needs_size, states_of
 from aveas_format.converters.openlabel.decode import decode_block
 from aveas_format.converters.openlabel.findings import check_objects, claims_profile, report_frame_findings
-from aveas_format.converters.openlabel.geometry import CoordinateSystems
+from aveas_format.converters.common.coordinate_systems import CoordinateSystems
 from aveas_format.converters.openlabel.participants import participants_of
 from aveas_format.converters.openlabel.profile import EXT, no_gc
 from aveas_format.converters.openlabel.source import (BLOCK, ReadWhole, WrongCut, broken, cuts, load_document,
