@@ -116,7 +116,8 @@ tests/realdata/test_openlabel.py), plus this library's own exports.
 
 Modules (``aveas_format.converters.openlabel``): ``profile`` the profile's mapping shared by both
 directions (classes, events, lights, conditions, timestamps, the attributes the import reads
-(``FRAME_ATTRIBUTES``: adding one is one line), the extension's table encoding); ``write`` and
+(``FRAME_ATTRIBUTES``: adding one is one line); the extension's tables go through
+:mod:`aveas_format.io.tablejson`); ``write`` and
 ``encode`` recording -> OpenLABEL (``recording_to_openlabel``, the exporter; the frames' JSON
 built from columns); ``states`` the export's states in frame order (bounded memory); ``read`` the
 importer (``openlabel_to_recording``, ``import_openlabel_to``): which path reads a file, the
@@ -129,9 +130,9 @@ other tables and metadata, the located findings about the source.
 
 from __future__ import annotations
 
-from aveas_format.converters.openlabel.profile import table_from_json, table_to_json
 from aveas_format.converters.openlabel.read import import_openlabel, openlabel_to_recording
 from aveas_format.converters.openlabel.write import export_openlabel, recording_to_openlabel
+from aveas_format.io.tablejson import table_from_json, table_to_json
 
 __all__ = ["export_openlabel", "import_openlabel", "openlabel_to_recording", "recording_to_openlabel",
            "table_from_json", "table_to_json"]

@@ -28,7 +28,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from aveas_format.converters.openlabel.profile import LONGITUDINAL, EXT, LIGHTS, json_safe
+from aveas_format.converters.openlabel.profile import LONGITUDINAL, EXT, LIGHTS
+from aveas_format.io.tablejson import json_safe
 
 try:  # the fast JSON encoder (extra ``fast``); the standard library's otherwise
     import orjson

@@ -38,19 +38,18 @@ from aveas_format.converters.openlabel.profile import (
     LIGHTS,
     METHOD_TO_PROFILE,
     vehicle_std,
-    json_safe,
     environment_data,
     iso_ms,
     no_gc,
     to_vehicle,
     to_world,
-    table_to_json,
 )
 from aveas_format.converters.openlabel.encode import CHUNK_ROWS, FrameParts, dumps, frame_chunks, orjson
 from aveas_format.converters.openlabel.states import open_states
 from aveas_format.converters.openlabel.source import compression
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.io.arrow import column_numpy
+from aveas_format.io.tablejson import json_safe, table_to_json
 
 # ================================================================================================
 # helpers
