@@ -119,7 +119,7 @@ directions (classes, events, lights, conditions, timestamps, the attributes the 
 (``FRAME_ATTRIBUTES``: adding one is one line); the extension's tables go through
 :mod:`aveas_format.io.tablejson`); ``write`` and
 ``encode`` recording -> OpenLABEL (``recording_to_openlabel``, the exporter; the frames' JSON
-built from columns); ``states`` the export's states in frame order (bounded memory); ``read`` the
+built from columns; the states in frame order through :mod:`aveas_format.io.timemajor`); ``read`` the
 importer (``openlabel_to_recording``, ``import_openlabel_to``): which path reads a file, the
 recording; ``source`` the file (head, blocks of whole frames, tail, errors, compression);
 ``decode`` a block of frames into columns (msgspec); ``geometry`` coordinate systems and cuboids in

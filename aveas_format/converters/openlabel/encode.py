@@ -29,6 +29,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from aveas_format.converters.openlabel.profile import LONGITUDINAL, EXT, LIGHTS
+from aveas_format.io.timemajor import chunk_bounds
 from aveas_format.io.tablejson import json_safe
 
 try:  # the fast JSON encoder (extra ``fast``); the standard library's otherwise
@@ -309,7 +310,7 @@ def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
     ``chunk_rows`` rows (whole frames): ``frame_of_row`` = each state row's frame (an index into
     ``times``), ``prepare(rows)`` = the per-row inputs of the state rows ``rows`` (in that order;
     :func:`aveas_format.converters.openlabel.write.openlabel_chunks`), asked for one chunk at a
-    time. ``part``: only the chunks ``[first, last)`` of :func:`chunk_bounds` (their text is the
+    time. ``part``: only the chunks ``[first, last)`` of :func:`~aveas_format.io.timemajor.chunk_bounds` (their text is the
     same as in the whole sequence: a comma before every chunk but the very first)."""
     order = np.argsort(frame_of_row, kind="stable")  # in a frame: the objects in the states' order
     if len(order) < 2**31:
@@ -337,18 +338,6 @@ def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
 
 
 _AFTER = np.array([b"", b"}}"], dtype=object)
-
-
-def chunk_bounds(fs: np.ndarray, chunk_rows: int = CHUNK_ROWS) -> list[int]:
-    """The row offsets where :func:`frame_chunks`' chunks start, and the number of rows last: about
-    ``chunk_rows`` rows each, cut after whole frames (``fs``: the sorted frame of each row)."""
-    n = len(fs)
-    out, start = [0], 0
-    while start < n:
-        stop = min(start + chunk_rows, n)
-        start = int(np.searchsorted(fs, fs[stop - 1], side="right"))
-        out.append(start)
-    return out
 
 
 #: rows from which the frames are encoded in parts by forked processes (below: the fork and the
@@ -486,7 +475,7 @@ class FrameParts:
 
 def deal_parts(bounds: list[int], workers: int) -> list[tuple[int, int, int]]:
     """The parts ``(first chunk, end chunk, owner)`` of :class:`FrameParts` for the chunks'
-    row offsets ``bounds`` (:func:`chunk_bounds`): rounds of one part per process (owner 0:
+    row offsets ``bounds`` (:func:`~aveas_format.io.timemajor.chunk_bounds`): rounds of one part per process (owner 0:
     this process), then a last part of this process's; about :data:`PART_ROWS` rows each, all
     about equal (a smaller share for this process, which also writes the output, was slower:
     docs/performance.md). Empty parts are left out; one part (owner 0) where the chunks are too

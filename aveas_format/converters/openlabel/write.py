@@ -45,11 +45,11 @@ from aveas_format.converters.openlabel.profile import (
     to_world,
 )
 from aveas_format.converters.openlabel.encode import CHUNK_ROWS, FrameParts, dumps, frame_chunks, orjson
-from aveas_format.converters.openlabel.states import open_states
 from aveas_format.converters.openlabel.source import compression
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.io.arrow import column_numpy
 from aveas_format.io.tablejson import json_safe, table_to_json
+from aveas_format.io.timemajor import open_states
 
 # ================================================================================================
 # helpers
@@ -135,9 +135,10 @@ def openlabel_chunks(rec, *, opendrive: str = "map.xodr", extension: bool = True
     files in ``spill_dir``, given as :class:`~aveas_format.safeio.atomic.FileSegment` s (for
     :func:`write_chunks_atomic`). A recording opened without its states
     (``open_recording(path, states=False)``) has them read from its file in bounded memory
-    (:class:`~.states.SpilledStates`, spilled to a temporary directory in ``spill_dir``)."""
+    (:class:`~aveas_format.io.timemajor.SpilledStates`, spilled to a temporary directory in
+    ``spill_dir``)."""
     chunk_rows = chunk_rows or CHUNK_ROWS
-    states = open_states(rec, chunk_rows, spill_dir)
+    states = open_states(rec, chunk_rows, spill_dir, _acceleration(rec.derived), prefix=".openlabel-states.")
     try:
         yield from _document(rec, states, opendrive, extension, road_attributes, chunk_rows, workers,
                              spill_dir)
@@ -148,7 +149,7 @@ def openlabel_chunks(rec, *, opendrive: str = "map.xodr", extension: bool = True
 def _document(rec, states, opendrive: str, extension: bool, road_attributes: bool, chunk_rows: int,
               workers: int, spill_dir: Path | None) -> Iterator[Any]:
     """The chunks of :func:`openlabel_chunks`, the states read through ``states``
-    (:func:`~.states.open_states`)."""
+    (:func:`~aveas_format.io.timemajor.open_states`)."""
     meta = rec.meta
     thr = meta.thresholds.model_dump() if meta.thresholds else {}
     thr_out = {k: (thr.get(k) or v) for k, v in DEFAULT_THRESHOLDS.items()}
@@ -218,6 +219,32 @@ def _profile_metadata(meta, opendrive: str, thr_out: dict[str, float]) -> dict[s
 # the states and participants as columns
 # ================================================================================================
 
+def _acceleration(derived: dict | None):
+    """``track_columns`` of :func:`~aveas_format.io.timemajor.open_states` for states without
+    ``ax``/``ay``: the world-frame acceleration ``ax_w, ay_w`` (the states' component where they
+    have it, else the derived kinematics' where it has a row per state, else estimated from the
+    velocities along each track)."""
+
+    def columns(names: list[str], n: int):
+        if "ax" in names and "ay" in names:
+            return None
+        kin = derived.get("kinematics") if derived else None
+        kin = None if kin is None or kin.num_rows != n else [column_numpy(kin, c, missing=None) for c in ("ax", "ay")]
+
+        def acc(t: pa.Table, offset: int) -> dict[str, np.ndarray]:
+            ax, ay = (column_numpy(t, c, missing=None) for c in ("ax", "ay"))
+            est = None if kin is None else [a[offset:offset + t.num_rows] for a in kin]
+            if est is None:
+                from aveas_format.mapref.build import velocity_from_positions
+
+                est = velocity_from_positions(t.column("participant_id").to_numpy(), column_numpy(t, "time"),
+                                              *(column_numpy(t, c, missing=None) for c in ("vx", "vy")))
+            return {"ax_w": np.nan_to_num(est[0]) if ax is None else ax,
+                    "ay_w": np.nan_to_num(est[1]) if ay is None else ay}
+        return acc
+    return columns
+
+
 class _Statics:
     """The participants' static values, by id (sizes, class, size uncertainties)."""
 
@@ -253,10 +280,9 @@ class _Statics:
 class _Columns:
     """The state rows ``s`` (one chunk of the frames) as numpy columns, with velocity and
     acceleration in the profile's vehicle frame (``vu, vv``, ``au, av``; the world-frame
-    acceleration ``ax_w, ay_w``: ``acc_w`` where the states have none, see
-    :func:`~.states.world_acceleration`)."""
+    acceleration ``ax_w, ay_w``: ``extra``'s where the states have none, :func:`_acceleration`)."""
 
-    def __init__(self, s: pa.Table, acc_w: tuple | None, static: _Statics) -> None:
+    def __init__(self, s: pa.Table, extra: dict | None, static: _Statics) -> None:
         self.static = static
         self.s = s
         self.pid = pid = s.column("participant_id").to_numpy()
@@ -270,7 +296,7 @@ class _Columns:
         self.vx, self.vy = vx, vy = tuple(column_numpy(s, c, missing=None) for c in ("vx", "vy"))
         self.vu, self.vv = to_vehicle(vx, vy, h)
         self.ax, self.ay = ax, ay = tuple(column_numpy(s, c, missing=None) for c in ("ax", "ay"))
-        self.ax_w, self.ay_w = (ax, ay) if acc_w is None else acc_w
+        self.ax_w, self.ay_w = (ax, ay) if extra is None else (extra["ax_w"], extra["ay_w"])
         self.au, self.av = to_vehicle(np.nan_to_num(self.ax_w), np.nan_to_num(self.ay_w), h)
         self.yaw_rate = column_numpy(s, "yaw_rate", missing=None)
         self.stds = {c: column_numpy(s, c, missing=None) for c in
