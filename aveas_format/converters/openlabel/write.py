@@ -45,11 +45,11 @@ from aveas_format.converters.openlabel.profile import (
     to_world,
 )
 from aveas_format.converters.openlabel.encode import CHUNK_ROWS, FrameParts, dumps, frame_chunks, orjson
-from aveas_format.converters.openlabel.source import compression
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.io.arrow import column_numpy
 from aveas_format.io.tablejson import json_safe, table_to_json
 from aveas_format.io.timemajor import open_states
+from aveas_format.safeio.compressed import compressed, compression
 
 # ================================================================================================
 # helpers
@@ -726,33 +726,6 @@ def _map_name(output: Path, options: OpenLabelExportOptions) -> str:
 def _outputs(output: Path, options: OpenLabelExportOptions) -> list[Path]:
     """The export's files: the JSON and, with ``write_map``, the map next to it."""
     return [output] + ([output.parent / _map_name(output, options)] if options.write_map else [])
-
-
-#: compression levels of the compact forms: fast, most of the size gain (docs/performance.md)
-GZIP_LEVEL, ZSTD_LEVEL = 3, 1
-
-
-def compressed(chunks, kind: str):
-    """The chunks compressed as a stream: one gzip member / one zstd frame (``kind`` as
-    :func:`~.source.compression` says)."""
-    if kind == "gzip":
-        import zlib
-
-        c = zlib.compressobj(GZIP_LEVEL, zlib.DEFLATED, 31)  # 31: the gzip container
-    else:
-        try:
-            import zstandard
-        except ImportError:
-            from aveas_format.errors import MissingDependencyError
-
-            raise MissingDependencyError("writing .zst needs zstandard: pip install "
-                                         "'aveas-format[zstd]'") from None
-        c = zstandard.ZstdCompressor(level=ZSTD_LEVEL).compressobj()
-    for data in chunks:
-        out = c.compress(data)
-        if out:
-            yield out
-    yield c.flush()
 
 
 @converter("openlabel", direction="export", options=OpenLabelExportOptions, outputs=_outputs,
