@@ -39,11 +39,17 @@ from aveas_format.converters.openlabel.profile import (
     environment_data,
     iso_ms,
     no_gc,
-    to_vehicle,
-    to_world,
 )
 from aveas_format.converters.registry import ConverterOptions
+from aveas_format.converters.common.geometry import rotate
 from aveas_format.io.arrow import column_numpy
+
+
+def to_vehicle(vx, vy, h):
+    return rotate(vx, vy, -h)
+
+
+to_world = rotate
 from aveas_format.io.tablejson import json_safe, table_to_json
 
 # ================================================================================================

@@ -24,13 +24,14 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from aveas_format.converters.common.timestamps import resolve_timestamps, timestamp_value
+from aveas_format.converters.common.geometry import rotate
+from aveas_format.converters.common.timestamps import resolve_timestamps, timestamp_value, to_utc
 from aveas_format.converters.labels import LabelFilter, implausible_size
 from aveas_format.converters.openlabel.findings import jpath, report_bad_sizes, report_no_state, report_repeats
 from aveas_format.converters.common.coordinate_systems import utm_crs
 from aveas_format.converters.openlabel.geometry import in_intervals, place, static_cuboids
 from aveas_format.converters.openlabel.profile import (EXT, FRAME_ATTRIBUTES, LIGHTS, VELOCITY_ATTRIBUTES,
-                                                       attributes_of, first_value, to_utc, to_world, vehicle_std)
+                                                       attributes_of, first_value, vehicle_std)
 from aveas_format.errors import FormatError, report_source
 from aveas_format.io.resort import StatesWriter
 from aveas_format.schema.tables import TABLES
@@ -387,9 +388,9 @@ def states_of(t: pa.Table, p: Plan, ctx) -> tuple[pa.Table, dict[int, np.ndarray
     x, y, heading = _to_local(rows, ctx.local, p.wcrs)
     states.update(x=x, y=y, heading=heading, z=rows["pz"])
     if p.has_vel and n:
-        states["vx"], states["vy"] = to_world(rows["vu"], rows["vv"], heading)
+        states["vx"], states["vy"] = rotate(rows["vu"], rows["vv"], heading)
         if p.has_acc:
-            states["ax"], states["ay"] = to_world(rows["au"], rows["av"], heading)
+            states["ax"], states["ay"] = rotate(rows["au"], rows["av"], heading)
         su, sv = rows["vu_std"], rows["vv_std"]
         if np.isfinite(su).any():
             states["vx_std"], states["vy_std"] = vehicle_std(su, sv, None, -heading)

@@ -5,8 +5,8 @@
   which states and participants columns the profile's attributes carry (the rest goes into the
   ``aveas_format`` extension, ``EXT``);
 - conditions <-> environment-context attributes (PMF vectors, Beaufort force), both ways;
-- timestamps (the profile's ``acquisition_date`` format, any ISO 8601 -> UTC), enum values as
-  ``aveas-openlabel`` writes them, world <-> vehicle frame of velocities and their 1-sigma;
+- the profile's ``acquisition_date`` format, enum values as ``aveas-openlabel`` writes them, the
+  1-sigma of velocities turned between the world and the vehicle frame;
 - attribute lookup in an OpenLABEL ``object_data``/``context_data`` (``attributes_of``, ``first_value``);
 - :class:`no_gc`, which both directions use around building or walking millions of small dicts.
 """
@@ -14,12 +14,10 @@
 from __future__ import annotations
 
 import re
-from datetime import datetime, timezone
 from typing import Any
 
 import numpy as np
 
-from aveas_format.errors import FormatError
 from aveas_format.schema.taxonomy import LIGHTING, ROAD_SURFACE
 
 #: the namespace of everything this library adds to an OpenLABEL file
@@ -125,24 +123,6 @@ def iso_ms(ts: str) -> str:
     return f"{m[1]}.{(m[2] or '').ljust(3, '0')[:3]}Z"
 
 
-def to_utc(ts: str) -> str:
-    """Any ISO 8601 timestamp (with offset) -> UTC ``...Z`` keeping the fraction digits."""
-    s = ts.strip()
-    m = re.match(r"^(\d{4}-\d{2}-\d{2})[T ](\d{2}:\d{2}:\d{2})(?:\.(\d{1,9}))?(Z|[+-]\d{2}(?::?\d{2})?)?$", s)
-    if not m:
-        raise FormatError(f"acquisition_date {ts!r} is not an ISO 8601 timestamp")
-    date, hms, frac, tz = m.groups()
-    tz = tz or "Z"
-    if tz in ("Z", "+00", "+0000", "+00:00", "-00:00"):
-        return f"{date}T{hms}{'.' + frac if frac else ''}Z"
-    if len(tz) == 3:
-        tz += ":00"
-    elif ":" not in tz:
-        tz = tz[:3] + ":" + tz[3:]
-    dt = datetime.fromisoformat(f"{date}T{hms}{tz}").astimezone(timezone.utc)
-    return dt.strftime("%Y-%m-%dT%H:%M:%S") + (f".{frac}" if frac else "") + "Z"
-
-
 def enum_value(v: Any) -> Any:
     """aveas-openlabel writes str enums as ``"Road__ClassificationValue.STRAIGHT"``: -> "straight"."""
     if isinstance(v, str) and "." in v:
@@ -160,17 +140,6 @@ def _beaufort_speed(force: float) -> float:
     edges = (0.0,) + _BEAUFORT + (36.0,)
     k = int(min(max(round(force), 0), 12))
     return round(0.5 * (edges[k] + edges[k + 1]), 2)
-
-
-def to_vehicle(vx: np.ndarray, vy: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """World -> vehicle frame (x forward, y left)."""
-    c, s = np.cos(h), np.sin(h)
-    return c * vx + s * vy, -s * vx + c * vy
-
-
-def to_world(u: np.ndarray, v: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    c, s = np.cos(h), np.sin(h)
-    return c * u - s * v, s * u + c * v
 
 
 def vehicle_std(sx: np.ndarray, sy: np.ndarray, corr: np.ndarray | None, h: np.ndarray

@@ -41,10 +41,9 @@ from aveas_format.converters.openlabel.profile import (
     environment_data,
     iso_ms,
     no_gc,
-    to_vehicle,
-    to_world,
 )
 from aveas_format.converters.openlabel.encode import CHUNK_ROWS, FrameParts, dumps, frame_chunks, orjson
+from aveas_format.converters.common.geometry import rotate
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.io.arrow import column_numpy
 from aveas_format.io.tablejson import json_safe, table_to_json
@@ -294,10 +293,10 @@ class _Columns:
         self.h = h = column_numpy(s, "heading", missing=None)
         self.z = column_numpy(s, "z", missing=None)
         self.vx, self.vy = vx, vy = tuple(column_numpy(s, c, missing=None) for c in ("vx", "vy"))
-        self.vu, self.vv = to_vehicle(vx, vy, h)
+        self.vu, self.vv = rotate(vx, vy, -h)  # (the vehicle frame)
         self.ax, self.ay = ax, ay = tuple(column_numpy(s, c, missing=None) for c in ("ax", "ay"))
         self.ax_w, self.ay_w = (ax, ay) if extra is None else (extra["ax_w"], extra["ay_w"])
-        self.au, self.av = to_vehicle(np.nan_to_num(self.ax_w), np.nan_to_num(self.ay_w), h)
+        self.au, self.av = rotate(np.nan_to_num(self.ax_w), np.nan_to_num(self.ay_w), -h)
         self.yaw_rate = column_numpy(s, "yaw_rate", missing=None)
         self.stds = {c: column_numpy(s, c, missing=None) for c in
                      ("x_std", "y_std", "z_std", "heading_std", "vx_std", "vy_std", "ax_std",
@@ -478,9 +477,9 @@ def _exact_values(s: pa.Table, cols: _Columns) -> dict[str, np.ndarray]:
 
     exact: dict[str, list] = {}
     hw = wrap_angle(cols.h)
-    back = dict(zip(("vx", "vy"), to_world(cols.vu, cols.vv, hw)))
+    back = dict(zip(("vx", "vy"), rotate(cols.vu, cols.vv, hw)))
     if cols.ax is not None and cols.ay is not None:
-        back.update(zip(("ax", "ay"), to_world(cols.au, cols.av, hw)))
+        back.update(zip(("ax", "ay"), rotate(cols.au, cols.av, hw)))
     z = cols.z
     if z is not None:
         hv = cols.static.sizes[cols.prow, 2]
