@@ -19,6 +19,7 @@ from decimal import Decimal
 import math
 from collections import defaultdict
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -301,11 +302,8 @@ class Boxes:
         self.writer.close()
 
 
-class Plan:
+class Plan(SimpleNamespace):
     """What :meth:`Boxes.decide` decided (per box arrays are indexed by the box's number)."""
-
-    def __init__(self, **kw: Any) -> None:
-        self.__dict__.update(kw)
 
 
 def _extension_of(ol: dict[str, Any]) -> dict[str, Any] | None:

@@ -210,6 +210,20 @@ def _pmf_vector(pmf: dict | None, cats: tuple[str, ...], mapping: dict[str, str]
     return [v / tot for v in vals.values()] if tot > 0 else None
 
 
+def _rounded(v: float) -> int:
+    return int(round(v))
+
+
+#: conditions <-> the environment context's numbers: (key, attribute, to the profile, from it)
+_ENV_NUMBERS = (
+    ("temperature_c", "environment/temperature_celsius", _rounded, float),
+    ("temperature_c_std", "environment/temperature/ustddev", float, float),
+    ("precipitation_mm_h", "environment/precipitation_intensity", _rounded, float),
+    ("visibility_m", "environment/visibility_range", _rounded, float),
+    ("cloud_cover_okta", "environment/cloud_cover", int, lambda v: int(v) if 0 <= int(v) <= 8 else None),
+    ("wind_speed_m_s", "environment/wind/beaufort_force", _beaufort, lambda v: _beaufort_speed(float(v))))
+
+
 def environment_data(cond: dict[str, Any]) -> dict[str, list]:
     data: dict[str, list] = {"num": [], "text": [], "vec": []}
     lighting = _pmf_vector(cond.get("lighting"), LIGHTING, LIGHTING_TO_PROFILE, PROFILE_LIGHTING)
@@ -223,19 +237,9 @@ def environment_data(cond: dict[str, Any]) -> dict[str, list]:
     if road:
         data["text"].append({"name": "road_condition", "val": PROFILE_ROAD[int(np.argmax(road))]})
         data["vec"].append({"name": "environment/road_condition/uncertainties", "val": road})
-    if cond.get("temperature_c") is not None:
-        data["num"].append({"name": "environment/temperature_celsius", "val": int(round(cond["temperature_c"]))})
-    if cond.get("temperature_c_std") is not None:
-        data["num"].append({"name": "environment/temperature/ustddev", "val": float(cond["temperature_c_std"])})
-    if cond.get("precipitation_mm_h") is not None:
-        data["num"].append({"name": "environment/precipitation_intensity",
-                            "val": int(round(cond["precipitation_mm_h"]))})
-    if cond.get("visibility_m") is not None:
-        data["num"].append({"name": "environment/visibility_range", "val": int(round(cond["visibility_m"]))})
-    if cond.get("cloud_cover_okta") is not None:
-        data["num"].append({"name": "environment/cloud_cover", "val": int(cond["cloud_cover_okta"])})
-    if cond.get("wind_speed_m_s") is not None:
-        data["num"].append({"name": "environment/wind/beaufort_force", "val": _beaufort(cond["wind_speed_m_s"])})
+    for key, name, to_profile, _ in _ENV_NUMBERS:
+        if cond.get(key) is not None:
+            data["num"].append({"name": name, "val": to_profile(cond[key])})
     return data
 
 
@@ -255,19 +259,10 @@ def conditions_from(cd: dict[str, Any]) -> dict[str, Any]:
         out["road_surface"] = {c: float(v) for c, v in zip(PROFILE_ROAD, ru)}
     elif rv in PROFILE_ROAD:
         out["road_surface"] = {rv: 1.0}
-    for name, key in (("environment/temperature_celsius", "temperature_c"),
-                      ("environment/temperature/ustddev", "temperature_c_std"),
-                      ("environment/precipitation_intensity", "precipitation_mm_h"),
-                      ("environment/visibility_range", "visibility_m")):
+    for key, name, _, from_profile in _ENV_NUMBERS:
         v = first_value(a, name)
-        if v is not None:
-            out[key] = float(v)
-    cc = first_value(a, "environment/cloud_cover")
-    if cc is not None and 0 <= int(cc) <= 8:
-        out["cloud_cover_okta"] = int(cc)
-    bf = first_value(a, "environment/wind/beaufort_force")
-    if bf is not None:
-        out["wind_speed_m_s"] = _beaufort_speed(float(bf))
+        if v is not None and from_profile(v) is not None:
+            out[key] = from_profile(v)
     return out
 
 

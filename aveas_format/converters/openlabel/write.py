@@ -54,14 +54,6 @@ from aveas_format.safeio.compressed import compressed, compression
 # helpers
 # ================================================================================================
 
-def _f(v: Any) -> float:
-    return float(v)
-
-
-def _finite(v: Any) -> bool:
-    return v is not None and not (isinstance(v, float) and math.isnan(v))
-
-
 def _pylist(table: pa.Table, name: str) -> list | None:
     if table is None or name not in table.column_names:
         return None
@@ -586,7 +578,7 @@ def _objects(p: pa.Table, pid: np.ndarray, static: _Statics, frame_of_row: np.nd
         cls = classes[j]
         rows = order[bounds[0][j]:bounds[1][j]]
         hh = height[q]
-        size = {"name": "dimensions/size", "val": [_f(length[q]), _f(width[q]), _f(hh) if _finite(hh) else 0.0]}
+        size = {"name": "dimensions/size", "val": [float(length[q]), float(width[q]), 0.0 if math.isnan(hh) else hh]}
         vec = [size]
         if any(c in p.column_names for c in ("length_std", "width_std")):
             vec.append({"name": "dimensions/size/ustddev",
@@ -597,10 +589,10 @@ def _objects(p: pa.Table, pid: np.ndarray, static: _Statics, frame_of_row: np.nd
             vec.append({"name": "classification/uncertainties", "val": [float(v) for v in w]})
         num = []
         if len(rows):
-            num += [{"name": "summary/speed/max", "val": _f(summary.speed_max[j])},
-                    {"name": "summary/speed/min", "val": _f(summary.speed_min[j])},
-                    {"name": "summary/accel/max", "val": _f(summary.acc_max[j]), "type": "value"},
-                    {"name": "summary/accel/min", "val": _f(summary.acc_min[j]), "type": "value"}]
+            num += [{"name": "summary/speed/max", "val": float(summary.speed_max[j])},
+                    {"name": "summary/speed/min", "val": float(summary.speed_min[j])},
+                    {"name": "summary/accel/max", "val": float(summary.acc_max[j]), "type": "value"},
+                    {"name": "summary/accel/min", "val": float(summary.acc_min[j]), "type": "value"}]
         obj_data: dict[str, Any] = {"vec": vec, "num": num, "text": [], "boolean": []}
         if cls not in NO_RECORDER:
             obj_data["boolean"].append({"name": "is_recorder", "val": roles[j] == "recording_vehicle"})
@@ -656,13 +648,17 @@ def _contexts(rec, times: np.ndarray, summary: _Summary) -> dict[str, Any]:
     env = rec.environment
     if env is not None and env.num_rows and len(times):
         for k, r in enumerate(env.to_pylist()):
-            fs = int(np.clip(np.searchsorted(times, r["time_start"] - 1e-9), 0, len(times) - 1))
-            fe = int(np.clip(np.searchsorted(times, r["time_end"] + 1e-9) - 1, fs, len(times) - 1))
-            out[str(k + 2)] = {
-                "name": "environment_context", "type": "EnvironmentContext",
-                "frame_intervals": [{"frame_start": fs, "frame_end": fe}],
-                "context_data": environment_data(r)}
+            out[str(k + 2)] = {"name": "environment_context", "type": "EnvironmentContext",
+                               "frame_intervals": _interval(times, r), "context_data": environment_data(r)}
     return out
+
+
+def _interval(times: np.ndarray, r: dict[str, Any]) -> list[dict[str, int]]:
+    """The frame interval of a row's ``time_start`` .. ``time_end``."""
+    last = max(len(times) - 1, 0)
+    fs = int(np.clip(np.searchsorted(times, r["time_start"] - 1e-9), 0, last))
+    fe = int(np.clip(np.searchsorted(times, r["time_end"] + 1e-9) - 1, fs, last))
+    return [{"frame_start": fs, "frame_end": fe}]
 
 
 def _events(ev: pa.Table | None, times: np.ndarray) -> dict[str, Any]:
@@ -674,11 +670,8 @@ def _events(ev: pa.Table | None, times: np.ndarray) -> dict[str, Any]:
             ids = r["participant_ids"] or []
             if etype is None or not ids:
                 continue
-            fs = int(np.clip(np.searchsorted(times, r["time_start"] - 1e-9), 0, max(len(times) - 1, 0)))
-            fe = int(np.clip(np.searchsorted(times, r["time_end"] + 1e-9) - 1, fs, max(len(times) - 1, 0)))
             events[str(r["event_id"])] = {
-                "name": f"{etype}{r['event_id']}", "type": etype,
-                "frame_intervals": [{"frame_start": fs, "frame_end": fe}],
+                "name": f"{etype}{r['event_id']}", "type": etype, "frame_intervals": _interval(times, r),
                 "event_data": {
                     "text": [{"name": "event_participant/role_a_id", "val": str(ids[0]), "type": "value"}],
                     "vec": [{"name": "event_participants/role_b_ids", "val": [str(v) for v in ids[1:]],
