@@ -73,7 +73,6 @@ class Boxes:
         self.found: dict[tuple[str, str], list] = {}
         self.interior: list[tuple[int, str, dict]] = []
         self.nonsimple = False
-        self.moving_static: list[str] = []
 
     def found_at(self, code: str, what: str, frame: Any, uid: str | None, count: int) -> None:
         f = self.found.get((code, what))
@@ -150,7 +149,6 @@ class Boxes:
                     rows.append((j, u, cub, edges))
         if not rows:
             return
-        self.moving_static = sorted({u for _, u, _, _ in rows})
         n = len(rows)
         v, nval = np.full((n, 10), np.nan), np.zeros(n, np.int8)
         for i, (_, u, cub, _) in enumerate(rows):
