@@ -14,11 +14,10 @@ import pyarrow as pa
 import pytest
 
 import aveas_format
-from aveas_format.converters.openlabel import encode
 from aveas_format.io import timemajor
 from aveas_format.converters.openlabel.write import openlabel_chunks
 from aveas_format.errors import ChecksumError
-from aveas_format.safeio import write_chunks_atomic
+from aveas_format.safeio import parts, write_chunks_atomic
 from aveas_format.sample import highway_scene
 
 from helpers_converters import rich_recording
@@ -29,7 +28,7 @@ def small_spill(monkeypatch):
     """Spill every recording, in buckets of a few hundred rows; forked parts from any size."""
     monkeypatch.setattr(timemajor, "SPILL_MIN_ROWS", 0)
     monkeypatch.setattr(timemajor, "BUCKET_BYTES", 20_000)
-    monkeypatch.setattr(encode, "PARTS_MIN_ROWS", 0)
+    monkeypatch.setattr(parts, "PARTS_MIN_ROWS", 0)
     made = []
     real = timemajor.SpilledStates._spill
     monkeypatch.setattr(timemajor.SpilledStates, "_spill",

@@ -17,6 +17,7 @@ import json
 import math
 from collections import defaultdict
 from datetime import datetime, timezone
+from functools import partial
 from pathlib import Path
 from collections.abc import Iterator
 from typing import Any
@@ -42,13 +43,14 @@ from aveas_format.converters.openlabel.profile import (
     iso_ms,
     no_gc,
 )
-from aveas_format.converters.openlabel.encode import CHUNK_ROWS, FrameParts, dumps, frame_chunks, orjson
+from aveas_format.converters.openlabel.encode import CHUNK_ROWS, dumps, frame_chunks, orjson
 from aveas_format.converters.common.geometry import rotate
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.io.arrow import column_numpy
 from aveas_format.io.tablejson import json_safe, table_to_json
-from aveas_format.io.timemajor import open_states
+from aveas_format.io.timemajor import chunk_bounds, open_states
 from aveas_format.safeio.compressed import compressed, compression
+from aveas_format.safeio.parts import ForkedParts
 
 # ================================================================================================
 # helpers
@@ -161,14 +163,18 @@ def _document(rec, states, opendrive: str, extension: bool, road_attributes: boo
         inputs.update(interior=interior, impact=impact)
         return inputs
 
-    parts = FrameParts(frame_of_row, times, prepare, summary, chunk_rows, workers, spill_dir) \
-        if workers > 1 and spill_dir is not None else None  # (forked before the writer's thread)
+    parts = None
+    if workers > 1 and spill_dir is not None:  # (forked before the writer's thread and before
+        # prepare has run: the forked processes' extremes start empty)
+        parts = ForkedParts(partial(frame_chunks, frame_of_row, times, prepare, chunk_rows=chunk_rows),
+                            chunk_bounds(np.sort(frame_of_row), chunk_rows), workers, spill_dir,
+                            state=summary.state, merge=summary.merge, prefix=".openlabel-frames.")
     try:
         yield b'{"openlabel":{"metadata":' + dumps(metadata) + b',"frames":{'
         del metadata
         with no_gc():
             if parts is not None:
-                yield from parts.frames()
+                yield from parts.chunks()
             else:
                 yield from frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows)
     finally:
