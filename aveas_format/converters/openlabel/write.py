@@ -43,10 +43,11 @@ from aveas_format.converters.openlabel.profile import (
     iso_ms,
     no_gc,
 )
-from aveas_format.converters.openlabel.encode import CHUNK_ROWS, dumps, frame_chunks, orjson
+from aveas_format.converters.openlabel.encode import CHUNK_ROWS, frame_chunks
 from aveas_format.converters.common.geometry import rotate
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.io.arrow import column_numpy
+from aveas_format.io.jsontext import dumps, orjson
 from aveas_format.io.tablejson import json_safe, table_to_json
 from aveas_format.io.timemajor import chunk_bounds, open_states
 from aveas_format.safeio.compressed import compressed, compression
