@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
+from aveas_format.converters.common.assemble import group_median
 from aveas_format.converters.common.geometry import rotate
 from aveas_format.converters.common.timestamps import resolve_timestamps, timestamp_value, to_utc
 from aveas_format.converters.labels import LabelFilter, implausible_size
@@ -424,16 +425,16 @@ def _numpy(col) -> np.ndarray:
 
 
 def _sizes(t: pa.Table, sized: np.ndarray, uidx: np.ndarray, needs_size) -> dict[int, np.ndarray]:
-    """Per object without a static size the median (length, width, height) of its boxes."""
+    """Per object without a static size the median (length, width, height) of its boxes (NaN
+    where one of them has NaN: a height the file leaves out)."""
     sel = np.flatnonzero(sized & needs_size[uidx])
-    if not len(sel):
-        return {}
-    u = uidx[sel]
-    dims = np.column_stack([_numpy(t.column(c))[sel] for c in ("dl", "dw", "dh")])
-    order = np.argsort(u, kind="stable")
-    uniq, first = np.unique(u[order], return_index=True)
-    bounds = [*first.tolist(), len(order)]
-    return {int(k): np.median(dims[order[bounds[i]:bounds[i + 1]]], axis=0) for i, k in enumerate(uniq.tolist())}
+    uniq, code = np.unique(uidx[sel], return_inverse=True)
+    dims = []
+    for c in ("dl", "dw", "dh"):
+        v = _numpy(t.column(c))[sel]
+        dims.append(np.where(np.bincount(code, np.isnan(v), len(uniq)) > 0, np.nan,
+                             group_median(code, v, len(uniq))))
+    return dict(zip(uniq.tolist(), np.column_stack(dims))) if len(sel) else {}
 
 
 def _to_local(rows: dict[str, np.ndarray], local, wcrs: str | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
