@@ -26,14 +26,14 @@ import numpy as np
 import pyarrow as pa
 
 from aveas_format.converters.common.assemble import group_median
-from aveas_format.converters.common.geometry import rotate
+from aveas_format.converters.common.geometry import rotate, rotated_std
 from aveas_format.converters.common.timestamps import resolve_timestamps, timestamp_value, to_utc
 from aveas_format.converters.labels import LabelFilter, implausible_size
 from aveas_format.converters.openlabel.findings import jpath, report_bad_sizes, report_no_state, report_repeats
 from aveas_format.converters.common.coordinate_systems import utm_crs
 from aveas_format.converters.openlabel.geometry import in_intervals, place, static_cuboids
 from aveas_format.converters.openlabel.profile import (EXT, FRAME_ATTRIBUTES, LIGHTS, VELOCITY_ATTRIBUTES,
-                                                       attributes_of, first_value, vehicle_std)
+                                                       attributes_of, first_value)
 from aveas_format.errors import FormatError, report_source
 from aveas_format.io.resort import StatesWriter
 from aveas_format.schema.tables import TABLES
@@ -390,10 +390,10 @@ def states_of(t: pa.Table, p: Plan, ctx) -> tuple[pa.Table, dict[int, np.ndarray
             states["ax"], states["ay"] = rotate(rows["au"], rows["av"], heading)
         su, sv = rows["vu_std"], rows["vv_std"]
         if np.isfinite(su).any():
-            states["vx_std"], states["vy_std"] = vehicle_std(su, sv, None, -heading)
+            states["vx_std"], states["vy_std"] = rotated_std(su, sv, None, -heading)
         su, sv = rows["au_std"], rows["av_std"]
         if np.isfinite(su).any() and "ax" in states:
-            states["ax_std"], states["ay_std"] = vehicle_std(su, sv, None, -heading)
+            states["ax_std"], states["ay_std"] = rotated_std(su, sv, None, -heading)
     for name, (shape, cols) in FRAME_ATTRIBUTES.items():  # the attributes that are states columns
         for c in (cols if shape == "vector" else [cols]):
             if c in _DIRECT and (p.has_vel or name not in VELOCITY_ATTRIBUTES) and np.isfinite(rows[c]).any():

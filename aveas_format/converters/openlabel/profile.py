@@ -5,10 +5,8 @@
   which states and participants columns the profile's attributes carry (the rest goes into the
   ``aveas_format`` extension, ``EXT``);
 - conditions <-> environment-context attributes (PMF vectors, Beaufort force), both ways;
-- the profile's ``acquisition_date`` format, enum values as ``aveas-openlabel`` writes them, the
-  1-sigma of velocities turned between the world and the vehicle frame;
-- attribute lookup in an OpenLABEL ``object_data``/``context_data`` (``attributes_of``, ``first_value``);
-- :class:`no_gc`, which both directions use around building or walking millions of small dicts.
+- the profile's ``acquisition_date`` format, enum values as ``aveas-openlabel`` writes them;
+- attribute lookup in an OpenLABEL ``object_data``/``context_data`` (``attributes_of``, ``first_value``).
 """
 
 from __future__ import annotations
@@ -142,17 +140,6 @@ def _beaufort_speed(force: float) -> float:
     return round(0.5 * (edges[k] + edges[k + 1]), 2)
 
 
-def vehicle_std(sx: np.ndarray, sy: np.ndarray, corr: np.ndarray | None, h: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """1-sigma of the vehicle-frame components of a world-frame Gaussian vector."""
-    r = np.zeros_like(sx) if corr is None else np.nan_to_num(corr)
-    c, s = np.cos(h), np.sin(h)
-    cxy = r * sx * sy
-    vu = c * c * sx * sx + s * s * sy * sy + 2 * c * s * cxy
-    vv = s * s * sx * sx + c * c * sy * sy - 2 * c * s * cxy
-    return np.sqrt(np.maximum(vu, 0)), np.sqrt(np.maximum(vv, 0))
-
-
 # ================================================================================================
 # attributes of object_data / context_data
 # ================================================================================================
@@ -264,24 +251,3 @@ def conditions_from(cd: dict[str, Any]) -> dict[str, Any]:
         if v is not None and from_profile(v) is not None:
             out[key] = from_profile(v)
     return out
-
-
-# ================================================================================================
-# garbage collection
-# ================================================================================================
-
-class no_gc:
-    """Pause the cyclic garbage collector while building or walking millions of small dicts
-    (it otherwise runs again and again over the growing, acyclic document)."""
-
-    def __enter__(self):
-        import gc
-
-        self._was = gc.isenabled()
-        gc.disable()
-
-    def __exit__(self, *exc):
-        import gc
-
-        if self._was:
-            gc.enable()

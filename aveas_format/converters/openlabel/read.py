@@ -41,14 +41,14 @@ from aveas_format.converters.openlabel.decode import decode_block
 from aveas_format.converters.openlabel.findings import check_objects, claims_profile, report_frame_findings
 from aveas_format.converters.common.coordinate_systems import CoordinateSystems
 from aveas_format.converters.openlabel.participants import participants_of
-from aveas_format.converters.openlabel.profile import EXT, no_gc
+from aveas_format.converters.openlabel.profile import EXT
 from aveas_format.converters.openlabel.source import (BLOCK, ReadWhole, WrongCut, broken, cuts, load_document,
                                                       open_file, open_frames, read_tail)
 from aveas_format.converters.openlabel.tables import recording_metadata, restore_derived, tables_of
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.mapref.build import load_map_bytes
 from aveas_format.errors import FormatError, report_source
-from aveas_format.numeric import small_pages
+from aveas_format.numeric import no_gc, small_pages
 
 log = logging.getLogger(__name__)
 #: bytes of boxes held in memory by an import that writes its recording (beyond: spilled)

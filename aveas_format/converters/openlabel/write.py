@@ -38,18 +38,17 @@ from aveas_format.converters.openlabel.profile import (
     EXT_VERSION,
     LIGHTS,
     METHOD_TO_PROFILE,
-    vehicle_std,
     environment_data,
     iso_ms,
-    no_gc,
 )
 from aveas_format.converters.openlabel.encode import CHUNK_ROWS, frame_chunks
-from aveas_format.converters.common.geometry import rotate
+from aveas_format.converters.common.geometry import rotate, rotated_std
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.io.arrow import column_numpy
 from aveas_format.io.jsontext import dumps, orjson
 from aveas_format.io.tablejson import json_safe, table_to_json
 from aveas_format.io.timemajor import chunk_bounds, open_states
+from aveas_format.numeric import no_gc
 from aveas_format.safeio.compressed import compressed, compression
 from aveas_format.safeio.parts import ForkedParts
 
@@ -507,11 +506,11 @@ def _uncertainty(cols: _Columns) -> tuple:
     vel_ok = acc_ok = np.zeros(n, bool)
     if stds["vx_std"] is not None and stds["vy_std"] is not None:
         vel_ok = np.isfinite(stds["vx_std"]) & np.isfinite(stds["vy_std"])
-        su, sv = vehicle_std(_z(stds["vx_std"]), _z(stds["vy_std"]), cols.vxvy, h)
+        su, sv = rotated_std(_z(stds["vx_std"]), _z(stds["vy_std"]), cols.vxvy, h)
         vel_std = [su, sv, 0.0, 0.0, 0.0, _z(stds["yaw_rate_std"])]
     if stds["ax_std"] is not None and stds["ay_std"] is not None:
         acc_ok = np.isfinite(stds["ax_std"]) & np.isfinite(stds["ay_std"])
-        su, sv = vehicle_std(_z(stds["ax_std"]), _z(stds["ay_std"]), cols.axay, h)
+        su, sv = rotated_std(_z(stds["ax_std"]), _z(stds["ay_std"]), cols.axay, h)
         acc_std = [su, sv, 0.0, 0.0, 0.0, 0.0]
     return box_std, vel_std, vel_ok, acc_std, acc_ok
 
