@@ -199,3 +199,20 @@ class small_pages:
     def __exit__(self, *exc):
         if self._set is not None:
             self._set(bool(self._was))
+
+
+class no_gc:
+    """Pause the cyclic garbage collector while building or walking millions of small objects
+    (it otherwise runs again and again over a growing, acyclic document)."""
+
+    def __enter__(self):
+        import gc
+
+        self._was = gc.isenabled()
+        gc.disable()
+
+    def __exit__(self, *exc):
+        import gc
+
+        if self._was:
+            gc.enable()

@@ -220,7 +220,7 @@ def _read_openlabel(path: Path, data: dict[str, Any], opts: InfraLidarOptions, r
                     systems: dict[str, np.ndarray], src: int) -> None:
     """The cuboids of one OpenLABEL file into ``rows``; their coordinate systems' transforms to the
     base frame into ``systems`` (per frame where ``frame_properties.transforms`` move them)."""
-    from aveas_format.converters.openlabel.geometry import CoordinateSystems as _Frames
+    from aveas_format.converters.common.coordinate_systems import CoordinateSystems as _Frames
 
     ol = data["openlabel"]
     if not isinstance(ol, dict):

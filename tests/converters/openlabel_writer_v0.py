@@ -35,17 +35,21 @@ from aveas_format.converters.openlabel.profile import (
     EXT_VERSION,
     LIGHTS,
     METHOD_TO_PROFILE,
-    vehicle_std,
-    json_safe,
     environment_data,
     iso_ms,
-    no_gc,
-    to_vehicle,
-    to_world,
-    table_to_json,
 )
 from aveas_format.converters.registry import ConverterOptions
+from aveas_format.converters.common.geometry import rotate, rotated_std
+from aveas_format.numeric import no_gc
 from aveas_format.io.arrow import column_numpy
+
+
+def to_vehicle(vx, vy, h):
+    return rotate(vx, vy, -h)
+
+
+to_world = rotate
+from aveas_format.io.tablejson import json_safe, table_to_json
 
 # ================================================================================================
 # helpers
@@ -367,12 +371,12 @@ def _uncertainty(p: pa.Table, cols: _Columns) -> tuple:
     vel_ok = acc_ok = np.zeros(n, bool)
     if stds["vx_std"] is not None and stds["vy_std"] is not None:
         vel_ok = np.isfinite(stds["vx_std"]) & np.isfinite(stds["vy_std"])
-        su, sv = vehicle_std(_z(stds["vx_std"]), _z(stds["vy_std"]), cols.vxvy, h)
+        su, sv = rotated_std(_z(stds["vx_std"]), _z(stds["vy_std"]), cols.vxvy, h)
         zero = np.zeros(n)
         vel_std = np.column_stack([su, sv, zero, zero, zero, _z(stds["yaw_rate_std"])]).tolist()
     if stds["ax_std"] is not None and stds["ay_std"] is not None:
         acc_ok = np.isfinite(stds["ax_std"]) & np.isfinite(stds["ay_std"])
-        su, sv = vehicle_std(_z(stds["ax_std"]), _z(stds["ay_std"]), cols.axay, h)
+        su, sv = rotated_std(_z(stds["ax_std"]), _z(stds["ay_std"]), cols.axay, h)
         zero = np.zeros(n)
         acc_std = np.column_stack([su, sv, zero, zero, zero, zero]).tolist()
     return box_std, size_std, vel_std, vel_ok, acc_std, acc_ok

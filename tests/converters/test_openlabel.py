@@ -305,16 +305,16 @@ def test_cli_export_and_convert(rich, tmp_path):
 
 def test_poses_and_utm_names(openlabel_data):
     """The VCD pose example gives one camera as a matrix and its twin as Euler angles."""
-    from aveas_format.converters.openlabel.geometry import pose, utm_crs
+    from aveas_format.converters.common.coordinate_systems import pose, utm_crs
 
     cs = json.loads((openlabel_data / "vcd__openlabel100_test_poses.json").read_text())
     cs = cs["openlabel"]["coordinate_systems"]
     a, b = pose(cs["CAM_1"]["pose_wrt_parent"]), pose(cs["CAM_2"]["pose_wrt_parent"])
     assert np.allclose(a, b)
-    assert utm_crs("utm-30t", "geo_utm") == "EPSG:32630"
-    assert utm_crs("UTM32N", None) == "EPSG:32632"
-    assert utm_crs("utm-56h", "geo_utm") == "EPSG:32756"
-    assert utm_crs("vehicle-iso8855", "local_cs") is None
+    assert utm_crs("utm-30t") == "EPSG:32630"
+    assert utm_crs("UTM32N") == "EPSG:32632"
+    assert utm_crs("utm-56h") == "EPSG:32756"
+    assert utm_crs("vehicle-iso8855") is None
 
 
 @pytest.mark.parametrize("tf", [{"matrix4x4": [1.0] * 17}, {"quaternion": [0, 0, 1]}, {"euler_angles": "ab"},
@@ -322,7 +322,7 @@ def test_poses_and_utm_names(openlabel_data):
 def test_an_unreadable_pose_is_a_located_error(tf):
     """A pose that is no 4x4 matrix (a number too many after a flipped byte, a short quaternion,
     NaN): a FormatError naming the coordinate system, not a traceback (found by the fuzz tests)."""
-    from aveas_format.converters.openlabel.geometry import CoordinateSystems
+    from aveas_format.converters.common.coordinate_systems import CoordinateSystems
     from aveas_format.errors import FormatError
 
     with pytest.raises(FormatError, match="pose_wrt_parent of coordinate system lidar"):

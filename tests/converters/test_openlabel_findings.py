@@ -179,12 +179,12 @@ def test_a_broken_compressed_file_is_a_clear_error(tmp_path):
 
 def test_a_decompression_bomb_stops_at_the_size_limit(tmp_path, monkeypatch):
     import aveas_format
-    from aveas_format.converters.openlabel import source
+    from aveas_format.safeio import compressed
 
     rec = highway_scene(n_vehicles=2, duration_s=1.0)
     p = tmp_path / "rec.json.gz"
     get_converter("openlabel", "export")(rec, p)
-    monkeypatch.setattr(source, "MAX_STREAMED_JSON_BYTES", 2 * p.stat().st_size)  # < the plain size
+    monkeypatch.setattr(compressed, "MAX_STREAMED_JSON_BYTES", 2 * p.stat().st_size)  # < the plain size
     with pytest.raises(aveas_format.FormatError, match="once decompressed exceeds the limit") as ei:
         convert("openlabel", [p])
     assert str(p) in str(ei.value)

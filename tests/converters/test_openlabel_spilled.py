@@ -14,10 +14,10 @@ import pyarrow as pa
 import pytest
 
 import aveas_format
-from aveas_format.converters.openlabel import encode, states
+from aveas_format.io import timemajor
 from aveas_format.converters.openlabel.write import openlabel_chunks
 from aveas_format.errors import ChecksumError
-from aveas_format.safeio import write_chunks_atomic
+from aveas_format.safeio import parts, write_chunks_atomic
 from aveas_format.sample import highway_scene
 
 from helpers_converters import rich_recording
@@ -26,12 +26,12 @@ from helpers_converters import rich_recording
 @pytest.fixture
 def small_spill(monkeypatch):
     """Spill every recording, in buckets of a few hundred rows; forked parts from any size."""
-    monkeypatch.setattr(states, "SPILL_MIN_ROWS", 0)
-    monkeypatch.setattr(states, "BUCKET_BYTES", 20_000)
-    monkeypatch.setattr(encode, "PARTS_MIN_ROWS", 0)
+    monkeypatch.setattr(timemajor, "SPILL_MIN_ROWS", 0)
+    monkeypatch.setattr(timemajor, "BUCKET_BYTES", 20_000)
+    monkeypatch.setattr(parts, "PARTS_MIN_ROWS", 0)
     made = []
-    real = states.SpilledStates._spill
-    monkeypatch.setattr(states.SpilledStates, "_spill",
+    real = timemajor.SpilledStates._spill
+    monkeypatch.setattr(timemajor.SpilledStates, "_spill",
                         lambda self, *a: (real(self, *a), made.append(self.n_buckets))[0])
     return made
 
@@ -89,11 +89,11 @@ def test_spilled_export_gives_the_loaded_exports_bytes(tmp_path, monkeypatch, sm
 def test_a_few_states_are_read_whole(tmp_path, monkeypatch):
     rec = highway_scene(n_vehicles=4, duration_s=4.0, seed=1)
     path = _written(tmp_path, rec, monkeypatch)
-    assert isinstance(states.open_states(aveas_format.open(path, states=False), 300), states.LoadedStates)
-    monkeypatch.setattr(states, "SPILL_MIN_ROWS", 0)
-    spilled = states.open_states(aveas_format.open(path, states=False), 300, tmp_path)
+    assert isinstance(timemajor.open_states(aveas_format.open(path, states=False), 300), timemajor.LoadedStates)
+    monkeypatch.setattr(timemajor, "SPILL_MIN_ROWS", 0)
+    spilled = timemajor.open_states(aveas_format.open(path, states=False), 300, tmp_path)
     try:
-        assert isinstance(spilled, states.SpilledStates)
+        assert isinstance(spilled, timemajor.SpilledStates)
         assert spilled.frame_of_row.dtype == np.int32
         np.testing.assert_array_equal(spilled.frame_of_row,
                                       np.unique(rec.states.column("time").to_numpy(), return_inverse=True)[1])
@@ -140,9 +140,9 @@ def test_a_compressed_export_spills_next_to_its_output(tmp_path, monkeypatch, sm
     rec = highway_scene(n_vehicles=6, duration_s=6.0, seed=2)
     path = _written(tmp_path, rec, monkeypatch)
     dirs = []
-    real = states.SpilledStates.__init__
-    monkeypatch.setattr(states.SpilledStates, "__init__",
-                        lambda self, r, rows, spill_dir=None: (dirs.append(spill_dir), real(self, r, rows, spill_dir))[1])
+    real = timemajor.SpilledStates.__init__
+    monkeypatch.setattr(timemajor.SpilledStates, "__init__",
+                        lambda self, r, rows, spill_dir=None, *a, **kw: (dirs.append(spill_dir), real(self, r, rows, spill_dir, *a, **kw))[1])
     export = get_converter("openlabel", "export")
     for name, r in (("loaded", aveas_format.open(path)), ("spilled", aveas_format.open(path, states=False))):
         (tmp_path / name).mkdir()

@@ -288,45 +288,29 @@ def _parts_export(rec, path, **kw):
 @pytest.mark.parametrize("workers,part_rows", [(2, 200_000), (3, 200_000), (2, 1_000), (3, 1_000)])
 def test_frames_encoded_in_forked_parts_give_the_same_file(tmp_path, monkeypatch, workers, part_rows):
     """The frames of a large export in parts (one round, or many: parts of ~1,000 rows dealt in
-    turn), those of the forked processes encoded into files next to the output and copied in by
-    the kernel: the same bytes as in one process, no part file left. A process that fails at
-    once, or after its first part, has its parts (the rest) encoded here instead."""
+    turn; safeio/parts.py), those of the forked processes encoded into files next to the output
+    and copied in by the kernel: the same bytes as in one process (the participants' extremes
+    merged), no part file left. A process that fails at once, or after its first part, has its
+    parts (the rest) encoded here instead."""
     import os
 
-    from aveas_format.converters.openlabel import encode
+    from aveas_format.safeio import parts
     from aveas_format.sample import highway_scene
 
     rec = highway_scene(n_vehicles=12, duration_s=20.0, seed=4)
-    monkeypatch.setattr(encode, "PARTS_MIN_ROWS", 0)
-    monkeypatch.setattr(encode, "PART_ROWS", part_rows)
+    monkeypatch.setattr(parts, "PARTS_MIN_ROWS", 0)
+    monkeypatch.setattr(parts, "PART_ROWS", part_rows)
     one = _parts_export(rec, tmp_path / "one.json")
     out = tmp_path / "parts"
     out.mkdir()
     assert _parts_export(rec, out / "rec.json", workers=workers, spill_dir=out) == one
     assert [p.name for p in out.iterdir()] == ["rec.json"]
-    real = encode._encode_parts
+    real = parts._write_parts
     for i, fails in enumerate([lambda *a: os._exit(3),  # (at once)
-                               lambda *a: real(*a[:5], a[5][:1], a[6]) or os._exit(3)]):  # (after a part)
-        monkeypatch.setattr(encode, "_encode_parts", fails)
+                               lambda enc, st, ps, conn: real(enc, st, ps[:1], conn) or os._exit(3)]):
+        monkeypatch.setattr(parts, "_write_parts", fails)
         assert _parts_export(rec, out / f"again{i}.json", workers=workers, spill_dir=out) == one
         assert sorted(p.name for p in out.iterdir()) == sorted(["rec.json", *(f"again{k}.json" for k in range(i + 1))])
-
-
-def test_the_parts_are_dealt_in_rounds_of_about_equal_rows():
-    from aveas_format.converters.openlabel import encode
-
-    bounds = list(range(0, 2_000_001, 10_000))  # 200 chunks of 10,000 rows
-    parts = encode.deal_parts(bounds, 2)
-    assert [o for _, _, o in parts] == [0, 1] * 5 + [0]  # 2M / (200k x 2) rounds, the last part here
-    assert parts[0][0] == 0 and parts[-1][1] == 200
-    assert all(a[1] == b[0] for a, b in zip(parts, parts[1:]))  # contiguous, every chunk once
-    rows = [bounds[b] - bounds[a] for a, b, _ in parts]
-    assert max(rows) - min(rows) <= 10_000  # about equal: a chunk at most
-    parts3 = encode.deal_parts(bounds, 3)
-    assert [o for _, _, o in parts3][:6] == [0, 1, 2, 0, 1, 2] and parts3[-1][2] == 0
-    assert encode.deal_parts(bounds[:4], 2) == [(0, 3, 0)]  # too few chunks to share
-    assert encode.deal_parts(bounds, 1) == [(0, 200, 0)]
-    assert [o for _, _, o in encode.deal_parts(bounds[:21], 2)] == [0, 1, 0]  # 200k rows: one round
 
 
 def test_a_part_whose_process_dies_half_way_is_cut_off_and_encoded_here(tmp_path, monkeypatch):
@@ -336,25 +320,23 @@ def test_a_part_whose_process_dies_half_way_is_cut_off_and_encoded_here(tmp_path
     import os
     import threading
 
-    from aveas_format.converters.openlabel import encode
-    from aveas_format.safeio import atomic
+    from aveas_format.safeio import atomic, parts
     from aveas_format.sample import highway_scene
 
     rec = highway_scene(n_vehicles=12, duration_s=20.0, seed=4)
-    monkeypatch.setattr(encode, "PARTS_MIN_ROWS", 0)
-    monkeypatch.setattr(encode, "PART_ROWS", 1_000)  # (several parts each)
+    monkeypatch.setattr(parts, "PARTS_MIN_ROWS", 0)
+    monkeypatch.setattr(parts, "PART_ROWS", 1_000)  # (several parts each)
     one = _parts_export(rec, tmp_path / "one.json")
     copying = threading.Event()  # (the writer has copied some of the part before it dies)
     real_copy = atomic._copy_range
     monkeypatch.setattr(atomic, "_copy_range", lambda *a: (real_copy(*a), copying.set()))
-    real = encode._encode_parts
+    real = parts._write_parts
 
-    def dies_half_way(frame_of_row, times, prepare, summary, chunk_rows, parts, conn):
-        real(frame_of_row, times, prepare, summary, chunk_rows, parts[:1], conn)  # (one whole part)
-        _, part, spill = parts[1]
+    def dies_half_way(encode, state, ps, conn):
+        real(encode, state, ps[:1], conn)  # (one whole part)
+        _, part, spill = ps[1]
         with open(spill, "wb") as f:
-            for i, data in enumerate(encode.frame_chunks(frame_of_row, times, prepare,
-                                                         chunk_rows=chunk_rows, part=part)):
+            for i, data in enumerate(encode(part=part)):
                 f.write(data)
                 f.flush()
                 if i == 1:
@@ -364,7 +346,7 @@ def test_a_part_whose_process_dies_half_way_is_cut_off_and_encoded_here(tmp_path
         time.sleep(0.5)  # (time for the writer to copy what is there)
         os._exit(3)
 
-    monkeypatch.setattr(encode, "_encode_parts", dies_half_way)
+    monkeypatch.setattr(parts, "_write_parts", dies_half_way)
     out = tmp_path / "parts"
     out.mkdir()
     got = _parts_export(rec, out / "rec.json", workers=2, spill_dir=out)
@@ -374,13 +356,12 @@ def test_a_part_whose_process_dies_half_way_is_cut_off_and_encoded_here(tmp_path
 
 def test_the_export_takes_workers_and_writes_the_same_file(tmp_path, monkeypatch):
     from aveas_format.converters import get_converter
-    from aveas_format.converters.openlabel import encode
+    from aveas_format.converters.openlabel import write
+    from aveas_format.safeio import parts
     from aveas_format.sample import highway_scene
 
     rec = highway_scene(n_vehicles=12, duration_s=20.0, seed=4)
-    from aveas_format.converters.openlabel import write
-
-    monkeypatch.setattr(encode, "PARTS_MIN_ROWS", 0)
+    monkeypatch.setattr(parts, "PARTS_MIN_ROWS", 0)
     monkeypatch.setattr(write, "CHUNK_ROWS", 300)
     from aveas_format.safeio import atomic
 

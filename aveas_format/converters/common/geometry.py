@@ -1,5 +1,5 @@
 """Geometry of source frames: reference points moved along the heading, angle conventions,
-rotations (quaternions, 2D), covariances turned and reduced to std and correlation, oriented box
+rotations (quaternions, 2D), vectors and their std turned, covariances turned and reduced to std and correlation, oriented box
 corners, points of a projected source CRS in the map's local frame, and the CRS of the map's frame
 (:func:`map_crs`: its geoReference, else the import's ``crs`` option)."""
 
@@ -74,6 +74,19 @@ def rotate(vx: np.ndarray, vy: np.ndarray, angle: np.ndarray | float
     """Vectors rotated counter-clockwise by ``angle`` (rad)."""
     c, s = np.cos(angle), np.sin(angle)
     return vx * c - vy * s, vx * s + vy * c
+
+
+def rotated_std(sx: np.ndarray, sy: np.ndarray, corr: np.ndarray | None, angle: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """1-sigma of a Gaussian 2D vector's components (std ``sx``, ``sy``, correlation ``corr``;
+    None: 0) along axes turned counter-clockwise by ``angle`` (a world vector's in the frame of a
+    vehicle heading ``angle``)."""
+    r = np.zeros_like(sx) if corr is None else np.nan_to_num(corr)
+    c, s = np.cos(angle), np.sin(angle)
+    cxy = r * sx * sy
+    vu = c * c * sx * sx + s * s * sy * sy + 2 * c * s * cxy
+    vv = s * s * sx * sx + c * c * sy * sy - 2 * c * s * cxy
+    return np.sqrt(np.maximum(vu, 0)), np.sqrt(np.maximum(vv, 0))
 
 
 def footprint_corners(x: np.ndarray, y: np.ndarray, heading: np.ndarray, length: np.ndarray,

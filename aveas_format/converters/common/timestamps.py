@@ -62,6 +62,24 @@ def iso_to_ns(text: str) -> int | None:
     return int(dt.timestamp()) * 1_000_000_000 + int((m[2] or "").ljust(9, "0"))
 
 
+def to_utc(ts: str) -> str:
+    """Any ISO 8601 timestamp (with offset) -> UTC ``...Z`` keeping the fraction digits."""
+    s = ts.strip()
+    m = re.match(r"^(\d{4}-\d{2}-\d{2})[T ](\d{2}:\d{2}:\d{2})(?:\.(\d{1,9}))?(Z|[+-]\d{2}(?::?\d{2})?)?$", s)
+    if not m:
+        raise FormatError(f"{ts!r} is not an ISO 8601 timestamp")
+    date, hms, frac, tz = m.groups()
+    tz = tz or "Z"
+    if tz in ("Z", "+00", "+0000", "+00:00", "-00:00"):
+        return f"{date}T{hms}{'.' + frac if frac else ''}Z"
+    if len(tz) == 3:
+        tz += ":00"
+    elif ":" not in tz:
+        tz = tz[:3] + ":" + tz[3:]
+    dt = datetime.fromisoformat(f"{date}T{hms}{tz}").astimezone(timezone.utc)
+    return dt.strftime("%Y-%m-%dT%H:%M:%S") + (f".{frac}" if frac else "") + "Z"
+
+
 def timestamp_value(v: Any) -> int | float | Decimal | str | None:
     """A number kept exact where it is written exactly: an integer (text) as an int, a decimal
     text (``"1631441453.299504000"``) or a ``Decimal`` (a JSON parser's exact number) as a

@@ -114,24 +114,22 @@ and ``..._test_bbox_simple.json``, VCD's ``vcd__openlabel100_test_{cuboids,poses
 and the AVEAS profile's ``aveas__minimum_openlabel_example.json`` (``../shared/data/openlabel/``;
 tests/realdata/test_openlabel.py), plus this library's own exports.
 
-Modules (``aveas_format.converters.openlabel``): ``profile`` the profile's mapping shared by both
-directions (classes, events, lights, conditions, timestamps, the attributes the import reads
-(``FRAME_ATTRIBUTES``: adding one is one line), the extension's table encoding); ``write`` and
-``encode`` recording -> OpenLABEL (``recording_to_openlabel``, the exporter; the frames' JSON
-built from columns); ``states`` the export's states in frame order (bounded memory); ``read`` the
-importer (``openlabel_to_recording``, ``import_openlabel_to``): which path reads a file, the
-recording; ``source`` the file (head, blocks of whole frames, tail, errors, compression);
-``decode`` a block of frames into columns (msgspec); ``geometry`` coordinate systems and cuboids in
-the root frame; ``boxes`` the boxes of all blocks -> what is decided over all of them -> states
-columns a bucket at a time; ``participants``, ``tables`` and ``findings`` the participants, the
-other tables and metadata, the located findings about the source.
+Modules (``aveas_format.converters.openlabel``): ``profile`` the profile's mapping, both
+directions (``FRAME_ATTRIBUTES``: adding an attribute the import reads is one line); ``write`` +
+``encode`` the export (the frames' JSON built from columns); ``read`` the importer (which path reads
+a file), ``source`` the file (head, blocks of whole frames, tail), ``decode`` a block into columns,
+``geometry`` cuboids in the root frame, ``boxes`` the boxes -> the decisions over all of them ->
+states columns, ``participants``, ``tables``, ``findings``. Shared elsewhere:
+:mod:`~aveas_format.io.timemajor` (the export's states in frame order),
+:mod:`~aveas_format.io.tablejson` (the extension's tables),
+:mod:`~aveas_format.converters.common.coordinate_systems`, :mod:`~aveas_format.safeio.compressed`.
 """
 
 from __future__ import annotations
 
-from aveas_format.converters.openlabel.profile import table_from_json, table_to_json
 from aveas_format.converters.openlabel.read import import_openlabel, openlabel_to_recording
 from aveas_format.converters.openlabel.write import export_openlabel, recording_to_openlabel
+from aveas_format.io.tablejson import table_from_json, table_to_json
 
 __all__ = ["export_openlabel", "import_openlabel", "openlabel_to_recording", "recording_to_openlabel",
            "table_from_json", "table_to_json"]

@@ -19,17 +19,21 @@ from decimal import Decimal
 import math
 from collections import defaultdict
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
 
-from aveas_format.converters.common.timestamps import resolve_timestamps, timestamp_value
+from aveas_format.converters.common.assemble import group_median
+from aveas_format.converters.common.geometry import rotate, rotated_std
+from aveas_format.converters.common.timestamps import resolve_timestamps, timestamp_value, to_utc
 from aveas_format.converters.labels import LabelFilter, implausible_size
 from aveas_format.converters.openlabel.findings import jpath, report_bad_sizes, report_no_state, report_repeats
-from aveas_format.converters.openlabel.geometry import in_intervals, place, static_cuboids, utm_crs
+from aveas_format.converters.common.coordinate_systems import utm_crs
+from aveas_format.converters.openlabel.geometry import in_intervals, place, static_cuboids
 from aveas_format.converters.openlabel.profile import (EXT, FRAME_ATTRIBUTES, LIGHTS, VELOCITY_ATTRIBUTES,
-                                                       attributes_of, first_value, to_utc, to_world, vehicle_std)
+                                                       attributes_of, first_value)
 from aveas_format.errors import FormatError, report_source
 from aveas_format.io.resort import StatesWriter
 from aveas_format.schema.tables import TABLES
@@ -70,7 +74,6 @@ class Boxes:
         self.found: dict[tuple[str, str], list] = {}
         self.interior: list[tuple[int, str, dict]] = []
         self.nonsimple = False
-        self.moving_static: list[str] = []
 
     def found_at(self, code: str, what: str, frame: Any, uid: str | None, count: int) -> None:
         f = self.found.get((code, what))
@@ -147,7 +150,6 @@ class Boxes:
                     rows.append((j, u, cub, edges))
         if not rows:
             return
-        self.moving_static = sorted({u for _, u, _, _ in rows})
         n = len(rows)
         v, nval = np.full((n, 10), np.nan), np.zeros(n, np.int8)
         for i, (_, u, cub, _) in enumerate(rows):
@@ -256,7 +258,7 @@ class Boxes:
         p.wcrs = options.world_crs
         if p.wcrs is None and len(roots) == 1:
             r = next(iter(roots))
-            p.wcrs = utm_crs(r, ((ol.get("coordinate_systems") or {}).get(r) or {}).get("type"))
+            p.wcrs = utm_crs(r)
         p.interior = self._interior(rank_of, p)
         return p
 
@@ -299,11 +301,8 @@ class Boxes:
         self.writer.close()
 
 
-class Plan:
+class Plan(SimpleNamespace):
     """What :meth:`Boxes.decide` decided (per box arrays are indexed by the box's number)."""
-
-    def __init__(self, **kw: Any) -> None:
-        self.__dict__.update(kw)
 
 
 def _extension_of(ol: dict[str, Any]) -> dict[str, Any] | None:
@@ -386,15 +385,15 @@ def states_of(t: pa.Table, p: Plan, ctx) -> tuple[pa.Table, dict[int, np.ndarray
     x, y, heading = _to_local(rows, ctx.local, p.wcrs)
     states.update(x=x, y=y, heading=heading, z=rows["pz"])
     if p.has_vel and n:
-        states["vx"], states["vy"] = to_world(rows["vu"], rows["vv"], heading)
+        states["vx"], states["vy"] = rotate(rows["vu"], rows["vv"], heading)
         if p.has_acc:
-            states["ax"], states["ay"] = to_world(rows["au"], rows["av"], heading)
+            states["ax"], states["ay"] = rotate(rows["au"], rows["av"], heading)
         su, sv = rows["vu_std"], rows["vv_std"]
         if np.isfinite(su).any():
-            states["vx_std"], states["vy_std"] = vehicle_std(su, sv, None, -heading)
+            states["vx_std"], states["vy_std"] = rotated_std(su, sv, None, -heading)
         su, sv = rows["au_std"], rows["av_std"]
         if np.isfinite(su).any() and "ax" in states:
-            states["ax_std"], states["ay_std"] = vehicle_std(su, sv, None, -heading)
+            states["ax_std"], states["ay_std"] = rotated_std(su, sv, None, -heading)
     for name, (shape, cols) in FRAME_ATTRIBUTES.items():  # the attributes that are states columns
         for c in (cols if shape == "vector" else [cols]):
             if c in _DIRECT and (p.has_vel or name not in VELOCITY_ATTRIBUTES) and np.isfinite(rows[c]).any():
@@ -426,16 +425,16 @@ def _numpy(col) -> np.ndarray:
 
 
 def _sizes(t: pa.Table, sized: np.ndarray, uidx: np.ndarray, needs_size) -> dict[int, np.ndarray]:
-    """Per object without a static size the median (length, width, height) of its boxes."""
+    """Per object without a static size the median (length, width, height) of its boxes (NaN
+    where one of them has NaN: a height the file leaves out)."""
     sel = np.flatnonzero(sized & needs_size[uidx])
-    if not len(sel):
-        return {}
-    u = uidx[sel]
-    dims = np.column_stack([_numpy(t.column(c))[sel] for c in ("dl", "dw", "dh")])
-    order = np.argsort(u, kind="stable")
-    uniq, first = np.unique(u[order], return_index=True)
-    bounds = [*first.tolist(), len(order)]
-    return {int(k): np.median(dims[order[bounds[i]:bounds[i + 1]]], axis=0) for i, k in enumerate(uniq.tolist())}
+    uniq, code = np.unique(uidx[sel], return_inverse=True)
+    dims = []
+    for c in ("dl", "dw", "dh"):
+        v = _numpy(t.column(c))[sel]
+        dims.append(np.where(np.bincount(code, np.isnan(v), len(uniq)) > 0, np.nan,
+                             group_median(code, v, len(uniq))))
+    return dict(zip(uniq.tolist(), np.column_stack(dims))) if len(sel) else {}
 
 
 def _to_local(rows: dict[str, np.ndarray], local, wcrs: str | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

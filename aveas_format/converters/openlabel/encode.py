@@ -1,294 +1,34 @@
 """The OpenLABEL frames as JSON bytes built from columns (the hot path of the export).
 
 No dict per state: each part of an object's data (the box, the velocity, the lights, the road
-facts, the extension's values...) is one column of JSON fragments, built for a chunk of rows at
-once — numbers are formatted by one ``orjson.dumps`` of a numpy array (split per row), strings
-through a cache of their distinct values, optional parts are empty fragments — and the fragments
-are put together by Arrow (an element-wise join of each template's constants and columns: no
-Python step per value or row). Only what is irregular by nature (interior
-signals, ``impact`` attributes, extension columns of nested types) goes through a Python value per
-row, and only in the rows that have it.
+facts, the extension's values...) is one column of JSON fragments of a
+:class:`~aveas_format.io.jsontext.Layout`, built for a chunk of rows at once (optional parts are
+empty fragments). Only what is irregular by nature (interior signals, ``impact`` attributes,
+extension columns of nested types) goes through a Python value per row, and only in the rows that
+have it.
 
 :func:`frame_chunks` yields the members of the ``frames`` object in frame order, a chunk of about
 :data:`CHUNK_ROWS` rows at a time, so that an export never holds the document (only the
-recording's columns and one chunk of text). Without orjson (``pip install aveas-format[fast]``)
-the same values come from the standard library's encoder, about 2x slower.
+recording's columns and one chunk of text).
 """
 
 from __future__ import annotations
 
-import json
-import math
-import os
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
 
-from aveas_format.converters.openlabel.profile import LONGITUDINAL, EXT, LIGHTS, json_safe
-
-try:  # the fast JSON encoder (extra ``fast``); the standard library's otherwise
-    import orjson
-except ImportError:  # pragma: no cover - exercised by a test that hides it
-    orjson = None
+from aveas_format.converters.openlabel.profile import LONGITUDINAL, EXT, LIGHTS
+from aveas_format.io.jsontext import Layout, dumps, numbers, texts
+from aveas_format.io.timemajor import chunk_bounds
 
 #: rows per chunk of the streamed frames (a chunk ends at a frame boundary)
 CHUNK_ROWS = 16384
 
 
-def dumps(v: Any) -> bytes:
-    """Compact JSON of a Python value as :func:`~aveas_format.converters.openlabel.profile.json_safe`
-    makes it JSON-safe (NaN/inf -> null, numpy scalars -> Python, bytes -> ``{"base64": ...}``)."""
-    if orjson is not None:  # orjson does the same itself, without walking the value in Python
-        return orjson.dumps(v, default=_clean_other, option=orjson.OPT_SERIALIZE_NUMPY)
-    return json.dumps(json_safe(v), separators=(",", ":"), allow_nan=False).encode()
-
-
-def _clean_other(v: Any) -> Any:
-    """What orjson leaves to its ``default``: bytes and other numpy scalars, as ``json_safe``."""
-    if isinstance(v, (bytes, bytearray, np.generic)):
-        return json_safe(v)
-    raise TypeError(f"not JSON serialisable: {type(v).__name__}")
-
-
-def _dump_array(a: np.ndarray) -> bytes:
-    if orjson is not None:
-        return orjson.dumps(a, option=orjson.OPT_SERIALIZE_NUMPY)
-    b = json.dumps(a.tolist(), separators=(",", ":")).encode()
-    if a.dtype.kind == "f":
-        b = b.replace(b"-Infinity", b"null").replace(b"Infinity", b"null").replace(b"NaN", b"null")
-    return b
-
-
-def numbers(a: np.ndarray) -> list[bytes]:
-    """JSON numbers of a 1-D array (float64 or int64; NaN -> null), or of each row of a 2-D array
-    joined by commas: one bytes per row."""
-    a = np.ascontiguousarray(a, dtype=np.int64 if a.dtype.kind in "iub" else np.float64)
-    if len(a) == 0:
-        return []
-    b = _dump_array(a)
-    return b[1:-1].split(b",") if a.ndim == 1 else b[2:-2].split(b"],[")
-
-
-def texts(values: list) -> list[bytes]:
-    """JSON strings of ``str(v)`` per value (each distinct value encoded once)."""
-    cache: dict[Any, bytes] = {}
-    return [cache[v] if v in cache else cache.setdefault(v, dumps(str(v))) for v in values]
-
-
-_TRUE_FALSE = np.array([b"false", b"true"], dtype=object)
-_EMPTY = pa.scalar(b"", pa.binary())
-
-
-def _split(text: bytes, sep: bytes) -> pa.Array:
-    """The pieces of ``text`` between ``sep`` as an Arrow binary array (split by Arrow)."""
-    return pc.split_pattern(pa.array([text], pa.binary()), pattern=sep).flatten()
-
-
-class _Layout:
-    """The JSON text of ``m`` rows of one layout.
-
-    A row is a sequence of segments: constant bytes, *values* (a column of JSON fragments, one
-    per row: :meth:`floats`, :meth:`ints`, :meth:`text`, :meth:`booleans`), *joined lists*
-    (:meth:`join`: items separated by commas, each item present where its mask is true). Rows
-    with the same items present share a template (constants and columns constant over the rows
-    inlined). Numbers are formatted by one call per kind (float, int) over all of the rows'
-    numeric columns and split by Arrow; each group's template is joined element-wise by Arrow
-    (``binary_join_element_wise``): no Python object per value, no Python step per row."""
-
-    def __init__(self, m: int) -> None:
-        self.m = m
-        #: value token -> bytes (the same in every row) or a column: ("n", float64 or int64 array,
-        #: 1-D, or 2-D: a vector's components), ("c", table of fragments, each row's index into
-        #: it) or ("t", an object array of fragments)
-        self._vals: list[Any] = []
-        self._masks: list[np.ndarray] = []
-        self._mask_ids: dict[bytes, int] = {}
-
-    # ---- values ---------------------------------------------------------------------------
-    def _number(self, a: Any, ints: bool) -> int:
-        dtype = np.int64 if ints else np.float64
-        if np.isscalar(a):
-            self._vals.append(numbers(np.array([a], dtype=dtype))[0])
-            return len(self._vals) - 1
-        a = np.asarray(a, dtype=dtype)
-        first = a[:1]
-        # the same bits in every row (-0.0 is not 0.0: the round trip keeps the sign)
-        if len(a) and ((a.view(np.int64) == first.view(np.int64)).all()
-                       or (a.ndim == 1 and not ints and np.isnan(a).all())):
-            self._vals.append(numbers(first)[0])  # constant over the rows: in the template
-        else:
-            self._vals.append(("n", a))
-        return len(self._vals) - 1
-
-    def floats(self, a: Any) -> int:
-        """A float column (float64 values; NaN -> null), or one number for every row, or the
-        rows of a matrix (one fragment ``a,b,c`` per row)."""
-        return self._number(a, False)
-
-    def ints(self, a: Any) -> int:
-        return self._number(a, True)
-
-    def text(self, values: Any) -> int:
-        """A column of ready JSON fragments (bytes, one per row), or one bytes for every row."""
-        self._vals.append(values if isinstance(values, bytes) else ("t", np.asarray(values, dtype=object)))
-        return len(self._vals) - 1
-
-    def coded(self, table: np.ndarray, codes: np.ndarray) -> int:
-        """A column of fragments given as each row's index into ``table`` (an object array of bytes)."""
-        self._vals.append(("c", table, np.asarray(codes, dtype=np.int64)))
-        return len(self._vals) - 1
-
-    def booleans(self, a: np.ndarray) -> int:
-        return self.coded(_TRUE_FALSE, np.asarray(a, dtype=bool))
-
-    # ---- structure ------------------------------------------------------------------------
-    def mask(self, mask: np.ndarray | None) -> Any:
-        """An item's presence: True (every row), False (none) or a mask index."""
-        if mask is None:
-            return True
-        mask = np.asarray(mask, dtype=bool)
-        if mask.all():
-            return True
-        if not mask.any():
-            return False
-        key = np.packbits(mask).tobytes()
-        if key not in self._mask_ids:
-            self._masks.append(mask)
-            self._mask_ids[key] = len(self._masks) - 1
-        return self._mask_ids[key]
-
-    def join(self, head: bytes, items: list, tail: bytes, empty: bytes | None = None) -> tuple:
-        """``head`` + the present items separated by commas + ``tail``; ``empty`` (when not None)
-        instead where no item is present. ``items``: (mask index/True/False, segments)."""
-        return ("join", head, [(p, segs) for p, segs in items if p is not False], tail, empty)
-
-    # ---- text ---------------------------------------------------------------------------------
-    def _groups(self) -> tuple[list[list[bool]], np.ndarray]:
-        """The rows' groups: which masks each group's rows have, and each row's group."""
-        m = self.m
-        if not self._masks:
-            return [[]], np.zeros(m, dtype=np.int64)
-        bits = np.column_stack(self._masks)
-        if bits.shape[1] < 63:
-            code = bits.astype(np.int64) @ (np.int64(1) << np.arange(bits.shape[1], dtype=np.int64))
-            shapes, inverse = np.unique(code, return_inverse=True)
-            present = [[bool(c >> b & 1) for b in range(bits.shape[1])] for c in shapes.tolist()]
-        else:
-            shapes, inverse = np.unique(bits, axis=0, return_inverse=True)
-            present = shapes.tolist()
-        return present, inverse.reshape(-1).astype(np.int64)
-
-    def _numbers_of(self, kind: str) -> list[int]:
-        """The tokens of the numeric columns of ``kind`` (``"f"``: floats, ``"i"``: ints)."""
-        return [k for k, v in enumerate(self._vals)
-                if isinstance(v, tuple) and v[0] == "n" and v[1].dtype.kind == kind]
-
-    def _fragments(self) -> list[Any]:
-        """Each value as bytes (constant) or an Arrow binary array of the rows' fragments: the
-        numbers of a kind formatted by one call and split by Arrow (no Python object per value)."""
-        vals = list(self._vals)
-        for kind in ("f", "i"):
-            cols = [k for k in self._numbers_of(kind) if vals[k][1].ndim == 1]  # (vectors below)
-            if not cols:
-                continue
-            mat = np.column_stack([vals[k][1] for k in cols])  # rows x columns, one formatting call
-            lo, hi = (int(mat.min()), int(mat.max())) if kind == "i" and mat.size else (0, 1 << 62)
-            if hi - lo < 65536:  # ids, counts, frames of a chunk: each distinct value's text once
-                table = pa.array(numbers(np.arange(lo, hi + 1, dtype=np.int64)), pa.binary())
-                for j, k in enumerate(cols):
-                    vals[k] = table.take(pa.array(mat[:, j] - lo))
-                continue
-            flat = _split(_dump_array(np.ascontiguousarray(mat.reshape(-1)))[1:-1], b",")
-            for j, k in enumerate(cols):
-                vals[k] = flat.take(pa.array(np.arange(j, len(flat), len(cols))))
-        for k, v in enumerate(vals):
-            if isinstance(v, tuple):
-                if v[0] == "n":  # (a vector's rows: "a,b,c" each)
-                    a = np.ascontiguousarray(v[1], dtype=np.int64 if v[1].dtype.kind in "iub" else np.float64)
-                    vals[k] = _split(_dump_array(a)[2:-2], b"],[") if len(a) else pa.array([], pa.binary())
-                elif v[0] == "c":  # (a negative code: a row whose mask leaves the value out)
-                    vals[k] = pa.array(v[1].tolist(), pa.binary()).take(pa.array(v[2], mask=v[2] < 0))
-                else:
-                    vals[k] = pa.array(v[1].tolist(), pa.binary())
-        return vals
-
-    def _joined(self, segments: list) -> pa.Array:
-        """The text of each row (an Arrow binary array, in row order) of the segments (bytes,
-        value tokens (ints), :meth:`join` tuples): each group's template joined element-wise by
-        Arrow (no Python step per row)."""
-        m = self.m
-        if m == 0:
-            return pa.array([], pa.binary())
-        vals = self._fragments()
-        present, inverse = self._groups()
-        order = np.argsort(inverse, kind="stable")
-        cuts = np.r_[0, np.cumsum(np.bincount(inverse, minlength=len(present)))]
-        done = []
-        for g, on in enumerate(present):
-            idx = order[cuts[g]:cuts[g + 1]]
-            if not len(idx):
-                continue
-            parts: list = []
-            self._template(segments, on, parts)
-            whole = len(idx) == m  # one layout for all rows: in order, no gather
-            args: list = []
-            for p in parts:  # (neighbouring constants as one)
-                p = vals[p] if isinstance(p, int) else p
-                if isinstance(p, bytes):
-                    if args and isinstance(args[-1], bytes):
-                        args[-1] += p
-                    else:
-                        args.append(p)
-                else:
-                    args.append(p if whole else p.take(pa.array(idx)))
-            if len(args) == 1 and isinstance(args[0], bytes):  # (no value varies: the text itself)
-                done.append(pa.array([args[0]] * len(idx), pa.binary()))
-                continue
-            done.append(pc.binary_join_element_wise(
-                *(pa.scalar(a, pa.binary()) if isinstance(a, bytes) else a for a in args), _EMPTY))
-        if len(done) == 1:
-            return done[0]
-        back = np.empty(m, np.int64)
-        back[order] = np.arange(m)
-        return pa.concat_arrays(done).take(pa.array(back))
-
-    def rows(self, segments: list) -> np.ndarray:
-        """The text of each row (an object array of bytes)."""
-        return np.array(self._joined(segments).to_pylist(), dtype=object)
-
-    def packed(self, segments: list) -> pa.Buffer:
-        """The rows' text one after the other: one buffer (bytes-like)."""
-        out = self._joined(segments)
-        offsets = np.frombuffer(out.buffers()[1], np.int32, len(out) + 1, out.offset * 4) if len(out) else [0, 0]
-        return out.buffers()[2][int(offsets[0]):int(offsets[-1])] if len(out) else pa.py_buffer(b"")
-
-    def _template(self, segments: list, on: list[bool], parts: list) -> None:
-        """The segments of a group of rows (``on``: which masks they have) as bytes and value
-        tokens (ints), the joined lists resolved."""
-        for seg in segments:
-            if isinstance(seg, bytes):
-                parts.append(seg)
-            elif isinstance(seg, (int, np.integer)):
-                parts.append(int(seg))
-            else:
-                _, head, items, tail, empty = seg
-                chosen = [segs for p, segs in items if p is True or on[p]]
-                if not chosen and empty is not None:
-                    parts.append(empty)
-                    continue
-                parts.append(head)
-                for k, segs in enumerate(chosen):
-                    if k:
-                        parts.append(b",")
-                    self._template(segs, on, parts)
-                parts.append(tail)
-
-
-def _vector(lay: _Layout, parts: list, idx: np.ndarray) -> list:
+def _vector(lay: Layout, parts: list, idx: np.ndarray) -> list:
     """Segments of a vector's components (arrays over all rows, or numbers) for the rows ``idx``:
     one fragment per row, or the vector in the template where it is the same in every row."""
     m = len(idx)
@@ -308,7 +48,7 @@ def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
     ``chunk_rows`` rows (whole frames): ``frame_of_row`` = each state row's frame (an index into
     ``times``), ``prepare(rows)`` = the per-row inputs of the state rows ``rows`` (in that order;
     :func:`aveas_format.converters.openlabel.write.openlabel_chunks`), asked for one chunk at a
-    time. ``part``: only the chunks ``[first, last)`` of :func:`chunk_bounds` (their text is the
+    time. ``part``: only the chunks ``[first, last)`` of :func:`~aveas_format.io.timemajor.chunk_bounds` (their text is the
     same as in the whole sequence: a comma before every chunk but the very first)."""
     order = np.argsort(frame_of_row, kind="stable")  # in a frame: the objects in the states' order
     if len(order) < 2**31:
@@ -338,191 +78,11 @@ def frame_chunks(frame_of_row: np.ndarray, times: np.ndarray, prepare, *,
 _AFTER = np.array([b"", b"}}"], dtype=object)
 
 
-def chunk_bounds(fs: np.ndarray, chunk_rows: int = CHUNK_ROWS) -> list[int]:
-    """The row offsets where :func:`frame_chunks`' chunks start, and the number of rows last: about
-    ``chunk_rows`` rows each, cut after whole frames (``fs``: the sorted frame of each row)."""
-    n = len(fs)
-    out, start = [0], 0
-    while start < n:
-        stop = min(start + chunk_rows, n)
-        start = int(np.searchsorted(fs, fs[stop - 1], side="right"))
-        out.append(start)
-    return out
-
-
-#: rows from which the frames are encoded in parts by forked processes (below: the fork and the
-#: copy cost more than they save)
-PARTS_MIN_ROWS = 200_000
-
-#: rows of one part (about 230 MB of JSON): small enough that a part's file is copied into the
-#: output and removed before the kernel writes it back to the disk, large enough that the
-#: processes seldom wait for each other
-PART_ROWS = 200_000
-
-#: a forked part handed on before this process settles the oldest one (the writer's queue holds
-#: more: the producer never waits on a full queue while the writer waits for it)
-MAX_PENDING = 2
-
-
-class FrameParts:
-    """The frames' chunks of :func:`frame_chunks` in parts of about :data:`PART_ROWS` rows, dealt
-    round by round to this process and ``workers - 1`` processes forked when this object is made
-    (they inherit the recording; made before any thread of the writer starts, and before
-    ``prepare`` has run, so that their extremes start empty); the last part is this process's.
-
-    :meth:`frames` streams this process's parts and hands each forked part on as a
-    :class:`~aveas_format.safeio.atomic.GrowingSegment` of the file its process writes in
-    ``spill_dir`` (the writer copies it as it grows, while this process encodes its next part;
-    a part's file is removed once copied, so the files never add up to the output's size). Before
-    the first chunk of its next part this process *settles* the forked parts handed on: waits for
-    their processes' word that each is whole (or that the process died: the part is then cut off
-    the output and encoded here, and so are that process's later parts). Each word carries the
-    process's participants' extremes so far (``state()``), merged into ``summary`` at the end
-    (``merge(state)``: the export's ``_Summary``). Where fork is not available or the rows are few,
-    everything is encoded here. :meth:`close` stops what still runs and removes its files."""
-
-    def __init__(self, frame_of_row: np.ndarray, times: np.ndarray, prepare, summary: Any,
-                 chunk_rows: int, workers: int, spill_dir: Path) -> None:
-        import multiprocessing
-        import tempfile
-
-        self.args = (frame_of_row, times, prepare)
-        self.summary, self.chunk_rows = summary, chunk_rows
-        self.procs: dict[int, Any] = {}  # owner -> (process, its end of the pipe)
-        self.files: dict[int, Path] = {}  # part -> the file its process writes
-        self.states: dict[int, Any] = {}  # owner -> its last word's extremes
-        self.done: dict[int, int] = {}  # owner -> the parts it has reported whole
-        self.failed: set[int] = set()
-        bounds = chunk_bounds(np.sort(frame_of_row), chunk_rows)
-        self.parts = deal_parts(bounds, workers)
-        if (len(frame_of_row) < PARTS_MIN_ROWS or len(self.parts) < 2
-                or "fork" not in multiprocessing.get_all_start_methods()):
-            self.parts = [(0, len(bounds) - 1, 0)]
-            return
-        ctx = multiprocessing.get_context("fork")
-        try:
-            for owner in range(1, workers):
-                mine = [j for j, (_, _, o) in enumerate(self.parts) if o == owner]
-                for j in mine:
-                    fd, name = tempfile.mkstemp(prefix=".openlabel-frames.", suffix=".tmp", dir=spill_dir)
-                    os.close(fd)
-                    self.files[j] = Path(name)
-                rd, wr = ctx.Pipe(duplex=False)
-                proc = ctx.Process(target=_encode_parts, daemon=True,
-                                   args=(*self.args, summary, chunk_rows,
-                                         [(j, self.parts[j][:2], str(self.files[j])) for j in mine], wr))
-                proc.start()
-                wr.close()
-                self.procs[owner] = (proc, rd)
-                self.done[owner] = -1
-        except BaseException:
-            self.close()
-            raise
-
-    def _here(self, j: int) -> Iterator[bytes]:
-        c0, c1, _ = self.parts[j]
-        return frame_chunks(*self.args, chunk_rows=self.chunk_rows, part=(c0, c1))
-
-    def _whole(self, owner: int, j: int) -> bool:
-        """Whether the process ``owner`` wrote its part ``j`` whole (waits for its word)."""
-        proc, rd = self.procs[owner]
-        while owner not in self.failed and self.done[owner] < j:
-            try:
-                self.done[owner], self.states[owner] = rd.recv()
-            except EOFError:  # (the process died)
-                proc.join()
-                self.failed.add(owner)
-        return self.done[owner] >= j
-
-    def _settle(self, pending: list) -> Iterator[bytes]:
-        """The forked parts handed on, settled in order: finished, or cut off and encoded here."""
-        while pending:
-            seg, j = pending[0]
-            ok = False
-            try:
-                ok = self._whole(self.parts[j][2], j)
-            finally:
-                seg.finish(ok)  # (the writer cuts off what it copied of a part not whole)
-                pending.pop(0)
-            if not ok:  # here, with the real error if there is one
-                yield from self._here(j)
-
-    def frames(self) -> Iterator[Any]:
-        from aveas_format.safeio.atomic import GrowingSegment
-
-        pending: list = []  # (segment, part) handed on, not yet settled
-        try:
-            for j, (_, _, owner) in enumerate(self.parts):
-                if owner and owner not in self.failed:
-                    if len(pending) >= MAX_PENDING:
-                        yield from self._settle(pending[:1])
-                        pending.pop(0)
-                    pending.append((GrowingSegment(self.files.pop(j)), j))
-                    yield pending[-1][0]  # (copied while its process still writes it)
-                    continue
-                for chunk in self._here(j):
-                    yield from self._settle(pending)  # (before this part's first chunk)
-                    yield chunk
-            yield from self._settle(pending)
-        finally:
-            for seg, _ in pending:  # (stopped early: the writer must not wait for them)
-                seg.finish(False)
-        for owner, (proc, _) in self.procs.items():
-            proc.join()
-            if owner in self.states:
-                self.summary.merge(self.states[owner])
-        self.procs = {}
-
-    def close(self) -> None:
-        for proc, rd in self.procs.values():
-            proc.kill()
-            proc.join()
-            rd.close()
-        for spill in self.files.values():
-            spill.unlink(missing_ok=True)
-        self.procs, self.files = {}, {}
-
-
-def deal_parts(bounds: list[int], workers: int) -> list[tuple[int, int, int]]:
-    """The parts ``(first chunk, end chunk, owner)`` of :class:`FrameParts` for the chunks'
-    row offsets ``bounds`` (:func:`chunk_bounds`): rounds of one part per process (owner 0:
-    this process), then a last part of this process's; about :data:`PART_ROWS` rows each, all
-    about equal (a smaller share for this process, which also writes the output, was slower:
-    docs/performance.md). Empty parts are left out; one part (owner 0) where the chunks are too
-    few to share."""
-    k, rows = len(bounds) - 1, bounds[-1]
-    if workers < 2 or k < 2 * workers:
-        return [(0, k, 0)]
-    rounds = max(1, min(round(rows / (PART_ROWS * workers)), (k - 1) // workers))
-    owners = [*(j % workers for j in range(rounds * workers)), 0]
-    at = np.arange(1, len(owners)) / len(owners) * rows
-    cuts = [0, *np.searchsorted(bounds, at).tolist(), k]
-    return [(a, b, o) for a, b, o in zip(cuts[:-1], cuts[1:], owners) if b > a]
-
-
-def _encode_parts(frame_of_row, times, prepare, summary: Any, chunk_rows: int, parts: list,
-                  conn) -> None:
-    """A forked process of :class:`FrameParts`: each of its ``parts`` (index, chunks, file) into
-    its file, then its word sent — the index and the participants' extremes so far (nothing more
-    sent: it failed)."""
-    import gc
-
-    gc.disable()  # (as the export's own encoding: millions of acyclic small objects)
-    try:
-        for j, part, spill in parts:
-            with open(spill, "wb") as f:
-                for data in frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows, part=part):
-                    f.write(data)
-            conn.send((j, summary.state()))
-    finally:
-        conn.close()
-
-
 def _objects_packed(r: dict[str, Any], idx: np.ndarray, before: tuple, after: tuple) -> pa.Buffer:
     """``"uid":{"object_data":{...}}`` for the rows ``idx``, one after the other, each between
     a fragment ``before`` and one ``after`` (``(table, each row's index into it)``)."""
     m = len(idx)
-    lay = _Layout(m)
+    lay = Layout(m)
     pid = r["pid"][idx]
     on = r["on"][idx]
     vec = [(True, _named("velocity", _vector(lay, r["vel"], idx), vec=True)),
@@ -572,7 +132,7 @@ def _objects_packed(r: dict[str, Any], idx: np.ndarray, before: tuple, after: tu
     return lay.packed(segments)
 
 
-def _irregular(r: dict[str, Any], idx: np.ndarray, pid: np.ndarray, lay: _Layout, vec: list,
+def _irregular(r: dict[str, Any], idx: np.ndarray, pid: np.ndarray, lay: Layout, vec: list,
                num: list, boolean: list) -> None:
     """Interior signals and ``impact`` attributes: by (participant, time), only in the rows that
     have them (each a ready fragment of comma-separated list items)."""
@@ -612,7 +172,7 @@ def _irregular(r: dict[str, Any], idx: np.ndarray, pid: np.ndarray, lay: _Layout
         target.append((lay.mask(a != b""), [lay.text(a)]))
 
 
-def _extension(r: dict[str, Any], idx: np.ndarray, lay: _Layout) -> list:
+def _extension(r: dict[str, Any], idx: np.ndarray, lay: Layout) -> list:
     """Segments of ``,"aveas_format":{...}`` where the row has extension values (the states'
     columns the profile lacks, placeholders of null profile columns, exact values), else none."""
     ext = r["ext"]
@@ -625,7 +185,7 @@ def _extension(r: dict[str, Any], idx: np.ndarray, lay: _Layout) -> list:
         members.append((lay.mask(mask), [b'"' + c.encode() + b'":', token]))
 
     for c, col in ext["columns"].items():
-        valid, token = _column_fragments(col.take(ix), lay)
+        valid, token = lay.arrow(col.take(ix))
         member(c, token, valid)
     for c, isnull in ext["nullable"].items():
         member(c, lay.text(b"null"), isnull[idx])
@@ -637,24 +197,4 @@ def _extension(r: dict[str, Any], idx: np.ndarray, lay: _Layout) -> list:
     return [lay.join(b',"' + EXT.encode() + b'":{', members, b"}", empty=b"")]
 
 
-def _column_fragments(col: pa.ChunkedArray | pa.Array, lay: _Layout) -> tuple[np.ndarray, int]:
-    """A states column's values as a value of ``lay`` (``(valid, token)``): numbers vectorised,
-    other types through their Python values (as the extension block has them)."""
-    if isinstance(col, pa.ChunkedArray):
-        col = col.combine_chunks()
-    if pa.types.is_dictionary(col.type):
-        col = col.cast(col.type.value_type)
-    valid = col.is_valid().to_numpy(zero_copy_only=False)
-    t = col.type
-    if pa.types.is_floating(t) or pa.types.is_integer(t):
-        fill = 0 if pa.types.is_integer(t) else math.nan
-        a = col.fill_null(fill).to_numpy(zero_copy_only=False)
-        if pa.types.is_floating(t):
-            return valid, lay.floats(a.astype(np.float64))  # float32 as its float64 value
-        return valid, lay.ints(a)
-    if pa.types.is_boolean(t):
-        return valid, lay.booleans(col.fill_null(False).to_numpy(zero_copy_only=False))
-    return valid, lay.text([dumps(v) if v is not None else b"" for v in col.to_pylist()])
-
-
-__all__ = ["CHUNK_ROWS", "dumps", "frame_chunks", "numbers", "texts"]
+__all__ = ["CHUNK_ROWS", "frame_chunks"]

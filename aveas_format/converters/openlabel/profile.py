@@ -5,27 +5,17 @@
   which states and participants columns the profile's attributes carry (the rest goes into the
   ``aveas_format`` extension, ``EXT``);
 - conditions <-> environment-context attributes (PMF vectors, Beaufort force), both ways;
-- timestamps (the profile's ``acquisition_date`` format, any ISO 8601 -> UTC), enum values as
-  ``aveas-openlabel`` writes them, world <-> vehicle frame of velocities and their 1-sigma;
-- attribute lookup in an OpenLABEL ``object_data``/``context_data`` (``attributes_of``, ``first_value``);
-- the extension's table encoding (:func:`table_to_json` / :func:`table_from_json`, lossless:
-  non-finite floats, binary and the derived-table metadata survive JSON);
-- :class:`no_gc`, which both directions use around building or walking millions of small dicts.
+- the profile's ``acquisition_date`` format, enum values as ``aveas-openlabel`` writes them;
+- attribute lookup in an OpenLABEL ``object_data``/``context_data`` (``attributes_of``, ``first_value``).
 """
 
 from __future__ import annotations
 
-import base64
-import json
-import math
 import re
-from datetime import datetime, timezone
 from typing import Any
 
 import numpy as np
-import pyarrow as pa
 
-from aveas_format.errors import FormatError
 from aveas_format.schema.taxonomy import LIGHTING, ROAD_SURFACE
 
 #: the namespace of everything this library adds to an OpenLABEL file
@@ -123,125 +113,12 @@ PROFILE_PART_COLS = {"participant_id", "source_id", "class", "class_pmf", "lengt
 # helpers
 # ================================================================================================
 
-def json_safe(v: Any) -> Any:
-    """JSON-safe: NaN -> None, numpy scalars -> Python."""
-    if isinstance(v, (np.floating, float)):
-        v = float(v)
-        return None if math.isnan(v) or math.isinf(v) else v
-    if isinstance(v, np.integer):
-        return int(v)
-    if isinstance(v, np.bool_):
-        return bool(v)
-    if isinstance(v, (bytes, bytearray)):
-        return {"base64": base64.b64encode(bytes(v)).decode()}
-    if isinstance(v, dict):
-        return {k: json_safe(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [json_safe(x) for x in v]
-    return v
-
-
-#: schema-metadata key of a derived table (aveas_format.derive.registry.DERIVED_KEY)
-_DERIVED_KEY = b"aveas_derived"
-_NONFINITE = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
-
-
-def table_to_json(table: pa.Table | None) -> dict[str, Any] | None:
-    """A table as ``{"columns": {name: [values]}, "rows": n}`` (binary as base64, dictionary as
-    plain). JSON has no NaN or infinity: the row indices of such float values go to
-    ``"nonfinite": {name: {"NaN"|"Infinity"|"-Infinity": [rows]}}`` (the list holds null there), and
-    the table's ``aveas_derived`` schema metadata (how a derived table was made) to
-    ``"derived_info"``."""
-    if table is None:
-        return None
-    cols = {}
-    nonfinite: dict[str, dict[str, list[int]]] = {}
-    for name in table.column_names:
-        col = table.column(name)
-        if pa.types.is_dictionary(col.type):
-            col = col.cast(col.type.value_type)
-        if pa.types.is_floating(col.type) and table.num_rows:
-            x = col.to_numpy(zero_copy_only=False).astype(np.float64)
-            valid = ~np.asarray(col.is_null().to_numpy(zero_copy_only=False), bool)
-            bad = {key: np.flatnonzero(valid & m).tolist()
-                   for key, m in (("NaN", np.isnan(x)), ("Infinity", np.isposinf(x)),
-                                  ("-Infinity", np.isneginf(x)))}
-            bad = {k: v for k, v in bad.items() if v}
-            if bad:
-                nonfinite[name] = bad
-        cols[name] = json_safe(col.to_pylist())
-    out: dict[str, Any] = {"columns": cols, "rows": table.num_rows}
-    if nonfinite:
-        out["nonfinite"] = nonfinite
-    info = (table.schema.metadata or {}).get(_DERIVED_KEY)
-    if info is not None:
-        out["derived_info"] = info.decode("utf-8", "replace")
-    return out
-
-
-def table_from_json(obj: dict[str, Any] | None, name: str) -> pa.Table | None:
-    """Inverse of :func:`table_to_json`, conformed to the format's declared types."""
-    if not obj:
-        return None
-    from aveas_format.io.arrow import conform
-    from aveas_format.schema.tables import TABLES
-
-    spec = TABLES[name]
-    nonfinite = obj.get("nonfinite") or {}
-    arrays = {}
-    for cname, vals in (obj.get("columns") or {}).items():
-        fix = nonfinite.get(cname)
-        if fix:
-            vals = list(vals)
-            for key, rows in fix.items():
-                for i in rows:
-                    if 0 <= int(i) < len(vals):
-                        vals[int(i)] = _NONFINITE.get(key, math.nan)
-        if any(isinstance(v, dict) and set(v) == {"base64"} for v in vals if v is not None):
-            arrays[cname] = pa.array([None if v is None else base64.b64decode(v["base64"])
-                                      for v in vals], pa.binary())
-        else:
-            try:
-                arrays[cname] = pa.array(vals)
-            except (pa.ArrowInvalid, pa.ArrowTypeError):
-                arrays[cname] = pa.array([None if v is None else json.dumps(v) for v in vals])
-    if not arrays:
-        return None
-    n = int(obj.get("rows", len(next(iter(arrays.values())))))
-    arrays = {k: (v if len(v) == n else pa.nulls(n)) for k, v in arrays.items()}
-    table = conform(pa.table(arrays), spec)
-    info = obj.get("derived_info")
-    if isinstance(info, str):
-        md = dict(table.schema.metadata or {})
-        md[_DERIVED_KEY] = info.encode()
-        table = table.replace_schema_metadata(md)
-    return table
-
-
 def iso_ms(ts: str) -> str:
     """recording start_time -> the profile's yyyy-MM-ddTHH:mm:ss.FFFZ."""
     m = re.match(r"^(\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2})(?:\.(\d+))?Z$", ts)
     if not m:
         return ts
     return f"{m[1]}.{(m[2] or '').ljust(3, '0')[:3]}Z"
-
-
-def to_utc(ts: str) -> str:
-    """Any ISO 8601 timestamp (with offset) -> UTC ``...Z`` keeping the fraction digits."""
-    s = ts.strip()
-    m = re.match(r"^(\d{4}-\d{2}-\d{2})[T ](\d{2}:\d{2}:\d{2})(?:\.(\d{1,9}))?(Z|[+-]\d{2}(?::?\d{2})?)?$", s)
-    if not m:
-        raise FormatError(f"acquisition_date {ts!r} is not an ISO 8601 timestamp")
-    date, hms, frac, tz = m.groups()
-    tz = tz or "Z"
-    if tz in ("Z", "+00", "+0000", "+00:00", "-00:00"):
-        return f"{date}T{hms}{'.' + frac if frac else ''}Z"
-    if len(tz) == 3:
-        tz += ":00"
-    elif ":" not in tz:
-        tz = tz[:3] + ":" + tz[3:]
-    dt = datetime.fromisoformat(f"{date}T{hms}{tz}").astimezone(timezone.utc)
-    return dt.strftime("%Y-%m-%dT%H:%M:%S") + (f".{frac}" if frac else "") + "Z"
 
 
 def enum_value(v: Any) -> Any:
@@ -261,28 +138,6 @@ def _beaufort_speed(force: float) -> float:
     edges = (0.0,) + _BEAUFORT + (36.0,)
     k = int(min(max(round(force), 0), 12))
     return round(0.5 * (edges[k] + edges[k + 1]), 2)
-
-
-def to_vehicle(vx: np.ndarray, vy: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """World -> vehicle frame (x forward, y left)."""
-    c, s = np.cos(h), np.sin(h)
-    return c * vx + s * vy, -s * vx + c * vy
-
-
-def to_world(u: np.ndarray, v: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    c, s = np.cos(h), np.sin(h)
-    return c * u - s * v, s * u + c * v
-
-
-def vehicle_std(sx: np.ndarray, sy: np.ndarray, corr: np.ndarray | None, h: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """1-sigma of the vehicle-frame components of a world-frame Gaussian vector."""
-    r = np.zeros_like(sx) if corr is None else np.nan_to_num(corr)
-    c, s = np.cos(h), np.sin(h)
-    cxy = r * sx * sy
-    vu = c * c * sx * sx + s * s * sy * sy + 2 * c * s * cxy
-    vv = s * s * sx * sx + c * c * sy * sy - 2 * c * s * cxy
-    return np.sqrt(np.maximum(vu, 0)), np.sqrt(np.maximum(vv, 0))
 
 
 # ================================================================================================
@@ -342,6 +197,20 @@ def _pmf_vector(pmf: dict | None, cats: tuple[str, ...], mapping: dict[str, str]
     return [v / tot for v in vals.values()] if tot > 0 else None
 
 
+def _rounded(v: float) -> int:
+    return int(round(v))
+
+
+#: conditions <-> the environment context's numbers: (key, attribute, to the profile, from it)
+_ENV_NUMBERS = (
+    ("temperature_c", "environment/temperature_celsius", _rounded, float),
+    ("temperature_c_std", "environment/temperature/ustddev", float, float),
+    ("precipitation_mm_h", "environment/precipitation_intensity", _rounded, float),
+    ("visibility_m", "environment/visibility_range", _rounded, float),
+    ("cloud_cover_okta", "environment/cloud_cover", int, lambda v: int(v) if 0 <= int(v) <= 8 else None),
+    ("wind_speed_m_s", "environment/wind/beaufort_force", _beaufort, lambda v: _beaufort_speed(float(v))))
+
+
 def environment_data(cond: dict[str, Any]) -> dict[str, list]:
     data: dict[str, list] = {"num": [], "text": [], "vec": []}
     lighting = _pmf_vector(cond.get("lighting"), LIGHTING, LIGHTING_TO_PROFILE, PROFILE_LIGHTING)
@@ -355,19 +224,9 @@ def environment_data(cond: dict[str, Any]) -> dict[str, list]:
     if road:
         data["text"].append({"name": "road_condition", "val": PROFILE_ROAD[int(np.argmax(road))]})
         data["vec"].append({"name": "environment/road_condition/uncertainties", "val": road})
-    if cond.get("temperature_c") is not None:
-        data["num"].append({"name": "environment/temperature_celsius", "val": int(round(cond["temperature_c"]))})
-    if cond.get("temperature_c_std") is not None:
-        data["num"].append({"name": "environment/temperature/ustddev", "val": float(cond["temperature_c_std"])})
-    if cond.get("precipitation_mm_h") is not None:
-        data["num"].append({"name": "environment/precipitation_intensity",
-                            "val": int(round(cond["precipitation_mm_h"]))})
-    if cond.get("visibility_m") is not None:
-        data["num"].append({"name": "environment/visibility_range", "val": int(round(cond["visibility_m"]))})
-    if cond.get("cloud_cover_okta") is not None:
-        data["num"].append({"name": "environment/cloud_cover", "val": int(cond["cloud_cover_okta"])})
-    if cond.get("wind_speed_m_s") is not None:
-        data["num"].append({"name": "environment/wind/beaufort_force", "val": _beaufort(cond["wind_speed_m_s"])})
+    for key, name, to_profile, _ in _ENV_NUMBERS:
+        if cond.get(key) is not None:
+            data["num"].append({"name": name, "val": to_profile(cond[key])})
     return data
 
 
@@ -387,38 +246,8 @@ def conditions_from(cd: dict[str, Any]) -> dict[str, Any]:
         out["road_surface"] = {c: float(v) for c, v in zip(PROFILE_ROAD, ru)}
     elif rv in PROFILE_ROAD:
         out["road_surface"] = {rv: 1.0}
-    for name, key in (("environment/temperature_celsius", "temperature_c"),
-                      ("environment/temperature/ustddev", "temperature_c_std"),
-                      ("environment/precipitation_intensity", "precipitation_mm_h"),
-                      ("environment/visibility_range", "visibility_m")):
+    for key, name, _, from_profile in _ENV_NUMBERS:
         v = first_value(a, name)
-        if v is not None:
-            out[key] = float(v)
-    cc = first_value(a, "environment/cloud_cover")
-    if cc is not None and 0 <= int(cc) <= 8:
-        out["cloud_cover_okta"] = int(cc)
-    bf = first_value(a, "environment/wind/beaufort_force")
-    if bf is not None:
-        out["wind_speed_m_s"] = _beaufort_speed(float(bf))
+        if v is not None and from_profile(v) is not None:
+            out[key] = from_profile(v)
     return out
-
-
-# ================================================================================================
-# garbage collection
-# ================================================================================================
-
-class no_gc:
-    """Pause the cyclic garbage collector while building or walking millions of small dicts
-    (it otherwise runs again and again over the growing, acyclic document)."""
-
-    def __enter__(self):
-        import gc
-
-        self._was = gc.isenabled()
-        gc.disable()
-
-    def __exit__(self, *exc):
-        import gc
-
-        if self._was:
-            gc.enable()

@@ -27,6 +27,7 @@ import logging
 import os
 from functools import partial
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Literal
 
 import msgspec
@@ -38,16 +39,16 @@ from aveas_format.converters.common.timestamps import TIMESTAMP_UNITS
 from aveas_format.converters.openlabel.boxes import Boxes, keep_by_type, needs_size, states_of
 from aveas_format.converters.openlabel.decode import decode_block
 from aveas_format.converters.openlabel.findings import check_objects, claims_profile, report_frame_findings
-from aveas_format.converters.openlabel.geometry import CoordinateSystems
+from aveas_format.converters.common.coordinate_systems import CoordinateSystems
 from aveas_format.converters.openlabel.participants import participants_of
-from aveas_format.converters.openlabel.profile import EXT, no_gc
+from aveas_format.converters.openlabel.profile import EXT
 from aveas_format.converters.openlabel.source import (BLOCK, ReadWhole, WrongCut, broken, cuts, load_document,
                                                       open_file, open_frames, read_tail)
 from aveas_format.converters.openlabel.tables import recording_metadata, restore_derived, tables_of
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.mapref.build import load_map_bytes
 from aveas_format.errors import FormatError, report_source
-from aveas_format.numeric import small_pages
+from aveas_format.numeric import no_gc, small_pages
 
 log = logging.getLogger(__name__)
 #: bytes of boxes held in memory by an import that writes its recording (beyond: spilled)
@@ -196,13 +197,13 @@ def _read_blocks(fr, boxes: Boxes, options) -> None:
     """The frames of ``fr`` block by block into ``boxes``: in worker processes that read their
     blocks themselves (a large plain file), else here; from a cut before a frame head that proves
     wrong (:class:`~.source.WrongCut`) on, cut by structure (here)."""
-    from aveas_format.parallel import map_ordered, processes
+    from aveas_format.parallel import Progress, map_ordered, processes
 
     workers = processes(options.workers) if fr.size > SMALL else 1
     lazy = workers > 1 and not fr.compressed and hasattr(os, "pread")
     cs = fr.head.get("coordinate_systems")
     exact_from = None
-    bar = _progress(fr.size, fr.path) if options.progress else None
+    bar = Progress(fr.size, f"reading {fr.path.name}", failures=False) if options.progress else None
     by = f"{workers} worker processes" if workers > 1 else "this process"
     count = {"head": 0, "structure": 0, "lenient": 0}
     try:
@@ -237,12 +238,6 @@ def _read_blocks(fr, boxes: Boxes, options) -> None:
              count["head"] + count["structure"], count["head"], count["structure"], count["lenient"], by)
     if fr.tail and "coordinate_systems" in fr.tail and not cs and boxes.nonsimple:
         raise ReadWhole("coordinate_systems after the frames that place its cuboids")
-
-
-def _progress(total: int, path: Path):
-    from aveas_format.parallel import Progress
-
-    return Progress(total, f"reading {path.name}", failures=False)
 
 
 _SYSTEMS: dict[bytes, CoordinateSystems] = {}
@@ -309,7 +304,7 @@ def _recording(ol: dict[str, Any], boxes: Boxes, map_bytes: bytes, options, path
     if p.n == 0 and (p.uids or p.no_state):
         raise _no_boxes_error(objects, boxes.shapes, path)
     use_file = options.road_coordinates == "file" or (options.road_coordinates == "auto" and p.has_road)
-    ctx = _Context(local=local, net=net, use_file=use_file, needs_size=needs_size(objects, p.names))
+    ctx = SimpleNamespace(local=local, net=net, use_file=use_file, needs_size=needs_size(objects, p.names))
     written = None
     if boxes.writer.spilled:
         import pyarrow.parquet as pq
@@ -346,11 +341,6 @@ def _recording(ol: dict[str, Any], boxes: Boxes, map_bytes: bytes, options, path
     if ext is not None:
         restore_derived(rec, ext, path)
     return rec, written
-
-
-class _Context:
-    def __init__(self, **kw: Any) -> None:
-        self.__dict__.update(kw)
 
 
 def _filled(t: pa.Table, p, ctx, fill) -> tuple[pa.Table, Any]:

@@ -16,7 +16,7 @@ Broken JSON and non-UTF-8 text are a :class:`FormatError` naming the file and th
 uses Python's JSON extensions (``NaN``, ``Infinity``: :class:`ReadWhole`), that is no object at
 its top level, or whose ``openlabel``/``frames`` repeat is read whole (:func:`load_document`, the
 limits of :func:`~aveas_format.safeio.load_json`). ``.json.gz`` and ``.json.zst`` are read through
-their decompressor (the decompressed stream is held to the plain file's limit).
+their decompressor (:mod:`aveas_format.safeio.compressed`).
 """
 
 from __future__ import annotations
@@ -33,88 +33,14 @@ import numpy as np
 from aveas_format.errors import FormatError, RecordingIOError
 from aveas_format.safeio import (MAX_BULK_JSON_BYTES, MAX_JSON_DEPTH, MAX_STREAMED_JSON_BYTES, check_json_size,
                                  load_json, scan_json_member)
+from aveas_format.safeio.compressed import compression, open_file
 
-#: the compact forms: name suffix -> decompressor
-COMPRESSED = {".gz": "gzip", ".zst": "zstandard"}
 #: bytes of frames per block (a block's Python objects while it is decoded: ~3x that)
 BLOCK = 8 << 20
 #: bytes before a block's end in which a cut looks for the last frame head
 CUT_WINDOW = 1 << 18
 _FRAME_HEAD = re.compile(rb'\s*"(?:[^"\\]|\\.)*"\s*:\s*\{\s*$')
 _EXTENSIONS = re.compile(rb"-?(NaN|Infinity)")
-
-
-def compression(path: Path) -> str | None:
-    """``"gzip"`` / ``"zstandard"`` for a ``.json.gz`` / ``.json.zst`` file (by its name), else None."""
-    return COMPRESSED.get(Path(path).suffix.lower())
-
-
-class Decompressed:
-    """A file read through its decompressor, seekable as the readers here need it: forward by
-    reading on, backward by starting over."""
-
-    def __init__(self, path: Path, kind: str) -> None:
-        self.path, self.kind = path, kind
-        self.raw = self.f = None
-        self._open()
-
-    def _open(self) -> None:
-        self.close()
-        self.raw = open(self.path, "rb")  # noqa: SIM115 - closed in close()
-        if self.kind == "gzip":
-            import gzip
-
-            self.f = gzip.GzipFile(fileobj=self.raw, mode="rb")
-        else:
-            from aveas_format.errors import require
-
-            zstandard = require("zstandard", extra="zstd", what="reading .json.zst")
-            self.f = zstandard.ZstdDecompressor().stream_reader(self.raw, read_across_frames=True)
-        self.pos = 0
-
-    def read(self, n: int = -1) -> bytes:
-        try:
-            data = self.f.read(n) if n is not None and n >= 0 else self.f.read()
-        except (OSError, EOFError, ValueError) as e:  # gzip.BadGzipFile, zstd.ZstdError, truncated
-            raise FormatError(f"cannot decompress ({self.kind}): {e}", path=self.path) from None
-        self.pos += len(data)
-        if self.pos > MAX_STREAMED_JSON_BYTES:  # (a decompression bomb: the plain file's limit)
-            raise FormatError(f"JSON of more than {MAX_STREAMED_JSON_BYTES:,} bytes once decompressed "
-                              "exceeds the limit", path=self.path)
-        return data
-
-    def seek(self, pos: int, whence: int = 0) -> int:
-        if whence != 0:
-            raise ValueError("only absolute seeks")
-        if pos < self.pos:
-            self._open()
-        while self.pos < pos:
-            if not self.read(min(1 << 20, pos - self.pos)):
-                break
-        return self.pos
-
-    def tell(self) -> int:
-        return self.pos
-
-    def close(self) -> None:
-        for f in (self.f, self.raw):
-            if f is not None:
-                f.close()
-
-    def __enter__(self) -> Decompressed:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-
-def open_file(path: Path):
-    """The file for reading (decompressed where its name says it is compressed)."""
-    kind = compression(path)
-    try:
-        return Decompressed(Path(path), kind) if kind else open(path, "rb")  # noqa: SIM115
-    except OSError as e:
-        raise RecordingIOError(f"cannot read: {e.strerror or e}", path=path) from None
 
 
 class ReadWhole(Exception):

@@ -20,9 +20,9 @@ from aveas_format.converters.openlabel.profile import (
     conditions_from,
     enum_value,
     first_value,
-    table_from_json,
 )
 from aveas_format.errors import report_source
+from aveas_format.io.tablejson import table_from_json
 
 
 def tables_of(ol: dict[str, Any], ext: dict[str, Any] | None, frame_time: dict[int, float],

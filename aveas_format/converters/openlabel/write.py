@@ -17,6 +17,7 @@ import json
 import math
 from collections import defaultdict
 from datetime import datetime, timezone
+from functools import partial
 from pathlib import Path
 from collections.abc import Iterator
 from typing import Any
@@ -37,32 +38,23 @@ from aveas_format.converters.openlabel.profile import (
     EXT_VERSION,
     LIGHTS,
     METHOD_TO_PROFILE,
-    vehicle_std,
-    json_safe,
     environment_data,
     iso_ms,
-    no_gc,
-    to_vehicle,
-    to_world,
-    table_to_json,
 )
-from aveas_format.converters.openlabel.encode import CHUNK_ROWS, FrameParts, dumps, frame_chunks, orjson
-from aveas_format.converters.openlabel.states import open_states
-from aveas_format.converters.openlabel.source import compression
+from aveas_format.converters.openlabel.encode import CHUNK_ROWS, frame_chunks
+from aveas_format.converters.common.geometry import rotate, rotated_std
 from aveas_format.converters.registry import ConverterOptions, converter
 from aveas_format.io.arrow import column_numpy
+from aveas_format.io.jsontext import dumps, orjson
+from aveas_format.io.tablejson import json_safe, table_to_json
+from aveas_format.io.timemajor import chunk_bounds, open_states
+from aveas_format.numeric import no_gc
+from aveas_format.safeio.compressed import compressed, compression
+from aveas_format.safeio.parts import ForkedParts
 
 # ================================================================================================
 # helpers
 # ================================================================================================
-
-def _f(v: Any) -> float:
-    return float(v)
-
-
-def _finite(v: Any) -> bool:
-    return v is not None and not (isinstance(v, float) and math.isnan(v))
-
 
 def _pylist(table: pa.Table, name: str) -> list | None:
     if table is None or name not in table.column_names:
@@ -136,9 +128,10 @@ def openlabel_chunks(rec, *, opendrive: str = "map.xodr", extension: bool = True
     files in ``spill_dir``, given as :class:`~aveas_format.safeio.atomic.FileSegment` s (for
     :func:`write_chunks_atomic`). A recording opened without its states
     (``open_recording(path, states=False)``) has them read from its file in bounded memory
-    (:class:`~.states.SpilledStates`, spilled to a temporary directory in ``spill_dir``)."""
+    (:class:`~aveas_format.io.timemajor.SpilledStates`, spilled to a temporary directory in
+    ``spill_dir``)."""
     chunk_rows = chunk_rows or CHUNK_ROWS
-    states = open_states(rec, chunk_rows, spill_dir)
+    states = open_states(rec, chunk_rows, spill_dir, _acceleration(rec.derived), prefix=".openlabel-states.")
     try:
         yield from _document(rec, states, opendrive, extension, road_attributes, chunk_rows, workers,
                              spill_dir)
@@ -149,7 +142,7 @@ def openlabel_chunks(rec, *, opendrive: str = "map.xodr", extension: bool = True
 def _document(rec, states, opendrive: str, extension: bool, road_attributes: bool, chunk_rows: int,
               workers: int, spill_dir: Path | None) -> Iterator[Any]:
     """The chunks of :func:`openlabel_chunks`, the states read through ``states``
-    (:func:`~.states.open_states`)."""
+    (:func:`~aveas_format.io.timemajor.open_states`)."""
     meta = rec.meta
     thr = meta.thresholds.model_dump() if meta.thresholds else {}
     thr_out = {k: (thr.get(k) or v) for k, v in DEFAULT_THRESHOLDS.items()}
@@ -170,14 +163,18 @@ def _document(rec, states, opendrive: str, extension: bool, road_attributes: boo
         inputs.update(interior=interior, impact=impact)
         return inputs
 
-    parts = FrameParts(frame_of_row, times, prepare, summary, chunk_rows, workers, spill_dir) \
-        if workers > 1 and spill_dir is not None else None  # (forked before the writer's thread)
+    parts = None
+    if workers > 1 and spill_dir is not None:  # (forked before the writer's thread and before
+        # prepare has run: the forked processes' extremes start empty)
+        parts = ForkedParts(partial(frame_chunks, frame_of_row, times, prepare, chunk_rows=chunk_rows),
+                            chunk_bounds(np.sort(frame_of_row), chunk_rows), workers, spill_dir,
+                            state=summary.state, merge=summary.merge, prefix=".openlabel-frames.")
     try:
         yield b'{"openlabel":{"metadata":' + dumps(metadata) + b',"frames":{'
         del metadata
         with no_gc():
             if parts is not None:
-                yield from parts.frames()
+                yield from parts.chunks()
             else:
                 yield from frame_chunks(frame_of_row, times, prepare, chunk_rows=chunk_rows)
     finally:
@@ -219,6 +216,32 @@ def _profile_metadata(meta, opendrive: str, thr_out: dict[str, float]) -> dict[s
 # the states and participants as columns
 # ================================================================================================
 
+def _acceleration(derived: dict | None):
+    """``track_columns`` of :func:`~aveas_format.io.timemajor.open_states` for states without
+    ``ax``/``ay``: the world-frame acceleration ``ax_w, ay_w`` (the states' component where they
+    have it, else the derived kinematics' where it has a row per state, else estimated from the
+    velocities along each track)."""
+
+    def columns(names: list[str], n: int):
+        if "ax" in names and "ay" in names:
+            return None
+        kin = derived.get("kinematics") if derived else None
+        kin = None if kin is None or kin.num_rows != n else [column_numpy(kin, c, missing=None) for c in ("ax", "ay")]
+
+        def acc(t: pa.Table, offset: int) -> dict[str, np.ndarray]:
+            ax, ay = (column_numpy(t, c, missing=None) for c in ("ax", "ay"))
+            est = None if kin is None else [a[offset:offset + t.num_rows] for a in kin]
+            if est is None:
+                from aveas_format.mapref.build import velocity_from_positions
+
+                est = velocity_from_positions(t.column("participant_id").to_numpy(), column_numpy(t, "time"),
+                                              *(column_numpy(t, c, missing=None) for c in ("vx", "vy")))
+            return {"ax_w": np.nan_to_num(est[0]) if ax is None else ax,
+                    "ay_w": np.nan_to_num(est[1]) if ay is None else ay}
+        return acc
+    return columns
+
+
 class _Statics:
     """The participants' static values, by id (sizes, class, size uncertainties)."""
 
@@ -254,10 +277,9 @@ class _Statics:
 class _Columns:
     """The state rows ``s`` (one chunk of the frames) as numpy columns, with velocity and
     acceleration in the profile's vehicle frame (``vu, vv``, ``au, av``; the world-frame
-    acceleration ``ax_w, ay_w``: ``acc_w`` where the states have none, see
-    :func:`~.states.world_acceleration`)."""
+    acceleration ``ax_w, ay_w``: ``extra``'s where the states have none, :func:`_acceleration`)."""
 
-    def __init__(self, s: pa.Table, acc_w: tuple | None, static: _Statics) -> None:
+    def __init__(self, s: pa.Table, extra: dict | None, static: _Statics) -> None:
         self.static = static
         self.s = s
         self.pid = pid = s.column("participant_id").to_numpy()
@@ -269,10 +291,10 @@ class _Columns:
         self.h = h = column_numpy(s, "heading", missing=None)
         self.z = column_numpy(s, "z", missing=None)
         self.vx, self.vy = vx, vy = tuple(column_numpy(s, c, missing=None) for c in ("vx", "vy"))
-        self.vu, self.vv = to_vehicle(vx, vy, h)
+        self.vu, self.vv = rotate(vx, vy, -h)  # (the vehicle frame)
         self.ax, self.ay = ax, ay = tuple(column_numpy(s, c, missing=None) for c in ("ax", "ay"))
-        self.ax_w, self.ay_w = (ax, ay) if acc_w is None else acc_w
-        self.au, self.av = to_vehicle(np.nan_to_num(self.ax_w), np.nan_to_num(self.ay_w), h)
+        self.ax_w, self.ay_w = (ax, ay) if extra is None else (extra["ax_w"], extra["ay_w"])
+        self.au, self.av = rotate(np.nan_to_num(self.ax_w), np.nan_to_num(self.ay_w), -h)
         self.yaw_rate = column_numpy(s, "yaw_rate", missing=None)
         self.stds = {c: column_numpy(s, c, missing=None) for c in
                      ("x_std", "y_std", "z_std", "heading_std", "vx_std", "vy_std", "ax_std",
@@ -453,9 +475,9 @@ def _exact_values(s: pa.Table, cols: _Columns) -> dict[str, np.ndarray]:
 
     exact: dict[str, list] = {}
     hw = wrap_angle(cols.h)
-    back = dict(zip(("vx", "vy"), to_world(cols.vu, cols.vv, hw)))
+    back = dict(zip(("vx", "vy"), rotate(cols.vu, cols.vv, hw)))
     if cols.ax is not None and cols.ay is not None:
-        back.update(zip(("ax", "ay"), to_world(cols.au, cols.av, hw)))
+        back.update(zip(("ax", "ay"), rotate(cols.au, cols.av, hw)))
     z = cols.z
     if z is not None:
         hv = cols.static.sizes[cols.prow, 2]
@@ -484,11 +506,11 @@ def _uncertainty(cols: _Columns) -> tuple:
     vel_ok = acc_ok = np.zeros(n, bool)
     if stds["vx_std"] is not None and stds["vy_std"] is not None:
         vel_ok = np.isfinite(stds["vx_std"]) & np.isfinite(stds["vy_std"])
-        su, sv = vehicle_std(_z(stds["vx_std"]), _z(stds["vy_std"]), cols.vxvy, h)
+        su, sv = rotated_std(_z(stds["vx_std"]), _z(stds["vy_std"]), cols.vxvy, h)
         vel_std = [su, sv, 0.0, 0.0, 0.0, _z(stds["yaw_rate_std"])]
     if stds["ax_std"] is not None and stds["ay_std"] is not None:
         acc_ok = np.isfinite(stds["ax_std"]) & np.isfinite(stds["ay_std"])
-        su, sv = vehicle_std(_z(stds["ax_std"]), _z(stds["ay_std"]), cols.axay, h)
+        su, sv = rotated_std(_z(stds["ax_std"]), _z(stds["ay_std"]), cols.axay, h)
         acc_std = [su, sv, 0.0, 0.0, 0.0, 0.0]
     return box_std, vel_std, vel_ok, acc_std, acc_ok
 
@@ -562,7 +584,7 @@ def _objects(p: pa.Table, pid: np.ndarray, static: _Statics, frame_of_row: np.nd
         cls = classes[j]
         rows = order[bounds[0][j]:bounds[1][j]]
         hh = height[q]
-        size = {"name": "dimensions/size", "val": [_f(length[q]), _f(width[q]), _f(hh) if _finite(hh) else 0.0]}
+        size = {"name": "dimensions/size", "val": [float(length[q]), float(width[q]), 0.0 if math.isnan(hh) else hh]}
         vec = [size]
         if any(c in p.column_names for c in ("length_std", "width_std")):
             vec.append({"name": "dimensions/size/ustddev",
@@ -573,10 +595,10 @@ def _objects(p: pa.Table, pid: np.ndarray, static: _Statics, frame_of_row: np.nd
             vec.append({"name": "classification/uncertainties", "val": [float(v) for v in w]})
         num = []
         if len(rows):
-            num += [{"name": "summary/speed/max", "val": _f(summary.speed_max[j])},
-                    {"name": "summary/speed/min", "val": _f(summary.speed_min[j])},
-                    {"name": "summary/accel/max", "val": _f(summary.acc_max[j]), "type": "value"},
-                    {"name": "summary/accel/min", "val": _f(summary.acc_min[j]), "type": "value"}]
+            num += [{"name": "summary/speed/max", "val": float(summary.speed_max[j])},
+                    {"name": "summary/speed/min", "val": float(summary.speed_min[j])},
+                    {"name": "summary/accel/max", "val": float(summary.acc_max[j]), "type": "value"},
+                    {"name": "summary/accel/min", "val": float(summary.acc_min[j]), "type": "value"}]
         obj_data: dict[str, Any] = {"vec": vec, "num": num, "text": [], "boolean": []}
         if cls not in NO_RECORDER:
             obj_data["boolean"].append({"name": "is_recorder", "val": roles[j] == "recording_vehicle"})
@@ -632,13 +654,17 @@ def _contexts(rec, times: np.ndarray, summary: _Summary) -> dict[str, Any]:
     env = rec.environment
     if env is not None and env.num_rows and len(times):
         for k, r in enumerate(env.to_pylist()):
-            fs = int(np.clip(np.searchsorted(times, r["time_start"] - 1e-9), 0, len(times) - 1))
-            fe = int(np.clip(np.searchsorted(times, r["time_end"] + 1e-9) - 1, fs, len(times) - 1))
-            out[str(k + 2)] = {
-                "name": "environment_context", "type": "EnvironmentContext",
-                "frame_intervals": [{"frame_start": fs, "frame_end": fe}],
-                "context_data": environment_data(r)}
+            out[str(k + 2)] = {"name": "environment_context", "type": "EnvironmentContext",
+                               "frame_intervals": _interval(times, r), "context_data": environment_data(r)}
     return out
+
+
+def _interval(times: np.ndarray, r: dict[str, Any]) -> list[dict[str, int]]:
+    """The frame interval of a row's ``time_start`` .. ``time_end``."""
+    last = max(len(times) - 1, 0)
+    fs = int(np.clip(np.searchsorted(times, r["time_start"] - 1e-9), 0, last))
+    fe = int(np.clip(np.searchsorted(times, r["time_end"] + 1e-9) - 1, fs, last))
+    return [{"frame_start": fs, "frame_end": fe}]
 
 
 def _events(ev: pa.Table | None, times: np.ndarray) -> dict[str, Any]:
@@ -650,11 +676,8 @@ def _events(ev: pa.Table | None, times: np.ndarray) -> dict[str, Any]:
             ids = r["participant_ids"] or []
             if etype is None or not ids:
                 continue
-            fs = int(np.clip(np.searchsorted(times, r["time_start"] - 1e-9), 0, max(len(times) - 1, 0)))
-            fe = int(np.clip(np.searchsorted(times, r["time_end"] + 1e-9) - 1, fs, max(len(times) - 1, 0)))
             events[str(r["event_id"])] = {
-                "name": f"{etype}{r['event_id']}", "type": etype,
-                "frame_intervals": [{"frame_start": fs, "frame_end": fe}],
+                "name": f"{etype}{r['event_id']}", "type": etype, "frame_intervals": _interval(times, r),
                 "event_data": {
                     "text": [{"name": "event_participant/role_a_id", "val": str(ids[0]), "type": "value"}],
                     "vec": [{"name": "event_participants/role_b_ids", "val": [str(v) for v in ids[1:]],
@@ -701,33 +724,6 @@ def _map_name(output: Path, options: OpenLabelExportOptions) -> str:
 def _outputs(output: Path, options: OpenLabelExportOptions) -> list[Path]:
     """The export's files: the JSON and, with ``write_map``, the map next to it."""
     return [output] + ([output.parent / _map_name(output, options)] if options.write_map else [])
-
-
-#: compression levels of the compact forms: fast, most of the size gain (docs/performance.md)
-GZIP_LEVEL, ZSTD_LEVEL = 3, 1
-
-
-def compressed(chunks, kind: str):
-    """The chunks compressed as a stream: one gzip member / one zstd frame (``kind`` as
-    :func:`~.source.compression` says)."""
-    if kind == "gzip":
-        import zlib
-
-        c = zlib.compressobj(GZIP_LEVEL, zlib.DEFLATED, 31)  # 31: the gzip container
-    else:
-        try:
-            import zstandard
-        except ImportError:
-            from aveas_format.errors import MissingDependencyError
-
-            raise MissingDependencyError("writing .zst needs zstandard: pip install "
-                                         "'aveas-format[zstd]'") from None
-        c = zstandard.ZstdCompressor(level=ZSTD_LEVEL).compressobj()
-    for data in chunks:
-        out = c.compress(data)
-        if out:
-            yield out
-    yield c.flush()
 
 
 @converter("openlabel", direction="export", options=OpenLabelExportOptions, outputs=_outputs,

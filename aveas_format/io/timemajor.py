@@ -1,24 +1,26 @@
-"""The states as the OpenLABEL export reads them: loaded, or spilled in frame order (bounded memory).
+"""A recording's states in time order, a chunk of whole time steps at a time (bounded memory):
+the inverse direction of :mod:`aveas_format.io.resort`.
 
-An OpenLABEL file is time-major (a frame holds every object present at its time), a recording's
-states are participant-major (sorted by participant, then time). The export asks for the state
-rows of one chunk of frames at a time (:func:`~.encode.frame_chunks`), in frame order:
+The states are participant-major (sorted by participant, then time); a time-major exporter writes
+every participant of one time step (*frame*) together. :func:`open_states` gives the state rows
+of one chunk of frames at a time (:func:`chunk_bounds`: about ``chunk_rows`` rows of whole
+frames), in frame order, within a frame in the states' order:
 
 - :class:`LoadedStates` takes them from the states table in memory (a recording opened whole);
 - :class:`SpilledStates` reads a recording on disk whose states were not loaded
-  (``open_recording(path, states=False)``; the CLI's ``export`` for an exporter that
-  ``streams_states``): one pass over ``states.parquet`` row group by row group writes each row to
-  the spill file of its *bucket* — consecutive whole chunks of frames, about
-  :data:`BUCKET_BYTES` of states each (Arrow IPC streams; uncompressed up to
-  :data:`aveas_format.io.resort.PLAIN_BUCKETS_BYTES` of states, else lz4) — which is the transpose done out
-  of core; then the export holds one bucket at a time. Memory: one row group during the pass, one
-  bucket and one chunk's text during the encoding, plus a few numbers per state (the frame of each
-  row; docs/performance.md "Memory"), whatever the recording's length.
+  (``open_recording(path, states=False)``): one pass over ``states.parquet`` row group by row
+  group writes each row to the spill file of its *bucket* — consecutive whole chunks of frames,
+  about :data:`BUCKET_BYTES` of states each (Arrow IPC streams, as :mod:`~aveas_format.io.resort`
+  writes its buckets) — which is the transpose done out of core; then the reader holds one bucket
+  at a time. Memory: one row group during the pass, one bucket during the reading, plus a few
+  numbers per state (the frame of each row), whatever the recording's length.
 
-Both give the world-frame acceleration of states without ``ax``/``ay`` (it needs whole tracks:
-from the derived kinematics, else from the velocities along each track); the spilled pass
-computes it on batches of whole tracks (a track's trailing rows held back to the next row group)
-and spills it with the rows. :func:`open_states` chooses.
+``track_columns`` adds columns that need whole tracks (the OpenLABEL export's acceleration
+estimated along each track where the states have none): ``track_columns(column names, rows)``
+gives None or a function of a table of whole tracks (and the index of its first row in the states)
+that returns the columns; the spilled pass calls it on batches of whole tracks (a track's
+trailing rows held back to the next row group) and spills the columns with the rows.
+The OpenLABEL export reads its states through this module.
 """
 
 from __future__ import annotations
@@ -26,76 +28,51 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 
-from aveas_format.converters.openlabel.encode import chunk_bounds
-from aveas_format.io.resort import READ, IpcWriter, bucket_options, write_by_bucket
 from aveas_format.io.arrow import column_numpy
+from aveas_format.io.resort import BUCKET_BYTES, MAX_BUCKETS, READ, IpcWriter, bucket_options, write_by_bucket
 from aveas_format.parallel import read_ahead
 
-#: about this many bytes of states per bucket of the spill (one bucket is held at a time)
-BUCKET_BYTES = 32 << 20
-#: at most this many buckets (their files are written at once)
-MAX_BUCKETS = 256
 #: a recording on disk with fewer states is read whole (the spill pass costs more than it saves)
 SPILL_MIN_ROWS = 500_000
-#: the spilled acceleration's columns (taken off again with the rows), and each row's index
-_ACC, _ROW = ("__aveas_ax_w", "__aveas_ay_w"), "__aveas_row"
+#: the prefix of the spilled extra columns (taken off again with the rows), and each row's index
+_EXTRA, _ROW = "__aveas_extra:", "__aveas_row"
+
+TrackColumns = Callable[[list[str], int], Callable[[pa.Table, int], dict[str, np.ndarray]] | None]
 
 
-def world_acceleration(kin: tuple | None, pid: np.ndarray, t: np.ndarray, vx: np.ndarray,
-                       vy: np.ndarray, ax: np.ndarray | None, ay: np.ndarray | None
-                       ) -> tuple[np.ndarray, np.ndarray]:
-    """The states' acceleration, else the derived kinematics' (``kin``: its ``ax, ay`` for these
-    rows, or None), else estimated from the velocities (rows of whole tracks, sorted by
-    participant and time)."""
-    if ax is not None and ay is not None:
-        return ax, ay
-    a_est = kin
-    if a_est is None:
-        from aveas_format.mapref.build import velocity_from_positions
-
-        a_est = velocity_from_positions(pid, t, vx, vy)
-    return (np.nan_to_num(a_est[0]) if ax is None else ax,
-            np.nan_to_num(a_est[1]) if ay is None else ay)
-
-
-def _has_acceleration(column_names: list[str]) -> bool:
-    return "ax" in column_names and "ay" in column_names
-
-
-def _kinematics(derived: dict | None, n: int) -> tuple | None:
-    """The derived kinematics' ``ax, ay`` when the table has a row per state, else None."""
-    kin = derived.get("kinematics") if derived else None
-    if kin is None or kin.num_rows != n:
-        return None
-    return tuple(column_numpy(kin, c, missing=None) for c in ("ax", "ay"))
-
-
-def _acceleration_of(table: pa.Table, kin: tuple | None) -> tuple[np.ndarray, np.ndarray]:
-    return world_acceleration(kin, table.column("participant_id").to_numpy(), column_numpy(table, "time"),
-                              *(column_numpy(table, c, missing=None) for c in ("vx", "vy", "ax", "ay")))
+def chunk_bounds(fs: np.ndarray, chunk_rows: int) -> list[int]:
+    """The row offsets where the chunks start, and the number of rows last: about ``chunk_rows``
+    rows each, cut after whole frames (``fs``: the sorted frame of each row)."""
+    n = len(fs)
+    out, start = [0], 0
+    while start < n:
+        stop = min(start + chunk_rows, n)
+        start = int(np.searchsorted(fs, fs[stop - 1], side="right"))
+        out.append(start)
+    return out
 
 
 class LoadedStates:
-    """The states table in memory (``derived``: the recording's derived tables, for the
-    kinematics' acceleration)."""
+    """The states table in memory (``track_columns``: module docstring)."""
 
-    def __init__(self, table: pa.Table, derived: dict | None) -> None:
+    def __init__(self, table: pa.Table, track_columns: TrackColumns | None = None) -> None:
         self.table = table
         self.column_names = table.column_names
         self.num_rows = table.num_rows
         self.times, self.frame_of_row = np.unique(column_numpy(table, "time"), return_inverse=True)
-        self.acc = None if _has_acceleration(self.column_names) else \
-            _acceleration_of(table, _kinematics(derived, table.num_rows))
+        extra = track_columns(self.column_names, self.num_rows) if track_columns else None
+        self.extra = None if extra is None else extra(table, 0)
 
-    def take(self, rows: np.ndarray) -> tuple[pa.Table, tuple | None]:
-        """The state rows ``rows`` and their world-frame acceleration (None: the states' own)."""
-        acc = None if self.acc is None else (self.acc[0][rows], self.acc[1][rows])
-        return self.table.take(pa.array(rows)), acc
+    def take(self, rows: np.ndarray) -> tuple[pa.Table, dict[str, np.ndarray] | None]:
+        """The state rows ``rows`` and their extra columns (None: no ``track_columns``)."""
+        extra = None if self.extra is None else {k: v[rows] for k, v in self.extra.items()}
+        return self.table.take(pa.array(rows)), extra
 
     def participant_ids(self) -> np.ndarray:
         return self.table.column("participant_id").to_numpy()
@@ -106,25 +83,26 @@ class LoadedStates:
 
 class SpilledStates:
     """The states of the recording ``rec`` on disk (not loaded) spilled in buckets of frames into
-    a temporary directory in ``spill_dir`` (module docstring); ``chunk_rows`` as the export's
-    :func:`~.encode.frame_chunks` (a chunk's rows are always in one bucket). The file's SHA-256
-    is checked against recording.json during the pass (a ChecksumError before anything is
-    encoded)."""
+    a temporary directory in ``spill_dir`` (module docstring); ``chunk_rows`` as
+    :func:`chunk_bounds` (a chunk's rows are always in one bucket). The file's SHA-256 is checked
+    against recording.json during the pass (a ChecksumError before anything is read from the
+    spill)."""
 
-    def __init__(self, rec, chunk_rows: int, spill_dir: Path | None = None) -> None:
+    def __init__(self, rec, chunk_rows: int, spill_dir: Path | None = None,
+                 track_columns: TrackColumns | None = None, prefix: str = ".states.") -> None:
         from aveas_format.io.reader import TableParts
         from aveas_format.parallel import background
 
         self.parts = parts = TableParts(rec.path, rec.meta, "states")
         self.column_names, self.num_rows = parts.column_names, parts.num_rows
-        self.dir = Path(tempfile.mkdtemp(prefix=".openlabel-states.", dir=spill_dir))
+        self.dir = Path(tempfile.mkdtemp(prefix=prefix, dir=spill_dir))
         self._owner = os.getpid()
         self._bucket, self._table, self._rows = -1, None, None
         try:
             hashed = background(parts.verify, name="states-sha256")
             try:
                 self.times, self.frame_of_row = self._frames()
-                self._spill(rec, chunk_rows)
+                self._spill(chunk_rows, track_columns(self.column_names, self.num_rows) if track_columns else None)
             finally:
                 hashed.result()  # (waited for in any case: no thread left behind)
         except BaseException:
@@ -167,10 +145,8 @@ class SpilledStates:
             self.bucket_of_frame[f0:f1] = bucket_of_chunk[c]
         self.n_buckets = int(bucket_of_chunk.max()) + 1 if len(bucket_of_chunk) else 0
 
-    def _spill(self, rec, chunk_rows: int) -> None:
+    def _spill(self, chunk_rows: int, extra) -> None:
         parts = self.parts
-        kin = None if _has_acceleration(self.column_names) else _kinematics(rec.derived, self.num_rows)
-        need_acc = not _has_acceleration(self.column_names)
         writers: dict[int, IpcWriter] = {}
         held: pa.Table | None = None
         offset = 0
@@ -180,40 +156,35 @@ class SpilledStates:
                     row_bytes = rg.nbytes / max(rg.num_rows, 1)
                     self._buckets(chunk_rows, row_bytes)
                     options = bucket_options(self.num_rows * row_bytes)
-                if need_acc:  # whole tracks: the last participant's rows wait for the next group
+                batch = rg
+                if extra is not None:  # whole tracks: the last participant's rows wait for the next group
                     batch = rg if held is None else pa.concat_tables([held, rg])
                     if g < parts.num_row_groups - 1 and batch.num_rows:
                         pid = batch.column("participant_id").to_numpy()
                         cut = int(np.flatnonzero(np.r_[True, pid[1:] != pid[:-1]])[-1])
                         batch, held = batch.slice(0, cut), batch.slice(cut)
-                    a = _acceleration_of(batch, None if kin is None else
-                                         (kin[0][offset:offset + batch.num_rows],
-                                          kin[1][offset:offset + batch.num_rows]))
-                    batch = batch.append_column(_ACC[0], pa.array(a[0], pa.float64())) \
-                                 .append_column(_ACC[1], pa.array(a[1], pa.float64()))
-                else:
-                    batch = rg
+                    for k, v in extra(batch, offset).items():
+                        batch = batch.append_column(_EXTRA + k, pa.array(v, pa.float64()))
                 n = batch.num_rows
                 if not n:
                     continue
                 batch = batch.append_column(_ROW, pa.array(np.arange(offset, offset + n, dtype=np.int64)))
                 b = self.bucket_of_frame[self.frame_of_row[offset:offset + n]]
                 order = np.argsort(b, kind="stable")  # (the rows' order kept within a bucket)
-                sb = b[order]
                 taken = batch.take(pa.array(order))
-                write_by_bucket(writers, taken, sb, lambda k: self.dir / f"b{k}.arrow", options)
+                write_by_bucket(writers, taken, b[order], lambda k: self.dir / f"b{k}.arrow", options)
                 offset += n
         finally:
             for w in writers.values():
                 w.close()
-        # the pass's buffers given back (the allocator keeps them otherwise; the forked encoders
-        # would each inherit them)
+        # the pass's buffers given back (the allocator keeps them otherwise; forked readers would
+        # each inherit them)
         pa.default_memory_pool().release_unused()
 
     # ---- reading ----------------------------------------------------------------------------
-    def take(self, rows: np.ndarray) -> tuple[pa.Table, tuple | None]:
-        """The state rows ``rows`` (one chunk of frames, in frame order) and their world-frame
-        acceleration (None: the states' own)."""
+    def take(self, rows: np.ndarray) -> tuple[pa.Table, dict[str, np.ndarray] | None]:
+        """The state rows ``rows`` (one chunk of frames, in frame order) and their extra columns
+        (None: no ``track_columns``)."""
         b = int(self.bucket_of_frame[self.frame_of_row[rows[0]]])
         if b != self._bucket:
             self._table = None  # (the last bucket freed before the next is read)
@@ -226,16 +197,16 @@ class SpilledStates:
         if local[-1] >= len(self._rows) or not np.array_equal(self._rows[local], rows):
             raise RuntimeError("the rows asked for are not one chunk of frames of one bucket")
         s = self._table.take(pa.array(local))
-        if _ACC[0] not in s.column_names:
+        names = [c for c in s.column_names if c.startswith(_EXTRA)]
+        if not names:
             return s, None
-        acc = tuple(s.column(c).to_numpy() for c in _ACC)
-        return s.drop_columns(list(_ACC)), acc
+        return s.drop_columns(names), {c[len(_EXTRA):]: s.column(c).to_numpy() for c in names}
 
     def participant_ids(self) -> np.ndarray:
         return self.parts.read(columns=["participant_id"]).column("participant_id").to_numpy()
 
     def close(self) -> None:
-        """The spill removed (by the process that made it: forked encoders only read it)."""
+        """The spill removed (by the process that made it: forked readers only read it)."""
         self._table = None
         if self._owner == os.getpid():
             self._owner = None
@@ -243,17 +214,19 @@ class SpilledStates:
             shutil.rmtree(self.dir, ignore_errors=True)
 
 
-def open_states(rec, chunk_rows: int, spill_dir: Path | None = None):
+def open_states(rec, chunk_rows: int, spill_dir: Path | None = None, track_columns: TrackColumns | None = None,
+                prefix: str = ".states."):
     """:class:`LoadedStates` of a recording whose states are loaded; for one opened without them
-    (``states=False``), :class:`SpilledStates`, or its states read whole when they are few
-    (:data:`SPILL_MIN_ROWS`) or the recording needs a migration."""
+    (``states=False``), :class:`SpilledStates` (its spill directory named ``prefix``...), or its
+    states read whole when they are few (:data:`SPILL_MIN_ROWS`) or the recording needs a
+    migration."""
     if rec.states is not None:
-        return LoadedStates(rec.states, rec.derived)
+        return LoadedStates(rec.states, track_columns)
     if rec.path is None:
         raise ValueError("the recording has no states (and no path to read them from)")
     entry = rec.meta.tables.get("states")
     if rec.migrated_from is not None or (entry is not None and entry.rows < SPILL_MIN_ROWS):
         from aveas_format.io.reader import open_recording
 
-        return LoadedStates(open_recording(rec.path, tables=["states"]).states, rec.derived)
-    return SpilledStates(rec, chunk_rows, spill_dir)
+        return LoadedStates(open_recording(rec.path, tables=["states"]).states, track_columns)
+    return SpilledStates(rec, chunk_rows, spill_dir, track_columns, prefix)
