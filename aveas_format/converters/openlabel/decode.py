@@ -20,8 +20,8 @@ the source found.
 
 from __future__ import annotations
 
+import io
 from decimal import Decimal
-
 from itertools import chain, repeat
 from operator import attrgetter, contains, is_not, itemgetter, methodcaller
 from types import SimpleNamespace
@@ -31,6 +31,7 @@ import msgspec
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
+import pyarrow.csv as pcsv
 
 from aveas_format.converters.labels import implausible_size
 from aveas_format.converters.openlabel.geometry import CoordinateSystems, place
@@ -283,15 +284,17 @@ def _cuboids(cubs: list, where) -> dict[str, np.ndarray]:
     attribute ``timestamp``, NaN where absent)."""
     n = len(cubs)
     raws = list(map(_VAL, cubs))
-    try:
-        vals = _CUBOIDS.decode(joined(raws))
-    except msgspec.ValidationError:
-        i = next(i for i, r in enumerate(raws) if not _numbers(r))
-        raise FormatError(f"{where(i)}: cuboid val holds non-numbers: "
-                          f"{bytes(raws[i])[:80].decode(errors='replace')}") from None
-    nval = np.fromiter(map(len, vals), np.int8, n)
+    v = vals = _matrix(raws)
+    if v is None:
+        try:
+            vals = _CUBOIDS.decode(joined(raws))
+        except msgspec.ValidationError:
+            i = next(i for i, r in enumerate(raws) if not _numbers(r))
+            raise FormatError(f"{where(i)}: cuboid val holds non-numbers: "
+                              f"{bytes(raws[i])[:80].decode(errors='replace')}") from None
+    nval = np.fromiter(map(len, vals), np.int8, n) if v is None else np.full(n, v.shape[1], np.int8)
     if n and (nval == 9).all():  # (the profile's: no quaternion, no tenth value)
-        v = np.array(vals, float)
+        v = np.array(vals, float) if v is None else v
     else:
         v = np.full((n, max(10, int(nval.max(initial=0)))), np.nan)
         for i, x in enumerate(vals):
@@ -308,6 +311,34 @@ def _cuboids(cubs: list, where) -> dict[str, np.ndarray]:
                 if isinstance(t, (int, float)) and not isinstance(t, bool):
                     cub_ts[i] = float(t)
     return {"v": v, "nval": nval, "cs": cs, "cub_ts": cub_ts}
+
+
+_DIGITS = b"0123456789.-+eE \t\r\n"
+#: the raw values joined by ``|`` -> CSV rows (brackets and whitespace dropped)
+_ROWS = bytes.maketrans(b"|", b"\n")
+
+
+def _matrix(raws: list) -> np.ndarray | None:
+    """The raw values (valid JSON) as the rows of a matrix where all are lists of ``k`` numbers,
+    parsed at once as CSV rows (Arrow's: correctly rounded as msgspec's), else None (also where
+    msgspec's float differs: an integer ``-0``, a number out of range)."""
+    n = len(raws)
+    text = b"|".join(raws)
+    skeleton = text.translate(None, _DIGITS)  # (what is left of n lists of k numbers: "[,,]|[,,]")
+    k = skeleton.find(b"]")
+    if not n or skeleton != b"|".join([b"[" + b"," * (k - 1) + b"]"] * n):
+        return None
+    rows = text.translate(_ROWS, b"[] \t\r\n") + b"\n"
+    try:
+        t = pcsv.read_csv(io.BytesIO(rows), pcsv.ReadOptions(use_threads=False, block_size=len(rows) + 1,
+                                                             autogenerate_column_names=True),
+                          convert_options=pcsv.ConvertOptions(column_types={f"f{i}": pa.float64() for i in range(k)}))
+    except pa.ArrowInvalid:  # (an empty list)
+        return None
+    v = np.column_stack([c.to_numpy() for c in t.columns]) if t.num_rows == n else None
+    if v is None or not np.isfinite(v).all() or (np.signbit(v[v == 0]).any() and (b"-0," in rows or b"-0\n" in rows)):
+        return None
+    return v
 
 
 def _numbers(raw: msgspec.Raw) -> bool:
@@ -442,6 +473,8 @@ def _vectors(raws: list) -> np.ndarray | None:
         if raws.count(raws[0]) == len(raws):
             row = _CUBOIDS.decode(b"[" + raws[0] + b"]")[0]
             return np.tile(np.asarray(row, float), (len(raws), 1))
+        if (m := _matrix(raws)) is not None:
+            return m
         vals = _CUBOIDS.decode(joined(raws))
     except msgspec.ValidationError:
         return None
