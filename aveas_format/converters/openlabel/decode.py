@@ -358,8 +358,6 @@ class _Attributes:
         self.n = n = len(ods)
         self.lenient = lenient
         self.where: dict[str, tuple] = {}  # name -> (the items of each box) or (boxes, raw values)
-        names_of = (lambda items: list(map(_NAME, items))) if lenient else \
-            (lambda items: list(map(_NAME_OF.__getitem__, map(type, items))))
         for kind in _KINDS:
             lists = list(map(attrgetter(kind), ods))
             if set(map(type, lists)) != {list}:
@@ -367,16 +365,15 @@ class _Attributes:
             lens = list(map(len, lists))
             if not max(lens, default=0):
                 continue
-            if min(lens) == max(lens):  # (the same names in the same order in every box?)
-                cols = [list(map(itemgetter(pos), lists)) for pos in range(lens[0])]
-                names = list(map(names_of, cols))
-                if all(isinstance(nm[0], str) and nm.count(nm[0]) == n for nm in names):
-                    for nm, c in zip(names, cols):
-                        if nm[0] not in _UNREAD:
-                            self.where.setdefault(nm[0], (c,))
-                    continue
             flat = list(chain.from_iterable(lists))
-            self._grouped(flat, names_of(flat), np.repeat(np.arange(n), lens))
+            key, k = list(map(_NAME if lenient else type, flat)), lens[0]  # (strict layout: a type is a name)
+            names = key[:k] if lenient else list(map(_NAME_OF.__getitem__, key[:k]))
+            if min(lens) == k and key == key[:k] * n and all(isinstance(nm, str) for nm in names):  # (one order)
+                for pos, nm in enumerate(names):
+                    if nm not in _UNREAD:
+                        self.where.setdefault(nm, (flat[pos::k],))
+                continue
+            self._grouped(flat, key if lenient else list(map(_NAME_OF.__getitem__, key)), np.repeat(np.arange(n), lens))
 
     def _grouped(self, flat: list, names: list, box: np.ndarray) -> None:
         try:
@@ -405,7 +402,9 @@ class _Attributes:
         w = self.where.get(name)
         if w is None:
             return np.zeros(0, np.int64), []
-        return (np.arange(self.n), list(map(_VAL, w[0]))) if len(w) == 1 else w
+        if len(w) == 1:  # (the values of a stride, once)
+            self.where[name] = w = (np.arange(self.n), list(map(_VAL, w[0])))
+        return w
 
     def boxes_with_prefix(self, prefix: str) -> list[int]:
         return sorted(set(chain.from_iterable(self.first(nm)[0].tolist() for nm in self.where
@@ -470,7 +469,7 @@ def _vectors(raws: list) -> np.ndarray | None:
     if not raws:
         return None
     try:
-        if raws.count(raws[0]) == len(raws):
+        if raws[-1] == raws[0] and raws.count(raws[0]) == len(raws):
             row = _CUBOIDS.decode(b"[" + raws[0] + b"]")[0]
             return np.tile(np.asarray(row, float), (len(raws), 1))
         if (m := _matrix(raws)) is not None:
