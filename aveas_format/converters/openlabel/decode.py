@@ -313,32 +313,27 @@ def _cuboids(cubs: list, where) -> dict[str, np.ndarray]:
     return {"v": v, "nval": nval, "cs": cs, "cub_ts": cub_ts}
 
 
-_DIGITS = b"0123456789.-+eE \t\r\n"
-#: the raw values joined by ``|`` -> CSV rows (brackets and whitespace dropped)
-_ROWS = bytes.maketrans(b"|", b"\n")
+_ROWS = bytes.maketrans(b"|", b"\n")  # (the raw values joined by "|" -> CSV rows)
 
 
 def _matrix(raws: list) -> np.ndarray | None:
     """The raw values (valid JSON) as the rows of a matrix where all are lists of ``k`` numbers,
     parsed at once as CSV rows (Arrow's: correctly rounded as msgspec's), else None (also where
     msgspec's float differs: an integer ``-0``, a number out of range)."""
-    n = len(raws)
     text = b"|".join(raws)
-    skeleton = text.translate(None, _DIGITS)  # (what is left of n lists of k numbers: "[,,]|[,,]")
+    skeleton = text.translate(None, b"0123456789.-+eE \t\r\n")  # (of n lists of k numbers: "[,,]|[,,]")
     k = skeleton.find(b"]")
-    if not n or skeleton != b"|".join([b"[" + b"," * (k - 1) + b"]"] * n):
+    if not raws or skeleton != b"|".join([b"[" + b"," * (k - 1) + b"]"] * len(raws)):
         return None
     rows = text.translate(_ROWS, b"[] \t\r\n") + b"\n"
+    opts = pcsv.ReadOptions(use_threads=False, block_size=len(rows) + 1, autogenerate_column_names=True)
     try:
-        t = pcsv.read_csv(io.BytesIO(rows), pcsv.ReadOptions(use_threads=False, block_size=len(rows) + 1,
-                                                             autogenerate_column_names=True),
-                          convert_options=pcsv.ConvertOptions(column_types={f"f{i}": pa.float64() for i in range(k)}))
+        v = np.column_stack([c.to_numpy() for c in pcsv.read_csv(io.BytesIO(rows), opts, convert_options=(
+            pcsv.ConvertOptions(column_types={f"f{i}": pa.float64() for i in range(k)}))).columns])
     except pa.ArrowInvalid:  # (an empty list)
         return None
-    v = np.column_stack([c.to_numpy() for c in t.columns]) if t.num_rows == n else None
-    if v is None or not np.isfinite(v).all() or (np.signbit(v[v == 0]).any() and (b"-0," in rows or b"-0\n" in rows)):
-        return None
-    return v
+    ok = len(v) == len(raws) and np.isfinite(v).all()
+    return v if ok and not (np.signbit(v[v == 0]).any() and (b"-0," in rows or b"-0\n" in rows)) else None
 
 
 def _numbers(raw: msgspec.Raw) -> bool:
