@@ -8,6 +8,7 @@ attributes decode as a JSON parser reads them."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import math
@@ -397,3 +398,35 @@ def test_verbose_says_which_path_read_the_file(exported, tmp_path):
     assert "read whole (NaN or Infinity" in r.output
     r = CliRunner().invoke(app, ["convert", "--from", "openlabel", str(p), "-o", str(tmp_path / "c.aveas")])
     assert "read whole" not in r.output
+
+
+def test_number_lists_read_as_a_json_parser_reads_them():
+    """The lists of numbers a block parses at once (the cuboids' values, a vector's values of one
+    length) are the floats ``json.loads`` reads, bit for bit: integers (``-0`` as 0.0), ``-0.0``,
+    exponents, 17 digits, integers beyond 64 bits, a number below the smallest double, whitespace
+    in the lists; next to a list that is empty, nested or holds no number (read box by box)."""
+    from aveas_format.converters.openlabel.decode import decode_block
+
+    def block(toks, vels):
+        objs = ",".join(f'"{i}":{{"object_data":{{"cuboid":[{{"name":"bounding_box","val":[{i},0,0.75,0,0,0.1,'
+                        f'{toks[i % len(toks)]},2,1.5]}}],"vec":[{{"name":"velocity","val":{v}}}]}}}}'
+                        for i, v in enumerate(vels))
+        return decode_block(('{"0":{"objects":{' + objs + "}}}").encode())
+
+    def bits(x):
+        return np.asarray(x, float).tobytes()
+
+    toks = ["-0.0", "0", "1E+2", "2.5e-3", "5e-324", "1e-400", "0.30000000000000004", "123456789012345678901",
+            "-17", "1.7976931348623157e308", "-2.2250738585072014e-308"]
+    for toks, sep in itertools.product((toks, ["-0", *toks]), (",", " , ", ",\n  ")):
+        vels = [f"[{t}{sep}{toks[-1 - i]}{sep}0,0,0{sep}{t}]" for i, t in enumerate(toks)]
+        for odd in (None, "[]", "[[1],2,0,0,0,1]", '[1,"a",0,0,0,1]', "[1,2]"):
+            blk = block(toks, vels + [odd] * (odd is not None))
+            want = [float(json.loads(t)) for t in toks]
+            assert bits(blk.cols["vu"][:len(toks)]) == bits(want), (sep, odd)
+            assert bits(blk.cols["yaw_rate"][:len(toks)]) == bits(want), (sep, odd)
+            assert bits(blk.cols["vv"][:len(toks)]) == bits(want[::-1]), (sep, odd)
+            assert bits(blk.cols["dl"][:len(toks)]) == bits(want), (sep, odd)
+            if odd in ("[]", "[[1],2,0,0,0,1]"):
+                assert math.isnan(blk.cols["vu"][-1]) and blk.cols["vv"][-1] == 2 if odd != "[]" else \
+                    math.isnan(blk.cols["vv"][-1])

@@ -20,8 +20,8 @@ the source found.
 
 from __future__ import annotations
 
+import io
 from decimal import Decimal
-
 from itertools import chain, repeat
 from operator import attrgetter, contains, is_not, itemgetter, methodcaller
 from types import SimpleNamespace
@@ -31,6 +31,7 @@ import msgspec
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
+import pyarrow.csv as pcsv
 
 from aveas_format.converters.labels import implausible_size
 from aveas_format.converters.openlabel.geometry import CoordinateSystems, place
@@ -283,15 +284,17 @@ def _cuboids(cubs: list, where) -> dict[str, np.ndarray]:
     attribute ``timestamp``, NaN where absent)."""
     n = len(cubs)
     raws = list(map(_VAL, cubs))
-    try:
-        vals = _CUBOIDS.decode(joined(raws))
-    except msgspec.ValidationError:
-        i = next(i for i, r in enumerate(raws) if not _numbers(r))
-        raise FormatError(f"{where(i)}: cuboid val holds non-numbers: "
-                          f"{bytes(raws[i])[:80].decode(errors='replace')}") from None
-    nval = np.fromiter(map(len, vals), np.int8, n)
+    v = vals = _matrix(raws)
+    if v is None:
+        try:
+            vals = _CUBOIDS.decode(joined(raws))
+        except msgspec.ValidationError:
+            i = next(i for i, r in enumerate(raws) if not _numbers(r))
+            raise FormatError(f"{where(i)}: cuboid val holds non-numbers: "
+                              f"{bytes(raws[i])[:80].decode(errors='replace')}") from None
+    nval = np.fromiter(map(len, vals), np.int8, n) if v is None else np.full(n, v.shape[1], np.int8)
     if n and (nval == 9).all():  # (the profile's: no quaternion, no tenth value)
-        v = np.array(vals, float)
+        v = np.array(vals, float) if v is None else v
     else:
         v = np.full((n, max(10, int(nval.max(initial=0)))), np.nan)
         for i, x in enumerate(vals):
@@ -308,6 +311,29 @@ def _cuboids(cubs: list, where) -> dict[str, np.ndarray]:
                 if isinstance(t, (int, float)) and not isinstance(t, bool):
                     cub_ts[i] = float(t)
     return {"v": v, "nval": nval, "cs": cs, "cub_ts": cub_ts}
+
+
+_ROWS = bytes.maketrans(b"|", b"\n")  # (the raw values joined by "|" -> CSV rows)
+
+
+def _matrix(raws: list) -> np.ndarray | None:
+    """The raw values (valid JSON) as the rows of a matrix where all are lists of ``k`` numbers,
+    parsed at once as CSV rows (Arrow's: correctly rounded as msgspec's), else None (also where
+    msgspec's float differs: an integer ``-0``, a number out of range)."""
+    text = b"|".join(raws)
+    skeleton = text.translate(None, b"0123456789.-+eE \t\r\n")  # (of n lists of k numbers: "[,,]|[,,]")
+    k = skeleton.find(b"]")
+    if not raws or skeleton != b"|".join([b"[" + b"," * (k - 1) + b"]"] * len(raws)):
+        return None
+    rows = text.translate(_ROWS, b"[] \t\r\n") + b"\n"
+    opts = pcsv.ReadOptions(use_threads=False, block_size=len(rows) + 1, autogenerate_column_names=True)
+    try:
+        v = np.column_stack([c.to_numpy() for c in pcsv.read_csv(io.BytesIO(rows), opts, convert_options=(
+            pcsv.ConvertOptions(column_types={f"f{i}": pa.float64() for i in range(k)}))).columns])
+    except pa.ArrowInvalid:  # (an empty list)
+        return None
+    ok = len(v) == len(raws) and np.isfinite(v).all()
+    return v if ok and not (np.signbit(v[v == 0]).any() and (b"-0," in rows or b"-0\n" in rows)) else None
 
 
 def _numbers(raw: msgspec.Raw) -> bool:
@@ -327,8 +353,6 @@ class _Attributes:
         self.n = n = len(ods)
         self.lenient = lenient
         self.where: dict[str, tuple] = {}  # name -> (the items of each box) or (boxes, raw values)
-        names_of = (lambda items: list(map(_NAME, items))) if lenient else \
-            (lambda items: list(map(_NAME_OF.__getitem__, map(type, items))))
         for kind in _KINDS:
             lists = list(map(attrgetter(kind), ods))
             if set(map(type, lists)) != {list}:
@@ -336,16 +360,15 @@ class _Attributes:
             lens = list(map(len, lists))
             if not max(lens, default=0):
                 continue
-            if min(lens) == max(lens):  # (the same names in the same order in every box?)
-                cols = [list(map(itemgetter(pos), lists)) for pos in range(lens[0])]
-                names = list(map(names_of, cols))
-                if all(isinstance(nm[0], str) and nm.count(nm[0]) == n for nm in names):
-                    for nm, c in zip(names, cols):
-                        if nm[0] not in _UNREAD:
-                            self.where.setdefault(nm[0], (c,))
-                    continue
             flat = list(chain.from_iterable(lists))
-            self._grouped(flat, names_of(flat), np.repeat(np.arange(n), lens))
+            key, k = list(map(_NAME if lenient else type, flat)), lens[0]  # (strict layout: a type is a name)
+            names = key[:k] if lenient else list(map(_NAME_OF.__getitem__, key[:k]))
+            if min(lens) == k and key == key[:k] * n and all(isinstance(nm, str) for nm in names):  # (one order)
+                for pos, nm in enumerate(names):
+                    if nm not in _UNREAD:
+                        self.where.setdefault(nm, (flat[pos::k],))
+                continue
+            self._grouped(flat, key if lenient else list(map(_NAME_OF.__getitem__, key)), np.repeat(np.arange(n), lens))
 
     def _grouped(self, flat: list, names: list, box: np.ndarray) -> None:
         try:
@@ -374,7 +397,9 @@ class _Attributes:
         w = self.where.get(name)
         if w is None:
             return np.zeros(0, np.int64), []
-        return (np.arange(self.n), list(map(_VAL, w[0]))) if len(w) == 1 else w
+        if len(w) == 1:  # (the values of a stride, once)
+            self.where[name] = w = (np.arange(self.n), list(map(_VAL, w[0])))
+        return w
 
     def boxes_with_prefix(self, prefix: str) -> list[int]:
         return sorted(set(chain.from_iterable(self.first(nm)[0].tolist() for nm in self.where
@@ -439,9 +464,11 @@ def _vectors(raws: list) -> np.ndarray | None:
     if not raws:
         return None
     try:
-        if raws.count(raws[0]) == len(raws):
+        if raws[-1] == raws[0] and raws.count(raws[0]) == len(raws):
             row = _CUBOIDS.decode(b"[" + raws[0] + b"]")[0]
             return np.tile(np.asarray(row, float), (len(raws), 1))
+        if (m := _matrix(raws)) is not None:
+            return m
         vals = _CUBOIDS.decode(joined(raws))
     except msgspec.ValidationError:
         return None
