@@ -34,7 +34,8 @@ import pyarrow.compute as pc
 import pyarrow.csv as pcsv
 
 from aveas_format.converters.labels import implausible_size
-from aveas_format.converters.openlabel.geometry import CoordinateSystems, place
+from aveas_format.converters.common.coordinate_systems import CoordinateSystems
+from aveas_format.converters.openlabel.geometry import place
 from aveas_format.converters.openlabel.profile import (EXT, FRAME_ATTRIBUTES, INTERIOR_ATTRIBUTES, LONGITUDINAL,
                                                        MANDATORY_FRAME_ATTRIBUTES, UNREAD_ATTRIBUTES, attributes_of,
                                                        enum_value, first_value, pmf_bad)

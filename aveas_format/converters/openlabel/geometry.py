@@ -13,8 +13,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from aveas_format.converters.common.coordinate_systems import (  # noqa: F401 - CoordinateSystems: decode's
-    CoordinateSystems, euler_rotation, quaternion_rotation)
+from aveas_format.converters.common.coordinate_systems import euler_rotation, quaternion_rotation
 from aveas_format.errors import FormatError
 
 
