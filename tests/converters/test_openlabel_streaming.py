@@ -313,47 +313,6 @@ def test_frames_encoded_in_forked_parts_give_the_same_file(tmp_path, monkeypatch
         assert sorted(p.name for p in out.iterdir()) == sorted(["rec.json", *(f"again{k}.json" for k in range(i + 1))])
 
 
-def test_a_part_whose_process_dies_half_way_is_cut_off_and_encoded_here(tmp_path, monkeypatch):
-    """The writer copies a forked part's file while it grows: a process that dies after writing
-    some of a part's frames (copied already, or not yet) leaves no trace of them in the output;
-    its earlier, whole part stays as it was copied."""
-    import os
-    import threading
-
-    from aveas_format.safeio import atomic, parts
-    from aveas_format.sample import highway_scene
-
-    rec = highway_scene(n_vehicles=12, duration_s=20.0, seed=4)
-    monkeypatch.setattr(parts, "PARTS_MIN_ROWS", 0)
-    monkeypatch.setattr(parts, "PART_ROWS", 1_000)  # (several parts each)
-    one = _parts_export(rec, tmp_path / "one.json")
-    copying = threading.Event()  # (the writer has copied some of the part before it dies)
-    real_copy = atomic._copy_range
-    monkeypatch.setattr(atomic, "_copy_range", lambda *a: (real_copy(*a), copying.set()))
-    real = parts._write_parts
-
-    def dies_half_way(encode, state, ps, conn):
-        real(encode, state, ps[:1], conn)  # (one whole part)
-        _, part, spill = ps[1]
-        with open(spill, "wb") as f:
-            for i, data in enumerate(encode(part=part)):
-                f.write(data)
-                f.flush()
-                if i == 1:
-                    break
-        import time
-
-        time.sleep(0.5)  # (time for the writer to copy what is there)
-        os._exit(3)
-
-    monkeypatch.setattr(parts, "_write_parts", dies_half_way)
-    out = tmp_path / "parts"
-    out.mkdir()
-    got = _parts_export(rec, out / "rec.json", workers=2, spill_dir=out)
-    assert copying.is_set()
-    assert got == one and [p.name for p in out.iterdir()] == ["rec.json"]
-
-
 def test_the_export_takes_workers_and_writes_the_same_file(tmp_path, monkeypatch):
     from aveas_format.converters import get_converter
     from aveas_format.converters.openlabel import write
