@@ -430,3 +430,21 @@ def test_number_lists_read_as_a_json_parser_reads_them():
             if odd in ("[]", "[[1],2,0,0,0,1]"):
                 assert math.isnan(blk.cols["vu"][-1]) and blk.cols["vv"][-1] == 2 if odd != "[]" else \
                     math.isnan(blk.cols["vv"][-1])
+
+
+def test_extension_members_present_null_or_absent():
+    """The ``aveas_format`` members of the boxes' cuboids, block after block (a block decoded with
+    the types of the one before): a member with a value, with null and absent told apart."""
+    from aveas_format.converters.openlabel.decode import decode_block
+    from aveas_format.converters.openlabel.profile import EXT
+
+    for exts in ([{"a": 1, "b": 2.5}, {"a": 2}], [{"a": 3}, {"a": None, "b": 1.0}], [{"b": 1.5}, {"a": 4}, {}],
+                 [{"a": 1, "b": None}, None, {"c": "x"}], [{"a": 1, "b": 2.5}, {"a": 1, "b": 2.5}]):
+        objs = {str(i): {"object_data": {"cuboid": [{"name": "bounding_box", "val": [i, 0, 0.75, 0, 0, 0.1, 4, 2, 1.5],
+                                                     **({EXT: e} if e is not None else {})}]}}
+                for i, e in enumerate(exts)}
+        blk = decode_block(json.dumps({"0": {"objects": objs}}).encode())
+        items = [e or {} for e in exts]
+        assert sorted(blk.ext) == sorted(set(itertools.chain(*items)))
+        for c, (vals, present) in blk.ext.items():
+            assert present.tolist() == [c in e for e in items] and vals.to_pylist() == [e.get(c) for e in items], exts

@@ -553,11 +553,15 @@ def _extension(cubs: list) -> dict[str, tuple[pa.Array, np.ndarray]]:
                 sa = pa.array(items, known)
             except (pa.ArrowInvalid, pa.ArrowTypeError, OverflowError):
                 pass
-        # (every member given a value, and no other: else the types inferred, the nulls told apart)
-        if sa is None or sum(len(sa) - f.null_count for f in sa.flatten()) != sum(map(len, items)):
+        # (as many values as members, a value only where its member is: every member given a
+        # value, and no other, so present where valid; else the types inferred, the nulls told apart)
+        given = sum(map(len, items))
+        if not (full := sa is not None and _valid(sa) == given):
             sa = pa.array(items)
             _EXT_TYPE["type"] = sa.type
-        return {f.name: (sa.field(i), np.fromiter(map(contains, items, repeat(f.name)), bool, len(items))
+            full = _valid(sa) == given
+        return {f.name: (sa.field(i), (sa.field(i).is_valid().to_numpy(zero_copy_only=False) if full else
+                                       np.fromiter(map(contains, items, repeat(f.name)), bool, len(items)))
                          if sa.field(i).null_count else np.ones(len(items), bool))
                 for i, f in enumerate(sa.type)}
     except (pa.ArrowInvalid, pa.ArrowTypeError, OverflowError):
@@ -570,6 +574,11 @@ def _extension(cubs: list) -> dict[str, tuple[pa.Array, np.ndarray]]:
         except (pa.ArrowInvalid, pa.ArrowTypeError, OverflowError):
             raise FormatError(f"the {EXT} member {c!r} of the boxes mixes values of several types") from None
     return out
+
+
+def _valid(sa: pa.StructArray) -> int:
+    """The number of values of the struct's members (not null)."""
+    return sum(len(sa) - f.null_count for f in sa.flatten())
 
 
 def _box_attributes(od: Any) -> dict[str, list[dict[str, Any]]]:
