@@ -200,6 +200,8 @@ def _subtypes(uids: list[str], slot: np.ndarray, cubs: list) -> dict[str, str]:
     """Per object of the block the text attribute ``type`` of its first box that has one there
     (a generic label's subtype: OSDaR's ``road_vehicle`` of type truck, :func:`~aveas_format.
     converters.labels.refine`); the attributes decoded only of each object's first box."""
+    if list(map(attrgetter("attributes"), cubs)).count(_NULL) == len(cubs):  # (no cuboid attributes: an export)
+        return {}
     first = dict(zip(map(uids.__getitem__, slot[::-1].tolist()), range(len(slot) - 1, -1, -1)))
     out: dict[str, str] = {}
     for u, i in first.items():
@@ -356,6 +358,8 @@ class _Attributes:
         self.where: dict[str, tuple] = {}  # name -> (the items of each box) or (boxes, raw values)
         for kind in _KINDS:
             lists = list(map(attrgetter(kind), ods))
+            if not any(lists):  # (no item of the kind in the block: boolean in an export)
+                continue
             if set(map(type, lists)) != {list}:
                 lists = [x if isinstance(x, list) else [x] if x is not None else [] for x in lists]
             lens = list(map(len, lists))
