@@ -404,12 +404,14 @@ def test_number_lists_read_as_a_json_parser_reads_them():
     """The lists of numbers a block parses at once (the cuboids' values, a vector's values of one
     length) are the floats ``json.loads`` reads, bit for bit: integers (``-0`` as 0.0), ``-0.0``,
     exponents, 17 digits, integers beyond 64 bits, a number below the smallest double, whitespace
-    in the lists; next to a list that is empty, nested or holds no number (read box by box)."""
+    in the lists; next to a list that is empty, nested or holds no number (read box by box). So are
+    single numbers (next to a null)."""
     from aveas_format.converters.openlabel.decode import decode_block
 
     def block(toks, vels):
         objs = ",".join(f'"{i}":{{"object_data":{{"cuboid":[{{"name":"bounding_box","val":[{i},0,0.75,0,0,0.1,'
-                        f'{toks[i % len(toks)]},2,1.5]}}],"vec":[{{"name":"velocity","val":{v}}}]}}}}'
+                        f'{toks[i % len(toks)]},2,1.5]}}],"vec":[{{"name":"velocity","val":{v}}}],'
+                        f'"num":[{{"name":"open_drive/lane_position","val":{(toks + ["null"])[i]}}}]}}}}'
                         for i, v in enumerate(vels))
         return decode_block(('{"0":{"objects":{' + objs + "}}}").encode())
 
@@ -427,6 +429,25 @@ def test_number_lists_read_as_a_json_parser_reads_them():
             assert bits(blk.cols["yaw_rate"][:len(toks)]) == bits(want), (sep, odd)
             assert bits(blk.cols["vv"][:len(toks)]) == bits(want[::-1]), (sep, odd)
             assert bits(blk.cols["dl"][:len(toks)]) == bits(want), (sep, odd)
+            assert bits(blk.cols["lane_position"][:len(toks)]) == bits(want), (sep, odd)
             if odd in ("[]", "[[1],2,0,0,0,1]"):
                 assert math.isnan(blk.cols["vu"][-1]) and blk.cols["vv"][-1] == 2 if odd != "[]" else \
                     math.isnan(blk.cols["vv"][-1])
+
+
+def test_extension_members_present_null_or_absent():
+    """The ``aveas_format`` members of the boxes' cuboids, block after block (a block decoded with
+    the types of the one before): a member with a value, with null and absent told apart."""
+    from aveas_format.converters.openlabel.decode import decode_block
+    from aveas_format.converters.openlabel.profile import EXT
+
+    for exts in ([{"a": 1, "b": 2.5}, {"a": 2}], [{"a": 3}, {"a": None, "b": 1.0}], [{"b": 1.5}, {"a": 4}, {}],
+                 [{"a": 1, "b": None}, None, {"c": "x"}], [{"a": 1, "b": 2.5}, {"a": 1, "b": 2.5}]):
+        objs = {str(i): {"object_data": {"cuboid": [{"name": "bounding_box", "val": [i, 0, 0.75, 0, 0, 0.1, 4, 2, 1.5],
+                                                     **({EXT: e} if e is not None else {})}]}}
+                for i, e in enumerate(exts)}
+        blk = decode_block(json.dumps({"0": {"objects": objs}}).encode())
+        items = [e or {} for e in exts]
+        assert sorted(blk.ext) == sorted(set(itertools.chain(*items)))
+        for c, (vals, present) in blk.ext.items():
+            assert present.tolist() == [c in e for e in items] and vals.to_pylist() == [e.get(c) for e in items], exts

@@ -200,6 +200,8 @@ def _subtypes(uids: list[str], slot: np.ndarray, cubs: list) -> dict[str, str]:
     """Per object of the block the text attribute ``type`` of its first box that has one there
     (a generic label's subtype: OSDaR's ``road_vehicle`` of type truck, :func:`~aveas_format.
     converters.labels.refine`); the attributes decoded only of each object's first box."""
+    if list(map(attrgetter("attributes"), cubs)).count(_NULL) == len(cubs):  # (no cuboid attributes: an export)
+        return {}
     first = dict(zip(map(uids.__getitem__, slot[::-1].tolist()), range(len(slot) - 1, -1, -1)))
     out: dict[str, str] = {}
     for u, i in first.items():
@@ -356,6 +358,8 @@ class _Attributes:
         self.where: dict[str, tuple] = {}  # name -> (the items of each box) or (boxes, raw values)
         for kind in _KINDS:
             lists = list(map(attrgetter(kind), ods))
+            if not any(lists):  # (no item of the kind in the block: boolean in an export)
+                continue
             if set(map(type, lists)) != {list}:
                 lists = [x if isinstance(x, list) else [x] if x is not None else [] for x in lists]
             lens = list(map(len, lists))
@@ -553,11 +557,15 @@ def _extension(cubs: list) -> dict[str, tuple[pa.Array, np.ndarray]]:
                 sa = pa.array(items, known)
             except (pa.ArrowInvalid, pa.ArrowTypeError, OverflowError):
                 pass
-        # (every member given a value, and no other: else the types inferred, the nulls told apart)
-        if sa is None or sum(len(sa) - f.null_count for f in sa.flatten()) != sum(map(len, items)):
+        # (as many values as members, a value only where its member is: every member given a
+        # value, and no other, so present where valid; else the types inferred, the nulls told apart)
+        given = sum(map(len, items))
+        if not (full := sa is not None and _valid(sa) == given):
             sa = pa.array(items)
             _EXT_TYPE["type"] = sa.type
-        return {f.name: (sa.field(i), np.fromiter(map(contains, items, repeat(f.name)), bool, len(items))
+            full = _valid(sa) == given
+        return {f.name: (sa.field(i), (sa.field(i).is_valid().to_numpy(zero_copy_only=False) if full else
+                                       np.fromiter(map(contains, items, repeat(f.name)), bool, len(items)))
                          if sa.field(i).null_count else np.ones(len(items), bool))
                 for i, f in enumerate(sa.type)}
     except (pa.ArrowInvalid, pa.ArrowTypeError, OverflowError):
@@ -570,6 +578,11 @@ def _extension(cubs: list) -> dict[str, tuple[pa.Array, np.ndarray]]:
         except (pa.ArrowInvalid, pa.ArrowTypeError, OverflowError):
             raise FormatError(f"the {EXT} member {c!r} of the boxes mixes values of several types") from None
     return out
+
+
+def _valid(sa: pa.StructArray) -> int:
+    """The number of values of the struct's members (not null)."""
+    return sum(len(sa) - f.null_count for f in sa.flatten())
 
 
 def _box_attributes(od: Any) -> dict[str, list[dict[str, Any]]]:
