@@ -36,6 +36,7 @@ from aveas_format.converters.openlabel.profile import (EXT, FRAME_ATTRIBUTES, LI
                                                        attributes_of, first_value)
 from aveas_format.errors import FormatError, report_source
 from aveas_format.io.resort import StatesWriter
+from aveas_format.parallel import background
 from aveas_format.schema.tables import TABLES
 
 _HV, _HACC, _HR, _BAD, _CTS = 1, 2, 4, 8, 16
@@ -400,13 +401,14 @@ def states_of(t: pa.Table, p: Plan, ctx) -> tuple[pa.Table, dict[int, np.ndarray
                 states[c] = pa.array(rows[c], mask=np.isnan(rows[c]), type=pa.float32()) if c in LIGHTS \
                     else rows[c]
     ext = {c[4:]: (t.column(c), _numpy(t.column("has:" + c[4:]))) for c in t.column_names if c.startswith("ext:")}
+    # lon/lat of the local positions (PROJ, without the GIL) while the rest is put together
+    lonlat = background(ctx.local.to_wgs84, x, y) if n and not {"x", "y", "lon", "lat"} & ext.keys() else None
     if ctx.use_file and n:
         _file_road_coordinates(states, rows, ctx.net, ext.get("lane_offset"))
-    same_xy = not ({"x", "y", "lon", "lat"} & ext.keys())
     _apply_extension(states, ext)
     states = _arrays(states, p.ext)
-    if same_xy and n:
-        lon, lat = ctx.local.to_wgs84(x, y)
+    if lonlat is not None:
+        lon, lat = lonlat.result()
         states["lon"], states["lat"] = pa.array(lon), pa.array(lat)
     return pa.table(states), sizes
 
