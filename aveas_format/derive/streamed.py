@@ -521,6 +521,7 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
     from aveas_format.io.container import Container, sha256_of
     from aveas_format.io.reader import open_recording
     from aveas_format.io.writer import check_target, move_into_place, parquet_bytes, prepare_table
+    from aveas_format.parallel import processes
     from aveas_format.schema.metadata import DerivedEntry, TableEntry
     from aveas_format.schema.tables import TABLES
     from aveas_format.schema.versions import FORMAT_VERSION
@@ -549,11 +550,14 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
 
     # the kinematics (an input of the others' provenance) are assembled while the windows are
     # derived: the parent's serial work after them is the other tables'. In a process of its
-    # own, started before the windows' workers (none is forked while a thread of this one runs)
+    # own, started before the windows' workers (none is forked while a thread of this one runs);
+    # where the windows run in this process (workers=1, a pool's worker), after them
     early: dict[str, Future] = {}
-    pool = ProcessPoolExecutor(1)
+    pool = ProcessPoolExecutor(1) if processes(workers) > 1 else None
 
     def tracks_done() -> None:
+        if pool is None:
+            return
         spec = TABLES[reg["kinematics"].table]
         early["kinematics"] = pool.submit(_assemble, work / "kinematics", spec, tmp / spec.file,
                                           provenance("kinematics")[0])
@@ -612,7 +616,8 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
     except OSError as e:
         raise RecordingIOError(f"cannot write: {e.strerror or e}", path=path) from None
     finally:
-        pool.shutdown()  # (an error before the kinematics were taken: their writing ends first)
+        if pool is not None:  # (an error before the kinematics were taken: their writing ends first)
+            pool.shutdown()
         shutil.rmtree(work, ignore_errors=True)
         if tmp.is_dir():
             shutil.rmtree(tmp, ignore_errors=True)
