@@ -183,7 +183,7 @@ def _window_recording(path: str, states: pa.Table):
                      head.map_source)
 
 
-def _params(rec, name: str, params: dict[str, Any]):
+def _params(name: str, params: dict[str, Any]):
     """Derivation ``name``'s parameters: those of the flat ``params`` it has."""
     from aveas_format.derive.registry import derivations
 
@@ -200,7 +200,7 @@ def _run(rec, name: str, params: dict[str, Any], **kw: Any) -> pa.Table:
 
     from aveas_format.derive.registry import DERIVED_KEY, derivations
 
-    p = _params(rec, name, params)
+    p = _params(name, params)
     t = derivations()[name].fn(rec, p, **kw)
     return t.replace_schema_metadata({**(t.schema.metadata or {}), DERIVED_KEY: json.dumps(
         {"derivation": name, "parameters": p.model_dump(mode="json")}).encode()})
@@ -260,7 +260,7 @@ def _window_task(item: tuple[int, float, float], *, path: str, tmp: str, out: st
     # the critical episodes of the core (the collision probabilities follow the tracks beyond
     # it); the events are made of all windows' episodes (derive_by_windows), and the summary's
     # event counts from them (merge_summaries)
-    episodes = window_episodes(rec, _params(rec, "events", params), (t0, t1)) if events else []
+    episodes = window_episodes(rec, _params("events", params), (t0, t1)) if events else []
     rec.events = None
     cp = {k_: v for k_, v in params.items() if k_ in CriticalityParams.model_fields}
     s = summary(rec, CriticalityParams(**cp), core=(t0, t1))
@@ -406,7 +406,7 @@ def derive_by_windows(path: str | Path, out_dir: str | Path, *,
         ev = None
         if events:
             head = open_recording(path, tables=["participants", "events"], verify=False)
-            ev = from_windows(head, episodes, _params(head, "events", params))
+            ev = from_windows(head, episodes, _params("events", params))
             pq.write_table(ev, out / "events.parquet")
             counts["events"] = _derived_count(ev)
         else:
@@ -539,8 +539,7 @@ def write_by_windows(src: str | Path, path: str | Path, *, window_s: float = DEF
     created = datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
     def provenance(n: str) -> tuple[bytes, dict, dict, str]:
-        d = reg[n]
-        p = d.params(**{k: v for k, v in params.items() if k in d.params.model_fields})
+        d, p = reg[n], _params(n, params)
         # the windows derive no encroachments: the events are not made of the source's
         inputs = {t: shas[t] for t in d.inputs() if t in shas
                   and not (n == "events" and t == "derived/encroachments")}

@@ -163,7 +163,7 @@ def _table(S: Samples, r: dict[str, np.ndarray]) -> pa.Table:
     if len(i):
         # the table's order (participant, time, other, relation), sorted on the index arrays
         order = _row_order(S, i, j, rel)
-        r = {k: v[order] for k, v in r.items()}
+        r = {k: v[order] for k, v in r.items() if k not in ("i", "j")}
         i, j, rel, kind = i[order], j[order], r["rel"], r["kind"]
     # the string columns from their codes at once (object arrays compare and gather slowly)
     kind = pc.if_else(pa.array(np.isfinite(r["ttc"])), _NAMES_KIND.take(pa.array(kind)),
