@@ -135,6 +135,22 @@ class NetworkCore:
         inner[zero] = outer[zero] = b.center[zero]
         return inner, outer
 
+    def lane_counts(self, road_id: Any, s: Any) -> dict[str, np.ndarray]:
+        """The lanes beside the centre lane at s, per side: ``left``/``right`` those present
+        (wider than 1 cm), ``left_drivable``/``right_drivable`` those of them of a drivable type."""
+        r, s = self._broadcast(road_id, s)
+        sc = np.clip(s, 0.0, self.road_length[r])
+        piece = self.lanes.find_piece(r, sc)
+        b = self.lanes.borders(piece, sc)
+        out = {}
+        for side, outers, ids, types in (("left", b.left, self.lanes.lid[piece], self.lanes.ltype[piece]),
+                                         ("right", b.right, self.lanes.rid[piece], self.lanes.rtype[piece])):
+            inners = np.concatenate([b.center[:, None], outers[:, :-1]], axis=1)
+            present = (ids != 0) & (np.abs(outers - inners) > 0.01)
+            out[side] = present.sum(1)
+            out[f"{side}_drivable"] = (present & (types >= 0) & self.drivable_code[np.where(types >= 0, types, 0)]).sum(1)
+        return out
+
     def lane_type(self, road_id: Any, s: Any, lane_id: Any) -> np.ndarray:
         """The ``type`` of lane ``lane_id`` at s (object array; None where the lane does not exist
         there), vectorised over road ids, s and lane ids."""

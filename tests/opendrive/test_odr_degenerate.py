@@ -50,6 +50,14 @@ def test_zero_width_lanes_hold_no_point(net):
     assert lane.tolist() == [0, 0, 0, -1]
 
 
+def test_lane_counts_leave_out_zero_width_lanes_and_count_drivable_types(net):
+    # road 1: driving + sidewalk on the right (the section in effect); road 4: lanes of zero width
+    # up to s = 30 (none counts), then one of 3.5 m on the right (the left one has no <width>)
+    c = net.lane_counts(["1", "1", "4", "4", "2"], [10.0, 90.0, 10.0, 40.0, 50.0])
+    assert c["right"].tolist() == [2, 2, 0, 1, 0] and c["right_drivable"].tolist() == [1, 1, 0, 1, 0]
+    assert c["left"].tolist() == [0, 0, 0, 0, 1] and c["left_drivable"].tolist() == [0, 0, 0, 0, 1]
+
+
 def test_polygons_skip_what_has_no_area(net):
     polys = net.lane_polygons(step=5.0)
     got = {(r, sec, lane): p.area for r, sec, lane, p in polys}

@@ -365,45 +365,23 @@ class _Summary:
 # per-row inputs of the frames, prepared vectorised
 # ================================================================================================
 
-def _road_facts(net, road_id: list, s: np.ndarray, lane_id: np.ndarray, lane_offset: np.ndarray
+def _road_facts(net, road_id: np.ndarray, s: np.ndarray, lane_id: np.ndarray, lane_offset: np.ndarray
                 ) -> dict[str, np.ndarray] | None:
-    """Per sample: lane_position, lanes left/right (physical, legal), classification.
+    """Per sample: lane_position, lanes left/right (physical, legal), classification (in a
+    junction, else by the reference line's curvature).
 
     Best effort: None where the map engine cannot answer (never fails the export)."""
     try:
-        n = len(s)
-        lanes = net.lanes
-        rid = np.asarray(road_id, dtype=object)
-        out = {"lane_position": np.full(n, np.nan), "left_phys": np.zeros(n, int),
-               "left_legal": np.zeros(n, int), "right_phys": np.zeros(n, int),
-               "right_legal": np.zeros(n, int), "classification": np.full(n, "straight", object)}
-        for r in set(rid.tolist()):
-            m = np.flatnonzero(rid == r)
-            ss = s[m]
-            inner, outer = net.lane_borders(r, ss, lane_id[m])
-            width = np.abs(outer - inner)
-            with np.errstate(invalid="ignore", divide="ignore"):
-                out["lane_position"][m] = np.clip(lane_offset[m] / width, -0.5, 0.5)
-            ri = net.road_index_of(r)
-            ri = np.broadcast_to(np.asarray(ri), ss.shape)
-            sc = np.clip(ss, 0.0, net.road_length[ri])
-            piece = lanes.find_piece(ri, sc)
-            b = lanes.borders(piece, sc)
-            for side, outers, ids, types in (("left", b.left, lanes.lid[piece], lanes.ltype[piece]),
-                                             ("right", b.right, lanes.rid[piece], lanes.rtype[piece])):
-                inners = np.concatenate([b.center[:, None], outers[:, :-1]], axis=1)
-                present = (ids != 0) & (np.abs(outers - inners) > 0.01)
-                drivable = present & (types >= 0) & net.drivable_code[np.where(types >= 0, types, 0)]
-                out[f"{side}_phys"][m] = present.sum(1)
-                out[f"{side}_legal"][m] = drivable.sum(1)
-            _, _, _, kappa = net.reference_line(r, sc)
-            road = net.roads.get(r) if hasattr(net.roads, "get") else None
-            junction = str(getattr(road, "junction", "-1")) if road is not None else "-1"
-            if junction not in ("-1", "", "None"):
-                out["classification"][m] = "x_intersection"
-            else:
-                out["classification"][m] = np.where(np.abs(kappa) > 1e-3, "curve", "straight")
-        return out
+        inner, outer = net.lane_borders(road_id, s, lane_id)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            lane_position = np.clip(lane_offset / np.abs(outer - inner), -0.5, 0.5)
+        lanes = net.lane_counts(road_id, s)
+        ri = net.road_index_of(road_id)
+        kappa = net.reference_line(road_id, np.clip(s, 0.0, net.road_length[ri]))[3]
+        shape = np.where(np.abs(kappa) > 1e-3, "curve", "straight")
+        return {"lane_position": lane_position, "left_phys": lanes["left"], "left_legal": lanes["left_drivable"],
+                "right_phys": lanes["right"], "right_legal": lanes["right_drivable"],
+                "classification": np.where(net.road_in_junction[ri], "x_intersection", shape).astype(object)}
     except Exception:  # noqa: BLE001 — optional attributes; the map engine may not support them
         return None
 
