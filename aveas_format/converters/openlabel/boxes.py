@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from aveas_format.converters.common.assemble import group_median
 from aveas_format.converters.common.geometry import rotate, rotated_std
@@ -469,24 +470,16 @@ def _file_road_coordinates(states: dict[str, Any], rows: dict[str, np.ndarray], 
     lp = rows["lane_position"]
     if not np.isfinite(lp).any():
         return
-    enc = road.dictionary_encode()
-    code = enc.indices.fill_null(-1).to_numpy(zero_copy_only=False)
-    lane = lanes.fill_null(0).to_numpy(zero_copy_only=False).astype(np.int64)
-    ok = np.isfinite(lp) & (code >= 0)
+    known = pc.is_in(road, value_set=pa.array(net.road_ids, pa.string())).fill_null(False)
+    ok = np.isfinite(lp) & known.to_numpy(zero_copy_only=False)  # (a road the map lacks: no offset)
     if given is not None and pa.types.is_floating(given[0].type):
         ok &= ~given[1]  # (present in the extension: null or a value, the map's is not used)
     lo = np.full(n, np.nan)
     idx = np.flatnonzero(ok)
-    order = idx[np.argsort(code[idx], kind="stable")]
-    bounds = np.searchsorted(code[order], np.arange(len(enc.dictionary) + 1))
-    for k, r in enumerate(enc.dictionary.to_pylist()):
-        m = order[bounds[k]:bounds[k + 1]]
-        if len(m):
-            try:
-                inner, outer = net.lane_borders(r, states["road_s"][m], lane[m])
-                lo[m] = lp[m] * np.abs(outer - inner)
-            except Exception:  # noqa: BLE001 — a road the map lacks
-                pass
+    if len(idx):
+        lane = lanes.fill_null(0).to_numpy(zero_copy_only=False).astype(np.int64)
+        inner, outer = net.lane_borders(road.take(idx).to_numpy(zero_copy_only=False), states["road_s"][idx], lane[idx])
+        lo[idx] = lp[idx] * np.abs(outer - inner)
     states["lane_offset"] = lo
 
 
