@@ -34,7 +34,7 @@ from aveas_format.converters.openlabel.findings import jpath, report_bad_sizes, 
 from aveas_format.converters.common.coordinate_systems import utm_crs
 from aveas_format.converters.openlabel.geometry import in_intervals, place, static_cuboids
 from aveas_format.converters.openlabel.profile import (EXT, FRAME_ATTRIBUTES, LIGHTS, VELOCITY_ATTRIBUTES,
-                                                       attributes_of, first_value)
+                                                       attributes_of, first_value, object_type)
 from aveas_format.errors import FormatError, report_source
 from aveas_format.io.resort import StatesWriter
 from aveas_format.parallel import background
@@ -526,11 +526,7 @@ def keep_by_type(path: Path | None, objects: dict[str, Any], keep_non_road_users
         keep: dict[str, bool] = {}
         first_skipped = None
         for u in uids:
-            obj = objects.get(u) if isinstance(objects.get(u), dict) else {}
-            od = obj.get("object_data") if isinstance(obj.get("object_data"), dict) else {}
-            otype = obj.get("type") or (od.get("type") if isinstance(od.get("type"), str) else None) \
-                or frame_types.get(u) or "other"
-            keep[u] = labels(otype) is not None
+            keep[u] = labels(object_type(objects, u, frame_types)) is not None
             if first_skipped is None and not keep[u]:
                 first_skipped = u
 

@@ -10,7 +10,7 @@ from typing import Any
 
 from aveas_format.converters.labels import label_kind
 from aveas_format.converters.openlabel.profile import (MANDATORY_OBJECT_ATTRIBUTES, TYPE_TO_CLASS, attributes_of,
-                                                       first_value, pmf_bad)
+                                                       first_value, object_type, pmf_bad)
 from aveas_format.errors import report_source
 
 
@@ -71,14 +71,12 @@ def check_objects(uids: list[str], objects: dict[str, Any], frame_types: dict[st
     missing: dict[str, list] = {}
     pmfs: list[tuple[str, Any]] = []
     for u in uids:
-        obj = objects.get(u) if isinstance(objects.get(u), dict) else {}
-        od = obj.get("object_data") if isinstance(obj.get("object_data"), dict) else {}
-        otype = str(obj.get("type") or (od.get("type") if isinstance(od.get("type"), str) else None)
-                    or frame_types.get(u) or "other")
+        otype = object_type(objects, u, frame_types)
         if otype not in TYPE_TO_CLASS and (profile or label_kind(otype) == ("other", "road_user")
                                            and otype.lower() != "other"):
             types.setdefault(otype, [u, 0])[1] += 1
-        attrs = attributes_of(od)
+        od = (objects.get(u) if isinstance(objects.get(u), dict) else {}).get("object_data")
+        attrs = attributes_of(od if isinstance(od, dict) else None)
         pmf = first_value(attrs, "classification/uncertainties")
         if pmf is not None:
             pmfs.append((u, pmf))

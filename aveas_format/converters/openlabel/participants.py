@@ -13,7 +13,7 @@ import numpy as np
 import pyarrow as pa
 
 from aveas_format.converters.labels import implausible_size, refine
-from aveas_format.converters.openlabel.profile import TYPE_TO_CLASS, attributes_of, first_value
+from aveas_format.converters.openlabel.profile import TYPE_TO_CLASS, attributes_of, first_value, object_type
 from aveas_format.schema.taxonomy import CLASSES
 
 #: an extension value an object does not carry (``None`` is a value: null)
@@ -68,9 +68,7 @@ def _profile_participants(uids: list[str], objects: dict[str, Any], pid_of: dict
     for u in uids:
         obj = objects.get(u) or {}
         attrs = attributes_of(obj.get("object_data"))
-        od = obj.get("object_data") if isinstance(obj.get("object_data"), dict) else {}
-        otype = str(obj.get("type") or (od.get("type") if isinstance(od.get("type"), str) else None)
-                    or frame_types.get(u) or "other")
+        otype = object_type(objects, u, frame_types)
         cls = TYPE_TO_CLASS.get(otype) or refine(otype, subtypes.get(u))
         is_ego = otype.lower() in ("egocar", "ego", "ego_vehicle") or bool(first_value(attrs, "is_recorder", False))
         ego_seen |= is_ego

@@ -144,6 +144,15 @@ def _beaufort_speed(force: float) -> float:
 # attributes of object_data / context_data
 # ================================================================================================
 
+def object_type(objects: Any, uid: str, frame_types: dict[str, str]) -> str:
+    """An object's type: in ``objects``, else inside its ``object_data`` (TUM Traffic), else the one
+    given inside a frame (``frame_types``), else ``other``."""
+    obj = objects.get(uid) if isinstance(objects, dict) and isinstance(objects.get(uid), dict) else {}
+    od = obj.get("object_data") if isinstance(obj.get("object_data"), dict) else {}
+    return str(obj.get("type") or (od.get("type") if isinstance(od.get("type"), str) else None)
+               or frame_types.get(uid) or "other")
+
+
 def attributes_of(od: dict[str, Any] | None) -> dict[str, list[dict[str, Any]]]:
     """name -> list of items (all types), in file order (on the import's hot path: one call per box)."""
     out: dict[str, list] = {}
