@@ -46,6 +46,10 @@ from aveas_format.io.writer import StatesFile
 
 #: rows held in memory before they are spilled (bytes of Arrow data; None: never spilled)
 MEMORY = 256 << 20
+#: rows held in memory by an import that writes its recording in bounded memory (beyond:
+#: spilled, then made into states a bucket at a time; making a bucket's states costs several
+#: times its rows' bytes, so an import held whole stays well below a gigabyte)
+IMPORT_MEMORY = 128 << 20
 #: about this many bytes of rows per bucket (one bucket is held at a time)
 BUCKET_BYTES = 32 << 20
 #: at most this many buckets (their files are written at once)
@@ -188,6 +192,14 @@ class StatesWriter:
             for h in self.held:
                 self._write(h)
             self.held, self.held_bytes = [], 0
+
+    def reset(self) -> None:
+        """Every row added so far dropped (a reader that starts over)."""
+        self._close_run()
+        for path, _ in self.runs:
+            Path(path).unlink(missing_ok=True)
+        self.held, self.keys, self.runs = [], [], []
+        self.held_bytes = self.nbytes = self.rows = 0
 
     @property
     def spilled(self) -> bool:

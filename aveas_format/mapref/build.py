@@ -165,12 +165,9 @@ def build_recording(
         crs = check_crs(crs, net.header.geo_reference)
 
     p = _table(participants, "participants")
-    s = _table(states, "states")
-    assert p is not None and s is not None
+    assert p is not None and states is not None
     p = _fill_participants(p, rec_prov)
-    s = prepare_table(conform(s, TABLES["states"]), TABLES["states"])
-    frame = LocalFrame(crs, offset=net.header.offset)
-    s = fill_states(s, frame, net if reference else None)
+    s = states_table(states, LocalFrame(crs, offset=net.header.offset), net if reference else None)
 
     t = s.column("time").to_numpy() if s.num_rows else np.zeros(0)
     pid = s.column("participant_id").to_numpy() if s.num_rows else np.zeros(0, np.int64)
@@ -235,6 +232,14 @@ def _fill_participants(p: pa.Table, prov: RecordingProvenance) -> pa.Table:
                  Role.STAGED_ACTOR.value if v == "staged" else Role.OBSERVED.value for v in provs]
         p = p.append_column("role", pa.array(roles, pa.string()))
     return prepare_table(p, TABLES["participants"])
+
+
+def states_table(states: TableLike, frame, net) -> pa.Table:
+    """The states as a recording has them: the format's columns and types, filled by
+    :func:`fill_states` (an importer that writes its states in parts: a bucket of whole
+    participants at a time)."""
+    s = prepare_table(conform(_table(states, "states"), TABLES["states"]), TABLES["states"])
+    return fill_states(s, frame, net)
 
 
 def fill_states(s: pa.Table, frame, net) -> pa.Table:

@@ -34,7 +34,7 @@ KITTI_EXCERPT = DATA / "third_party" / "vcd__openlabel100_kitti_tracking_0016_ex
 def small_buckets(monkeypatch):
     """Buckets of a few dozen boxes; every box spilled."""
     monkeypatch.setattr(resort, "BUCKET_BYTES", 5_000)
-    monkeypatch.setattr(read, "MEMORY", 1)
+    monkeypatch.setattr(read, "IMPORT_MEMORY", 1)
 
 
 def _both(src: Path, tmp_path: Path, name: str = "out.aveas", map_source=STRAIGHT_MAP, **options):
@@ -199,7 +199,7 @@ def test_cli_convert_writes_in_parts(tmp_path, monkeypatch):
     rec = highway_scene(n_vehicles=12, duration_s=6.0, seed=4)
     src = tmp_path / "rec.json"
     get_converter("openlabel", "export")(rec, src)
-    monkeypatch.setattr(read, "MEMORY", 1)
+    monkeypatch.setattr(read, "IMPORT_MEMORY", 1)
     monkeypatch.setattr(resort, "BUCKET_BYTES", 20_000)
     wrote = []
     real = resort._ParquetStates.add
@@ -246,7 +246,7 @@ def _report(src: Path, monkeypatch, memory: int) -> dict:
 
     from aveas_format.cli.app import app
 
-    monkeypatch.setattr(read, "MEMORY", memory)
+    monkeypatch.setattr(read, "IMPORT_MEMORY", memory)
     r = CliRunner().invoke(app, ["validate", str(src), "--map", str(STRAIGHT_MAP), "--format", "json"])
     assert r.exit_code in (0, 1), r.output
     report = json.loads(r.stdout)

@@ -19,7 +19,9 @@ Modules, one concern each:
   description :class:`Sensor` with its coverage (:class:`Footprint`, :class:`Range`) and size
   aggregation (:class:`Sizes`).
 - ``assemble``: the step itself, :func:`to_recording` (velocities, per-participant aggregation,
-  nulls, coverage, recording.json, the hand-off to map-referencing).
+  nulls, coverage, recording.json, the hand-off to map-referencing); for a time-major source read
+  in bounded memory, ``bounded_states`` and ``write_by_buckets`` (the states made and written a
+  bucket of whole participants at a time).
 - ``tables``: reading CSV/Parquet with located errors; source ids -> participant codes.
 - ``timestamps``: timestamps whose unit and epoch a format leaves open; ISO 8601; UTC text.
 - ``geometry``: reference points, angle conventions, quaternions and 2D rotations, covariances,

@@ -23,7 +23,8 @@ does the rest, the same way for every source:
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +34,7 @@ import pyarrow as pa
 from aveas_format.converters.common.boxes import MEASURED, Boxes, Footprint, Range, Sensor, Sizes
 from aveas_format.converters.common.provenance import source_block
 from aveas_format.errors import FormatError
+from aveas_format.io.resort import IMPORT_MEMORY, StatesWriter
 from aveas_format.mapref.build import build_recording
 from aveas_format.numeric import central_differences
 from aveas_format.schema.taxonomy import CLASSES
@@ -56,18 +58,7 @@ def to_recording(boxes: Boxes, sensor: Sensor, *, converter: str, inputs: Sequen
     boxes = boxes.sort()
     parts = participant_columns(boxes, sensor.sizes, participants)
     ids = np.asarray(parts["participant_id"], np.int64)
-    states: dict[str, Any] = {"participant_id": ids[boxes.pid], "time": boxes.time}
-    cols = dict(boxes.columns)
-    if "vx" not in cols and "vy" not in cols:
-        has_std = "x_std" in cols and "y_std" in cols and "vx_std" not in cols
-        vx, vy, vxs, vys = central_differences(boxes.pid, boxes.time, cols["x"], cols["y"],
-                                               cols.get("x_std"), cols.get("y_std"), std=has_std)
-        cols["vx"], cols["vy"] = vx, vy
-        if has_std:
-            cols["vx_std"], cols["vy_std"] = vxs, vys
-    for k, v in cols.items():
-        if k not in MEASURED:
-            states[k] = v if k in _NOT_NULL else nullable(v)
+    states = states_columns(boxes, ids)
     meta: dict[str, Any] = {}
     if sensor.coverage is not None:
         unobserved, coverage, duration = coverage_regions_of(sensor.coverage, boxes, ids, map_bytes)
@@ -85,6 +76,90 @@ def to_recording(boxes: Boxes, sensor: Sensor, *, converter: str, inputs: Sequen
     return hand_over(converter, inputs, options, map_bytes=map_bytes, participants=parts,
                      states=states, events=events, interior=interior, sensor=sensor,
                      resolved=resolved, version=version, **meta)
+
+
+def states_columns(boxes: Boxes, ids: np.ndarray) -> dict[str, Any]:
+    """The states columns of sorted boxes (steps 2 and 4 of the module doc; ``ids``: the
+    participant id of each code)."""
+    states: dict[str, Any] = {"participant_id": ids[boxes.pid], "time": boxes.time}
+    cols = dict(boxes.columns)
+    if "vx" not in cols and "vy" not in cols:
+        has_std = "x_std" in cols and "y_std" in cols and "vx_std" not in cols
+        vx, vy, vxs, vys = central_differences(boxes.pid, boxes.time, cols["x"], cols["y"],
+                                               cols.get("x_std"), cols.get("y_std"), std=has_std)
+        cols["vx"], cols["vy"] = vx, vy
+        if has_std:
+            cols["vx_std"], cols["vy_std"] = vxs, vys
+    for k, v in cols.items():
+        if k not in MEASURED:
+            states[k] = v if k in _NOT_NULL else nullable(v)
+    return states
+
+
+@contextmanager
+def bounded_states(output: Path, overwrite: bool, *, key: str, memory: int | None = None
+                   ) -> Iterator[StatesWriter]:
+    """A :class:`~aveas_format.io.resort.StatesWriter` for an import written to ``output`` in
+    bounded memory (:func:`write_by_buckets`): rows beyond ``memory`` bytes (default
+    :data:`~aveas_format.io.resort.IMPORT_MEMORY`) spilled to a hidden temporary directory next to the
+    output (the states file is moved in, not copied), removed afterwards."""
+    import shutil
+    import tempfile
+
+    from aveas_format.io.writer import check_target
+
+    work = Path(tempfile.mkdtemp(prefix=".aveas-import.", dir=check_target(Path(output), overwrite)))
+    try:
+        with StatesWriter(work, memory=memory or IMPORT_MEMORY, key=key) as w:
+            yield w
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def write_by_buckets(writer: StatesWriter, boxes_of: Callable[[pa.Table], Boxes], sensor: Sensor,
+                     source_ids: Sequence[Any], *, output: Path, overwrite: bool, converter: str,
+                     inputs: Sequence[Path], options: Any, map_bytes: bytes,
+                     participants: Mapping[str, Any], resolved: Mapping[str, Any] | None = None,
+                     version: str = "1", workers: int | None = 1):
+    """:func:`to_recording` of the boxes a :class:`~aveas_format.io.resort.StatesWriter` holds
+    (a time-major source read in bounded memory, :func:`bounded_states`), written to ``output``:
+    ``boxes_of(bucket)`` makes the :class:`Boxes` of a bucket of whole participants (codes among
+    all of ``source_ids``), whose states are made as :func:`to_recording` makes them, referenced to
+    the map and written to ``states.parquet`` a bucket at a time (spilled buckets in ``workers``
+    processes). What needs all boxes at once is not done here: ``participants`` states each
+    participant's class and size, and the sensor has no coverage. ``(recording as written, its
+    states, those on the map)``; the recording's states are not loaded."""
+    import pyarrow.parquet as pq
+
+    from aveas_format.crs import LocalFrame
+    from aveas_format.io.writer import write_recording
+    from aveas_format.mapref.build import states_table
+
+    if sensor.coverage is not None or not {"class", "length", "width"} <= set(participants):
+        raise ValueError("write_by_buckets: the sensor has a coverage, or the participants' class "
+                         "and sizes are not stated (both need every box: use to_recording)")
+    parts = participant_columns(Boxes([], [], [], [], source_ids=source_ids), sensor.sizes, participants)
+    ids = np.asarray(parts["participant_id"], np.int64)
+    meta = {k: v for k, v in (("nominal_rate_hz", sensor.nominal_rate_hz), ("crs", sensor.crs or None),
+                              ("extras", None if sensor.extras is None else dict(sensor.extras)),
+                              ("duration_s", sensor.duration_s)) if v is not None}
+    kw = dict(map_bytes=map_bytes, participants=parts, sensor=sensor, resolved=resolved, version=version)
+    empty = {c: pa.array([], pa.int64() if c == "participant_id" else pa.float64())
+             for c in ("participant_id", "time", "x", "y", "heading", "vx", "vy")}
+    rec = hand_over(converter, inputs, options, states=empty, **kw, **meta)  # (the CRS, the map)
+    frame, net = LocalFrame(rec.meta.crs, offset=rec.map.header.offset), rec.map
+
+    def bucket(t: pa.Table) -> tuple[pa.Table, None]:
+        return states_table(states_columns(boxes_of(t).sort(), ids), frame, net), None
+
+    states_file, summary, _ = writer.write(Path(writer.spill_dir) / "states.parquet", transform=bucket,
+                                           workers=workers)
+    if summary["rows"]:
+        meta = {**{k: summary[k] for k in ("duration_s", "nominal_rate_hz", "location")}, **meta}
+    rec = hand_over(converter, inputs, options, states=pq.read_schema(states_file.path).empty_table(),
+                    **kw, **meta)
+    write_recording(rec, output, overwrite=overwrite, states_file=states_file)
+    return rec, states_file.rows, summary["on_road"]
 
 
 def participant_columns(boxes: Boxes, sizes: Sizes, given: Mapping[str, Any] | None

@@ -48,11 +48,10 @@ from aveas_format.converters.openlabel.tables import recording_metadata, restore
 from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.mapref.build import load_map_bytes
 from aveas_format.errors import FormatError, report_source
+from aveas_format.io.resort import IMPORT_MEMORY
 from aveas_format.numeric import no_gc, small_pages
 
 log = logging.getLogger(__name__)
-#: bytes of boxes held in memory by an import that writes its recording (beyond: spilled)
-MEMORY = 128 << 20
 #: files up to this many bytes are read in this process (a few blocks: starting worker processes
 #: costs more than it saves; the 27 MB sample: 1.1 s here, 1.8 s in two workers)
 SMALL = 4 * BLOCK
@@ -107,8 +106,8 @@ def _find_map(path: Path | None, ol: dict[str, Any], map_source) -> bytes:
 def import_openlabel_to(inputs: list[Path], output: Path, *, map_source=None, options=None,
                         overwrite: bool = False, memory: int | None = None):
     """Import one OpenLABEL file and write the recording to ``output`` (atomically; the boxes
-    spilled beyond ``memory`` bytes (default :data:`MEMORY`), the states written a bucket of
-    participants at a time).
+    spilled beyond ``memory`` bytes, default :data:`~aveas_format.io.resort.IMPORT_MEMORY`; the
+    states written a bucket of participants at a time).
     ``(recording as written, states, states on the map)``; its states are not loaded where they
     were written in parts."""
     import shutil
@@ -121,7 +120,7 @@ def import_openlabel_to(inputs: list[Path], output: Path, *, map_source=None, op
     work = Path(tempfile.mkdtemp(prefix=".openlabel-import.", dir=check_target(output, overwrite)))
     try:  # (next to the output: the states file is moved in, not copied)
         rec, written = _read(path, map_source, options or OpenLabelImportOptions(), spill_dir=work,
-                             memory=memory or MEMORY)
+                             memory=memory or IMPORT_MEMORY)
         if written is None:
             rec.write(output, overwrite=overwrite)
             n = rec.states.num_rows
@@ -283,7 +282,7 @@ def _decode_cut(item: tuple) -> Any:
 def _recording(ol: dict[str, Any], boxes: Boxes, map_bytes: bytes, options, path: Path | None):
     """``(recording, (states file, summary) or None)`` from the frames read into ``boxes`` and the
     other members of the document ``ol``."""
-    from aveas_format.mapref.build import build_recording, fill_states
+    from aveas_format.mapref.build import build_recording, states_table
     from aveas_format.crs import LocalFrame
     from aveas_format.opendrive import load_map
 
@@ -312,7 +311,7 @@ def _recording(ol: dict[str, Any], boxes: Boxes, map_bytes: bytes, options, path
         log.info("%s: the boxes spilled (more than %s MB); the states written a bucket of participants "
                  "at a time", path, f"{boxes.writer.memory / 1e6:,.0f}")
         states_file, summary, infos = boxes.writer.write(
-            Path(boxes.writer.spill_dir) / "states.parquet", transform=partial(_filled, p=p, ctx=ctx, fill=fill_states),
+            Path(boxes.writer.spill_dir) / "states.parquet", transform=partial(_filled, p=p, ctx=ctx, fill=states_table),
             key_map=p.pid_of_idx, workers=options.workers)
         written = (states_file, summary)
         states = pq.read_schema(states_file.path).empty_table()
@@ -344,14 +343,9 @@ def _recording(ol: dict[str, Any], boxes: Boxes, map_bytes: bytes, options, path
 
 
 def _filled(t: pa.Table, p, ctx, fill) -> tuple[pa.Table, Any]:
-    """A bucket's states as the recording has them (:func:`~aveas_format.mapref.build.fill_states`)."""
-    from aveas_format.io.arrow import conform
-    from aveas_format.io.writer import prepare_table
-    from aveas_format.schema.tables import TABLES
-
+    """A bucket's states as the recording has them (:func:`~aveas_format.mapref.build.states_table`)."""
     states, sizes = states_of(t, p, ctx)
-    spec = TABLES["states"]
-    return fill(prepare_table(conform(states, spec), spec), ctx.local, None if ctx.use_file else ctx.net), sizes
+    return fill(states, ctx.local, None if ctx.use_file else ctx.net), sizes
 
 
 def _crs(net, rmeta: dict[str, Any], md: dict[str, Any], options, path: Path | None) -> str:
