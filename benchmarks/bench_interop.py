@@ -214,7 +214,7 @@ def _osi_bindings(rec, map_reference: str = "") -> bytes:
     import betterosi as b
     import numpy as np
 
-    from aveas_format.converters.osi import _DEFAULT_HEIGHT, EXPORT_CLASS, _light_state
+    from aveas_format.converters.osi_export import _DEFAULT_HEIGHT, EXPORT_CLASS, _light_state
     from aveas_format.io.arrow import column_numpy
 
     st = rec.states
@@ -508,9 +508,19 @@ if name in ("osi-import", "osi-import-betterosi"):  # the trace of an earlier ch
 elif name == "osi-columns":  # the import's columnar decoder alone (samples and statics)
     import aveas_format.converters.osi as osi_mod
 
+    from aveas_format.io.resort import StatesWriter
+
     base = hwm_mb()
     t0 = time.perf_counter()
-    n = len(osi_mod._decode_columns([out], osi_mod.OsiOptions())[0])
+    with StatesWriter(memory=None, key="oid") as w:
+        osi_mod._decode_columns([out], osi_mod.OsiOptions(), osi_mod._Sink(w))
+        n = w.rows
+elif name == "osi-import-written":  # the CLI's convert: the states written in bounded memory
+    from aveas_format.converters import convert_to
+
+    base = hwm_mb()
+    t0 = time.perf_counter()
+    n = convert_to("osi", [out], rec_dir.parent / "written.aveas", map_source=rec_dir / "map.xodr")[1]
 elif name == "osi-decode":  # floor of the import: betterosi decoding + the fields the import reads
     import betterosi as b
 
@@ -574,15 +584,17 @@ def large_osi_mcap(target_states: int) -> list[dict]:
         got = {}
         for name, file in (("osi", "rec.osi"), ("osi-floor", "none"), ("osi", "rec_osi.mcap"),
                            ("mcap", "rec.mcap"), ("mcap-floor", "floor.mcap"),
-                           ("osi-import", "rec.osi"), ("osi-import-betterosi", "rec.osi"),
+                           ("osi-import", "rec.osi"), ("osi-import-written", "rec.osi"),
+                           ("osi-import-betterosi", "rec.osi"),
                            ("osi-columns", "rec.osi"), ("osi-decode", "rec.osi")):
             r = subprocess.run([sys.executable, "-c", _CHILD_PROTO, name, str(tmp / "rec"),
                                 str(tmp / file)], capture_output=True, text=True)
             if r.returncode:
                 raise RuntimeError(r.stderr[-2000:])
             e = got[(name, file)] = json.loads(r.stdout.strip().splitlines()[-1])
-            if name in ("osi-import", "osi-import-betterosi", "osi-columns"):
+            if name in ("osi-import", "osi-import-written", "osi-import-betterosi", "osi-columns"):
                 what = {"osi-import": "import_osi_large (.osi)",
+                        "osi-import-written": "import_osi_large, written in bounded memory (convert_to)",
                         "osi-import-betterosi": "import_osi_large, decoded by betterosi (before 22f)",
                         "osi-columns": "decode_osi_columns_large (the decoder alone)"}[name]
                 rows.append(_row(what, e["states"], e["seconds"],

@@ -47,6 +47,14 @@ OSI export writes ``proj_string``, ``map_reference`` and the map next to the tra
 trace a metadata record ``aveas`` with the recording's partner, rights, start time and title, so
 that its re-import needs nothing else.
 
+Large traces: ``convert`` (of one trace) and ``validate TRACE`` import in bounded memory: the
+samples are held in a :class:`~aveas_format.io.resort.StatesWriter` (spilled to a hidden temporary
+directory next to the output beyond 128 MB) and made into states a bucket of objects at a time
+(:func:`~aveas_format.converters.common.assemble.write_by_buckets`), written to
+``states.parquet``: the same recording as the import in memory (the location's mean summed bucket
+by bucket: equal to 1e-12 degrees). The Python function ``convert`` returns a recording in memory;
+``convert_to`` writes it in bounded memory.
+
 Tested on: omega-prime's esmini-written traces ``alks_cut-in.osi`` and ``acc-test.osi`` on
 ``straight_500m.xodr`` (``../shared/data/real/omega-prime``; also with the map's geoReference
 removed), and this toolkit's own OSI exports of every real OpenSCENARIO file.
@@ -59,21 +67,22 @@ import math
 import struct
 from array import array
 import warnings
+from functools import partial
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Literal
 
 import numpy as np
-from pydantic import Field
+import pyarrow as pa
 
-from aveas_format.converters import _protowire as pw
-from aveas_format.converters.common.assemble import to_recording
+from aveas_format.converters.common.assemble import bounded_states, to_recording, write_by_buckets
 from aveas_format.converters.common.boxes import Boxes, Rows, Sensor
-from aveas_format.converters.common.companion import companion_map_path, write_companion_map
 from aveas_format.converters.common.fastpath import FastPathUnsupported, read_by
 from aveas_format.converters.common.geometry import projected_to_local, rotate
-from aveas_format.converters.registry import ConverterOptions, ImportOptions, converter
+from aveas_format.converters.registry import ImportOptions, converter
 from aveas_format.errors import FormatError, RecordingIOError, report_source
 from aveas_format.io.arrow import column_numpy
+from aveas_format.io.resort import StatesWriter
 from aveas_format.mapref.build import load_map_bytes
 from aveas_format.safeio import check_mcap
 
@@ -189,12 +198,38 @@ def _map_of_trace(path: Path, map_source, meta: dict[str, dict[str, str]], optio
     return cand
 
 
+def convert_osi_to(inputs: list[Path], output: Path, *, map_source, options: OsiOptions, overwrite: bool = False):
+    """The trace's recording written to ``output`` in bounded memory: the samples held in a
+    :class:`~aveas_format.io.resort.StatesWriter` (spilled next to the output beyond its memory),
+    the states made and written a bucket of objects at a time (``convert`` of one trace, ``validate
+    TRACE``): the same recording as :func:`convert_osi`."""
+    with bounded_states(output, overwrite, key="oid") as w:
+        trace = _trace(inputs, map_source, options, w)
+        return write_by_buckets(w, partial(_boxes_of, trace=trace, options=options), trace.sensor,
+                                trace.source_ids, output=output, overwrite=overwrite, converter="osi",
+                                inputs=inputs, options=options, map_bytes=trace.map_bytes,
+                                participants=trace.participants)
+
+
 @converter("osi", description="ASAM OSI trace (.osi length-prefixed binary or MCAP): GroundTruth "
            "moving objects", patterns=("*.osi", "*.mcap"), method="traffic_simulation",
            options=OsiOptions, requires=("betterosi",), extra="osi", sniff=(b"osi3.", b"net.asam.osi"),
-           needs_map=False)
+           needs_map=False, writes=convert_osi_to)
 def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     """The map is ``--map`` or the one the trace references (``map_reference``) next to it."""
+    with StatesWriter(memory=None, key="oid") as w:
+        trace = _trace(inputs, map_source, options, w)
+        boxes = _boxes_of(next(w.buckets()), trace, options)
+    return to_recording(boxes, trace.sensor, converter="osi", inputs=inputs, options=options,
+                        map_bytes=trace.map_bytes, participants=trace.participants)
+
+
+def _trace(inputs: list[Path], map_source, options: OsiOptions, writer: StatesWriter) -> SimpleNamespace:
+    """The samples of the traces into ``writer`` (a row per sample: the object id ``oid``, the
+    message ``msg`` and :data:`_FLOAT_COLS`) and what the import decides over all of them: the
+    objects imported (``uniq``, ``source_ids``; those without a size reported and left out:
+    ``sizeless``), the time origin ``t0``, the participants, the map, the projection and the
+    sensor."""
     from aveas_format.converters.common.carried import sensor_values
     from aveas_format.opendrive import load_map
 
@@ -207,41 +242,27 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     meta = _trace_metadata(inputs[0])
     map_source = _map_of_trace(inputs[0], map_source, meta, options)
 
+    def into(decode):
+        def run():
+            writer.reset()  # (a fast path that refuses a trace half-way leaves rows behind)
+            return decode(inputs, options, _Sink(writer))
+        return run
+
     what = ", ".join(p.name for p in inputs)
-    f, ids, msgs, static, host_ids, proj, found = read_by(
-        what, ("the columnar decoder", lambda: _decode_columns(inputs, options)),
-        ("betterosi", lambda: _decode_objects(inputs, options)))
+    static, host_ids, proj, found, tmin = read_by(what, ("the columnar decoder", into(_decode_columns)),
+                                                 ("betterosi", into(_decode_objects)))
     sizeless = [oid for oid, d in static.items() if d["length"] is None]
     for oid in sizeless:
         found.add("source.osi.missing_dimension", oid, static[oid]["no_size_msg"],
                   f"moving object {oid} has no positive base.dimension (length, width) in any of "
                   f"its messages: not imported", count=static[oid]["no_size_n"])
-    if sizeless:  # objects without a size cannot be participants: their samples go
-        keep = ~np.isin(ids, sizeless)
-        f, ids, msgs = f[keep], ids[keep], msgs[keep]
-        for oid in sizeless:
-            del static[oid]
+        del static[oid]  # (objects without a size cannot be participants: their samples go)
     found.report(inputs[0] if len(inputs) == 1 else None)
-    if not len(f):
+    uniq = np.asarray(sorted(static), np.int64)
+    if not len(uniq):
         raise FormatError("no GroundTruth moving objects in the trace", path=inputs[0])
-    t0 = float(f[:, 0].min())
-    uniq, pid = np.unique(np.asarray(ids, np.int64), return_inverse=True)
-    # a duplicate names the object id and the frame (0-based message index, the states'
-    # source_frame) of its second sample
-    boxes = Boxes(pid, f[:, 0] - t0, f[:, 1], f[:, 2], source_ids=[str(int(u)) for u in uniq],
-                  rows=Rows(inputs if len(inputs) == 1 else [], place=msgs, unit="frame")).sort()
-    # the other columns in the boxes' order: one gather of whole rows (not one per column)
-    f = f[boxes.order]
-    for j, k in enumerate(_FLOAT_COLS):
-        if k not in ("t", "x", "y"):
-            boxes[_STATE_OF.get(k, k)] = (np.asarray(f[:, j], np.float32) if k in _LIGHTS
-                                          else np.asarray(f[:, j], np.float64))
-    n = len(boxes)
-    for c in ("x", "y", "heading", "vx", "vy"):
-        boxes[f"{c}_std"] = np.zeros(n)
-    boxes["source_frame"] = np.asarray(msgs, np.int64)[boxes.order]
     map_bytes = load_map_bytes(map_source)
-    crs = _to_map_frame(boxes, proj, load_map(map_bytes).header, options)
+    header = load_map(map_bytes).header
     m = len(uniq)
     info = [static[int(u)] for u in uniq]
     participants = {
@@ -254,31 +275,83 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
         "attributes": [json.dumps({"osi_type": d["osi_type"], "osi_lanes": sorted(d["lanes"])})
                        for d in info],
     }
+    t0 = min(tmin[int(u)] for u in uniq)
     zt = (meta.get("net.asam.osi.trace") or {}).get("zero_time")
     carried = sensor_values(meta.get(CARRIED_RECORD) or {})
     if zt and not options.start_time:
         carried["start_time"] = _shift_iso(zt, t0)
     sensor = Sensor(method=options.method, provenance="simulated",
                     platform="ASAM OSI trace", sensors=[{"id": "osi", "kind": "simulator"}],
-                    crs=crs, **{"partner": "ASAM OSI simulation", **carried})
-    return to_recording(boxes, sensor, converter="osi", inputs=inputs, options=options,
-                        map_bytes=map_bytes, participants=participants)
+                    crs=_map_frame_crs(proj, header, options), **{"partner": "ASAM OSI simulation", **carried})
+    return SimpleNamespace(uniq=uniq, source_ids=[str(int(u)) for u in uniq], sizeless=np.asarray(sizeless, np.int64),
+                           t0=t0, participants=participants, map_bytes=map_bytes, header=header, proj=proj,
+                           sensor=sensor, inputs=inputs)
 
 
-def _to_map_frame(boxes: Boxes, proj, header, options: OsiOptions) -> str | None:
-    """The boxes moved from the OSI global frame into the map's (in place), and the
-    recording's CRS where the map has none. The OSI frame is the map's; where the trace's
-    ``proj_string`` differs from the map's geoReference, positions go through the projected CRS
-    into the map's frame (directions turned by the grid convergence and the frame offset's yaw).
-    Without a geoReference the trace's ``proj_string`` (with its offset) is the recording's CRS."""
+class _Sink:
+    """The decoders' samples into a :class:`~aveas_format.io.resort.StatesWriter`: a block of
+    :data:`_FLOAT_COLS` rows with their object ids and message indices at a time; the earliest time
+    of each object on the way (``tmin``)."""
+
+    def __init__(self, writer: StatesWriter) -> None:
+        self.writer, self.tmin = writer, {}
+
+    def __call__(self, f: np.ndarray, ids: np.ndarray, msgs: np.ndarray) -> None:
+        if not len(f):
+            return
+        u, inv = np.unique(ids, return_inverse=True)
+        first = np.full(len(u), np.inf)
+        np.minimum.at(first, inv.reshape(-1), f[:, 0])
+        for o, t in zip(u.tolist(), first.tolist()):
+            self.tmin[o] = min(self.tmin.get(o, np.inf), t)
+        self.writer.add({"oid": np.asarray(ids, np.int64), "msg": np.asarray(msgs, np.int64),
+                         **{k: np.ascontiguousarray(f[:, j]) for j, k in enumerate(_FLOAT_COLS)}})
+
+
+def _boxes_of(bucket: pa.Table, trace: SimpleNamespace, options: OsiOptions) -> Boxes:
+    """The boxes of a bucket of whole objects (:func:`_trace`'s samples), in the map's frame."""
+    ids = bucket.column("oid").to_numpy()
+    keep = ~np.isin(ids, trace.sizeless)
+    if not keep.all():
+        bucket, ids = bucket.filter(pa.array(keep)), ids[keep]
+    f = np.column_stack([column_numpy(bucket, k) for k in _FLOAT_COLS])
+    msgs = bucket.column("msg").to_numpy()
+    # a duplicate names the object id and the frame (0-based message index, the states'
+    # source_frame) of its second sample
+    boxes = Boxes(np.searchsorted(trace.uniq, ids), f[:, 0] - trace.t0, f[:, 1], f[:, 2],
+                  source_ids=trace.source_ids,
+                  rows=Rows(trace.inputs if len(trace.inputs) == 1 else [], place=msgs, unit="frame")).sort()
+    # the other columns in the boxes' order: one gather of whole rows (not one per column)
+    f = f[boxes.order]
+    for j, k in enumerate(_FLOAT_COLS):
+        if k not in ("t", "x", "y"):
+            boxes[_STATE_OF.get(k, k)] = (np.asarray(f[:, j], np.float32) if k in _LIGHTS
+                                          else np.asarray(f[:, j], np.float64))
+    n = len(boxes)
+    for c in ("x", "y", "heading", "vx", "vy"):
+        boxes[f"{c}_std"] = np.zeros(n)
+    boxes["source_frame"] = np.asarray(msgs, np.int64)[boxes.order]
+    _to_map_frame(boxes, trace.proj, trace.header)
+    return boxes
+
+
+def _map_frame_crs(proj, header, options: OsiOptions) -> str | None:
+    """The recording's CRS where the map has no geoReference: the trace's ``proj_string`` with its
+    offset (unless ``--crs`` gives one)."""
+    if proj is None or header.geo_reference or options.crs:
+        return None
+    return _offset_crs(proj[0], proj[1])
+
+
+def _to_map_frame(boxes: Boxes, proj, header) -> None:
+    """The boxes moved from the OSI global frame into the map's (in place). The OSI frame is the
+    map's; where the trace's ``proj_string`` differs from the map's geoReference, positions go
+    through the projected CRS into the map's frame (directions turned by the grid convergence and
+    the frame offset's yaw). Without a geoReference nothing moves (:func:`_map_frame_crs`)."""
     from aveas_format.crs import LocalFrame, crs_equal
 
-    if proj is None:
-        return None
-    if not header.geo_reference:
-        return None if options.crs else _offset_crs(proj[0], proj[1])
-    if crs_equal(proj[0], header.geo_reference):
-        return None
+    if proj is None or not header.geo_reference or crs_equal(proj[0], header.geo_reference):
+        return
     px, py = LocalFrame(proj[0], proj[1], warn=False).to_projected(boxes["x"], boxes["y"])
     boxes["x"], boxes["y"], rot = projected_to_local(px, py, proj[0], header.geo_reference,
                                                      header.offset)
@@ -286,20 +359,24 @@ def _to_map_frame(boxes: Boxes, proj, header, options: OsiOptions) -> str | None
     boxes["heading"] = boxes["heading"] + rot
     boxes["vx"], boxes["vy"] = rotate(boxes["vx"], boxes["vy"], rot)
     boxes["ax"], boxes["ay"] = rotate(boxes["ax"], boxes["ay"], rot)
-    return None
 
 
-def _decode_objects(inputs: list[Path], options: OsiOptions):
-    """The samples of the traces decoded by betterosi, one message object at a time: (floats
-    (``_FLOAT_COLS``, one row per sample), object ids, message indices, per-object statics, host
-    ids, the first proj_string and its offset, the findings)."""
+def _decode_objects(inputs: list[Path], options: OsiOptions, sink: _Sink):
+    """The samples of the traces decoded by betterosi, one message object at a time, into
+    ``sink``: ``(per-object statics, host ids, the first proj_string and its offset, the findings,
+    the earliest time of each object)``."""
     # the floats (_FLOAT_COLS) of each sample (a tuple each, turned into a float64 block every
     # _BLOCK samples: ~110 B per sample, not a Python float per value), its object id and message
     # index apart (typed arrays)
     from aveas_format.converters.common.mcap import mcap_errors
 
     cols: dict[str, Any] = {"f": [], "id": array("q"), "msg": array("q")}
-    blocks: list[np.ndarray] = []
+
+    def flush() -> None:
+        sink(np.asarray(cols["f"], np.float64).reshape(-1, len(_FLOAT_COLS)),
+             np.frombuffer(cols["id"], np.int64).copy(), np.frombuffer(cols["msg"], np.int64).copy())
+        cols.update(f=[], id=array("q"), msg=array("q"))
+
     static: dict[int, dict[str, Any]] = {}
     host_ids: set[int] = set()
     proj: tuple[str, tuple[float, float, float, float]] | None = None
@@ -334,22 +411,18 @@ def _decode_objects(inputs: list[Path], options: OsiOptions):
                         _object(mo, t, n_msg, cols, static, found)
                     n_msg += 1
                     if len(cols["f"]) >= _BLOCK:
-                        blocks.append(np.asarray(cols["f"], np.float64))
-                        cols["f"].clear()
+                        flush()
         except errors as e:
             if isinstance(e, (FormatError, RecordingIOError)):  # located already
                 raise
             raise FormatError(f"cannot decode OSI message {n_msg}: {type(e).__name__}: {e}",
                               path=path) from None
-    blocks.append(np.asarray(cols["f"], np.float64).reshape(-1, len(_FLOAT_COLS)))
-    f = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
-    del blocks
-    return (f, np.frombuffer(cols["id"], np.int64), np.frombuffer(cols["msg"], np.int64), static,
-            host_ids, proj, found)
+    flush()
+    return static, host_ids, proj, found, sink.tmin
 
 
-def _decode_columns(inputs: list[Path], options: OsiOptions):
-    """What :func:`_decode_objects` gives, from the columnar decoder
+def _decode_columns(inputs: list[Path], options: OsiOptions, sink: _Sink):
+    """What :func:`_decode_objects` does, by the columnar decoder
     (:mod:`aveas_format.converters.osi_columns`); :class:`~aveas_format.converters.common.fastpath.
     FastPathUnsupported` where it does not take the trace (then betterosi decodes it)."""
     import betterosi as b
@@ -358,7 +431,6 @@ def _decode_columns(inputs: list[Path], options: OsiOptions):
 
     otypes = {int(m): m.name for m in b.MovingObject.Type}
     vtypes = {int(m): m.name for m in b.MovingObject.VehicleClassification.Type}
-    fs, ids, msgs = [], [], []
     static: dict[int, dict[str, Any]] = {}
     host_ids: set[int] = set()
     proj = None
@@ -397,16 +469,10 @@ def _decode_columns(inputs: list[Path], options: OsiOptions):
                 pairs = np.unique(np.stack([oid[lane_obj], lane_id], axis=1), axis=0)
                 for o, lane in pairs.tolist():
                     static[o]["lanes"].add(lane)
-            fs.append(ch["f"])
-            ids.append(oid)
-            msgs.append(ch["msg"] + n_msg)
+            sink(ch["f"], oid, ch["msg"] + n_msg)
             n_file += len(t)
         n_msg += n_file
-    if not fs:
-        return np.zeros((0, len(_FLOAT_COLS))), np.zeros(0, np.int64), np.zeros(0, np.int64), \
-            static, host_ids, proj, _Findings()
-    return (np.concatenate(fs), np.concatenate(ids), np.concatenate(msgs), static, host_ids, proj,
-            _Findings())
+    return static, host_ids, proj, _Findings(), sink.tmin
 
 
 def _offset_crs(proj: str, offset: tuple[float, float, float, float]) -> str:
@@ -560,231 +626,3 @@ def _object(mo, t: float, msg: int, cols: dict[str, Any], static: dict[int, dict
     lanes = mo.assigned_lane_id
     if lanes:
         d["lanes"].update(int(li.value) for li in lanes)
-
-
-# ---- export ------------------------------------------------------------------------------------
-
-#: class -> (OSI MovingObject type, vehicle classification type or None)
-EXPORT_CLASS: dict[str, tuple[str, str | None]] = {
-    "car": ("VEHICLE", "MEDIUM_CAR"), "van": ("VEHICLE", "DELIVERY_VAN"),
-    "truck": ("VEHICLE", "HEAVY_TRUCK"), "trailer": ("VEHICLE", "TRAILER"),
-    "bus": ("VEHICLE", "BUS"), "motorcycle": ("VEHICLE", "MOTORBIKE"),
-    "bicycle": ("VEHICLE", "BICYCLE"), "railvehicle": ("VEHICLE", "TRAM"),
-    "mobility_device": ("VEHICLE", "MICROMOBILITY_DEVICE"), "pedestrian": ("PEDESTRIAN", None),
-    "animal": ("ANIMAL", None), "pushable_pullable": ("OTHER", None), "other": ("OTHER", None),
-}
-
-
-class OsiExportOptions(ConverterOptions):
-    host_id: int | None = None
-    """Participant that becomes the GroundTruth's host vehicle (default: the first participant with
-    role system_under_test or recording_vehicle, else none)."""
-    every: int = Field(1, ge=1)
-    """Write every n-th time step (1 = all)."""
-    map_file: str | None = None
-    """File name of the map written next to the trace (default: the trace's name with .xodr)."""
-    write_map: bool = True
-    """Write the map next to the trace (with the recording's crs as its geoReference where the map
-    has none); every GroundTruth's ``map_reference`` names it, so that the trace re-imports
-    without ``--map``."""
-
-
-def _light_state(b, brake: float, left: float, right: float, hazard: float):
-    def on(p: float) -> bool:
-        return bool(np.isfinite(p) and p >= 0.5)
-
-    ind = ("WARNING" if on(hazard) else "LEFT" if on(left) else "RIGHT" if on(right) else
-           "OFF" if np.isfinite(left) or np.isfinite(right) or np.isfinite(hazard) else "UNKNOWN")
-    brk = "NORMAL" if on(brake) else "OFF" if np.isfinite(brake) else "UNKNOWN"
-    return b.MovingObjectVehicleClassificationLightState(
-        indicator_state=getattr(b.MovingObjectVehicleClassificationLightStateIndicatorState, ind),
-        brake_light_state=getattr(b.MovingObjectVehicleClassificationLightStateBrakeLightState, brk))
-
-
-#: states encoded at once by the OSI export (bounds its memory: ~1 kB per state while encoding)
-BATCH_STATES = 25_000
-
-#: heights (m) where a participant has none
-_DEFAULT_HEIGHT = {"pedestrian": 1.75, "bicycle": 1.7, "truck": 3.5, "bus": 3.2, "trailer": 3.5}
-
-
-def encode_ground_truths(b, participants, order: np.ndarray, bounds: np.ndarray, sec: np.ndarray,
-                         nanos: np.ndarray, host: int | None, proj_string: str, *, pid, x, y,
-                         heading, vx, vy, ax, ay, lights, map_reference: str = "") -> pw.Ragged:
-    """The serialized ``osi3.GroundTruth`` of each time step, from columns (:mod:`._protowire`):
-    the states ``order[bounds[k]:bounds[k+1]]`` are the moving objects of step ``k`` (timestamp
-    ``sec[k]``, ``nanos[k]``). Field for field what the bindings' messages held (the module
-    docstring of :func:`export_osi`); ``lights`` (brake, left, right, hazard probabilities) or
-    None."""
-    p = participants
-    p_ids = p.column("participant_id").to_numpy()
-    by_id = np.argsort(p_ids)
-    row = by_id[np.searchsorted(p_ids, pid[order], sorter=by_id)]
-    classes = p.column("class").cast("string").to_pylist()
-    heights = (p.column("height").to_pylist() if "height" in p.column_names else [None] * len(classes))
-    h_p = np.array([hh or _DEFAULT_HEIGHT.get(c, 1.5) for hh, c in zip(heights, classes)], float)
-    mtype = b.MovingObjectType
-    vtypes = b.MovingObjectVehicleClassificationType
-    kinds = [EXPORT_CLASS.get(c, ("OTHER", None)) for c in classes]
-    otype_p = np.array([int(getattr(mtype, o)) for o, _ in kinds], np.int64)
-    vtype_p = np.array([int(getattr(vtypes, v)) if v else -1 for _, v in kinds], np.int64)
-    L = column_numpy(p, "length")[row]
-    W = column_numpy(p, "width")[row]
-    H = h_p[row]
-    o = order
-
-    def vec(a, bb, c):
-        return pw.concat(pw.f_double(1, a), pw.f_double(2, bb), pw.f_double(3, c))
-
-    zeros = np.zeros(len(o))
-    acc_ok = np.isfinite(ax[o])
-    base = pw.concat(
-        pw.f_message(1, vec(L, W, H)),                                 # dimension
-        pw.f_message(2, vec(x[o], y[o], H / 2)),                       # position
-        pw.f_message(3, pw.f_double(3, heading[o])),                   # orientation.yaw
-        pw.f_message(4, vec(vx[o], vy[o], zeros)),                     # velocity
-        pw.keep(pw.f_message(5, vec(np.where(acc_ok, ax[o], 0.0), np.where(acc_ok, ay[o], 0.0),
-                                    zeros)), acc_ok))                  # acceleration
-    vt = vtype_p[row]
-    is_vehicle = vt >= 0
-    vc = [pw.f_varint(1, np.maximum(vt, 0))]
-    if lights is not None:
-        brake, left, right, hazard = (v[o] for v in lights)
-
-        def on(v):
-            return np.isfinite(v) & (v >= 0.5)
-
-        ind_s = b.MovingObjectVehicleClassificationLightStateIndicatorState
-        brk_s = b.MovingObjectVehicleClassificationLightStateBrakeLightState
-        known = np.isfinite(left) | np.isfinite(right) | np.isfinite(hazard)
-        ind = np.select([on(hazard), on(left), on(right), known],
-                        [int(ind_s.WARNING), int(ind_s.LEFT), int(ind_s.RIGHT), int(ind_s.OFF)],
-                        int(ind_s.UNKNOWN))
-        brk = np.select([on(brake), np.isfinite(brake)], [int(brk_s.NORMAL), int(brk_s.OFF)],
-                        int(brk_s.UNKNOWN))
-        vc.append(pw.f_message(2, pw.concat(pw.f_varint(1, ind), pw.f_varint(7, brk))))
-    mo = pw.concat(
-        pw.f_message(1, pw.f_varint(1, pid[o])),                       # id
-        pw.f_message(2, base),
-        pw.f_varint(3, otype_p[row]),                                  # type
-        pw.keep(pw.f_message(6, pw.concat(*vc)), is_vehicle))          # vehicle_classification
-    m = len(sec)
-    parts = [pw.f_message(2, pw.concat(pw.f_varint(1, sec), pw.f_varint(2, nanos)))]  # timestamp
-    if host is not None:
-        parts.append(pw.Ragged.const(pw.f_message(3, pw.f_varint(1, np.array([host]))).data.tobytes(),
-                                     m))                                # host_vehicle_id
-    parts.append(pw.group(pw.f_message(5, mo), bounds))                # moving_object
-    if proj_string:
-        parts.append(pw.Ragged.const(pw.f_strings(14, [proj_string]).data.tobytes(), m))
-    if map_reference:  # the map's file name, next to the trace
-        parts.append(pw.Ragged.const(pw.f_strings(15, [map_reference]).data.tobytes(), m))
-    return pw.concat(*parts)
-
-
-class _Encoded:
-    """A serialized GroundTruth as betterosi's writer takes a message (its type for the MCAP
-    channel's schema, its bytes)."""
-
-    def __init__(self, raw: bytes, proto) -> None:
-        self.raw, self.proto = raw, proto
-
-    def desc(self):
-        return self.proto.desc()
-
-    def to_binary(self) -> bytes:
-        return self.raw
-
-
-@converter("osi", direction="export", options=OsiExportOptions,
-           description="ASAM OSI GroundTruth trace (.osi length-prefixed binary, or .mcap)",
-           requires=("betterosi",), extra="osi")
-def export_osi(rec, output: Path, *, options: OsiExportOptions) -> list[Path]:
-    """One ``osi3.GroundTruth`` per distinct ``time``: every participant present then as a moving
-    object (id = participant_id; base position = footprint centre with z = half the height, yaw =
-    heading, velocity, acceleration where the states or derived kinematics have it, dimension;
-    type and vehicle classification from the class; brake and indicator lights where the states
-    carry their probabilities, on at >= 0.5), ``proj_string`` = the recording's CRS, and the host
-    vehicle. Timestamps are the recording's ``time`` (s); an MCAP trace carries ``zero_time`` =
-    ``start_time``. The map is written next to the trace (``write_map``, ``map_file``; OSI
-    references it, does not embed it), with the recording's ``crs`` as its ``<geoReference>`` where
-    the map has none. ``.osi`` or ``.mcap`` by the output's suffix."""
-    import os
-
-    import betterosi as b
-
-    from aveas_format.converters.common.carried import carried_meta
-    from aveas_format.safeio import write_chunks_atomic
-
-    suffix = output.suffix.lower()
-    if suffix not in (".osi", ".mcap"):
-        raise FormatError("the OSI export writes .osi or .mcap (by the output's suffix)", path=output)
-    st = rec.states
-    n = st.num_rows
-    companion = companion_map_path(output, options)
-    map_name = companion.name if companion is not None else (options.map_file or "")
-
-    pid = st["participant_id"].to_numpy()
-    t = column_numpy(st, "time")
-    # a null or absent value: NaN, or 0 for the heading and velocity
-    x, y, ax, ay = (column_numpy(st, c, missing=math.nan) for c in ("x", "y", "ax", "ay"))
-    heading, vx, vy = (column_numpy(st, c, null=0.0, missing=0.0) for c in ("heading", "vx", "vy"))
-    kin = rec.derived.get("kinematics")
-    if (kin is not None and np.isnan(ax).all() and kin.num_rows == n
-            and np.array_equal(kin["participant_id"].to_numpy(), pid)
-            and np.array_equal(kin["time"].to_numpy(zero_copy_only=False), t)):  # row-aligned
-        ax, ay = column_numpy(kin, "ax"), column_numpy(kin, "ay")
-    lights = [column_numpy(st, c, missing=math.nan) for c in
-              ("light_brake_p", "light_indicator_left_p", "light_indicator_right_p", "light_hazard_p")]
-    has_lights = any(np.isfinite(v).any() for v in lights)
-    parts = rec.participants.to_pylist()
-    info = {p["participant_id"]: p for p in parts}
-    host = options.host_id
-    if host is None:
-        host = next((p["participant_id"] for p in parts
-                     if p.get("role") in ("system_under_test", "recording_vehicle")), None)
-    elif host not in info:
-        raise FormatError(f"host_id {host}: no such participant", path=output)
-    times = np.unique(t)[::options.every]
-    sel = np.flatnonzero(np.isin(t, times)) if options.every > 1 else np.arange(n)
-    order = sel[np.lexsort((pid[sel], t[sel]))]
-    bounds = np.r_[np.searchsorted(t[order], times), len(order)]
-    sec, nanos = np.divmod(np.round(times * 1e9).astype(np.int64), 10**9)
-
-    def batches():
-        """(GroundTruth bytes, step indices) of batches of about :data:`BATCH_STATES` states:
-        the memory of the encoding stays bounded whatever the length of the recording."""
-        k0 = 0
-        while k0 < len(times):
-            k1 = int(np.searchsorted(bounds, bounds[k0] + BATCH_STATES, side="right"))
-            k1 = min(max(k1 - 1, k0 + 1), len(times))
-            yield encode_ground_truths(
-                b, rec.participants, order[bounds[k0]:bounds[k1]], bounds[k0:k1 + 1] - bounds[k0],
-                sec[k0:k1], nanos[k0:k1], host, rec.meta.crs or "", pid=pid, x=x, y=y,
-                heading=heading, vx=vx, vy=vy, ax=ax, ay=ay,
-                lights=lights if has_lights else None, map_reference=map_name), range(k0, k1)
-            k0 = k1
-
-    extra = ([write_companion_map(rec, companion)]
-             if companion is not None and rec.map_source is not None else [])
-    if suffix == ".osi":
-        return [write_chunks_atomic(output, (pw.length_prefixed(g) for g, _ in batches())),
-                *extra]
-    tmp = output.with_name(f".{output.stem}.tmp-{os.getpid()}.mcap")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", DeprecationWarning)
-            with b.Writer(tmp, metadata={"zero_time": rec.meta.start_time,
-                                         "description": f"aveas-format export of "
-                                                        f"{rec.meta.recording_id}"}) as w:
-                w.add_metadata(CARRIED_RECORD, {**carried_meta(rec),
-                                                **({"map": map_name} if map_name else {})})
-                proto = b.GroundTruth()
-                for gts, steps in batches():
-                    for raw, k in zip(gts.tolist(), steps):
-                        w.add(_Encoded(raw, proto), log_time=int(sec[k]) * 10**9 + int(nanos[k]))
-        with open(tmp, "rb") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, output)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return [output, *extra]

@@ -289,7 +289,7 @@ def test_export_bytes_are_the_bindings_encoding(tmp_path):
     bindings write for the same GroundTruth: built here with betterosi from the recording's first
     time step (lights, the host vehicle, a state without acceleration)."""
     from aveas_format.converters import get_converter
-    from aveas_format.converters.osi import EXPORT_CLASS
+    from aveas_format.converters.osi_export import EXPORT_CLASS
 
     rec = _lit_recording()
     st = rec.states
@@ -333,11 +333,49 @@ def test_export_bytes_are_the_bindings_encoding(tmp_path):
 
 def test_export_in_batches_writes_the_same_trace(tmp_path, monkeypatch):
     """The export encodes batches of time steps (bounded memory): any batch size, the same bytes."""
-    from aveas_format.converters import get_converter, osi
+    from aveas_format.converters import get_converter, osi_export
 
     rec = _lit_recording()
     export = get_converter("osi", "export")
     export(rec, tmp_path / "whole.osi", options={"write_map": False})
-    monkeypatch.setattr(osi, "BATCH_STATES", 7)
+    monkeypatch.setattr(osi_export, "BATCH_STATES", 7)
     export(rec, tmp_path / "batched.osi", options={"write_map": False})
     assert (tmp_path / "whole.osi").read_bytes() == (tmp_path / "batched.osi").read_bytes()
+
+
+@pytest.mark.parametrize("suffix", [".osi", ".mcap"])
+def test_bounded_import_writes_the_recording_in_memory(tmp_path, suffix, monkeypatch):
+    """``convert_to`` (the CLI's convert, validate TRACE) holds the samples in a StatesWriter
+    spilled beyond its memory and writes the states a bucket of objects at a time: with a memory
+    of 64 kB and buckets of 32 kB (many buckets) the recording is the one ``convert`` makes."""
+    from aveas_format.converters import convert_to, get_converter
+    from aveas_format.converters.common import assemble
+    from aveas_format.io import open_recording
+    from aveas_format.io import resort
+    from aveas_format.sample import highway_scene
+
+    rec = highway_scene(n_vehicles=40, duration_s=20.0, seed=2)
+    trace = tmp_path / f"hw{suffix}"
+    get_converter("osi", "export")(rec, trace)
+    whole = convert("osi", [trace], options={"recording_id": "hw"})
+    buckets = []
+    distribute = resort.StatesWriter._distribute
+
+    def counted(self, key_map):
+        buckets.append(distribute(self, key_map))
+        return buckets[-1]
+
+    monkeypatch.setattr(assemble, "IMPORT_MEMORY", 64 << 10)
+    monkeypatch.setattr(resort, "BUCKET_BYTES", 32 << 10)
+    monkeypatch.setattr(resort.StatesWriter, "_distribute", counted)
+    written, n, on_road = convert_to("osi", [trace], tmp_path / "b.aveas", options={"recording_id": "hw"})
+    assert len(buckets) == 1 and len(buckets[0]) > 10  # (spilled, then made into many buckets)
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # the spill is gone
+    back = open_recording(tmp_path / "b.aveas")
+    assert n == whole.states.num_rows and on_road == n - whole.states["road_id"].null_count
+    assert back.states.equals(whole.states) and back.participants.equals(whole.participants)
+    a, b = back.meta.model_dump(), whole.meta.model_dump()
+    loc_a, loc_b = a.pop("location"), b.pop("location")  # (a mean summed bucket by bucket)
+    assert a == b | {"tables": a["tables"]} and a["tables"]["states"]["rows"] == n
+    assert loc_a.pop("alt") == loc_b.pop("alt") and loc_a == pytest.approx(loc_b, abs=1e-12, rel=0)
+    assert aveas_format.validate(back).exit_code("error") == 0

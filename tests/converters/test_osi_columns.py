@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 
 from aveas_format.converters import _protowire as pw
-from aveas_format.converters import convert, osi
+from aveas_format.converters import convert, osi, osi_export
 from aveas_format.converters.common.fastpath import FastPathUnsupported
 from aveas_format.errors import FormatError
+from aveas_format.io.resort import StatesWriter
 from aveas_format.opendrive.builder import straight_highway
 from helpers_realdata import real_files
 
@@ -31,13 +32,26 @@ def _write(path, raws):
     return path
 
 
+def _decoded(decode, path, options):
+    """A decoder's samples as one block: ``(floats, object ids, message indices, statics, host
+    ids, proj, findings)``."""
+    with StatesWriter(memory=None, key="oid") as w:
+        static, hosts, proj, found, _ = decode([path], options, osi._Sink(w))
+        t = next(w.buckets(), None)
+    if t is None:
+        return np.zeros((0, len(osi._FLOAT_COLS))), np.zeros(0, np.int64), np.zeros(0, np.int64), \
+            static, hosts, proj, found
+    f = np.column_stack([t.column(k).to_numpy() for k in osi._FLOAT_COLS])
+    return f, t.column("oid").to_numpy(), t.column("msg").to_numpy(), static, hosts, proj, found
+
+
 def _same_decoding(path, **opts):
     """Both decoders on one trace: everything they give is equal (NaN where NaN)."""
     options = osi.OsiOptions(**opts)
-    cols = osi._decode_columns([path], options)  # raises FastPathUnsupported if it does not take it
+    cols = _decoded(osi._decode_columns, path, options)  # (FastPathUnsupported: not taken)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-        objs = osi._decode_objects([path], options)
+        objs = _decoded(osi._decode_objects, path, options)
     np.testing.assert_array_equal(cols[0], objs[0])  # floats, NaN at the same places
     assert cols[1].tolist() == list(objs[1]) and cols[2].tolist() == list(objs[2])
     assert cols[3].keys() == objs[3].keys()
@@ -188,7 +202,7 @@ def test_what_it_does_not_take_goes_to_betterosi(tmp_path, monkeypatch):
         raws = [_msg(5, extra) + _msg(2, _v(1, 100 + i)) for i in range(3)]
         trace = _write(tmp_path / "d_gt_.osi", raws)
         with pytest.raises(FastPathUnsupported):
-            osi._decode_columns([trace], osi.OsiOptions())
+            _decoded(osi._decode_columns, trace, osi.OsiOptions())
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             rec = convert("osi", [trace], map_source=road)
@@ -204,7 +218,7 @@ def test_broken_bytes_give_betterosis_located_error(tmp_path, bad):
     good = _msg(5, _object(3, 1.0, shuffled=False)) + _msg(2, _v(1, 1))
     trace = _write(tmp_path / "b_gt_.osi", [good, good + bad])
     with pytest.raises(FastPathUnsupported):
-        osi._decode_columns([trace], osi.OsiOptions())
+        _decoded(osi._decode_columns, trace, osi.OsiOptions())
     with pytest.raises(FormatError, match="OSI message 1"):
         convert("osi", [trace], map_source=tmp_path / "none.xodr")
 
@@ -222,9 +236,9 @@ def test_chunks_give_the_same_samples(tmp_path, monkeypatch):
     from aveas_format.converters import osi_columns
 
     trace = _write(tmp_path / "c_gt_.osi", _random_messages(np.random.default_rng(9), 30))
-    whole = osi._decode_columns([trace], osi.OsiOptions())
+    whole = _decoded(osi._decode_columns, trace, osi.OsiOptions())
     monkeypatch.setattr(osi_columns, "CHUNK_BYTES", 100)
-    chunked = osi._decode_columns([trace], osi.OsiOptions())
+    chunked = _decoded(osi._decode_columns, trace, osi.OsiOptions())
     np.testing.assert_array_equal(whole[0], chunked[0])
     assert whole[2].tolist() == chunked[2].tolist() and whole[3] == chunked[3]
 
@@ -239,7 +253,7 @@ def test_mcap_traces_decode_the_same(tmp_path, sensor_view):
         proto = b.SensorView() if sensor_view else b.GroundTruth()
         with b.Writer(trace) as w:
             for k, raw in enumerate(msgs):
-                w.add(osi._Encoded(raw, proto), log_time=k * 10**8)
+                w.add(osi_export._Encoded(raw, proto), log_time=k * 10**8)
     cols = _same_decoding(trace)
     assert len(cols[0]) == 36
 
@@ -251,7 +265,7 @@ def test_bytes_it_knows_it_does_not_take_go_to_betterosi(tmp_path, caplog):
     good = _msg(5, _object(3, 1.0, shuffled=False)) + _msg(2, _v(1, 1))
     trace = _write(tmp_path / "u_gt_.osi", [good + _field(14, pw.LEN, b"\xff\xfe")])
     with pytest.raises(FastPathUnsupported, match="message 0: proj_string is not UTF-8"):
-        osi._decode_columns([trace], osi.OsiOptions())
+        _decoded(osi._decode_columns, trace, osi.OsiOptions())
     with caplog.at_level("INFO", logger="aveas_format.converters"), \
             pytest.raises(FormatError, match="OSI message 0"):
         convert("osi", [trace], map_source=tmp_path / "none.xodr")
