@@ -205,7 +205,7 @@ def convert_osi_to(inputs: list[Path], output: Path, *, map_source, options: Osi
     TRACE``): the same recording as :func:`convert_osi`."""
     with bounded_states(output, overwrite, key="oid") as w:
         trace = _trace(inputs, map_source, options, w)
-        return write_by_buckets(w, partial(_boxes_of, trace=trace, options=options), trace.sensor,
+        return write_by_buckets(w, partial(_boxes_of, trace=trace), trace.sensor,
                                 trace.source_ids, output=output, overwrite=overwrite, converter="osi",
                                 inputs=inputs, options=options, map_bytes=trace.map_bytes,
                                 participants=trace.participants)
@@ -219,7 +219,7 @@ def convert_osi(inputs: list[Path], *, map_source, options: OsiOptions):
     """The map is ``--map`` or the one the trace references (``map_reference``) next to it."""
     with StatesWriter(memory=None, key="oid") as w:
         trace = _trace(inputs, map_source, options, w)
-        boxes = _boxes_of(next(w.buckets()), trace, options)
+        boxes = _boxes_of(next(w.buckets()), trace)
     return to_recording(boxes, trace.sensor, converter="osi", inputs=inputs, options=options,
                         map_bytes=trace.map_bytes, participants=trace.participants)
 
@@ -308,29 +308,25 @@ class _Sink:
                          **{k: np.ascontiguousarray(f[:, j]) for j, k in enumerate(_FLOAT_COLS)}})
 
 
-def _boxes_of(bucket: pa.Table, trace: SimpleNamespace, options: OsiOptions) -> Boxes:
+def _boxes_of(bucket: pa.Table, trace: SimpleNamespace) -> Boxes:
     """The boxes of a bucket of whole objects (:func:`_trace`'s samples), in the map's frame."""
+    bucket = bucket.combine_chunks()
     ids = bucket.column("oid").to_numpy()
     keep = ~np.isin(ids, trace.sizeless)
     if not keep.all():
         bucket, ids = bucket.filter(pa.array(keep)), ids[keep]
-    f = np.column_stack([column_numpy(bucket, k) for k in _FLOAT_COLS])
-    msgs = bucket.column("msg").to_numpy()
+    t, x, y, msgs = (column_numpy(bucket, k) for k in ("t", "x", "y", "msg"))
     # a duplicate names the object id and the frame (0-based message index, the states'
     # source_frame) of its second sample
-    boxes = Boxes(np.searchsorted(trace.uniq, ids), f[:, 0] - trace.t0, f[:, 1], f[:, 2],
-                  source_ids=trace.source_ids,
+    boxes = Boxes(np.searchsorted(trace.uniq, ids), t - trace.t0, x, y, source_ids=trace.source_ids,
                   rows=Rows(trace.inputs if len(trace.inputs) == 1 else [], place=msgs, unit="frame")).sort()
-    # the other columns in the boxes' order: one gather of whole rows (not one per column)
-    f = f[boxes.order]
-    for j, k in enumerate(_FLOAT_COLS):
-        if k not in ("t", "x", "y"):
-            boxes[_STATE_OF.get(k, k)] = (np.asarray(f[:, j], np.float32) if k in _LIGHTS
-                                          else np.asarray(f[:, j], np.float64))
+    for k in _FLOAT_COLS[3:]:  # the other columns in the boxes' order
+        v = column_numpy(bucket, k)[boxes.order]
+        boxes[_STATE_OF.get(k, k)] = v.astype(np.float32) if k in _LIGHTS else v
     n = len(boxes)
     for c in ("x", "y", "heading", "vx", "vy"):
         boxes[f"{c}_std"] = np.zeros(n)
-    boxes["source_frame"] = np.asarray(msgs, np.int64)[boxes.order]
+    boxes["source_frame"] = msgs[boxes.order]
     _to_map_frame(boxes, trace.proj, trace.header)
     return boxes
 

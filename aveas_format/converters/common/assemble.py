@@ -127,8 +127,9 @@ def write_by_buckets(writer: StatesWriter, boxes_of: Callable[[pa.Table], Boxes]
     all of ``source_ids``), whose states are made as :func:`to_recording` makes them, referenced to
     the map and written to ``states.parquet`` a bucket at a time (spilled buckets in ``workers``
     processes). What needs all boxes at once is not done here: ``participants`` states each
-    participant's class and size, and the sensor has no coverage. ``(recording as written, its
-    states, those on the map)``; the recording's states are not loaded."""
+    participant's class and size, and the sensor has no coverage; the duplicates policy
+    ``first`` warns once per bucket that has repeats. ``(recording as written, its states, those
+    on the map)``; the recording's states are not loaded."""
     import pyarrow.parquet as pq
 
     from aveas_format.crs import LocalFrame
