@@ -368,7 +368,7 @@ def test_bounded_import_writes_the_recording_in_memory(tmp_path, suffix, monkeyp
     monkeypatch.setattr(assemble, "IMPORT_MEMORY", 64 << 10)
     monkeypatch.setattr(resort, "BUCKET_BYTES", 32 << 10)
     monkeypatch.setattr(resort.StatesWriter, "_distribute", counted)
-    written, n, on_road = convert_to("osi", [trace], tmp_path / "b.aveas", options={"recording_id": "hw"})
+    _, n, on_road = convert_to("osi", [trace], tmp_path / "b.aveas", options={"recording_id": "hw"})
     assert len(buckets) == 1 and len(buckets[0]) > 10  # (spilled, then made into many buckets)
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # the spill is gone
     back = open_recording(tmp_path / "b.aveas")
