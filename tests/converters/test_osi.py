@@ -379,3 +379,22 @@ def test_bounded_import_writes_the_recording_in_memory(tmp_path, suffix, monkeyp
     assert a == b | {"tables": a["tables"]} and a["tables"]["states"]["rows"] == n
     assert loc_a.pop("alt") == loc_b.pop("alt") and loc_a == pytest.approx(loc_b, abs=1e-12, rel=0)
     assert aveas_format.validate(back).exit_code("error") == 0
+
+
+def test_bounded_import_locates_a_repeated_time_as_in_memory(tmp_path, road):
+    """A sample repeated at one time: ``convert_to`` names the file, the frame, the object and the
+    time as ``convert`` does, and leaves neither an output nor its spill behind."""
+    from aveas_format.converters import convert_to
+    from aveas_format.errors import FormatError
+
+    t, objs = truth(20)
+    t[7] = t[6]
+    trace = write_osi(tmp_path / "run_gt.osi", messages(t, objs))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (the time going back)
+        with pytest.raises(FormatError) as whole:
+            convert("osi", [trace], map_source=road)
+        with pytest.raises(FormatError) as bounded:
+            convert_to("osi", [trace], tmp_path / "out.aveas", map_source=road)
+    assert str(bounded.value) == str(whole.value) and "frame 7: participant '1' sampled twice" in str(whole.value)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run_gt.osi"]
