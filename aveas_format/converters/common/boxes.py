@@ -142,16 +142,19 @@ class Boxes:
         return out
 
     # -- the one sort ----------------------------------------------------------------------------
-    def sort(self) -> Boxes:
+    def sort(self, repeats: list | None = None) -> Boxes:
         """The rows sorted by (participant, time) with the duplicates policy applied: ``error``
         raises naming the later of two samples of a participant at one time (its file and place)
         and the participant's source id; ``first`` keeps the first (in the batch's order) and
-        warns once with the count. Sorted boxes are returned as they are."""
+        warns once with the count (:func:`repeat_message`), or, given a list ``repeats``, appends
+        ``(count, path, who, time)`` of the first repeat to it instead (a source that sorts its
+        boxes a bucket at a time warns once for all). Sorted boxes are returned as they are."""
         if self.is_sorted:
             return self
         order = np.lexsort((self.time, self.pid))
         ps, ts = self.pid[order], self.time[order]
-        dup = np.r_[False, (ps[1:] == ps[:-1]) & (ts[1:] == ts[:-1])]
+        dup = np.zeros(len(ps), bool)  # (no rows: none)
+        dup[1:] = (ps[1:] == ps[:-1]) & (ts[1:] == ts[:-1])
         if dup.any():
             k = int(np.flatnonzero(dup)[0])
             i = int(order[k])  # the later sample (lexsort is stable)
@@ -160,9 +163,11 @@ class Boxes:
             if self.duplicates == "error":
                 raise FormatError(f"{who} sampled twice at time {fmt_num(self.time[i])}", **where)
             path = where.get("path")
-            warnings.warn(f"{path.name + ': ' if path else ''}{int(dup.sum())} sample(s) repeat a "
-                          f"participant's time and were dropped, the first kept (e.g. {who} at "
-                          f"time {fmt_num(self.time[i])} s)", stacklevel=3)
+            if repeats is not None:
+                repeats.append((int(dup.sum()), path, who, float(self.time[i])))
+            else:
+                warnings.warn(repeat_message(int(dup.sum()), path, who, float(self.time[i])),
+                              stacklevel=3)
         out = self.take(order[~dup])
         out.is_sorted = True
         return out
@@ -187,6 +192,13 @@ class Boxes:
     def counts(self) -> np.ndarray:
         """Rows per participant code (0 for a participant without rows)."""
         return np.bincount(self.pid, minlength=self.m)
+
+
+def repeat_message(count: int, path: Path | None, who: str, time: float) -> str:
+    """The warning of the duplicates policy ``first``: ``count`` samples dropped, the first
+    repeat (``who`` at ``time`` s) as the example."""
+    return (f"{path.name + ': ' if path else ''}{count} sample(s) repeat a participant's time and "
+            f"were dropped, the first kept (e.g. {who} at time {fmt_num(time)} s)")
 
 
 def _take(v: Any, idx: np.ndarray) -> Any:
