@@ -116,11 +116,12 @@ def bounded_states(output: Path, overwrite: bool, *, key: str, memory: int | Non
         shutil.rmtree(work, ignore_errors=True)
 
 
-def write_by_buckets(writer: StatesWriter, boxes_of: Callable[[pa.Table], Boxes], sensor: Sensor,
-                     source_ids: Sequence[Any], *, output: Path, overwrite: bool, converter: str,
+def write_by_buckets(writer: StatesWriter, boxes_of: Callable[[pa.Table], Any], sensor: Sensor,
+                     source_ids: Sequence[Any] | None, *, output: Path, overwrite: bool, converter: str,
                      inputs: Sequence[Path], options: Any, map_bytes: bytes,
-                     participants: Mapping[str, Any], resolved: Mapping[str, Any] | None = None,
-                     version: str = "1", workers: int | None = 1):
+                     participants: Mapping[str, Any] | Callable[[list], tuple[Sequence[Any], Mapping[str, Any]]],
+                     resolved: Mapping[str, Any] | None = None, version: str = "1",
+                     workers: int | None = 1, key_map: np.ndarray | None = None):
     """:func:`to_recording` of the boxes a :class:`~aveas_format.io.resort.StatesWriter` holds
     (a time-major source read in bounded memory, :func:`bounded_states`), written to ``output``:
     ``boxes_of(bucket)`` makes the :class:`Boxes` of a bucket of whole participants (codes among
@@ -129,17 +130,31 @@ def write_by_buckets(writer: StatesWriter, boxes_of: Callable[[pa.Table], Boxes]
     processes). What needs all boxes at once is not done here: ``participants`` states each
     participant's class and size, and the sensor has no coverage; the duplicates policy
     ``first`` warns once per bucket that has repeats. ``(recording as written, its states, those
-    on the map)``; the recording's states are not loaded."""
+    on the map)``; the recording's states are not loaded.
+
+    Participants decided bucket by bucket (a source that drops whole participants, or aggregates
+    them, as it makes their boxes): ``participants`` a callable and ``source_ids`` None;
+    ``boxes_of(bucket)`` then gives ``(boxes, info)`` with the boxes' codes the final participant
+    ids (the buckets are made in order, one at a time: ``workers`` 1), and
+    ``participants([info of each bucket])`` gives ``(source_ids, participants)`` after the last.
+    ``key_map``: the buckets' order (:meth:`~aveas_format.io.resort.StatesWriter.buckets`)."""
     import pyarrow.parquet as pq
 
     from aveas_format.crs import LocalFrame
     from aveas_format.io.writer import write_recording
     from aveas_format.mapref.build import states_table
+    from aveas_format.parallel import processes
 
-    if sensor.coverage is not None or not {"class", "length", "width"} <= set(participants):
+    later = callable(participants)
+    if later and (source_ids is not None or processes(workers) > 1):
+        raise ValueError("write_by_buckets: participants from the buckets need source_ids None and "
+                         "one worker (the buckets made in order)")
+    if sensor.coverage is not None or not later and not {"class", "length", "width"} <= set(participants):
         raise ValueError("write_by_buckets: the sensor has a coverage, or the participants' class "
                          "and sizes are not stated (both need every box: use to_recording)")
-    parts = participant_columns(Boxes([], [], [], [], source_ids=source_ids), sensor.sizes, participants)
+    parts = participant_columns(Boxes([], [], [], [], source_ids=[] if later else source_ids),
+                                sensor.sizes, participants if not later else  # (none yet: the CRS, the map)
+                                {"class": pa.array([], pa.string()), "length": np.zeros(0), "width": np.zeros(0)})
     ids = np.asarray(parts["participant_id"], np.int64)
     meta = {k: v for k, v in (("nominal_rate_hz", sensor.nominal_rate_hz), ("crs", sensor.crs or None),
                               ("extras", None if sensor.extras is None else dict(sensor.extras)),
@@ -150,11 +165,19 @@ def write_by_buckets(writer: StatesWriter, boxes_of: Callable[[pa.Table], Boxes]
     rec = hand_over(converter, inputs, options, states=empty, **kw, **meta)  # (the CRS, the map)
     frame, net = LocalFrame(rec.meta.crs, offset=rec.map.header.offset), rec.map
 
-    def bucket(t: pa.Table) -> tuple[pa.Table, None]:
-        return states_table(states_columns(boxes_of(t).sort(), ids), frame, net), None
+    def bucket(t: pa.Table) -> tuple[pa.Table, Any]:
+        boxes, info = boxes_of(t) if later else (boxes_of(t), None)
+        boxes = boxes.sort()
+        b_ids = np.arange(int(boxes.pid.max(initial=-1)) + 1) if later else ids
+        return states_table(states_columns(boxes, b_ids), frame, net), info
 
-    states_file, summary, _ = writer.write(Path(writer.spill_dir) / "states.parquet", transform=bucket,
-                                           workers=workers)
+    states_file, summary, infos = writer.write(Path(writer.spill_dir) / "states.parquet",
+                                               transform=bucket, workers=workers, key_map=key_map)
+    if later:
+        src, given = participants(infos)
+        if not {"class", "length", "width"} <= set(given):
+            raise ValueError("write_by_buckets: the participants' class and sizes are not stated")
+        kw["participants"] = participant_columns(Boxes([], [], [], [], source_ids=src), sensor.sizes, given)
     if summary["rows"]:
         meta = {**{k: summary[k] for k in ("duration_s", "nominal_rate_hz", "location")}, **meta}
     rec = hand_over(converter, inputs, options, states=pq.read_schema(states_file.path).empty_table(),
