@@ -71,7 +71,7 @@ class TransformTree:
             r = np.repeat(quaternion_matrix(e["q"][-1:]), m, axis=0)
             return r, np.repeat(e["tr"][-1:], m, axis=0), np.ones(m, bool), None
         te = e["t"]
-        ok = (t >= te[0] - self.tol) & (t <= te[-1] + self.tol)
+        ok = self._inside(e, t)
         tc = np.clip(t, te[0], te[-1])
         base = te[0]
         tf = (tc - base).astype(np.float64)
@@ -90,6 +90,24 @@ class TransformTree:
         if e["cov"] is not None:
             cov = np.stack([np.interp(tf, tef, e["cov"][:, k]) for k in range(9)], -1).reshape(m, 3, 3)
         return rot.as_matrix(), tr, ok, cov
+
+    def _inside(self, e: dict[str, Any], t: np.ndarray) -> np.ndarray:
+        """Whether the stamps ``t`` lie in a dynamic edge's time span (+- the tolerance)."""
+        return (t >= e["t"][0] - self.tol) & (t <= e["t"][-1] + self.tol)
+
+    def valid(self, frame: str, t: np.ndarray) -> np.ndarray:
+        """The ``ok`` of :meth:`lookup` alone (whether ``t`` lies in the time spans of the
+        dynamic transforms of the chain from ``frame`` to the map frame), without the poses."""
+        ok = np.ones(len(t), bool)
+        cur = frame
+        for _ in range(64):
+            if cur == self.map:
+                return ok
+            e = self.e[cur]
+            if not (e["static"] or len(e["t"]) == 1):
+                ok &= self._inside(e, t)
+            cur = e["parent"]
+        raise FormatError(f"transform chain of frame {frame!r} is too deep or cyclic")
 
     def lookup(self, frame: str, t: np.ndarray, want_cov: bool = True):
         """Pose of ``frame`` in the map frame at ``t``: R (m,3,3), p (m,3), ok (m,) (inside the
