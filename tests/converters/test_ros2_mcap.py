@@ -445,3 +445,144 @@ def test_verbose_says_which_decoder_read_each_schema(scene_mcap, road_map, tmp_p
     assert res.returncode == 0, res.stderr
     assert ("aveas-format: scene.mcap: messages of nav_msgs/msg/Odometry: read by rosbags"
             in res.stderr), res.stderr
+
+
+# --- the import in bounded memory --------------------------------------------------------------------
+
+def _busy_scene(path):
+    """A longer scene: 40 TrackedObjects tracks in the map frame coming and going (some with an
+    unavailable orientation), one message sent twice (repeated stamps), derived_object_msgs in
+    base_link (the odometry's frame) with a car, a barrier (no road user) and a track first seen
+    before the odometry starts (outside the transforms' span), a lidar frame on /tf_static."""
+    m, msgs = 120, []
+    for i in range(m):
+        t = i / RATE
+        t_ns = T0 + int(round(t * 1e9))
+        msgs.append(("/localization/kinematic_state", "nav_msgs/msg/Odometry", odometry(t_ns, t), t_ns))
+        if i == 0:
+            msgs.append(("/tf_static", "tf2_msgs/msg/TFMessage", {"transforms": [{
+                "header": header(t_ns, "base_link"), "child_frame_id": "lidar",
+                "transform": {"translation": {"x": 1.2, "y": 0.0, "z": 1.8}, "rotation": quat(0.05)}}]}, t_ns))
+        tr = tracked(t_ns + 20_000_000, t + 0.02)
+        a, b = tr["objects"]
+        objs = []
+        for k in range(40):
+            if k * 2 <= i < k * 2 + 60:
+                o = {**(a if k % 2 else b), "object_id": {"uuid": list(uuid.UUID(int=100 + k).bytes)}}
+                kin = dict(o["kinematics"], orientation_availability=0 if k % 5 == 0 else 2)
+                kin["pose_with_covariance"] = {"pose": pose(5.0 * k + 21.0 * t, -1.75 - 3.5 * (k % 3), 0.7, 0.01 * k),
+                                               "covariance": cov6(POSE_COV_A, 0.01)}
+                objs.append(dict(o, kinematics=kin))
+        tr["objects"] = objs
+        topic = "/perception/object_recognition/tracking/objects"
+        msgs.append((topic, "autoware_perception_msgs/msg/TrackedObjects", tr, t_ns))
+        if i == 30:
+            msgs.append((topic, "autoware_perception_msgs/msg/TrackedObjects", tr, t_ns))
+        d = derived(t_ns + 50_000_000, i)
+        barrier = dict(d["objects"][0], id=9, classification=10)
+        barrier["pose"] = {"pose": pose(30.0 - 20.0 * t, -5.0, 0.5, 0.0), "covariance": cov6(np.diag([0.09, 0.01]))}
+        d["objects"].append(barrier)
+        if i >= 50:
+            d["objects"].append(dict(d["objects"][0], id=8))
+        msgs.append(("/radar/objects", "derived_object_msgs/msg/ObjectWithCovarianceArray", d, t_ns))
+    early = derived(T0 - 5_000_000_000, 0)
+    early["objects"] = [dict(early["objects"][0], id=8)]
+    msgs.insert(0, ("/radar/objects", "derived_object_msgs/msg/ObjectWithCovarianceArray", early, T0))
+    return write_mcap(path, msgs)
+
+
+@pytest.mark.realdata
+def test_bounded_import_writes_the_recording_in_memory(tmp_path, road_map, monkeypatch):
+    """``convert_to`` (the CLI's convert, validate FILE) holds the object rows in a StatesWriter
+    spilled beyond its memory and writes the states a bucket of tracks at a time: with a memory of
+    64 kB, buckets of 32 kB and rows flushed every 500 the recording is the one ``convert``
+    makes, with the same warnings (one each, counted over all buckets)."""
+    import warnings
+
+    from aveas_format.converters import convert_to
+    from aveas_format.converters.common import assemble
+    from aveas_format.converters.ros2_mcap import rows
+    from aveas_format.io import open_recording, resort
+
+    path = _busy_scene(tmp_path / "busy.mcap")
+    opts = _opts(recording_id="busy", license="CC0-1.0")
+    with warnings.catch_warnings(record=True) as said_whole:
+        warnings.simplefilter("always")
+        whole = convert("ros2-mcap", [path], map_source=road_map, options=opts)
+    buckets = []
+    distribute = resort.StatesWriter._distribute
+
+    def counted(self, key_map):
+        buckets.append(distribute(self, key_map))
+        return buckets[-1]
+
+    monkeypatch.setattr(assemble, "IMPORT_MEMORY", 64 << 10)
+    monkeypatch.setattr(resort, "BUCKET_BYTES", 32 << 10)
+    monkeypatch.setattr(rows, "FLUSH_ROWS", 500)
+    monkeypatch.setattr(resort.StatesWriter, "_distribute", counted)
+    with warnings.catch_warnings(record=True) as said_bounded:
+        warnings.simplefilter("always")
+        _, n, on_road = convert_to("ros2-mcap", [path], tmp_path / "b.aveas", map_source=road_map,
+                                   options=opts)
+    assert len(buckets) == 1 and len(buckets[0]) > 10  # (spilled, then made into many buckets)
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # the spill is gone
+    said = [sorted(str(w.message) for w in ws) for ws in (said_whole, said_bounded)]
+    assert said[0] == said[1]
+    assert any(s.startswith("1 object samples lie outside") for s in said[0])  # (track 8's first)
+    assert any(s.startswith("busy.mcap: 16 sample(s) repeat") for s in said[0])  # (message 30 twice)
+    assert any(s.startswith("skipped 1 tracks: 1 barrier") for s in said[0])
+    back = open_recording(tmp_path / "b.aveas")
+    assert whole.participants.num_rows == 43  # the ego, 40 tracks, the car 7 and track 8
+    ids = whole.participants.column("source_id").to_pylist()
+    assert ids[:3] == ["ego", "0:" + uuid.UUID(int=100).hex, "1:7"]
+    # track 8 numbered where its first sample with a transform is (after the track of message 50)
+    assert ids.index("1:8") == ids.index("0:" + uuid.UUID(int=125).hex) + 1
+    assert n == whole.states.num_rows and on_road == n - whole.states["road_id"].null_count
+    assert back.states.equals(whole.states) and back.participants.equals(whole.participants)
+    a, b = back.meta.model_dump(), whole.meta.model_dump()
+    loc_a, loc_b = a.pop("location"), b.pop("location")  # (a mean summed bucket by bucket)
+    assert a == b | {"tables": a["tables"]} and a["tables"]["states"]["rows"] == n
+    assert loc_a.pop("alt") == loc_b.pop("alt") and loc_a == pytest.approx(loc_b, abs=1e-12, rel=0)
+
+
+@pytest.mark.realdata
+def test_bounded_import_names_the_message_as_in_memory(scene_mcap, road_map, tmp_path, monkeypatch):
+    """The errors that name a message (a frame without transform, a pose that is not finite in a
+    message read after several flushes) and a track without a length: ``convert_to`` raises what
+    ``convert`` raises and leaves neither an output nor its spill behind."""
+    from aveas_format.converters import convert_to
+    from aveas_format.converters.common import assemble
+    from aveas_format.converters.ros2_mcap import rows
+    from aveas_format.io import resort
+
+    msgs = []
+    for i in range(40):
+        m = tracked(T0 + i * 100_000_000, i / 10)
+        if i == 33:
+            m["objects"][1]["kinematics"]["pose_with_covariance"]["pose"]["position"]["y"] = float("inf")
+        msgs.append(("/objects", "autoware_perception_msgs/msg/TrackedObjects", m, T0 + i))
+    (tmp_path / "in").mkdir()
+    (tmp_path / "out").mkdir()
+    nan = write_mcap(tmp_path / "in" / "nan.mcap", msgs)
+    msgs = []
+    for i in range(40):
+        m = tracked(T0 + i * 100_000_000, i / 10)
+        # track B (the second) without a size, track A (the first) without a width: the length
+        # is checked first
+        m["objects"][1]["shape"]["dimensions"] = {"x": 0.0, "y": 0.0, "z": 0.0}
+        m["objects"][0]["shape"]["dimensions"]["y"] = 0.0
+        msgs.append(("/objects", "autoware_perception_msgs/msg/TrackedObjects", m, T0 + i))
+    sizeless = write_mcap(tmp_path / "in" / "sizeless.mcap", msgs)
+    monkeypatch.setattr(assemble, "IMPORT_MEMORY", 4 << 10)
+    monkeypatch.setattr(resort, "BUCKET_BYTES", 2 << 10)
+    monkeypatch.setattr(rows, "FLUSH_ROWS", 10)
+    for path, opts, what in ((scene_mcap, {"odometry_topic": ""}, "message 0: frame 'base_link' has no transform"),
+                             (nan, {}, "message 33: object 1: pose is not finite"),
+                             (sizeless, {}, f"participant {UUID_B.hex()!r} has no positive length")):
+        with pytest.raises(aveas_format.FormatError) as whole:
+            convert("ros2-mcap", [path], map_source=road_map, options=opts)
+        with pytest.raises(aveas_format.FormatError) as bounded:
+            convert_to("ros2-mcap", [path], tmp_path / "out" / "o.aveas", map_source=road_map,
+                       options=opts)
+        assert str(bounded.value) == str(whole.value) and what in str(whole.value)
+        assert list((tmp_path / "out").iterdir()) == []

@@ -53,9 +53,23 @@ twist in the header frame is absolute unless ``relative_velocity`` (then the ego
 ``omega x r`` are added).
 
 Time: ``header.stamp`` (not the log time; a zero stamp falls back to the log time with a
-warning); time zero = the earliest stamp, which also gives ``start_time``. Decoding is per
-message; everything after it is vectorised per frame. Duplicate (participant, stamp) samples keep
+warning); time zero = the earliest stamp with a transform, which also gives ``start_time``.
+Decoding is per message; everything after it is vectorised per frame. Duplicate (participant, stamp) samples keep
 the first. Provenance ``natural``, role ``observed`` for objects.
+
+Large recordings: ``convert`` (of one recording) and ``validate FILE`` import in bounded memory:
+the object rows are flushed every 65,536 rows into a
+:class:`~aveas_format.io.resort.StatesWriter` (spilled to a hidden temporary directory next to
+the output beyond 128 MB) keyed by track; what needs every row is decided first from each row's
+stamp and frame alone (12 bytes a row: the rows outside the transforms' spans, time zero, the
+tracks' order); then the states are made a bucket of whole tracks at a time, in order (the
+transforms, repeated stamps, tracks that are no road user, velocities, headings, the
+participants' sizes and class PMFs are all per track;
+:func:`~aveas_format.converters.common.assemble.write_by_buckets` with the participants from the
+buckets), written to ``states.parquet``: the same recording as the import in memory (the same
+warnings, one each with the counts over all buckets; the location's mean summed bucket by bucket:
+equal to 1e-12 degrees). The Python function ``convert`` returns a recording in memory (the same
+steps with one bucket); ``convert_to`` writes it in bounded memory.
 
 Tested on: MCAP files written here with ``mcap_ros2.writer`` and the real message definitions of
 ``../shared/data/ros2_msgdefs/`` (Autoware TrackedObjects, derived_object_msgs, vision_msgs
@@ -72,11 +86,16 @@ Modules (what lives where, from the bottom up):
 - ``tree``: the transform samples (``TransformSamples``) and the transform tree (``TransformTree``: interpolated
   lookups chained to the map frame, with the ego's pose covariance).
 - ``messages``: the per-message readers (object arrays, odometry, NavSatFix, tf) -> flat rows.
+- ``rows``: the object rows flushed as columns into the StatesWriter, keyed by track
+  (``ObjectSink``), with each row's stamp and frame kept for the decisions over all rows.
 - ``read``: which topics to read and the one pass over their messages (``read_topics``).
 - ``frames``: the frame and covariance maths (``cov3``, ``to_map``, ``twist_to_map``,
   ``apply_offset``).
-- ``converter``: ``convert_ros2_mcap`` (registered as ``ros2-mcap``) and its steps: the ego track,
-  the objects in the map frame, the states, the participants.
+- ``objects``: a bucket of whole tracks in the map frame (``objects_in_map``) and as boxes
+  (``object_boxes``: repeats, no road users, velocities, headings).
+- ``converter``: ``convert_ros2_mcap`` (registered as ``ros2-mcap``) and ``convert_ros2_mcap_to``
+  (its bounded ``writes``) and their steps: the reading and the decisions over all rows, the ego
+  track, a bucket's boxes, the participants.
 
 Importing this package registers the converter (once: the registry imports the package, the
 package imports ``converter``).

@@ -6,37 +6,75 @@ from __future__ import annotations
 
 import json
 import warnings
+from collections import Counter
+from functools import partial
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 
-from aveas_format.converters.common.assemble import group_mean, participant_columns, to_recording
-from aveas_format.converters.common.boxes import MEASURED, Boxes, Rows, Sensor, Sizes
+from aveas_format.converters.common.assemble import (
+    bounded_states,
+    participant_columns,
+    to_recording,
+    write_by_buckets,
+)
+from aveas_format.converters.common.boxes import MEASURED, Boxes, Rows, Sensor, Sizes, repeat_message
 from aveas_format.converters.common.geometry import covariance_std_corr
-from aveas_format.converters.common.tables import factorize
 from aveas_format.converters.common.timestamps import utc_iso_from_ns
 from aveas_format.converters.registry import converter
 from aveas_format.converters.ros2_mcap.frames import apply_offset, cov3, to_map, twist_to_map
-from aveas_format.converters.ros2_mcap.messages import ObjectRows
+from aveas_format.converters.ros2_mcap.objects import object_boxes, objects_in_map, skipped_message
 from aveas_format.converters.ros2_mcap.options import CLS, NCLS, Ros2McapOptions
 from aveas_format.converters.ros2_mcap.read import read_topics
 from aveas_format.converters.ros2_mcap.tree import TransformTree
 from aveas_format.errors import FormatError
+from aveas_format.io.arrow import column_numpy
+from aveas_format.io.resort import StatesWriter
 from aveas_format.mapref.build import load_map_bytes
 from aveas_format.numeric import central_differences
 from aveas_format.schema.taxonomy import CLASSES
+
+
+def convert_ros2_mcap_to(inputs: list[Path], output: Path, *, map_source, options: Ros2McapOptions,
+                         overwrite: bool = False):
+    """The recording written to ``output`` in bounded memory: the object rows held in a
+    :class:`~aveas_format.io.resort.StatesWriter` (spilled next to the output beyond its memory),
+    the states made and written a bucket of whole tracks at a time (``convert`` of one recording,
+    ``validate FILE``): the same recording as :func:`convert_ros2_mcap`."""
+    with bounded_states(output, overwrite, key="track") as w:
+        ctx = _recording(inputs, map_source, options, w)
+        return write_by_buckets(w, partial(_bucket, ctx=ctx), ctx.sensor, None, output=output,
+                                overwrite=overwrite, converter="ros2-mcap", inputs=inputs,
+                                options=options, map_bytes=ctx.map_bytes,
+                                participants=partial(_finish, ctx=ctx), key_map=ctx.key_map)
+
 
 @converter("ros2-mcap", description="ROS 2 MCAP of a road vehicle: Autoware/derived_object_msgs/"
            "vision_msgs objects + Odometry/NavSatFix ego + /tf",
            patterns=("*.mcap",), method="road_vehicle", options=Ros2McapOptions,
            requires=("mcap", "mcap_ros2"), extra="ros2", provides=("start_time",),
-           sniff=(b"ros2msg", b"ros2idl"))
+           sniff=(b"ros2msg", b"ros2idl"), writes=convert_ros2_mcap_to)
 def convert_ros2_mcap(inputs: list[Path], *, map_source, options: Ros2McapOptions):
-    o = options
+    with StatesWriter(memory=None, key="track") as w:
+        ctx = _recording(inputs, map_source, options, w)
+        boxes, info = _bucket(next(w.buckets()), ctx)
+    source_ids, participants = _finish([info], ctx)
+    boxes.source_ids = np.asarray(source_ids, dtype=object)
+    return to_recording(boxes, ctx.sensor, converter="ros2-mcap", inputs=inputs, options=options,
+                        map_bytes=ctx.map_bytes, participants=participants)
+
+
+def _recording(inputs: list[Path], map_source, o: Ros2McapOptions, writer: StatesWriter) -> SimpleNamespace:
+    """The messages read (the object rows into ``writer``, the ego's states added as track 0)
+    and what the import decides over all rows: the transform tree, the ego, the errors that name
+    a message, the rows outside the transforms' time spans (a warning), time zero, the tracks'
+    order (``key_map``: final code of each track code) and source ids, the sensor."""
     if o.ego_class not in CLASSES:
         raise FormatError(f"ego_class {o.ego_class!r} is not one of {list(CLASSES)}")
-    types, obj_topics, odom, fix, objs, edges, ego_odom, ego_fix = read_topics(inputs, o)
+    types, obj_topics, odom, fix, sink, edges, ego_odom, ego_fix = read_topics(inputs, o, writer)
     map_bytes = load_map_bytes(map_source)
     tree = TransformTree(edges, o.map_frame, int(o.tf_tolerance_s * 1e9))
     first = inputs[0]
@@ -46,24 +84,121 @@ def convert_ros2_mcap(inputs: list[Path], *, map_source, options: Ros2McapOption
         ego = _ego_from_odometry(ego_odom, odom, tree, o, first)
     elif ego_fix["t"]:
         ego = _ego_from_navsatfix(ego_fix, fix, tree, o, map_bytes)
-    rows = _objects_in_map(objs, obj_topics, tree, ego, o, first)
-    t0 = _time_zero(rows, ego, first)
-    parts = []
+    t_ns, fcode, track = sink.columns()
+    valid = _valid(sink, t_ns, fcode, obj_topics, tree, ego, o, first)
+    stamps = [a for a in (t_ns[valid], None if ego is None else ego["t"]) if a is not None and len(a)]
+    if not stamps:
+        raise FormatError("no samples: the object topics are empty and there is no ego pose",
+                          path=first)
+    t0 = int(min(int(a.min()) for a in stamps))
+    # the tracks in the order of their first valid row (0: the ego; without a valid row: last)
+    u, fi = np.unique(track[valid], return_index=True)
+    by_first = u[np.argsort(fi, kind="stable")]
+    key_map = np.full(len(sink.keys) + 1, len(u) + 1, np.int64)
+    key_map[0] = 0
+    key_map[by_first] = np.arange(1, len(u) + 1)
+    del t_ns, fcode, track, valid
     if ego is not None:  # participant 0
         e = _ego_states(ego, o)
-        parts.append(e | {"time": (e.pop("t_ns") - t0) / 1e9})
-    obj = _object_boxes(rows, t0, o, first) if rows and len(rows["t_ns"]) else None
-    if obj is not None:
-        parts.append({k: v for k, v in obj.columns.items() if k not in MEASURED}
-                     | {"participant_id": obj.pid + len(parts), "time": obj.time})
-    cols = {k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in parts[0]}
-    source_ids = (["ego"] if ego is not None else []) + ([] if obj is None else list(obj.source_ids))
-    boxes = Boxes(cols.pop("participant_id"), cols.pop("time"), cols.pop("x"), cols.pop("y"),
-                  source_ids=source_ids, rows=Rows([first]), **cols)
+        e["time"] = (e.pop("t_ns") - t0) / 1e9
+        e.pop("participant_id")
+        writer.add({"track": np.zeros(len(e["time"]), np.int64), **e})
     sensor = Sensor(method="road_vehicle", start_time=utc_iso_from_ns(t0),
                     platform="road vehicle (ROS 2)", sensors=_sensors(ego, obj_topics, types, o))
-    return to_recording(boxes, sensor, converter="ros2-mcap", inputs=inputs, options=options,
-                        map_bytes=map_bytes, participants=_participants(ego, obj, o))
+    return SimpleNamespace(options=o, tree=tree, ego=ego, frames=sink.frames, first=first, t0=t0,
+                           key_map=key_map, source_ids=np.asarray(sink.keys, dtype=object)[by_first - 1],
+                           map_bytes=map_bytes, sensor=sensor, next_id=int(ego is not None), found=[])
+
+
+def _valid(sink, t_ns: np.ndarray, fcode: np.ndarray, obj_topics: list[str], tree: TransformTree,
+           ego: dict[str, Any] | None, o: Ros2McapOptions, first: Path) -> np.ndarray:
+    """Whether each object row has a transform to the map frame at its stamp; a non-finite pose
+    or a frame without transform is an error naming its first message; the rows without a
+    warning with their count."""
+    if sink.bad is not None:
+        ti, mi, oi = sink.bad
+        raise FormatError(f"topic {obj_topics[ti]} message {mi}: object {oi}: pose is "
+                          "not finite", path=first)
+    valid = np.ones(len(t_ns), bool)
+    for fr in sorted(sink.frames):
+        k = sink.frame_of[fr]
+        frn = fr.lstrip("/") or o.map_frame
+        if not tree.reaches(frn, o.map_frame):
+            ti, mi = sink.frame_first[k]
+            raise FormatError(
+                f"topic {obj_topics[ti]} message {mi}: frame {fr!r} has no transform to "
+                f"{o.map_frame!r} (needs /tf, an odometry with child frame {fr!r} or a NavSatFix "
+                f"ego with base_frame={fr!r})", path=first)
+        sel = np.flatnonzero(fcode == k)
+        valid[sel] = tree.valid(frn, t_ns[sel])
+    if len(t_ns):
+        if not valid.all():
+            warnings.warn(f"{int((~valid).sum())} object samples lie outside the transforms' time "
+                          f"span (+- {o.tf_tolerance_s} s) and are dropped", stacklevel=4)
+        if not valid.any() and ego is None:
+            raise FormatError("no object sample has a transform to the map frame", path=first)
+    return valid
+
+
+#: the ego's states columns as :func:`_ego_states` makes them (then ``time``)
+_EGO = ("x", "y", "heading", "vx", "vy", "x_std", "y_std", "xy_corr", "heading_std", "vx_std",
+        "vy_std", "vxvy_corr")
+
+
+def _bucket(bucket: pa.Table, ctx: SimpleNamespace) -> tuple[Boxes, dict[str, Any]]:
+    """The boxes of a bucket of whole tracks (the ego's too in the first), their participant ids
+    final (the buckets made in order, one at a time), and what the bucket found (``info``: its
+    participants' source ids and per-object aggregates, repeats, skipped tracks, an error)."""
+    b = bucket.combine_chunks()
+    is_ego = b.column("track").to_numpy() == 0
+    parts: list[dict[str, Any]] = []
+    info: dict[str, Any] = {"source_ids": [], "repeats": [], "skipped": 0, "labels": Counter(),
+                            "objects": None, "error": None}
+    if is_ego.any():
+        eg = b.filter(pa.array(is_ego))
+        parts.append({"participant_id": np.zeros(eg.num_rows, np.int64),
+                      **{k: column_numpy(eg, k) for k in _EGO}, "time": column_numpy(eg, "time")})
+        info["source_ids"].append("ego")
+        b = b.filter(pa.array(~is_ego))
+    rows = objects_in_map(b, ctx) if b.num_rows else {}
+    if rows and len(rows["t_ns"]):
+        obj = object_boxes(rows, ctx, info)
+        parts.append({k: v for k, v in obj.columns.items() if k not in MEASURED}
+                     | {"participant_id": obj.pid + ctx.next_id, "time": obj.time})
+        ctx.next_id += obj.m
+        info["source_ids"] += list(obj.source_ids)
+        if obj.m:
+            try:
+                info["objects"] = participant_columns(obj, Sizes(), None)
+            except FormatError as e:  # (raised after the warnings, as by the import in memory)
+                info["error"] = e
+    if not parts:  # (tracks without a valid row only)
+        parts.append({"participant_id": np.zeros(0, np.int64), "time": np.zeros(0),
+                      **{k: np.zeros(0) for k in _EGO}})
+    cols = {k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in parts[0]}
+    boxes = Boxes(cols.pop("participant_id"), cols.pop("time"), cols.pop("x"), cols.pop("y"),
+                  source_ids=info["source_ids"], rows=Rows([ctx.first]), **cols)
+    return boxes, info
+
+
+def _finish(infos: list[dict[str, Any]], ctx: SimpleNamespace) -> tuple[list[str], dict[str, Any]]:
+    """After the last bucket: the warnings of the repeats and of the tracks that are no road
+    user (one each, with the counts over all buckets), an error of a bucket (a track without a
+    positive length, then width), and the participants' source ids and columns."""
+    repeats = [r for i in infos for r in i["repeats"]]
+    if repeats:
+        _, path, who, t = repeats[0]
+        warnings.warn(repeat_message(sum(r[0] for r in repeats), path, who, t), stacklevel=3)
+    skipped = sum(i["skipped"] for i in infos)
+    if skipped:
+        warnings.warn(skipped_message(skipped, sum((i["labels"] for i in infos), Counter())),
+                      stacklevel=3)
+    errors = [i["error"] for i in infos if i["error"] is not None]
+    if errors:  # (the in-memory import checks every track's length before any width)
+        raise min(errors, key=lambda e: "positive length" not in str(e))
+    source_ids = [s for i in infos for s in i["source_ids"]]
+    objects = [i["objects"] for i in infos if i["objects"] is not None]
+    return source_ids, _participants(ctx.ego, objects, ctx.options)
 
 
 # --- ego track -------------------------------------------------------------------------------------
@@ -150,129 +285,6 @@ def _ego_from_navsatfix(ego_fix: dict[str, list], fix: str, tree: TransformTree,
             "source": fix, "frame": o.base_frame}
 
 
-# --- objects ---------------------------------------------------------------------------------------
-
-def _objects_in_map(objs: ObjectRows, obj_topics: list[str], tree: TransformTree, ego: dict[str, Any] | None,
-                    o: Ros2McapOptions, first: Path) -> dict[str, np.ndarray]:
-    """Every object row in the map frame (positions, headings, velocities, covariances), frame by
-    frame; rows outside the transforms' time spans are dropped with a warning. {} without rows."""
-    n = len(objs.t_ns)
-    if not n:
-        return {}
-    t_ns = np.asarray(objs.t_ns, np.int64)
-    pose = np.asarray(objs.pose, np.float64)
-    pcov = cov3(objs.pcov)
-    twist = np.asarray(objs.twist, np.float64)
-    tcov = cov3(objs.tcov)
-    kind = np.asarray(objs.twist_kind)
-    topic = np.asarray(objs.topic)
-    bad = ~np.isfinite(pose).all(axis=1)
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        mi, oi = objs.where[i]
-        raise FormatError(f"topic {obj_topics[topic[i]]} message {mi}: object {oi}: pose is "
-                          "not finite", path=first)
-    x = np.empty(n)
-    y = np.empty(n)
-    z = np.empty(n)
-    heading = np.empty(n)
-    cov = np.empty((n, 3, 3))
-    vel = np.full((n, 2), np.nan)
-    vcov = np.full((n, 2, 2), np.nan)
-    valid = np.ones(n, bool)
-    frames, fcodes = np.unique(np.asarray(objs.frame, dtype=object).astype(str),
-                               return_inverse=True)
-    for k, fr in enumerate(frames):
-        fr = str(fr)
-        sel = np.flatnonzero(fcodes == k)
-        frn = fr.lstrip("/") or o.map_frame
-        if not tree.reaches(frn, o.map_frame):
-            i = sel[0]
-            mi, _ = objs.where[i]
-            raise FormatError(
-                f"topic {obj_topics[topic[i]]} message {mi}: frame {fr!r} has no transform to "
-                f"{o.map_frame!r} (needs /tf, an odometry with child frame {fr!r} or a NavSatFix "
-                f"ego with base_frame={fr!r})", path=first)
-        r_f, p_f, ok, cov_f = tree.lookup(frn, t_ns[sel])
-        valid[sel] = ok
-        pos, hd, cv, th = to_map(r_f, p_f, cov_f, pose[sel], pcov[sel])
-        x[sel], y[sel], z[sel] = pos[:, 0], pos[:, 1], pos[:, 2]
-        heading[sel] = hd
-        cov[sel] = cv
-        # velocities: object body frame (rotate by heading) or header frame (rotate by frame yaw)
-        body = kind[sel] == 0
-        hdr = kind[sel] == 1
-        if body.any():
-            b = sel[body]
-            v, vc = twist_to_map(hd[body], twist[b], tcov[b], cv[body, 2, 2])
-            vel[b], vcov[b] = v, vc
-        if hdr.any():
-            h = sel[hdr]
-            var_th = cov_f[0][hdr, 2, 2] if cov_f is not None else np.zeros(hdr.sum())
-            v, vc = twist_to_map(th[hdr], twist[h], tcov[h], var_th)
-            if o.relative_velocity and ego is not None and frn != o.map_frame:
-                v, vc = _add_ego_motion(v, vc, t_ns[h], x[h], y[h], ego)
-            vel[h], vcov[h] = v, vc
-    if not valid.all():
-        warnings.warn(f"{int((~valid).sum())} object samples lie outside the transforms' time "
-                      f"span (+- {o.tf_tolerance_s} s) and are dropped", stacklevel=3)
-    keys = [f"{topic[i]}:{objs.oid[i]}" for i in range(n)] if len(obj_topics) > 1 else objs.oid
-    rows = {"t_ns": t_ns, "key": np.asarray(keys, dtype=object), "x": x, "y": y, "z": z,
-            "heading": heading, "cov": cov, "vel": vel, "vcov": vcov,
-            "dims": np.asarray(objs.dims, np.float64), "pmf": np.asarray(objs.pmf),
-            "nru": np.asarray(objs.nru, np.float64), "nru_label": np.asarray(objs.nru_label, dtype=object),
-            "orient": np.asarray(objs.orient), "valid": valid}
-    rows = {k: v[valid] for k, v in rows.items()}
-    if not len(rows["t_ns"]) and ego is None:
-        raise FormatError("no object sample has a transform to the map frame", path=first)
-    return rows
-
-
-def _road_users(boxes: Boxes, nru: np.ndarray, nru_label: np.ndarray, o: Ros2McapOptions) -> Boxes:
-    """The boxes without the tracks whose classification is mostly a label that is no road user
-    (unless ``keep_non_road_users``), with a warning counting them by label."""
-    if o.keep_non_road_users or not len(boxes) or not (nru > 0.5).any():
-        return boxes
-    skip = group_mean(boxes.pid, nru, boxes.m) > 0.5
-    if not skip.any():
-        return boxes
-    from collections import Counter
-
-    first = boxes.first_rows()
-    names = Counter(str(nru_label[i]) or "no road user" for i in first[skip])
-    warnings.warn(f"skipped {int(skip.sum())} tracks: " + ", ".join(f"{c} {n}" for n, c in sorted(names.items()))
-                  + " (no road user); option keep_non_road_users=true imports them", stacklevel=4)
-    return boxes.drop_participants(skip)
-
-
-def _add_ego_motion(v: np.ndarray, vc: np.ndarray, t_ns: np.ndarray, x: np.ndarray, y: np.ndarray,
-                    ego: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
-    """Velocities relative to the moving ego -> absolute: the ego's velocity (interpolated at the
-    stamps) plus ``omega x r`` about its position, its velocity covariance added."""
-    tq = (t_ns - ego["t"][0]).astype(np.float64)
-    te = (ego["t"] - ego["t"][0]).astype(np.float64)
-    evx = np.interp(tq, te, ego["v"][:, 0])
-    evy = np.interp(tq, te, ego["v"][:, 1])
-    w = np.interp(tq, te, ego["yaw_rate"]) if ego["yaw_rate"] is not None else 0.0
-    ex = np.interp(tq, te, ego["x"])
-    ey = np.interp(tq, te, ego["y"])
-    v = v + np.c_[evx - w * (y - ey), evy + w * (x - ex)]
-    vc = vc + np.nan_to_num(np.stack(
-        [np.interp(tq, te, ego["vcov"][:, a, b]) for a in range(2) for b in range(2)],
-        -1).reshape(-1, 2, 2))
-    return v, vc
-
-
-def _time_zero(rows: dict[str, np.ndarray], ego: dict[str, Any] | None, first: Path) -> int:
-    """The earliest stamp of the object rows and the ego track (ns)."""
-    stamps = [a for a in (rows.get("t_ns"), None if ego is None else ego["t"])
-              if a is not None and len(a)]
-    if not stamps:
-        raise FormatError("no samples: the object topics are empty and there is no ego pose",
-                          path=first)
-    return int(min(int(a.min()) for a in stamps))
-
-
 # --- states ----------------------------------------------------------------------------------------
 
 def _ego_states(ego: dict[str, Any], o: Ros2McapOptions) -> dict[str, np.ndarray]:
@@ -296,58 +308,15 @@ def _ego_states(ego: dict[str, Any], o: Ros2McapOptions) -> dict[str, np.ndarray
                 heading_std=np.sqrt(ecov[:, 2, 2]), vx_std=vsx, vy_std=vsy, vxvy_corr=vrho)
 
 
-def _object_boxes(rows: dict[str, np.ndarray], t0: int, o: Ros2McapOptions, first: Path) -> Boxes:
-    """The objects' boxes (sorted; a repeated (track, stamp) keeps the first, with a warning;
-    tracks that are no road user dropped): velocities from positions where the source has none,
-    the heading from the motion where it is unavailable or only known up to its sign, everything
-    in the OpenDRIVE map's frame, with the per-box dimensions and class PMFs."""
-    from aveas_format.mapref.build import heading_from_velocity
-
-    codes, uniq = factorize(rows["key"])
-    boxes = Boxes(codes, (rows["t_ns"] - t0) / 1e9, rows["x"], rows["y"], source_ids=list(uniq),
-                  rows=Rows([first]), duplicates="first", length=rows["dims"][:, 0],
-                  width=rows["dims"][:, 1], height=rows["dims"][:, 2], class_pmf=rows["pmf"]).sort()
-    r = {k: rows[k][boxes.order] for k in ("heading", "cov", "vel", "vcov", "orient", "nru", "nru_label")}
-    keep = _road_users(boxes, r["nru"], r["nru_label"], o)
-    if keep is not boxes:
-        sel = np.flatnonzero(np.isin(boxes.order, keep.order))
-        r = {k: v[sel] for k, v in r.items()}
-        boxes = keep
-    codes, ts = boxes.pid, boxes.time
-    # velocities where the source has none: from positions
-    psx = np.sqrt(np.clip(r["cov"][:, 0, 0], 0, None))
-    psy = np.sqrt(np.clip(r["cov"][:, 1, 1], 0, None))
-    fvx, fvy, fvxs, fvys = central_differences(codes, ts, boxes["x"], boxes["y"], psx, psy)
-    nov = np.isnan(r["vel"]).any(axis=1)
-    r["vel"][nov] = np.c_[fvx, fvy][nov]
-    r["vcov"][nov] = 0.0
-    r["vcov"][nov, 0, 0], r["vcov"][nov, 1, 1] = fvxs[nov] ** 2, fvys[nov] ** 2
-    # heading where unavailable or only known up to its sign
-    hv = heading_from_velocity(codes, r["vel"][:, 0], r["vel"][:, 1])
-    moving = np.hypot(r["vel"][:, 0], r["vel"][:, 1]) >= 0.5
-    h = np.where(r["orient"] == 0, hv, r["heading"])
-    h = np.where((r["orient"] == 1) & moving & (np.cos(h - hv) < 0), h + np.pi, h)
-    r["cov"][r["orient"] == 0, 2, 2] = np.nan
-    x, y, h, cxy, vx, vy, vc = apply_offset(o.frame_offset, boxes["x"], boxes["y"], h,
-                                            r["cov"][:, :2, :2], r["vel"][:, 0], r["vel"][:, 1],
-                                            r["vcov"])
-    sx, sy, rho = covariance_std_corr(cxy)
-    vsx, vsy, vrho = covariance_std_corr(vc)
-    for k, v in dict(x=x, y=y, heading=h, vx=vx, vy=vy, x_std=sx, y_std=sy, xy_corr=rho,
-                     heading_std=np.sqrt(r["cov"][:, 2, 2]), vx_std=vsx, vy_std=vsy,
-                     vxvy_corr=vrho).items():
-        boxes[k] = v
-    return boxes
-
-
 # --- participants and sensors ----------------------------------------------------------------------
 
-def _participants(ego: dict[str, Any] | None, obj: Boxes | None, o: Ros2McapOptions
+def _participants(ego: dict[str, Any] | None, objects: list[dict[str, Any]], o: Ros2McapOptions
                   ) -> dict[str, Any]:
     """The participants' columns: the ego (from the options) first, then the objects (their
-    boxes' mean dimensions with their spread, mean class PMF)."""
+    boxes' mean dimensions with their spread, mean class PMF: ``objects``, the
+    :func:`~aveas_format.converters.common.assemble.participant_columns` of each bucket's boxes)."""
     n_ego = int(ego is not None)
-    nobj = 0 if obj is None else obj.m
+    nobj = sum(len(p["class_pmf"]) for p in objects)
     mtot = n_ego + nobj
     pmf_all = np.zeros((mtot, NCLS), np.float32)
     length = np.empty(mtot)
@@ -360,13 +329,15 @@ def _participants(ego: dict[str, Any] | None, obj: Boxes | None, o: Ros2McapOpti
         pmf_all[0, CLS[o.ego_class]] = 1.0
         length[0], width[0], height[0] = o.ego_length, o.ego_width, o.ego_height
         lstd[0] = wstd[0] = hstd[0] = 0.0
-    if nobj:
-        p = participant_columns(obj, Sizes(), None)
-        pmf_all[n_ego:] = p["class_pmf"]
+    at = n_ego
+    for p in objects:
+        m = len(p["class_pmf"])
+        pmf_all[at:at + m] = p["class_pmf"]
         for a, k in ((length, "length"), (width, "width"), (height, "height"), (lstd, "length_std"),
                      (wstd, "width_std"), (hstd, "height_std")):
-            a[n_ego:] = np.asarray(p[k].to_numpy(zero_copy_only=False) if hasattr(p[k], "to_numpy")
-                                   else p[k], np.float64)
+            a[at:at + m] = np.asarray(p[k].to_numpy(zero_copy_only=False) if hasattr(p[k], "to_numpy")
+                                      else p[k], np.float64)
+        at += m
     participants = {
         "class": np.asarray(CLASSES, dtype=object)[np.argmax(pmf_all, axis=1)],
         "class_pmf": pmf_all, "length": length, "width": width, "height": height,

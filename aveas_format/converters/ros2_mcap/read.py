@@ -10,7 +10,6 @@ from aveas_format.converters.common.mcap import mcap_errors, why
 from aveas_format.converters.ros2_mcap.decode import DecoderError, Decoders, channels, decode_errors
 from aveas_format.converters.ros2_mcap.messages import (
     OBJECT_READERS,
-    ObjectRows,
     read_navsatfix,
     read_odometry,
     read_tf,
@@ -26,8 +25,10 @@ from aveas_format.converters.ros2_mcap.options import (
     Ros2McapOptions,
     canonical_type,
 )
+from aveas_format.converters.ros2_mcap.rows import ObjectSink
 from aveas_format.converters.ros2_mcap.tree import TransformSamples
 from aveas_format.errors import FormatError, RecordingIOError
+from aveas_format.io.resort import StatesWriter
 from aveas_format.safeio import check_mcap
 
 
@@ -90,16 +91,17 @@ def _select_topics(paths: list[Path], opts: Ros2McapOptions):
     return types, obj_topics, odom, fix, tf_topics
 
 
-def read_topics(paths: list[Path], opts: Ros2McapOptions):
+def read_topics(paths: list[Path], opts: Ros2McapOptions, writer: StatesWriter):
     """One pass over the wanted topics of every file: (types, object topics, odometry topic,
-    NavSatFix topic, object rows, transform samples, odometry samples, NavSatFix samples)."""
+    NavSatFix topic, the object rows (an :class:`ObjectSink` that flushed them into ``writer``),
+    transform samples, odometry samples, NavSatFix samples)."""
     from mcap.reader import make_reader
 
     types, obj_topics, odom, fix, tf_topics = _select_topics(paths, opts)
     topic_index = {t: i for i, t in enumerate(obj_topics)}
     wanted = set(obj_topics) | set(tf_topics) | {t for t in (odom, fix) if t}
 
-    objs = ObjectRows()
+    sink = ObjectSink(writer, len(obj_topics) > 1)
     edges = TransformSamples()
     ego_odom: dict[str, list] = {"t": [], "pose": [], "pcov": [], "twist": [], "tcov": [],
                                  "frame": [], "child": []}
@@ -141,7 +143,8 @@ def read_topics(paths: list[Path], opts: Ros2McapOptions):
                     if ty in OBJECT_READERS and topic in topic_index:
                         t_ns, ok = header_stamp(msg.header, m.log_time)
                         zero_stamps += not ok
-                        OBJECT_READERS[ty](msg, objs, t_ns, topic_index[topic], mi, opts)
+                        OBJECT_READERS[ty](msg, sink.rows, t_ns, topic_index[topic], mi, opts)
+                        sink.maybe_flush()
                     elif ty == T_TF:
                         read_tf(msg, edges, topic, m.log_time)
                     elif ty == T_ODOM and topic == odom:
@@ -159,4 +162,5 @@ def read_topics(paths: list[Path], opts: Ros2McapOptions):
     if zero_stamps:
         warnings.warn(f"{zero_stamps} messages have a zero header.stamp; their log time is used",
                       stacklevel=3)
-    return types, obj_topics, odom, fix, objs, edges, ego_odom, ego_fix
+    sink.flush()
+    return types, obj_topics, odom, fix, sink, edges, ego_odom, ego_fix
