@@ -500,7 +500,6 @@ def test_bounded_import_writes_the_recording_in_memory(tmp_path, road_map, monke
     import warnings
 
     from aveas_format.converters import convert_to
-    from aveas_format.converters.common import assemble
     from aveas_format.converters.ros2_mcap import rows
     from aveas_format.io import open_recording, resort
 
@@ -516,7 +515,7 @@ def test_bounded_import_writes_the_recording_in_memory(tmp_path, road_map, monke
         buckets.append(distribute(self, key_map))
         return buckets[-1]
 
-    monkeypatch.setattr(assemble, "IMPORT_MEMORY", 64 << 10)
+    monkeypatch.setattr(rows, "MEMORY", 64 << 10)
     monkeypatch.setattr(resort, "BUCKET_BYTES", 32 << 10)
     monkeypatch.setattr(rows, "FLUSH_ROWS", 500)
     monkeypatch.setattr(resort.StatesWriter, "_distribute", counted)
@@ -551,7 +550,6 @@ def test_bounded_import_names_the_message_as_in_memory(scene_mcap, road_map, tmp
     message read after several flushes) and a track without a length: ``convert_to`` raises what
     ``convert`` raises and leaves neither an output nor its spill behind."""
     from aveas_format.converters import convert_to
-    from aveas_format.converters.common import assemble
     from aveas_format.converters.ros2_mcap import rows
     from aveas_format.io import resort
 
@@ -573,7 +571,7 @@ def test_bounded_import_names_the_message_as_in_memory(scene_mcap, road_map, tmp
         m["objects"][0]["shape"]["dimensions"]["y"] = 0.0
         msgs.append(("/objects", "autoware_perception_msgs/msg/TrackedObjects", m, T0 + i))
     sizeless = write_mcap(tmp_path / "in" / "sizeless.mcap", msgs)
-    monkeypatch.setattr(assemble, "IMPORT_MEMORY", 4 << 10)
+    monkeypatch.setattr(rows, "MEMORY", 4 << 10)
     monkeypatch.setattr(resort, "BUCKET_BYTES", 2 << 10)
     monkeypatch.setattr(rows, "FLUSH_ROWS", 10)
     for path, opts, what in ((scene_mcap, {"odometry_topic": ""}, "message 0: frame 'base_link' has no transform"),

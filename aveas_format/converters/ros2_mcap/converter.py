@@ -28,6 +28,7 @@ from aveas_format.converters.registry import converter
 from aveas_format.converters.ros2_mcap.frames import apply_offset, cov3, to_map, twist_to_map
 from aveas_format.converters.ros2_mcap.objects import object_boxes, objects_in_map, skipped_message
 from aveas_format.converters.ros2_mcap.options import CLS, NCLS, Ros2McapOptions
+from aveas_format.converters.ros2_mcap import rows as object_rows
 from aveas_format.converters.ros2_mcap.read import read_topics
 from aveas_format.converters.ros2_mcap.tree import TransformTree
 from aveas_format.errors import FormatError
@@ -44,7 +45,7 @@ def convert_ros2_mcap_to(inputs: list[Path], output: Path, *, map_source, option
     :class:`~aveas_format.io.resort.StatesWriter` (spilled next to the output beyond its memory),
     the states made and written a bucket of whole tracks at a time (``convert`` of one recording,
     ``validate FILE``): the same recording as :func:`convert_ros2_mcap`."""
-    with bounded_states(output, overwrite, key="track") as w:
+    with bounded_states(output, overwrite, key="track", memory=object_rows.MEMORY) as w:
         ctx = _recording(inputs, map_source, options, w)
         return write_by_buckets(w, partial(_bucket, ctx=ctx), ctx.sensor, None, output=output,
                                 overwrite=overwrite, converter="ros2-mcap", inputs=inputs,

@@ -18,6 +18,10 @@ from aveas_format.io.resort import StatesWriter
 
 #: object rows decoded (Python lists) before they are flushed into the writer as columns
 FLUSH_ROWS = 65_536
+#: bytes of object rows an import in bounded memory holds before it spills: a row is ~430 bytes
+#: (poses, covariances, class PMF) and making a bucket's states costs ~8 times its bytes, so a
+#: quarter of :data:`~aveas_format.io.resort.IMPORT_MEMORY` (an import held whole peaks near 0.5 GB)
+MEMORY = 32 << 20
 #: the per-row blocks, stored as numbered float64 columns (``pose0``..``pose6``...): name -> width
 BLOCKS = {"pose": 7, "pcov": 9, "twist": 3, "tcov": 9, "dims": 3, "pmf": NCLS}
 #: the integer columns of a row (its track code, stamp, topic index, frame code, twist kind,
