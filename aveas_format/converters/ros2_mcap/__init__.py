@@ -59,10 +59,10 @@ the first. Provenance ``natural``, role ``observed`` for objects.
 
 Large recordings: ``convert`` (of one recording) and ``validate FILE`` import in bounded memory:
 the object rows are flushed every 65,536 rows into a
-:class:`~aveas_format.io.resort.StatesWriter` (spilled to a hidden temporary directory next to
-the output beyond 32 MB: a row and its states cost more than an OSI sample) keyed by track; what needs every row is decided first from each row's
-stamp and frame alone (12 bytes a row: the rows outside the transforms' spans, time zero, the
-tracks' order); then the states are made a bucket of whole tracks at a time, in order (the
+:class:`~aveas_format.io.resort.StatesWriter` keyed by track (spilled to a hidden temporary
+directory next to the output beyond 32 MB: a row and its states cost more than an OSI sample);
+what needs every row is decided first from each row's stamp and frame alone (12 bytes a row: the
+rows outside the transforms' spans, time zero, the tracks' order); then the states are made a bucket of whole tracks at a time, in order (the
 transforms, repeated stamps, tracks that are no road user, velocities, headings, the
 participants' sizes and class PMFs are all per track;
 :func:`~aveas_format.converters.common.assemble.write_by_buckets` with the participants from the
