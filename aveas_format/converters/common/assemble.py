@@ -19,6 +19,11 @@ does the rest, the same way for every source:
 7. the map-referencing hand-off (:func:`aveas_format.mapref.build.build_recording`: lon/lat
    through the CRS, road coordinates through the map, the heading from the motion where the
    source has none).
+
+A time-major source read in bounded memory holds its samples in a
+:class:`~aveas_format.io.resort.StatesWriter` (:func:`bounded_states`); :func:`write_by_buckets`
+does steps 1, 2, 4 and 7 a bucket of whole participants at a time and writes the states as it
+goes (no coverage; the participants stated before, or made by the buckets in order).
 """
 
 from __future__ import annotations
