@@ -236,3 +236,37 @@ def openlabel_blocks(directory, *, n_vehicles: int, duration_s: float, seed: int
         _, span, _ = scan_json_member(f, "openlabel", "frames")
         f.seek(span[0] + 1)
         return [b"{" + cut + b"}" for _, cut in stream._cut_blocks(f, span, size)]
+
+
+def count_buckets(monkeypatch) -> list:
+    """The bucket numbers of each spill a StatesWriter distributes (a list filled as it goes)."""
+    from aveas_format.io import resort
+
+    buckets: list = []
+    distribute = resort.StatesWriter._distribute
+
+    def counted(self, key_map):
+        buckets.append(distribute(self, key_map))
+        return buckets[-1]
+
+    monkeypatch.setattr(resort.StatesWriter, "_distribute", counted)
+    return buckets
+
+
+def assert_written_as_in_memory(path, whole, n: int, on_road: int) -> None:
+    """The recording an import wrote in bounded memory at ``path`` (``convert_to``'s ``n`` states,
+    ``on_road`` of them on the map) is ``whole``, the import in memory: states and participants
+    equal, recording.json equal but for the tables' entries and the location (a mean summed bucket
+    by bucket: to 1e-12 degrees); no spill left next to it."""
+    import pytest
+
+    from aveas_format.io import open_recording
+
+    assert [p.name for p in path.parent.iterdir() if p.name.startswith(".")] == []
+    back = open_recording(path)
+    assert n == whole.states.num_rows and on_road == n - whole.states["road_id"].null_count
+    assert back.states.equals(whole.states) and back.participants.equals(whole.participants)
+    a, b = back.meta.model_dump(), whole.meta.model_dump()
+    loc_a, loc_b = a.pop("location"), b.pop("location")
+    assert a == b | {"tables": a["tables"]} and a["tables"]["states"]["rows"] == n
+    assert loc_a.pop("alt") == loc_b.pop("alt") and loc_a == pytest.approx(loc_b, abs=1e-12, rel=0)

@@ -132,6 +132,17 @@ def tracked(t_ns, t):
     ]}
 
 
+def _bad_pose(n, at, axis, value):
+    """``n`` TrackedObjects messages, object 1's position ``axis`` set to ``value`` in message ``at``."""
+    msgs = []
+    for i in range(n):
+        m = tracked(T0 + i * 100_000_000, i / 10)
+        if i == at:
+            m["objects"][1]["kinematics"]["pose_with_covariance"]["pose"]["position"][axis] = value
+        msgs.append(("/objects", "autoware_perception_msgs/msg/TrackedObjects", m, T0 + i))
+    return msgs
+
+
 def derived(t_ns, mi, rel=(15.0, 3.5)):
     return {"header": header(t_ns, "base_link"), "objects": [{
         "header": header(t_ns, "base_link"), "id": 7, "detection_level": 1, "object_classified": True,
@@ -341,13 +352,7 @@ def test_malformed_inputs_are_located(scene_mcap, road_map, tmp_path):
                        match=r"topic /radar/objects message 0: frame 'base_link' has no transform"):
         convert("ros2-mcap", [scene_mcap], map_source=road_map, options={"odometry_topic": ""})
     # a NaN position in message 2
-    msgs = []
-    for i in range(4):
-        m = tracked(T0 + i * 100_000_000, i / 10)
-        if i == 2:
-            m["objects"][1]["kinematics"]["pose_with_covariance"]["pose"]["position"]["x"] = float("nan")
-        msgs.append(("/objects", "autoware_perception_msgs/msg/TrackedObjects", m, T0 + i))
-    bad = write_mcap(tmp_path / "nan.mcap", msgs)
+    bad = write_mcap(tmp_path / "nan.mcap", _bad_pose(4, 2, "x", float("nan")))
     with pytest.raises(aveas_format.FormatError, match=r"nan.mcap: topic /objects message 2: object 1: "
                                                         r"pose is not finite"):
         convert("ros2-mcap", [bad], map_source=road_map)
@@ -501,47 +506,34 @@ def test_bounded_import_writes_the_recording_in_memory(tmp_path, road_map, monke
 
     from aveas_format.converters import convert_to
     from aveas_format.converters.ros2_mcap import rows
-    from aveas_format.io import open_recording, resort
+    from aveas_format.io import resort
+    from helpers_converters import assert_written_as_in_memory, count_buckets
 
     path = _busy_scene(tmp_path / "busy.mcap")
     opts = _opts(recording_id="busy", license="CC0-1.0")
     with warnings.catch_warnings(record=True) as said_whole:
         warnings.simplefilter("always")
         whole = convert("ros2-mcap", [path], map_source=road_map, options=opts)
-    buckets = []
-    distribute = resort.StatesWriter._distribute
-
-    def counted(self, key_map):
-        buckets.append(distribute(self, key_map))
-        return buckets[-1]
-
+    buckets = count_buckets(monkeypatch)
     monkeypatch.setattr(rows, "MEMORY", 64 << 10)
     monkeypatch.setattr(resort, "BUCKET_BYTES", 32 << 10)
     monkeypatch.setattr(rows, "FLUSH_ROWS", 500)
-    monkeypatch.setattr(resort.StatesWriter, "_distribute", counted)
     with warnings.catch_warnings(record=True) as said_bounded:
         warnings.simplefilter("always")
         _, n, on_road = convert_to("ros2-mcap", [path], tmp_path / "b.aveas", map_source=road_map,
                                    options=opts)
     assert len(buckets) == 1 and len(buckets[0]) > 10  # (spilled, then made into many buckets)
-    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # the spill is gone
     said = [sorted(str(w.message) for w in ws) for ws in (said_whole, said_bounded)]
     assert said[0] == said[1]
     assert any(s.startswith("1 object samples lie outside") for s in said[0])  # (track 8's first)
     assert any(s.startswith("busy.mcap: 16 sample(s) repeat") for s in said[0])  # (message 30 twice)
     assert any(s.startswith("skipped 1 tracks: 1 barrier") for s in said[0])
-    back = open_recording(tmp_path / "b.aveas")
     assert whole.participants.num_rows == 43  # the ego, 40 tracks, the car 7 and track 8
     ids = whole.participants.column("source_id").to_pylist()
     assert ids[:3] == ["ego", "0:" + uuid.UUID(int=100).hex, "1:7"]
     # track 8 numbered where its first sample with a transform is (after the track of message 50)
     assert ids.index("1:8") == ids.index("0:" + uuid.UUID(int=125).hex) + 1
-    assert n == whole.states.num_rows and on_road == n - whole.states["road_id"].null_count
-    assert back.states.equals(whole.states) and back.participants.equals(whole.participants)
-    a, b = back.meta.model_dump(), whole.meta.model_dump()
-    loc_a, loc_b = a.pop("location"), b.pop("location")  # (a mean summed bucket by bucket)
-    assert a == b | {"tables": a["tables"]} and a["tables"]["states"]["rows"] == n
-    assert loc_a.pop("alt") == loc_b.pop("alt") and loc_a == pytest.approx(loc_b, abs=1e-12, rel=0)
+    assert_written_as_in_memory(tmp_path / "b.aveas", whole, n, on_road)
 
 
 @pytest.mark.realdata
@@ -553,15 +545,9 @@ def test_bounded_import_names_the_message_as_in_memory(scene_mcap, road_map, tmp
     from aveas_format.converters.ros2_mcap import rows
     from aveas_format.io import resort
 
-    msgs = []
-    for i in range(40):
-        m = tracked(T0 + i * 100_000_000, i / 10)
-        if i == 33:
-            m["objects"][1]["kinematics"]["pose_with_covariance"]["pose"]["position"]["y"] = float("inf")
-        msgs.append(("/objects", "autoware_perception_msgs/msg/TrackedObjects", m, T0 + i))
     (tmp_path / "in").mkdir()
     (tmp_path / "out").mkdir()
-    nan = write_mcap(tmp_path / "in" / "nan.mcap", msgs)
+    nan = write_mcap(tmp_path / "in" / "nan.mcap", _bad_pose(40, 33, "y", float("inf")))
     msgs = []
     for i in range(40):
         m = tracked(T0 + i * 100_000_000, i / 10)
