@@ -147,7 +147,8 @@ def write_by_buckets(writer: StatesWriter, boxes_of: Callable[[pa.Table], Any], 
 
     from aveas_format.crs import LocalFrame
     from aveas_format.io.writer import write_recording
-    from aveas_format.mapref.build import states_table
+    from aveas_format.mapref.build import check_crs, states_table
+    from aveas_format.opendrive import load_map
     from aveas_format.parallel import processes
 
     later = callable(participants)
@@ -157,18 +158,16 @@ def write_by_buckets(writer: StatesWriter, boxes_of: Callable[[pa.Table], Any], 
     if sensor.coverage is not None or not later and not {"class", "length", "width"} <= set(participants):
         raise ValueError("write_by_buckets: the sensor has a coverage, or the participants' class "
                          "and sizes are not stated (both need every box: use to_recording)")
-    parts = participant_columns(Boxes([], [], [], [], source_ids=[] if later else source_ids),
-                                sensor.sizes, participants if not later else  # (none yet: the CRS, the map)
-                                {"class": pa.array([], pa.string()), "length": np.zeros(0), "width": np.zeros(0)})
-    ids = np.asarray(parts["participant_id"], np.int64)
+    if not later:
+        parts = participant_columns(Boxes([], [], [], [], source_ids=source_ids), sensor.sizes, participants)
+        ids = np.asarray(parts["participant_id"], np.int64)
     meta = {k: v for k, v in (("nominal_rate_hz", sensor.nominal_rate_hz), ("crs", sensor.crs or None),
                               ("extras", None if sensor.extras is None else dict(sensor.extras)),
                               ("duration_s", sensor.duration_s)) if v is not None}
-    kw = dict(map_bytes=map_bytes, participants=parts, sensor=sensor, resolved=resolved, version=version)
-    empty = {c: pa.array([], pa.int64() if c == "participant_id" else pa.float64())
-             for c in ("participant_id", "time", "x", "y", "heading", "vx", "vy")}
-    rec = hand_over(converter, inputs, options, states=empty, **kw, **meta)  # (the CRS, the map)
-    frame, net = LocalFrame(rec.meta.crs, offset=rec.map.header.offset), rec.map
+    net = load_map(map_bytes)  # (the CRS as build_recording decides it: the states are referenced here)
+    crs, check = _given_crs(options, meta.get("crs"))
+    frame = LocalFrame(check_crs(crs, net.header.geo_reference) if check or not crs else crs,
+                       offset=net.header.offset)
 
     def bucket(t: pa.Table) -> tuple[pa.Table, Any]:
         boxes, info = boxes_of(t) if later else (boxes_of(t), None)
@@ -182,11 +181,12 @@ def write_by_buckets(writer: StatesWriter, boxes_of: Callable[[pa.Table], Any], 
         src, given = participants(infos)
         if not {"class", "length", "width"} <= set(given):
             raise ValueError("write_by_buckets: the participants' class and sizes are not stated")
-        kw["participants"] = participant_columns(Boxes([], [], [], [], source_ids=src), sensor.sizes, given)
+        parts = participant_columns(Boxes([], [], [], [], source_ids=src), sensor.sizes, given)
     if summary["rows"]:
         meta = {**{k: summary[k] for k in ("duration_s", "nominal_rate_hz", "location")}, **meta}
-    rec = hand_over(converter, inputs, options, states=pq.read_schema(states_file.path).empty_table(),
-                    **kw, **meta)
+    rec = hand_over(converter, inputs, options, map_bytes=map_bytes, participants=parts, sensor=sensor,
+                    states=pq.read_schema(states_file.path).empty_table(), resolved=resolved, version=version,
+                    **meta)
     write_recording(rec, output, overwrite=overwrite, states_file=states_file)
     return rec, states_file.rows, summary["on_road"]
 
@@ -256,12 +256,21 @@ def hand_over(converter: str, inputs: Sequence[Path], options: Any, *, map_bytes
     if title:
         md["title"] = title
     md.update({k: v for k, v in meta.items() if v is not None})
-    if getattr(o, "crs", None) and getattr(o, "crs_is_recording_crs", True):
-        md["crs"] = o.crs  # (the user's wins over one the source implies: both name the map's frame)
-        md["check_map_crs"] = True  # the user's CRS must agree with the map's geoReference
+    crs, check = _given_crs(o, md.get("crs"))
+    if check:
+        md["crs"], md["check_map_crs"] = crs, True
     return build_recording(map_source=map_bytes, participants=participants, states=states,
                            partner=partner, source=source_block(converter, inputs, options, version,
                                                                 dict(resolved or {})), **md)
+
+
+def _given_crs(options: Any, crs: str | None) -> tuple[str | None, bool]:
+    """The recording's CRS before the map is consulted: the user's option (which must agree with
+    the map's geoReference: ``True``) wins over ``crs``, the one the source implies (both name the
+    map's frame)."""
+    if getattr(options, "crs", None) and getattr(options, "crs_is_recording_crs", True):
+        return options.crs, True
+    return crs, False
 
 
 def _given(options: Any, name: str) -> Any:
