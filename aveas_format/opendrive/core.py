@@ -115,37 +115,40 @@ class NetworkCore:
         lane_id, off, _, _, _ = self.lanes.locate(b, t)
         return lane_id, off
 
-    def lane_borders(self, road_id: Any, s: Any, lane_id: Any):
-        """``(inner_t, outer_t)`` of lane ``lane_id`` at s (NaN where the lane does not exist)."""
-        r, s, lid = self._broadcast(road_id, s, lane_id)
+    def _sides(self, r: np.ndarray, s: np.ndarray):
+        """The lanes of roads ``r`` at ``s`` (broadcast), per side: ``(side, ids, type codes, inner
+        borders, outer borders)`` (n x lanes of the piece), and the centre line's t."""
         sc = np.clip(s, 0.0, self.road_length[r])
         piece = self.lanes.find_piece(r, sc)
         b = self.lanes.borders(piece, sc)
+        sides = [(side, ids[piece], types[piece], np.concatenate([b.center[:, None], outers[:, :-1]], axis=1),
+                  outers) for side, outers, ids, types in (("left", b.left, self.lanes.lid, self.lanes.ltype),
+                                                           ("right", b.right, self.lanes.rid, self.lanes.rtype))]
+        return sides, b.center
+
+    def lane_borders(self, road_id: Any, s: Any, lane_id: Any):
+        """``(inner_t, outer_t)`` of lane ``lane_id`` at s (NaN where the lane does not exist)."""
+        r, s, lid = self._broadcast(road_id, s, lane_id)
+        sides, center = self._sides(r, s)
         lid = lid.astype(np.int64)
         inner = np.full(len(s), np.nan)
         outer = np.full(len(s), np.nan)
-        for outers, ids in ((b.left, self.lanes.lid[piece]), (b.right, self.lanes.rid[piece])):
-            inners = np.concatenate([b.center[:, None], outers[:, :-1]], axis=1)
+        for _, ids, _, inners, outers in sides:
             match = ids == lid[:, None]
             rows = np.flatnonzero(match.any(1))
             k = np.argmax(match[rows], axis=1)
             inner[rows] = inners[rows, k]
             outer[rows] = outers[rows, k]
         zero = lid == 0
-        inner[zero] = outer[zero] = b.center[zero]
+        inner[zero] = outer[zero] = center[zero]
         return inner, outer
 
     def lane_counts(self, road_id: Any, s: Any) -> dict[str, np.ndarray]:
         """The lanes beside the centre lane at s, per side: ``left``/``right`` those present
         (wider than 1 cm), ``left_drivable``/``right_drivable`` those of them of a drivable type."""
-        r, s = self._broadcast(road_id, s)
-        sc = np.clip(s, 0.0, self.road_length[r])
-        piece = self.lanes.find_piece(r, sc)
-        b = self.lanes.borders(piece, sc)
+        sides, _ = self._sides(*self._broadcast(road_id, s))
         out = {}
-        for side, outers, ids, types in (("left", b.left, self.lanes.lid[piece], self.lanes.ltype[piece]),
-                                         ("right", b.right, self.lanes.rid[piece], self.lanes.rtype[piece])):
-            inners = np.concatenate([b.center[:, None], outers[:, :-1]], axis=1)
+        for side, ids, types, inners, outers in sides:
             present = (ids != 0) & (np.abs(outers - inners) > 0.01)
             out[side] = present.sum(1)
             out[f"{side}_drivable"] = (present & (types >= 0) & self.drivable_code[np.where(types >= 0, types, 0)]).sum(1)
