@@ -62,8 +62,7 @@ def convert_ros2_mcap(inputs: list[Path], *, map_source, options: Ros2McapOption
     with StatesWriter(memory=None, key="track") as w:
         ctx = _recording(inputs, map_source, options, w)
         boxes, info = _bucket(next(w.buckets()), ctx)
-    source_ids, participants = _finish([info], ctx)
-    boxes.source_ids = np.asarray(source_ids, dtype=object)
+    _, participants = _finish([info], ctx)  # (one bucket: the boxes have every source id)
     return to_recording(boxes, ctx.sensor, converter="ros2-mcap", inputs=inputs, options=options,
                         map_bytes=ctx.map_bytes, participants=participants)
 
