@@ -198,7 +198,8 @@ def _map_of_trace(path: Path, map_source, meta: dict[str, dict[str, str]], optio
     return cand
 
 
-def convert_osi_to(inputs: list[Path], output: Path, *, map_source, options: OsiOptions, overwrite: bool = False):
+def convert_osi_to(inputs: list[Path], output: Path, *, map_source, options: OsiOptions,
+                   overwrite: bool = False):
     """The trace's recording written to ``output`` in bounded memory: the samples held in a
     :class:`~aveas_format.io.resort.StatesWriter` (spilled next to the output beyond its memory),
     the states made and written a bucket of objects at a time (``convert`` of one trace, ``validate
@@ -208,7 +209,7 @@ def convert_osi_to(inputs: list[Path], output: Path, *, map_source, options: Osi
         return write_by_buckets(w, partial(_boxes_of, trace=trace), trace.sensor,
                                 trace.source_ids, output=output, overwrite=overwrite, converter="osi",
                                 inputs=inputs, options=options, map_bytes=trace.map_bytes,
-                                participants=trace.participants)
+                                participants=trace.participants, net=trace.net)
 
 
 @converter("osi", description="ASAM OSI trace (.osi length-prefixed binary or MCAP): GroundTruth "
@@ -262,7 +263,7 @@ def _trace(inputs: list[Path], map_source, options: OsiOptions, writer: StatesWr
     if not len(uniq):
         raise FormatError("no GroundTruth moving objects in the trace", path=inputs[0])
     map_bytes = load_map_bytes(map_source)
-    header = load_map(map_bytes).header
+    net = load_map(map_bytes)
     m = len(uniq)
     info = [static[int(u)] for u in uniq]
     participants = {
@@ -282,10 +283,11 @@ def _trace(inputs: list[Path], map_source, options: OsiOptions, writer: StatesWr
         carried["start_time"] = _shift_iso(zt, t0)
     sensor = Sensor(method=options.method, provenance="simulated",
                     platform="ASAM OSI trace", sensors=[{"id": "osi", "kind": "simulator"}],
-                    crs=_map_frame_crs(proj, header, options), **{"partner": "ASAM OSI simulation", **carried})
-    return SimpleNamespace(uniq=uniq, source_ids=[str(int(u)) for u in uniq], sizeless=np.asarray(sizeless, np.int64),
-                           t0=t0, participants=participants, map_bytes=map_bytes, header=header, proj=proj,
-                           sensor=sensor, inputs=inputs)
+                    crs=_map_frame_crs(proj, net.header, options),
+                    **{"partner": "ASAM OSI simulation", **carried})
+    return SimpleNamespace(uniq=uniq, source_ids=[str(int(u)) for u in uniq],
+                           sizeless=np.asarray(sizeless, np.int64), t0=t0, participants=participants,
+                           map_bytes=map_bytes, net=net, proj=proj, sensor=sensor, inputs=inputs)
 
 
 class _Sink:
@@ -327,7 +329,7 @@ def _boxes_of(bucket: pa.Table, trace: SimpleNamespace) -> Boxes:
     for c in ("x", "y", "heading", "vx", "vy"):
         boxes[f"{c}_std"] = np.zeros(n)
     boxes["source_frame"] = msgs[boxes.order]
-    _to_map_frame(boxes, trace.proj, trace.header)
+    _to_map_frame(boxes, trace.proj, trace.net.header)
     return boxes
 
 

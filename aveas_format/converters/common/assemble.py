@@ -126,7 +126,7 @@ def write_by_buckets(writer: StatesWriter, boxes_of: Callable[[pa.Table], Any], 
                      inputs: Sequence[Path], options: Any, map_bytes: bytes,
                      participants: Mapping[str, Any] | Callable[[list], tuple[Sequence[Any], Mapping[str, Any]]],
                      resolved: Mapping[str, Any] | None = None, version: str = "1",
-                     workers: int | None = 1, key_map: np.ndarray | None = None):
+                     workers: int | None = 1, key_map: np.ndarray | None = None, net: Any = None):
     """:func:`to_recording` of the boxes a :class:`~aveas_format.io.resort.StatesWriter` holds
     (a time-major source read in bounded memory, :func:`bounded_states`), written to ``output``:
     ``boxes_of(bucket)`` makes the :class:`Boxes` of a bucket of whole participants (codes among
@@ -142,7 +142,8 @@ def write_by_buckets(writer: StatesWriter, boxes_of: Callable[[pa.Table], Any], 
     ``boxes_of(bucket)`` then gives ``(boxes, info)`` with the boxes' codes the final participant
     ids (the buckets are made in order, one at a time: ``workers`` 1), and
     ``participants([info of each bucket])`` gives ``(source_ids, participants)`` after the last.
-    ``key_map``: the buckets' order (:meth:`~aveas_format.io.resort.StatesWriter.buckets`)."""
+    ``key_map``: the buckets' order (:meth:`~aveas_format.io.resort.StatesWriter.buckets`); ``net``:
+    the map parsed from ``map_bytes`` where the converter has it."""
     import pyarrow.parquet as pq
 
     from aveas_format.crs import LocalFrame
@@ -164,7 +165,7 @@ def write_by_buckets(writer: StatesWriter, boxes_of: Callable[[pa.Table], Any], 
     meta = {k: v for k, v in (("nominal_rate_hz", sensor.nominal_rate_hz), ("crs", sensor.crs or None),
                               ("extras", None if sensor.extras is None else dict(sensor.extras)),
                               ("duration_s", sensor.duration_s)) if v is not None}
-    net = load_map(map_bytes)  # (the CRS as build_recording decides it: the states are referenced here)
+    net = net or load_map(map_bytes)  # (the CRS as build_recording decides it: the states are referenced here)
     crs, check = _given_crs(options, meta.get("crs"))
     frame = LocalFrame(check_crs(crs, net.header.geo_reference) if check or not crs else crs,
                        offset=net.header.offset)
