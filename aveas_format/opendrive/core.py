@@ -72,12 +72,19 @@ class NetworkCore:
         arr = np.asarray(road_id, dtype=object).ravel()
         if arr.size == 0:
             return np.zeros(0, dtype=np.int64)
-        uniq, inv = np.unique(arr.astype(str), return_inverse=True)
-        try:
-            ui = np.array([self.road_index[u] for u in uniq], dtype=np.int64)
-        except KeyError as exc:
-            raise KeyError(f"no road {exc.args[0]!r} in the map") from None
-        return ui[inv]
+        import pyarrow as pa
+
+        try:  # (texts, the common case: each distinct one looked up once, hashed, not sorted)
+            enc = pa.array(arr, pa.string()).dictionary_encode()
+            uniq, inv = enc.dictionary.to_pylist(), enc.indices.to_numpy(zero_copy_only=False)
+            if enc.indices.null_count:
+                raise ValueError("null road ids")
+        except (ValueError, TypeError):  # (ids that are no texts, None: as texts)
+            uniq, inv = np.unique(arr.astype(str), return_inverse=True)
+        missing = sorted(u for u in uniq if u not in self.road_index)
+        if missing:
+            raise KeyError(f"no road {missing[0]!r} in the map")
+        return np.array([self.road_index[u] for u in uniq], dtype=np.int64)[inv]
 
     def _broadcast(self, road_id: Any, *arrays: Any) -> tuple[np.ndarray, ...]:
         ri = self.road_index_of(road_id)
@@ -129,10 +136,14 @@ class NetworkCore:
     def lane_borders(self, road_id: Any, s: Any, lane_id: Any):
         """``(inner_t, outer_t)`` of lane ``lane_id`` at s (NaN where the lane does not exist)."""
         r, s, lid = self._broadcast(road_id, s, lane_id)
-        sides, center = self._sides(r, s)
+        return self._borders_of(*self._sides(r, s), lid)
+
+    @staticmethod
+    def _borders_of(sides: list, center: np.ndarray, lid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`lane_borders` of lanes ``lid`` from :meth:`_sides`."""
         lid = lid.astype(np.int64)
-        inner = np.full(len(s), np.nan)
-        outer = np.full(len(s), np.nan)
+        inner = np.full(len(lid), np.nan)
+        outer = np.full(len(lid), np.nan)
         for _, ids, _, inners, outers in sides:
             match = ids == lid[:, None]
             rows = np.flatnonzero(match.any(1))
@@ -143,11 +154,17 @@ class NetworkCore:
         inner[zero] = outer[zero] = center[zero]
         return inner, outer
 
-    def lane_counts(self, road_id: Any, s: Any) -> dict[str, np.ndarray]:
+    def lane_counts(self, road_id: Any, s: Any, lane_id: Any = None) -> dict[str, np.ndarray]:
         """The lanes beside the centre lane at s, per side: ``left``/``right`` those present
-        (wider than 1 cm), ``left_drivable``/``right_drivable`` those of them of a drivable type."""
-        sides, _ = self._sides(*self._broadcast(road_id, s))
-        out = {}
+        (wider than 1 cm), ``left_drivable``/``right_drivable`` those of them of a drivable type;
+        with ``lane_id`` also that lane's ``inner``/``outer`` borders (:meth:`lane_borders`, the
+        lanes read once for both)."""
+        if lane_id is not None:
+            r, s, lid = self._broadcast(road_id, s, lane_id)
+        else:
+            (r, s), lid = self._broadcast(road_id, s), None
+        sides, center = self._sides(r, s)
+        out = {} if lid is None else dict(zip(("inner", "outer"), self._borders_of(sides, center, lid)))
         for side, ids, types, inners, outers in sides:
             present = (ids != 0) & (np.abs(outers - inners) > 0.01)
             out[side] = present.sum(1)

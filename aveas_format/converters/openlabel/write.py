@@ -372,10 +372,9 @@ def _road_facts(net, road_id: np.ndarray, s: np.ndarray, lane_id: np.ndarray, la
 
     Best effort: None where the map engine cannot answer (never fails the export)."""
     try:
-        inner, outer = net.lane_borders(road_id, s, lane_id)
+        lanes = net.lane_counts(road_id, s, lane_id)
         with np.errstate(invalid="ignore", divide="ignore"):
-            lane_position = np.clip(lane_offset / np.abs(outer - inner), -0.5, 0.5)
-        lanes = net.lane_counts(road_id, s)
+            lane_position = np.clip(lane_offset / np.abs(lanes["outer"] - lanes["inner"]), -0.5, 0.5)
         ri = net.road_index_of(road_id)
         kappa = net.reference_line(road_id, np.clip(s, 0.0, net.road_length[ri]))[3]
         shape = np.where(np.abs(kappa) > 1e-3, "curve", "straight")
